@@ -1,0 +1,357 @@
+//! Least-squares identification of a [`ParamSet`] from TCP positions measured in {W}
+//! (paper eqs. 11-15): Gauss-Newton with column scaling and a Moore-Penrose step, or
+//! Levenberg-Marquardt.
+//!
+//! Each iteration accumulates the normal matrix `N = J^T J` and `J^T r` configuration by
+//! configuration (never the 3n x p Jacobian), scales the columns to unit norm, and solves for the
+//! step. While the scaled matrix is well conditioned, the step comes from its Cholesky factor, which
+//! equals the pseudo-inverse solution (eq. 14 = eq. 15 at full rank). When a Cholesky pivot signals
+//! near-dependence, the step comes from the eigendecomposition of the scaled normal matrix (the SVD
+//! of the scaled Jacobian through its Gram matrix: `sigma_k^2` are its eigenvalues), truncated at the
+//! rank tolerance, and the parameters the poses cannot separate are named. The singular values,
+//! condition number and the final rank check always come from that decomposition at the last
+//! iterate.
+
+use nalgebra::{DMatrix, DVector, SymmetricEigen, Vector3};
+
+use crate::robot::{Joints, KinState, ParamSet, RobotModel, forward, tcp_jacobian};
+
+/// One measured configuration: joint values commanded and the TCP measured in {W}.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Observation {
+    /// Joint values, rad.
+    pub q: Joints,
+    /// Measured TCP position in {W}, mm.
+    pub tcp_world_mm: Vector3<f64>,
+}
+
+/// The solver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Solver {
+    /// Gauss-Newton with the pseudo-inverse step (the paper's method).
+    GaussNewton,
+    /// Levenberg-Marquardt with Nielsen's damping update, starting at `tau` times the largest
+    /// diagonal element of the scaled normal matrix.
+    LevenbergMarquardt {
+        /// Initial damping factor.
+        tau: f64,
+    },
+}
+
+/// Stopping rules and tolerances.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Solver.
+    pub solver: Solver,
+    /// Iteration cap (Jacobian evaluations).
+    pub max_iterations: usize,
+    /// Converged when a step changes the predicted positions by less than this RMS, mm.
+    pub step_tol_mm: f64,
+    /// Converged when a step lowers the cost by less than this fraction of it (after at least
+    /// one step that changed the predictions by less than 1e-6 mm).
+    pub cost_rtol: f64,
+    /// Singular values of the column-scaled Jacobian below `rank_rtol * sigma_max` count as zero.
+    /// Through the Gram matrix, values below about 1e-7 are not resolved: keep this above that.
+    pub rank_rtol: f64,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self { solver: Solver::GaussNewton, max_iterations: 50, step_tol_mm: 1e-9, cost_rtol: 1e-14, rank_rtol: 1e-6 }
+    }
+}
+
+/// How an identification ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FitOutcome {
+    /// The step criterion was met.
+    Converged {
+        /// Jacobian evaluations.
+        iterations: usize,
+    },
+    /// The iteration cap was reached first.
+    IterationCap {
+        /// Jacobian evaluations.
+        iterations: usize,
+    },
+    /// The configurations cannot separate these parameters; no values are returned for them.
+    RankDeficient {
+        /// Names of the parameters in the (numerical) null space of the scaled Jacobian.
+        unidentifiable: Vec<String>,
+    },
+}
+
+impl FitOutcome {
+    /// A short label for tables: `converged`, `iteration_cap`, `rank_deficient`.
+    pub fn label(&self) -> &'static str {
+        match self {
+            FitOutcome::Converged { .. } => "converged",
+            FitOutcome::IterationCap { .. } => "iteration_cap",
+            FitOutcome::RankDeficient { .. } => "rank_deficient",
+        }
+    }
+}
+
+/// Result of an identification.
+#[derive(Clone, Debug)]
+pub struct Fit {
+    /// How it ended.
+    pub outcome: FitOutcome,
+    /// The identified model; `None` when rank deficient.
+    pub model: Option<RobotModel>,
+    /// Identified values in the order of the set, internal units; `None` for parameters the
+    /// configurations cannot separate.
+    pub values: Vec<Option<f64>>,
+    /// Jacobian evaluations.
+    pub iterations: usize,
+    /// Singular values of the column-scaled identification Jacobian at the last iterate, descending.
+    pub singular_values: Vec<f64>,
+    /// `sigma_max / sigma_min` of the column-scaled Jacobian (infinite when rank deficient).
+    pub condition_number: f64,
+    /// Root mean square of the position residual norms at the returned values, mm.
+    pub residual_rms_mm: f64,
+}
+
+/// Normal equations of one iterate, column-scaled.
+struct Normal {
+    /// Scaled `J^T J` (unit diagonal where the column is non-zero), full symmetric.
+    n: DMatrix<f64>,
+    /// Scaled `J^T r`.
+    b: DVector<f64>,
+    /// Column norms of the unscaled Jacobian.
+    norms: DVector<f64>,
+    /// Sum of squared residuals, mm^2.
+    cost: f64,
+}
+
+fn accumulate(model: &RobotModel, set: &ParamSet, obs: &[Observation], st: &mut KinState, cols: &mut [Vector3<f64>], rows: &mut [Vec<f64>; 3], lower: &mut [f64]) -> Normal {
+    let p = set.len();
+    lower.fill(0.0);
+    let mut b = DVector::zeros(p);
+    let mut cost = 0.0;
+    for o in obs {
+        let pw = tcp_jacobian(model, st, &o.q, set, cols);
+        let r = o.tcp_world_mm - pw;
+        cost += r.norm_squared();
+        for (a, c) in cols.iter().enumerate() {
+            rows[0][a] = c.x;
+            rows[1][a] = c.y;
+            rows[2][a] = c.z;
+            b[a] += c.dot(&r);
+        }
+        let [r0, r1, r2] = &*rows;
+        // Rank-3 update of the lower triangle, row by row (contiguous, vectorises).
+        for a in 0..p {
+            let (x0, x1, x2) = (r0[a], r1[a], r2[a]);
+            let row = &mut lower[a * p..a * p + a + 1];
+            for (c, v) in row.iter_mut().enumerate() {
+                *v += x0 * r0[c] + x1 * r1[c] + x2 * r2[c];
+            }
+        }
+    }
+    let norms = DVector::from_fn(p, |j, _| lower[j * p + j].sqrt());
+    let inv = norms.map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
+    let n = DMatrix::from_fn(p, p, |i, j| {
+        let (a, c) = if i >= j { (i, j) } else { (j, i) };
+        lower[a * p + c] * inv[i] * inv[j]
+    });
+    let b = b.component_mul(&inv);
+    Normal { n, b, norms, cost }
+}
+
+/// Eigen-decomposition of the scaled normal matrix: singular values (descending) and the rank test.
+struct Spectrum {
+    eig: SymmetricEigen<f64, nalgebra::Dyn>,
+    sigma_max: f64,
+}
+
+impl Spectrum {
+    fn new(n: &DMatrix<f64>) -> Self {
+        let eig = SymmetricEigen::new(n.clone());
+        let sigma_max = eig.eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l)).max(0.0).sqrt();
+        Self { eig, sigma_max }
+    }
+
+    fn singular_values(&self) -> Vec<f64> {
+        let mut s: Vec<f64> = self.eig.eigenvalues.iter().map(|l| l.max(0.0).sqrt()).collect();
+        s.sort_by(|a, b| b.total_cmp(a));
+        s
+    }
+
+    fn is_null(&self, k: usize, rank_rtol: f64) -> bool {
+        self.eig.eigenvalues[k].max(0.0).sqrt() < rank_rtol * self.sigma_max
+    }
+
+    /// Parameters with a large component in a null vector (at least 10 % of that vector's largest).
+    fn unidentifiable(&self, set: &ParamSet, rank_rtol: f64) -> Vec<usize> {
+        let mut out = Vec::new();
+        for k in 0..self.eig.eigenvalues.len() {
+            if !self.is_null(k, rank_rtol) {
+                continue;
+            }
+            let v = self.eig.eigenvectors.column(k);
+            let vmax = v.amax();
+            for (j, x) in v.iter().enumerate() {
+                if x.abs() >= 0.1 * vmax && !out.contains(&j) {
+                    out.push(j);
+                }
+            }
+        }
+        out.sort_unstable();
+        debug_assert!(out.iter().all(|&j| j < set.len()));
+        out
+    }
+
+    /// Truncated pseudo-inverse solution of `(N + mu I) x = b`.
+    fn solve(&self, b: &DVector<f64>, mu: f64, rank_rtol: f64) -> DVector<f64> {
+        let v = &self.eig.eigenvectors;
+        let mut x = DVector::zeros(b.len());
+        for k in 0..self.eig.eigenvalues.len() {
+            if self.is_null(k, rank_rtol) {
+                continue;
+            }
+            let coef = v.column(k).dot(b) / (self.eig.eigenvalues[k] + mu);
+            x.axpy(coef, &v.column(k), 1.0);
+        }
+        x
+    }
+}
+
+/// Solves `(N + mu I) x = b` by Cholesky; `None` when a pivot shows near-dependence.
+fn cholesky_step(n: &DMatrix<f64>, b: &DVector<f64>, mu: f64, rank_rtol: f64) -> Option<DVector<f64>> {
+    let mut m = n.clone();
+    for i in 0..m.nrows() {
+        m[(i, i)] += mu;
+    }
+    let chol = m.cholesky()?;
+    let l = chol.l_dirty();
+    // A unit-diagonal SPD matrix has lambda_min <= min pivot^2: a small pivot means a small sigma.
+    let min_pivot = (0..l.nrows()).map(|i| l[(i, i)]).fold(f64::INFINITY, f64::min);
+    if mu == 0.0 && min_pivot < rank_rtol * 1e2 {
+        return None;
+    }
+    Some(chol.solve(b))
+}
+
+/// Identifies the parameters of `set` from `obs`, starting at `start` (which also supplies every
+/// parameter outside the set).
+pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &FitOptions) -> Fit {
+    let p = set.len();
+    let mut st = KinState::default();
+    let mut cols = vec![Vector3::zeros(); p];
+    let mut rows = [vec![0.0; p], vec![0.0; p], vec![0.0; p]];
+    let mut lower = vec![0.0; p * p];
+    let mut x = set.pack(start);
+    let mut model = start.clone();
+    let scale_rms = 1.0 / ((3 * obs.len()).max(1) as f64).sqrt();
+
+    let mut mu = 0.0;
+    let mut nu = 2.0;
+    let mut iterations = 0;
+    let mut converged = false;
+    let mut last_normal = None;
+    let mut small_steps = 0;
+    while iterations < opts.max_iterations {
+        iterations += 1;
+        let ne = accumulate(&model, set, obs, &mut st, &mut cols, &mut rows, &mut lower);
+        if iterations == 1
+            && let Solver::LevenbergMarquardt { tau } = opts.solver
+        {
+            mu = tau * (0..p).map(|i| ne.n[(i, i)]).fold(0.0, f64::max);
+        }
+        let step_scaled = cholesky_step(&ne.n, &ne.b, mu, opts.rank_rtol)
+            .unwrap_or_else(|| Spectrum::new(&ne.n).solve(&ne.b, mu, opts.rank_rtol));
+        let step = step_scaled.zip_map(&ne.norms, |s, nrm| if nrm > 0.0 { s / nrm } else { 0.0 });
+        // RMS change of the predicted positions, from the linear model: |J dx| = |Js ds|.
+        let predicted = (step_scaled.dot(&(&ne.n * &step_scaled))).max(0.0).sqrt() * scale_rms;
+        let trial_x = &x + &step;
+        let trial = match set.unpack(start, trial_x.as_slice()) {
+            Ok(m) => m,
+            Err(_) => break,
+        };
+        let accept = match opts.solver {
+            Solver::GaussNewton => true,
+            Solver::LevenbergMarquardt { .. } => {
+                let new_cost = cost(&trial, obs, &mut st);
+                let gain = 2.0 * step_scaled.dot(&ne.b) - step_scaled.dot(&(&ne.n * &step_scaled));
+                let rho = if gain > 0.0 { (ne.cost - new_cost) / gain } else { -1.0 };
+                if rho > 0.0 {
+                    mu *= f64::max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0).powi(3));
+                    nu = 2.0;
+                    true
+                } else {
+                    mu *= nu;
+                    nu *= 2.0;
+                    false
+                }
+            }
+        };
+        let prev_cost = ne.cost;
+        last_normal = Some(ne);
+        if accept {
+            x = trial_x;
+            model = trial;
+        }
+        if accept && predicted < opts.step_tol_mm {
+            converged = true;
+            break;
+        }
+        if accept && predicted < 1e-6 {
+            small_steps += 1;
+            let new_cost = cost(&model, obs, &mut st);
+            if small_steps > 1 && (prev_cost - new_cost).abs() <= opts.cost_rtol * prev_cost.max(f64::MIN_POSITIVE) {
+                converged = true;
+                break;
+            }
+        }
+        if !accept && mu > 1e16 {
+            // Damping has run away: no step lowers the cost any more.
+            converged = true;
+            break;
+        }
+    }
+
+    let residual_rms_mm = (cost(&model, obs, &mut st) / obs.len().max(1) as f64).sqrt();
+    let Some(ne) = last_normal else {
+        return Fit {
+            outcome: FitOutcome::IterationCap { iterations },
+            model: Some(model),
+            values: x.iter().map(|v| Some(*v)).collect(),
+            iterations,
+            singular_values: vec![],
+            condition_number: f64::NAN,
+            residual_rms_mm,
+        };
+    };
+    let spectrum = Spectrum::new(&ne.n);
+    let singular_values = spectrum.singular_values();
+    let smin = singular_values.last().copied().unwrap_or(0.0);
+    let hidden = spectrum.unidentifiable(set, opts.rank_rtol);
+    let condition_number = if hidden.is_empty() && smin > 0.0 { spectrum.sigma_max / smin } else { f64::INFINITY };
+    if !hidden.is_empty() {
+        let names = set.names();
+        return Fit {
+            outcome: FitOutcome::RankDeficient { unidentifiable: hidden.iter().map(|&j| names[j].clone()).collect() },
+            model: None,
+            values: x.iter().enumerate().map(|(j, v)| (!hidden.contains(&j)).then_some(*v)).collect(),
+            iterations,
+            singular_values,
+            condition_number,
+            residual_rms_mm,
+        };
+    }
+    Fit {
+        outcome: if converged { FitOutcome::Converged { iterations } } else { FitOutcome::IterationCap { iterations } },
+        model: Some(model),
+        values: x.iter().map(|v| Some(*v)).collect(),
+        iterations,
+        singular_values,
+        condition_number,
+        residual_rms_mm,
+    }
+}
+
+/// Sum of squared position residuals of `model` over `obs`, mm^2.
+fn cost(model: &RobotModel, obs: &[Observation], st: &mut KinState) -> f64 {
+    obs.iter().map(|o| (o.tcp_world_mm - forward(model, st, &o.q)).norm_squared()).sum()
+}

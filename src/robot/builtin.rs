@@ -1,0 +1,130 @@
+//! Built-in robots: the ABB IRB 120 of the TriCal paper.
+//!
+//! Sources: the modified-DH table is Table 3 of the 2018 paper (d6 = 72 mm puts frame 6 on the
+//! flange); limits, masses and centres of mass are from `shared/reference/irb120.toml`, which cites
+//! the ROS-Industrial URDF for each (CAD estimates without the cable harness). The identified values
+//! are the means of the paper's Table 7.
+
+use nalgebra::Vector3;
+
+use super::model::{Inertial, JointLimit, Link, RobotData, RobotModel, XyzZyx};
+use super::params::{ParamId, ParamSet};
+
+/// Standard gravity used by the reference torque vectors, m/s^2 (irb120.toml `gravity_m_s2`).
+pub const GRAVITY_M_S2: f64 = 9.81;
+
+/// Link masses (kg) and centres of mass in MDH frame i (mm), irb120.toml `[[link]] mdh_com_mm`.
+/// Link 6's z is shifted by -72 mm: the file puts frame 6 at the wrist with d6 = 0 and the flange at
+/// Tz(72), Table 3 puts frame 6 on the flange with d6 = 72.
+const IRB120_INERTIALS: [(f64, [f64; 3]); 6] = [
+    (3.067, [0.098, -0.12, -51.59]),
+    (3.909, [101.24, 0.78, -2.12]),
+    (2.944, [57.91, 22.81, 1.06]),
+    (1.328, [0.41, -0.15, -77.3]),
+    (0.546, [0.062, -1.09, 0.037]),
+    (0.137, [0.001, -0.17, 64.94 - 72.0]),
+];
+
+/// Joint limits, deg (irb120.toml `q_min_deg`, `q_max_deg`, from the URDF).
+const IRB120_LIMITS_DEG: [(f64, f64); 6] = [(-165.0, 165.0), (-110.0, 110.0), (-110.0, 70.0), (-160.0, 160.0), (-120.0, 120.0), (-400.0, 400.0)];
+
+/// Table 3 of the 2018 paper: (alpha_{i-1} deg, a_{i-1} mm, d_i mm, theta_offs_i deg).
+const IRB120_MDH: [(f64, f64, f64, f64); 6] =
+    [(0.0, 0.0, 290.0, 0.0), (-90.0, 0.0, 0.0, -90.0), (0.0, 270.0, 0.0, 0.0), (-90.0, 70.0, 302.0, 0.0), (90.0, 0.0, 0.0, 0.0), (-90.0, 0.0, 72.0, 180.0)];
+
+/// The nominal IRB 120: Table 3, base frame = world frame, TCP on the flange, no payload.
+pub fn irb120() -> RobotModel {
+    let links = IRB120_MDH.map(|(alpha, a, d, off)| Link {
+        alpha: alpha.to_radians(),
+        a,
+        beta: 0.0,
+        theta_offset: off.to_radians(),
+        d,
+        compliance: 0.0,
+    });
+    let data = RobotData {
+        name: "ABB IRB 120-3/0.58".into(),
+        links,
+        world_from_base: XyzZyx::default(),
+        flange_tcp_mm: Vector3::zeros(),
+        limits: IRB120_LIMITS_DEG.map(|(lo, hi)| JointLimit { min: lo.to_radians(), max: hi.to_radians() }),
+        links_inertial: IRB120_INERTIALS.map(|(m, c)| Inertial { mass_kg: m, com_mm: Vector3::from(c) }),
+        payload: Inertial::NONE,
+        gravity_base: Vector3::new(0.0, 0.0, -GRAVITY_M_S2),
+    };
+    RobotModel::new(data).expect("the built-in IRB 120 is valid")
+}
+
+/// TCP of the TriCal device in the flange frame, mm. ASSUMED: the paper measures it on a CMM but
+/// does not print it. It is placed off the axis of joint 6 so that theta_offs6, which the paper
+/// identifies, moves the TCP (on the axis it would not).
+pub const TRICAL_TCP_MM: [f64; 3] = [35.0, 0.0, 125.0];
+
+/// Mass of the TriCal device (conical aluminium bracket, three ID-C112XB indicators with their
+/// U-WAVE-T transmitters), kg, and its centre of mass in the flange frame, mm. ASSUMED: the paper
+/// prints neither; the centre of mass is off the axis of joint 6, which is what gives c6 a torque
+/// to act on (the paper identifies c6 = -44.6 mdeg/(N m) with a 7 % spread).
+pub const TRICAL_PAYLOAD: (f64, [f64; 3]) = (1.0, [20.0, 0.0, 60.0]);
+
+/// `world_from_base` before calibration: the "Nominal" column of Table 7 (mm, deg).
+pub const TRICAL_NOMINAL_BASE: [f64; 6] = [160.211, -255.727, -220.548, 91.603, 0.496, -1.384];
+
+/// Table 7 means, in the units of [`ParamId::unit`] (mm, deg, mdeg/(N m)), in Table 7 order.
+pub const TABLE7_MEANS: [(&str, f64); 31] = [
+    ("alpha1", -90.034),
+    ("alpha2", -0.045),
+    ("alpha3", -90.011),
+    ("alpha4", 89.998),
+    ("alpha5", -89.990),
+    ("a1", 0.013),
+    ("a2", 270.146),
+    ("a3", 70.120),
+    ("a4", -0.075),
+    ("a5", -0.012),
+    ("d3", -0.094),
+    ("d4", 302.296),
+    ("d5", 0.019),
+    ("d6", 72.163),
+    ("theta_offs2", -89.910),
+    ("theta_offs3", 0.097),
+    ("theta_offs4", -0.013),
+    ("theta_offs5", 0.062),
+    ("theta_offs6", 180.259),
+    ("c2", -2.060),
+    ("c3", -5.522),
+    ("c4", -33.738),
+    ("c5", -30.448),
+    ("c6", -44.555),
+    ("beta2", 0.039),
+    ("x0W", 158.865),
+    ("y0W", -253.835),
+    ("z0W", -219.170),
+    ("alpha0W", 91.677),
+    ("beta0W", 0.148),
+    ("gamma0W", -1.380),
+];
+
+/// The IRB 120 as the controller believes it before calibration in the TriCal cell: Table 3, the
+/// nominal base of Table 7, the TriCal device as tool and payload (assumed values, see above).
+pub fn trical_2018_nominal() -> RobotModel {
+    irb120()
+        .edited(|d| {
+            let [x, y, z, a, b, g] = TRICAL_NOMINAL_BASE;
+            d.world_from_base = XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
+            d.flange_tcp_mm = Vector3::from(TRICAL_TCP_MM);
+            d.payload = Inertial { mass_kg: TRICAL_PAYLOAD.0, com_mm: Vector3::from(TRICAL_PAYLOAD.1) };
+        })
+        .expect("valid")
+}
+
+/// The IRB 120 the paper measured: [`trical_2018_nominal`] with the 31 parameters set to the
+/// Table 7 means (compliance included).
+pub fn trical_2018_table7() -> RobotModel {
+    let set = ParamSet::trical_31();
+    let values: Vec<f64> = TABLE7_MEANS
+        .iter()
+        .map(|(name, v)| ParamId::parse(name).expect("Table 7 names are valid").unit().to_internal(*v))
+        .collect();
+    debug_assert_eq!(set.names(), TABLE7_MEANS.iter().map(|(n, _)| n.to_string()).collect::<Vec<_>>());
+    set.unpack(&trical_2018_nominal(), &values).expect("valid")
+}

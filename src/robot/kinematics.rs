@@ -1,0 +1,256 @@
+//! Forward kinematics with gravity-induced joint compliance, and the analytic identification
+//! Jacobian of the TCP position in {W} with respect to any [`ParamSet`].
+//!
+//! Algorithms are free functions `f(&model, &mut state, q)`: the [`RobotModel`] is shared, the
+//! [`KinState`] is per-thread scratch that holds every frame of the last evaluation.
+//!
+//! The TCP position is `p = world_from_base * base_from_6(theta) * tcp`, with
+//! `theta = theta0 + c * tau(theta0)` and `theta0 = q + theta_offs` (paper eqs. 6-10, Table 5).
+
+use nalgebra::{Isometry3, Matrix3, Matrix3xX, Translation3, UnitQuaternion, Vector3};
+
+use super::model::{JOINTS, Joints, RobotModel};
+use super::params::{BaseParam, LinkParam, ParamId, ParamSet};
+use super::statics::{gravity_pass, torque_sensitivities};
+
+/// Per-evaluation scratch: the frames of the last forward pass, in the base frame {0}.
+///
+/// Index 0 is the base frame itself, index i is MDH frame i; frame 6 is the flange.
+#[derive(Clone, Debug)]
+pub struct KinState {
+    pub(crate) rot0: [Matrix3<f64>; JOINTS + 1],
+    pub(crate) org0: [Vector3<f64>; JOINTS + 1],
+    pub(crate) rot: [Matrix3<f64>; JOINTS + 1],
+    pub(crate) org: [Vector3<f64>; JOINTS + 1],
+    pub(crate) sincos0: [(f64, f64); JOINTS],
+    pub(crate) theta: Joints,
+    pub(crate) tau: Joints,
+    /// Mass moment of links k..6 plus payload, kg mm, at theta0.
+    pub(crate) moment: [Vector3<f64>; JOINTS + 1],
+    /// Mass of links k..6 plus payload, kg.
+    pub(crate) mass: [f64; JOINTS + 1],
+    pub(crate) tcp_base: Vector3<f64>,
+    pub(crate) tcp_world: Vector3<f64>,
+}
+
+impl Default for KinState {
+    fn default() -> Self {
+        Self {
+            rot0: [Matrix3::identity(); JOINTS + 1],
+            org0: [Vector3::zeros(); JOINTS + 1],
+            rot: [Matrix3::identity(); JOINTS + 1],
+            org: [Vector3::zeros(); JOINTS + 1],
+            sincos0: [(0.0, 1.0); JOINTS],
+            theta: [0.0; JOINTS],
+            tau: [0.0; JOINTS],
+            moment: [Vector3::zeros(); JOINTS + 1],
+            mass: [0.0; JOINTS + 1],
+            tcp_base: Vector3::zeros(),
+            tcp_world: Vector3::zeros(),
+        }
+    }
+}
+
+impl KinState {
+    /// Holding torques of the last evaluation, N m.
+    pub fn torques(&self) -> &Joints {
+        &self.tau
+    }
+
+    /// Joint angles of the last evaluation including offsets and deflections, rad.
+    pub fn theta(&self) -> &Joints {
+        &self.theta
+    }
+
+    /// TCP in {W} of the last evaluation, mm.
+    pub fn tcp_world(&self) -> Vector3<f64> {
+        self.tcp_world
+    }
+
+    /// `base_from_frame_i` of the last evaluation (i = 0..=6, deflected configuration), mm.
+    pub fn base_from_frame(&self, i: usize) -> Isometry3<f64> {
+        isometry(&self.rot[i], &self.org[i])
+    }
+}
+
+fn isometry(r: &Matrix3<f64>, p: &Vector3<f64>) -> Isometry3<f64> {
+    let rot = UnitQuaternion::from_matrix(r);
+    Isometry3::from_parts(Translation3::from(*p), rot)
+}
+
+/// Builds frames 1..=6 for MDH angles given by their sines and cosines.
+#[inline(always)]
+fn chain(model: &RobotModel, sc: &[(f64, f64); JOINTS], rot: &mut [Matrix3<f64>; JOINTS + 1], org: &mut [Vector3<f64>; JOINTS + 1]) {
+    for i in 1..=JOINTS {
+        let link = &model.data().links[i - 1];
+        let prev_r = rot[i - 1];
+        let p = prev_r * model.joint[i - 1].fixed;
+        let (s, c) = sc[i - 1];
+        let c0 = p.column(0) * c + p.column(1) * s;
+        let c1 = p.column(1) * c - p.column(0) * s;
+        let c2 = p.column(2).into_owned();
+        rot[i] = Matrix3::from_columns(&[c0, c1, c2]);
+        org[i] = org[i - 1] + prev_r.column(0) * link.a + c2 * link.d;
+    }
+}
+
+/// sin and cos of `theta0 + delta` from those of `theta0`; a short series for the small deflections.
+#[inline(always)]
+fn sincos_shifted((s0, c0): (f64, f64), delta: f64) -> (f64, f64) {
+    let (sd, cd) = if delta.abs() < 1e-3 {
+        // Truncation below 2e-21 for |delta| < 1e-3.
+        let d2 = delta * delta;
+        (delta * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0)), 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0))
+    } else {
+        delta.sin_cos()
+    };
+    (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
+}
+
+/// Forward kinematics with compliance: fills `st` and returns the TCP position in {W}, mm.
+pub fn forward(model: &RobotModel, st: &mut KinState, q: &Joints) -> Vector3<f64> {
+    let links = &model.data().links;
+    for i in 0..JOINTS {
+        st.sincos0[i] = (q[i] + links[i].theta_offset).sin_cos();
+    }
+    let sc0 = st.sincos0;
+    chain(model, &sc0, &mut st.rot0, &mut st.org0);
+    gravity_pass(model, st);
+    if model.rigid {
+        st.rot = st.rot0;
+        st.org = st.org0;
+        for i in 0..JOINTS {
+            st.theta[i] = q[i] + links[i].theta_offset;
+        }
+    } else {
+        let mut sc = [(0.0, 1.0); JOINTS];
+        for i in 0..JOINTS {
+            let delta = links[i].compliance * st.tau[i];
+            st.theta[i] = q[i] + links[i].theta_offset + delta;
+            sc[i] = sincos_shifted(sc0[i], delta);
+        }
+        chain(model, &sc, &mut st.rot, &mut st.org);
+    }
+    st.tcp_base = st.org[JOINTS] + st.rot[JOINTS] * model.data().flange_tcp_mm;
+    st.tcp_world = model.base_pos + model.base_rot * st.tcp_base;
+    st.tcp_world
+}
+
+/// TCP position in {W}, mm, with a scratch state of its own (convenience for non-hot code).
+pub fn tcp_world(model: &RobotModel, q: &Joints) -> Vector3<f64> {
+    forward(model, &mut KinState::default(), q)
+}
+
+/// `world_from_flange` at `q` (deflected configuration), mm.
+pub fn world_from_flange(model: &RobotModel, st: &mut KinState, q: &Joints) -> Isometry3<f64> {
+    forward(model, st, q);
+    let r = model.base_rot * st.rot[JOINTS];
+    let p = model.base_pos + model.base_rot * st.org[JOINTS];
+    isometry(&r, &p)
+}
+
+/// `world_from_base` of the model.
+pub fn world_from_base(model: &RobotModel) -> Isometry3<f64> {
+    isometry(&model.base_rot, &model.base_pos)
+}
+
+/// An infinitesimal motion of frames j..6 caused by one parameter, in {0}.
+#[derive(Clone, Copy)]
+enum Motion {
+    Rotation { axis: Vector3<f64>, point: Vector3<f64> },
+    Translation(Vector3<f64>),
+}
+
+impl Motion {
+    #[inline(always)]
+    fn of_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        match self {
+            Motion::Rotation { axis, point } => axis.cross(&(p - point)),
+            Motion::Translation(t) => *t,
+        }
+    }
+}
+
+/// The motion caused by a unit change of link parameter `kind` of joint `i`, in the frames `rot/org`.
+#[inline(always)]
+fn link_motion(model: &RobotModel, rot: &[Matrix3<f64>; JOINTS + 1], org: &[Vector3<f64>; JOINTS + 1], i: usize, kind: LinkParam) -> Option<Motion> {
+    let prev_x = rot[i - 1].column(0).into_owned();
+    Some(match kind {
+        LinkParam::Alpha => Motion::Rotation { axis: prev_x, point: org[i - 1] },
+        LinkParam::A => Motion::Translation(prev_x),
+        LinkParam::Beta => Motion::Rotation {
+            axis: rot[i - 1] * model.joint[i - 1].beta_axis,
+            point: org[i - 1] + prev_x * model.data().links[i - 1].a,
+        },
+        LinkParam::ThetaOffset => Motion::Rotation { axis: rot[i].column(2).into_owned(), point: org[i] },
+        LinkParam::D => Motion::Translation(rot[i].column(2).into_owned()),
+        LinkParam::Compliance => return None,
+    })
+}
+
+/// Identification Jacobian `d p_W / d rho` (3 x p, internal units) at `q` for the parameters in
+/// `set`, written column by column into `jac`; returns the TCP position in {W}, mm.
+///
+/// Every column is analytic, including the change of the gravity torques with the kinematic
+/// parameters (the compliance term `c_k d tau_k / d rho`).
+pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &ParamSet, jac: &mut [Vector3<f64>]) -> Vector3<f64> {
+    assert_eq!(jac.len(), set.len(), "one Jacobian column per parameter");
+    let pw = forward(model, st, q);
+    let p = st.tcp_base;
+    let links = &model.data().links;
+    // Position sensitivity of each joint angle (deflected frames).
+    let jt: [Vector3<f64>; JOINTS] = std::array::from_fn(|k| st.rot[k + 1].column(2).cross(&(p - st.org[k + 1])));
+    let (w, u) = torque_sensitivities(model, st);
+    let compliant = !model.rigid;
+
+    for (col, id) in jac.iter_mut().zip(set.ids()) {
+        *col = match *id {
+            ParamId::Link { joint: i, kind } => {
+                let mut dp = match link_motion(model, &st.rot, &st.org, i, kind) {
+                    Some(m) => m.of_point(&p),
+                    None => jt[i - 1] * st.tau[i - 1],
+                };
+                if compliant && let Some(m0) = link_motion(model, &st.rot0, &st.org0, i, kind) {
+                    // Motion of links i..6 at theta0 changes the holding torques of every joint.
+                    let (omega, dr) = match m0 {
+                        Motion::Rotation { axis, point } => (Some(axis), axis.cross(&(st.moment[i] - point * st.mass[i]))),
+                        Motion::Translation(t) => (None, t * st.mass[i]),
+                    };
+                    for k in 1..=JOINTS {
+                        let ck = links[k - 1].compliance;
+                        if ck == 0.0 {
+                            continue;
+                        }
+                        let dtau = if k >= i { omega.map_or(0.0, |o| o.dot(&w[k - 1])) } else { dr.dot(&u[k - 1]) };
+                        dp += jt[k - 1] * (ck * dtau);
+                    }
+                }
+                model.base_rot * dp
+            }
+            ParamId::Base(b) => {
+                let rel = pw - model.base_pos;
+                let f = &model.data().world_from_base;
+                match b {
+                    BaseParam::X => Vector3::x(),
+                    BaseParam::Y => Vector3::y(),
+                    BaseParam::Z => Vector3::z(),
+                    BaseParam::Alpha => Vector3::z().cross(&rel),
+                    BaseParam::Beta => {
+                        let (s, c) = f.alpha.sin_cos();
+                        Vector3::new(-s, c, 0.0).cross(&rel)
+                    }
+                    BaseParam::Gamma => model.base_rot.column(0).cross(&rel),
+                }
+            }
+            ParamId::Tool(k) => model.base_rot * st.rot[JOINTS].column(k),
+        };
+    }
+    pw
+}
+
+/// Convenience form of [`tcp_jacobian`] returning a fresh 3 x p matrix.
+pub fn tcp_jacobian_matrix(model: &RobotModel, q: &Joints, set: &ParamSet) -> (Vector3<f64>, Matrix3xX<f64>) {
+    let mut cols = vec![Vector3::zeros(); set.len()];
+    let p = tcp_jacobian(model, &mut KinState::default(), q, set, &mut cols);
+    (p, Matrix3xX::from_columns(&cols))
+}

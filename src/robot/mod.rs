@@ -1,0 +1,14 @@
+//! The virtual robot: model data, named parameters, kinematics, statics and built-in robots.
+
+pub mod builtin;
+pub mod kinematics;
+pub mod model;
+pub mod params;
+pub mod statics;
+pub mod truth;
+
+pub use kinematics::{KinState, forward, tcp_jacobian, tcp_jacobian_matrix, tcp_world, world_from_base, world_from_flange};
+pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx};
+pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
+pub use statics::gravity_torques;
+pub use truth::{DeviationSpec, deviate};
