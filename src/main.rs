@@ -1,1 +1,7 @@
-fn main() {}
+//! The `calsim` command line.
+
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    calsim::cli::main()
+}

@@ -45,10 +45,11 @@ pub struct FitOptions {
     pub solver: Solver,
     /// Iteration cap (Jacobian evaluations).
     pub max_iterations: usize,
-    /// Converged when a step changes the predicted positions by less than this RMS, mm.
+    /// Converged when an accepted step changes the predicted positions by less than this RMS, mm.
+    /// Gauss-Newton converges quadratically here, so what remains after such a step is orders of
+    /// magnitude smaller still.
     pub step_tol_mm: f64,
-    /// Converged when a step lowers the cost by less than this fraction of it (after at least
-    /// one step that changed the predictions by less than 1e-6 mm).
+    /// Converged when an accepted step changes the cost by less than this fraction of it.
     pub cost_rtol: f64,
     /// Singular values of the column-scaled Jacobian below `rank_rtol * sigma_max` count as zero.
     /// Through the Gram matrix, values below about 1e-7 are not resolved: keep this above that.
@@ -57,7 +58,7 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { solver: Solver::GaussNewton, max_iterations: 50, step_tol_mm: 1e-9, cost_rtol: 1e-14, rank_rtol: 1e-6 }
+        Self { solver: Solver::GaussNewton, max_iterations: 50, step_tol_mm: 1e-6, cost_rtol: 1e-12, rank_rtol: 1e-6 }
     }
 }
 
@@ -110,11 +111,22 @@ pub struct Fit {
     pub condition_number: f64,
     /// Root mean square of the position residual norms at the returned values, mm.
     pub residual_rms_mm: f64,
+    /// Cost and step of every iteration.
+    pub history: Vec<Iteration>,
+}
+
+/// One iteration of an identification.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Iteration {
+    /// Sum of squared position residuals at the iterate, mm^2.
+    pub cost_mm2: f64,
+    /// RMS change of the predicted positions by the step taken from it, mm.
+    pub step_rms_mm: f64,
 }
 
 /// Normal equations of one iterate, column-scaled.
 struct Normal {
-    /// Scaled `J^T J` (unit diagonal where the column is non-zero), full symmetric.
+    /// Scaled `J^T J` (unit diagonal where the column is non-zero).
     n: DMatrix<f64>,
     /// Scaled `J^T r`.
     b: DVector<f64>,
@@ -124,37 +136,50 @@ struct Normal {
     cost: f64,
 }
 
-fn accumulate(model: &RobotModel, set: &ParamSet, obs: &[Observation], st: &mut KinState, cols: &mut [Vector3<f64>], rows: &mut [Vec<f64>; 3], lower: &mut [f64]) -> Normal {
-    let p = set.len();
-    lower.fill(0.0);
-    let mut b = DVector::zeros(p);
-    let mut cost = 0.0;
-    for o in obs {
-        let pw = tcp_jacobian(model, st, &o.q, set, cols);
-        let r = o.tcp_world_mm - pw;
-        cost += r.norm_squared();
-        for (a, c) in cols.iter().enumerate() {
-            rows[0][a] = c.x;
-            rows[1][a] = c.y;
-            rows[2][a] = c.z;
-            b[a] += c.dot(&r);
+/// Scratch of one identification, allocated once.
+struct Workspace {
+    st: KinState,
+    cols: Vec<Vector3<f64>>,
+    /// Transposed stacked Jacobian, p x 3n.
+    jt: DMatrix<f64>,
+    /// Stacked residuals, 3n.
+    r: DVector<f64>,
+    /// Unscaled normal matrix, p x p.
+    n: DMatrix<f64>,
+}
+
+impl Workspace {
+    fn new(p: usize, configurations: usize) -> Self {
+        Self {
+            st: KinState::default(),
+            cols: vec![Vector3::zeros(); p],
+            jt: DMatrix::zeros(p, 3 * configurations),
+            r: DVector::zeros(3 * configurations),
+            n: DMatrix::zeros(p, p),
         }
-        let [r0, r1, r2] = &*rows;
-        // Rank-3 update of the lower triangle, row by row (contiguous, vectorises).
-        for a in 0..p {
-            let (x0, x1, x2) = (r0[a], r1[a], r2[a]);
-            let row = &mut lower[a * p..a * p + a + 1];
-            for (c, v) in row.iter_mut().enumerate() {
-                *v += x0 * r0[c] + x1 * r1[c] + x2 * r2[c];
+    }
+}
+
+fn accumulate(model: &RobotModel, set: &ParamSet, obs: &[Observation], ws: &mut Workspace) -> Normal {
+    let p = set.len();
+    for (i, o) in obs.iter().enumerate() {
+        let pw = tcp_jacobian(model, &mut ws.st, &o.q, set, &mut ws.cols);
+        let r = o.tcp_world_mm - pw;
+        for c in 0..3 {
+            ws.r[3 * i + c] = r[c];
+            for (a, col) in ws.cols.iter().enumerate() {
+                ws.jt[(a, 3 * i + c)] = col[c];
             }
         }
     }
-    let norms = DVector::from_fn(p, |j, _| lower[j * p + j].sqrt());
+    // N = J^T J by one GEMM (nalgebra hands it to matrixmultiply's vectorised kernels).
+    let j = ws.jt.transpose();
+    ws.n.gemm(1.0, &ws.jt, &j, 0.0);
+    let b = &ws.jt * &ws.r;
+    let cost = ws.r.norm_squared();
+    let norms = DVector::from_fn(p, |j, _| ws.n[(j, j)].sqrt());
     let inv = norms.map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
-    let n = DMatrix::from_fn(p, p, |i, j| {
-        let (a, c) = if i >= j { (i, j) } else { (j, i) };
-        lower[a * p + c] * inv[i] * inv[j]
-    });
+    let n = DMatrix::from_fn(p, p, |i, j| ws.n[(i, j)] * inv[i] * inv[j]);
     let b = b.component_mul(&inv);
     Normal { n, b, norms, cost }
 }
@@ -170,12 +195,6 @@ impl Spectrum {
         let eig = SymmetricEigen::new(n.clone());
         let sigma_max = eig.eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l)).max(0.0).sqrt();
         Self { eig, sigma_max }
-    }
-
-    fn singular_values(&self) -> Vec<f64> {
-        let mut s: Vec<f64> = self.eig.eigenvalues.iter().map(|l| l.max(0.0).sqrt()).collect();
-        s.sort_by(|a, b| b.total_cmp(a));
-        s
     }
 
     fn is_null(&self, k: usize, rank_rtol: f64) -> bool {
@@ -237,10 +256,7 @@ fn cholesky_step(n: &DMatrix<f64>, b: &DVector<f64>, mu: f64, rank_rtol: f64) ->
 /// parameter outside the set).
 pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &FitOptions) -> Fit {
     let p = set.len();
-    let mut st = KinState::default();
-    let mut cols = vec![Vector3::zeros(); p];
-    let mut rows = [vec![0.0; p], vec![0.0; p], vec![0.0; p]];
-    let mut lower = vec![0.0; p * p];
+    let mut ws = Workspace::new(p, obs.len());
     let mut x = set.pack(start);
     let mut model = start.clone();
     let scale_rms = 1.0 / ((3 * obs.len()).max(1) as f64).sqrt();
@@ -249,11 +265,21 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     let mut nu = 2.0;
     let mut iterations = 0;
     let mut converged = false;
-    let mut last_normal = None;
-    let mut small_steps = 0;
+    let mut last_normal: Option<Normal> = None;
+    let mut history = Vec::new();
+    let mut accepted_cost: Option<f64> = None;
     while iterations < opts.max_iterations {
         iterations += 1;
-        let ne = accumulate(&model, set, obs, &mut st, &mut cols, &mut rows, &mut lower);
+        let ne = accumulate(&model, set, obs, &mut ws);
+        if let Some(prev) = accepted_cost
+            && (prev - ne.cost).abs() <= opts.cost_rtol * prev
+        {
+            // The last accepted step no longer changes the cost: this iterate is the solution.
+            converged = true;
+            history.push(Iteration { cost_mm2: ne.cost, step_rms_mm: 0.0 });
+            last_normal = Some(ne);
+            break;
+        }
         if iterations == 1
             && let Solver::LevenbergMarquardt { tau } = opts.solver
         {
@@ -264,54 +290,42 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
         let step = step_scaled.zip_map(&ne.norms, |s, nrm| if nrm > 0.0 { s / nrm } else { 0.0 });
         // RMS change of the predicted positions, from the linear model: |J dx| = |Js ds|.
         let predicted = (step_scaled.dot(&(&ne.n * &step_scaled))).max(0.0).sqrt() * scale_rms;
+        history.push(Iteration { cost_mm2: ne.cost, step_rms_mm: predicted });
         let trial_x = &x + &step;
-        let trial = match set.unpack(start, trial_x.as_slice()) {
-            Ok(m) => m,
-            Err(_) => break,
-        };
+        let Ok(trial) = set.unpack(start, trial_x.as_slice()) else { break };
         let accept = match opts.solver {
             Solver::GaussNewton => true,
             Solver::LevenbergMarquardt { .. } => {
-                let new_cost = cost(&trial, obs, &mut st);
+                let new_cost = cost(&trial, obs, &mut ws.st);
                 let gain = 2.0 * step_scaled.dot(&ne.b) - step_scaled.dot(&(&ne.n * &step_scaled));
                 let rho = if gain > 0.0 { (ne.cost - new_cost) / gain } else { -1.0 };
                 if rho > 0.0 {
                     mu *= f64::max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0).powi(3));
                     nu = 2.0;
-                    true
                 } else {
                     mu *= nu;
                     nu *= 2.0;
-                    false
                 }
+                rho > 0.0
             }
         };
-        let prev_cost = ne.cost;
+        accepted_cost = accept.then_some(ne.cost);
         last_normal = Some(ne);
         if accept {
             x = trial_x;
             model = trial;
-        }
-        if accept && predicted < opts.step_tol_mm {
-            converged = true;
-            break;
-        }
-        if accept && predicted < 1e-6 {
-            small_steps += 1;
-            let new_cost = cost(&model, obs, &mut st);
-            if small_steps > 1 && (prev_cost - new_cost).abs() <= opts.cost_rtol * prev_cost.max(f64::MIN_POSITIVE) {
+            if predicted < opts.step_tol_mm {
                 converged = true;
                 break;
             }
-        }
-        if !accept && mu > 1e16 {
+        } else if mu > 1e16 {
             // Damping has run away: no step lowers the cost any more.
             converged = true;
             break;
         }
     }
 
-    let residual_rms_mm = (cost(&model, obs, &mut st) / obs.len().max(1) as f64).sqrt();
+    let residual_rms_mm = (cost(&model, obs, &mut ws.st) / obs.len().max(1) as f64).sqrt();
     let Some(ne) = last_normal else {
         return Fit {
             outcome: FitOutcome::IterationCap { iterations },
@@ -321,13 +335,16 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
             singular_values: vec![],
             condition_number: f64::NAN,
             residual_rms_mm,
+            history,
         };
     };
-    let spectrum = Spectrum::new(&ne.n);
-    let singular_values = spectrum.singular_values();
+    let mut singular_values: Vec<f64> = ne.n.clone().symmetric_eigenvalues().iter().map(|l| l.max(0.0).sqrt()).collect();
+    singular_values.sort_by(|a, b| b.total_cmp(a));
+    let smax = singular_values.first().copied().unwrap_or(0.0);
     let smin = singular_values.last().copied().unwrap_or(0.0);
-    let hidden = spectrum.unidentifiable(set, opts.rank_rtol);
-    let condition_number = if hidden.is_empty() && smin > 0.0 { spectrum.sigma_max / smin } else { f64::INFINITY };
+    // Eigenvectors only when some singular value is numerically zero: they name the parameters.
+    let hidden = if smin < opts.rank_rtol * smax || smax == 0.0 { Spectrum::new(&ne.n).unidentifiable(set, opts.rank_rtol) } else { Vec::new() };
+    let condition_number = if hidden.is_empty() && smin > 0.0 { smax / smin } else { f64::INFINITY };
     if !hidden.is_empty() {
         let names = set.names();
         return Fit {
@@ -338,6 +355,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
             singular_values,
             condition_number,
             residual_rms_mm,
+            history,
         };
     }
     Fit {
@@ -348,6 +366,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
         singular_values,
         condition_number,
         residual_rms_mm,
+        history,
     }
 }
 

@@ -2,4 +2,4 @@
 
 pub mod least_squares;
 
-pub use least_squares::{Fit, FitOptions, FitOutcome, Observation, Solver, identify};
+pub use least_squares::{Fit, FitOptions, FitOutcome, Iteration, Observation, Solver, identify};

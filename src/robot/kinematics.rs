@@ -202,6 +202,22 @@ pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &Par
     let jt: [Vector3<f64>; JOINTS] = std::array::from_fn(|k| st.rot[k + 1].column(2).cross(&(p - st.org[k + 1])));
     let (w, u) = torque_sensitivities(model, st);
     let compliant = !model.rigid;
+    // The compliance term of a column is sum_k c_k (d tau_k / d rho) jt_k. A rigid rotation `omega`
+    // of links i..6 changes tau_k by omega . w_k for k >= i, and a displacement `dr` of their mass
+    // moment changes tau_k by dr . u_k for k < i: so the term is W_i omega + U_i dr, with the
+    // suffix sums W_i = sum_{k>=i} c_k jt_k w_k^T and prefix sums U_i = sum_{k<i} c_k jt_k u_k^T.
+    let mut w_suffix = [Matrix3::zeros(); JOINTS + 2];
+    let mut u_prefix = [Matrix3::zeros(); JOINTS + 2];
+    if compliant {
+        for k in (1..=JOINTS).rev() {
+            let cj = jt[k - 1] * links[k - 1].compliance;
+            w_suffix[k] = w_suffix[k + 1] + cj * w[k - 1].transpose();
+        }
+        for k in 1..=JOINTS {
+            let cj = jt[k - 1] * links[k - 1].compliance;
+            u_prefix[k + 1] = u_prefix[k] + cj * u[k - 1].transpose();
+        }
+    }
 
     for (col, id) in jac.iter_mut().zip(set.ids()) {
         *col = match *id {
@@ -211,19 +227,12 @@ pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &Par
                     None => jt[i - 1] * st.tau[i - 1],
                 };
                 if compliant && let Some(m0) = link_motion(model, &st.rot0, &st.org0, i, kind) {
-                    // Motion of links i..6 at theta0 changes the holding torques of every joint.
-                    let (omega, dr) = match m0 {
-                        Motion::Rotation { axis, point } => (Some(axis), axis.cross(&(st.moment[i] - point * st.mass[i]))),
-                        Motion::Translation(t) => (None, t * st.mass[i]),
-                    };
-                    for k in 1..=JOINTS {
-                        let ck = links[k - 1].compliance;
-                        if ck == 0.0 {
-                            continue;
+                    dp += match m0 {
+                        Motion::Rotation { axis, point } => {
+                            w_suffix[i] * axis + u_prefix[i] * axis.cross(&(st.moment[i] - point * st.mass[i]))
                         }
-                        let dtau = if k >= i { omega.map_or(0.0, |o| o.dot(&w[k - 1])) } else { dr.dot(&u[k - 1]) };
-                        dp += jt[k - 1] * (ck * dtau);
-                    }
+                        Motion::Translation(t) => u_prefix[i] * (t * st.mass[i]),
+                    };
                 }
                 model.base_rot * dp
             }

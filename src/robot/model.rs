@@ -215,42 +215,41 @@ impl RobotModel {
 }
 
 fn validate(d: &RobotData) -> Result<(), ModelError> {
-    let finite = |field: String, value: f64| {
-        if value.is_finite() { Ok(()) } else { Err(ModelError::NotFinite { field, value }) }
+    // Field names are formatted only on failure: models are rebuilt at every identification step.
+    let finite = |field: &dyn Fn() -> String, value: f64| {
+        if value.is_finite() { Ok(()) } else { Err(ModelError::NotFinite { field: field(), value }) }
     };
     for (i, l) in d.links.iter().enumerate() {
         let j = i + 1;
-        finite(format!("joint {j} alpha"), l.alpha)?;
-        finite(format!("joint {j} a"), l.a)?;
-        finite(format!("joint {j} beta"), l.beta)?;
-        finite(format!("joint {j} theta_offset"), l.theta_offset)?;
-        finite(format!("joint {j} d"), l.d)?;
-        finite(format!("joint {j} compliance"), l.compliance)?;
+        let named = [("alpha", l.alpha), ("a", l.a), ("beta", l.beta), ("theta_offset", l.theta_offset), ("d", l.d), ("compliance", l.compliance)];
+        for (name, v) in named {
+            finite(&|| format!("joint {j} {name}"), v)?;
+        }
     }
     let b = &d.world_from_base;
     for (name, v) in [("x", b.x), ("y", b.y), ("z", b.z), ("alpha", b.alpha), ("beta", b.beta), ("gamma", b.gamma)] {
-        finite(format!("world_from_base {name}"), v)?;
+        finite(&|| format!("world_from_base {name}"), v)?;
     }
     for k in 0..3 {
-        finite(format!("flange_tcp_mm[{k}]"), d.flange_tcp_mm[k])?;
-        finite(format!("gravity_base[{k}]"), d.gravity_base[k])?;
-        finite(format!("payload com_mm[{k}]"), d.payload.com_mm[k])?;
+        finite(&|| format!("flange_tcp_mm[{k}]"), d.flange_tcp_mm[k])?;
+        finite(&|| format!("gravity_base[{k}]"), d.gravity_base[k])?;
     }
     for (i, lim) in d.limits.iter().enumerate() {
-        finite(format!("joint {} limit min", i + 1), lim.min)?;
-        finite(format!("joint {} limit max", i + 1), lim.max)?;
+        finite(&|| format!("joint {} limit min", i + 1), lim.min)?;
+        finite(&|| format!("joint {} limit max", i + 1), lim.max)?;
         if lim.min >= lim.max {
             return Err(ModelError::EmptyRange { joint: i + 1, min: lim.min, max: lim.max });
         }
     }
-    let masses = d.links_inertial.iter().enumerate().map(|(i, b)| (format!("link {} mass", i + 1), b));
-    for (field, body) in masses.chain(std::iter::once(("payload mass".to_string(), &d.payload))) {
-        finite(field.clone(), body.mass_kg)?;
+    let bodies = d.links_inertial.iter().enumerate().map(|(i, b)| (Some(i + 1), b)).chain(std::iter::once((None, &d.payload)));
+    for (link, body) in bodies {
+        let field = || link.map_or_else(|| "payload".to_string(), |i| format!("link {i}"));
+        finite(&|| format!("{} mass", field()), body.mass_kg)?;
         if body.mass_kg < 0.0 {
-            return Err(ModelError::NegativeMass { field, value: body.mass_kg });
+            return Err(ModelError::NegativeMass { field: format!("{} mass", field()), value: body.mass_kg });
         }
         for k in 0..3 {
-            finite(format!("{field} com_mm[{k}]"), body.com_mm[k])?;
+            finite(&|| format!("{} com_mm[{k}]", field()), body.com_mm[k])?;
         }
     }
     Ok(())

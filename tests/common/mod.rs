@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
-use calsim::robot::{JOINTS, Joints, RobotModel};
-use rand::{RngExt, SeedableRng};
+use calsim::robot::{Joints, RobotModel};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 /// `shared/reference/<name>`, beside the clone.
@@ -19,14 +19,5 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 
 /// `n` random configurations inside the joint limits (10 % margin each side; joint 6 within +-180 deg).
 pub fn random_configs(model: &RobotModel, n: usize, rng: &mut ChaCha8Rng) -> Vec<Joints> {
-    (0..n)
-        .map(|_| {
-            std::array::from_fn::<f64, JOINTS, _>(|i| {
-                let l = model.limits()[i];
-                let (lo, hi) = if i == 5 { (-std::f64::consts::PI, std::f64::consts::PI) } else { (l.min, l.max) };
-                let m = 0.1 * (hi - lo);
-                rng.random_range(lo + m..hi - m)
-            })
-        })
-        .collect()
+    (0..n).map(|_| calsim::campaign::uniform_configuration(model, 0.1, rng)).collect()
 }
