@@ -1,6 +1,7 @@
 //! The virtual robot: model data, named parameters, kinematics, statics and built-in robots.
 
 pub mod builtin;
+pub mod ik;
 pub mod kinematics;
 pub mod model;
 pub mod params;
@@ -12,3 +13,4 @@ pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotDat
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use statics::gravity_torques;
 pub use truth::{DeviationSpec, deviate};
+pub use ik::{IkError, inverse};

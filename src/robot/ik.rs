@@ -1,0 +1,183 @@
+//! Inverse kinematics of the model a controller believes: the closed form of the nominal
+//! spherical wrist (every solution), then Newton refinement on the full model (identified
+//! parameters, Hayati beta, compliance).
+//!
+//! Closed form, from Table 3 with `theta2 = q2 - 90 deg`: the wrist centre in the arm plane is
+//! `r = a2 sin q2 + L sin(q2 + q3 + phi)`, `h = a2 cos q2 + L cos(q2 + q3 + phi)` above the shoulder,
+//! with `L = hypot(a3, d4)` and `phi = atan2(d4, a3)`; the wrist is `R_36 = Rx(-90) Rz(q4) Ry(-q5) Rz(q6 + 180)`.
+//!
+//! Choice among solutions: the one within the joint limits closest to the seed (Euclidean in joint
+//! space, joint 6 unwrapped to the seed's turn).
+
+use std::f64::consts::PI;
+
+use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
+
+use super::kinematics::{KinState, forward};
+use super::model::{JOINTS, Joints, RobotModel};
+
+/// Why no configuration was returned.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IkError {
+    /// The wrist centre is out of the arm's reach.
+    #[error("target out of reach")]
+    Unreachable,
+    /// Every solution violates a joint limit.
+    #[error("every solution violates a joint limit")]
+    Limits,
+    /// Newton refinement on the full model did not converge.
+    #[error("refinement did not converge (residual {residual_mm:e} mm)")]
+    NoConvergence {
+        /// Position residual at the last iterate, mm.
+        residual_mm: f64,
+    },
+}
+
+/// Closed-form solutions of the *nominal* geometry of `model` (its a2, a3, d1, d4, d6 and the
+/// Table 3 twists; every other parameter taken as zero) for `base_from_flange`.
+pub fn closed_form(model: &RobotModel, base_from_flange: &Isometry3<f64>) -> Vec<Joints> {
+    let l = model.links();
+    let (d1, a2, a3, d4, d6) = (l[0].d, l[2].a, l[3].a, l[3].d, l[5].d);
+    let r06 = base_from_flange.rotation.to_rotation_matrix().into_inner();
+    let wc = base_from_flange.translation.vector - r06.column(2) * d6;
+    let len = a3.hypot(d4);
+    let phi = d4.atan2(a3);
+    let mut out = Vec::with_capacity(8);
+    let rho = wc.x.hypot(wc.y);
+    let h = wc.z - d1;
+    for (q1, r) in [(wc.y.atan2(wc.x), rho), (wc.y.atan2(wc.x) + PI, -rho)] {
+        let c = (r * r + h * h - a2 * a2 - len * len) / (2.0 * a2 * len);
+        // Slightly past full stretch for the nominal geometry can still be inside the reach of the
+        // full model: clamp, and let the refinement decide.
+        if c.abs() > 1.0 + 1e-3 {
+            continue;
+        }
+        let c = c.clamp(-1.0, 1.0);
+        for elbow in [1.0, -1.0] {
+            let psi = elbow * c.acos(); // q3 + phi
+            let q3 = psi - phi;
+            let q2 = r.atan2(h) - (len * psi.sin()).atan2(a2 + len * psi.cos());
+            let q = [wrap(q1), wrap(q2), wrap(q3), 0.0, 0.0, 0.0];
+            let r03 = arm_rotation(model, &q);
+            let m = rx(PI / 2.0) * r03.transpose() * r06; // Rz(q4) Ry(-q5) Rz(theta6)
+            let b = m[(0, 2)].hypot(m[(1, 2)]).atan2(m[(2, 2)]);
+            for (b, flip) in [(b, 0.0), (-b, PI)] {
+                let (a, cc) = if b.abs() < 1e-12 {
+                    // Wrist singularity: only q4 + theta6 is defined; keep q4 = 0.
+                    (0.0, m[(1, 0)].atan2(m[(0, 0)]))
+                } else {
+                    (m[(1, 2)].atan2(m[(0, 2)]) + flip, m[(2, 1)].atan2(-m[(2, 0)]) + flip)
+                };
+                out.push([q[0], q[1], q[2], wrap(a), wrap(-b), wrap(cc - l[5].theta_offset)]);
+            }
+        }
+    }
+    out
+}
+
+fn rx(a: f64) -> Matrix3<f64> {
+    Rotation3::from_axis_angle(&Vector3::x_axis(), a).into_inner()
+}
+
+fn wrap(a: f64) -> f64 {
+    let mut x = (a + PI).rem_euclid(2.0 * PI) - PI;
+    if x <= -PI {
+        x += 2.0 * PI;
+    }
+    x
+}
+
+/// Rotation of frame 3 in the base frame for the nominal Table 3 twists and offsets.
+fn arm_rotation(model: &RobotModel, q: &Joints) -> Matrix3<f64> {
+    let l = model.links();
+    let rz = |t: f64| Rotation3::from_axis_angle(&Vector3::z_axis(), t).into_inner();
+    rz(q[0] + l[0].theta_offset) * rx(-PI / 2.0) * rz(q[1] + l[1].theta_offset) * rz(q[2] + l[2].theta_offset)
+}
+
+/// Moves joint 6 by whole turns to the value nearest `seed6` within the limits.
+fn unwrap_joint6(model: &RobotModel, q6: f64, seed6: f64) -> f64 {
+    let lim = model.limits()[5];
+    let turns = ((seed6 - q6) / (2.0 * PI)).round();
+    let mut best = q6 + turns * 2.0 * PI;
+    for k in [-1.0, 1.0] {
+        let cand = q6 + (turns + k) * 2.0 * PI;
+        if (best < lim.min || best > lim.max) && cand >= lim.min && cand <= lim.max {
+            best = cand;
+        }
+    }
+    best
+}
+
+/// `base_from_flange` for a TCP pose in {W}: `world_from_tcp` with the TCP frame parallel to the
+/// flange frame (calsim's tools are position-only; the TCP frame carries the flange orientation).
+pub fn base_from_flange_for_tcp(model: &RobotModel, world_from_tcp: &Isometry3<f64>) -> Isometry3<f64> {
+    let world_from_base = super::kinematics::world_from_base(model);
+    let base_from_tcp = world_from_base.inverse() * world_from_tcp;
+    let r = base_from_tcp.rotation;
+    Isometry3::from_parts((base_from_tcp.translation.vector - r * model.data().flange_tcp_mm).into(), r)
+}
+
+/// Joint values that put the TCP of `model` at `world_from_tcp` (position and flange orientation),
+/// nearest `seed` among the closed-form branches, refined by Newton's method on the full model.
+pub fn inverse(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joints) -> Result<Joints, IkError> {
+    let target_flange = base_from_flange_for_tcp(model, world_from_tcp);
+    let mut candidates = closed_form(model, &target_flange);
+    if candidates.is_empty() {
+        return Err(IkError::Unreachable);
+    }
+    for q in &mut candidates {
+        q[5] = unwrap_joint6(model, q[5], seed[5]);
+    }
+    candidates.sort_by(|a, b| distance(a, seed).total_cmp(&distance(b, seed)));
+    let mut last = IkError::Limits;
+    for q0 in candidates.iter().filter(|q| model.within_limits(q)) {
+        match refine(model, world_from_tcp, q0) {
+            Ok(q) if model.within_limits(&q) => return Ok(q),
+            Ok(_) => {}
+            Err(e) => last = e,
+        }
+    }
+    Err(last)
+}
+
+fn distance(a: &Joints, b: &Joints) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
+}
+
+/// Newton's method on the full model from `q0`: TCP position and flange orientation, with the
+/// geometric Jacobian of the deflected configuration (the compliance term dtau/dq is left out of
+/// the Jacobian, which only slows convergence by a factor of order c * dtau/dq ~ 1e-3).
+pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
+    let mut st = KinState::default();
+    let mut q = *q0;
+    let rb = super::kinematics::world_from_base(model).rotation.to_rotation_matrix().into_inner();
+    let target_p = world_from_tcp.translation.vector;
+    let target_r = world_from_tcp.rotation.to_rotation_matrix().into_inner();
+    let mut residual = f64::INFINITY;
+    for _ in 0..60 {
+        let p = forward(model, &mut st, &q);
+        let r = rb * st.rot[JOINTS];
+        let dp = target_p - p;
+        // Orientation error as a rotation vector (first order), robust near the identity.
+        let dr = (0..3).map(|k| r.column(k).cross(&target_r.column(k))).fold(Vector3::zeros(), |a, v| a + v) * 0.5;
+        residual = dp.norm();
+        if residual < 1e-11 && dr.norm() < 1e-13 {
+            return Ok(q);
+        }
+        let tcp = st.tcp_base;
+        let mut jac = Matrix6::zeros();
+        for k in 0..JOINTS {
+            let z = st.rot[k + 1].column(2).into_owned();
+            let v = rb * z.cross(&(tcp - st.org[k + 1]));
+            let w = rb * z;
+            jac.fixed_view_mut::<3, 1>(0, k).copy_from(&v);
+            jac.fixed_view_mut::<3, 1>(3, k).copy_from(&w);
+        }
+        let rhs = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
+        let Some(step) = jac.lu().solve(&rhs) else { break };
+        for k in 0..JOINTS {
+            q[k] += step[k];
+        }
+    }
+    Err(IkError::NoConvergence { residual_mm: residual })
+}

@@ -1,0 +1,55 @@
+//! The controller's inverse kinematics: closed form of the nominal wrist, Newton on the full model.
+
+mod common;
+
+use calsim::robot::builtin::{irb120, trical_2018_nominal, trical_2018_table7};
+use calsim::robot::ik::{base_from_flange_for_tcp, closed_form};
+use calsim::robot::{KinState, RobotModel, inverse, world_from_flange};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+fn world_from_tcp(model: &RobotModel, q: &[f64; 6]) -> Isometry3<f64> {
+    let mut st = KinState::default();
+    let f = world_from_flange(model, &mut st, q);
+    Isometry3::from_parts(Translation3::from(st.tcp_world()), f.rotation)
+}
+
+#[test]
+fn closed_form_returns_the_configuration_among_its_eight_solutions() {
+    let model = irb120();
+    let mut rng = common::rng(4);
+    for q in common::random_configs(&model, 200, &mut rng) {
+        let target = world_from_flange(&model, &mut KinState::default(), &q);
+        let sols = closed_form(&model, &base_from_flange_for_tcp(&model, &target));
+        assert!(sols.len() >= 4, "{} solutions", sols.len());
+        let best = sols.iter().map(|s| s.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)).fold(f64::INFINITY, f64::min);
+        assert!(best < 1e-9, "q = {q:?}: nearest solution off by {best:e} rad");
+    }
+}
+
+#[test]
+fn ik_round_trip_is_within_1e9_mm_on_nominal_and_perturbed_models() {
+    for model in [trical_2018_nominal(), trical_2018_table7()] {
+        let mut rng = common::rng(5);
+        let mut worst = 0.0_f64;
+        for q in common::random_configs(&model, 200, &mut rng) {
+            let target = world_from_tcp(&model, &q);
+            // Seed away from the answer: IK must find the branch and refine it.
+            let seed = q.map(|v| v + 0.2);
+            let sol = inverse(&model, &target, &seed).expect("reachable");
+            let back = world_from_tcp(&model, &sol);
+            let dp = (back.translation.vector - target.translation.vector).norm();
+            let dr = back.rotation.angle_to(&target.rotation);
+            worst = worst.max(dp);
+            assert!(dp < 1e-9 && dr < 1e-9, "position {dp:e} mm, rotation {dr:e} rad");
+            assert!(model.within_limits(&sol));
+        }
+        eprintln!("{}: worst round trip {worst:e} mm", model.name());
+    }
+}
+
+#[test]
+fn unreachable_targets_are_an_error() {
+    let model = irb120();
+    let far = Isometry3::from_parts(Translation3::new(2000.0, 0.0, 300.0), UnitQuaternion::identity());
+    assert!(inverse(&model, &far, &[0.0; 6]).is_err());
+}
