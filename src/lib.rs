@@ -1,6 +1,9 @@
 #![doc = include_str!("../README.md")]
 
 pub mod campaign;
+pub mod cell;
 pub mod cli;
+pub mod experiment;
 pub mod identify;
+pub mod instrument;
 pub mod robot;

@@ -1,20 +1,429 @@
-//! Campaigns: the configurations a cell measures. Owns its random streams (seeded by the caller).
+//! The measuring campaign of the TriCal paper (sections 2.2 and 3.1): the semi-automatic steps,
+//! the identification pool measured with the TriCal (setup 1) and the validation poses measured
+//! with the laser tracker (setup 2). Everything is measured once; studies draw from it.
 
+pub mod centring;
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
+use serde::Deserialize;
 
-use crate::robot::{JOINTS, Joints, RobotModel};
+use crate::cell::Cell;
+use crate::cell::collision::{CollisionWorld, Obstacle, irb120_link_capsules};
+use crate::identify::Observation;
+use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
+use crate::instrument::trical::{TriCal, flange_from_tool_rotation};
+use crate::robot::{JOINTS, Joints, KinState, RobotModel, VirtualRobot, forward, inverse, world_from_base};
+pub use centring::{CentringError, CentringResult, centre};
 
 /// A configuration drawn uniformly inside the joint limits, leaving `margin` (a fraction of each
 /// range) free at both ends; joint 6 is drawn within +-180 deg, its full turn.
 pub fn uniform_configuration<R: Rng + ?Sized>(model: &RobotModel, margin: f64, rng: &mut R) -> Joints {
     std::array::from_fn::<f64, JOINTS, _>(|i| {
         let l = model.limits()[i];
-        let (lo, hi) = if i == JOINTS - 1 {
-            (l.min.max(-std::f64::consts::PI), l.max.min(std::f64::consts::PI))
-        } else {
-            (l.min, l.max)
-        };
+        let (lo, hi) = if i == JOINTS - 1 { (l.min.max(-std::f64::consts::PI), l.max.min(std::f64::consts::PI)) } else { (l.min, l.max) };
         let m = margin * (hi - lo);
         rng.random_range(lo + m..hi - m)
     })
+}
+
+/// The campaign as a scenario describes it.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignSpec {
+    /// Identification configurations per datum sphere (the paper: 120, 360 in all).
+    pub pool_per_sphere: u32,
+    /// Half-angle of the cone of tool axes around the downward vertical of {W}, deg.
+    pub approach_cone_deg: f64,
+    /// Validation configurations (the paper: 506).
+    pub validation_poses: u32,
+    /// Margin left at both ends of each joint range for validation configurations (fraction).
+    pub validation_margin: f64,
+    /// Configurations of the TCP check on sphere 1 (the paper: 4).
+    pub tcp_check_configurations: u32,
+    /// Distance an operator leaves between TCP and ball centre when jogging, mm.
+    pub jog_error_mm: f64,
+    /// Tries allowed per kept configuration before the campaign gives up.
+    pub max_tries_per_configuration: u32,
+}
+
+impl Default for CampaignSpec {
+    fn default() -> Self {
+        Self {
+            pool_per_sphere: 120,
+            approach_cone_deg: 40.0,
+            validation_poses: 506,
+            validation_margin: 0.05,
+            tcp_check_configurations: 4,
+            jog_error_mm: 0.5,
+            max_tries_per_configuration: 200,
+        }
+    }
+}
+
+/// One measured identification configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoolEntry {
+    /// Datum sphere (0-based).
+    pub sphere: usize,
+    /// Joint values of the first move, rad.
+    pub q_commanded: Joints,
+    /// Joint values recorded at the end of the centring, rad.
+    pub q: Joints,
+    /// Centring iterations (corrections after the first reading).
+    pub iterations: u32,
+    /// Modelled time to measure this configuration, s.
+    pub seconds: f64,
+    /// True distance between TCP and ball centre at the end, mm. For diagnosis only: never used by
+    /// identification.
+    pub true_offset_mm: f64,
+}
+
+/// One validation configuration measured by the laser tracker.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidationPose {
+    /// Joint values, rad.
+    pub q: Joints,
+    /// TCP measured in {W} by the registered tracker, mm.
+    pub measured_w: Vector3<f64>,
+}
+
+/// What the semi-automatic steps found.
+#[derive(Clone, Debug)]
+pub struct SemiAutomatic {
+    /// TCP in the flange frame from the TCP check with the nominal model, mm.
+    pub tcp_check_mm: Vector3<f64>,
+    /// TCP in the flange frame measured on the CMM (the one identification uses), mm.
+    pub tcp_cmm_mm: Vector3<f64>,
+    /// Sphere centres located in the base frame with the nominal model, mm.
+    pub spheres_base: Vec<Vector3<f64>>,
+    /// Configurations recorded on each sphere while locating it.
+    pub located_q: Vec<Joints>,
+}
+
+/// Everything the campaign measured, and the models it built.
+pub struct Campaign {
+    /// The controller's model before calibration: Table 3, the base fitted to the located
+    /// spheres, the TCP from the CMM.
+    pub nominal: RobotModel,
+    /// The semi-automatic steps.
+    pub semi_automatic: SemiAutomatic,
+    /// The identification pool (setup 1).
+    pub pool: Vec<PoolEntry>,
+    /// The validation poses (setup 2).
+    pub validation: Vec<ValidationPose>,
+    /// Wall time spent generating and measuring the pool, s.
+    pub pool_wall_s: f64,
+    /// Configurations rejected while building the pool because they were unreachable or colliding.
+    pub pool_rejected: u32,
+    /// Configurations whose centring failed (no reading, or the iteration cap), not kept.
+    pub centring_failures: u32,
+    /// Configurations rejected while building the validation set.
+    pub validation_rejected: u32,
+}
+
+impl Campaign {
+    /// The observation of a pool entry: its recorded joints and its sphere's centre in {W} as the
+    /// ballbar gave it.
+    pub fn observation(&self, cell: &Cell, entry: &PoolEntry) -> Observation {
+        Observation { q: entry.q, tcp_world_mm: cell.spheres_w_measured[entry.sphere] }
+    }
+}
+
+/// Why a campaign could not be completed.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CampaignError {
+    /// The robot cannot reach a datum sphere with the device.
+    #[error("sphere {sphere}: {reason}")]
+    Sphere {
+        /// Sphere number, 1-based.
+        sphere: usize,
+        /// What went wrong.
+        reason: String,
+    },
+    /// Too many tries without a valid configuration.
+    #[error("{what}: no valid configuration after {tries} tries (cone, limits or collisions too tight)")]
+    Exhausted {
+        /// Which set.
+        what: String,
+        /// Tries made.
+        tries: u32,
+    },
+}
+
+/// The fixed parts of the cell as obstacles in the robot base frame (placed with the true base).
+pub fn obstacles(cell: &Cell, base_from_world: &Isometry3<f64>) -> Vec<Obstacle> {
+    let s = &cell.spec;
+    let r = s.ball_diameter_mm / 2.0;
+    let plate_top = -(s.riser_height_mm + r);
+    let mut out = Vec::new();
+    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    for p in &cell.spheres_w {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+        // Riser from the plate to just below the ball.
+        let a = base_from_world * nalgebra::Point3::new(p.x, p.y, plate_top);
+        let b = base_from_world * nalgebra::Point3::new(p.x, p.y, p.z - r - s.riser_radius_mm);
+        out.push(Obstacle::capsule("riser", a.coords, b.coords, s.riser_radius_mm));
+    }
+    let m = s.plate_margin_mm;
+    let half = Vector3::new((hi.x - lo.x) / 2.0 + m, (hi.y - lo.y) / 2.0 + m, s.plate_thickness_mm / 2.0);
+    let centre_w = Vector3::new((hi.x + lo.x) / 2.0, (hi.y + lo.y) / 2.0, plate_top - s.plate_thickness_mm / 2.0);
+    let plate = base_from_world * Isometry3::from_parts(Translation3::from(centre_w), UnitQuaternion::identity());
+    out.push(Obstacle::cuboid("plate", half, &plate));
+    // Pedestal from the table to the plate (base frame is level with the table).
+    let plate_bottom_base = plate.translation.vector.z - s.plate_thickness_mm / 2.0;
+    let ped_h = (plate_bottom_base - s.table_z_base_mm).max(1.0);
+    let ped = Isometry3::translation(plate.translation.vector.x, plate.translation.vector.y, s.table_z_base_mm + ped_h / 2.0);
+    out.push(Obstacle::cuboid("pedestal", Vector3::new(50.0, 50.0, ped_h / 2.0 - 0.5), &ped));
+    let table = Isometry3::translation(0.0, 0.0, s.table_z_base_mm - 25.0);
+    out.push(Obstacle::cuboid("table", Vector3::new(2000.0, 2000.0, 24.0), &table));
+    out
+}
+
+/// Capsules of the TriCal device in the flange frame: the conical bracket and the three indicator
+/// bodies behind their plungers (dimensions estimated from the paper's Figure 1).
+pub fn trical_capsules(tcp: &Vector3<f64>) -> Vec<crate::cell::collision::CapsuleSpec> {
+    let r6t = flange_from_tool_rotation();
+    let mut v = vec![crate::cell::collision::CapsuleSpec { a: [0.0, 0.0, 15.0], b: [tcp.x * 0.5, tcp.y * 0.5, tcp.z * 0.55], radius: 30.0 }];
+    for k in 0..3 {
+        let axis = r6t.column(k).into_owned();
+        let a = tcp + axis * 28.0;
+        let b = tcp + axis * 75.0;
+        v.push(crate::cell::collision::CapsuleSpec { a: a.into(), b: b.into(), radius: 9.0 });
+    }
+    v
+}
+
+/// The collision world of a cell for a model: fixtures placed with `truth_base` (where they are).
+/// Self-collision pairs that touch at the zero configuration are allowed (see [`CollisionWorld`]).
+pub fn collision_world(cell: &Cell, model: &RobotModel, truth_base: &Isometry3<f64>, tcp: &Vector3<f64>) -> CollisionWorld {
+    let mut world = CollisionWorld::new(&irb120_link_capsules(), &trical_capsules(tcp), obstacles(cell, &truth_base.inverse()));
+    let mut st = KinState::default();
+    forward(model, &mut st, &[0.0; JOINTS]);
+    world.allow_pairs_touching_at(&st);
+    world
+}
+
+/// `world_from_tcp` with the TCP at `p_w` and the flange axis along `axis_w` (pointing from the
+/// flange to the TCP), spun by `spin` about it.
+pub fn tcp_pose(p_w: &Vector3<f64>, axis_w: &Vector3<f64>, spin: f64) -> Isometry3<f64> {
+    let z = axis_w.normalize();
+    let helper = if z.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let x0 = (helper - z * z.dot(&helper)).normalize();
+    let y0 = z.cross(&x0);
+    let (s, c) = spin.sin_cos();
+    let x = x0 * c + y0 * s;
+    let y = z.cross(&x);
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z])));
+    Isometry3::from_parts(Translation3::from(*p_w), rot)
+}
+
+/// A direction drawn uniformly in the cone of half-angle `half_angle` around `axis`.
+fn cone_direction<R: Rng + ?Sized>(axis: &Vector3<f64>, half_angle: f64, rng: &mut R) -> Vector3<f64> {
+    let cos_min = half_angle.cos();
+    let cz = rng.random_range(cos_min..=1.0);
+    let phi = rng.random_range(0.0..std::f64::consts::TAU);
+    let sz = (1.0 - cz * cz).max(0.0).sqrt();
+    let a = axis.normalize();
+    let helper = if a.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let u = a.cross(&helper).normalize();
+    let v = a.cross(&u);
+    a * cz + (u * phi.cos() + v * phi.sin()) * sz
+}
+
+/// Inputs of a campaign.
+pub struct Setup<'a> {
+    /// The cell (true spheres, ballbar measurements).
+    pub cell: &'a Cell,
+    /// The physical robot.
+    pub robot: &'a VirtualRobot,
+    /// The physical robot during validation (thermal drift).
+    pub robot_validation: &'a VirtualRobot,
+    /// The TriCal device.
+    pub trical: &'a TriCal,
+    /// The laser tracker.
+    pub tracker: &'a LaserTracker,
+    /// The nominal model (Table 3, payload), before the semi-automatic steps.
+    pub nominal: &'a RobotModel,
+    /// What to measure.
+    pub spec: &'a CampaignSpec,
+}
+
+/// Runs the semi-automatic steps, measures the pool and the validation set.
+pub fn run<R: Rng + ?Sized>(setup: &Setup<'_>, rng: &mut R) -> Result<Campaign, CampaignError> {
+    let Setup { cell, robot, robot_validation, trical, tracker, nominal, spec } = *setup;
+    let truth_base = world_from_base(&robot.truth);
+    let tcp_true = robot.truth.data().flange_tcp_mm;
+    let tcp_cmm = trical.cmm_tcp(&tcp_true, rng);
+    let world = collision_world(cell, nominal, &truth_base, &tcp_cmm);
+    let down = -Vector3::z();
+
+    // Semi-automatic steps. The operator jogs the device onto each ball (simulated with the true
+    // robot), then Algorithm 1 centres it; the controller still believes the nominal model with
+    // the base frame at the world origin and the CMM tool.
+    let jogging = nominal.edited(|d| d.flange_tcp_mm = tcp_cmm).expect("valid");
+    let mut located_q = Vec::new();
+    let mut check_q = Vec::new();
+    let mut last_q = [0.0; JOINTS];
+    for (k, sphere_w) in cell.spheres_w.iter().enumerate() {
+        let configs = if k == 0 { spec.tcp_check_configurations.max(1) } else { 1 };
+        for j in 0..configs {
+            let axis = if j == 0 { down } else { cone_direction(&down, spec.approach_cone_deg.to_radians() * 0.8, rng) };
+            let mut done = None;
+            for _ in 0..spec.max_tries_per_configuration {
+                let jog = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize() * spec.jog_error_mm;
+                let target = tcp_pose(&(sphere_w + jog), &axis, rng.random_range(0.0..std::f64::consts::TAU));
+                let Ok(q) = inverse(&robot.truth, &target, &last_q) else { continue };
+                if let Ok(res) = centre(&jogging, robot, trical, cell, k, &q, &last_q, rng) {
+                    done = Some(res);
+                    break;
+                }
+            }
+            let res = done.ok_or_else(|| CampaignError::Sphere { sphere: k + 1, reason: "the device cannot be centred on it".into() })?;
+            last_q = res.q;
+            if j == 0 {
+                located_q.push(res.q);
+            }
+            if k == 0 {
+                check_q.push(res.q);
+            }
+        }
+    }
+    // TCP check: the flange poses of the nominal model and one unknown sphere centre, least squares.
+    let flange_only = nominal.edited(|d| {
+        d.flange_tcp_mm = Vector3::zeros();
+        d.world_from_base = Default::default();
+    });
+    let flange_only = flange_only.expect("valid");
+    let tcp_check_mm = tcp_check(&flange_only, &check_q).unwrap_or(tcp_cmm);
+    let base_model = flange_only.edited(|d| d.flange_tcp_mm = tcp_check_mm).expect("valid");
+    let spheres_base: Vec<Vector3<f64>> = located_q.iter().map(|q| forward(&base_model, &mut KinState::default(), q)).collect();
+    // The nominal base: the rigid transform that maps the located spheres onto their {W} coordinates.
+    let world_from_base_fit = rigid_fit(&spheres_base, &cell.spheres_w_measured);
+    let nominal_model = nominal
+        .edited(|d| {
+            d.flange_tcp_mm = tcp_cmm;
+            d.world_from_base = xyz_zyx(&world_from_base_fit);
+        })
+        .expect("valid");
+
+    // Identification pool.
+    let t0 = Instant::now();
+    let mut pool = Vec::new();
+    let mut rejected = 0;
+    let mut centring_failures = 0;
+    let mut st = KinState::default();
+    for (k, seed_q) in located_q.iter().enumerate() {
+        let target_w = cell.spheres_w_measured[k];
+        let mut last = *seed_q;
+        let mut kept = 0;
+        let mut tries = 0;
+        while kept < spec.pool_per_sphere {
+            tries += 1;
+            if tries > spec.max_tries_per_configuration * spec.pool_per_sphere {
+                return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
+            }
+            let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
+            let pose = tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU));
+            let Ok(q) = inverse(&nominal_model, &pose, seed_q) else {
+                rejected += 1;
+                continue;
+            };
+            forward(&nominal_model, &mut st, &q);
+            if world.first_collision(&st).is_some() {
+                rejected += 1;
+                continue;
+            }
+            match centre(&nominal_model, robot, trical, cell, k, &q, &last, rng) {
+                Ok(res) => {
+                    last = res.q;
+                    pool.push(PoolEntry { sphere: k, q_commanded: q, q: res.q, iterations: res.iterations, seconds: res.seconds, true_offset_mm: res.true_offset_mm });
+                    kept += 1;
+                }
+                Err(_) => centring_failures += 1,
+            }
+        }
+    }
+    let pool_wall_s = t0.elapsed().as_secs_f64();
+
+    // Validation: random configurations, collision-free, the SMR in sight of the tracker.
+    let base_from_world = truth_base.inverse();
+    let tracker_base = (base_from_world * nalgebra::Point3::from(tracker.position_w)).coords;
+    let mut validation = Vec::new();
+    let mut validation_rejected = 0;
+    let mut from = located_q[0];
+    let mut tries = 0;
+    let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
+    while validation.len() < spec.validation_poses as usize {
+        tries += 1;
+        if tries > spec.max_tries_per_configuration * spec.validation_poses.max(1) {
+            return Err(CampaignError::Exhausted { what: "validation set".into(), tries });
+        }
+        let q = uniform_configuration(&nominal_model, spec.validation_margin, rng);
+        forward(&nominal_model, &mut st, &q);
+        let tcp = st.tcp_base;
+        let sight = tracker_base - tcp;
+        let facing = st.base_from_frame(JOINTS).rotation * Vector3::z();
+        let ok = world.first_collision(&st).is_none()
+            && sight.norm() <= tracker.spec.max_range_mm
+            && facing.dot(&sight.normalize()) >= accept_cos
+            && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
+        if !ok {
+            validation_rejected += 1;
+            continue;
+        }
+        let true_w = robot_validation.tcp_after_move(&mut st, &q, &from, rng);
+        from = q;
+        validation.push(ValidationPose { q, measured_w: tracker.measure(&true_w, rng) });
+    }
+
+    Ok(Campaign {
+        nominal: nominal_model,
+        semi_automatic: SemiAutomatic { tcp_check_mm, tcp_cmm_mm: tcp_cmm, spheres_base, located_q },
+        pool,
+        validation,
+        pool_wall_s,
+        pool_rejected: rejected,
+        centring_failures,
+        validation_rejected,
+    })
+}
+
+/// TCP in the flange frame from configurations centred on one ball: least squares on
+/// `R_j t - s = -p_j` (t the TCP, s the ball centre, both unknown).
+pub fn tcp_check(flange_model: &RobotModel, qs: &[Joints]) -> Option<Vector3<f64>> {
+    if qs.len() < 2 {
+        return None;
+    }
+    let mut a = nalgebra::DMatrix::zeros(3 * qs.len(), 6);
+    let mut b = nalgebra::DVector::zeros(3 * qs.len());
+    let mut st = KinState::default();
+    for (j, q) in qs.iter().enumerate() {
+        let f = crate::robot::world_from_flange(flange_model, &mut st, q);
+        let r = f.rotation.to_rotation_matrix().into_inner();
+        for i in 0..3 {
+            for c in 0..3 {
+                a[(3 * j + i, c)] = r[(i, c)];
+            }
+            a[(3 * j + i, 3 + i)] = -1.0;
+            b[3 * j + i] = -f.translation.vector[i];
+        }
+    }
+    let x = a.svd(true, true).solve(&b, 1e-10).ok()?;
+    Some(Vector3::new(x[0], x[1], x[2]))
+}
+
+/// The eq. 7 parameters of a rigid transform: `T = Dx Dy Dz Rz(alpha) Ry(beta) Rx(gamma)`.
+pub fn xyz_zyx(t: &Isometry3<f64>) -> crate::robot::XyzZyx {
+    let r = t.rotation.to_rotation_matrix();
+    // Rz(a) Ry(b) Rx(g): r20 = -sin b, r21 = cos b sin g, r22 = cos b cos g, r10 = sin a cos b, r00 = cos a cos b.
+    let m = r.matrix();
+    let beta = (-m[(2, 0)]).asin();
+    let gamma = m[(2, 1)].atan2(m[(2, 2)]);
+    let alpha = m[(1, 0)].atan2(m[(0, 0)]);
+    let p = t.translation.vector;
+    crate::robot::XyzZyx { x: p.x, y: p.y, z: p.z, alpha, beta, gamma }
 }

@@ -1,0 +1,155 @@
+//! The virtual TriCal experiment assembled from its specifications: cell, physical robot, device,
+//! tracker and campaign, each drawn from its own seeded stream.
+
+use nalgebra::{Point3, Vector3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Deserialize;
+
+use crate::campaign::{self, Campaign, CampaignError, CampaignSpec, Setup};
+use crate::cell::world_frame::WorldFrameError;
+use crate::cell::{Cell, CellSpec};
+use crate::instrument::laser_tracker::{LaserTracker, LaserTrackerSpec};
+use crate::instrument::trical::{TriCal, TriCalSpec};
+use crate::robot::builtin::{TRICAL_PAYLOAD, TRICAL_TCP_MM, irb120, trical_2018_table7};
+use crate::robot::{Inertial, RobotModel, UnmodelledSpec, VirtualRobot, world_from_base};
+
+/// The physical robot as a scenario describes it.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSpec {
+    /// ISO 9283 position repeatability RP, mm (the paper: 0.010 mm).
+    pub repeatability_mm: f64,
+    /// Configuration at which the joint noise is scaled to that repeatability, deg.
+    pub repeatability_reference_q_deg: [f64; 6],
+    /// TCP of the device in the flange frame, mm (not printed in the paper: assumed).
+    pub tcp_mm: [f64; 3],
+    /// Mass of the device, kg (assumed).
+    pub payload_kg: f64,
+    /// Centre of mass of the device in the flange frame, mm (assumed).
+    pub payload_com_mm: [f64; 3],
+    /// Effects outside the identified model.
+    #[serde(default)]
+    pub unmodelled: UnmodelledSpec,
+}
+
+impl Default for RobotSpec {
+    fn default() -> Self {
+        Self {
+            repeatability_mm: 0.010,
+            repeatability_reference_q_deg: [0.0, 20.0, 20.0, 0.0, 50.0, 0.0],
+            tcp_mm: TRICAL_TCP_MM,
+            payload_kg: TRICAL_PAYLOAD.0,
+            payload_com_mm: TRICAL_PAYLOAD.1,
+            unmodelled: UnmodelledSpec::default(),
+        }
+    }
+}
+
+/// Everything the virtual TriCal experiment needs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ExperimentSpec {
+    /// The physical robot.
+    pub robot: RobotSpec,
+    /// The cell.
+    pub cell: CellSpec,
+    /// The device.
+    pub trical: TriCalSpec,
+    /// The validation tracker.
+    pub tracker: LaserTrackerSpec,
+    /// The campaign.
+    pub campaign: CampaignSpec,
+}
+
+/// A built experiment: the physical world and what the campaign measured in it.
+pub struct Experiment {
+    /// The cell.
+    pub cell: Cell,
+    /// The physical robot during identification.
+    pub robot: VirtualRobot,
+    /// The physical robot during validation (thermal drift applied).
+    pub robot_validation: VirtualRobot,
+    /// The device.
+    pub trical: TriCal,
+    /// The tracker.
+    pub tracker: LaserTracker,
+    /// The campaign's measurements and models.
+    pub campaign: Campaign,
+}
+
+/// Why an experiment could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum ExperimentError {
+    /// The sphere layout does not define a frame.
+    #[error(transparent)]
+    WorldFrame(#[from] WorldFrameError),
+    /// The campaign failed.
+    #[error(transparent)]
+    Campaign(#[from] CampaignError),
+}
+
+/// A stream of its own for each part of the experiment, derived from the scenario seed.
+pub fn stream(seed: u64, part: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(split_seed(seed, part))
+}
+
+/// Mixes a seed and an index into an independent seed (SplitMix64 finaliser).
+pub fn split_seed(seed: u64, index: u64) -> u64 {
+    let mut z = seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x632B_E59B_D9B4_E019);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl ExperimentSpec {
+    /// The true robot: Table 7 means, with this device as tool and payload.
+    pub fn truth(&self) -> RobotModel {
+        trical_2018_table7().edited(|d| self.apply_device(d)).expect("valid device")
+    }
+
+    /// The nominal robot: Table 3 with this device (the base is fitted by the campaign).
+    pub fn nominal(&self) -> RobotModel {
+        irb120().edited(|d| self.apply_device(d)).expect("valid device")
+    }
+
+    fn apply_device(&self, d: &mut crate::robot::RobotData) {
+        d.flange_tcp_mm = Vector3::from(self.robot.tcp_mm);
+        d.payload = Inertial { mass_kg: self.robot.payload_kg, com_mm: Vector3::from(self.robot.payload_com_mm) };
+    }
+
+    /// Builds the physical world from `seed` and runs the campaign.
+    pub fn build(&self, seed: u64) -> Result<Experiment, ExperimentError> {
+        let cell = Cell::build(&self.cell, &mut stream(seed, 1))?;
+        let reference = self.robot.repeatability_reference_q_deg.map(f64::to_radians);
+        let robot = VirtualRobot::new(self.truth(), &self.robot.unmodelled, self.robot.repeatability_mm, &reference, &mut stream(seed, 2));
+        let robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
+        let trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, 3));
+        let base_in_w = world_from_base(&robot.truth).transform_point(&Point3::origin()).coords;
+        let sphere3 = cell.spheres_w[2.min(cell.spheres_w.len() - 1)];
+        let tracker = LaserTracker::place(&self.tracker, &sphere3, &base_in_w, &cell.spheres_w, &cell.spheres_w_measured, &mut stream(seed, 4));
+        let setup = Setup { cell: &cell, robot: &robot, robot_validation: &robot_validation, trical: &trical, tracker: &tracker, nominal: &self.nominal(), spec: &self.campaign };
+        let campaign = campaign::run(&setup, &mut stream(seed, 5))?;
+        Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign })
+    }
+
+    /// This experiment without any noise or unmodelled effect, centred to `epsilon_mm`: measurements
+    /// are exact up to the centring tolerance.
+    pub fn noise_free(&self, epsilon_mm: f64) -> Self {
+        let mut s = self.clone();
+        s.robot.repeatability_mm = 0.0;
+        s.robot.unmodelled = UnmodelledSpec::default();
+        s.cell.ball_diameter_tolerance_um = 0.0;
+        s.cell.ballbar_sigma_um = 0.0;
+        s.trical.indicator_accuracy_um = 0.0;
+        s.trical.indicator_resolution_um = 0.0;
+        s.trical.indicator_misalignment_deg = 0.0;
+        s.trical.cmm_sigma_um = 0.0;
+        s.trical.epsilon_mm = epsilon_mm;
+        s.trical.max_iterations = 60;
+        s.tracker.range_sigma_um = 0.0;
+        s.tracker.range_sigma_um_per_m = 0.0;
+        s.tracker.transverse_sigma_um = 0.0;
+        s.tracker.transverse_sigma_um_per_m = 0.0;
+        s
+    }
+}

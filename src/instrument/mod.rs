@@ -1,0 +1,4 @@
+//! Simulated instruments: each answers where the TCP (or a target) is in {W}, with what error.
+
+pub mod laser_tracker;
+pub mod trical;

@@ -1,0 +1,136 @@
+//! The physical robot of a simulation: the true model, the effects its 31 parameters cannot
+//! express, and the repeatability of every move.
+//!
+//! A move to commanded joints `q` puts the links at `q + transmission(q) + backlash(direction) +
+//! noise`; the encoders report `q` (the servo reached it), so none of these terms is visible to
+//! the controller: they reach identification and validation as position errors.
+
+use std::f64::consts::PI;
+
+use rand::{Rng, RngExt, SeedableRng};
+use rand_distr::{Distribution, Normal, Uniform};
+use serde::Deserialize;
+
+use super::kinematics::{KinState, forward};
+use super::model::{JOINTS, Joints, RobotModel};
+
+/// Effects outside the identified model, as a scenario describes them. Every amplitude defaults
+/// to zero (off).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct UnmodelledSpec {
+    /// Amplitude of the low-order transmission harmonics (orders 1 and 2: eccentricity), per joint
+    /// 2..6 (joint 1 too), mdeg.
+    pub transmission_low_mdeg: f64,
+    /// Amplitude of the high-order harmonics (gear mesh, encoder cycles), mdeg.
+    pub transmission_high_mdeg: f64,
+    /// Range of the high orders, periods per turn `[min, max]`; one order per joint drawn in it.
+    pub transmission_high_orders: Option<[u32; 2]>,
+    /// Backlash per joint (full width), mdeg: the link lags by half of it behind the last motion.
+    pub backlash_mdeg: f64,
+    /// Thermal growth of every link length between identification and validation, ppm.
+    pub thermal_drift_ppm: f64,
+}
+
+/// One harmonic of a joint's transmission error, rad.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Harmonic {
+    /// Periods per turn of the joint.
+    pub order: f64,
+    /// Amplitude, rad.
+    pub amplitude: f64,
+    /// Phase, rad.
+    pub phase: f64,
+}
+
+/// The physical robot: true model, drawn unmodelled effects, repeatability.
+#[derive(Clone, Debug)]
+pub struct VirtualRobot {
+    /// The true geometry and compliance.
+    pub truth: RobotModel,
+    /// Transmission harmonics per joint.
+    pub harmonics: [Vec<Harmonic>; JOINTS],
+    /// Half the backlash per joint, rad.
+    pub half_backlash: [f64; JOINTS],
+    /// Standard deviation of the joint-level noise of a move, rad.
+    pub sigma_q: f64,
+}
+
+impl VirtualRobot {
+    /// Draws the unmodelled effects of `spec` and scales the joint noise so that the ISO 9283
+    /// repeatability at `reference_q` is `repeatability_mm`.
+    pub fn new<R: Rng + ?Sized>(truth: RobotModel, spec: &UnmodelledSpec, repeatability_mm: f64, reference_q: &Joints, rng: &mut R) -> Self {
+        let phase = Uniform::new(0.0, 2.0 * PI).expect("range");
+        let harmonics = std::array::from_fn(|_| {
+            let mut h = Vec::new();
+            if spec.transmission_low_mdeg > 0.0 {
+                for order in [1.0, 2.0] {
+                    h.push(Harmonic { order, amplitude: (spec.transmission_low_mdeg * 1e-3).to_radians(), phase: phase.sample(rng) });
+                }
+            }
+            if spec.transmission_high_mdeg > 0.0 {
+                let [lo, hi] = spec.transmission_high_orders.unwrap_or([20, 120]);
+                let order = rng.random_range(lo..=hi.max(lo)) as f64;
+                h.push(Harmonic { order, amplitude: (spec.transmission_high_mdeg * 1e-3).to_radians(), phase: phase.sample(rng) });
+            }
+            h
+        });
+        let half_backlash = [(spec.backlash_mdeg * 1e-3).to_radians() / 2.0; JOINTS];
+        let sigma_q = repeatability_mm / repeatability_per_radian(&truth, reference_q);
+        Self { truth, harmonics, half_backlash, sigma_q }
+    }
+
+    /// Link angles after a move to `q` coming from `from`, with a fresh draw of the joint noise.
+    pub fn link_angles<R: Rng + ?Sized>(&self, q: &Joints, from: &Joints, rng: &mut R) -> Joints {
+        let noise = Normal::new(0.0, self.sigma_q.max(0.0)).expect("finite sigma");
+        std::array::from_fn(|i| {
+            let tx: f64 = self.harmonics[i].iter().map(|h| h.amplitude * (h.order * q[i] + h.phase).sin()).sum();
+            let lag = if q[i] > from[i] { -self.half_backlash[i] } else if q[i] < from[i] { self.half_backlash[i] } else { 0.0 };
+            q[i] + tx + lag + if self.sigma_q > 0.0 { noise.sample(rng) } else { 0.0 }
+        })
+    }
+
+    /// True TCP in {W} after a move to `q` from `from`, mm.
+    pub fn tcp_after_move<R: Rng + ?Sized>(&self, st: &mut KinState, q: &Joints, from: &Joints, rng: &mut R) -> nalgebra::Vector3<f64> {
+        let links = self.link_angles(q, from, rng);
+        forward(&self.truth, st, &links)
+    }
+
+    /// This robot with every link length grown by `ppm` (thermal drift).
+    pub fn drifted(&self, ppm: f64) -> Self {
+        let k = 1.0 + ppm * 1e-6;
+        let truth = self
+            .truth
+            .edited(|d| {
+                for l in &mut d.links {
+                    l.a *= k;
+                    l.d *= k;
+                }
+            })
+            .expect("scaled lengths stay finite");
+        Self { truth, ..self.clone() }
+    }
+}
+
+/// ISO 9283 repeatability (RP = mean + 3 std of distances to the barycentre) per radian of
+/// independent joint noise at `q`: for small noise the TCP scatter is Gaussian with covariance
+/// `sigma^2 J J^T`; RP is estimated from 20000 draws of a fixed-seed stream (deterministic).
+fn repeatability_per_radian(model: &RobotModel, q: &Joints) -> f64 {
+    let mut st = KinState::default();
+    let p0 = forward(model, &mut st, q);
+    let h = 1e-7;
+    let cols: Vec<nalgebra::Vector3<f64>> = (0..JOINTS)
+        .map(|k| {
+            let mut qk = *q;
+            qk[k] += h;
+            (forward(model, &mut st, &qk) - p0) / h
+        })
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9283);
+    let normal = Normal::new(0.0, 1.0).expect("unit normal");
+    let n = 20_000;
+    let d: Vec<f64> = (0..n).map(|_| cols.iter().map(|c| c * normal.sample(&mut rng)).sum::<nalgebra::Vector3<f64>>().norm()).collect();
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let std = (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1) as f64).sqrt();
+    mean + 3.0 * std
+}
