@@ -3,3 +3,8 @@
 pub mod least_squares;
 
 pub use least_squares::{Fit, FitOptions, FitOutcome, Iteration, Observation, Solver, identify};
+pub mod detmax;
+pub mod observability;
+
+pub use detmax::{Design, DetmaxOptions, detmax};
+pub use observability::{Observability, PoolJacobian};

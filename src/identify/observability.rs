@@ -1,0 +1,111 @@
+//! Observability indices (Sun and Hollerbach 2008) of a set of configurations, and the pool
+//! Jacobian they are computed from.
+//!
+//! **Column scaling.** Indices compare sets of configurations, so every set is scaled the same
+//! way: column j of the identification Jacobian is divided by `s_j`, the root mean square over the
+//! whole pool of the norm of that column per configuration (`s_j^2 = sum_k |J_kj|^2 / N`), computed
+//! once at the model DETMAX starts from. Identification scales each set's columns to unit norm
+//! for its own numerics; for one set the two scalings differ by a diagonal matrix, so the fitted
+//! values are the same, but the singular values each reports are of its own scaling.
+
+use nalgebra::{DMatrix, SymmetricEigen, Vector3};
+
+use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
+
+/// The pool's identification Jacobians, column-scaled, stored row-major per configuration:
+/// `rows[k][r * m + j]` is row r (x, y, z) and parameter j of configuration k.
+#[derive(Clone, Debug)]
+pub struct PoolJacobian {
+    /// Parameters (columns).
+    pub m: usize,
+    /// Scaled 3 x m blocks, one per configuration.
+    pub blocks: Vec<Vec<f64>>,
+    /// Column scale factors `s_j` (internal units of the parameter per mm).
+    pub scale: Vec<f64>,
+}
+
+impl PoolJacobian {
+    /// Evaluates and scales the Jacobians of `qs` at `model` for `set`.
+    pub fn new(model: &RobotModel, set: &ParamSet, qs: &[Joints]) -> Self {
+        let m = set.len();
+        let mut st = KinState::default();
+        let mut cols = vec![Vector3::zeros(); m];
+        let mut raw: Vec<Vec<f64>> = Vec::with_capacity(qs.len());
+        let mut sum_sq = vec![0.0; m];
+        for q in qs {
+            tcp_jacobian(model, &mut st, q, set, &mut cols);
+            let mut block = vec![0.0; 3 * m];
+            for (j, c) in cols.iter().enumerate() {
+                for r in 0..3 {
+                    block[r * m + j] = c[r];
+                }
+                sum_sq[j] += c.norm_squared();
+            }
+            raw.push(block);
+        }
+        let n = qs.len().max(1) as f64;
+        let scale: Vec<f64> = sum_sq.iter().map(|s| (s / n).sqrt()).collect();
+        for block in &mut raw {
+            for r in 0..3 {
+                for j in 0..m {
+                    let s = scale[j];
+                    block[r * m + j] = if s > 0.0 { block[r * m + j] / s } else { 0.0 };
+                }
+            }
+        }
+        Self { m, blocks: raw, scale }
+    }
+
+    /// Information matrix `sum_k J_k^T J_k` of the configurations `set`, m x m.
+    pub fn information(&self, set: &[usize]) -> DMatrix<f64> {
+        let m = self.m;
+        let mut stacked = DMatrix::zeros(3 * set.len(), m);
+        for (i, &k) in set.iter().enumerate() {
+            for r in 0..3 {
+                for j in 0..m {
+                    stacked[(3 * i + r, j)] = self.blocks[k][r * m + j];
+                }
+            }
+        }
+        stacked.tr_mul(&stacked)
+    }
+}
+
+/// The five observability indices of a set of `n` configurations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Observability {
+    /// O1 = (s1 s2 ... sm)^(1/m) / sqrt(n) (paper eq. 16).
+    pub o1: f64,
+    /// O2 = s_min / s_max (inverse condition number).
+    pub o2: f64,
+    /// O3 = s_min.
+    pub o3: f64,
+    /// O4 = s_min^2 / s_max (noise amplification index).
+    pub o4: f64,
+    /// O5 = 1 / (1/s1 + ... + 1/sm).
+    pub o5: f64,
+}
+
+impl Observability {
+    /// Indices from the information matrix `J^T J` of the scaled Jacobian of `n` configurations.
+    pub fn from_information(info: &DMatrix<f64>, n: usize) -> Self {
+        let mut s: Vec<f64> = SymmetricEigen::new(info.clone()).eigenvalues.iter().map(|l| l.max(0.0).sqrt()).collect();
+        s.sort_by(|a, b| b.total_cmp(a));
+        Self::from_singular_values(&s, n)
+    }
+
+    /// Indices from the singular values (any order) of the scaled Jacobian of `n` configurations.
+    pub fn from_singular_values(s: &[f64], n: usize) -> Self {
+        let m = s.len() as f64;
+        let smax = s.iter().copied().fold(0.0, f64::max);
+        let smin = s.iter().copied().fold(f64::INFINITY, f64::min);
+        let log_mean = s.iter().map(|v| v.max(f64::MIN_POSITIVE).ln()).sum::<f64>() / m;
+        Self {
+            o1: log_mean.exp() / (n as f64).sqrt(),
+            o2: smin / smax,
+            o3: smin,
+            o4: smin * smin / smax,
+            o5: 1.0 / s.iter().map(|v| 1.0 / v).sum::<f64>(),
+        }
+    }
+}
