@@ -1,8 +1,11 @@
 //! Command-line interface: argument parsing and the terminal report. Errors are printed as one
 //! line and exit with code 2 (bad input) or 1 (a check that failed).
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
 
 use clap::{Parser, Subcommand, ValueEnum};
 use rand::SeedableRng;
@@ -11,6 +14,9 @@ use rand_distr::{Distribution, Normal};
 
 use crate::campaign::uniform_configuration;
 use crate::identify::{FitOptions, Observation, Solver, identify};
+use crate::io::report::{self, Figures};
+use crate::io::results::Timings;
+use crate::io::scenario;
 use crate::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use crate::robot::{KinState, ParamSet, forward};
 
@@ -24,8 +30,52 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run a study: campaign, DETMAX, identifications, validation; write the results.
+    Run(RunArgs),
+    /// Run a study and compare it with the bands of the scenario's [expect] table (exit 1 on a miss).
+    Check(RunArgs),
     /// Identify the paper's IRB 120 (Table 7 truth) from simulated TCP positions and validate it.
     Demo(DemoArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct RunArgs {
+    /// Scenario file (TOML), e.g. scenarios/irb120_trical.toml.
+    scenario: PathBuf,
+    /// Directory the results go to (in a subdirectory named after the scenario).
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
+    /// Seed, replacing the scenario's.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Set sizes as start:end:step (inclusive), replacing the scenario's.
+    #[arg(long, value_parser = parse_sizes)]
+    set_sizes: Option<SetSizes>,
+    /// Repetitions per set size, replacing the scenario's.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    repetitions: Option<u32>,
+}
+
+/// Set sizes given on the command line.
+#[derive(Clone, Debug)]
+struct SetSizes(Vec<u32>);
+
+fn parse_sizes(s: &str) -> Result<SetSizes, String> {
+    let parts: Vec<&str> = s.split(':').collect();
+    let num = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("`{x}` is not a whole number"));
+    let (a, b, step) = match parts.as_slice() {
+        [a] => (num(a)?, num(a)?, 1),
+        [a, b] => (num(a)?, num(b)?, 1),
+        [a, b, c] => (num(a)?, num(b)?, num(c)?),
+        _ => return Err("expected start:end:step, e.g. 20:100:5".into()),
+    };
+    if step == 0 || a > b {
+        return Err(format!("{s}: needs start <= end and a step > 0"));
+    }
+    Ok(SetSizes((a..=b).step_by(step as usize).collect()))
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -65,15 +115,82 @@ pub fn main() -> ExitCode {
             return ExitCode::from(code);
         }
     };
-    match cli.command {
-        Command::Demo(args) => match demo(&args) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(msg) => {
-                eprintln!("error: {msg}");
-                ExitCode::from(2)
-            }
-        },
+    let result = match &cli.command {
+        Command::Run(args) => study(args, false),
+        Command::Check(args) => study(args, true),
+        Command::Demo(args) => demo(args).map(|()| ExitCode::SUCCESS),
+    };
+    match result {
+        Ok(code) => code,
+        Err(msg) => {
+            eprintln!("error: {msg}");
+            ExitCode::from(2)
+        }
     }
+}
+
+fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
+    let t0 = Instant::now();
+    let mut scenario = scenario::load(&args.scenario).map_err(|e| e.to_string())?;
+    if let Some(seed) = args.seed {
+        scenario.seed = seed;
+    }
+    if let Some(SetSizes(sizes)) = &args.set_sizes {
+        scenario.study.set_sizes = sizes.clone();
+        if !sizes.contains(&scenario.study.table_set_size) {
+            scenario.study.table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(scenario.study.table_set_size)).expect("non-empty");
+        }
+    }
+    if let Some(r) = args.repetitions {
+        scenario.study.repetitions = r;
+    }
+    // Re-check what the overrides changed (sizes against the pool and the parameters).
+    let text = scenario.text.clone();
+    scenario::check_overrides(&scenario).map_err(|e| e.to_string())?;
+    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+
+    eprintln!("calsim {}: {} (seed {}), {} threads", if check { "check" } else { "run" }, scenario.name, scenario.seed, threads);
+    let spec = &scenario.experiment;
+    let experiment = spec.build(scenario.seed).map_err(|e| format!("{}: campaign: {e}", args.scenario.display()))?;
+    let campaign_s = t0.elapsed().as_secs_f64();
+    let before = spec.before_model(&experiment.campaign);
+    let n_tasks = scenario.study.set_sizes.len() * scenario.study.repetitions as usize;
+    let bar = ProgressBar::new(n_tasks as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} identifications, {elapsed} elapsed, ETA {eta}").expect("template"));
+    let results = pool
+        .install(|| crate::study::run(&experiment, &before, &scenario.study, scenario.seed, &|done, _| bar.set_position(done as u64)))
+        .map_err(|e| format!("{}: [study] parameters: {e}", args.scenario.display()))?;
+    bar.finish_and_clear();
+    let study_s = t0.elapsed().as_secs_f64();
+    let figures = Figures::of(&results, &experiment.robot.truth, scenario.study.table_set_size as usize);
+    let rows = report::checks(&figures, &scenario.expect);
+    let t_write = Instant::now();
+    let mut timings = Timings { campaign_s, pool_s: experiment.campaign.pool_wall_s, pool_jacobian_s: results.pool_jacobian_s, tasks_s: results.tasks_s, study_s, write_s: 0.0 };
+    let dest = crate::io::results::write(&args.out, &scenario, &results, &figures, &rows, threads, &timings).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    timings.write_s = t_write.elapsed().as_secs_f64();
+    debug_assert_eq!(text, scenario.text);
+
+    println!("{}", report::terminal_table(&rows));
+    println!(
+        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results written in {:.3} s to {}",
+        study_s,
+        campaign_s,
+        experiment.campaign.pool_wall_s,
+        n_tasks,
+        results.tasks_s,
+        timings.write_s,
+        dest.display()
+    );
+    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
+    if check {
+        let checked = rows.iter().filter(|r| r.pass.is_some()).count();
+        println!("check: {} of {checked} figures within their bands", checked - missed);
+        if missed > 0 {
+            return Ok(ExitCode::from(1));
+        }
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn demo(args: &DemoArgs) -> Result<(), String> {

@@ -16,7 +16,7 @@ use crate::robot::{Inertial, RobotModel, UnmodelledSpec, VirtualRobot, world_fro
 
 /// The physical robot as a scenario describes it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct RobotSpec {
     /// ISO 9283 position repeatability RP, mm (the paper: 0.010 mm).
     pub repeatability_mm: f64,
@@ -29,8 +29,10 @@ pub struct RobotSpec {
     /// Centre of mass of the device in the flange frame, mm (assumed).
     pub payload_com_mm: [f64; 3],
     /// Effects outside the identified model.
-    #[serde(default)]
     pub unmodelled: UnmodelledSpec,
+    /// `world_from_base` of the model before calibration, `[x, y, z]` mm then `[alpha, beta, gamma]`
+    /// deg (eq. 7). Absent: the base the semi-automatic steps fit to the located spheres.
+    pub nominal_base_mm_deg: Option<[f64; 6]>,
 }
 
 impl Default for RobotSpec {
@@ -42,6 +44,7 @@ impl Default for RobotSpec {
             payload_kg: TRICAL_PAYLOAD.0,
             payload_com_mm: TRICAL_PAYLOAD.1,
             unmodelled: UnmodelledSpec::default(),
+            nominal_base_mm_deg: Some(crate::robot::builtin::TRICAL_NOMINAL_BASE),
         }
     }
 }
@@ -115,6 +118,18 @@ impl ExperimentSpec {
     fn apply_device(&self, d: &mut crate::robot::RobotData) {
         d.flange_tcp_mm = Vector3::from(self.robot.tcp_mm);
         d.payload = Inertial { mass_kg: self.robot.payload_kg, com_mm: Vector3::from(self.robot.payload_com_mm) };
+    }
+
+    /// The model before calibration (the start of every identification): the campaign's nominal
+    /// model with the scenario's nominal base if it gives one.
+    pub fn before_model(&self, campaign: &Campaign) -> RobotModel {
+        match self.robot.nominal_base_mm_deg {
+            Some([x, y, z, a, b, g]) => campaign
+                .nominal
+                .edited(|d| d.world_from_base = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() })
+                .expect("finite base"),
+            None => campaign.nominal.clone(),
+        }
     }
 
     /// Builds the physical world from `seed` and runs the campaign.

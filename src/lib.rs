@@ -6,4 +6,6 @@ pub mod cli;
 pub mod experiment;
 pub mod identify;
 pub mod instrument;
+pub mod io;
 pub mod robot;
+pub mod study;

@@ -33,7 +33,7 @@ fn detmax_beats_the_best_of_1000_random_subsets() {
     let pool = pool();
     let mut rng = common::rng(8);
     for n in [20, 75] {
-        let best_random = (0..1000).map(|_| o1_of(&pool, &sample(&mut rng, pool.blocks.len(), n).into_vec())).fold(0.0, f64::max);
+        let best_random = (0..1000).map(|_| o1_of(&pool, &sample(&mut rng, pool.len, n).into_vec())).fold(0.0, f64::max);
         let design = detmax(&pool, n, &DetmaxOptions::default(), &mut rng).unwrap();
         let o1 = o1_of(&pool, &design.selection);
         eprintln!("n = {n}: DETMAX O1 {o1:.5}, best of 1000 random {best_random:.5}");

@@ -31,7 +31,7 @@ pub fn uniform_configuration<R: Rng + ?Sized>(model: &RobotModel, margin: f64, r
 
 /// The campaign as a scenario describes it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct CampaignSpec {
     /// Identification configurations per datum sphere (the paper: 120, 360 in all).
     pub pool_per_sphere: u32,

@@ -11,7 +11,7 @@ use serde::Deserialize;
 
 /// The cell as a scenario describes it (units in the names).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct CellSpec {
     /// Datum-sphere centres in {W}, mm: the first at the origin, the second on +x, the third in the
     /// xy-plane with y > 0 (that is how eqs. 1-5 define {W}); any further ones anywhere.

@@ -67,74 +67,99 @@ pub enum DetmaxError {
 #[derive(Clone)]
 struct State<'a> {
     pool: &'a PoolJacobian,
-    minv: Vec<f64>,
+    /// `M^-1`.
+    minv: DMatrix<f64>,
     logdet: f64,
+    /// `D_k = J_k M^-1 J_k^T` for every pool configuration.
     d: Vec<Matrix3<f64>>,
     member: Vec<bool>,
     size: usize,
 }
 
+/// Buffers reused by every update.
+struct Scratch {
+    /// `U = M^-1 J_a^T`, m x 3.
+    u: DMatrix<f64>,
+    /// `U W`, m x 3.
+    v: DMatrix<f64>,
+    /// The columns of U, zero-padded to the pool's stride.
+    u_cols: [Vec<f64>; 3],
+    /// `J_pool U`, one row of three per pool row.
+    p: Vec<[f64; 3]>,
+}
+
+impl Scratch {
+    fn new(pool: &PoolJacobian) -> Self {
+        Self {
+            u: DMatrix::zeros(pool.m, 3),
+            v: DMatrix::zeros(pool.m, 3),
+            u_cols: std::array::from_fn(|_| vec![0.0; pool.stride]),
+            p: vec![[0.0; 3]; 3 * pool.len],
+        }
+    }
+}
+
+/// `out[i] = row_i . (u0, u1, u2)` for every padded row of `rows`: the product J U, written so
+/// that it vectorises (nalgebra's GEMM takes a scalar path when a dimension is below 6).
+fn rows_times_columns(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
+    let [u0, u1, u2] = u;
+    for (row, o) in rows.chunks_exact(stride).zip(out.iter_mut()) {
+        let (mut a0, mut a1, mut a2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+        for (((x, y0), y1), y2) in row.chunks_exact(4).zip(u0.chunks_exact(4)).zip(u1.chunks_exact(4)).zip(u2.chunks_exact(4)) {
+            for i in 0..4 {
+                a0[i] += x[i] * y0[i];
+                a1[i] += x[i] * y1[i];
+                a2[i] += x[i] * y2[i];
+            }
+        }
+        *o = [(a0[0] + a0[1]) + (a0[2] + a0[3]), (a1[0] + a1[1]) + (a1[2] + a1[3]), (a2[0] + a2[1]) + (a2[2] + a2[3])];
+    }
+}
+
 impl<'a> State<'a> {
     fn new(pool: &'a PoolJacobian, set: &[usize]) -> Option<Self> {
-        let m = pool.m;
         let info = pool.information(set);
         let chol = info.cholesky()?;
         let logdet = 2.0 * chol.l_dirty().diagonal().iter().map(|v| v.ln()).sum::<f64>();
         if !logdet.is_finite() {
             return None;
         }
-        let inv = chol.inverse();
-        let minv: Vec<f64> = (0..m * m).map(|i| inv[(i / m, i % m)]).collect();
-        let mut member = vec![false; pool.blocks.len()];
+        let minv = chol.inverse();
+        let mut member = vec![false; pool.len];
         for &k in set {
             member[k] = true;
         }
-        let mut s = Self { pool, minv, logdet, d: vec![Matrix3::zeros(); pool.blocks.len()], member, size: set.len() };
-        for k in 0..pool.blocks.len() {
-            let u = s.times_minv(k);
-            s.d[k] = s.block_times(k, &u);
-        }
-        Some(s)
-    }
-
-    /// `U = M^-1 J_k^T`, stored as three columns of length m.
-    fn times_minv(&self, k: usize) -> [Vec<f64>; 3] {
-        let m = self.pool.m;
-        let j = &self.pool.blocks[k];
-        std::array::from_fn(|c| {
-            let row = &j[c * m..(c + 1) * m];
-            (0..m).map(|l| self.minv[l * m..(l + 1) * m].iter().zip(row).map(|(a, b)| a * b).sum()).collect()
-        })
-    }
-
-    /// `J_k U` (3 x 3).
-    fn block_times(&self, k: usize, u: &[Vec<f64>; 3]) -> Matrix3<f64> {
-        let m = self.pool.m;
-        let j = &self.pool.blocks[k];
-        Matrix3::from_fn(|r, c| j[r * m..(r + 1) * m].iter().zip(&u[c]).map(|(a, b)| a * b).sum())
+        // D_k for all k at once: the 3 x 3 diagonal blocks of J M^-1 J^T.
+        let jm = &pool.j * &minv;
+        let d = (0..pool.len).map(|k| jm.rows(3 * k, 3) * pool.j.rows(3 * k, 3).transpose()).map(|x| Matrix3::from_iterator(x.iter().copied())).collect();
+        Some(Self { pool, minv, logdet, d, member, size: set.len() })
     }
 
     /// Adds (sign = 1) or removes (sign = -1) configuration a.
-    fn update(&mut self, a: usize, sign: f64) -> bool {
+    fn update(&mut self, a: usize, sign: f64, sc: &mut Scratch) -> bool {
         let s = Matrix3::identity() + self.d[a] * sign;
         let det = s.determinant();
         if det <= 0.0 {
             return false;
         }
         let Some(w) = s.try_inverse() else { return false };
-        let u = self.times_minv(a);
-        let m = self.pool.m;
-        // M'^-1 = M^-1 - sign U W U^T, row by row: V = U W, then row l -= sign V_l U^T.
-        for l in 0..m {
-            let v = [0, 1, 2].map(|c| u[0][l] * w[(0, c)] + u[1][l] * w[(1, c)] + u[2][l] * w[(2, c)]);
-            let row = &mut self.minv[l * m..(l + 1) * m];
-            for (jj, x) in row.iter_mut().enumerate() {
-                *x -= sign * (v[0] * u[0][jj] + v[1] * u[1][jj] + v[2] * u[2][jj]);
+        let ja_t = self.pool.j.rows(3 * a, 3).transpose();
+        // U = M^-1 J_a^T.
+        sc.u.gemm(1.0, &self.minv, &ja_t, 0.0);
+        // M'^-1 = M^-1 - sign U W U^T.
+        sc.v.gemm(1.0, &sc.u, &w, 0.0);
+        self.minv.gemm(-sign, &sc.v, &sc.u.transpose(), 1.0);
+        // Every D_k: P = J U, D_k -= sign P_k W P_k^T.
+        for c in 0..3 {
+            for l in 0..self.pool.m {
+                sc.u_cols[c][l] = sc.u[(l, c)];
             }
         }
-        for k in 0..self.d.len() {
-            let p = self.block_times(k, &u);
-            self.d[k] -= p * w * p.transpose() * sign;
+        rows_times_columns(&self.pool.rows, self.pool.stride, &sc.u_cols, &mut sc.p);
+        let ws = w * sign;
+        for (dk, pk) in self.d.iter_mut().zip(sc.p.chunks_exact(3)) {
+            let pk = Matrix3::new(pk[0][0], pk[0][1], pk[0][2], pk[1][0], pk[1][1], pk[1][2], pk[2][0], pk[2][1], pk[2][2]);
+            *dk -= pk * ws * pk.transpose();
         }
         self.logdet += det.ln();
         self.member[a] = sign > 0.0;
@@ -167,7 +192,7 @@ fn score(d: &Matrix3<f64>, sign: f64) -> f64 {
 
 /// Chooses `n` configurations of `pool` by DETMAX from a random start drawn with `rng`.
 pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptions, rng: &mut R) -> Result<Design, DetmaxError> {
-    let size = pool.blocks.len();
+    let size = pool.len;
     if n == 0 || n >= size || 3 * n < pool.m {
         return Err(DetmaxError::Size { n, pool: size, m: pool.m });
     }
@@ -180,6 +205,7 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
         }
     }
     let mut state = state.ok_or(DetmaxError::Singular(opts.max_starts))?;
+    let mut scratch = Scratch::new(pool);
     let mut history = vec![state.o1()];
     let mut steps = 0;
     let mut k = 1;
@@ -188,11 +214,21 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
         for up_first in [true, false] {
             let mut trial = state.clone();
             let mut ok = true;
-            for phase in [up_first, !up_first] {
+            let mut first_moved = None;
+            'excursion: for (half, phase) in [up_first, !up_first].into_iter().enumerate() {
                 for _ in 0..k {
                     let pick = if phase { trial.best_addition() } else { trial.best_removal() };
+                    // An exchange of length 1 that would undo its own first move returns to the
+                    // start design: a failure known before its last update.
+                    if k == 1 && half == 1 && pick == first_moved {
+                        ok = false;
+                        break 'excursion;
+                    }
                     steps += 1;
-                    ok &= pick.is_some_and(|a| trial.update(a, if phase { 1.0 } else { -1.0 }));
+                    ok &= pick.is_some_and(|a| trial.update(a, if phase { 1.0 } else { -1.0 }, &mut scratch));
+                    if half == 0 {
+                        first_moved = pick;
+                    }
                 }
             }
             if ok && trial.logdet > state.logdet + 1e-9 {

@@ -12,14 +12,20 @@ use nalgebra::{DMatrix, SymmetricEigen, Vector3};
 
 use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
 
-/// The pool's identification Jacobians, column-scaled, stored row-major per configuration:
-/// `rows[k][r * m + j]` is row r (x, y, z) and parameter j of configuration k.
+/// The pool's identification Jacobians, column-scaled, stacked: rows 3k..3k+3 are configuration k.
 #[derive(Clone, Debug)]
 pub struct PoolJacobian {
     /// Parameters (columns).
     pub m: usize,
-    /// Scaled 3 x m blocks, one per configuration.
-    pub blocks: Vec<Vec<f64>>,
+    /// Configurations.
+    pub len: usize,
+    /// The stacked scaled Jacobian, 3N x m.
+    pub j: DMatrix<f64>,
+    /// The same rows, row-major, each zero-padded to `stride` (a multiple of 4) for the hot
+    /// products of DETMAX.
+    pub rows: Vec<f64>,
+    /// Padded row length.
+    pub stride: usize,
     /// Column scale factors `s_j` (internal units of the parameter per mm).
     pub scale: Vec<f64>,
 }
@@ -30,42 +36,35 @@ impl PoolJacobian {
         let m = set.len();
         let mut st = KinState::default();
         let mut cols = vec![Vector3::zeros(); m];
-        let mut raw: Vec<Vec<f64>> = Vec::with_capacity(qs.len());
-        let mut sum_sq = vec![0.0; m];
-        for q in qs {
+        let mut j = DMatrix::zeros(3 * qs.len(), m);
+        for (k, q) in qs.iter().enumerate() {
             tcp_jacobian(model, &mut st, q, set, &mut cols);
-            let mut block = vec![0.0; 3 * m];
-            for (j, c) in cols.iter().enumerate() {
-                for r in 0..3 {
-                    block[r * m + j] = c[r];
-                }
-                sum_sq[j] += c.norm_squared();
+            for (c, col) in cols.iter().enumerate() {
+                j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
             }
-            raw.push(block);
         }
         let n = qs.len().max(1) as f64;
-        let scale: Vec<f64> = sum_sq.iter().map(|s| (s / n).sqrt()).collect();
-        for block in &mut raw {
-            for r in 0..3 {
-                for j in 0..m {
-                    let s = scale[j];
-                    block[r * m + j] = if s > 0.0 { block[r * m + j] / s } else { 0.0 };
-                }
+        let scale: Vec<f64> = j.column_iter().map(|c| (c.norm_squared() / n).sqrt()).collect();
+        for (c, s) in scale.iter().enumerate() {
+            if *s > 0.0 {
+                j.column_mut(c).unscale_mut(*s);
             }
         }
-        Self { m, blocks: raw, scale }
+        let stride = m.div_ceil(4) * 4;
+        let mut rows = vec![0.0; j.nrows() * stride];
+        for (i, row) in rows.chunks_exact_mut(stride).enumerate() {
+            for c in 0..m {
+                row[c] = j[(i, c)];
+            }
+        }
+        Self { m, len: qs.len(), j, rows, stride, scale }
     }
 
     /// Information matrix `sum_k J_k^T J_k` of the configurations `set`, m x m.
     pub fn information(&self, set: &[usize]) -> DMatrix<f64> {
-        let m = self.m;
-        let mut stacked = DMatrix::zeros(3 * set.len(), m);
+        let mut stacked = DMatrix::zeros(3 * set.len(), self.m);
         for (i, &k) in set.iter().enumerate() {
-            for r in 0..3 {
-                for j in 0..m {
-                    stacked[(3 * i + r, j)] = self.blocks[k][r * m + j];
-                }
-            }
+            stacked.rows_mut(3 * i, 3).copy_from(&self.j.rows(3 * k, 3));
         }
         stacked.tr_mul(&stacked)
     }

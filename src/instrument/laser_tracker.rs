@@ -15,7 +15,7 @@ use serde::Deserialize;
 
 /// The tracker as a scenario describes it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct LaserTrackerSpec {
     /// Horizontal distance from sphere 3, away from the robot base, mm.
     pub distance_from_sphere3_mm: f64,

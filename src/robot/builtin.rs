@@ -128,3 +128,10 @@ pub fn trical_2018_table7() -> RobotModel {
     debug_assert_eq!(set.names(), TABLE7_MEANS.iter().map(|(n, _)| n.to_string()).collect::<Vec<_>>());
     set.unpack(&trical_2018_nominal(), &values).expect("valid")
 }
+
+/// Table 7 standard deviations over 30 optimised sets of 75, in the order and units of
+/// [`TABLE7_MEANS`] (printed to three decimals: 0.000 means below 0.0005).
+pub const TABLE7_STD: [f64; 31] = [
+    0.001, 0.001, 0.001, 0.000, 0.001, 0.008, 0.004, 0.007, 0.001, 0.003, 0.004, 0.011, 0.002, 0.003, 0.004, 0.002, 0.001, 0.001, 0.001, 0.099,
+    0.149, 0.611, 0.527, 3.047, 0.001, 0.006, 0.013, 0.017, 0.001, 0.003, 0.000,
+];

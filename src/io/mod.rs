@@ -1,0 +1,5 @@
+//! Files: scenarios in, result tables, summaries and manifests out.
+
+pub mod report;
+pub mod results;
+pub mod scenario;

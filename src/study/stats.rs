@@ -1,0 +1,87 @@
+//! Descriptive statistics of error samples.
+
+/// Statistics of a sample of absolute position errors, mm.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct ErrorStats {
+    /// Mean, mm.
+    pub mean: f64,
+    /// Median, mm.
+    pub median: f64,
+    /// Sample standard deviation, mm.
+    pub std: f64,
+    /// 95th percentile (linear interpolation), mm.
+    pub p95: f64,
+    /// Maximum, mm.
+    pub max: f64,
+    /// Root mean square, mm.
+    pub rms: f64,
+}
+
+impl ErrorStats {
+    /// Statistics of `values` (empty: all zero).
+    pub fn of(values: &[f64]) -> Self {
+        if values.is_empty() {
+            return Self::default();
+        }
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let var = if values.len() > 1 { values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        Self {
+            mean,
+            median: quantile(&sorted, 0.5),
+            std: var.sqrt(),
+            p95: quantile(&sorted, 0.95),
+            max: sorted[sorted.len() - 1],
+            rms: (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt(),
+        }
+    }
+}
+
+/// Quantile `p` of an ascending sample, linear interpolation between order statistics.
+pub fn quantile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let h = (sorted.len() - 1) as f64 * p.clamp(0.0, 1.0);
+    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+/// Median of an unsorted sample.
+pub fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    quantile(&v, 0.5)
+}
+
+/// Interquartile range of an unsorted sample.
+pub fn iqr(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    quantile(&v, 0.75) - quantile(&v, 0.25)
+}
+
+/// Pearson correlation coefficient.
+pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in x.iter().zip(y) {
+        sxy += (a - mx) * (b - my);
+        sxx += (a - mx) * (a - mx);
+        syy += (b - my) * (b - my);
+    }
+    sxy / (sxx * syy).sqrt()
+}
+
+/// Least-squares line `y = a + b x`: (a, b).
+pub fn regression(x: &[f64], y: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+    let b = sxy / sxx;
+    (my - b * mx, b)
+}
