@@ -143,7 +143,7 @@ impl ExperimentSpec {
         let sphere3 = cell.spheres_w[2.min(cell.spheres_w.len() - 1)];
         let tracker = LaserTracker::place(&self.tracker, &sphere3, &base_in_w, &cell.spheres_w, &cell.spheres_w_measured, &mut stream(seed, 4));
         let setup = Setup { cell: &cell, robot: &robot, robot_validation: &robot_validation, trical: &trical, tracker: &tracker, nominal: &self.nominal(), spec: &self.campaign };
-        let campaign = campaign::run(&setup, &mut stream(seed, 5))?;
+        let campaign = campaign::run(&setup, split_seed(seed, 5))?;
         Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign })
     }
 

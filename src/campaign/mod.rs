@@ -11,6 +11,7 @@ use rand::{Rng, RngExt};
 use serde::Deserialize;
 
 use crate::cell::Cell;
+use crate::experiment::stream;
 use crate::cell::collision::{CollisionWorld, Obstacle, irb120_link_capsules};
 use crate::identify::Observation;
 use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
@@ -252,12 +253,31 @@ pub struct Setup<'a> {
     pub spec: &'a CampaignSpec,
 }
 
-/// Runs the semi-automatic steps, measures the pool and the validation set.
-pub fn run<R: Rng + ?Sized>(setup: &Setup<'_>, rng: &mut R) -> Result<Campaign, CampaignError> {
+/// Random streams of the campaign. Each step draws from its own stream, keyed by what it is (the
+/// sphere, the attempt, the pose index), never from one shared sequence: a centring loop that takes
+/// one iteration more in a what-if scenario then changes that configuration only, and two scenarios
+/// that differ in one amplitude are compared on the same targets, noise and validation poses
+/// (common random numbers).
+mod streams {
+    pub const CMM: u64 = 1;
+    pub const SEMI_AUTOMATIC: u64 = 2;
+    pub const VALIDATION_POSES: u64 = 3;
+    /// Pool targets of sphere k: `POOL_TARGETS + k`.
+    pub const POOL_TARGETS: u64 = 100;
+    /// Centring of pool attempt t of sphere k: `POOL_CENTRING + k * 2^32 + t`.
+    pub const POOL_CENTRING: u64 = 1 << 40;
+    /// Move and tracker noise of validation pose i: `VALIDATION_NOISE + i`.
+    pub const VALIDATION_NOISE: u64 = 1 << 41;
+}
+
+/// Runs the semi-automatic steps, measures the pool and the validation set, drawing every random
+/// quantity from streams derived from `seed`.
+pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
     let Setup { cell, robot, robot_validation, trical, tracker, nominal, spec } = *setup;
     let truth_base = world_from_base(&robot.truth);
     let tcp_true = robot.truth.data().flange_tcp_mm;
-    let tcp_cmm = trical.cmm_tcp(&tcp_true, rng);
+    let tcp_cmm = trical.cmm_tcp(&tcp_true, &mut stream(seed, streams::CMM));
+    let rng = &mut stream(seed, streams::SEMI_AUTOMATIC);
     let world = collision_world(cell, nominal, &truth_base, &tcp_cmm);
     let down = -Vector3::z();
 
@@ -318,6 +338,7 @@ pub fn run<R: Rng + ?Sized>(setup: &Setup<'_>, rng: &mut R) -> Result<Campaign, 
     let mut st = KinState::default();
     for (k, seed_q) in located_q.iter().enumerate() {
         let target_w = cell.spheres_w_measured[k];
+        let rng = &mut stream(seed, streams::POOL_TARGETS + k as u64);
         let mut last = *seed_q;
         let mut kept = 0;
         let mut tries = 0;
@@ -337,7 +358,8 @@ pub fn run<R: Rng + ?Sized>(setup: &Setup<'_>, rng: &mut R) -> Result<Campaign, 
                 rejected += 1;
                 continue;
             }
-            match centre(&nominal_model, robot, trical, cell, k, &q, &last, rng) {
+            let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries as u64);
+            match centre(&nominal_model, robot, trical, cell, k, &q, &last, centring_rng) {
                 Ok(res) => {
                     last = res.q;
                     pool.push(PoolEntry { sphere: k, q_commanded: q, q: res.q, iterations: res.iterations, seconds: res.seconds, true_offset_mm: res.true_offset_mm });
@@ -357,6 +379,7 @@ pub fn run<R: Rng + ?Sized>(setup: &Setup<'_>, rng: &mut R) -> Result<Campaign, 
     let mut from = located_q[0];
     let mut tries = 0;
     let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
+    let rng = &mut stream(seed, streams::VALIDATION_POSES);
     while validation.len() < spec.validation_poses as usize {
         tries += 1;
         if tries > spec.max_tries_per_configuration * spec.validation_poses.max(1) {
@@ -375,9 +398,10 @@ pub fn run<R: Rng + ?Sized>(setup: &Setup<'_>, rng: &mut R) -> Result<Campaign, 
             validation_rejected += 1;
             continue;
         }
-        let true_w = robot_validation.tcp_after_move(&mut st, &q, &from, rng);
+        let noise = &mut stream(seed, streams::VALIDATION_NOISE + validation.len() as u64);
+        let true_w = robot_validation.tcp_after_move(&mut st, &q, &from, noise);
         from = q;
-        validation.push(ValidationPose { q, measured_w: tracker.measure(&true_w, rng) });
+        validation.push(ValidationPose { q, measured_w: tracker.measure(&true_w, noise) });
     }
 
     Ok(Campaign {

@@ -1,0 +1,131 @@
+//! The study driver and the command line: determinism across thread counts, scenario errors,
+//! result files, and the CI check on the reduced scenario.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use calsim::io::scenario;
+use calsim::study::{self, StudyResults};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn calsim() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_calsim"));
+    c.env("RUST_LIB_BACKTRACE", "0").env("RUST_BACKTRACE", "0").current_dir(repo());
+    c
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("calsim-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs the reduced study on a pool of `threads` threads.
+fn run_with_threads(threads: usize) -> StudyResults {
+    let mut s = scenario::load(&repo().join("scenarios/ci_quick.toml")).unwrap();
+    s.study.set_sizes = vec![20, 35];
+    s.study.repetitions = 3;
+    s.study.table_set_size = 35;
+    let experiment = s.experiment.build(s.seed).unwrap();
+    let before = s.experiment.before_model(&experiment.campaign);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    pool.install(|| study::run(&experiment, &before, &s.study, s.seed, &|_, _| {}).unwrap())
+}
+
+#[test]
+fn results_are_identical_for_one_and_two_threads() {
+    let one = run_with_threads(1);
+    let two = run_with_threads(2);
+    assert_eq!(one.tasks.len(), 6);
+    assert_eq!(one.before_errors, two.before_errors);
+    for (a, b) in one.tasks.iter().zip(&two.tasks) {
+        // Everything but the wall time, bit for bit.
+        let b = study::TaskResult { seconds: a.seconds, ..b.clone() };
+        assert_eq!(a, &b, "task {:?}", a.task);
+    }
+    // The tasks did real work: a converged identification with a validation error.
+    assert!(one.tasks.iter().all(|t| t.outcome == "converged" && t.validation.mean > 0.0));
+}
+
+/// Writes `text` as a scenario file named `name` in a scratch directory; returns its path.
+fn scenario_file(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn base_text() -> String {
+    std::fs::read_to_string(repo().join("scenarios/ci_quick.toml")).unwrap()
+}
+
+/// Runs `calsim run` on a bad scenario and returns its stderr after checking the exit code 2.
+fn bad_input(file: &Path) -> String {
+    let out = calsim().arg("run").arg(file).arg("--out").arg(file.parent().unwrap()).output().unwrap();
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    assert!(!err.contains("panicked") && !err.contains("backtrace"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    err
+}
+
+#[test]
+fn an_unknown_key_is_named_with_the_file() {
+    let dir = scratch("unknown");
+    let text = base_text().replace("ball_diameter_mm = 12.7", "ball_diameter_mm = 12.7\nball_diametre_mm = 12.7");
+    let f = scenario_file(&dir, "typo.toml", &text);
+    let err = bad_input(&f);
+    assert!(err.contains("typo.toml") && err.contains("ball_diametre_mm"), "{err}");
+}
+
+#[test]
+fn an_out_of_range_value_is_named_with_its_key() {
+    let dir = scratch("range");
+    let text = base_text().replace("epsilon_mm = 0.010", "epsilon_mm = -0.010");
+    let f = scenario_file(&dir, "negative.toml", &text);
+    let err = bad_input(&f);
+    assert!(err.contains("negative.toml") && err.contains("trical") && err.contains("epsilon_mm"), "{err}");
+}
+
+#[test]
+fn a_wrong_type_and_a_missing_file_are_clear_errors() {
+    let dir = scratch("type");
+    let text = base_text().replace("repetitions = 10", "repetitions = \"ten\"");
+    let f = scenario_file(&dir, "string.toml", &text);
+    let err = bad_input(&f);
+    assert!(err.contains("string.toml") && err.contains("repetitions"), "{err}");
+    let err = bad_input(&dir.join("absent.toml"));
+    assert!(err.contains("absent.toml"), "{err}");
+}
+
+#[test]
+fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
+    let read = |name: &str| -> toml::Table { std::fs::read_to_string(repo().join("scenarios").join(name)).unwrap().parse().unwrap() };
+    let mut full = read("irb120_trical.toml");
+    let mut quick = read("ci_quick.toml");
+    for t in [&mut full, &mut quick] {
+        t.remove("study");
+        t.remove("expect");
+    }
+    assert_eq!(full, quick);
+}
+
+/// The check CI relies on: the reduced study meets the bands of its [expect] table, and a run
+/// leaves the complete result set and no temporary directory behind.
+#[test]
+fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
+    let dir = scratch("check");
+    let out = calsim().args(["check", "scenarios/ci_quick.toml", "--out"]).arg(&dir).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("figures within their bands"), "{stdout}");
+    let entries: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert_eq!(entries, vec!["ci_quick".to_string()], "no temporary directory left: {entries:?}");
+    for f in ["tasks.parquet", "parameters.parquet", "validation_errors.parquet", "manifest.json", "summary.md"] {
+        let len = std::fs::metadata(dir.join("ci_quick").join(f)).map(|m| m.len()).unwrap_or(0);
+        assert!(len > 0, "{f} missing or empty");
+    }
+}
