@@ -1,10 +1,12 @@
 //! Core kernels: forward kinematics with gravity compliance, FK plus the 3 x 31 identification
-//! Jacobian, and one 75-configuration identification to convergence.
+//! Jacobian, one 75-configuration identification to convergence, and DETMAX on the 360 pool of
+//! the paper's campaign (n = 20, 75, 100) with the Jacobian of the pool it works on.
 
 use std::hint::black_box;
 
 use calsim::campaign::uniform_configuration;
-use calsim::identify::{FitOptions, Observation, identify};
+use calsim::experiment::ExperimentSpec;
+use calsim::identify::{DetmaxOptions, FitOptions, Observation, PoolJacobian, detmax, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use calsim::robot::{KinState, ParamSet, forward, tcp_jacobian};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -50,5 +52,23 @@ fn kernels(c: &mut Criterion) {
     c.bench_function("identify_75_gauss_newton", |b| b.iter(|| black_box(identify(black_box(&nominal), &set, black_box(&obs), &opts))));
 }
 
-criterion_group!(benches, kernels);
+fn design(c: &mut Criterion) {
+    let e = ExperimentSpec::default().build(2018).expect("campaign");
+    let qs: Vec<_> = e.campaign.pool.iter().map(|p| p.q).collect();
+    let set = ParamSet::trical_31();
+    c.bench_function("pool_jacobian_360", |b| b.iter(|| black_box(PoolJacobian::new(black_box(&e.campaign.nominal), &set, black_box(&qs)))));
+    let pool = PoolJacobian::new(&e.campaign.nominal, &set, &qs);
+    let opts = DetmaxOptions::default();
+    for n in [20, 75, 100] {
+        let mut seed = 0;
+        c.bench_function(&format!("detmax_o1_n{n}_of_360"), |b| {
+            b.iter(|| {
+                seed += 1;
+                black_box(detmax(&pool, n, &opts, &mut ChaCha8Rng::seed_from_u64(seed)).expect("design"))
+            })
+        });
+    }
+}
+
+criterion_group!(benches, kernels, design);
 criterion_main!(benches);

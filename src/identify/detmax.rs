@@ -102,14 +102,41 @@ impl Scratch {
 /// `out[i] = row_i . (u0, u1, u2)` for every padded row of `rows`: the product J U, written so
 /// that it vectorises (nalgebra's GEMM takes a scalar path when a dimension is below 6).
 fn rows_times_columns(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU was just found to support AVX2 and FMA, the only requirement of
+        // `rows_times_columns_avx2` (it holds no other unsafe operation).
+        #[allow(unsafe_code)]
+        unsafe {
+            rows_times_columns_avx2(rows, stride, u, out)
+        };
+        return;
+    }
+    rows_times_columns_kernel::<false>(rows, stride, u, out);
+}
+
+/// The hot product of DETMAX compiled for AVX2 with fused multiply-adds: 4-wide vectors instead of
+/// the 2-wide SSE2 of the x86-64 baseline (chosen at run time by `rows_times_columns`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn rows_times_columns_avx2(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
+    rows_times_columns_kernel::<true>(rows, stride, u, out);
+}
+
+/// `out[r] = (row_r . u0, row_r . u1, row_r . u2)` over padded rows, with four independent partial
+/// sums per column so that the compiler vectorises it. `FMA` selects fused multiply-adds (only
+/// where the target has them; elsewhere `mul_add` would be a slow library call).
+#[inline(always)]
+fn rows_times_columns_kernel<const FMA: bool>(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
     let [u0, u1, u2] = u;
+    let madd = |a: f64, x: f64, y: f64| if FMA { x.mul_add(y, a) } else { a + x * y };
     for (row, o) in rows.chunks_exact(stride).zip(out.iter_mut()) {
         let (mut a0, mut a1, mut a2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
         for (((x, y0), y1), y2) in row.chunks_exact(4).zip(u0.chunks_exact(4)).zip(u1.chunks_exact(4)).zip(u2.chunks_exact(4)) {
             for i in 0..4 {
-                a0[i] += x[i] * y0[i];
-                a1[i] += x[i] * y1[i];
-                a2[i] += x[i] * y2[i];
+                a0[i] = madd(a0[i], x[i], y0[i]);
+                a1[i] = madd(a1[i], x[i], y1[i]);
+                a2[i] = madd(a2[i], x[i], y2[i]);
             }
         }
         *o = [(a0[0] + a0[1]) + (a0[2] + a0[3]), (a1[0] + a1[1]) + (a1[2] + a1[3]), (a2[0] + a2[1]) + (a2[2] + a2[3])];

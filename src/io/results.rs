@@ -26,10 +26,8 @@ pub struct Timings {
     pub pool_jacobian_s: f64,
     /// All identifications (DETMAX, identification, validation).
     pub tasks_s: f64,
-    /// Whole study, campaign included.
+    /// Whole study, campaign included (the results are written after the manifest is made).
     pub study_s: f64,
-    /// Writing the results.
-    pub write_s: f64,
 }
 
 #[derive(Serialize)]
