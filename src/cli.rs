@@ -8,6 +8,8 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use clap::{Parser, Subcommand, ValueEnum};
+
+use crate::io::plots::PlotInputs;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -57,6 +59,9 @@ struct RunArgs {
     /// Repetitions per set size, replacing the scenario's.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     repetitions: Option<u32>,
+    /// Skip the figures (PNG and SVG of the paper's Figs. 7-13).
+    #[arg(long)]
+    no_plots: bool,
 }
 
 /// Set sizes given on the command line.
@@ -167,7 +172,13 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     let rows = report::checks(&figures, &scenario.expect);
     let t_write = Instant::now();
     let timings = Timings { campaign_s, pool_s: experiment.campaign.pool_wall_s, pool_jacobian_s: results.pool_jacobian_s, tasks_s: results.tasks_s, study_s };
-    let dest = crate::io::results::write(&args.out, &scenario, &results, &figures, &rows, threads, &timings).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let plot_inputs = (!args.no_plots).then(|| PlotInputs {
+        validation_w: experiment.campaign.validation.iter().map(|v| v.measured_w).collect(),
+        spheres_w: experiment.cell.spheres_w.clone(),
+        base_w: crate::robot::world_from_base(&experiment.robot.truth).translation.vector,
+        table_n: scenario.study.table_set_size as usize,
+    });
+    let dest = crate::io::results::write(&args.out, &scenario, &results, &figures, &rows, threads, &timings, plot_inputs.as_ref()).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     debug_assert_eq!(text, scenario.text);
 

@@ -128,4 +128,23 @@ fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
         let len = std::fs::metadata(dir.join("ci_quick").join(f)).map(|m| m.len()).unwrap_or(0);
         assert!(len > 0, "{f} missing or empty");
     }
+    // The paper's figures, as PNG and SVG, embedded in the summary.
+    let summary = std::fs::read_to_string(dir.join("ci_quick/summary.md")).unwrap();
+    for stem in ["fig07_validation_poses", "fig08_mean_error_by_set_size", "fig09_std_error_by_set_size", "fig10_error_map", "fig11_error_vs_distance_to_base", "fig12_error_vs_distance_to_ccz", "fig13_error_histograms"] {
+        let png = std::fs::read(dir.join("ci_quick").join(format!("{stem}.png"))).unwrap_or_default();
+        assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000, "{stem}.png missing or blank");
+        let svg = std::fs::read_to_string(dir.join("ci_quick").join(format!("{stem}.svg"))).unwrap_or_default();
+        assert!(svg.contains("<svg") && svg.contains("<text"), "{stem}.svg missing or without labels");
+        assert!(summary.contains(&format!("]({stem}.png)")), "{stem} not in the summary");
+    }
+}
+
+#[test]
+fn no_plots_skips_the_figures() {
+    let dir = scratch("noplots");
+    let out = calsim().args(["run", "scenarios/ci_quick.toml", "--set-sizes", "20:30:10", "--repetitions", "2", "--no-plots", "--out"]).arg(&dir).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let names: Vec<String> = std::fs::read_dir(dir.join("ci_quick")).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert!(names.iter().all(|n| !n.ends_with(".png") && !n.ends_with(".svg")), "{names:?}");
+    assert!(names.contains(&"summary.md".to_string()));
 }

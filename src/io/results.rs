@@ -11,6 +11,7 @@ use polars::prelude::*;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
+use crate::io::plots::{PlotInputs, Written};
 use crate::io::report::{Check, Figures};
 use crate::io::scenario::Scenario;
 use crate::study::StudyResults;
@@ -68,7 +69,10 @@ fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> 
 }
 
 /// Writes every result file of `results` into `out/<scenario name>`, replacing what was there.
-pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &Figures, checks: &[Check], threads: usize, timings: &Timings) -> std::io::Result<PathBuf> {
+///
+/// `plots`, when given, adds the paper's figures as PNG and SVG, embedded in `summary.md`.
+#[allow(clippy::too_many_arguments)]
+pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &Figures, checks: &[Check], threads: usize, timings: &Timings, plots: Option<&PlotInputs>) -> std::io::Result<PathBuf> {
     fs::create_dir_all(out)?;
     let dest = out.join(&scenario.name);
     let tmp = out.join(format!(".{}.tmp-{}", scenario.name, std::process::id()));
@@ -76,7 +80,7 @@ pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &
         fs::remove_dir_all(&tmp)?;
     }
     fs::create_dir_all(&tmp)?;
-    let result = write_into(&tmp, scenario, results, figures, checks, threads, timings);
+    let result = write_into(&tmp, scenario, results, figures, checks, threads, timings, plots);
     if let Err(e) = result {
         let _ = fs::remove_dir_all(&tmp);
         return Err(e);
@@ -92,7 +96,8 @@ pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &
     Ok(dest)
 }
 
-fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], threads: usize, timings: &Timings) -> std::io::Result<()> {
+#[allow(clippy::too_many_arguments)]
+fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], threads: usize, timings: &Timings, plots: Option<&PlotInputs>) -> std::io::Result<()> {
     let t = &r.tasks;
     let col_u32 = |name: &str, v: Vec<u32>| Column::new(name.into(), v);
     let col_f64 = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
@@ -192,12 +197,16 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, ch
         timings,
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
-    fs::write(dir.join("summary.md"), summary(scenario, r, f, checks))?;
+    let drawn = match plots {
+        Some(p) => crate::io::plots::write_all(dir, r, p).map_err(|e| std::io::Error::other(format!("plots: {e}")))?,
+        None => Vec::new(),
+    };
+    fs::write(dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
     Ok(())
 }
 
 /// The summary: the paper's Tables 7 and 8 and before/after figures next to calsim's.
-pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check]) -> String {
+pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], drawn: &[Written]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# {}: calsim against the published figures\n", scenario.name);
     let _ = writeln!(
@@ -255,5 +264,11 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
         let _ = writeln!(s, "| {} | {:.4} | {:.4} | {:.4} | {} |", z.n, z.median_of_means, z.iqr_of_means, z.median_of_stds, z.not_converged);
     }
     let _ = writeln!(s, "\nFig. 11: Pearson r of the error after calibration against the distance to the base: {:.3}. Fig. 12: against the distance to the centre of the calibration zone: {:.3}.", f.r_base, f.r_ccz);
+    if !drawn.is_empty() {
+        let _ = writeln!(s, "\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n");
+        for w in drawn {
+            let _ = writeln!(s, "![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
+        }
+    }
     s
 }
