@@ -62,6 +62,9 @@ struct RunArgs {
     /// Skip the figures (PNG and SVG of the paper's Figs. 7-13).
     #[arg(long)]
     no_plots: bool,
+    /// Skip the Rerun recording (study.rrd).
+    #[arg(long)]
+    no_recording: bool,
 }
 
 /// Set sizes given on the command line.
@@ -178,19 +181,29 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         base_w: crate::robot::world_from_base(&experiment.robot.truth).translation.vector,
         table_n: scenario.study.table_set_size as usize,
     });
-    let dest = crate::io::results::write(&args.out, &scenario, &results, &figures, &rows, threads, &timings, plot_inputs.as_ref()).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let representative = crate::io::plots::representative(&results, scenario.study.table_set_size as usize).map(|(task, _)| task);
+    let record_s = std::cell::Cell::new(0.0);
+    let record = |path: &std::path::Path| {
+        let t = Instant::now();
+        let r = crate::io::recording::write(path, &scenario.name, &experiment, &before, &results, representative);
+        record_s.set(t.elapsed().as_secs_f64());
+        r
+    };
+    let extras = crate::io::results::Extras { plots: plot_inputs.as_ref(), recording: if args.no_recording { None } else { Some(&record) } };
+    let dest = crate::io::results::write(&args.out, &scenario, &results, &figures, &rows, threads, &timings, &extras).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     debug_assert_eq!(text, scenario.text);
 
     println!("{}", report::terminal_table(&rows));
     println!(
-        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results written in {:.3} s to {}",
+        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",
         study_s,
         campaign_s,
         experiment.campaign.pool_wall_s,
         n_tasks,
         results.tasks_s,
         write_s,
+        record_s.get(),
         dest.display()
     );
     let missed = rows.iter().filter(|r| r.pass == Some(false)).count();

@@ -8,4 +8,5 @@ pub mod identify;
 pub mod instrument;
 pub mod io;
 pub mod robot;
+pub mod spms;
 pub mod study;

@@ -1,6 +1,7 @@
 //! Files: scenarios in, result tables, summaries and manifests out.
 
 pub mod plots;
+pub mod recording;
 pub mod report;
 pub mod results;
 pub mod scenario;

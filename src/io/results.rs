@@ -68,11 +68,20 @@ fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> 
     Ok(())
 }
 
+/// Optional outputs beside the tables.
+#[derive(Default)]
+pub struct Extras<'a> {
+    /// Inputs of the figures; `None` draws none.
+    pub plots: Option<&'a PlotInputs>,
+    /// Writes the Rerun recording to the path it is given; `None` records nothing.
+    pub recording: Option<&'a dyn Fn(&Path) -> Result<(), String>>,
+}
+
 /// Writes every result file of `results` into `out/<scenario name>`, replacing what was there.
 ///
-/// `plots`, when given, adds the paper's figures as PNG and SVG, embedded in `summary.md`.
+/// `extras` adds the figures (PNG and SVG, embedded in `summary.md`) and the recording.
 #[allow(clippy::too_many_arguments)]
-pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &Figures, checks: &[Check], threads: usize, timings: &Timings, plots: Option<&PlotInputs>) -> std::io::Result<PathBuf> {
+pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &Figures, checks: &[Check], threads: usize, timings: &Timings, extras: &Extras<'_>) -> std::io::Result<PathBuf> {
     fs::create_dir_all(out)?;
     let dest = out.join(&scenario.name);
     let tmp = out.join(format!(".{}.tmp-{}", scenario.name, std::process::id()));
@@ -80,7 +89,7 @@ pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &
         fs::remove_dir_all(&tmp)?;
     }
     fs::create_dir_all(&tmp)?;
-    let result = write_into(&tmp, scenario, results, figures, checks, threads, timings, plots);
+    let result = write_into(&tmp, scenario, results, figures, checks, threads, timings, extras);
     if let Err(e) = result {
         let _ = fs::remove_dir_all(&tmp);
         return Err(e);
@@ -97,7 +106,7 @@ pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &
 }
 
 #[allow(clippy::too_many_arguments)]
-fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], threads: usize, timings: &Timings, plots: Option<&PlotInputs>) -> std::io::Result<()> {
+fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], threads: usize, timings: &Timings, extras: &Extras<'_>) -> std::io::Result<()> {
     let t = &r.tasks;
     let col_u32 = |name: &str, v: Vec<u32>| Column::new(name.into(), v);
     let col_f64 = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
@@ -197,7 +206,10 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, ch
         timings,
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
-    let drawn = match plots {
+    if let Some(record) = extras.recording {
+        record(&dir.join("study.rrd")).map_err(|e| std::io::Error::other(format!("recording: {e}")))?;
+    }
+    let drawn = match extras.plots {
         Some(p) => crate::io::plots::write_all(dir, r, p).map_err(|e| std::io::Error::other(format!("plots: {e}")))?,
         None => Vec::new(),
     };
