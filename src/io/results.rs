@@ -68,13 +68,16 @@ fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> 
     Ok(())
 }
 
+/// Writes a recording to the path it is given.
+pub type Recorder<'a> = &'a dyn Fn(&Path) -> Result<(), String>;
+
 /// Optional outputs beside the tables.
 #[derive(Default)]
 pub struct Extras<'a> {
     /// Inputs of the figures; `None` draws none.
     pub plots: Option<&'a PlotInputs>,
     /// Writes the Rerun recording to the path it is given; `None` records nothing.
-    pub recording: Option<&'a dyn Fn(&Path) -> Result<(), String>>,
+    pub recording: Option<Recorder<'a>>,
 }
 
 /// Writes every result file of `results` into `out/<scenario name>`, replacing what was there.
