@@ -37,7 +37,6 @@ fn main() {
 
     let poses = |n: usize, rng: &mut ChaCha8Rng| {
         let mut data = BeamData { radius_mm: R, ..Default::default() };
-        let mut truth_frames = Vec::new();
         while data.frames.len() < n {
             let rot = UnitQuaternion::from_scaled_axis(Vector3::from_fn(|_, _| rng.random_range(-0.26..0.26)));
             // The sphere relative to the head: the five beams span nearly its diameter, so it can move
@@ -51,12 +50,11 @@ fn main() {
             // A1-A3 define the head frame: the true frame is t (points placed in it).
             data.frames.push(measured);
             data.readings.push(l);
-            truth_frames.push(t);
         }
-        (data, truth_frames)
+        data
     };
 
-    let (data, _) = poses(55, &mut rng);
+    let data = poses(55, &mut rng);
     // PSO then LM on the paper's form, from the nominal Table 2 beams.
     let form = Form::Paper;
     let nominal = form.pack(&table2_beams(), &(sphere_w + Vector3::new(3.0, -2.0, 4.0)));
@@ -104,13 +102,13 @@ fn main() {
     }
 
     // Section 5.2: 55 measurements of the sphere, SPMS (identified beams) against the tracker.
-    let (check, truth_frames) = poses(55, &mut rng);
+    let check = poses(55, &mut rng);
     for (name, sol, f) in [("PSO + LM, paper 6K+3", &paper, Form::Paper), ("LM alone, minimal 5K+3", &minimal, Form::Minimal)] {
         let beams = f.unpack(&sol.x, 5);
         let gains = f.gains(&sol.x, 5);
         let mut errors = Vec::new();
         let mut residual_max: f64 = 0.0;
-        for ((t, l), _tt) in check.frames.iter().zip(&check.readings).zip(&truth_frames) {
+        for (t, l) in check.frames.iter().zip(&check.readings) {
             let scaled: Vec<f64> = l.iter().zip(&gains).map(|(l, g)| l * g).collect();
             let Some((c, res)) = fit_centre(&beams, &scaled, R) else { continue };
             residual_max = res.iter().fold(residual_max, |m, r| m.max(r.abs()));

@@ -191,10 +191,16 @@ fn boxplot<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &[(usize, Ve
     Ok(())
 }
 
-/// Error colour scale from blue (small) to red (large).
-fn heat(t: f64) -> RGBColor {
+/// Error colour scale from blue (0, small) to red (1, large), as RGB; the figures and the
+/// recording both use it.
+pub fn heat_rgb(t: f64) -> [u8; 3] {
     let t = t.clamp(0.0, 1.0);
-    RGBColor((255.0 * t) as u8, (80.0 * (1.0 - (2.0 * t - 1.0).abs())) as u8, (255.0 * (1.0 - t)) as u8)
+    [(255.0 * t) as u8, (80.0 * (1.0 - (2.0 * t - 1.0).abs())) as u8, (255.0 * (1.0 - t)) as u8]
+}
+
+fn heat(t: f64) -> RGBColor {
+    let [r, g, b] = heat_rgb(t);
+    RGBColor(r, g, b)
 }
 
 fn fig10<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs, after: &[f64], n: usize, task: usize) -> DrawResult {

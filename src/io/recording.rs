@@ -43,10 +43,10 @@ fn quat(q: &UnitQuaternion<f64>) -> rerun::Quaternion {
     rerun::Quaternion::from_xyzw([q.i as f32, q.j as f32, q.k as f32, q.w as f32])
 }
 
-/// Blue (0) to red (1).
+/// The error colour scale of the figures ([`crate::io::plots::heat_rgb`]).
 fn heat(t: f64) -> Color {
-    let t = t.clamp(0.0, 1.0);
-    Color::from_rgb((255.0 * t) as u8, (80.0 * (1.0 - (2.0 * t - 1.0).abs())) as u8, (255.0 * (1.0 - t)) as u8)
+    let [r, g, b] = crate::io::plots::heat_rgb(t);
+    Color::from_rgb(r, g, b)
 }
 
 /// Capsules between world points, as Rerun draws them (a length along +Z, moved and turned).
@@ -62,9 +62,8 @@ fn capsules(ends: &[(Vector3<f64>, Vector3<f64>, f64)]) -> Capsules3D {
 }
 
 /// The robot's link and device capsules in {W} at joint values `q` of `model`.
-fn robot_capsules(model: &RobotModel, st: &mut KinState, q: &[f64; JOINTS], links: &[Vec<CapsuleSpec>; JOINTS + 1], tool: &[CapsuleSpec]) -> Vec<(Vector3<f64>, Vector3<f64>, f64)> {
+fn robot_capsules(model: &RobotModel, wb: &Isometry3<f64>, st: &mut KinState, q: &[f64; JOINTS], links: &[Vec<CapsuleSpec>; JOINTS + 1], tool: &[CapsuleSpec]) -> Vec<(Vector3<f64>, Vector3<f64>, f64)> {
     forward(model, st, q);
-    let wb = world_from_base(model);
     let mut out = Vec::new();
     let mut push = |frame: Isometry3<f64>, c: &CapsuleSpec| {
         let a = wb * frame * Point3::from(Vector3::from(c.a));
@@ -176,7 +175,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     for (k, p) in pool.iter().enumerate() {
         rec.set_time_sequence("pool_configuration", k as i64);
         let c = SPHERE_COLOURS[p.sphere % SPHERE_COLOURS.len()];
-        rec.log("pool/robot", &capsules(&robot_capsules(truth, &mut st, &p.q, &links, &tool)).with_colors([Color::from_rgb(c[0], c[1], c[2])]))?;
+        rec.log("pool/robot", &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &p.q, &links, &tool)).with_colors([Color::from_rgb(c[0], c[1], c[2])]))?;
         for r in &p.readings {
             rec.set_time_sequence("centring_reading", reading);
             reading += 1;
@@ -191,7 +190,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     let validation = &e.campaign.validation;
     for (k, v) in validation.iter().enumerate() {
         rec.set_time_sequence("validation_pose", k as i64);
-        rec.log("validation/robot", &capsules(&robot_capsules(truth, &mut st, &v.q, &links, &tool)).with_colors([Color::from_rgb(120, 120, 200)]))?;
+        rec.log("validation/robot", &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &v.q, &links, &tool)).with_colors([Color::from_rgb(120, 120, 200)]))?;
     }
     rec.reset_time();
     let points: Vec<[f32; 3]> = validation.iter().map(|v| p3(&v.measured_w)).collect();

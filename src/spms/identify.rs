@@ -75,9 +75,9 @@ impl Form {
         Vector3::new(x[n - 3], x[n - 2], x[n - 1])
     }
 
-    /// Unpacks the beams (directions normalised, origins moved so that a reading keeps its point
-    /// when the paper's direction is not unit: the gain is folded into the reading scale and
-    /// reported by [`Form::gains`]).
+    /// Unpacks the beams with unit directions. In the paper's form a direction that is not unit
+    /// also scales the readings: that gain is reported by [`Form::gains`], and a reading `L` of
+    /// beam k measures the point `p + dir * gains[k] * L`.
     pub fn unpack(self, x: &DVector<f64>, k: usize) -> Vec<Beam> {
         (0..k).map(|j| {
             let (p, g) = self.beam(x, j);
@@ -235,9 +235,9 @@ pub fn pso<R: Rng + ?Sized>(data: &BeamData, form: Form, centre: &DVector<f64>, 
     let mut vs: Vec<DVector<f64>> = (0..opts.population).map(|_| DVector::zeros(d)).collect();
     let mut pbest = xs.clone();
     let mut pcost: Vec<f64> = xs.iter().map(|x| data.cost(form, x)).collect();
-    let (mut gi, _) = pcost.iter().enumerate().fold((0, f64::INFINITY), |(bi, bc), (i, &c)| if c < bc { (i, c) } else { (bi, bc) });
-    let mut gbest = pbest[gi].clone();
-    let mut gcost = pcost[gi];
+    let first = pcost.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
+    let mut gbest = pbest[first].clone();
+    let mut gcost = pcost[first];
     let g2 = (opts.iterations.max(1) as f64).powi(2);
     for n in 0..opts.iterations {
         let w = opts.w_max - (opts.w_max - opts.w_min) * (n as f64).powi(2) / g2;
@@ -254,13 +254,11 @@ pub fn pso<R: Rng + ?Sized>(data: &BeamData, form: Form, centre: &DVector<f64>, 
                 pbest[p] = xs[p].clone();
                 if c < gcost {
                     gcost = c;
-                    gi = p;
                     gbest = xs[p].clone();
                 }
             }
         }
     }
-    let _ = gi;
     let n = data.frames.len() * data.readings.first().map(|r| r.len()).unwrap_or(0);
     Solution { x: gbest, iterations: opts.iterations, rms_mm: (gcost / n.max(1) as f64).sqrt(), singular_values: Vec::new() }
 }
