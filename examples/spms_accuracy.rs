@@ -43,7 +43,9 @@ fn main() {
             // a few mm across them but 20 mm along them (y, the mean beam direction) and stay in range.
             let c = c_head + Vector3::new(rng.random_range(-3.0..3.0), rng.random_range(-20.0..20.0), rng.random_range(-3.0..3.0));
             let t = Isometry3::from_parts(Translation3::from(sphere_w - rot * c), rot);
-            let Ok(l) = spms.read(&c, Some(rng)) else { continue };
+            let Ok(l) = spms.read(&c, Some(rng)) else {
+                continue;
+            };
             // The frame as the tracker measures it: A1-A3 with noise, then Gram-Schmidt.
             let a = [Vector3::zeros(), Vector3::new(120.0, 0.0, 0.0), Vector3::new(35.0, 80.0, 0.0)].map(|p| (t * nalgebra::Point3::from(p)).coords + Vector3::from_fn(|_, _| tracker.sample(rng)));
             let measured = calsim::spms::frame_from_points(&a[0], &a[1], &a[2]).expect("frame");
@@ -58,7 +60,15 @@ fn main() {
     // PSO then LM on the paper's form, from the nominal Table 2 beams.
     let form = Form::Paper;
     let nominal = form.pack(&table2_beams(), &(sphere_w + Vector3::new(3.0, -2.0, 4.0)));
-    let half = DVector::from_fn(nominal.len(), |i, _| if i >= nominal.len() - 3 { 10.0 } else if i % 6 < 3 { 2.0 } else { 0.02 });
+    let half = DVector::from_fn(nominal.len(), |i, _| {
+        if i >= nominal.len() - 3 {
+            10.0
+        } else if i % 6 < 3 {
+            2.0
+        } else {
+            0.02
+        }
+    });
     let t0 = Instant::now();
     let start = pso(&data, form, &nominal, &half, &PsoOptions { population: 5000, iterations: 60, ..PsoOptions::default() }, &mut rng);
     let t_pso = t0.elapsed().as_secs_f64();
@@ -85,7 +95,9 @@ fn main() {
     let cond = |s: &[f64]| s.first().copied().unwrap_or(0.0) / s.last().copied().unwrap_or(f64::NAN);
     println!("beam identification from 55 poses (truth: Table 2 beams with 0.5 mm / 0.5 deg assembly errors)");
     println!("  PSO (5000 particles, 60 iterations) {:.2} s: rms {:.4} mm", t_pso, start.rms_mm);
-    for (name, sol, f, secs) in [("PSO + LM, paper 6K+3", &paper, Form::Paper, t_pso + t_lm), ("LM alone, paper 6K+3", &paper_alone, Form::Paper, f64::NAN), ("LM alone, minimal 5K+3", &minimal, Form::Minimal, t_min)] {
+    for (name, sol, f, secs) in
+        [("PSO + LM, paper 6K+3", &paper, Form::Paper, t_pso + t_lm), ("LM alone, paper 6K+3", &paper_alone, Form::Paper, f64::NAN), ("LM alone, minimal 5K+3", &minimal, Form::Minimal, t_min)]
+    {
         let beams = f.unpack(&sol.x, 5);
         let (p, a) = beam_error(&beams);
         let gains = f.gains(&sol.x, 5);
@@ -110,7 +122,9 @@ fn main() {
         let mut residual_max: f64 = 0.0;
         for (t, l) in check.frames.iter().zip(&check.readings) {
             let scaled: Vec<f64> = l.iter().zip(&gains).map(|(l, g)| l * g).collect();
-            let Some((c, res)) = fit_centre(&beams, &scaled, R) else { continue };
+            let Some((c, res)) = fit_centre(&beams, &scaled, R) else {
+                continue;
+            };
             residual_max = res.iter().fold(residual_max, |m, r| m.max(r.abs()));
             let measured_w = t * nalgebra::Point3::from(c);
             let tracker_w = sphere_w + Vector3::from_fn(|_, _| tracker.sample(&mut rng));
@@ -120,6 +134,9 @@ fn main() {
         let max = errors.iter().copied().fold(0.0, f64::max);
         let mean = errors.iter().sum::<f64>() / n;
         let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-        println!("measuring error over {} measurements with {name}: max {max:.3}, mean {mean:.3}, RMS {rms:.3} mm (paper: 0.091, 0.034, 0.039); sphere-fit residuals max {residual_max:.4} mm (paper: nearly all < 0.03)", errors.len());
+        println!(
+            "measuring error over {} measurements with {name}: max {max:.3}, mean {mean:.3}, RMS {rms:.3} mm (paper: 0.091, 0.034, 0.039); sphere-fit residuals max {residual_max:.4} mm (paper: nearly all < 0.03)",
+            errors.len()
+        );
     }
 }

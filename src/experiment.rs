@@ -124,10 +124,9 @@ impl ExperimentSpec {
     /// model with the scenario's nominal base if it gives one.
     pub fn before_model(&self, campaign: &Campaign) -> RobotModel {
         match self.robot.nominal_base_mm_deg {
-            Some([x, y, z, a, b, g]) => campaign
-                .nominal
-                .edited(|d| d.world_from_base = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() })
-                .expect("finite base"),
+            Some([x, y, z, a, b, g]) => {
+                campaign.nominal.edited(|d| d.world_from_base = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() }).expect("finite base")
+            }
             None => campaign.nominal.clone(),
         }
     }

@@ -119,9 +119,7 @@ fn with_default_noise_the_validation_error_after_identification_is_at_the_noise_
     let fit = identify(&c.nominal, &ParamSet::trical_31(), &obs, &FitOptions::default());
     let model = fit.model.expect("identified");
     let mut st = KinState::default();
-    let mean = |m: &calsim::robot::RobotModel, st: &mut KinState| {
-        c.validation.iter().map(|v| (forward(m, st, &v.q) - v.measured_w).norm()).sum::<f64>() / c.validation.len() as f64
-    };
+    let mean = |m: &calsim::robot::RobotModel, st: &mut KinState| c.validation.iter().map(|v| (forward(m, st, &v.q) - v.measured_w).norm()).sum::<f64>() / c.validation.len() as f64;
     let before = mean(&c.nominal, &mut st);
     let after = mean(&model, &mut st);
     eprintln!("validation mean error over {} poses: before {before:.3} mm, after {after:.4} mm", c.validation.len());

@@ -4,10 +4,7 @@
 mod common;
 
 use calsim::robot::builtin::{TABLE7_MEANS, irb120, trical_2018_nominal, trical_2018_table7};
-use calsim::robot::{
-    DeviationSpec, Inertial, JOINTS, KinState, ParamId, ParamSet, RobotModel, deviate, gravity_torques, tcp_jacobian, tcp_world,
-    world_from_flange,
-};
+use calsim::robot::{DeviationSpec, Inertial, JOINTS, KinState, ParamId, ParamSet, RobotModel, deviate, gravity_torques, tcp_jacobian, tcp_world, world_from_flange};
 use nalgebra::Vector3;
 use rand::RngExt;
 use serde::Deserialize;

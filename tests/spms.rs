@@ -30,7 +30,9 @@ fn the_sphere_fit_recovers_the_centre_exactly_from_noise_free_readings() {
     for _ in 0..40 {
         // The five beams span nearly the sphere's diameter: a few mm aside, one of them misses.
         let c = nominal_centre() + Vector3::from_fn(|_, _| rng.random_range(-2.0..2.0));
-        let Ok(readings) = spms.read::<ChaCha8Rng>(&c, None) else { continue };
+        let Ok(readings) = spms.read::<ChaCha8Rng>(&c, None) else {
+            continue;
+        };
         fitted += 1;
         assert!(readings.iter().all(|l| (75.0..=130.0).contains(l)));
         let (fit, residuals) = fit_centre(&beams, &readings, R).unwrap();
@@ -133,7 +135,15 @@ fn pso_then_lm_recovers_the_beams_from_a_far_start() {
     let truth = table2_beams();
     let form = Form::Minimal;
     let exact = form.pack(&truth, &sphere_w);
-    let half = DVector::from_fn(exact.len(), |i, _| if i >= exact.len() - 3 { 10.0 } else if i % 5 < 3 { 5.0 } else { 0.05 });
+    let half = DVector::from_fn(exact.len(), |i, _| {
+        if i >= exact.len() - 3 {
+            10.0
+        } else if i % 5 < 3 {
+            5.0
+        } else {
+            0.05
+        }
+    });
     // The swarm's box is centred half a width off the truth in every parameter.
     let off = &exact + &half * 0.5;
     let opts = PsoOptions { population: 400, iterations: 150, ..PsoOptions::default() };

@@ -130,7 +130,15 @@ fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
     }
     // The paper's figures, as PNG and SVG, embedded in the summary.
     let summary = std::fs::read_to_string(dir.join("ci_quick/summary.md")).unwrap();
-    for stem in ["fig07_validation_poses", "fig08_mean_error_by_set_size", "fig09_std_error_by_set_size", "fig10_error_map", "fig11_error_vs_distance_to_base", "fig12_error_vs_distance_to_ccz", "fig13_error_histograms"] {
+    for stem in [
+        "fig07_validation_poses",
+        "fig08_mean_error_by_set_size",
+        "fig09_std_error_by_set_size",
+        "fig10_error_map",
+        "fig11_error_vs_distance_to_base",
+        "fig12_error_vs_distance_to_ccz",
+        "fig13_error_histograms",
+    ] {
         let png = std::fs::read(dir.join("ci_quick").join(format!("{stem}.png"))).unwrap_or_default();
         assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000, "{stem}.png missing or blank");
         let svg = std::fs::read_to_string(dir.join("ci_quick").join(format!("{stem}.svg"))).unwrap_or_default();

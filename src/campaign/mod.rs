@@ -11,8 +11,8 @@ use rand::{Rng, RngExt};
 use serde::Deserialize;
 
 use crate::cell::Cell;
-use crate::experiment::stream;
 use crate::cell::collision::{CollisionWorld, Obstacle, irb120_link_capsules};
+use crate::experiment::stream;
 use crate::identify::Observation;
 use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
 use crate::instrument::trical::{TriCal, flange_from_tool_rotation};
@@ -52,15 +52,7 @@ pub struct CampaignSpec {
 
 impl Default for CampaignSpec {
     fn default() -> Self {
-        Self {
-            pool_per_sphere: 120,
-            approach_cone_deg: 40.0,
-            validation_poses: 506,
-            validation_margin: 0.05,
-            tcp_check_configurations: 4,
-            jog_error_mm: 0.5,
-            max_tries_per_configuration: 200,
-        }
+        Self { pool_per_sphere: 120, approach_cone_deg: 40.0, validation_poses: 506, validation_margin: 0.05, tcp_check_configurations: 4, jog_error_mm: 0.5, max_tries_per_configuration: 200 }
     }
 }
 
@@ -335,7 +327,9 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
             for _ in 0..spec.max_tries_per_configuration {
                 let jog = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize() * spec.jog_error_mm;
                 let target = tcp_pose(&(sphere_w + jog), &axis, rng.random_range(0.0..std::f64::consts::TAU));
-                let Ok(q) = inverse(&robot.truth, &target, &last_q) else { continue };
+                let Ok(q) = inverse(&robot.truth, &target, &last_q) else {
+                    continue;
+                };
                 if let Ok(res) = centre(&jogging, robot, trical, cell, k, &q, &last_q, rng) {
                     done = Some(res);
                     break;
@@ -429,10 +423,8 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         let tcp = st.tcp_base;
         let sight = tracker_base - tcp;
         let facing = st.base_from_frame(JOINTS).rotation * Vector3::z();
-        let ok = world.first_collision(&st).is_none()
-            && sight.norm() <= tracker.spec.max_range_mm
-            && facing.dot(&sight.normalize()) >= accept_cos
-            && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
+        let ok =
+            world.first_collision(&st).is_none() && sight.norm() <= tracker.spec.max_range_mm && facing.dot(&sight.normalize()) >= accept_cos && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
         if !ok {
             validation_rejected += 1;
             continue;

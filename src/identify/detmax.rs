@@ -90,12 +90,7 @@ struct Scratch {
 
 impl Scratch {
     fn new(pool: &PoolJacobian) -> Self {
-        Self {
-            u: DMatrix::zeros(pool.m, 3),
-            v: DMatrix::zeros(pool.m, 3),
-            u_cols: std::array::from_fn(|_| vec![0.0; pool.stride]),
-            p: vec![[0.0; 3]; 3 * pool.len],
-        }
+        Self { u: DMatrix::zeros(pool.m, 3), v: DMatrix::zeros(pool.m, 3), u_cols: std::array::from_fn(|_| vec![0.0; pool.stride]), p: vec![[0.0; 3]; 3 * pool.len] }
     }
 }
 
@@ -169,7 +164,9 @@ impl<'a> State<'a> {
         if det <= 0.0 {
             return false;
         }
-        let Some(w) = s.try_inverse() else { return false };
+        let Some(w) = s.try_inverse() else {
+            return false;
+        };
         let ja_t = self.pool.j.rows(3 * a, 3).transpose();
         // U = M^-1 J_a^T.
         sc.u.gemm(1.0, &self.minv, &ja_t, 0.0);

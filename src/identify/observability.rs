@@ -99,12 +99,6 @@ impl Observability {
         let smax = s.iter().copied().fold(0.0, f64::max);
         let smin = s.iter().copied().fold(f64::INFINITY, f64::min);
         let log_mean = s.iter().map(|v| v.max(f64::MIN_POSITIVE).ln()).sum::<f64>() / m;
-        Self {
-            o1: log_mean.exp() / (n as f64).sqrt(),
-            o2: smin / smax,
-            o3: smin,
-            o4: smin * smin / smax,
-            o5: 1.0 / s.iter().map(|v| 1.0 / v).sum::<f64>(),
-        }
+        Self { o1: log_mean.exp() / (n as f64).sqrt(), o2: smin / smax, o3: smin, o4: smin * smin / smax, o5: 1.0 / s.iter().map(|v| 1.0 / v).sum::<f64>() }
     }
 }

@@ -80,8 +80,7 @@ impl LaserTracker {
         let truth = Isometry3::from_parts(Translation3::from(position_w), rot);
         let mut tracker = Self { spec: spec.clone(), position_w, registration: truth, truth };
         let k = spec.registration_samples.max(1);
-        let measured: Vec<Vector3<f64>> =
-            nests_w.iter().map(|p| (0..k).map(|_| tracker.measure_in_tracker(p, rng)).sum::<Vector3<f64>>() / k as f64).collect();
+        let measured: Vec<Vector3<f64>> = nests_w.iter().map(|p| (0..k).map(|_| tracker.measure_in_tracker(p, rng)).sum::<Vector3<f64>>() / k as f64).collect();
         tracker.registration = rigid_fit(&measured, nests_w_nominal);
         tracker
     }

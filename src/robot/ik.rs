@@ -174,7 +174,9 @@ pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) 
             jac.fixed_view_mut::<3, 1>(3, k).copy_from(&w);
         }
         let rhs = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
-        let Some(step) = jac.lu().solve(&rhs) else { break };
+        let Some(step) = jac.lu().solve(&rhs) else {
+            break;
+        };
         for k in 0..JOINTS {
             q[k] += step[k];
         }

@@ -178,10 +178,7 @@ fn link_motion(model: &RobotModel, rot: &[Matrix3<f64>; JOINTS + 1], org: &[Vect
     Some(match kind {
         LinkParam::Alpha => Motion::Rotation { axis: prev_x, point: org[i - 1] },
         LinkParam::A => Motion::Translation(prev_x),
-        LinkParam::Beta => Motion::Rotation {
-            axis: rot[i - 1] * model.joint[i - 1].beta_axis,
-            point: org[i - 1] + prev_x * model.data().links[i - 1].a,
-        },
+        LinkParam::Beta => Motion::Rotation { axis: rot[i - 1] * model.joint[i - 1].beta_axis, point: org[i - 1] + prev_x * model.data().links[i - 1].a },
         LinkParam::ThetaOffset => Motion::Rotation { axis: rot[i].column(2).into_owned(), point: org[i] },
         LinkParam::D => Motion::Translation(rot[i].column(2).into_owned()),
         LinkParam::Compliance => return None,
@@ -228,9 +225,7 @@ pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &Par
                 };
                 if compliant && let Some(m0) = link_motion(model, &st.rot0, &st.org0, i, kind) {
                     dp += match m0 {
-                        Motion::Rotation { axis, point } => {
-                            w_suffix[i] * axis + u_prefix[i] * axis.cross(&(st.moment[i] - point * st.mass[i]))
-                        }
+                        Motion::Rotation { axis, point } => w_suffix[i] * axis + u_prefix[i] * axis.cross(&(st.moment[i] - point * st.mass[i])),
                         Motion::Translation(t) => u_prefix[i] * (t * st.mass[i]),
                     };
                 }

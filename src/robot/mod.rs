@@ -9,10 +9,10 @@ pub mod statics;
 pub mod truth;
 pub mod virtual_robot;
 
+pub use ik::{IkError, inverse};
 pub use kinematics::{KinState, forward, tcp_jacobian, tcp_jacobian_matrix, tcp_world, world_from_base, world_from_flange};
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use statics::gravity_torques;
 pub use truth::{DeviationSpec, deviate};
-pub use ik::{IkError, inverse};
 pub use virtual_robot::{UnmodelledSpec, VirtualRobot};

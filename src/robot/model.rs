@@ -172,13 +172,7 @@ impl RobotModel {
             JointConst { fixed: rx * ry, beta_axis: rx.column(1).into_owned() }
         });
         let rigid = data.links.iter().all(|l| l.compliance == 0.0);
-        Ok(Self {
-            base_rot: data.world_from_base.rotation(),
-            base_pos: data.world_from_base.translation(),
-            joint,
-            rigid,
-            data,
-        })
+        Ok(Self { base_rot: data.world_from_base.rotation(), base_pos: data.world_from_base.translation(), joint, rigid, data })
     }
 
     /// The data this model was built from.

@@ -85,7 +85,13 @@ impl VirtualRobot {
         let noise = Normal::new(0.0, self.sigma_q.max(0.0)).expect("finite sigma");
         std::array::from_fn(|i| {
             let tx: f64 = self.harmonics[i].iter().map(|h| h.amplitude * (h.order * q[i] + h.phase).sin()).sum();
-            let lag = if q[i] > from[i] { -self.half_backlash[i] } else if q[i] < from[i] { self.half_backlash[i] } else { 0.0 };
+            let lag = if q[i] > from[i] {
+                -self.half_backlash[i]
+            } else if q[i] < from[i] {
+                self.half_backlash[i]
+            } else {
+                0.0
+            };
             q[i] + tx + lag + if self.sigma_q > 0.0 { noise.sample(rng) } else { 0.0 }
         })
     }

@@ -79,11 +79,12 @@ impl Form {
     /// also scales the readings: that gain is reported by [`Form::gains`], and a reading `L` of
     /// beam k measures the point `p + dir * gains[k] * L`.
     pub fn unpack(self, x: &DVector<f64>, k: usize) -> Vec<Beam> {
-        (0..k).map(|j| {
-            let (p, g) = self.beam(x, j);
-            Beam { p, dir: nalgebra::Unit::new_normalize(g) }
-        })
-        .collect()
+        (0..k)
+            .map(|j| {
+                let (p, g) = self.beam(x, j);
+                Beam { p, dir: nalgebra::Unit::new_normalize(g) }
+            })
+            .collect()
     }
 
     /// Norms of the directions (1 for the minimal form): the reading gain the paper's form implies.

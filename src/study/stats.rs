@@ -28,14 +28,7 @@ impl ErrorStats {
         let var = if values.len() > 1 { values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
         let mut sorted = values.to_vec();
         sorted.sort_by(f64::total_cmp);
-        Self {
-            mean,
-            median: quantile(&sorted, 0.5),
-            std: var.sqrt(),
-            p95: quantile(&sorted, 0.95),
-            max: sorted[sorted.len() - 1],
-            rms: (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt(),
-        }
+        Self { mean, median: quantile(&sorted, 0.5), std: var.sqrt(), p95: quantile(&sorted, 0.95), max: sorted[sorted.len() - 1], rms: (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt() }
     }
 }
 
