@@ -54,11 +54,16 @@ pub struct FitOptions {
     /// Singular values of the column-scaled Jacobian below `rank_rtol * sigma_max` count as zero.
     /// Through the Gram matrix, values below about 1e-7 are not resolved: keep this above that.
     pub rank_rtol: f64,
+    /// What to do with directions below `rank_rtol`: `false` refuses the fit
+    /// ([`FitOutcome::RankDeficient`], no model); `true` leaves them at the start values (the
+    /// truncated pseudo-inverse step, eq. 15 of the TriCal paper) and returns the model
+    /// ([`FitOutcome::Truncated`]).
+    pub truncate: bool,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { solver: Solver::GaussNewton, max_iterations: 50, step_tol_mm: 1e-6, cost_rtol: 1e-12, rank_rtol: 1e-6 }
+        Self { solver: Solver::GaussNewton, max_iterations: 50, step_tol_mm: 1e-6, cost_rtol: 1e-12, rank_rtol: 1e-6, truncate: false }
     }
 }
 
@@ -75,6 +80,14 @@ pub enum FitOutcome {
         /// Jacobian evaluations.
         iterations: usize,
     },
+    /// Converged with the directions below the rank tolerance left at the start values
+    /// ([`FitOptions::truncate`]).
+    Truncated {
+        /// Jacobian evaluations.
+        iterations: usize,
+        /// Parameters with a large share in the directions left out.
+        unidentifiable: Vec<String>,
+    },
     /// The configurations cannot separate these parameters; no values are returned for them.
     RankDeficient {
         /// Names of the parameters in the (numerical) null space of the scaled Jacobian.
@@ -88,6 +101,7 @@ impl FitOutcome {
         match self {
             FitOutcome::Converged { .. } => "converged",
             FitOutcome::IterationCap { .. } => "iteration_cap",
+            FitOutcome::Truncated { .. } => "truncated",
             FitOutcome::RankDeficient { .. } => "rank_deficient",
         }
     }
@@ -150,13 +164,7 @@ struct Workspace {
 
 impl Workspace {
     fn new(p: usize, configurations: usize) -> Self {
-        Self {
-            st: KinState::default(),
-            cols: vec![Vector3::zeros(); p],
-            jt: DMatrix::zeros(p, 3 * configurations),
-            r: DVector::zeros(3 * configurations),
-            n: DMatrix::zeros(p, p),
-        }
+        Self { st: KinState::default(), cols: vec![Vector3::zeros(); p], jt: DMatrix::zeros(p, 3 * configurations), r: DVector::zeros(3 * configurations), n: DMatrix::zeros(p, p) }
     }
 }
 
@@ -285,14 +293,15 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
         {
             mu = tau * (0..p).map(|i| ne.n[(i, i)]).fold(0.0, f64::max);
         }
-        let step_scaled = cholesky_step(&ne.n, &ne.b, mu, opts.rank_rtol)
-            .unwrap_or_else(|| Spectrum::new(&ne.n).solve(&ne.b, mu, opts.rank_rtol));
+        let step_scaled = cholesky_step(&ne.n, &ne.b, mu, opts.rank_rtol).unwrap_or_else(|| Spectrum::new(&ne.n).solve(&ne.b, mu, opts.rank_rtol));
         let step = step_scaled.zip_map(&ne.norms, |s, nrm| if nrm > 0.0 { s / nrm } else { 0.0 });
         // RMS change of the predicted positions, from the linear model: |J dx| = |Js ds|.
         let predicted = (step_scaled.dot(&(&ne.n * &step_scaled))).max(0.0).sqrt() * scale_rms;
         history.push(Iteration { cost_mm2: ne.cost, step_rms_mm: predicted });
         let trial_x = &x + &step;
-        let Ok(trial) = set.unpack(start, trial_x.as_slice()) else { break };
+        let Ok(trial) = set.unpack(start, trial_x.as_slice()) else {
+            break;
+        };
         let accept = match opts.solver {
             Solver::GaussNewton => true,
             Solver::LevenbergMarquardt { .. } => {
@@ -345,6 +354,21 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     // Eigenvectors only when some singular value is numerically zero: they name the parameters.
     let hidden = if smin < opts.rank_rtol * smax || smax == 0.0 { Spectrum::new(&ne.n).unidentifiable(set, opts.rank_rtol) } else { Vec::new() };
     let condition_number = if hidden.is_empty() && smin > 0.0 { smax / smin } else { f64::INFINITY };
+    if !hidden.is_empty() && opts.truncate {
+        let names = set.names();
+        // Ratio of the largest to the smallest singular value kept.
+        let kept = singular_values.iter().copied().filter(|s| *s >= opts.rank_rtol * smax).fold(f64::INFINITY, f64::min);
+        return Fit {
+            outcome: FitOutcome::Truncated { iterations, unidentifiable: hidden.iter().map(|&j| names[j].clone()).collect() },
+            model: Some(model),
+            values: x.iter().map(|v| Some(*v)).collect(),
+            iterations,
+            singular_values,
+            condition_number: smax / kept,
+            residual_rms_mm,
+            history,
+        };
+    }
     if !hidden.is_empty() {
         let names = set.names();
         return Fit {

@@ -37,14 +37,7 @@ pub struct StudySpec {
 
 impl Default for StudySpec {
     fn default() -> Self {
-        Self {
-            set_sizes: (20..=100).step_by(5).collect(),
-            repetitions: 30,
-            table_set_size: 75,
-            solver: "gauss_newton".into(),
-            detmax_max_excursion: 3,
-            parameters: None,
-        }
+        Self { set_sizes: (20..=100).step_by(5).collect(), repetitions: 30, table_set_size: 75, solver: "gauss_newton".into(), detmax_max_excursion: 3, parameters: None }
     }
 }
 
@@ -200,7 +193,7 @@ fn run_task(
     let obs: Vec<Observation> = selection.iter().map(|&k| observations[k]).collect();
     let fit = identify(before, set, &obs, opts);
     let unidentifiable = match &fit.outcome {
-        crate::identify::FitOutcome::RankDeficient { unidentifiable } => unidentifiable.clone(),
+        crate::identify::FitOutcome::RankDeficient { unidentifiable } | crate::identify::FitOutcome::Truncated { unidentifiable, .. } => unidentifiable.clone(),
         _ => Vec::new(),
     };
     let mut st = KinState::default();
