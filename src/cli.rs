@@ -138,6 +138,9 @@ pub fn main() -> ExitCode {
 }
 
 fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
+    if scenario::kind_of(&args.scenario).map_err(|e| e.to_string())? == "spms" {
+        return spms_study(args, check);
+    }
     let t0 = Instant::now();
     let mut scenario = scenario::load(&args.scenario).map_err(|e| e.to_string())?;
     if let Some(seed) = args.seed {
@@ -217,6 +220,74 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// `run` / `check` of an SPMS scenario (`kind = "spms"`).
+fn spms_study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
+    let mut sc = scenario::load_spms(&args.scenario).map_err(|e| e.to_string())?;
+    if let Some(seed) = args.seed {
+        sc.seed = seed;
+    }
+    let st = &mut sc.spec.study;
+    if let Some(SetSizes(sizes)) = &args.set_sizes {
+        st.set_sizes = sizes.clone();
+        if !sizes.contains(&st.table_set_size) {
+            st.table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(st.table_set_size)).expect("non-empty");
+        }
+    }
+    if let Some(r) = args.repetitions {
+        st.repetitions = r;
+    }
+    scenario::check_spms(&sc.spec, &format!("{} (with command-line overrides)", args.scenario.display())).map_err(|e| e.to_string())?;
+    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    eprintln!("calsim {}: {} (SPMS, seed {}), {} threads", if check { "check" } else { "run" }, sc.name, sc.seed, threads);
+    let bar = ProgressBar::new(0);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} identifications, {elapsed} elapsed, ETA {eta}").expect("template"));
+    let results = pool
+        .install(|| {
+            crate::spms::study::run(&sc.spec, sc.seed, &|done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64)
+            })
+        })
+        .map_err(|e| format!("{}: {e}", args.scenario.display()))?;
+    bar.finish_and_clear();
+    let figures = crate::spms::study::SpmsFigures::of(&results, sc.spec.study.table_set_size as usize);
+    let rows = crate::io::spms_results::checks(&figures, &sc.expect);
+    let t_write = Instant::now();
+    let record_s = std::cell::Cell::new(0.0);
+    let record = |path: &std::path::Path| {
+        let t = Instant::now();
+        let r = crate::io::recording::write_spms(path, &sc.name, &sc.spec, &results);
+        record_s.set(t.elapsed().as_secs_f64());
+        r
+    };
+    let extras = crate::io::spms_results::SpmsExtras { plots: !args.no_plots, recording: if args.no_recording { None } else { Some(&record) } };
+    let dest = crate::io::spms_results::write(&args.out, &sc, &results, &figures, &rows, threads, &extras).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let write_s = t_write.elapsed().as_secs_f64();
+    println!("{}", report::terminal_table(&rows));
+    let t = &results.timings;
+    println!(
+        "timing: study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",
+        t.study_s,
+        t.head_s,
+        t.cell_s,
+        results.tasks.len(),
+        t.tasks_s,
+        write_s,
+        record_s.get(),
+        dest.display()
+    );
+    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
+    if check {
+        let checked = rows.iter().filter(|r| r.pass.is_some()).count();
+        println!("check: {} of {checked} figures within their bands", checked - missed);
+        if missed > 0 {
+            return Ok(ExitCode::from(1));
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn demo(args: &DemoArgs) -> Result<(), String> {
     if !(args.noise_um.is_finite() && args.noise_um >= 0.0) {
         return Err(format!("--noise-um {}: must be a finite number >= 0", args.noise_um));
@@ -247,14 +318,7 @@ fn demo(args: &DemoArgs) -> Result<(), String> {
     let fit_s = t_fit.elapsed().as_secs_f64();
 
     println!("calsim demo: {} ({} configurations, noise {} um per axis, seed {})", truth.name(), args.configurations, args.noise_um, args.seed);
-    println!(
-        "outcome {}, {} iterations, condition number {:.1}, residual RMS {:.4} mm, {:.0} us",
-        fit.outcome.label(),
-        fit.iterations,
-        fit.condition_number,
-        fit.residual_rms_mm,
-        fit_s * 1e6
-    );
+    println!("outcome {}, {} iterations, condition number {:.1}, residual RMS {:.4} mm, {:.0} us", fit.outcome.label(), fit.iterations, fit.condition_number, fit.residual_rms_mm, fit_s * 1e6);
     println!("\n{:<12} {:>11} {:>12} {:>12} {:>12}  unit", "parameter", "nominal", "truth", "identified", "error");
     for (id, v) in set.ids().iter().zip(&fit.values) {
         let u = id.unit();

@@ -5,3 +5,4 @@ pub mod recording;
 pub mod report;
 pub mod results;
 pub mod scenario;
+pub mod spms_results;

@@ -9,8 +9,8 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use crate::study::stats::{ErrorStats, pearson, quantile, regression as least_squares_line};
 use crate::study::StudyResults;
+use crate::study::stats::{ErrorStats, pearson, quantile, regression as least_squares_line};
 
 /// The font every figure uses, embedded (see `assets/README.md`).
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
@@ -38,6 +38,9 @@ pub struct Written {
 }
 
 type DrawResult = Result<(), String>;
+
+/// Values per set size: `(n, values)`.
+pub type BySize = Vec<(usize, Vec<f64>)>;
 
 fn e2s<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
@@ -94,7 +97,10 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     let means = per_size(&|v| v.mean);
     let stds = per_size(&|v| v.std);
     both!(dir, "fig08_mean_error_by_set_size", |root| boxplot(root, &means, "Fig. 8: mean validation error per identification", "mean error after calibration (mm)"));
-    out.push(Written { stem: "fig08_mean_error_by_set_size".into(), caption: "Fig. 8: mean validation error of each identification per set size (box: quartiles; whiskers: 1.5 IQR; crosses: outliers)".into() });
+    out.push(Written {
+        stem: "fig08_mean_error_by_set_size".into(),
+        caption: "Fig. 8: mean validation error of each identification per set size (box: quartiles; whiskers: 1.5 IQR; crosses: outliers)".into(),
+    });
     both!(dir, "fig09_std_error_by_set_size", |root| boxplot(root, &stds, "Fig. 9: standard deviation of the validation error", "std of error after calibration (mm)"));
     out.push(Written { stem: "fig09_std_error_by_set_size".into(), caption: "Fig. 9: standard deviation of the validation error of each identification per set size".into() });
 
@@ -103,13 +109,19 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     };
     let n = inputs.table_n;
     both!(dir, "fig10_error_map", |root| fig10(root, inputs, after, n, task));
-    out.push(Written { stem: "fig10_error_map".into(), caption: format!("Fig. 10: error after calibration at each validation pose (set of {n}, task {task}: the median of the repetitions), the 10 largest circled") });
+    out.push(Written {
+        stem: "fig10_error_map".into(),
+        caption: format!("Fig. 10: error after calibration at each validation pose (set of {n}, task {task}: the median of the repetitions), the 10 largest circled"),
+    });
     let db = &results.distance_to_base_mm;
     let dc = &results.distance_to_ccz_mm;
     both!(dir, "fig11_error_vs_distance_to_base", |root| regression(root, db, after, "Fig. 11: error vs distance to the robot base", "distance from the base origin (mm)"));
     out.push(Written { stem: "fig11_error_vs_distance_to_base".into(), caption: "Fig. 11: error after calibration against the distance to the base, with the least-squares line".into() });
     both!(dir, "fig12_error_vs_distance_to_ccz", |root| regression(root, dc, after, "Fig. 12: error vs distance to the centre of the calibration zone", "distance from the CCZ (mm)"));
-    out.push(Written { stem: "fig12_error_vs_distance_to_ccz".into(), caption: "Fig. 12: error after calibration against the distance to the centre of the calibration zone (centroid of the spheres)".into() });
+    out.push(Written {
+        stem: "fig12_error_vs_distance_to_ccz".into(),
+        caption: "Fig. 12: error after calibration against the distance to the centre of the calibration zone (centroid of the spheres)".into(),
+    });
     both!(dir, "fig13_error_histograms", |root| fig13(root, &results.before_errors, after, n));
     out.push(Written { stem: "fig13_error_histograms".into(), caption: "Fig. 13: distribution of the position errors before and after calibration, with descriptive statistics".into() });
     Ok(out)
@@ -135,9 +147,17 @@ fn fig07<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs) -> D
         let axis = ["x", "y", "z"];
         let mut chart = ChartBuilder::on(area).caption(name, (FAMILY, 16)).margin(10).x_label_area_size(40).y_label_area_size(55).build_cartesian_2d(xr, yr).map_err(e2s)?;
         chart.configure_mesh().x_desc(format!("{} in {{W}} (mm)", axis[a])).y_desc(format!("{} in {{W}} (mm)", axis[b])).label_style((FAMILY, 12)).draw().map_err(e2s)?;
-        chart.draw_series(p.validation_w.iter().map(|v| Circle::new((v[a], v[b]), 2, BLUE.mix(0.5).filled()))).map_err(e2s)?.label("validation pose").legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
+        chart
+            .draw_series(p.validation_w.iter().map(|v| Circle::new((v[a], v[b]), 2, BLUE.mix(0.5).filled())))
+            .map_err(e2s)?
+            .label("validation pose")
+            .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
         chart.draw_series(p.spheres_w.iter().map(|v| Circle::new((v[a], v[b]), 6, RED.filled()))).map_err(e2s)?.label("datum sphere").legend(|(x, y)| Circle::new((x, y), 4, RED.filled()));
-        chart.draw_series(std::iter::once(TriangleMarker::new((p.base_w[a], p.base_w[b]), 8, BLACK.filled()))).map_err(e2s)?.label("robot base").legend(|(x, y)| TriangleMarker::new((x, y), 5, BLACK.filled()));
+        chart
+            .draw_series(std::iter::once(TriangleMarker::new((p.base_w[a], p.base_w[b]), 8, BLACK.filled())))
+            .map_err(e2s)?
+            .label("robot base")
+            .legend(|(x, y)| TriangleMarker::new((x, y), 5, BLACK.filled()));
         chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).label_font((FAMILY, 12)).draw().map_err(e2s)?;
     }
     Ok(())
@@ -145,48 +165,70 @@ fn fig07<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs) -> D
 
 /// Box plots per set size: quartiles, median, whiskers at 1.5 IQR, outliers as crosses.
 fn boxplot<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &[(usize, Vec<f64>)], title: &str, ylabel: &str) -> DrawResult {
+    boxplots(root, &[("", BLUE, data.to_vec())], title, ylabel)
+}
+
+/// Box plots per set size of one or more series side by side (box: quartiles, red bar: median,
+/// whiskers: 1.5 IQR, crosses: outliers); a legend when the series are labelled.
+fn boxplots<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, series: &[(&str, RGBColor, BySize)], title: &str, ylabel: &str) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
-    let xr = range_of(data.iter().map(|(n, _)| *n as f64), 0.06);
-    let yr = range_of(data.iter().flat_map(|(_, v)| v.iter().copied()), 0.08);
+    let sizes: Vec<usize> = series.first().map(|s| s.2.iter().map(|(n, _)| *n).collect()).unwrap_or_default();
+    let xr = range_of(sizes.iter().map(|n| *n as f64), 0.06);
+    let yr = range_of(series.iter().flat_map(|s| s.2.iter().flat_map(|(_, v)| v.iter().copied())), 0.08);
     let yr = 0f64.min(yr.start)..yr.end;
-    let step = if data.len() > 1 { (data[data.len() - 1].0 - data[0].0) as f64 / (data.len() - 1) as f64 } else { 10.0 };
-    let half = 0.3 * step;
+    let step = if sizes.len() > 1 { sizes.windows(2).map(|w| (w[1] - w[0]) as f64).fold(f64::INFINITY, f64::min) } else { 10.0 };
+    let k = series.len().max(1) as f64;
+    let half = 0.3 * step / k;
     let mut chart = ChartBuilder::on(root).caption(title, (FAMILY, 22)).margin(15).x_label_area_size(45).y_label_area_size(65).build_cartesian_2d(xr, yr).map_err(e2s)?;
     chart
         .configure_mesh()
         .x_desc("set size n (configurations)")
         .y_desc(ylabel)
         .x_label_formatter(&|x| format!("{x:.0}"))
-        .x_labels(data.len().max(2))
+        .x_labels(sizes.len().max(2))
         .light_line_style(WHITE)
         .label_style((FAMILY, 13))
         .draw()
         .map_err(e2s)?;
-    for (n, v) in data {
-        if v.is_empty() {
-            continue;
+    for (si, (label, colour, data)) in series.iter().enumerate() {
+        let offset = (si as f64 - (k - 1.0) / 2.0) * 2.2 * half;
+        for (n, v) in data {
+            if v.is_empty() {
+                continue;
+            }
+            let x = *n as f64 + offset;
+            let mut v = v.clone();
+            v.sort_by(f64::total_cmp);
+            let (q1, q2, q3) = (quantile(&v, 0.25), quantile(&v, 0.5), quantile(&v, 0.75));
+            let iqr = q3 - q1;
+            let inside = |y: &&f64| **y >= q1 - 1.5 * iqr && **y <= q3 + 1.5 * iqr;
+            let lo = v.iter().filter(inside).fold(f64::INFINITY, |a, &b| a.min(b));
+            let hi = v.iter().filter(inside).fold(f64::NEG_INFINITY, |a, &b| a.max(b));
+            chart.draw_series(std::iter::once(Rectangle::new([(x - half, q1), (x + half, q3)], colour.mix(0.25).filled()))).map_err(e2s)?;
+            chart.draw_series(std::iter::once(Rectangle::new([(x - half, q1), (x + half, q3)], colour.stroke_width(1)))).map_err(e2s)?;
+            let line = |pts: Vec<(f64, f64)>, style: ShapeStyle| PathElement::new(pts, style);
+            chart
+                .draw_series([
+                    line(vec![(x - half, q2), (x + half, q2)], RED.stroke_width(2)),
+                    line(vec![(x, q3), (x, hi)], BLACK.stroke_width(1)),
+                    line(vec![(x, q1), (x, lo)], BLACK.stroke_width(1)),
+                    line(vec![(x - half / 2.0, hi), (x + half / 2.0, hi)], BLACK.stroke_width(1)),
+                    line(vec![(x - half / 2.0, lo), (x + half / 2.0, lo)], BLACK.stroke_width(1)),
+                ])
+                .map_err(e2s)?;
+            chart.draw_series(v.iter().filter(|y| !inside(y)).map(|&y| Cross::new((x, y), 4, BLACK.stroke_width(1)))).map_err(e2s)?;
         }
-        let x = *n as f64;
-        let mut v = v.clone();
-        v.sort_by(f64::total_cmp);
-        let (q1, q2, q3) = (quantile(&v, 0.25), quantile(&v, 0.5), quantile(&v, 0.75));
-        let iqr = q3 - q1;
-        let inside = |y: &&f64| **y >= q1 - 1.5 * iqr && **y <= q3 + 1.5 * iqr;
-        let lo = v.iter().filter(inside).fold(f64::INFINITY, |a, &b| a.min(b));
-        let hi = v.iter().filter(inside).fold(f64::NEG_INFINITY, |a, &b| a.max(b));
-        chart.draw_series(std::iter::once(Rectangle::new([(x - half, q1), (x + half, q3)], BLUE.mix(0.25).filled()))).map_err(e2s)?;
-        chart.draw_series(std::iter::once(Rectangle::new([(x - half, q1), (x + half, q3)], BLUE.stroke_width(1)))).map_err(e2s)?;
-        let line = |pts: Vec<(f64, f64)>, style: ShapeStyle| PathElement::new(pts, style);
-        chart
-            .draw_series([
-                line(vec![(x - half, q2), (x + half, q2)], RED.stroke_width(2)),
-                line(vec![(x, q3), (x, hi)], BLACK.stroke_width(1)),
-                line(vec![(x, q1), (x, lo)], BLACK.stroke_width(1)),
-                line(vec![(x - half / 2.0, hi), (x + half / 2.0, hi)], BLACK.stroke_width(1)),
-                line(vec![(x - half / 2.0, lo), (x + half / 2.0, lo)], BLACK.stroke_width(1)),
-            ])
-            .map_err(e2s)?;
-        chart.draw_series(v.iter().filter(|y| !inside(y)).map(|&y| Cross::new((x, y), 4, BLACK.stroke_width(1)))).map_err(e2s)?;
+        if !label.is_empty() {
+            let c = *colour;
+            chart
+                .draw_series(std::iter::once(Rectangle::new([(f64::NAN, f64::NAN), (f64::NAN, f64::NAN)], c.mix(0.25).filled())))
+                .map_err(e2s)?
+                .label(*label)
+                .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.mix(0.5).filled()));
+        }
+    }
+    if series.iter().any(|s| !s.0.is_empty()) {
+        chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(e2s)?;
     }
     Ok(())
 }
@@ -219,8 +261,16 @@ fn fig10<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs, afte
         .map_err(e2s)?
         .label("10 largest errors")
         .legend(|(x, y)| Circle::new((x, y), 6, BLACK.stroke_width(2)));
-    chart.draw_series(p.spheres_w.iter().map(|v| TriangleMarker::new((v.x, v.y), 7, GREEN.filled()))).map_err(e2s)?.label("datum spheres").legend(|(x, y)| TriangleMarker::new((x, y), 5, GREEN.filled()));
-    chart.draw_series(std::iter::once(Circle::new((0.0, 0.0), 0, WHITE))).map_err(e2s)?.label(format!("colour: 0 mm (blue) to {emax:.3} mm (red)")).legend(|(x, y)| Rectangle::new([(x - 6, y - 4), (x + 6, y + 4)], heat(1.0).filled()));
+    chart
+        .draw_series(p.spheres_w.iter().map(|v| TriangleMarker::new((v.x, v.y), 7, GREEN.filled())))
+        .map_err(e2s)?
+        .label("datum spheres")
+        .legend(|(x, y)| TriangleMarker::new((x, y), 5, GREEN.filled()));
+    chart
+        .draw_series(std::iter::once(Circle::new((0.0, 0.0), 0, WHITE)))
+        .map_err(e2s)?
+        .label(format!("colour: 0 mm (blue) to {emax:.3} mm (red)"))
+        .legend(|(x, y)| Rectangle::new([(x - 6, y - 4), (x + 6, y + 4)], heat(1.0).filled()));
     chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 12)).draw().map_err(e2s)?;
     Ok(())
 }
@@ -263,10 +313,135 @@ fn fig13<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, before: &[f64], afte
         let mut chart = ChartBuilder::on(area).caption(&name, (FAMILY, 16)).margin(10).x_label_area_size(40).y_label_area_size(50).build_cartesian_2d(0.0..hi, 0.0..cmax * 1.45).map_err(e2s)?;
         chart.configure_mesh().x_desc("position error (mm)").y_desc("validation poses").label_style((FAMILY, 12)).draw().map_err(e2s)?;
         chart.draw_series(counts.iter().enumerate().map(|(k, &c)| Rectangle::new([(k as f64 * w, 0.0), ((k + 1) as f64 * w, c as f64)], colour.mix(0.6).filled()))).map_err(e2s)?;
-        let text = [format!("poses {}", v.len()), format!("mean {:.3} mm", s.mean), format!("median {:.3} mm", s.median), format!("std {:.3} mm", s.std), format!("p95 {:.3} mm", s.p95), format!("max {:.3} mm", s.max)];
+        let text = [
+            format!("poses {}", v.len()),
+            format!("mean {:.3} mm", s.mean),
+            format!("median {:.3} mm", s.median),
+            format!("std {:.3} mm", s.std),
+            format!("p95 {:.3} mm", s.p95),
+            format!("max {:.3} mm", s.max),
+        ];
         for (i, t) in text.iter().enumerate() {
             chart.draw_series(std::iter::once(Text::new(t.clone(), (0.55 * hi, cmax * (1.4 - 0.07 * i as f64)), (FAMILY, 13)))).map_err(e2s)?;
         }
     }
+    Ok(())
+}
+
+/// What the SPMS figures show.
+pub struct SpmsPlotInputs<'a> {
+    /// Per accuracy sample, largest sphere-fit residual: paper's form, minimal form, mm.
+    pub residuals: [&'a [f64]; 2],
+    /// Per accuracy sample, measuring error: paper's form, minimal form, mm.
+    pub measuring: [&'a [f64]; 2],
+    /// Table 6 per point: published before, calsim before, published after, and calsim after per
+    /// selection (label, values), mm.
+    pub ap_published: [[f64; 5]; 2],
+    /// calsim before calibration, per point, mm.
+    pub ap_before: [f64; 5],
+    /// calsim after calibration per selection, per point, mm.
+    pub ap_after: Vec<(String, [f64; 5])>,
+    /// Mean AP after calibration per identification, per selection and set size.
+    pub ap_mean_by_size: Vec<(String, BySize)>,
+    /// Set size of the Table 6 comparison.
+    pub table_n: usize,
+}
+
+/// Writes the SPMS figures into `dir`; returns what was written.
+pub fn write_spms(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, String> {
+    static REGISTER: Once = Once::new();
+    REGISTER.call_once(|| {
+        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
+    });
+    let mut out = Vec::new();
+    both!(dir, "spms_fig05_fit_residuals", |root| per_sample(
+        root,
+        &p.residuals,
+        "Fig. 5: sphere-fit residuals per measurement",
+        "largest |residual| of the fit (mm)",
+        Some((0.03, "0.03 mm (paper: nearly all below)"))
+    ));
+    out.push(Written {
+        stem: "spms_fig05_fit_residuals".into(),
+        caption: "Fig. 5: largest sphere-fit residual of each accuracy measurement, head identified by PSO + LM (paper's form) and by LM on the minimal form".into(),
+    });
+    both!(dir, "spms_fig06_measuring_error", |root| per_sample(
+        root,
+        &p.measuring,
+        "Fig. 6: measuring error of the SPMS against the laser tracker",
+        "|SPMS - tracker| (mm)",
+        Some((0.034, "paper mean 0.034 mm"))
+    ));
+    out.push(Written { stem: "spms_fig06_measuring_error".into(), caption: "Fig. 6: measuring error of each sphere measurement against the laser tracker (Table 3)".into() });
+    both!(dir, "spms_table6_ap_per_point", |root| ap_bars(root, p));
+    out.push(Written {
+        stem: "spms_table6_ap_per_point".into(),
+        caption: format!("Table 6: ISO 9283 AP per test point before and after calibration, published and calsim (after: median over the repetitions with sets of {})", p.table_n),
+    });
+    let colours = [BLUE, RGBColor(230, 120, 0), RGBColor(0, 140, 60)];
+    let series: Vec<(&str, RGBColor, BySize)> = p.ap_mean_by_size.iter().enumerate().map(|(i, (l, d))| (l.as_str(), colours[i % 3], d.clone())).collect();
+    both!(dir, "spms_ap_by_set_size", |root| boxplots(root, &series, "Mean AP over P1-P5 after calibration per identification", "mean AP after calibration (mm)"));
+    out.push(Written { stem: "spms_ap_by_set_size".into(), caption: "Mean ISO 9283 AP over P1-P5 after each identification, per set size: random sets (the paper) and DETMAX sets on O1".into() });
+    Ok(out)
+}
+
+fn per_sample<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, v: &[&[f64]; 2], title: &str, ylabel: &str, line: Option<(f64, &str)>) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let n = v[0].len().max(v[1].len()).max(1);
+    let top = v.iter().flat_map(|s| s.iter().copied()).chain(line.map(|l| l.0)).fold(0.0, f64::max) * 1.15;
+    let mut chart =
+        ChartBuilder::on(root).caption(title, (FAMILY, 22)).margin(15).x_label_area_size(45).y_label_area_size(65).build_cartesian_2d(0.0..(n as f64 + 1.0), 0.0..top.max(1e-6)).map_err(e2s)?;
+    chart.configure_mesh().x_desc("measurement").y_desc(ylabel).light_line_style(WHITE).label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    for (s, (label, colour)) in v.iter().zip([("PSO + LM, paper's 6K+3 form", BLUE), ("LM, minimal 5K+3 form", RGBColor(230, 120, 0))]) {
+        chart
+            .draw_series(s.iter().enumerate().map(|(i, y)| Circle::new((i as f64 + 1.0, *y), 4, colour.filled())))
+            .map_err(e2s)?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x + 7, y), 4, colour.filled()));
+    }
+    if let Some((y, label)) = line {
+        chart
+            .draw_series(std::iter::once(PathElement::new(vec![(0.0, y), (n as f64 + 1.0, y)], BLACK.stroke_width(1))))
+            .map_err(e2s)?
+            .label(label)
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(1)));
+    }
+    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(e2s)?;
+    Ok(())
+}
+
+fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs<'_>) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let mut bars: Vec<(String, RGBColor, [f64; 5])> = vec![
+        ("published, before".into(), RGBColor(150, 150, 150), p.ap_published[0]),
+        ("calsim, before".into(), RGBColor(200, 60, 60), p.ap_before),
+        ("published, after".into(), RGBColor(90, 90, 90), p.ap_published[1]),
+    ];
+    let colours = [BLUE, RGBColor(0, 140, 60)];
+    for (i, (l, v)) in p.ap_after.iter().enumerate() {
+        bars.push((format!("calsim, after ({l})"), colours[i % 2], *v));
+    }
+    let top = bars.iter().flat_map(|b| b.2).filter(|x| x.is_finite()).fold(0.0, f64::max) * 1.15;
+    let mut chart = ChartBuilder::on(root)
+        .caption("Table 6: ISO 9283 AP per test point", (FAMILY, 22))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(0.5..5.5, 0.0..top.max(1e-6))
+        .map_err(e2s)?;
+    chart.configure_mesh().x_desc("test point").y_desc("AP (mm)").x_labels(5).x_label_formatter(&|x| format!("P{x:.0}")).light_line_style(WHITE).label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    let w = 0.8 / bars.len() as f64;
+    for (i, (label, colour, v)) in bars.iter().enumerate() {
+        let c = *colour;
+        chart
+            .draw_series(v.iter().enumerate().filter(|(_, y)| y.is_finite()).map(|(k, y)| {
+                let x0 = k as f64 + 1.0 - 0.4 + i as f64 * w;
+                Rectangle::new([(x0, 0.0), (x0 + w * 0.9, *y)], c.filled())
+            }))
+            .map_err(e2s)?
+            .label(label.as_str())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
+    }
+    chart.configure_series_labels().position(SeriesLabelPosition::UpperRight).background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(e2s)?;
     Ok(())
 }

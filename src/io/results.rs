@@ -46,7 +46,7 @@ struct Manifest<'a> {
     timings: &'a Timings,
 }
 
-fn git_commit() -> String {
+pub(crate) fn git_commit() -> String {
     std::process::Command::new("git")
         .args(["rev-parse", "HEAD"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -57,11 +57,11 @@ fn git_commit() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
-fn err(e: impl std::fmt::Display) -> std::io::Error {
+pub(crate) fn err(e: impl std::fmt::Display) -> std::io::Error {
     std::io::Error::other(e.to_string())
 }
 
-fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
+pub(crate) fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
     let mut df = DataFrame::new_infer_height(columns).map_err(err)?;
     let file = fs::File::create(dir.join(name))?;
     ParquetWriter::new(file).finish(&mut df).map_err(err)?;
@@ -85,19 +85,24 @@ pub struct Extras<'a> {
 /// `extras` adds the figures (PNG and SVG, embedded in `summary.md`) and the recording.
 #[allow(clippy::too_many_arguments)]
 pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &Figures, checks: &[Check], threads: usize, timings: &Timings, extras: &Extras<'_>) -> std::io::Result<PathBuf> {
+    write_atomically(out, &scenario.name, |tmp| write_into(tmp, scenario, results, figures, checks, threads, timings, extras))
+}
+
+/// Runs `fill` on a fresh temporary directory beside `out/<name>` and renames it into place;
+/// on failure the temporary directory is removed and `out/<name>` is left as it was.
+pub(crate) fn write_atomically(out: &Path, name: &str, fill: impl FnOnce(&Path) -> std::io::Result<()>) -> std::io::Result<PathBuf> {
     fs::create_dir_all(out)?;
-    let dest = out.join(&scenario.name);
-    let tmp = out.join(format!(".{}.tmp-{}", scenario.name, std::process::id()));
+    let dest = out.join(name);
+    let tmp = out.join(format!(".{name}.tmp-{}", std::process::id()));
     if tmp.exists() {
         fs::remove_dir_all(&tmp)?;
     }
     fs::create_dir_all(&tmp)?;
-    let result = write_into(&tmp, scenario, results, figures, checks, threads, timings, extras);
-    if let Err(e) = result {
+    if let Err(e) = fill(&tmp) {
         let _ = fs::remove_dir_all(&tmp);
         return Err(e);
     }
-    let old = out.join(format!(".{}.old-{}", scenario.name, std::process::id()));
+    let old = out.join(format!(".{name}.old-{}", std::process::id()));
     if dest.exists() {
         fs::rename(&dest, &old)?;
     }
@@ -156,13 +161,7 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, ch
     parquet(
         dir,
         "parameters.parquet",
-        vec![
-            Column::new("task".into(), task),
-            Column::new("parameter".into(), param),
-            Column::new("unit".into(), unit),
-            Column::new("identified".into(), value),
-            Column::new("truth".into(), truth_v),
-        ],
+        vec![Column::new("task".into(), task), Column::new("parameter".into(), param), Column::new("unit".into(), unit), Column::new("identified".into(), value), Column::new("truth".into(), truth_v)],
     )?;
 
     let (mut which, mut task, mut pose, mut error, mut dbase, mut dccz) = (vec![], vec![], vec![], vec![], vec![], vec![]);
@@ -243,7 +242,8 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
         };
         let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
     }
-    let _ = writeln!(s, "\nAfter-calibration figures are medians over the {} repetitions at n = {} of each identification's statistic over the validation poses.", scenario.study.repetitions, f.table_n);
+    let _ =
+        writeln!(s, "\nAfter-calibration figures are medians over the {} repetitions at n = {} of each identification's statistic over the validation poses.", scenario.study.repetitions, f.table_n);
     let _ = writeln!(
         s,
         "\n## Errors before and after calibration (mm)\n\n| | mean | median | std | p95 | max |\n|---|---|---|---|---|---|\n| before (paper: mean 2.628, max 6.282) | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |\n| after, n = {} (median over repetitions; paper Table 8: median 0.208, std 0.084, max 0.482) | {:.3} | {:.3} | {:.3} | - | {:.3} |",
@@ -278,7 +278,11 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
     for z in &f.sizes {
         let _ = writeln!(s, "| {} | {:.4} | {:.4} | {:.4} | {} |", z.n, z.median_of_means, z.iqr_of_means, z.median_of_stds, z.not_converged);
     }
-    let _ = writeln!(s, "\nFig. 11: Pearson r of the error after calibration against the distance to the base: {:.3}. Fig. 12: against the distance to the centre of the calibration zone: {:.3}.", f.r_base, f.r_ccz);
+    let _ = writeln!(
+        s,
+        "\nFig. 11: Pearson r of the error after calibration against the distance to the base: {:.3}. Fig. 12: against the distance to the centre of the calibration zone: {:.3}.",
+        f.r_base, f.r_ccz
+    );
     if !drawn.is_empty() {
         let _ = writeln!(s, "\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n");
         for w in drawn {

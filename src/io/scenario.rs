@@ -259,12 +259,7 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     }
     let p = &cell.spheres_w_mm;
     if p[0] != [0.0, 0.0, 0.0] || p[1][1] != 0.0 || p[1][2] != 0.0 || p[1][0] <= 0.0 || p[2][2] != 0.0 || p[2][1] <= 0.0 {
-        return Err(c.fail(
-            "cell",
-            "spheres_w_mm",
-            format!("{:?}", &p[..3]),
-            "the first three define {W} (eqs. 1-5): [0,0,0], then [d12,0,0] with d12 > 0, then [x,y,0] with y > 0",
-        ));
+        return Err(c.fail("cell", "spheres_w_mm", format!("{:?}", &p[..3]), "the first three define {W} (eqs. 1-5): [0,0,0], then [d12,0,0] with d12 > 0, then [x,y,0] with y > 0"));
     }
     c.positive("cell", "ball_diameter_mm", cell.ball_diameter_mm, "datum ball")?;
     c.non_negative("cell", "ball_diameter_tolerance_um", cell.ball_diameter_tolerance_um, "tolerance")?;
@@ -318,5 +313,186 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     if cp.max_tries_per_configuration == 0 {
         return Err(c.fail("campaign", "max_tries_per_configuration", 0, "must be >= 1"));
     }
+    Ok(())
+}
+
+/// Which study a scenario file describes: the top-level `kind` key (`"spms"`), absent for TriCal.
+pub fn kind_of(path: &Path) -> Result<String, ScenarioError> {
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let table: toml::Table = toml::from_str(&text).map_err(|e| ScenarioError::Parse { path: shown.clone(), key: position(&text, e.span()), message: e.message().to_string() })?;
+    match table.get("kind") {
+        None => Ok("trical".into()),
+        Some(toml::Value::String(k)) if k == "spms" || k == "trical" => Ok(k.clone()),
+        Some(v) => Err(ScenarioError::Parse { path: shown, key: "kind".into(), message: format!("{v} is not a study kind (\"trical\" or \"spms\")") }),
+    }
+}
+
+/// An SPMS scenario file as written.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SpmsFile {
+    #[allow(dead_code)]
+    kind: String,
+    seed: u64,
+    #[serde(default)]
+    head: crate::spms::head::HeadSpec,
+    #[serde(default)]
+    beams: crate::spms::head::BeamIdSpec,
+    #[serde(default)]
+    robot: crate::spms::calibration::ArmSpec,
+    #[serde(default)]
+    station: crate::spms::calibration::StationSpec,
+    #[serde(default)]
+    iso9283: crate::spms::calibration::IsoSpec,
+    #[serde(default)]
+    study: crate::spms::study::SpmsStudySpec,
+    #[serde(default)]
+    expect: crate::spms::study::SpmsExpect,
+}
+
+/// A loaded, checked SPMS scenario.
+#[derive(Clone, Debug)]
+pub struct SpmsScenario {
+    /// Name (the file stem).
+    pub name: String,
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// Its text (hashed into the manifest).
+    pub text: String,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// The study's inputs.
+    pub spec: crate::spms::study::SpmsSpec,
+    /// Figures to check.
+    pub expect: crate::spms::study::SpmsExpect,
+}
+
+/// Reads and checks an SPMS scenario file.
+pub fn load_spms(path: &Path) -> Result<SpmsScenario, ScenarioError> {
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let de = toml::Deserializer::parse(&text).map_err(|e| ScenarioError::Parse { path: shown.clone(), key: position(&text, e.span()), message: e.message().to_string() })?;
+    let file: SpmsFile = serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        let inner = e.into_inner();
+        ScenarioError::Parse { path: shown.clone(), key: if key == "." { position(&text, inner.span()) } else { key }, message: inner.message().to_string() }
+    })?;
+    let spec = crate::spms::study::SpmsSpec { head: file.head, beams: file.beams, robot: file.robot, station: file.station, iso9283: file.iso9283, study: file.study };
+    check_spms(&spec, &shown)?;
+    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
+    Ok(SpmsScenario { name, path: path.to_path_buf(), text, seed: file.seed, spec, expect: file.expect })
+}
+
+/// Checks an SPMS spec (also after command-line overrides); `path` names it in errors.
+pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), ScenarioError> {
+    let c = Checker { path };
+    let h = &f.head;
+    c.positive("head", "sphere_diameter_mm", h.sphere_diameter_mm, "reference sphere")?;
+    c.within("head", "assembly_error_mm", h.assembly_error_mm, 0.0, 5.0, "beam point error")?;
+    c.within("head", "assembly_error_deg", h.assembly_error_deg, 0.0, 5.0, "beam direction error")?;
+    let s = &h.sensor;
+    c.positive("head.sensor", "range_min_mm", s.range_min_mm, "sensor range")?;
+    if s.range_max_mm.is_nan() || s.range_max_mm <= s.range_min_mm {
+        return Err(c.fail("head.sensor", "range_max_mm", s.range_max_mm, "must be above range_min_mm"));
+    }
+    c.within("head.sensor", "linearity_pct_fs", s.linearity_pct_fs, 0.0, 5.0, "% of full scale")?;
+    c.within("head.sensor", "repeatability_um", s.repeatability_um, 0.0, 1000.0, "one standard deviation")?;
+    c.within("head.sensor", "temperature_pct_fs_per_c", s.temperature_pct_fs_per_c, 0.0, 1.0, "% of full scale per degree")?;
+    c.within("head.sensor", "temperature_delta_c", s.temperature_delta_c, -50.0, 50.0, "degrees from the identification")?;
+
+    let b = &f.beams;
+    // The paper's form has 6K + 3 unknowns and each pose gives K equations.
+    if b.poses < 8 {
+        return Err(c.fail("beams", "poses", b.poses, "must be >= 8 (6K + 3 unknowns, K equations per pose)"));
+    }
+    if b.accuracy_samples == 0 {
+        return Err(c.fail("beams", "accuracy_samples", 0, "must be >= 1"));
+    }
+    c.within("beams", "head_tilt_deg", b.head_tilt_deg, 0.0, 45.0, "tilt of the head")?;
+    c.within("beams", "sphere_across_mm", b.sphere_across_mm, 0.0, 20.0, "travel across the beams")?;
+    c.within("beams", "sphere_along_mm", b.sphere_along_mm, 0.0, 50.0, "travel along the beams")?;
+    c.non_negative("beams", "tracker_sigma_um", b.tracker_sigma_um, "tracker noise")?;
+    if b.pso_population < 2 || b.pso_iterations == 0 {
+        return Err(c.fail("beams", "pso_population / pso_iterations", format!("{} / {}", b.pso_population, b.pso_iterations), "need a population >= 2 and >= 1 iteration"));
+    }
+    c.positive("beams", "pso_half_width_mm", b.pso_half_width_mm, "search box")?;
+    c.positive("beams", "pso_half_width_dir", b.pso_half_width_dir, "search box")?;
+    c.positive("beams", "pso_half_width_centre_mm", b.pso_half_width_centre_mm, "search box")?;
+    c.non_negative("beams", "rough_centre_error_mm", b.rough_centre_error_mm, "start error")?;
+    c.positive("beams", "lm_tau", b.lm_tau, "LM damping")?;
+    if b.lm_max_iterations == 0 {
+        return Err(c.fail("beams", "lm_max_iterations", 0, "must be >= 1"));
+    }
+    if b.form().is_none() {
+        return Err(c.fail("beams", "calibration_form", &b.calibration_form, "must be \"paper\" or \"minimal\""));
+    }
+
+    let r = &f.robot;
+    if r.truth_model().is_none() {
+        return Err(c.fail("robot", "truth", &r.truth, "must be \"table5_without_dtheta2\", \"table5\" or \"table4\""));
+    }
+    c.within("robot", "sphere_flange_error_mm", r.sphere_flange_error_mm, 0.0, 10.0, "tool error")?;
+    c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
+    let u = &r.unmodelled;
+    c.non_negative("robot.unmodelled", "transmission_low_mdeg", u.transmission_low_mdeg, "amplitude")?;
+    c.non_negative("robot.unmodelled", "transmission_high_mdeg", u.transmission_high_mdeg, "amplitude")?;
+    c.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
+    c.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
+    if let Some([lo, hi]) = u.transmission_high_orders
+        && (lo == 0 || lo > hi)
+    {
+        return Err(c.fail("robot.unmodelled", "transmission_high_orders", format!("[{lo}, {hi}]"), "must be [min, max] with 1 <= min <= max"));
+    }
+
+    let st = &f.station;
+    if st.sphere_points_base_mm.is_empty() {
+        return Err(c.fail("station", "sphere_points_base_mm", "[]", "needs at least one station"));
+    }
+    for p in &st.sphere_points_base_mm {
+        if p[0].hypot(p[1]) < 300.0 {
+            return Err(c.fail("station", "sphere_points_base_mm", format!("{p:?}"), "a station must stand at least 300 mm from the base axis"));
+        }
+    }
+    c.within("station", "placement_error_mm", st.placement_error_mm, 0.0, 50.0, "placement")?;
+    c.within("station", "placement_error_deg", st.placement_error_deg, 0.0, 10.0, "placement")?;
+    c.non_negative("station", "tracker_sigma_um", st.tracker_sigma_um, "tracker noise")?;
+    c.within("station", "approach_cone_deg", st.approach_cone_deg, 0.0, 80.0, "half-angle")?;
+    c.within("station", "spin_deg", st.spin_deg, 0.0, 180.0, "rotation about the flange axis")?;
+    for v in st.sphere_travel_mm {
+        c.within("station", "sphere_travel_mm", v, 0.0, 30.0, "travel in the head")?;
+    }
+    let sd = &f.study;
+    let m = sd.parameter_set().map_err(|e| c.fail("study", "parameters", format!("{:?}", sd.parameters.clone().unwrap_or_default()), &e.to_string()))?.len();
+    if sd.set_sizes.is_empty() {
+        return Err(c.fail("study", "set_sizes", "[]", "needs at least one set size"));
+    }
+    for &n in &sd.set_sizes {
+        if (n as usize) * 3 < m || n as usize > st.pool {
+            return Err(c.fail("study", "set_sizes", n, &format!("each size must give at least {m} equations (3 per configuration) and not exceed the pool of {}", st.pool)));
+        }
+    }
+    if sd.repetitions == 0 {
+        return Err(c.fail("study", "repetitions", 0, "must be >= 1"));
+    }
+    if !sd.set_sizes.contains(&sd.table_set_size) {
+        return Err(c.fail("study", "table_set_size", sd.table_set_size, "must be one of set_sizes"));
+    }
+    if let Err(bad) = sd.parsed_selections() {
+        return Err(c.fail("study", "selections", bad, "must be \"random\" or \"detmax\""));
+    }
+    if sd.selections.is_empty() {
+        return Err(c.fail("study", "selections", "[]", "needs at least one selection"));
+    }
+    c.within("study", "detmax_max_excursion", sd.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
+    c.within("study", "rank_rtol", sd.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
+
+    let iso = &f.iso9283;
+    c.positive("iso9283", "cube_mm", iso.cube_mm, "cube side")?;
+    c.within("iso9283", "corner_fraction", iso.corner_fraction, 0.0, 0.5, "fraction of the diagonal")?;
+    if iso.cycles == 0 {
+        return Err(c.fail("iso9283", "cycles", 0, "must be >= 1"));
+    }
+    c.non_negative("iso9283", "tracker_sigma_um", iso.tracker_sigma_um, "tracker noise")?;
     Ok(())
 }

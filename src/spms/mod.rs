@@ -6,8 +6,11 @@
 //! Lengths in mm. A beam that misses the sphere or whose distance leaves the sensor's range is an
 //! error, never a number.
 
+pub mod calibration;
+pub mod head;
 pub mod identify;
 pub mod iso9283;
+pub mod study;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};

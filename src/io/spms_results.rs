@@ -1,0 +1,392 @@
+//! Result files of an SPMS study in `results/<scenario>/`: `beams.parquet`, `measurements.parquet`,
+//! `tasks.parquet`, `parameters.parquet`, `iso9283.parquet`, `manifest.json`, `summary.md`, the
+//! figures and, when asked, the recording. Written into a temporary directory renamed into place.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::*;
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+
+use crate::io::plots::{SpmsPlotInputs, Written};
+use crate::io::report::{Check, band_row, display_name};
+use crate::io::results::{Recorder, err, git_commit, parquet, write_atomically};
+use crate::io::scenario::SpmsScenario;
+use crate::spms::identify::Form;
+use crate::spms::study::{Selection, SpmsExpect, SpmsFigures, SpmsResults, SpmsTimings};
+
+/// Published figures of the SPMS paper (`shared/reference/published-figures.toml`, `spms_2023`).
+pub mod published {
+    /// Table 3: max, mean, RMS measuring error, mm.
+    pub const TABLE3: (f64, f64, f64) = (0.091, 0.034, 0.039);
+    /// Table 6: AP per point before calibration, mm.
+    pub const AP_BEFORE: [f64; 5] = [0.336, 1.462, 0.997, 1.454, 1.030];
+    /// Table 6: AP per point after calibration, mm.
+    pub const AP_AFTER: [f64; 5] = [0.167, 0.712, 0.496, 0.620, 0.311];
+    /// Table 6 text: max, mean, "RMS" before, mm.
+    pub const BEFORE: (f64, f64, f64) = (1.462, 1.056, 0.829);
+    /// Table 6 text: max, mean, "RMS" after, mm.
+    pub const AFTER: (f64, f64, f64) = (0.712, 0.461, 0.388);
+}
+
+/// The comparison rows for an SPMS scenario's `[expect]` table.
+pub fn checks(f: &SpmsFigures, e: &SpmsExpect) -> Vec<Check> {
+    let (m, b) = (f.measuring, f.before.1);
+    let mut rows = vec![
+        band_row("Table 3: max measuring error, mm", published::TABLE3.0, m.0, e.measuring_max_mm),
+        band_row("Table 3: mean measuring error, mm", published::TABLE3.1, m.1, e.measuring_mean_mm),
+        band_row("Table 3: RMS measuring error, mm", published::TABLE3.2, m.2, e.measuring_rms_mm),
+        Check {
+            figure: "Fig. 5: share of fits with residuals < 0.03 mm".into(),
+            published: "nearly all".into(),
+            reproduced: format!("{:.0} %", 100.0 * f.residual_below_003),
+            band: e.fit_residual_below_003_min.map(|v| format!(">= {:.0} %", 100.0 * v)).unwrap_or_else(|| "-".into()),
+            pass: e.fit_residual_below_003_min.map(|v| f.residual_below_003 >= v),
+        },
+        band_row("Table 6 before: max AP, mm", published::BEFORE.0, b.0, e.ap_before_max_mm),
+        band_row("Table 6 before: mean AP, mm", published::BEFORE.1, b.1, e.ap_before_mean_mm),
+        band_row("Table 6 before: RMS AP, mm", published::BEFORE.2, b.2, e.ap_before_rms_mm),
+    ];
+    for a in &f.after {
+        let checked = a.selection == Selection::Random;
+        let pick = |band: Option<crate::io::scenario::Band>| if checked { band } else { None };
+        let l = format!("{} sets of {}", a.selection.label(), f.table_n);
+        rows.push(band_row(&format!("Table 6 after ({l}): max AP, mm"), published::AFTER.0, a.summary.0, pick(e.ap_after_max_mm)));
+        rows.push(band_row(&format!("Table 6 after ({l}): mean AP, mm"), published::AFTER.1, a.summary.1, pick(e.ap_after_mean_mm)));
+        rows.push(band_row(&format!("Table 6 after ({l}): RMS AP, mm"), published::AFTER.2, a.summary.2, pick(e.ap_after_rms_mm)));
+    }
+    rows
+}
+
+#[derive(Serialize)]
+struct Manifest<'a> {
+    scenario: &'a str,
+    kind: &'static str,
+    scenario_path: String,
+    scenario_sha256: String,
+    seed: u64,
+    threads: usize,
+    crate_version: &'static str,
+    git_commit: String,
+    tasks: usize,
+    set_sizes: Vec<u32>,
+    repetitions: u32,
+    selections: Vec<String>,
+    timings: &'a SpmsTimings,
+}
+
+/// Optional outputs beside the tables.
+#[derive(Default)]
+pub struct SpmsExtras<'a> {
+    /// Draw the figures.
+    pub plots: bool,
+    /// Writes the Rerun recording to the path it is given; `None` records nothing.
+    pub recording: Option<Recorder<'a>>,
+}
+
+/// Writes every result file of `r` into `out/<scenario name>`, replacing what was there.
+pub fn write(out: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], threads: usize, extras: &SpmsExtras<'_>) -> std::io::Result<PathBuf> {
+    write_atomically(out, &s.name, |dir| write_into(dir, s, r, f, checks, threads, extras))
+}
+
+fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], threads: usize, extras: &SpmsExtras<'_>) -> std::io::Result<()> {
+    let h = &r.head;
+    // Beams: truth and both identifications.
+    let (mut which, mut beam, mut px, mut py, mut pz, mut dx, mut dy, mut dz, mut gain, mut perr, mut aerr) = (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+    let truth: Vec<_> = h.spms.sensors.iter().map(|s| s.beam).collect();
+    let mut push = |label: &str, beams: &[crate::spms::Beam], gains: &[f64], pe: &[f64], ae: &[f64]| {
+        for (k, b) in beams.iter().enumerate() {
+            which.push(label.to_string());
+            beam.push(k as u32 + 1);
+            px.push(b.p.x);
+            py.push(b.p.y);
+            pz.push(b.p.z);
+            dx.push(b.dir.x);
+            dy.push(b.dir.y);
+            dz.push(b.dir.z);
+            gain.push(gains[k]);
+            perr.push(pe[k]);
+            aerr.push(ae[k]);
+        }
+    };
+    let ones = vec![1.0; truth.len()];
+    let zeros = vec![0.0; truth.len()];
+    push("truth", &truth, &ones, &zeros, &zeros);
+    for id in [&h.paper, &h.minimal] {
+        push(if id.form == Form::Paper { "pso_lm_paper" } else { "lm_minimal" }, &id.beams, &id.gains, &id.point_error_mm, &id.angle_error_deg);
+    }
+    let c = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
+    parquet(
+        dir,
+        "beams.parquet",
+        vec![
+            Column::new("head".into(), which),
+            Column::new("beam".into(), beam),
+            c("p_x_mm", px),
+            c("p_y_mm", py),
+            c("p_z_mm", pz),
+            c("dir_x", dx),
+            c("dir_y", dy),
+            c("dir_z", dz),
+            c("gain", gain),
+            c("point_error_at_100mm_mm", perr),
+            c("angle_error_deg", aerr),
+        ],
+    )?;
+    let (mut which, mut sample, mut error, mut resid) = (vec![], vec![], vec![], vec![]);
+    for id in [&h.paper, &h.minimal] {
+        for (k, (e, res)) in id.measuring_error_mm.iter().zip(&id.fit_residual_max_mm).enumerate() {
+            which.push(if id.form == Form::Paper { "pso_lm_paper" } else { "lm_minimal" }.to_string());
+            sample.push(k as u32 + 1);
+            error.push(*e);
+            resid.push(*res);
+        }
+    }
+    parquet(dir, "measurements.parquet", vec![Column::new("head".into(), which), Column::new("sample".into(), sample), c("measuring_error_mm", error), c("fit_residual_max_mm", resid)])?;
+
+    let t = &r.tasks;
+    let u32c = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
+    let opt = |n: &str, v: Vec<Option<f64>>| Column::new(n.into(), v);
+    let mut cols = vec![
+        u32c("task", t.iter().map(|x| x.index as u32).collect()),
+        Column::new("selection".into(), t.iter().map(|x| x.selection.label().to_string()).collect::<Vec<_>>()),
+        u32c("set_size", t.iter().map(|x| x.set_size as u32).collect()),
+        u32c("repetition", t.iter().map(|x| x.repetition as u32).collect()),
+        c("o1", t.iter().map(|x| x.observability.o1).collect()),
+        c("condition_number", t.iter().map(|x| x.condition_number).collect()),
+        Column::new("outcome".into(), t.iter().map(|x| x.outcome.clone()).collect::<Vec<_>>()),
+        Column::new("unidentifiable".into(), t.iter().map(|x| x.unidentifiable.join(" ")).collect::<Vec<_>>()),
+        c("residual_rms_mm", t.iter().map(|x| x.residual_rms_mm).collect()),
+    ];
+    for k in 0..5 {
+        cols.push(opt(&format!("ap_p{}_mm", k + 1), t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_mm[k])).collect()));
+    }
+    for k in 0..5 {
+        cols.push(opt(&format!("rp_p{}_mm", k + 1), t.iter().map(|x| x.iso.as_ref().map(|i| i.rp_mm[k])).collect()));
+    }
+    cols.push(opt("ap_max_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().0)).collect()));
+    cols.push(opt("ap_mean_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().1)).collect()));
+    cols.push(opt("ap_rms_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().2)).collect()));
+    cols.push(c("seconds", t.iter().map(|x| x.seconds).collect()));
+    parquet(dir, "tasks.parquet", cols)?;
+
+    let ids = r.set.ids();
+    let truth_v: Vec<f64> = ids.iter().map(|id| id.unit().from_internal(id.get(r.cell.robot.truth.data()))).collect();
+    let nominal_v: Vec<f64> = ids.iter().map(|id| id.unit().from_internal(id.get(r.cell.nominal.data()))).collect();
+    let (mut task, mut param, mut unit, mut value, mut tv, mut nv) = (vec![], vec![], vec![], vec![], vec![], vec![]);
+    for x in t {
+        for (j, id) in ids.iter().enumerate() {
+            task.push(x.index as u32);
+            param.push(id.name());
+            unit.push(id.unit().symbol().to_string());
+            value.push(x.values[j].map(|v| id.unit().from_internal(v)));
+            tv.push(truth_v[j]);
+            nv.push(nominal_v[j]);
+        }
+    }
+    parquet(dir, "parameters.parquet", vec![u32c("task", task), Column::new("parameter".into(), param), Column::new("unit".into(), unit), opt("identified", value), c("truth", tv), c("nominal", nv)])?;
+    let (mut which, mut point, mut ap, mut rp) = (vec![], vec![], vec![], vec![]);
+    for k in 0..5 {
+        which.push("before".to_string());
+        point.push(format!("P{}", k + 1));
+        ap.push(r.before.ap_mm[k]);
+        rp.push(r.before.rp_mm[k]);
+    }
+    parquet(dir, "iso9283_before.parquet", vec![Column::new("calibration".into(), which), Column::new("point".into(), point), c("ap_mm", ap), c("rp_mm", rp)])?;
+
+    let manifest = Manifest {
+        scenario: &s.name,
+        kind: "spms",
+        scenario_path: s.path.display().to_string(),
+        scenario_sha256: format!("{:x}", Sha256::digest(s.text.as_bytes())),
+        seed: s.seed,
+        threads,
+        crate_version: env!("CARGO_PKG_VERSION"),
+        git_commit: git_commit(),
+        tasks: t.len(),
+        set_sizes: s.spec.study.set_sizes.clone(),
+        repetitions: s.spec.study.repetitions,
+        selections: s.spec.study.selections.clone(),
+        timings: &r.timings,
+    };
+    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    if let Some(record) = extras.recording {
+        record(&dir.join("study.rrd")).map_err(|e| std::io::Error::other(format!("recording: {e}")))?;
+    }
+    let drawn = if extras.plots {
+        let mut sizes: Vec<usize> = t.iter().map(|x| x.set_size).collect();
+        sizes.sort_unstable();
+        sizes.dedup();
+        let by_size = |sel: Selection| -> Vec<(usize, Vec<f64>)> {
+            sizes.iter().map(|&n| (n, t.iter().filter(|x| x.selection == sel && x.set_size == n).filter_map(|x| x.iso.as_ref().map(|i| i.ap_summary().1)).collect())).collect()
+        };
+        let inputs = SpmsPlotInputs {
+            residuals: [&h.paper.fit_residual_max_mm, &h.minimal.fit_residual_max_mm],
+            measuring: [&h.paper.measuring_error_mm, &h.minimal.measuring_error_mm],
+            ap_published: [published::AP_BEFORE, published::AP_AFTER],
+            ap_before: r.before.ap_mm,
+            ap_after: f.after.iter().map(|a| (a.selection.label().to_string(), a.ap_mm)).collect(),
+            ap_mean_by_size: f.after.iter().map(|a| (a.selection.label().to_string(), by_size(a.selection))).collect(),
+            table_n: f.table_n,
+        };
+        crate::io::plots::write_spms(dir, &inputs).map_err(|e| std::io::Error::other(format!("plots: {e}")))?
+    } else {
+        Vec::new()
+    };
+    fs::write(dir.join("summary.md"), summary(s, r, f, checks, &drawn))?;
+    Ok(())
+}
+
+fn f3(x: f64) -> String {
+    if x.is_finite() { format!("{x:.3}") } else { "-".into() }
+}
+
+/// The summary: Tables 3 and 6 next to calsim's, the two beam solvers, random vs DETMAX sets.
+pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], drawn: &[Written]) -> String {
+    let mut o = String::new();
+    let h = &r.head;
+    let _ = writeln!(o, "# {}: SPMS and ER20-C10 (Gao et al. 2023), seed {}\n", s.name, s.seed);
+    let _ = writeln!(
+        o,
+        "{} identifications ({} selections x {} set sizes x {} repetitions) from a pool of {} configurations at {} station(s); {} candidates rejected (no IK within limits, or a beam off the sphere or out of range).\n",
+        r.tasks.len(),
+        s.spec.study.selections.len(),
+        s.spec.study.set_sizes.len(),
+        s.spec.study.repetitions,
+        r.cell.pool.len(),
+        r.cell.stations.len(),
+        r.cell.rejected
+    );
+    let _ = writeln!(o, "## Published figures\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|");
+    for c in checks {
+        let res = match c.pass {
+            Some(true) => "pass",
+            Some(false) => "miss",
+            None => "-",
+        };
+        let _ = writeln!(o, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, res);
+    }
+    let _ = writeln!(o, "\nTable 6 prints an RMS (0.829 before, 0.388 after) that is not the RMS of its own five AP values (1.133 and 0.517); calsim's RMS is that of the five values.\n");
+
+    let _ = writeln!(o, "## Beam identification (Table 2) and measuring accuracy (Table 3)\n");
+    let _ = writeln!(
+        o,
+        "| solver | unknowns | rms residual, mm | iterations | time, s | condition | worst beam point error at 100 mm, mm | worst direction error, deg | gains | measuring error max / mean / RMS, mm | fits with residual < 0.03 mm |"
+    );
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|---|---|---|");
+    for id in [&h.paper, &h.minimal] {
+        let (mx, mean, rms) = crate::spms::iso9283::summary(&id.measuring_error_mm);
+        let below = id.fit_residual_max_mm.iter().filter(|x| **x < 0.03).count();
+        let _ = writeln!(
+            o,
+            "| {} | {} | {:.4} | {} | {:.3} | {:.2e} | {:.3} | {:.3} | {} | {} / {} / {} | {} of {} |",
+            id.label,
+            id.form.len(id.beams.len()),
+            id.rms_mm,
+            id.iterations,
+            id.seconds,
+            id.condition,
+            id.point_error_mm.iter().fold(0.0, |a: f64, b| a.max(*b)),
+            id.angle_error_deg.iter().fold(0.0, |a: f64, b| a.max(*b)),
+            id.gains.iter().map(|g| format!("{g:.4}")).collect::<Vec<_>>().join(" "),
+            f3(mx),
+            f3(mean),
+            f3(rms),
+            below,
+            id.fit_residual_max_mm.len()
+        );
+    }
+    let _ = writeln!(
+        o,
+        "\nPSO alone ({} particles, {} iterations): rms {:.4} mm in {:.3} s. Published Table 3: 0.091 / 0.034 / 0.039 mm. The robot calibration measures with the `{}` head.\n",
+        s.spec.beams.pso_population, s.spec.beams.pso_iterations, h.pso_rms_mm, h.pso_s, s.spec.beams.calibration_form
+    );
+
+    let _ = writeln!(o, "## ISO 9283 absolute positioning (Table 6)\n");
+    let _ = write!(o, "| point | published before | calsim before | published after |");
+    for a in &f.after {
+        let _ = write!(o, " calsim after, {} |", a.selection.label());
+    }
+    let _ = write!(o, "\n|---|---|---|---|");
+    for _ in &f.after {
+        let _ = write!(o, "---|");
+    }
+    let _ = writeln!(o);
+    for k in 0..5 {
+        let _ = write!(o, "| P{} | {:.3} | {} | {:.3} |", k + 1, published::AP_BEFORE[k], f3(f.before.0[k]), published::AP_AFTER[k]);
+        for a in &f.after {
+            let _ = write!(o, " {} |", f3(a.ap_mm[k]));
+        }
+        let _ = writeln!(o);
+    }
+    let _ = writeln!(
+        o,
+        "\nAfter calibration: median over the repetitions with sets of {}. RP before calibration per point: {} mm.\n",
+        f.table_n,
+        r.before.rp_mm.iter().map(|v| format!("{v:.3}")).collect::<Vec<_>>().join(", ")
+    );
+
+    let _ = writeln!(
+        o,
+        "## Random sets and DETMAX sets\n\n| selection | n | identified | median O1 | median condition | median mean AP, mm | IQR mean AP, mm | worst mean AP, mm |\n|---|---|---|---|---|---|---|---|"
+    );
+    let mut sizes: Vec<usize> = r.tasks.iter().map(|t| t.set_size).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    for a in &f.after {
+        for &n in &sizes {
+            let ts: Vec<_> = r.tasks.iter().filter(|t| t.selection == a.selection && t.set_size == n).collect();
+            let means: Vec<f64> = ts.iter().filter_map(|t| t.iso.as_ref().map(|i| i.ap_summary().1)).collect();
+            let mut sorted = means.clone();
+            sorted.sort_by(f64::total_cmp);
+            let q = |p: f64| crate::study::stats::quantile(&sorted, p);
+            let _ = writeln!(
+                o,
+                "| {} | {} | {} of {} | {:.4} | {:.0} | {} | {} | {} |",
+                a.selection.label(),
+                n,
+                means.len(),
+                ts.len(),
+                crate::spms::study::median(&ts.iter().map(|t| t.observability.o1).collect::<Vec<_>>()),
+                crate::spms::study::median(&ts.iter().map(|t| t.condition_number).collect::<Vec<_>>()),
+                f3(q(0.5)),
+                f3(q(0.75) - q(0.25)),
+                f3(sorted.last().copied().unwrap_or(f64::NAN))
+            );
+        }
+    }
+    let tn = f.table_n;
+    let ids = r.set.ids();
+    let _ = writeln!(
+        o,
+        "\n## Identified parameters (random sets of {tn}: median over the repetitions)\n\n| parameter | unit | nominal (Table 4) | truth | identified (median) | identified - truth |\n|---|---|---|---|---|---|"
+    );
+    for (j, id) in ids.iter().enumerate() {
+        let unit = id.unit();
+        let vals: Vec<f64> = r.tasks.iter().filter(|t| t.selection == Selection::Random && t.set_size == tn).filter_map(|t| t.values[j]).map(|v| unit.from_internal(v)).collect();
+        let med = crate::spms::study::median(&vals);
+        let truth = unit.from_internal(id.get(r.cell.robot.truth.data()));
+        let nominal = unit.from_internal(id.get(r.cell.nominal.data()));
+        let _ = writeln!(o, "| {} | {} | {:.4} | {:.4} | {:.4} | {:+.4} |", display_name(&id.name()), unit.symbol(), nominal, truth, med, med - truth);
+    }
+    let t = &r.timings;
+    let _ = writeln!(
+        o,
+        "\n## Timing\n\nhead (build, PSO + LM, minimal LM, accuracy) {:.3} s; cell and pool {:.3} s; pool Jacobian {:.3} s; {} identifications with their ISO 9283 tests {:.3} s; study {:.3} s.\n",
+        t.head_s,
+        t.cell_s,
+        t.pool_jacobian_s,
+        r.tasks.len(),
+        t.tasks_s,
+        t.study_s
+    );
+    if !drawn.is_empty() {
+        let _ = writeln!(o, "## Figures\n");
+        for w in drawn {
+            let _ = writeln!(o, "![{}]({}.png)\n\n{} ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
+        }
+    }
+    o
+}
