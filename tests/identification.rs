@@ -84,6 +84,36 @@ fn freeing_d2_with_the_31_is_rank_deficient_and_names_d2_and_d3() {
     assert!(fit.condition_number.is_infinite());
 }
 
+/// With `truncate`, the same rank-deficient set gives a model: the direction d2 and d3 share stays
+/// at the start (d2 + d3 is what the poses see), everything else is recovered, and the positions
+/// are reproduced exactly.
+#[test]
+fn truncation_leaves_the_unobservable_direction_at_the_start() {
+    let truth = trical_2018_table7();
+    let start = trical_2018_nominal();
+    let set = ParamSet::trical_31().freed(ParamId::parse("d2").unwrap());
+    let obs = exact_observations(&truth, 75, 5);
+    let fit = identify(&start, &set, &obs, &FitOptions { truncate: true, ..FitOptions::default() });
+    let FitOutcome::Truncated { unidentifiable, .. } = &fit.outcome else { panic!("expected a truncated fit, got {:?}", fit.outcome) };
+    assert!(unidentifiable.contains(&"d2".to_string()) && unidentifiable.contains(&"d3".to_string()), "{unidentifiable:?}");
+    let model = fit.model.expect("a truncated fit returns its model");
+    assert!(fit.residual_rms_mm < 1e-7, "rms {}", fit.residual_rms_mm);
+    let (d2, d3) = (ParamId::parse("d2").unwrap(), ParamId::parse("d3").unwrap());
+    let sum = |m: &RobotModel| d2.get(m.data()) + d3.get(m.data());
+    assert!((sum(&model) - sum(&truth)).abs() < 1e-6, "d2 + d3 {} vs {}", sum(&model), sum(&truth));
+    // The minimum-norm step splits the change of d2 + d3 equally: d2 - d3 keeps its start value
+    // (to the accuracy of the null vector through the Gram matrix; the truth is 0.094 mm away).
+    let diff = |m: &RobotModel| d2.get(m.data()) - d3.get(m.data());
+    assert!((diff(&model) - diff(&start)).abs() < 1e-4, "d2 - d3 {} vs start {}", diff(&model), diff(&start));
+    // The rest: recovered to the accuracy of that null vector (the truth is 0.01-0.3 mm and
+    // 1e-4-1e-3 rad from the start).
+    for id in set.ids().iter().filter(|id| **id != d2 && **id != d3) {
+        let tol = if id.unit() == Unit::Mm { 1e-4 } else { 1e-6 };
+        assert!((id.get(model.data()) - id.get(truth.data())).abs() < tol, "{} off by {:e}", id.name(), id.get(model.data()) - id.get(truth.data()));
+    }
+    assert!(fit.condition_number.is_finite());
+}
+
 #[test]
 fn too_few_configurations_are_rank_deficient() {
     // 8 configurations give 24 equations for 31 unknowns.
