@@ -78,3 +78,40 @@ fn the_recording_holds_the_cell_the_poses_the_centring_and_the_study() {
         assert!(timelines(p).contains(&"set_size".to_string()), "{p}: {:?}", timelines(p));
     }
 }
+
+#[test]
+fn the_spms_recording_holds_the_heads_the_pool_the_test_and_the_study() {
+    let dir = std::env::temp_dir().join(format!("calsim-test-recording-spms-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_calsim"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["run", "scenarios/er20c10_spms.toml", "--set-sizes", "20:50:30", "--repetitions", "2", "--no-plots", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (entities, blueprint) = read(&dir.join("er20c10_spms/study.rrd"));
+    assert!(blueprint, "no blueprint in the file");
+    let rows = |p: &str| entities.get(p).map(|e| e.rows).unwrap_or_else(|| panic!("{p} missing from {:?}", entities.keys().collect::<Vec<_>>()));
+    let timelines = |p: &str| entities.get(p).map(|e| e.timelines.clone()).unwrap_or_default();
+    // Three stations, each head with its beams and frame.
+    for k in 0..3 {
+        assert!(rows(&format!("/cell/heads/{k}/beams")) >= 1 && rows(&format!("/cell/heads/{k}/frame")) >= 1, "head {k}");
+    }
+    assert!(rows("/cell/frames/base") >= 1 && rows("/pool/sphere") >= 1);
+    // The arm at each of the 300 pool configurations, with the measuring error (plus the series style).
+    assert_eq!(rows("/pool/robot"), 300);
+    assert!(timelines("/pool/robot").contains(&"pool_configuration".to_string()));
+    assert_eq!(rows("/pool/measuring_error_um"), 300 + 1);
+    for p in ["/iso9283/cube", "/iso9283/before", "/iso9283/after"] {
+        assert!(rows(p) >= 1, "{p}");
+    }
+    // Per selection, one value per task (2 sizes x 2 repetitions) plus the series style.
+    for sel in ["random", "detmax"] {
+        for p in ["ap_mean_mm", "ap_max_mm", "o1"] {
+            let path = format!("/study/{sel}/{p}");
+            assert_eq!(rows(&path), 4 + 1, "{path}");
+            assert!(timelines(&path).contains(&"set_size".to_string()), "{path}");
+        }
+    }
+}

@@ -159,6 +159,8 @@ pub struct HeadExperiment {
     pub pso_s: f64,
     /// PSO then LM on the paper's form.
     pub paper: IdentifiedHead,
+    /// LM alone on the paper's form from the same rough start (what PSO is there to avoid).
+    pub paper_lm_only: IdentifiedHead,
     /// LM alone on the minimal form.
     pub minimal: IdentifiedHead,
 }
@@ -279,6 +281,9 @@ pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment
     let pso_s = t0.elapsed().as_secs_f64();
     let paper = levenberg_marquardt(&data, Form::Paper, &start.x, id.lm_tau, id.lm_max_iterations);
     let paper_s = t0.elapsed().as_secs_f64();
+    let t_alone = Instant::now();
+    let paper_alone = levenberg_marquardt(&data, Form::Paper, &nominal, id.lm_tau, id.lm_max_iterations);
+    let paper_alone_s = t_alone.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let minimal = levenberg_marquardt(&data, Form::Minimal, &Form::Minimal.pack(&table2_beams(), &rough), id.lm_tau, id.lm_max_iterations);
     let minimal_s = t1.elapsed().as_secs_f64();
@@ -316,8 +321,9 @@ pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment
         head
     };
     let paper = make(Form::Paper, "PSO + LM, paper 6K+3", &paper, paper_s);
+    let paper_lm_only = make(Form::Paper, "LM alone, paper 6K+3", &paper_alone, paper_alone_s);
     let minimal = make(Form::Minimal, "LM alone, minimal 5K+3", &minimal, minimal_s);
-    Ok(HeadExperiment { spms, pso_rms_mm: start.rms_mm, pso_s, paper, minimal })
+    Ok(HeadExperiment { spms, pso_rms_mm: start.rms_mm, pso_s, paper, paper_lm_only, minimal })
 }
 
 /// Max, mean and RMS of a sample, mm.

@@ -175,7 +175,7 @@ pub struct SpmsResults {
 /// Wall times of an SPMS study, s.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SpmsTimings {
-    /// Head built, beams identified (PSO + LM, minimal LM), accuracy tested.
+    /// Head built, beams identified (PSO + LM, LM alone on both forms), accuracy tested.
     pub head_s: f64,
     /// Cell built and pool measured.
     pub cell_s: f64,
