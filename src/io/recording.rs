@@ -1,7 +1,7 @@
 //! The Rerun recording of a study (`study.rrd`): the cell, the robot at every pool and validation
 //! configuration, the TriCal centring readings, the validation errors before and after
 //! calibration, and the per-task figures of the study, with a blueprint that opens on the 3D cell
-//! next to the time series.
+//! next to the time series (in tabs: the one of the opening timeline first).
 //!
 //! The recorder is an observer: it is fed the finished experiment and study results and runs after
 //! the numerical work, so a run without a recording executes no Rerun code at all.
@@ -18,7 +18,7 @@
 use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
-use rerun::blueprint::{Blueprint, BlueprintActivation, Horizontal, Spatial3DView, TimeSeriesView, Vertical};
+use rerun::blueprint::{Blueprint, BlueprintActivation, Horizontal, Spatial3DView, Tabs, TimePanel, TimeSeriesView};
 use rerun::{Arrows3D, Boxes3D, Capsules3D, Color, Points3D, RecordingStream, Scalars, SeriesLines};
 
 use crate::campaign::{Solid, cell_solids, trical_capsules};
@@ -108,12 +108,15 @@ pub fn write(path: &Path, name: &str, experiment: &Experiment, before: &RobotMod
 fn blueprint() -> Blueprint {
     Blueprint::new(Horizontal::new([
         Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"]).into(),
-        Vertical::new([
-            TimeSeriesView::new("study: validation error and O1 per task").with_origin("/study").into(),
+        // Tabs: the view of the timeline the file opens on first, the study's (on `task`) beside it.
+        Tabs::new([
             TimeSeriesView::new("TriCal centring: indicator readings").with_origin("/pool/centring").into(),
+            TimeSeriesView::new("study: validation error and O1 per task (timeline `task`)").with_origin("/study").into(),
         ])
         .into(),
-    ]))
+    ])
+    .with_column_shares([3.0, 2.0]))
+    .with_time_panel(TimePanel::new().with_timeline("pool_configuration"))
 }
 
 fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: &StudyResults, representative: Option<usize>) -> Rr {
@@ -254,12 +257,14 @@ pub fn write_spms(path: &Path, name: &str, spec: &crate::spms::study::SpmsSpec, 
     log_spms(&rec, spec, r).map_err(|e| e.to_string())?;
     let bp = Blueprint::new(Horizontal::new([
         Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/sphere", "/pool/robot", "/iso9283/**"]).into(),
-        Vertical::new([
-            TimeSeriesView::new("study: AP after calibration and O1 per task").with_origin("/study").into(),
+        Tabs::new([
             TimeSeriesView::new("pool: SPMS measuring error").with_origin("/pool/measuring_error_um").into(),
+            TimeSeriesView::new("study: AP after calibration and O1 per task (timeline `task`)").with_origin("/study").into(),
         ])
         .into(),
-    ]));
+    ])
+    .with_column_shares([3.0, 2.0]))
+    .with_time_panel(TimePanel::new().with_timeline("pool_configuration"));
     bp.send(&rec, BlueprintActivation { make_active: true, make_default: true }).map_err(|e| e.to_string())?;
     rec.flush_blocking().map_err(|e| e.to_string())?;
     Ok(())
@@ -310,13 +315,16 @@ fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crat
     let h = iso.cube_mm as f32 / 2.0;
     rec.log_static("iso9283/cube", &Boxes3D::from_centers_and_half_sizes([p3(&Vector3::from(iso.cube_centre_base_mm))], [[h, h, h]]).with_colors([Color::from_unmultiplied_rgba(120, 120, 120, 40)]))?;
     let amax = r.before.ap_mm.iter().copied().fold(0.0, f64::max).max(1e-9);
+    // Before: large points with their labels; after: smaller points inside them, labels on hover.
     let log_ap = |path: &str, ap: &[f64; 5], label: &str| {
+        let before = label == "before";
         rec.log_static(
             path,
             &Points3D::new(points.iter().map(p3))
-                .with_radii([12.0f32])
+                .with_radii([if before { 14.0f32 } else { 8.0 }])
                 .with_colors(ap.iter().map(|a| heat(a / amax)))
-                .with_labels(ap.iter().enumerate().map(|(k, a)| format!("P{} AP {a:.3} mm {label}", k + 1))),
+                .with_labels(ap.iter().enumerate().map(|(k, a)| format!("P{} AP {a:.3} mm {label}", k + 1)))
+                .with_show_labels(before),
         )
     };
     log_ap("iso9283/before", &r.before.ap_mm, "before")?;
