@@ -209,15 +209,19 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         record_s.get(),
         dest.display()
     );
-    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
-    if check {
-        let checked = rows.iter().filter(|r| r.pass.is_some()).count();
-        println!("check: {} of {checked} figures within their bands", checked - missed);
-        if missed > 0 {
-            return Ok(ExitCode::from(1));
-        }
+    Ok(verdict(&rows, check))
+}
+
+/// The exit code of `run` (success) or `check` (1 when a figure misses its band), with the
+/// check's one-line verdict.
+fn verdict(rows: &[report::Check], check: bool) -> ExitCode {
+    if !check {
+        return ExitCode::SUCCESS;
     }
-    Ok(ExitCode::SUCCESS)
+    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
+    let checked = rows.iter().filter(|r| r.pass.is_some()).count();
+    println!("check: {} of {checked} figures within their bands", checked - missed);
+    if missed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS }
 }
 
 /// `run` / `check` of an SPMS scenario (`kind = "spms"`).
@@ -277,15 +281,7 @@ fn spms_study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         record_s.get(),
         dest.display()
     );
-    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
-    if check {
-        let checked = rows.iter().filter(|r| r.pass.is_some()).count();
-        println!("check: {} of {checked} figures within their bands", checked - missed);
-        if missed > 0 {
-            return Ok(ExitCode::from(1));
-        }
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(verdict(&rows, check))
 }
 
 fn demo(args: &DemoArgs) -> Result<(), String> {

@@ -2,8 +2,7 @@
 //! round trip through the calibration, determinism across thread counts, and the scenario on the
 //! command line (the check CI runs, bad input).
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
 use calsim::identify::least_squares::{FitOptions, FitOutcome};
 use calsim::io::scenario;
@@ -13,22 +12,7 @@ use calsim::spms::calibration::{ArmSpec, IsoSpec, StationSpec, build, default_pa
 use calsim::spms::head::{self, BeamIdSpec, HeadSpec};
 use calsim::spms::study::{self, SpmsSpec, SpmsTask};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn calsim() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_calsim"));
-    c.env("RUST_LIB_BACKTRACE", "0").env("RUST_BACKTRACE", "0").current_dir(repo());
-    c
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("calsim-test-spms-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use common::{calsim, repo, scratch};
 
 /// A small beam experiment: enough to identify the head, quick in the test build.
 fn quick_beams() -> BeamIdSpec {
@@ -132,7 +116,7 @@ fn spms_results_are_identical_for_one_and_two_threads() {
 /// every result file.
 #[test]
 fn ci_check_of_the_spms_scenario_passes_and_writes_every_result() {
-    let dir = scratch("check");
+    let dir = scratch("spms-check");
     let out = calsim().args(["check", "scenarios/er20c10_spms.toml", "--out"]).arg(&dir).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
@@ -153,7 +137,7 @@ fn ci_check_of_the_spms_scenario_passes_and_writes_every_result() {
 
 #[test]
 fn a_bad_spms_scenario_is_a_clear_error() {
-    let dir = scratch("bad");
+    let dir = scratch("spms-bad");
     let text = std::fs::read_to_string(repo().join("scenarios/er20c10_spms.toml")).unwrap();
     for (name, edited, expect) in [
         ("unknown_key.toml", text.replace("cycles = 30", "cycles = 30\ncycle_count = 3"), "iso9283.cycle_count"),

@@ -1,28 +1,14 @@
 //! The study driver and the command line: determinism across thread counts, scenario errors,
 //! result files, and the CI check on the reduced scenario.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use calsim::io::scenario;
 use calsim::study::{self, StudyResults};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn calsim() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_calsim"));
-    c.env("RUST_LIB_BACKTRACE", "0").env("RUST_BACKTRACE", "0").current_dir(repo());
-    c
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("calsim-test-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use common::{calsim, repo, scratch};
 
 /// Runs the reduced study on a pool of `threads` threads.
 fn run_with_threads(threads: usize) -> StudyResults {

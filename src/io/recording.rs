@@ -106,16 +106,18 @@ pub fn write(path: &Path, name: &str, experiment: &Experiment, before: &RobotMod
 }
 
 fn blueprint() -> Blueprint {
-    Blueprint::new(Horizontal::new([
-        Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"]).into(),
-        // Tabs: the view of the timeline the file opens on first, the study's (on `task`) beside it.
-        Tabs::new([
-            TimeSeriesView::new("TriCal centring: indicator readings").with_origin("/pool/centring").into(),
-            TimeSeriesView::new("study: validation error and O1 per task (timeline `task`)").with_origin("/study").into(),
+    Blueprint::new(
+        Horizontal::new([
+            Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"]).into(),
+            // Tabs: the view of the timeline the file opens on first, the study's (on `task`) beside it.
+            Tabs::new([
+                TimeSeriesView::new("TriCal centring: indicator readings").with_origin("/pool/centring").into(),
+                TimeSeriesView::new("study: validation error and O1 per task (timeline `task`)").with_origin("/study").into(),
+            ])
+            .into(),
         ])
-        .into(),
-    ])
-    .with_column_shares([3.0, 2.0]))
+        .with_column_shares([3.0, 2.0]),
+    )
     .with_time_panel(TimePanel::new().with_timeline("pool_configuration"))
 }
 
@@ -255,15 +257,17 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
 pub fn write_spms(path: &Path, name: &str, spec: &crate::spms::study::SpmsSpec, r: &crate::spms::study::SpmsResults) -> Result<(), String> {
     let rec = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).save(path).map_err(|e| e.to_string())?;
     log_spms(&rec, spec, r).map_err(|e| e.to_string())?;
-    let bp = Blueprint::new(Horizontal::new([
-        Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/sphere", "/pool/robot", "/iso9283/**"]).into(),
-        Tabs::new([
-            TimeSeriesView::new("pool: SPMS measuring error").with_origin("/pool/measuring_error_um").into(),
-            TimeSeriesView::new("study: AP after calibration and O1 per task (timeline `task`)").with_origin("/study").into(),
+    let bp = Blueprint::new(
+        Horizontal::new([
+            Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/sphere", "/pool/robot", "/iso9283/**"]).into(),
+            Tabs::new([
+                TimeSeriesView::new("pool: SPMS measuring error").with_origin("/pool/measuring_error_um").into(),
+                TimeSeriesView::new("study: AP after calibration and O1 per task (timeline `task`)").with_origin("/study").into(),
+            ])
+            .into(),
         ])
-        .into(),
-    ])
-    .with_column_shares([3.0, 2.0]))
+        .with_column_shares([3.0, 2.0]),
+    )
     .with_time_panel(TimePanel::new().with_timeline("pool_configuration"));
     bp.send(&rec, BlueprintActivation { make_active: true, make_default: true }).map_err(|e| e.to_string())?;
     rec.flush_blocking().map_err(|e| e.to_string())?;

@@ -204,6 +204,20 @@ impl Checker<'_> {
         if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be >= 0 ({what})"))) }
     }
 
+    /// The `[robot.unmodelled]` table, the same in both kinds of scenario.
+    fn unmodelled(&self, u: &crate::robot::UnmodelledSpec) -> Result<(), ScenarioError> {
+        self.non_negative("robot.unmodelled", "transmission_low_mdeg", u.transmission_low_mdeg, "amplitude")?;
+        self.non_negative("robot.unmodelled", "transmission_high_mdeg", u.transmission_high_mdeg, "amplitude")?;
+        self.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
+        self.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
+        if let Some([lo, hi]) = u.transmission_high_orders
+            && (lo == 0 || lo > hi)
+        {
+            return Err(self.fail("robot.unmodelled", "transmission_high_orders", format!("[{lo}, {hi}]"), "must be [min, max] with 1 <= min <= max"));
+        }
+        Ok(())
+    }
+
     fn within(&self, section: &str, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<(), ScenarioError> {
         if v.is_finite() && v >= lo && v <= hi { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})"))) }
     }
@@ -242,16 +256,7 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
             return Err(c.fail("robot", "tcp_mm / payload_com_mm / repeatability_reference_q_deg", v, &format!("entry {k} must be finite")));
         }
     }
-    let u = &r.unmodelled;
-    c.non_negative("robot.unmodelled", "transmission_low_mdeg", u.transmission_low_mdeg, "amplitude")?;
-    c.non_negative("robot.unmodelled", "transmission_high_mdeg", u.transmission_high_mdeg, "amplitude")?;
-    c.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
-    c.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
-    if let Some([lo, hi]) = u.transmission_high_orders
-        && (lo == 0 || lo > hi)
-    {
-        return Err(c.fail("robot.unmodelled", "transmission_high_orders", format!("[{lo}, {hi}]"), "must be [min, max] with 1 <= min <= max"));
-    }
+    c.unmodelled(&r.unmodelled)?;
 
     let cell = &f.cell;
     if cell.spheres_w_mm.len() < 3 {
@@ -434,16 +439,7 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
     }
     c.within("robot", "sphere_flange_error_mm", r.sphere_flange_error_mm, 0.0, 10.0, "tool error")?;
     c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
-    let u = &r.unmodelled;
-    c.non_negative("robot.unmodelled", "transmission_low_mdeg", u.transmission_low_mdeg, "amplitude")?;
-    c.non_negative("robot.unmodelled", "transmission_high_mdeg", u.transmission_high_mdeg, "amplitude")?;
-    c.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
-    c.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
-    if let Some([lo, hi]) = u.transmission_high_orders
-        && (lo == 0 || lo > hi)
-    {
-        return Err(c.fail("robot.unmodelled", "transmission_high_orders", format!("[{lo}, {hi}]"), "must be [min, max] with 1 <= min <= max"));
-    }
+    c.unmodelled(&r.unmodelled)?;
 
     let st = &f.station;
     if st.sphere_points_base_mm.is_empty() {

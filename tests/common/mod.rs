@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 use std::path::PathBuf;
+use std::process::Command;
 
 use calsim::robot::{Joints, RobotModel};
 use rand::SeedableRng;
@@ -20,4 +21,24 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 /// `n` random configurations inside the joint limits (10 % margin each side; joint 6 within +-180 deg).
 pub fn random_configs(model: &RobotModel, n: usize, rng: &mut ChaCha8Rng) -> Vec<Joints> {
     (0..n).map(|_| calsim::campaign::uniform_configuration(model, 0.1, rng)).collect()
+}
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The `calsim` binary, run from the repository root without backtraces.
+pub fn calsim() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_calsim"));
+    c.env("RUST_LIB_BACKTRACE", "0").env("RUST_BACKTRACE", "0").current_dir(repo());
+    c
+}
+
+/// An empty scratch directory of this test process.
+pub fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("calsim-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
 }
