@@ -137,24 +137,31 @@ pub fn main() -> ExitCode {
     }
 }
 
-fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
-    if scenario::kind_of(&args.scenario).map_err(|e| e.to_string())? == "spms" {
-        return spms_study(args, check);
-    }
-    let t0 = Instant::now();
-    let mut scenario = scenario::load(&args.scenario).map_err(|e| e.to_string())?;
-    if let Some(seed) = args.seed {
-        scenario.seed = seed;
+/// The command-line overrides of the seed, the set sizes (the table size moves to the nearest
+/// given size) and the repetitions.
+fn apply_overrides(args: &RunArgs, seed: &mut u64, set_sizes: &mut Vec<u32>, table_set_size: &mut u32, repetitions: &mut u32) {
+    if let Some(s) = args.seed {
+        *seed = s;
     }
     if let Some(SetSizes(sizes)) = &args.set_sizes {
-        scenario.study.set_sizes = sizes.clone();
-        if !sizes.contains(&scenario.study.table_set_size) {
-            scenario.study.table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(scenario.study.table_set_size)).expect("non-empty");
+        *set_sizes = sizes.clone();
+        if !sizes.contains(table_set_size) {
+            *table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(*table_set_size)).expect("non-empty");
         }
     }
     if let Some(r) = args.repetitions {
-        scenario.study.repetitions = r;
+        *repetitions = r;
     }
+}
+
+fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
+    let t0 = Instant::now();
+    let mut scenario = match scenario::load_any(&args.scenario).map_err(|e| e.to_string())? {
+        scenario::Loaded::Trical(s) => *s,
+        scenario::Loaded::Spms(s) => return spms_study(args, *s, check),
+    };
+    let st = &mut scenario.study;
+    apply_overrides(args, &mut scenario.seed, &mut st.set_sizes, &mut st.table_set_size, &mut st.repetitions);
     // Re-check what the overrides changed (sizes against the pool and the parameters).
     let text = scenario.text.clone();
     scenario::check_overrides(&scenario).map_err(|e| e.to_string())?;
@@ -225,21 +232,9 @@ fn verdict(rows: &[report::Check], check: bool) -> ExitCode {
 }
 
 /// `run` / `check` of an SPMS scenario (`kind = "spms"`).
-fn spms_study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
-    let mut sc = scenario::load_spms(&args.scenario).map_err(|e| e.to_string())?;
-    if let Some(seed) = args.seed {
-        sc.seed = seed;
-    }
+fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Result<ExitCode, String> {
     let st = &mut sc.spec.study;
-    if let Some(SetSizes(sizes)) = &args.set_sizes {
-        st.set_sizes = sizes.clone();
-        if !sizes.contains(&st.table_set_size) {
-            st.table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(st.table_set_size)).expect("non-empty");
-        }
-    }
-    if let Some(r) = args.repetitions {
-        st.repetitions = r;
-    }
+    apply_overrides(args, &mut sc.seed, &mut st.set_sizes, &mut st.table_set_size, &mut st.repetitions);
     scenario::check_spms(&sc.spec, &format!("{} (with command-line overrides)", args.scenario.display())).map_err(|e| e.to_string())?;
     let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;

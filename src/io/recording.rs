@@ -100,25 +100,32 @@ fn identified(results: &StudyResults, before: &RobotModel, index: usize) -> Opti
 pub fn write(path: &Path, name: &str, experiment: &Experiment, before: &RobotModel, results: &StudyResults, representative: Option<usize>) -> Result<(), String> {
     let rec = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).save(path).map_err(|e| e.to_string())?;
     log_all(&rec, experiment, before, results, representative).map_err(|e| e.to_string())?;
-    blueprint().send(&rec, BlueprintActivation { make_active: true, make_default: true }).map_err(|e| e.to_string())?;
+    blueprint(&["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"], ("TriCal centring: indicator readings", "/pool/centring"), "study: validation error and O1 per task (timeline `task`)")
+        .send(&rec, BlueprintActivation { make_active: true, make_default: true })
+        .map_err(|e| e.to_string())?;
     rec.flush_blocking().map_err(|e| e.to_string())?;
     Ok(())
 }
 
-fn blueprint() -> Blueprint {
+/// The layout both kinds of recording open on: the 3D cell (`cell_contents`) next to two time
+/// series in tabs, the first on the `pool_configuration` timeline the file opens on, the second the
+/// study's per-task series (on `task`).
+fn blueprint(cell_contents: &[&str], first_series: (&str, &str), study_title: &str) -> Blueprint {
     Blueprint::new(
         Horizontal::new([
-            Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"]).into(),
-            // Tabs: the view of the timeline the file opens on first, the study's (on `task`) beside it.
-            Tabs::new([
-                TimeSeriesView::new("TriCal centring: indicator readings").with_origin("/pool/centring").into(),
-                TimeSeriesView::new("study: validation error and O1 per task (timeline `task`)").with_origin("/study").into(),
-            ])
-            .into(),
+            Spatial3DView::new("cell").with_origin("/").with_contents(cell_contents.iter().copied()).into(),
+            Tabs::new([TimeSeriesView::new(first_series.0).with_origin(first_series.1).into(), TimeSeriesView::new(study_title).with_origin("/study").into()]).into(),
         ])
         .with_column_shares([3.0, 2.0]),
     )
     .with_time_panel(TimePanel::new().with_timeline("pool_configuration"))
+}
+
+/// Static x, y, z arrows (red, green, blue) of `frame`, `len` mm long.
+fn log_axes(rec: &RecordingStream, path: &str, frame: &Isometry3<f64>, len: f64) -> Rr {
+    let o = frame.translation.vector;
+    let v: Vec<[f32; 3]> = (0..3).map(|k| p3(&(frame.rotation * Vector3::ith(k, len)))).collect();
+    rec.log_static(path, &Arrows3D::from_vectors(v).with_origins([p3(&o); 3]).with_colors([Color::from_rgb(230, 40, 40), Color::from_rgb(40, 200, 40), Color::from_rgb(40, 80, 230)]))
 }
 
 fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: &StudyResults, representative: Option<usize>) -> Rr {
@@ -163,9 +170,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     )?;
     rec.log_static("cell/tracker", &Points3D::new([p3(&e.tracker.position_w)]).with_radii([40.0f32]).with_labels(["laser tracker"]).with_colors([Color::from_rgb(240, 200, 0)]))?;
     for (path, frame) in [("cell/frames/world", Isometry3::identity()), ("cell/frames/base", world_from_base_true)] {
-        let o = frame.translation.vector;
-        let axes: Vec<[f32; 3]> = (0..3).map(|k| p3(&(frame.rotation * Vector3::ith(k, 150.0)))).collect();
-        rec.log_static(path, &Arrows3D::from_vectors(axes).with_origins([p3(&o); 3]).with_colors([Color::from_rgb(230, 40, 40), Color::from_rgb(40, 200, 40), Color::from_rgb(40, 80, 230)]))?;
+        log_axes(rec, path, &frame, 150.0)?;
     }
 
     // The pool: TCP targets coloured by sphere, the robot per configuration, the centring readings.
@@ -257,18 +262,11 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
 pub fn write_spms(path: &Path, name: &str, spec: &crate::spms::study::SpmsSpec, r: &crate::spms::study::SpmsResults) -> Result<(), String> {
     let rec = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).save(path).map_err(|e| e.to_string())?;
     log_spms(&rec, spec, r).map_err(|e| e.to_string())?;
-    let bp = Blueprint::new(
-        Horizontal::new([
-            Spatial3DView::new("cell").with_origin("/").with_contents(["/cell/**", "/pool/sphere", "/pool/robot", "/iso9283/**"]).into(),
-            Tabs::new([
-                TimeSeriesView::new("pool: SPMS measuring error").with_origin("/pool/measuring_error_um").into(),
-                TimeSeriesView::new("study: AP after calibration and O1 per task (timeline `task`)").with_origin("/study").into(),
-            ])
-            .into(),
-        ])
-        .with_column_shares([3.0, 2.0]),
-    )
-    .with_time_panel(TimePanel::new().with_timeline("pool_configuration"));
+    let bp = blueprint(
+        &["/cell/**", "/pool/sphere", "/pool/robot", "/iso9283/**"],
+        ("pool: SPMS measuring error", "/pool/measuring_error_um"),
+        "study: AP after calibration and O1 per task (timeline `task`)",
+    );
     bp.send(&rec, BlueprintActivation { make_active: true, make_default: true }).map_err(|e| e.to_string())?;
     rec.flush_blocking().map_err(|e| e.to_string())?;
     Ok(())
@@ -277,18 +275,13 @@ pub fn write_spms(path: &Path, name: &str, spec: &crate::spms::study::SpmsSpec, 
 fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crate::spms::study::SpmsResults) -> Rr {
     use rerun::LineStrips3D;
     rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-    let axes = |rec: &RecordingStream, path: &str, frame: &Isometry3<f64>, len: f64| -> Rr {
-        let o = frame.translation.vector;
-        let v: Vec<[f32; 3]> = (0..3).map(|k| p3(&(frame.rotation * Vector3::ith(k, len)))).collect();
-        rec.log_static(path, &Arrows3D::from_vectors(v).with_origins([p3(&o); 3]).with_colors([Color::from_rgb(230, 40, 40), Color::from_rgb(40, 200, 40), Color::from_rgb(40, 80, 230)]))
-    };
-    axes(rec, "cell/frames/base", &Isometry3::identity(), 300.0)?;
+    log_axes(rec, "cell/frames/base", &Isometry3::identity(), 300.0)?;
     let cell = &r.cell;
     for (k, s) in cell.stations.iter().enumerate() {
         let strips: Vec<Vec<[f32; 3]>> =
             r.head.spms.sensors.iter().map(|sn| vec![p3(&(s.base_from_head * Point3::from(sn.beam.p)).coords), p3(&(s.base_from_head * Point3::from(sn.beam.point(130.0))).coords)]).collect();
         rec.log_static(format!("cell/heads/{k}/beams"), &LineStrips3D::new(strips).with_colors([Color::from_rgb(220, 30, 30)]).with_radii([1.0f32]))?;
-        axes(rec, &format!("cell/heads/{k}/frame"), &s.base_from_head, 80.0)?;
+        log_axes(rec, &format!("cell/heads/{k}/frame"), &s.base_from_head, 80.0)?;
     }
     let truth = cell.robot.truth.edited(|d| d.world_from_base = crate::robot::XyzZyx::default()).expect("valid");
     let base_from_s = world_from_base(&cell.robot.truth).inverse();

@@ -31,8 +31,9 @@ pub struct Timings {
     pub study_s: f64,
 }
 
+/// Where a result came from: the head of every `manifest.json`.
 #[derive(Serialize)]
-struct Manifest<'a> {
+pub(crate) struct Provenance<'a> {
     scenario: &'a str,
     scenario_path: String,
     scenario_sha256: String,
@@ -40,13 +41,34 @@ struct Manifest<'a> {
     threads: usize,
     crate_version: &'static str,
     git_commit: String,
+}
+
+impl<'a> Provenance<'a> {
+    /// The provenance of a run of the scenario `name` read from `path` with `text`.
+    pub(crate) fn new(name: &'a str, path: &Path, text: &str, seed: u64, threads: usize) -> Self {
+        Self {
+            scenario: name,
+            scenario_path: path.display().to_string(),
+            scenario_sha256: format!("{:x}", Sha256::digest(text.as_bytes())),
+            seed,
+            threads,
+            crate_version: env!("CARGO_PKG_VERSION"),
+            git_commit: git_commit(),
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct Manifest<'a> {
+    #[serde(flatten)]
+    provenance: Provenance<'a>,
     tasks: usize,
     set_sizes: Vec<u32>,
     repetitions: u32,
     timings: &'a Timings,
 }
 
-pub(crate) fn git_commit() -> String {
+fn git_commit() -> String {
     std::process::Command::new("git")
         .args(["rev-parse", "HEAD"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -195,13 +217,7 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, ch
     )?;
 
     let manifest = Manifest {
-        scenario: &scenario.name,
-        scenario_path: scenario.path.display().to_string(),
-        scenario_sha256: format!("{:x}", Sha256::digest(scenario.text.as_bytes())),
-        seed: scenario.seed,
-        threads,
-        crate_version: env!("CARGO_PKG_VERSION"),
-        git_commit: git_commit(),
+        provenance: Provenance::new(&scenario.name, &scenario.path, &scenario.text, scenario.seed, threads),
         tasks: t.len(),
         set_sizes: scenario.study.set_sizes.clone(),
         repetitions: scenario.study.repetitions,

@@ -143,12 +143,7 @@ pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
 /// Parses and checks scenario text; `path` names it in errors.
 pub fn parse(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
     let shown = path.display().to_string();
-    let de = toml::Deserializer::parse(text).map_err(|e| ScenarioError::Parse { path: shown.clone(), key: position(text, e.span()), message: e.message().to_string() })?;
-    let file: ScenarioFile = serde_path_to_error::deserialize(de).map_err(|e| {
-        let key = e.path().to_string();
-        let inner = e.into_inner();
-        ScenarioError::Parse { path: shown.clone(), key: if key == "." { position(text, inner.span()) } else { key }, message: inner.message().to_string() }
-    })?;
+    let file: ScenarioFile = deserialize(text, &shown)?;
     check(&file, &shown)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
     Ok(Scenario {
@@ -175,6 +170,16 @@ pub fn check_overrides(s: &Scenario) -> Result<(), ScenarioError> {
         expect: s.expect.clone(),
     };
     check(&file, &format!("{} (with command-line overrides)", s.path.display()))
+}
+
+/// Deserializes scenario text, naming the offending key (or line) in the error.
+fn deserialize<T: serde::de::DeserializeOwned>(text: &str, shown: &str) -> Result<T, ScenarioError> {
+    let de = toml::Deserializer::parse(text).map_err(|e| ScenarioError::Parse { path: shown.into(), key: position(text, e.span()), message: e.message().to_string() })?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        let inner = e.into_inner();
+        ScenarioError::Parse { path: shown.into(), key: if key == "." { position(text, inner.span()) } else { key }, message: inner.message().to_string() }
+    })
 }
 
 fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
@@ -321,14 +326,24 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     Ok(())
 }
 
-/// Which study a scenario file describes: the top-level `kind` key (`"spms"`), absent for TriCal.
-pub fn kind_of(path: &Path) -> Result<String, ScenarioError> {
+/// A scenario of either kind.
+#[derive(Clone, Debug)]
+pub enum Loaded {
+    /// A TriCal study (no `kind` key, or `kind = "trical"`).
+    Trical(Box<Scenario>),
+    /// An SPMS study (`kind = "spms"`).
+    Spms(Box<SpmsScenario>),
+}
+
+/// Reads a scenario file once and loads it as the kind its top-level `kind` key names.
+pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
     let shown = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     let table: toml::Table = toml::from_str(&text).map_err(|e| ScenarioError::Parse { path: shown.clone(), key: position(&text, e.span()), message: e.message().to_string() })?;
     match table.get("kind") {
-        None => Ok("trical".into()),
-        Some(toml::Value::String(k)) if k == "spms" || k == "trical" => Ok(k.clone()),
+        None => parse(&text, path).map(|s| Loaded::Trical(Box::new(s))),
+        Some(toml::Value::String(k)) if k == "trical" => parse(&text, path).map(|s| Loaded::Trical(Box::new(s))),
+        Some(toml::Value::String(k)) if k == "spms" => parse_spms(&text, path).map(|s| Loaded::Spms(Box::new(s))),
         Some(v) => Err(ScenarioError::Parse { path: shown, key: "kind".into(), message: format!("{v} is not a study kind (\"trical\" or \"spms\")") }),
     }
 }
@@ -376,17 +391,18 @@ pub struct SpmsScenario {
 /// Reads and checks an SPMS scenario file.
 pub fn load_spms(path: &Path) -> Result<SpmsScenario, ScenarioError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
-    let de = toml::Deserializer::parse(&text).map_err(|e| ScenarioError::Parse { path: shown.clone(), key: position(&text, e.span()), message: e.message().to_string() })?;
-    let file: SpmsFile = serde_path_to_error::deserialize(de).map_err(|e| {
-        let key = e.path().to_string();
-        let inner = e.into_inner();
-        ScenarioError::Parse { path: shown.clone(), key: if key == "." { position(&text, inner.span()) } else { key }, message: inner.message().to_string() }
-    })?;
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown, message: e.to_string() })?;
+    parse_spms(&text, path)
+}
+
+/// Parses and checks SPMS scenario text; `path` names it in errors.
+pub fn parse_spms(text: &str, path: &Path) -> Result<SpmsScenario, ScenarioError> {
+    let shown = path.display().to_string();
+    let file: SpmsFile = deserialize(text, &shown)?;
     let spec = crate::spms::study::SpmsSpec { head: file.head, beams: file.beams, robot: file.robot, station: file.station, iso9283: file.iso9283, study: file.study };
     check_spms(&spec, &shown)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
-    Ok(SpmsScenario { name, path: path.to_path_buf(), text, seed: file.seed, spec, expect: file.expect })
+    Ok(SpmsScenario { name, path: path.to_path_buf(), text: text.to_string(), seed: file.seed, spec, expect: file.expect })
 }
 
 /// Checks an SPMS spec (also after command-line overrides); `path` names it in errors.

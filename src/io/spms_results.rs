@@ -8,11 +8,10 @@ use std::path::{Path, PathBuf};
 
 use polars::prelude::*;
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 
 use crate::io::plots::{SpmsPlotInputs, Written};
 use crate::io::report::{Check, band_row, display_name};
-use crate::io::results::{Recorder, err, git_commit, parquet, write_atomically};
+use crate::io::results::{Provenance, Recorder, err, parquet, write_atomically};
 use crate::io::scenario::SpmsScenario;
 use crate::spms::study::{Selection, SpmsExpect, SpmsFigures, SpmsResults, SpmsTimings};
 
@@ -61,14 +60,9 @@ pub fn checks(f: &SpmsFigures, e: &SpmsExpect) -> Vec<Check> {
 
 #[derive(Serialize)]
 struct Manifest<'a> {
-    scenario: &'a str,
+    #[serde(flatten)]
+    provenance: Provenance<'a>,
     kind: &'static str,
-    scenario_path: String,
-    scenario_sha256: String,
-    seed: u64,
-    threads: usize,
-    crate_version: &'static str,
-    git_commit: String,
     tasks: usize,
     set_sizes: Vec<u32>,
     repetitions: u32,
@@ -196,14 +190,8 @@ fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, ch
     parquet(dir, "iso9283_before.parquet", vec![Column::new("calibration".into(), which), Column::new("point".into(), point), c("ap_mm", ap), c("rp_mm", rp)])?;
 
     let manifest = Manifest {
-        scenario: &s.name,
+        provenance: Provenance::new(&s.name, &s.path, &s.text, s.seed, threads),
         kind: "spms",
-        scenario_path: s.path.display().to_string(),
-        scenario_sha256: format!("{:x}", Sha256::digest(s.text.as_bytes())),
-        seed: s.seed,
-        threads,
-        crate_version: env!("CARGO_PKG_VERSION"),
-        git_commit: git_commit(),
         tasks: t.len(),
         set_sizes: s.spec.study.set_sizes.clone(),
         repetitions: s.spec.study.repetitions,

@@ -16,6 +16,7 @@ use serde::Deserialize;
 
 use super::head::IdentifiedHead;
 use super::{Spms, iso9283};
+use crate::campaign::xyz_zyx;
 use crate::experiment::stream;
 use crate::identify::least_squares::{FitOptions, Observation, identify};
 use crate::robot::builtin::{er20c10_table4, er20c10_table5};
@@ -219,12 +220,6 @@ mod streams {
     pub const ISO: u64 = 0x4552_3230_0002;
 }
 
-fn to_xyzzyx(t: &Isometry3<f64>) -> XyzZyx {
-    let (gamma, beta, alpha) = t.rotation.euler_angles();
-    let p = t.translation.vector;
-    XyzZyx { x: p.x, y: p.y, z: p.z, alpha, beta, gamma }
-}
-
 /// The flange orientation that faces the head, spun and tilted.
 fn presentation(axis: &Vector3<f64>, tilt: f64, tilt_dir: f64, spin: f64) -> UnitQuaternion<f64> {
     // Reference: flange z along `axis`, flange x as close to +z of the frame as possible (the
@@ -245,9 +240,6 @@ fn facing_head(sphere_base: &Vector3<f64>, c_head: &Vector3<f64>) -> Isometry3<f
     Isometry3::from_parts(Translation3::from(sphere_base - rot * c_head), rot)
 }
 
-/// A1-A3 on the head, head frame, mm (as in the beam experiment).
-const FRAME_POINTS_MM: [[f64; 3]; 3] = [[0.0, 0.0, 0.0], [120.0, 0.0, 0.0], [35.0, 80.0, 0.0]];
-
 /// Builds the cell and measures the pool with `head` (the identified beams) on `spms` (the
 /// physical head).
 pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &IdentifiedHead, seed: u64) -> Result<Cell, CellError> {
@@ -267,25 +259,19 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
     }
     // The tracker measures every head's A1-A3 in its own frame; the heads' frames are then
     // expressed in the first one's as measured.
-    let measured_tracker_from_head: Vec<Isometry3<f64>> = true_heads
-        .iter()
-        .map(|t| {
-            let a = FRAME_POINTS_MM.map(|p| t.transform_point(&Point3::from(p)).coords + Vector3::from_fn(|_, _| tracker.sample(&mut rng)));
-            super::frame_from_points(&a[0], &a[1], &a[2]).expect("A1-A3 are not collinear")
-        })
-        .collect();
+    let measured_tracker_from_head: Vec<Isometry3<f64>> = true_heads.iter().map(|t| super::measured_frame(t, &tracker, &mut rng).expect("A1-A3 are not collinear")).collect();
     let world_from_tracker = measured_tracker_from_head[0].inverse();
     let tool_nominal = Vector3::from(arm.sphere_flange_mm);
     let tool_true = tool_nominal + Vector3::from_fn(|_, _| normal.sample(&mut rng) * arm.sphere_flange_error_mm);
     let nominal = er20c10_table4()
         .edited(|d| {
-            d.world_from_base = to_xyzzyx(&nominal_heads[0].inverse());
+            d.world_from_base = xyz_zyx(&nominal_heads[0].inverse());
             d.flange_tcp_mm = tool_nominal;
         })
         .expect("valid");
     let truth = truth0
         .edited(|d| {
-            d.world_from_base = to_xyzzyx(&true_heads[0].inverse());
+            d.world_from_base = xyz_zyx(&true_heads[0].inverse());
             d.flange_tcp_mm = tool_true;
         })
         .expect("valid");
@@ -443,9 +429,4 @@ pub fn random_selection<R: Rng + ?Sized>(pool: usize, n: usize, rng: &mut R) -> 
     let mut s = rand::seq::index::sample(rng, pool, n.min(pool)).into_vec();
     s.sort_unstable();
     s
-}
-
-/// True sphere centre of `q` in {S} without noise or unmodelled effects, mm.
-pub fn true_centre(cell: &Cell, q: &Joints) -> Vector3<f64> {
-    forward(&cell.robot.truth, &mut KinState::default(), q)
 }

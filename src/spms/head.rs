@@ -185,8 +185,6 @@ mod streams {
 
 /// Where the tracker and head stand in the accuracy and identification experiments, tracker frame.
 const SPHERE_TRACKER_MM: [f64; 3] = [1500.0, 200.0, 800.0];
-/// A1-A3 on the head, head frame, mm.
-const FRAME_POINTS_MM: [[f64; 3]; 3] = [[0.0, 0.0, 0.0], [120.0, 0.0, 0.0], [35.0, 80.0, 0.0]];
 
 /// Builds the physical head from Table 2 and the assembly errors.
 pub fn build_head(spec: &HeadSpec, seed: u64) -> Spms {
@@ -222,8 +220,7 @@ fn poses<R: Rng + ?Sized>(spms: &Spms, id: &BeamIdSpec, n: usize, rng: &mut R) -
         let Ok(l) = spms.read(&c, Some(&mut *rng)) else {
             continue;
         };
-        let a = FRAME_POINTS_MM.map(|p| t.transform_point(&Point3::from(p)).coords + Vector3::from_fn(|_, _| tracker.sample(rng)));
-        let Some(measured) = super::frame_from_points(&a[0], &a[1], &a[2]) else {
+        let Some(measured) = super::measured_frame(&t, &tracker, rng) else {
             continue;
         };
         data.frames.push(measured);
@@ -324,9 +321,4 @@ pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment
     let paper_lm_only = make(Form::Paper, "LM alone, paper 6K+3", &paper_alone, paper_alone_s);
     let minimal = make(Form::Minimal, "LM alone, minimal 5K+3", &minimal, minimal_s);
     Ok(HeadExperiment { spms, pso_rms_mm: start.rms_mm, pso_s, paper, paper_lm_only, minimal })
-}
-
-/// Max, mean and RMS of a sample, mm.
-pub fn max_mean_rms(v: &[f64]) -> (f64, f64, f64) {
-    super::iso9283::summary(v)
 }

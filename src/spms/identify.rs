@@ -212,13 +212,13 @@ pub struct PsoOptions {
     pub population: usize,
     /// Iterations.
     pub iterations: usize,
-    /// Cognitive and social factors (2 and 2).
+    /// Cognitive factor (2 in the paper).
     pub c1: f64,
-    /// Social factor.
+    /// Social factor (2 in the paper).
     pub c2: f64,
-    /// Inertia at the first and the last iteration (0.9, 0.4).
+    /// Inertia at the first iteration (0.9 in the paper; eq. 16).
     pub w_max: f64,
-    /// Inertia at the last iteration.
+    /// Inertia at the last iteration (0.4 in the paper).
     pub w_min: f64,
 }
 

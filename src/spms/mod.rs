@@ -175,6 +175,18 @@ impl Spms {
     }
 }
 
+/// A1-A3 on a head, head frame, mm: the points a laser tracker measures to give the head's frame.
+/// A1 is the origin, A2 on +x, A3 in the xy plane, so the Gram-Schmidt frame of the exact points
+/// is the head frame itself.
+pub const FRAME_POINTS_MM: [[f64; 3]; 3] = [[0.0, 0.0, 0.0], [120.0, 0.0, 0.0], [35.0, 80.0, 0.0]];
+
+/// `tracker_from_head` as a tracker measures it: A1-A3 ([`FRAME_POINTS_MM`]) placed by the true
+/// `tracker_from_head`, each coordinate with a draw of `noise`, then Gram-Schmidt (eqs. 4-7).
+pub fn measured_frame<R: Rng + ?Sized>(tracker_from_head: &Isometry3<f64>, noise: &Normal<f64>, rng: &mut R) -> Option<Isometry3<f64>> {
+    let a = FRAME_POINTS_MM.map(|p| tracker_from_head.transform_point(&nalgebra::Point3::from(p)).coords + Vector3::from_fn(|_, _| noise.sample(rng)));
+    frame_from_points(&a[0], &a[1], &a[2])
+}
+
 /// The sphere centre fitted to the surface points of the readings (eqs. 1-3): Gauss-Newton on
 /// `sum (|F_k - c| - R)^2`, started beyond the mean point along the mean beam direction.
 /// Returns the centre and the residuals `|F_k - c| - R`, mm.

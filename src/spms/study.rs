@@ -333,7 +333,6 @@ impl SpmsFigures {
         let h = &r.head;
         let below = h.paper.fit_residual_max_mm.iter().filter(|x| **x < 0.03).count() as f64 / h.paper.fit_residual_max_mm.len().max(1) as f64;
         let mut sels: Vec<Selection> = r.tasks.iter().map(|t| t.selection).collect();
-        sels.dedup();
         sels.sort();
         sels.dedup();
         let after = sels
