@@ -56,7 +56,9 @@ fn design(c: &mut Criterion) {
     let e = ExperimentSpec::default().build(2018).expect("campaign");
     let qs: Vec<_> = e.campaign.pool.iter().map(|p| p.q).collect();
     let set = ParamSet::trical_31();
-    c.bench_function("pool_jacobian_360", |b| b.iter(|| black_box(PoolJacobian::new(black_box(&e.campaign.nominal), &set, black_box(&qs)))));
+    c.bench_function("pool_jacobian_360", |b| {
+        b.iter(|| black_box(PoolJacobian::new(black_box(&e.campaign.nominal), &set, black_box(&qs))))
+    });
     let pool = PoolJacobian::new(&e.campaign.nominal, &set, &qs);
     let opts = DetmaxOptions::default();
     for n in [20, 75, 100] {

@@ -18,7 +18,10 @@ fn main() {
             std::process::exit(2);
         }
     };
-    println!("{:>8} {:>10} {:>12} {:>10} {:>12} {:>10} {:>10}", "eps_um", "iter_mean", "seconds_mean", "failures", "worst_um", "pool_s", "pool_h");
+    println!(
+        "{:>8} {:>10} {:>12} {:>10} {:>12} {:>10} {:>10}",
+        "eps_um", "iter_mean", "seconds_mean", "failures", "worst_um", "pool_s", "pool_h"
+    );
     for e in eps {
         let mut spec = s.experiment.clone();
         spec.trical.epsilon_mm = e * 1e-3;

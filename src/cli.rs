@@ -16,11 +16,13 @@ use rand_distr::{Distribution, Normal};
 
 use crate::campaign::uniform_configuration;
 use crate::identify::{FitOptions, Observation, Solver, identify};
-use crate::io::report::{self, Figures};
+use crate::io::report;
 use crate::io::results::Timings;
 use crate::io::scenario;
 use crate::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use crate::robot::{KinState, ParamSet, forward};
+use crate::study::check::{Check, tally};
+use crate::study::figures::{self, Figures};
 
 /// calsim: simulation and Monte Carlo studies of robot calibration with low-cost 3D measuring devices.
 #[derive(Parser, Debug)]
@@ -182,16 +184,22 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     bar.finish_and_clear();
     let study_s = t0.elapsed().as_secs_f64();
     let figures = Figures::of(&results, &experiment.robot.truth, scenario.study.table_set_size as usize);
-    let rows = report::checks(&figures, &scenario.expect);
+    let rows = figures::checks(&figures, &scenario.expect);
     let t_write = Instant::now();
-    let timings = Timings { campaign_s, pool_s: experiment.campaign.pool_wall_s, pool_jacobian_s: results.pool_jacobian_s, tasks_s: results.tasks_s, study_s };
+    let timings = Timings {
+        campaign_s,
+        pool_s: experiment.campaign.pool_wall_s,
+        pool_jacobian_s: results.pool_jacobian_s,
+        tasks_s: results.tasks_s,
+        study_s,
+    };
     let plot_inputs = (!args.no_plots).then(|| PlotInputs {
         validation_w: experiment.campaign.validation.iter().map(|v| v.measured_w).collect(),
         spheres_w: experiment.cell.spheres_w.clone(),
         base_w: crate::robot::world_from_base(&experiment.robot.truth).translation.vector,
         table_n: scenario.study.table_set_size as usize,
     });
-    let representative = crate::io::plots::representative(&results, scenario.study.table_set_size as usize).map(|(task, _)| task);
+    let representative = figures::representative(&results, scenario.study.table_set_size as usize).map(|(task, _)| task);
     let record_s = std::cell::Cell::new(0.0);
     let record = |path: &std::path::Path| {
         let t = Instant::now();
@@ -199,8 +207,10 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         record_s.set(t.elapsed().as_secs_f64());
         r
     };
-    let extras = crate::io::results::Extras { plots: plot_inputs.as_ref(), recording: if args.no_recording { None } else { Some(&record) } };
-    let dest = crate::io::results::write(&args.out, &scenario, &results, &figures, &rows, threads, &timings, &extras).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let extras =
+        crate::io::results::Extras { plots: plot_inputs.as_ref(), recording: if args.no_recording { None } else { Some(&record) } };
+    let report = crate::io::results::Report { figures: &figures, checks: &rows, threads, timings: &timings, extras };
+    let dest = crate::io::results::write(&args.out, &scenario, &results, &report).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     debug_assert_eq!(text, scenario.text);
 
@@ -221,12 +231,11 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
 
 /// The exit code of `run` (success) or `check` (1 when a figure misses its band), with the
 /// check's one-line verdict.
-fn verdict(rows: &[report::Check], check: bool) -> ExitCode {
+fn verdict(rows: &[Check], check: bool) -> ExitCode {
     if !check {
         return ExitCode::SUCCESS;
     }
-    let missed = rows.iter().filter(|r| r.pass == Some(false)).count();
-    let checked = rows.iter().filter(|r| r.pass.is_some()).count();
+    let (checked, missed) = tally(rows);
     println!("check: {} of {checked} figures within their bands", checked - missed);
     if missed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS }
 }
@@ -251,7 +260,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         .map_err(|e| format!("{}: {e}", args.scenario.display()))?;
     bar.finish_and_clear();
     let figures = crate::spms::study::SpmsFigures::of(&results, sc.spec.study.table_set_size as usize);
-    let rows = crate::io::spms_results::checks(&figures, &sc.expect);
+    let rows = crate::spms::study::checks(&figures, &sc.expect);
     let t_write = Instant::now();
     let record_s = std::cell::Cell::new(0.0);
     let record = |path: &std::path::Path| {
@@ -260,8 +269,10 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         record_s.set(t.elapsed().as_secs_f64());
         r
     };
-    let extras = crate::io::spms_results::SpmsExtras { plots: !args.no_plots, recording: if args.no_recording { None } else { Some(&record) } };
-    let dest = crate::io::spms_results::write(&args.out, &sc, &results, &figures, &rows, threads, &extras).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let extras =
+        crate::io::spms_results::SpmsExtras { plots: !args.no_plots, recording: if args.no_recording { None } else { Some(&record) } };
+    let dest = crate::io::spms_results::write(&args.out, &sc, &results, &figures, &rows, threads, &extras)
+        .map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     println!("{}", report::terminal_table(&rows));
     let t = &results.timings;
@@ -308,8 +319,21 @@ fn demo(args: &DemoArgs) -> Result<(), String> {
     let fit = identify(&nominal, &set, &obs, &FitOptions { solver, ..FitOptions::default() });
     let fit_s = t_fit.elapsed().as_secs_f64();
 
-    println!("calsim demo: {} ({} configurations, noise {} um per axis, seed {})", truth.name(), args.configurations, args.noise_um, args.seed);
-    println!("outcome {}, {} iterations, condition number {:.1}, residual RMS {:.4} mm, {:.0} us", fit.outcome.label(), fit.iterations, fit.condition_number, fit.residual_rms_mm, fit_s * 1e6);
+    println!(
+        "calsim demo: {} ({} configurations, noise {} um per axis, seed {})",
+        truth.name(),
+        args.configurations,
+        args.noise_um,
+        args.seed
+    );
+    println!(
+        "outcome {}, {} iterations, condition number {:.1}, residual RMS {:.4} mm, {:.0} us",
+        fit.outcome.label(),
+        fit.iterations,
+        fit.condition_number,
+        fit.residual_rms_mm,
+        fit_s * 1e6
+    );
     println!("\n{:<12} {:>11} {:>12} {:>12} {:>12}  unit", "parameter", "nominal", "truth", "identified", "error");
     for (id, v) in set.ids().iter().zip(&fit.values) {
         let u = id.unit();

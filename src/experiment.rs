@@ -2,8 +2,6 @@
 //! tracker and campaign, each drawn from its own seeded stream.
 
 use nalgebra::{Point3, Vector3};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 
 use crate::campaign::{self, Campaign, CampaignError, CampaignSpec, Setup};
@@ -13,6 +11,7 @@ use crate::instrument::laser_tracker::{LaserTracker, LaserTrackerSpec};
 use crate::instrument::trical::{TriCal, TriCalSpec};
 use crate::robot::builtin::{TRICAL_PAYLOAD, TRICAL_TCP_MM, irb120, trical_2018_table7};
 use crate::robot::{Inertial, RobotModel, UnmodelledSpec, VirtualRobot, world_from_base};
+use crate::seeds::{self, split_seed, stream};
 
 /// The physical robot as a scenario describes it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -89,19 +88,9 @@ pub enum ExperimentError {
     /// The campaign failed.
     #[error(transparent)]
     Campaign(#[from] CampaignError),
-}
-
-/// A stream of its own for each part of the experiment, derived from the scenario seed.
-pub fn stream(seed: u64, part: u64) -> ChaCha8Rng {
-    ChaCha8Rng::seed_from_u64(split_seed(seed, part))
-}
-
-/// Mixes a seed and an index into an independent seed (SplitMix64 finaliser).
-pub fn split_seed(seed: u64, index: u64) -> u64 {
-    let mut z = seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x632B_E59B_D9B4_E019);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    /// The tracker's registration on the sphere nests has no finite fit.
+    #[error("the laser tracker's registration on the sphere nests has no finite fit")]
+    Registration,
 }
 
 impl ExperimentSpec {
@@ -124,25 +113,50 @@ impl ExperimentSpec {
     /// model with the scenario's nominal base if it gives one.
     pub fn before_model(&self, campaign: &Campaign) -> RobotModel {
         match self.robot.nominal_base_mm_deg {
-            Some([x, y, z, a, b, g]) => {
-                campaign.nominal.edited(|d| d.world_from_base = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() }).expect("finite base")
-            }
+            Some([x, y, z, a, b, g]) => campaign
+                .nominal
+                .edited(|d| {
+                    d.world_from_base = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() }
+                })
+                .expect("finite base"),
             None => campaign.nominal.clone(),
         }
     }
 
     /// Builds the physical world from `seed` and runs the campaign.
     pub fn build(&self, seed: u64) -> Result<Experiment, ExperimentError> {
-        let cell = Cell::build(&self.cell, &mut stream(seed, 1))?;
+        let cell = Cell::build(&self.cell, &mut stream(seed, seeds::experiment::CELL))?;
         let reference = self.robot.repeatability_reference_q_deg.map(f64::to_radians);
-        let robot = VirtualRobot::new(self.truth(), &self.robot.unmodelled, self.robot.repeatability_mm, &reference, &mut stream(seed, 2));
+        let robot = VirtualRobot::new(
+            self.truth(),
+            &self.robot.unmodelled,
+            self.robot.repeatability_mm,
+            &reference,
+            &mut stream(seed, seeds::experiment::ROBOT),
+        );
         let robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
-        let trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, 3));
+        let trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, seeds::experiment::TRICAL));
         let base_in_w = world_from_base(&robot.truth).transform_point(&Point3::origin()).coords;
         let sphere3 = cell.spheres_w[2.min(cell.spheres_w.len() - 1)];
-        let tracker = LaserTracker::place(&self.tracker, &sphere3, &base_in_w, &cell.spheres_w, &cell.spheres_w_measured, &mut stream(seed, 4));
-        let setup = Setup { cell: &cell, robot: &robot, robot_validation: &robot_validation, trical: &trical, tracker: &tracker, nominal: &self.nominal(), spec: &self.campaign };
-        let campaign = campaign::run(&setup, split_seed(seed, 5))?;
+        let tracker = LaserTracker::place(
+            &self.tracker,
+            &sphere3,
+            &base_in_w,
+            &cell.spheres_w,
+            &cell.spheres_w_measured,
+            &mut stream(seed, seeds::experiment::TRACKER),
+        )
+        .ok_or(ExperimentError::Registration)?;
+        let setup = Setup {
+            cell: &cell,
+            robot: &robot,
+            robot_validation: &robot_validation,
+            trical: &trical,
+            tracker: &tracker,
+            nominal: &self.nominal(),
+            spec: &self.campaign,
+        };
+        let campaign = campaign::run(&setup, split_seed(seed, seeds::experiment::CAMPAIGN))?;
         Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign })
     }
 

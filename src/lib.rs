@@ -7,6 +7,8 @@ pub mod experiment;
 pub mod identify;
 pub mod instrument;
 pub mod io;
+pub mod numeric;
 pub mod robot;
+pub mod seeds;
 pub mod spms;
 pub mod study;

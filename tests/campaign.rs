@@ -70,7 +70,8 @@ fn centring_converges_below_epsilon_for_99_percent_of_the_pool() {
     // The true offset at convergence: epsilon plus the indicator error (accuracy and resolution per
     // axis, and the ball's radius tolerance, on three axes).
     let t = &spec.trical;
-    let indicator = 3f64.sqrt() * (t.indicator_accuracy_um + t.indicator_resolution_um / 2.0 + spec.cell.ball_diameter_tolerance_um / 2.0) * 1e-3;
+    let indicator =
+        3f64.sqrt() * (t.indicator_accuracy_um + t.indicator_resolution_um / 2.0 + spec.cell.ball_diameter_tolerance_um / 2.0) * 1e-3;
     let worst = c.pool.iter().map(|p| p.true_offset_mm).fold(0.0, f64::max);
     assert!(worst <= t.epsilon_mm + indicator, "worst true offset {worst} mm > {} mm", t.epsilon_mm + indicator);
     assert!(c.pool.iter().all(|p| p.seconds >= t.approach_move_s + t.wait_s));
@@ -119,7 +120,9 @@ fn with_default_noise_the_validation_error_after_identification_is_at_the_noise_
     let fit = identify(&c.nominal, &ParamSet::trical_31(), &obs, &FitOptions::default());
     let model = fit.model.expect("identified");
     let mut st = KinState::default();
-    let mean = |m: &calsim::robot::RobotModel, st: &mut KinState| c.validation.iter().map(|v| (forward(m, st, &v.q) - v.measured_w).norm()).sum::<f64>() / c.validation.len() as f64;
+    let mean = |m: &calsim::robot::RobotModel, st: &mut KinState| {
+        c.validation.iter().map(|v| (forward(m, st, &v.q) - v.measured_w).norm()).sum::<f64>() / c.validation.len() as f64
+    };
     let before = mean(&c.nominal, &mut st);
     let after = mean(&model, &mut st);
     eprintln!("validation mean error over {} poses: before {before:.3} mm, after {after:.4} mm", c.validation.len());

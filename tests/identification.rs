@@ -35,7 +35,10 @@ fn identification_recovers_table7_robot_from_noise_free_poses() {
     let fit = identify(&trical_2018_nominal(), &set, &obs, &FitOptions::default());
     assert!(matches!(fit.outcome, FitOutcome::Converged { .. }), "{:?}", fit.outcome);
     let (name, err) = worst_error(&set, &fit.values, &truth);
-    eprintln!("iterations {}, condition {:.1}, residual {:e} mm, worst {name} {err:e}", fit.iterations, fit.condition_number, fit.residual_rms_mm);
+    eprintln!(
+        "iterations {}, condition {:.1}, residual {:e} mm, worst {name} {err:e}",
+        fit.iterations, fit.condition_number, fit.residual_rms_mm
+    );
     assert!(err < 1e-6, "{name} off by {err:e}");
     assert!(fit.residual_rms_mm < 1e-9);
     assert_eq!(fit.singular_values.len(), 31);
@@ -109,7 +112,12 @@ fn truncation_leaves_the_unobservable_direction_at_the_start() {
     // 1e-4-1e-3 rad from the start).
     for id in set.ids().iter().filter(|id| **id != d2 && **id != d3) {
         let tol = if id.unit() == Unit::Mm { 1e-4 } else { 1e-6 };
-        assert!((id.get(model.data()) - id.get(truth.data())).abs() < tol, "{} off by {:e}", id.name(), id.get(model.data()) - id.get(truth.data()));
+        assert!(
+            (id.get(model.data()) - id.get(truth.data())).abs() < tol,
+            "{} off by {:e}",
+            id.name(),
+            id.get(model.data()) - id.get(truth.data())
+        );
     }
     assert!(fit.condition_number.is_finite());
 }

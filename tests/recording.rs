@@ -51,11 +51,20 @@ fn the_recording_holds_the_cell_the_poses_the_centring_and_the_study() {
     let path: PathBuf = dir.join("ci_quick/study.rrd");
     let (entities, blueprint) = read(&path);
     assert!(blueprint, "no blueprint in the file");
-    let rows = |p: &str| entities.get(p).map(|e| e.rows).unwrap_or_else(|| panic!("{p} missing from {:?}", entities.keys().collect::<Vec<_>>()));
+    let rows =
+        |p: &str| entities.get(p).map(|e| e.rows).unwrap_or_else(|| panic!("{p} missing from {:?}", entities.keys().collect::<Vec<_>>()));
     let timelines = |p: &str| entities.get(p).map(|e| e.timelines.clone()).unwrap_or_default();
 
     // Static cell.
-    for p in ["/cell/spheres", "/cell/solids/risers", "/cell/solids/boxes", "/cell/tracker", "/cell/frames/world", "/cell/frames/base", "/pool/tcp"] {
+    for p in [
+        "/cell/spheres",
+        "/cell/solids/risers",
+        "/cell/solids/boxes",
+        "/cell/tracker",
+        "/cell/frames/world",
+        "/cell/frames/base",
+        "/pool/tcp",
+    ] {
         assert!(rows(p) >= 1, "{p}");
     }
     // The robot at each of the 360 pool configurations and the 506 validation poses.
@@ -92,7 +101,8 @@ fn the_spms_recording_holds_the_heads_the_pool_the_test_and_the_study() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let (entities, blueprint) = read(&dir.join("er20c10_spms/study.rrd"));
     assert!(blueprint, "no blueprint in the file");
-    let rows = |p: &str| entities.get(p).map(|e| e.rows).unwrap_or_else(|| panic!("{p} missing from {:?}", entities.keys().collect::<Vec<_>>()));
+    let rows =
+        |p: &str| entities.get(p).map(|e| e.rows).unwrap_or_else(|| panic!("{p} missing from {:?}", entities.keys().collect::<Vec<_>>()));
     let timelines = |p: &str| entities.get(p).map(|e| e.timelines.clone()).unwrap_or_default();
     // Three stations, each head with its beams and frame.
     for k in 0..3 {

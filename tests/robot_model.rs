@@ -4,7 +4,10 @@
 mod common;
 
 use calsim::robot::builtin::{TABLE7_MEANS, irb120, trical_2018_nominal, trical_2018_table7};
-use calsim::robot::{DeviationSpec, Inertial, JOINTS, KinState, ParamId, ParamSet, RobotModel, deviate, gravity_torques, tcp_jacobian, tcp_world, world_from_flange};
+use calsim::robot::{
+    DeviationSpec, Inertial, JOINTS, KinState, ParamId, ParamSet, RobotModel, deviate, gravity_torques, tcp_jacobian, tcp_world,
+    world_from_flange,
+};
 use nalgebra::Vector3;
 use rand::RngExt;
 use serde::Deserialize;
@@ -37,7 +40,7 @@ struct GravityTest {
 
 #[test]
 fn gravity_torques_match_the_reference_vectors_to_1e5_nm() {
-    let text = std::fs::read_to_string(common::reference("irb120.toml")).expect("shared/reference/irb120.toml beside the clone");
+    let text = std::fs::read_to_string(common::reference("irb120.toml")).expect("reference/irb120.toml");
     let reference: Reference = toml::from_str(&text).expect("reference file parses");
     assert_eq!(reference.gravity_test.len(), 5);
     let bare = irb120();

@@ -114,7 +114,12 @@ fn beam_identification_recovers_the_table2_beams_from_noise_free_data() {
         // Start from beams off by ~2 mm and ~1 deg, the sphere off by 5 mm.
         let rough: Vec<_> = truth
             .iter()
-            .map(|b| calsim::spms::Beam::new((b.p + Vector3::from_fn(|_, _| rng.random_range(-2.0..2.0))).into(), (b.dir.into_inner() + Vector3::from_fn(|_, _| rng.random_range(-0.02..0.02))).into()))
+            .map(|b| {
+                calsim::spms::Beam::new(
+                    (b.p + Vector3::from_fn(|_, _| rng.random_range(-2.0..2.0))).into(),
+                    (b.dir.into_inner() + Vector3::from_fn(|_, _| rng.random_range(-0.02..0.02))).into(),
+                )
+            })
             .collect();
         let x0 = form.pack(&rough, &(sphere_w + Vector3::new(5.0, -3.0, 4.0)));
         let sol = levenberg_marquardt(&data, form, &x0, 1e-8, 200);

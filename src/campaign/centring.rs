@@ -42,25 +42,35 @@ pub enum CentringError {
     IterationCap(u32),
 }
 
-/// Centres the TCP on `sphere` starting from the commanded configuration `q0` (reached from `from`).
+/// Where a centring starts: the sphere, the commanded configuration `q0` and the one it is reached from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Approach {
+    /// Index of the datum sphere.
+    pub sphere: usize,
+    /// The first commanded configuration.
+    pub q0: Joints,
+    /// The configuration the robot comes from (its approach direction).
+    pub from: Joints,
+}
+
+/// Centres the TCP on the sphere of `approach`, the controller believing `controller`.
 pub fn centre<R: Rng + ?Sized>(
     controller: &RobotModel,
     robot: &VirtualRobot,
     trical: &TriCal,
     cell: &Cell,
-    sphere: usize,
-    q0: &Joints,
-    from: &Joints,
+    approach: Approach,
     rng: &mut R,
 ) -> Result<CentringResult, CentringError> {
+    let Approach { sphere, q0, from } = approach;
     let spec = &trical.spec;
     let r6t = flange_from_tool_rotation();
     let centre_w = cell.spheres_w[sphere];
     let radius = cell.ball_diameters_mm[sphere] / 2.0;
     let truth_rot = robot.truth.base_rot;
     let mut st = KinState::default();
-    let mut q = *q0;
-    let mut prev = *from;
+    let mut q = q0;
+    let mut prev = from;
     let mut seconds = spec.approach_move_s + spec.wait_s;
     let mut iterations = 0;
     let mut readings = Vec::new();

@@ -11,13 +11,14 @@ use rand::{Rng, RngExt};
 use serde::Deserialize;
 
 use crate::cell::Cell;
-use crate::cell::collision::{CollisionWorld, Obstacle, irb120_link_capsules};
-use crate::experiment::stream;
+use crate::cell::collision::{CollisionWorld, irb120_link_capsules};
+use crate::cell::solids::obstacles;
 use crate::identify::Observation;
 use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
-use crate::instrument::trical::{TriCal, flange_from_tool_rotation};
+use crate::instrument::trical::{TriCal, trical_capsules};
 use crate::robot::{JOINTS, Joints, KinState, RobotModel, VirtualRobot, forward, inverse, world_from_base};
-pub use centring::{CentringError, CentringResult, centre};
+use crate::seeds::{campaign as streams, stream};
+pub use centring::{Approach, CentringError, CentringResult, centre};
 
 /// A configuration drawn uniformly inside the joint limits, leaving `margin` (a fraction of each
 /// range) free at both ends; joint 6 is drawn within +-180 deg, its full turn.
@@ -52,7 +53,15 @@ pub struct CampaignSpec {
 
 impl Default for CampaignSpec {
     fn default() -> Self {
-        Self { pool_per_sphere: 120, approach_cone_deg: 40.0, validation_poses: 506, validation_margin: 0.05, tcp_check_configurations: 4, jog_error_mm: 0.5, max_tries_per_configuration: 200 }
+        Self {
+            pool_per_sphere: 120,
+            approach_cone_deg: 40.0,
+            validation_poses: 506,
+            validation_margin: 0.05,
+            tcp_check_configurations: 4,
+            jog_error_mm: 0.5,
+            max_tries_per_configuration: 200,
+        }
     }
 }
 
@@ -144,89 +153,8 @@ pub enum CampaignError {
         /// Which set.
         what: String,
         /// Tries made.
-        tries: u32,
+        tries: u64,
     },
-}
-
-/// A solid of the cell in the robot base frame: the one description the collision world and the
-/// recording both draw from.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Solid {
-    /// A capsule between two points, mm.
-    Capsule {
-        /// Name.
-        name: &'static str,
-        /// First end.
-        a: Vector3<f64>,
-        /// Second end.
-        b: Vector3<f64>,
-        /// Radius.
-        radius: f64,
-    },
-    /// A box with half extents at a pose, mm.
-    Cuboid {
-        /// Name.
-        name: &'static str,
-        /// Half extents.
-        half: Vector3<f64>,
-        /// `base_from_box`.
-        pose: Isometry3<f64>,
-    },
-}
-
-/// The fixed solids of the cell (risers, plate, pedestal, table) in the base frame.
-pub fn cell_solids(cell: &Cell, base_from_world: &Isometry3<f64>) -> Vec<Solid> {
-    let s = &cell.spec;
-    let r = s.ball_diameter_mm / 2.0;
-    let plate_top = -(s.riser_height_mm + r);
-    let mut out = Vec::new();
-    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
-    for p in &cell.spheres_w {
-        lo = lo.inf(p);
-        hi = hi.sup(p);
-        // Riser from the plate to just below the ball.
-        let a = base_from_world * nalgebra::Point3::new(p.x, p.y, plate_top);
-        let b = base_from_world * nalgebra::Point3::new(p.x, p.y, p.z - r - s.riser_radius_mm);
-        out.push(Solid::Capsule { name: "riser", a: a.coords, b: b.coords, radius: s.riser_radius_mm });
-    }
-    let m = s.plate_margin_mm;
-    let half = Vector3::new((hi.x - lo.x) / 2.0 + m, (hi.y - lo.y) / 2.0 + m, s.plate_thickness_mm / 2.0);
-    let centre_w = Vector3::new((hi.x + lo.x) / 2.0, (hi.y + lo.y) / 2.0, plate_top - s.plate_thickness_mm / 2.0);
-    let plate = base_from_world * Isometry3::from_parts(Translation3::from(centre_w), UnitQuaternion::identity());
-    out.push(Solid::Cuboid { name: "plate", half, pose: plate });
-    // Pedestal from the table to the plate (base frame is level with the table).
-    let plate_bottom_base = plate.translation.vector.z - s.plate_thickness_mm / 2.0;
-    let ped_h = (plate_bottom_base - s.table_z_base_mm).max(1.0);
-    let ped = Isometry3::translation(plate.translation.vector.x, plate.translation.vector.y, s.table_z_base_mm + ped_h / 2.0);
-    out.push(Solid::Cuboid { name: "pedestal", half: Vector3::new(50.0, 50.0, ped_h / 2.0 - 0.5), pose: ped });
-    let table = Isometry3::translation(0.0, 0.0, s.table_z_base_mm - 25.0);
-    out.push(Solid::Cuboid { name: "table", half: Vector3::new(2000.0, 2000.0, 24.0), pose: table });
-    out
-}
-
-/// The obstacles of the collision world: the cell's solids.
-pub fn obstacles(cell: &Cell, base_from_world: &Isometry3<f64>) -> Vec<Obstacle> {
-    cell_solids(cell, base_from_world)
-        .into_iter()
-        .map(|s| match s {
-            Solid::Capsule { name, a, b, radius } => Obstacle::capsule(name, a, b, radius),
-            Solid::Cuboid { name, half, pose } => Obstacle::cuboid(name, half, &pose),
-        })
-        .collect()
-}
-
-/// Capsules of the TriCal device in the flange frame: the conical bracket and the three indicator
-/// bodies behind their plungers (dimensions estimated from the paper's Figure 1).
-pub fn trical_capsules(tcp: &Vector3<f64>) -> Vec<crate::cell::collision::CapsuleSpec> {
-    let r6t = flange_from_tool_rotation();
-    let mut v = vec![crate::cell::collision::CapsuleSpec { a: [0.0, 0.0, 15.0], b: [tcp.x * 0.5, tcp.y * 0.5, tcp.z * 0.55], radius: 30.0 }];
-    for k in 0..3 {
-        let axis = r6t.column(k).into_owned();
-        let a = tcp + axis * 28.0;
-        let b = tcp + axis * 75.0;
-        v.push(crate::cell::collision::CapsuleSpec { a: a.into(), b: b.into(), radius: 9.0 });
-    }
-    v
 }
 
 /// The collision world of a cell for a model: fixtures placed with `truth_base` (where they are).
@@ -289,18 +217,6 @@ pub struct Setup<'a> {
 /// one iteration more in a what-if scenario then changes that configuration only, and two scenarios
 /// that differ in one amplitude are compared on the same targets, noise and validation poses
 /// (common random numbers).
-mod streams {
-    pub const CMM: u64 = 1;
-    pub const SEMI_AUTOMATIC: u64 = 2;
-    pub const VALIDATION_POSES: u64 = 3;
-    /// Pool targets of sphere k: `POOL_TARGETS + k`.
-    pub const POOL_TARGETS: u64 = 100;
-    /// Centring of pool attempt t of sphere k: `POOL_CENTRING + k * 2^32 + t`.
-    pub const POOL_CENTRING: u64 = 1 << 40;
-    /// Move and tracker noise of validation pose i: `VALIDATION_NOISE + i`.
-    pub const VALIDATION_NOISE: u64 = 1 << 41;
-}
-
 /// Runs the semi-automatic steps, measures the pool and the validation set, drawing every random
 /// quantity from streams derived from `seed`.
 pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
@@ -330,7 +246,7 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
                 let Ok(q) = inverse(&robot.truth, &target, &last_q) else {
                     continue;
                 };
-                if let Ok(res) = centre(&jogging, robot, trical, cell, k, &q, &last_q, rng) {
+                if let Ok(res) = centre(&jogging, robot, trical, cell, Approach { sphere: k, q0: q, from: last_q }, rng) {
                     done = Some(res);
                     break;
                 }
@@ -355,11 +271,12 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
     let base_model = flange_only.edited(|d| d.flange_tcp_mm = tcp_check_mm).expect("valid");
     let spheres_base: Vec<Vector3<f64>> = located_q.iter().map(|q| forward(&base_model, &mut KinState::default(), q)).collect();
     // The nominal base: the rigid transform that maps the located spheres onto their {W} coordinates.
-    let world_from_base_fit = rigid_fit(&spheres_base, &cell.spheres_w_measured);
+    let world_from_base_fit = rigid_fit(&spheres_base, &cell.spheres_w_measured)
+        .ok_or_else(|| CampaignError::Sphere { sphere: 1, reason: "the located spheres give no finite base frame".into() })?;
     let nominal_model = nominal
         .edited(|d| {
             d.flange_tcp_mm = tcp_cmm;
-            d.world_from_base = xyz_zyx(&world_from_base_fit);
+            d.world_from_base = crate::robot::XyzZyx::from_isometry(&world_from_base_fit);
         })
         .expect("valid");
 
@@ -377,7 +294,7 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         let mut tries = 0;
         while kept < spec.pool_per_sphere {
             tries += 1;
-            if tries > spec.max_tries_per_configuration * spec.pool_per_sphere {
+            if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.pool_per_sphere) {
                 return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
             }
             let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
@@ -391,11 +308,19 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
                 rejected += 1;
                 continue;
             }
-            let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries as u64);
-            match centre(&nominal_model, robot, trical, cell, k, &q, &last, centring_rng) {
+            let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries);
+            match centre(&nominal_model, robot, trical, cell, Approach { sphere: k, q0: q, from: last }, centring_rng) {
                 Ok(res) => {
                     last = res.q;
-                    pool.push(PoolEntry { sphere: k, q_commanded: q, q: res.q, iterations: res.iterations, seconds: res.seconds, true_offset_mm: res.true_offset_mm, readings: res.readings });
+                    pool.push(PoolEntry {
+                        sphere: k,
+                        q_commanded: q,
+                        q: res.q,
+                        iterations: res.iterations,
+                        seconds: res.seconds,
+                        true_offset_mm: res.true_offset_mm,
+                        readings: res.readings,
+                    });
                     kept += 1;
                 }
                 Err(_) => centring_failures += 1,
@@ -415,7 +340,7 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
     let rng = &mut stream(seed, streams::VALIDATION_POSES);
     while validation.len() < spec.validation_poses as usize {
         tries += 1;
-        if tries > spec.max_tries_per_configuration * spec.validation_poses.max(1) {
+        if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.validation_poses.max(1)) {
             return Err(CampaignError::Exhausted { what: "validation set".into(), tries });
         }
         let q = uniform_configuration(&nominal_model, spec.validation_margin, rng);
@@ -423,8 +348,10 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         let tcp = st.tcp_base;
         let sight = tracker_base - tcp;
         let facing = st.base_from_frame(JOINTS).rotation * Vector3::z();
-        let ok =
-            world.first_collision(&st).is_none() && sight.norm() <= tracker.spec.max_range_mm && facing.dot(&sight.normalize()) >= accept_cos && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
+        let ok = world.first_collision(&st).is_none()
+            && sight.norm() <= tracker.spec.max_range_mm
+            && facing.dot(&sight.normalize()) >= accept_cos
+            && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
         if !ok {
             validation_rejected += 1;
             continue;
@@ -467,18 +394,6 @@ pub fn tcp_check(flange_model: &RobotModel, qs: &[Joints]) -> Option<Vector3<f64
             b[3 * j + i] = -f.translation.vector[i];
         }
     }
-    let x = a.svd(true, true).solve(&b, 1e-10).ok()?;
+    let x = crate::numeric::svd(a, true, true)?.solve(&b, 1e-10).ok()?;
     Some(Vector3::new(x[0], x[1], x[2]))
-}
-
-/// The eq. 7 parameters of a rigid transform: `T = Dx Dy Dz Rz(alpha) Ry(beta) Rx(gamma)`.
-pub fn xyz_zyx(t: &Isometry3<f64>) -> crate::robot::XyzZyx {
-    let r = t.rotation.to_rotation_matrix();
-    // Rz(a) Ry(b) Rx(g): r20 = -sin b, r21 = cos b sin g, r22 = cos b cos g, r10 = sin a cos b, r00 = cos a cos b.
-    let m = r.matrix();
-    let beta = (-m[(2, 0)]).asin();
-    let gamma = m[(2, 1)].atan2(m[(2, 2)]);
-    let alpha = m[(1, 0)].atan2(m[(0, 0)]);
-    let p = t.translation.vector;
-    crate::robot::XyzZyx { x: p.x, y: p.y, z: p.z, alpha, beta, gamma }
 }

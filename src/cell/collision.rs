@@ -34,7 +34,11 @@ pub fn irb120_link_capsules() -> [Vec<CapsuleSpec>; JOINTS + 1] {
     [
         vec![cap([-53.4, 1.0, 11.1], [-53.4, 1.0, 85.1], 167.2)],
         vec![cap([-0.7, 0.9, -119.0], [-0.7, 0.9, -32.9], 116.9)],
-        vec![cap([10.4, 0.0, -84.4], [10.4, 0.0, 83.9], 83.4), cap([79.4, 0.0, -0.3], [162.1, 0.0, -0.3], 109.2), cap([255.5, 0.0, -73.7], [255.5, 0.0, 73.2], 62.8)],
+        vec![
+            cap([10.4, 0.0, -84.4], [10.4, 0.0, 83.9], 83.4),
+            cap([79.4, 0.0, -0.3], [162.1, 0.0, -0.3], 109.2),
+            cap([255.5, 0.0, -73.7], [255.5, 0.0, 73.2], 62.8),
+        ],
         vec![cap([41.5, -31.4, 4.9], [41.5, 100.7, 4.9], 109.5)],
         vec![cap([-0.1, -0.5, -142.5], [-0.1, -0.5, -1.3], 74.3)],
         vec![cap([0.0, -28.6, 0.0], [0.0, 29.5, 0.0], 55.1)],
@@ -104,7 +108,12 @@ impl CollisionWorld {
     /// A world of the given link capsules (per MDH frame 0..=6), device capsules (flange frame)
     /// and obstacles (base frame).
     pub fn new(links: &[Vec<CapsuleSpec>; JOINTS + 1], device: &[CapsuleSpec], obstacles: Vec<Obstacle>) -> Self {
-        Self { links: links.iter().map(|l| l.iter().map(to_capsule).collect()).collect(), device: device.iter().map(to_capsule).collect(), obstacles, allowed: Vec::new() }
+        Self {
+            links: links.iter().map(|l| l.iter().map(to_capsule).collect()).collect(),
+            device: device.iter().map(to_capsule).collect(),
+            obstacles,
+            allowed: Vec::new(),
+        }
     }
 
     /// Leaves out of the self-collision test every pair of bodies that touch in the configuration
@@ -120,7 +129,12 @@ impl CollisionWorld {
     }
 
     fn bodies<'a>(&'a self, frames: &'a [Pose]) -> Vec<(&'a [Capsule], &'a Pose)> {
-        self.links.iter().enumerate().map(|(i, c)| (c.as_slice(), &frames[i])).chain(std::iter::once((self.device.as_slice(), &frames[JOINTS]))).collect()
+        self.links
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (c.as_slice(), &frames[i]))
+            .chain(std::iter::once((self.device.as_slice(), &frames[JOINTS])))
+            .collect()
     }
 
     fn first_self_collision(&self, st: &KinState) -> Option<(usize, usize)> {
@@ -168,7 +182,8 @@ impl CollisionWorld {
         let ray = Ray::new(vec(from), vec(&(d / len)));
         let max = (len - clearance_mm).max(0.0);
         let frames: Vec<Pose> = (0..=JOINTS).map(|i| pose(&st.base_from_frame(i))).collect();
-        let blocked_by_links = self.links.iter().enumerate().any(|(i, caps)| caps.iter().any(|c| c.cast_ray(&frames[i], &ray, max, true).is_some()));
+        let blocked_by_links =
+            self.links.iter().enumerate().any(|(i, caps)| caps.iter().any(|c| c.cast_ray(&frames[i], &ray, max, true).is_some()));
         let blocked_by_device = self.device.iter().any(|c| c.cast_ray(&frames[JOINTS], &ray, max, true).is_some());
         let blocked_by_fixtures = self.obstacles.iter().any(|o| o.shape.cast_ray(&o.pose, &ray, max, true).is_some());
         !(blocked_by_links || blocked_by_device || blocked_by_fixtures)

@@ -2,6 +2,7 @@
 //! the spheres define.
 
 pub mod collision;
+pub mod solids;
 pub mod world_frame;
 
 use nalgebra::{DMatrix, Vector3};
@@ -70,8 +71,16 @@ impl Cell {
     pub fn build<R: Rng + ?Sized>(spec: &CellSpec, rng: &mut R) -> Result<Self, world_frame::WorldFrameError> {
         let spheres_w: Vec<Vector3<f64>> = spec.spheres_w_mm.iter().map(|p| Vector3::from(*p)).collect();
         let tol = spec.ball_diameter_tolerance_um * 1e-3;
-        let ball_diameters_mm =
-            spheres_w.iter().map(|_| if tol > 0.0 { spec.ball_diameter_mm + Uniform::new_inclusive(-tol, tol).expect("tolerance").sample(rng) } else { spec.ball_diameter_mm }).collect();
+        let ball_diameters_mm = spheres_w
+            .iter()
+            .map(|_| {
+                if tol > 0.0 {
+                    spec.ball_diameter_mm + Uniform::new_inclusive(-tol, tol).expect("tolerance").sample(rng)
+                } else {
+                    spec.ball_diameter_mm
+                }
+            })
+            .collect();
         let noise = Normal::new(0.0, spec.ballbar_sigma_um * 1e-3).expect("finite sigma");
         let exact = world_frame::distance_matrix(&spheres_w);
         let n = spheres_w.len();

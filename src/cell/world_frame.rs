@@ -21,6 +21,9 @@ pub enum WorldFrameError {
         /// Distance 2-3, mm.
         d23: f64,
     },
+    /// The distances give no finite frame (a non-finite distance, or the fit did not converge).
+    #[error("the ballbar distances give no finite frame")]
+    NotFinite,
 }
 
 /// Sphere centres in {W} from the symmetric matrix of measured centre distances (mm).
@@ -62,7 +65,7 @@ pub fn sphere_centres(distances: &DMatrix<f64>, guess: &[Vector3<f64>]) -> Resul
                 }
             }
         }
-        let step = jac.svd(true, true).solve(&r, 1e-12).expect("SVD solve");
+        let step = crate::numeric::svd(jac, true, true).and_then(|s| s.solve(&r, 1e-12).ok()).ok_or(WorldFrameError::NotFinite)?;
         for k in 1..n {
             for (axis, col) in coordinates(k) {
                 p[k][axis] += step[col];

@@ -90,7 +90,12 @@ struct Scratch {
 
 impl Scratch {
     fn new(pool: &PoolJacobian) -> Self {
-        Self { u: DMatrix::zeros(pool.m, 3), v: DMatrix::zeros(pool.m, 3), u_cols: std::array::from_fn(|_| vec![0.0; pool.stride]), p: vec![[0.0; 3]; 3 * pool.len] }
+        Self {
+            u: DMatrix::zeros(pool.m, 3),
+            v: DMatrix::zeros(pool.m, 3),
+            u_cols: std::array::from_fn(|_| vec![0.0; pool.stride]),
+            p: vec![[0.0; 3]; 3 * pool.len],
+        }
     }
 }
 
@@ -153,7 +158,10 @@ impl<'a> State<'a> {
         }
         // D_k for all k at once: the 3 x 3 diagonal blocks of J M^-1 J^T.
         let jm = &pool.j * &minv;
-        let d = (0..pool.len).map(|k| jm.rows(3 * k, 3) * pool.j.rows(3 * k, 3).transpose()).map(|x| Matrix3::from_iterator(x.iter().copied())).collect();
+        let d = (0..pool.len)
+            .map(|k| jm.rows(3 * k, 3) * pool.j.rows(3 * k, 3).transpose())
+            .map(|x| Matrix3::from_iterator(x.iter().copied()))
+            .collect();
         Some(Self { pool, minv, logdet, d, member, size: set.len() })
     }
 
@@ -275,7 +283,9 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
 pub fn o1_of(pool: &PoolJacobian, set: &[usize]) -> f64 {
     let info: DMatrix<f64> = pool.information(set);
     match info.cholesky() {
-        Some(c) => ((2.0 * c.l_dirty().diagonal().iter().map(|v| v.ln()).sum::<f64>()) / (2.0 * pool.m as f64)).exp() / (set.len() as f64).sqrt(),
+        Some(c) => {
+            ((2.0 * c.l_dirty().diagonal().iter().map(|v| v.ln()).sum::<f64>()) / (2.0 * pool.m as f64)).exp() / (set.len() as f64).sqrt()
+        }
         None => 0.0,
     }
 }

@@ -12,6 +12,7 @@
 //! condition number and the final rank check always come from that decomposition at the last
 //! iterate.
 
+use super::damping::Damping;
 use nalgebra::{DMatrix, DVector, SymmetricEigen, Vector3};
 
 use crate::robot::{Joints, KinState, ParamSet, RobotModel, forward, tcp_jacobian};
@@ -88,6 +89,9 @@ pub enum FitOutcome {
         /// Parameters with a large share in the directions left out.
         unidentifiable: Vec<String>,
     },
+    /// The residuals or the normal equations became NaN or infinite (or their decomposition did
+    /// not converge): no model.
+    NotFinite,
     /// The configurations cannot separate these parameters; no values are returned for them.
     RankDeficient {
         /// Names of the parameters in the (numerical) null space of the scaled Jacobian.
@@ -103,7 +107,27 @@ impl FitOutcome {
             FitOutcome::IterationCap { .. } => "iteration_cap",
             FitOutcome::Truncated { .. } => "truncated",
             FitOutcome::RankDeficient { .. } => "rank_deficient",
+            FitOutcome::NotFinite => "not_finite",
         }
+    }
+
+    /// The parameters the configurations could not separate (empty unless rank deficient or truncated).
+    pub fn unidentifiable(&self) -> &[String] {
+        match self {
+            FitOutcome::RankDeficient { unidentifiable } | FitOutcome::Truncated { unidentifiable, .. } => unidentifiable,
+            _ => &[],
+        }
+    }
+
+    /// Whether the fit returned no model (the set cannot separate the parameters, or the numbers
+    /// stopped being finite).
+    pub fn is_rank_deficient(&self) -> bool {
+        matches!(self, FitOutcome::RankDeficient { .. } | FitOutcome::NotFinite)
+    }
+
+    /// Whether the step criterion was met with every parameter identified.
+    pub fn is_converged(&self) -> bool {
+        matches!(self, FitOutcome::Converged { .. })
     }
 }
 
@@ -127,6 +151,22 @@ pub struct Fit {
     pub residual_rms_mm: f64,
     /// Cost and step of every iteration.
     pub history: Vec<Iteration>,
+}
+
+impl Fit {
+    /// The fit of `p` parameters that stopped at `iterations` because the numbers were not finite.
+    fn not_finite(p: usize, iterations: usize, history: Vec<Iteration>) -> Self {
+        Fit {
+            outcome: FitOutcome::NotFinite,
+            model: None,
+            values: vec![None; p],
+            iterations,
+            singular_values: vec![],
+            condition_number: f64::NAN,
+            residual_rms_mm: f64::NAN,
+            history,
+        }
+    }
 }
 
 /// One iteration of an identification.
@@ -164,7 +204,13 @@ struct Workspace {
 
 impl Workspace {
     fn new(p: usize, configurations: usize) -> Self {
-        Self { st: KinState::default(), cols: vec![Vector3::zeros(); p], jt: DMatrix::zeros(p, 3 * configurations), r: DVector::zeros(3 * configurations), n: DMatrix::zeros(p, p) }
+        Self {
+            st: KinState::default(),
+            cols: vec![Vector3::zeros(); p],
+            jt: DMatrix::zeros(p, 3 * configurations),
+            r: DVector::zeros(3 * configurations),
+            n: DMatrix::zeros(p, p),
+        }
     }
 }
 
@@ -199,10 +245,10 @@ struct Spectrum {
 }
 
 impl Spectrum {
-    fn new(n: &DMatrix<f64>) -> Self {
-        let eig = SymmetricEigen::new(n.clone());
+    fn new(n: &DMatrix<f64>) -> Option<Self> {
+        let eig = crate::numeric::symmetric_eigen(n.clone())?;
         let sigma_max = eig.eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l)).max(0.0).sqrt();
-        Self { eig, sigma_max }
+        Some(Self { eig, sigma_max })
     }
 
     fn is_null(&self, k: usize, rank_rtol: f64) -> bool {
@@ -269,8 +315,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     let mut model = start.clone();
     let scale_rms = 1.0 / ((3 * obs.len()).max(1) as f64).sqrt();
 
-    let mut mu = 0.0;
-    let mut nu = 2.0;
+    let mut damping = Damping::none();
     let mut iterations = 0;
     let mut converged = false;
     let mut last_normal: Option<Normal> = None;
@@ -279,6 +324,9 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     while iterations < opts.max_iterations {
         iterations += 1;
         let ne = accumulate(&model, set, obs, &mut ws);
+        if !(ne.cost.is_finite() && ne.n.iter().all(|v| v.is_finite())) {
+            return Fit::not_finite(p, iterations, history);
+        }
         if let Some(prev) = accepted_cost
             && (prev - ne.cost).abs() <= opts.cost_rtol * prev
         {
@@ -291,9 +339,13 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
         if iterations == 1
             && let Solver::LevenbergMarquardt { tau } = opts.solver
         {
-            mu = tau * (0..p).map(|i| ne.n[(i, i)]).fold(0.0, f64::max);
+            damping = Damping::start(tau, (0..p).map(|i| ne.n[(i, i)]).fold(0.0, f64::max));
         }
-        let step_scaled = cholesky_step(&ne.n, &ne.b, mu, opts.rank_rtol).unwrap_or_else(|| Spectrum::new(&ne.n).solve(&ne.b, mu, opts.rank_rtol));
+        let Some(step_scaled) = cholesky_step(&ne.n, &ne.b, damping.mu, opts.rank_rtol)
+            .or_else(|| Spectrum::new(&ne.n).map(|s| s.solve(&ne.b, damping.mu, opts.rank_rtol)))
+        else {
+            return Fit::not_finite(p, iterations, history);
+        };
         let step = step_scaled.zip_map(&ne.norms, |s, nrm| if nrm > 0.0 { s / nrm } else { 0.0 });
         // RMS change of the predicted positions, from the linear model: |J dx| = |Js ds|.
         let predicted = (step_scaled.dot(&(&ne.n * &step_scaled))).max(0.0).sqrt() * scale_rms;
@@ -308,14 +360,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
                 let new_cost = cost(&trial, obs, &mut ws.st);
                 let gain = 2.0 * step_scaled.dot(&ne.b) - step_scaled.dot(&(&ne.n * &step_scaled));
                 let rho = if gain > 0.0 { (ne.cost - new_cost) / gain } else { -1.0 };
-                if rho > 0.0 {
-                    mu *= f64::max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0).powi(3));
-                    nu = 2.0;
-                } else {
-                    mu *= nu;
-                    nu *= 2.0;
-                }
-                rho > 0.0
+                damping.update(rho)
             }
         };
         accepted_cost = accept.then_some(ne.cost);
@@ -327,7 +372,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
                 converged = true;
                 break;
             }
-        } else if mu > 1e16 {
+        } else if damping.mu > 1e16 {
             // Damping has run away: no step lowers the cost any more.
             converged = true;
             break;
@@ -347,12 +392,20 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
             history,
         };
     };
-    let mut singular_values: Vec<f64> = ne.n.clone().symmetric_eigenvalues().iter().map(|l| l.max(0.0).sqrt()).collect();
+    let Some(eigenvalues) = crate::numeric::symmetric_eigenvalues(ne.n.clone()) else {
+        return Fit::not_finite(p, iterations, history);
+    };
+    let mut singular_values: Vec<f64> = eigenvalues.iter().map(|l| l.max(0.0).sqrt()).collect();
     singular_values.sort_by(|a, b| b.total_cmp(a));
     let smax = singular_values.first().copied().unwrap_or(0.0);
     let smin = singular_values.last().copied().unwrap_or(0.0);
     // Eigenvectors only when some singular value is numerically zero: they name the parameters.
-    let hidden = if smin < opts.rank_rtol * smax || smax == 0.0 { Spectrum::new(&ne.n).unidentifiable(set, opts.rank_rtol) } else { Vec::new() };
+    let hidden =
+        if smin < opts.rank_rtol * smax || smax == 0.0 {
+            Spectrum::new(&ne.n).map_or_else(|| (0..p).collect(), |s| s.unidentifiable(set, opts.rank_rtol))
+        } else {
+            Vec::new()
+        };
     let condition_number = if hidden.is_empty() && smin > 0.0 { smax / smin } else { f64::INFINITY };
     if !hidden.is_empty() && opts.truncate {
         let names = set.names();

@@ -1,5 +1,6 @@
 //! Identification: least squares on measured TCP positions.
 
+pub mod damping;
 pub mod least_squares;
 
 pub use least_squares::{Fit, FitOptions, FitOutcome, Iteration, Observation, Solver, identify};

@@ -8,7 +8,7 @@
 //! for its own numerics; for one set the two scalings differ by a diagonal matrix, so the fitted
 //! values are the same, but the singular values each reports are of its own scaling.
 
-use nalgebra::{DMatrix, SymmetricEigen, Vector3};
+use nalgebra::{DMatrix, Vector3};
 
 use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
 
@@ -88,7 +88,10 @@ pub struct Observability {
 impl Observability {
     /// Indices from the information matrix `J^T J` of the scaled Jacobian of `n` configurations.
     pub fn from_information(info: &DMatrix<f64>, n: usize) -> Self {
-        let mut s: Vec<f64> = SymmetricEigen::new(info.clone()).eigenvalues.iter().map(|l| l.max(0.0).sqrt()).collect();
+        let Some(eigenvalues) = crate::numeric::symmetric_eigenvalues(info.clone()) else {
+            return Self::from_singular_values(&vec![f64::NAN; info.nrows()], n);
+        };
+        let mut s: Vec<f64> = eigenvalues.iter().map(|l| l.max(0.0).sqrt()).collect();
         s.sort_by(|a, b| b.total_cmp(a));
         Self::from_singular_values(&s, n)
     }
@@ -99,6 +102,54 @@ impl Observability {
         let smax = s.iter().copied().fold(0.0, f64::max);
         let smin = s.iter().copied().fold(f64::INFINITY, f64::min);
         let log_mean = s.iter().map(|v| v.max(f64::MIN_POSITIVE).ln()).sum::<f64>() / m;
-        Self { o1: log_mean.exp() / (n as f64).sqrt(), o2: smin / smax, o3: smin, o4: smin * smin / smax, o5: 1.0 / s.iter().map(|v| 1.0 / v).sum::<f64>() }
+        Self {
+            o1: log_mean.exp() / (n as f64).sqrt(),
+            o2: smin / smax,
+            o3: smin,
+            o4: smin * smin / smax,
+            o5: 1.0 / s.iter().map(|v| 1.0 / v).sum::<f64>(),
+        }
     }
+}
+
+/// Parameters of `set` that no set of configurations can separate on `model`: the information
+/// matrix of 200 configurations drawn across the joint ranges (a fixed stream, so the answer is the
+/// same every time), column-scaled; the eigenvectors of its numerically zero eigenvalues (singular
+/// value below 1e-8 of the largest) name the parameters with at least 10 % of the vector's largest
+/// component. A zero column (a parameter that moves nothing) and an exact redundancy (two
+/// parameters that move the TCP alike everywhere) are both found.
+pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::ParamSet) -> Vec<String> {
+    use rand::RngExt;
+    let mut rng = crate::seeds::stream(0, crate::seeds::STRUCTURAL_CHECK);
+    let qs: Vec<crate::robot::Joints> = (0..200)
+        .map(|_| {
+            std::array::from_fn(|i| {
+                let l = model.limits()[i];
+                let (lo, hi) = (l.min.max(-std::f64::consts::PI), l.max.min(std::f64::consts::PI));
+                if hi > lo { rng.random_range(lo..hi) } else { lo }
+            })
+        })
+        .collect();
+    let pool = PoolJacobian::new(model, set, &qs);
+    let all: Vec<usize> = (0..qs.len()).collect();
+    let names = set.names();
+    let Some(eig) = crate::numeric::symmetric_eigen(pool.information(&all)) else {
+        return names;
+    };
+    let smax = eig.eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l)).max(0.0).sqrt();
+    let mut hidden = Vec::new();
+    for (k, l) in eig.eigenvalues.iter().enumerate() {
+        if l.max(0.0).sqrt() >= 1e-8 * smax && smax > 0.0 {
+            continue;
+        }
+        let v = eig.eigenvectors.column(k);
+        let vmax = v.amax();
+        for (j, x) in v.iter().enumerate() {
+            if x.abs() >= 0.1 * vmax && !hidden.contains(&j) {
+                hidden.push(j);
+            }
+        }
+    }
+    hidden.sort_unstable();
+    hidden.into_iter().map(|j| names[j].clone()).collect()
 }

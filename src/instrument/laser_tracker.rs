@@ -69,20 +69,32 @@ pub struct LaserTracker {
 impl LaserTracker {
     /// Places the tracker `spec.distance_from_sphere3_mm` beyond sphere 3 from `base_in_w` and
     /// registers it on SMRs in the nests at `nests_w` (true positions), fitted to `nests_w_nominal`
-    /// (the {W} coordinates from the ballbar).
-    pub fn place<R: Rng + ?Sized>(spec: &LaserTrackerSpec, sphere3_w: &Vector3<f64>, base_in_w: &Vector3<f64>, nests_w: &[Vector3<f64>], nests_w_nominal: &[Vector3<f64>], rng: &mut R) -> Self {
+    /// (the {W} coordinates from the ballbar); `None` when the registration has no finite fit.
+    pub fn place<R: Rng + ?Sized>(
+        spec: &LaserTrackerSpec,
+        sphere3_w: &Vector3<f64>,
+        base_in_w: &Vector3<f64>,
+        nests_w: &[Vector3<f64>],
+        nests_w_nominal: &[Vector3<f64>],
+        rng: &mut R,
+    ) -> Option<Self> {
         let mut away = sphere3_w - base_in_w;
         away.z = 0.0;
         let away = if away.norm() > 1e-9 { away.normalize() } else { Vector3::x() };
         let position_w = sphere3_w + away * spec.distance_from_sphere3_mm + Vector3::z() * spec.height_above_spheres_mm;
         // The tracker's own frame: any orientation; it faces the robot (x towards the base).
-        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[-away, Vector3::z().cross(&-away), Vector3::z()])));
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
+            -away,
+            Vector3::z().cross(&-away),
+            Vector3::z(),
+        ])));
         let truth = Isometry3::from_parts(Translation3::from(position_w), rot);
         let mut tracker = Self { spec: spec.clone(), position_w, registration: truth, truth };
         let k = spec.registration_samples.max(1);
-        let measured: Vec<Vector3<f64>> = nests_w.iter().map(|p| (0..k).map(|_| tracker.measure_in_tracker(p, rng)).sum::<Vector3<f64>>() / k as f64).collect();
-        tracker.registration = rigid_fit(&measured, nests_w_nominal);
-        tracker
+        let measured: Vec<Vector3<f64>> =
+            nests_w.iter().map(|p| (0..k).map(|_| tracker.measure_in_tracker(p, rng)).sum::<Vector3<f64>>() / k as f64).collect();
+        tracker.registration = rigid_fit(&measured, nests_w_nominal)?;
+        Some(tracker)
     }
 
     /// Measures a point given in {W}: the reading in the tracker frame, with noise, mm.
@@ -105,18 +117,39 @@ impl LaserTracker {
     }
 }
 
-/// Least-squares rigid transform `b_from_a` mapping points `a` onto `b` (Horn/Kabsch by SVD).
-pub fn rigid_fit(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Isometry3<f64> {
+/// Least-squares rigid transform `b_from_a` mapping points `a` onto `b` (Horn/Kabsch by SVD);
+/// `None` when the points are not finite.
+pub fn rigid_fit(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<Isometry3<f64>> {
     let ca = a.iter().sum::<Vector3<f64>>() / a.len() as f64;
     let cb = b.iter().sum::<Vector3<f64>>() / b.len() as f64;
     let h = a.iter().zip(b).fold(Matrix3::zeros(), |h, (p, q)| h + (p - ca) * (q - cb).transpose());
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u.expect("u"), svd.v_t.expect("v_t"));
+    let svd = crate::numeric::svd3(h)?;
+    let (u, vt) = (svd.u?, svd.v_t?);
     let mut d = Matrix3::identity();
     if (vt.transpose() * u.transpose()).determinant() < 0.0 {
         d[(2, 2)] = -1.0;
     }
     let r = vt.transpose() * d * u.transpose();
     let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-    Isometry3::from_parts(Translation3::from(cb - rot * ca), rot)
+    Some(Isometry3::from_parts(Translation3::from(cb - rot * ca), rot))
+}
+
+/// A tracker point measurement with the same noise on each axis of its frame: the model of the
+/// SPMS experiments (A1-A3 of the head, the sphere centre, the ISO 9283 points), whose papers give
+/// one figure per axis rather than the range and angle terms of [`LaserTracker`].
+#[derive(Clone, Copy, Debug)]
+pub struct AxisNoise {
+    noise: Normal<f64>,
+}
+
+impl AxisNoise {
+    /// Noise of `sigma_um` per axis (finite and >= 0, as the scenario checks guarantee).
+    pub fn new(sigma_um: f64) -> Self {
+        Self { noise: Normal::new(0.0, sigma_um * 1e-3).expect("a finite sigma >= 0") }
+    }
+
+    /// `p` as the tracker measures it: one draw per coordinate, x then y then z, mm.
+    pub fn measure<R: Rng + ?Sized>(&self, p: &Vector3<f64>, rng: &mut R) -> Vector3<f64> {
+        p + Vector3::from_fn(|_, _| self.noise.sample(rng))
+    }
 }

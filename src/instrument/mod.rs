@@ -1,4 +1,5 @@
 //! Simulated instruments: each answers where the TCP (or a target) is in {W}, with what error.
 
 pub mod laser_tracker;
+pub mod optical_cmm;
 pub mod trical;

@@ -11,6 +11,7 @@
 //! `r_i = (c . u_i) + sqrt((R + r_t)^2 - |c|^2 + (c . u_i)^2) - (R0 + r_t)` for a ball of radius
 //! `R` whose centre is at `c` from the TCP, which is `c . u_i` to first order.
 
+use crate::cell::collision::CapsuleSpec;
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal, Uniform};
@@ -160,4 +161,18 @@ impl TriCal {
         let n = Normal::new(0.0, self.spec.cmm_sigma_um * 1e-3).expect("finite sigma");
         true_tcp.map(|v| v + if self.spec.cmm_sigma_um > 0.0 { n.sample(rng) } else { 0.0 })
     }
+}
+
+/// Capsules of the TriCal device in the flange frame: the conical bracket and the three indicator
+/// bodies behind their plungers (dimensions estimated from the paper's Figure 1).
+pub fn trical_capsules(tcp: &Vector3<f64>) -> Vec<CapsuleSpec> {
+    let r6t = flange_from_tool_rotation();
+    let mut v = vec![CapsuleSpec { a: [0.0, 0.0, 15.0], b: [tcp.x * 0.5, tcp.y * 0.5, tcp.z * 0.55], radius: 30.0 }];
+    for k in 0..3 {
+        let axis = r6t.column(k).into_owned();
+        let a = tcp + axis * 28.0;
+        let b = tcp + axis * 75.0;
+        v.push(CapsuleSpec { a: a.into(), b: b.into(), radius: 9.0 });
+    }
+    v
 }

@@ -64,18 +64,6 @@ macro_rules! both {
     }};
 }
 
-/// The set of the table size whose mean validation error is the median of the repetitions: the
-/// representative identification of Figs. 10-13. Returns its task index and per-pose errors.
-pub fn representative(results: &StudyResults, n: usize) -> Option<(usize, &[f64])> {
-    let mut at_n: Vec<_> = results.tasks.iter().filter(|t| t.task.set_size == n && t.errors.is_some()).collect();
-    if at_n.is_empty() {
-        return None;
-    }
-    at_n.sort_by(|a, b| a.validation.mean.total_cmp(&b.validation.mean));
-    let t = at_n[(at_n.len() - 1) / 2];
-    Some((t.task.index, t.errors.as_deref().unwrap_or(&[])))
-}
-
 /// Writes every figure into `dir`; returns what was written.
 pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Result<Vec<Written>, String> {
     static REGISTER: Once = Once::new();
@@ -86,25 +74,55 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     let mut out = Vec::new();
 
     both!(dir, "fig07_validation_poses", |root| fig07(root, inputs));
-    out.push(Written { stem: "fig07_validation_poses".into(), caption: format!("Fig. 7: the {} validation poses and the datum spheres, top and side views", inputs.validation_w.len()) });
+    out.push(Written {
+        stem: "fig07_validation_poses".into(),
+        caption: format!("Fig. 7: the {} validation poses and the datum spheres, top and side views", inputs.validation_w.len()),
+    });
 
     let mut sizes: Vec<usize> = results.tasks.iter().map(|t| t.task.set_size).collect();
     sizes.sort_unstable();
     sizes.dedup();
     let per_size = |f: &dyn Fn(&ErrorStats) -> f64| -> Vec<(usize, Vec<f64>)> {
-        sizes.iter().map(|&n| (n, results.tasks.iter().filter(|t| t.task.set_size == n && t.outcome != "rank_deficient").map(|t| f(&t.validation)).collect())).collect()
+        sizes
+            .iter()
+            .map(|&n| {
+                (
+                    n,
+                    results
+                        .tasks
+                        .iter()
+                        .filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient())
+                        .map(|t| f(&t.validation))
+                        .collect(),
+                )
+            })
+            .collect()
     };
     let means = per_size(&|v| v.mean);
     let stds = per_size(&|v| v.std);
-    both!(dir, "fig08_mean_error_by_set_size", |root| boxplot(root, &means, "Fig. 8: mean validation error per identification", "mean error after calibration (mm)"));
+    both!(dir, "fig08_mean_error_by_set_size", |root| boxplot(
+        root,
+        &means,
+        "Fig. 8: mean validation error per identification",
+        "mean error after calibration (mm)"
+    ));
     out.push(Written {
         stem: "fig08_mean_error_by_set_size".into(),
-        caption: "Fig. 8: mean validation error of each identification per set size (box: quartiles; whiskers: 1.5 IQR; crosses: outliers)".into(),
+        caption: "Fig. 8: mean validation error of each identification per set size (box: quartiles; whiskers: 1.5 IQR; crosses: outliers)"
+            .into(),
     });
-    both!(dir, "fig09_std_error_by_set_size", |root| boxplot(root, &stds, "Fig. 9: standard deviation of the validation error", "std of error after calibration (mm)"));
-    out.push(Written { stem: "fig09_std_error_by_set_size".into(), caption: "Fig. 9: standard deviation of the validation error of each identification per set size".into() });
+    both!(dir, "fig09_std_error_by_set_size", |root| boxplot(
+        root,
+        &stds,
+        "Fig. 9: standard deviation of the validation error",
+        "std of error after calibration (mm)"
+    ));
+    out.push(Written {
+        stem: "fig09_std_error_by_set_size".into(),
+        caption: "Fig. 9: standard deviation of the validation error of each identification per set size".into(),
+    });
 
-    let Some((task, after)) = representative(results, inputs.table_n) else {
+    let Some((task, after)) = crate::study::figures::representative(results, inputs.table_n) else {
         return Ok(out);
     };
     let n = inputs.table_n;
@@ -115,15 +133,34 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     });
     let db = &results.distance_to_base_mm;
     let dc = &results.distance_to_ccz_mm;
-    both!(dir, "fig11_error_vs_distance_to_base", |root| regression(root, db, after, "Fig. 11: error vs distance to the robot base", "distance from the base origin (mm)"));
-    out.push(Written { stem: "fig11_error_vs_distance_to_base".into(), caption: "Fig. 11: error after calibration against the distance to the base, with the least-squares line".into() });
-    both!(dir, "fig12_error_vs_distance_to_ccz", |root| regression(root, dc, after, "Fig. 12: error vs distance to the centre of the calibration zone", "distance from the CCZ (mm)"));
+    both!(dir, "fig11_error_vs_distance_to_base", |root| regression(
+        root,
+        db,
+        after,
+        "Fig. 11: error vs distance to the robot base",
+        "distance from the base origin (mm)"
+    ));
+    out.push(Written {
+        stem: "fig11_error_vs_distance_to_base".into(),
+        caption: "Fig. 11: error after calibration against the distance to the base, with the least-squares line".into(),
+    });
+    both!(dir, "fig12_error_vs_distance_to_ccz", |root| regression(
+        root,
+        dc,
+        after,
+        "Fig. 12: error vs distance to the centre of the calibration zone",
+        "distance from the CCZ (mm)"
+    ));
     out.push(Written {
         stem: "fig12_error_vs_distance_to_ccz".into(),
-        caption: "Fig. 12: error after calibration against the distance to the centre of the calibration zone (centroid of the spheres)".into(),
+        caption: "Fig. 12: error after calibration against the distance to the centre of the calibration zone (centroid of the spheres)"
+            .into(),
     });
     both!(dir, "fig13_error_histograms", |root| fig13(root, &results.before_errors, after, n));
-    out.push(Written { stem: "fig13_error_histograms".into(), caption: "Fig. 13: distribution of the position errors before and after calibration, with descriptive statistics".into() });
+    out.push(Written {
+        stem: "fig13_error_histograms".into(),
+        caption: "Fig. 13: distribution of the position errors before and after calibration, with descriptive statistics".into(),
+    });
     Ok(out)
 }
 
@@ -145,20 +182,42 @@ fn fig07<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs) -> D
         let xr = range_of(all.clone().map(|v| v[a]), 0.05);
         let yr = range_of(all.map(|v| v[b]), 0.05);
         let axis = ["x", "y", "z"];
-        let mut chart = ChartBuilder::on(area).caption(name, (FAMILY, 16)).margin(10).x_label_area_size(40).y_label_area_size(55).build_cartesian_2d(xr, yr).map_err(e2s)?;
-        chart.configure_mesh().x_desc(format!("{} in {{W}} (mm)", axis[a])).y_desc(format!("{} in {{W}} (mm)", axis[b])).label_style((FAMILY, 12)).draw().map_err(e2s)?;
+        let mut chart = ChartBuilder::on(area)
+            .caption(name, (FAMILY, 16))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(xr, yr)
+            .map_err(e2s)?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("{} in {{W}} (mm)", axis[a]))
+            .y_desc(format!("{} in {{W}} (mm)", axis[b]))
+            .label_style((FAMILY, 12))
+            .draw()
+            .map_err(e2s)?;
         chart
             .draw_series(p.validation_w.iter().map(|v| Circle::new((v[a], v[b]), 2, BLUE.mix(0.5).filled())))
             .map_err(e2s)?
             .label("validation pose")
             .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
-        chart.draw_series(p.spheres_w.iter().map(|v| Circle::new((v[a], v[b]), 6, RED.filled()))).map_err(e2s)?.label("datum sphere").legend(|(x, y)| Circle::new((x, y), 4, RED.filled()));
+        chart
+            .draw_series(p.spheres_w.iter().map(|v| Circle::new((v[a], v[b]), 6, RED.filled())))
+            .map_err(e2s)?
+            .label("datum sphere")
+            .legend(|(x, y)| Circle::new((x, y), 4, RED.filled()));
         chart
             .draw_series(std::iter::once(TriangleMarker::new((p.base_w[a], p.base_w[b]), 8, BLACK.filled())))
             .map_err(e2s)?
             .label("robot base")
             .legend(|(x, y)| TriangleMarker::new((x, y), 5, BLACK.filled()));
-        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).label_font((FAMILY, 12)).draw().map_err(e2s)?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font((FAMILY, 12))
+            .draw()
+            .map_err(e2s)?;
     }
     Ok(())
 }
@@ -170,7 +229,12 @@ fn boxplot<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, data: &[(usize, Ve
 
 /// Box plots per set size of one or more series side by side (box: quartiles, red bar: median,
 /// whiskers: 1.5 IQR, crosses: outliers); a legend when the series are labelled.
-fn boxplots<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, series: &[(&str, RGBColor, BySize)], title: &str, ylabel: &str) -> DrawResult {
+fn boxplots<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    series: &[(&str, RGBColor, BySize)],
+    title: &str,
+    ylabel: &str,
+) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
     let sizes: Vec<usize> = series.first().map(|s| s.2.iter().map(|(n, _)| *n).collect()).unwrap_or_default();
     let xr = range_of(sizes.iter().map(|n| *n as f64), 0.06);
@@ -179,7 +243,13 @@ fn boxplots<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, series: &[(&str, 
     let step = if sizes.len() > 1 { sizes.windows(2).map(|w| (w[1] - w[0]) as f64).fold(f64::INFINITY, f64::min) } else { 10.0 };
     let k = series.len().max(1) as f64;
     let half = 0.3 * step / k;
-    let mut chart = ChartBuilder::on(root).caption(title, (FAMILY, 22)).margin(15).x_label_area_size(45).y_label_area_size(65).build_cartesian_2d(xr, yr).map_err(e2s)?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 22))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(xr, yr)
+        .map_err(e2s)?;
     chart
         .configure_mesh()
         .x_desc("set size n (configurations)")
@@ -228,7 +298,13 @@ fn boxplots<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, series: &[(&str, 
         }
     }
     if series.iter().any(|s| !s.0.is_empty()) {
-        chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(e2s)?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font((FAMILY, 14))
+            .draw()
+            .map_err(e2s)?;
     }
     Ok(())
 }
@@ -251,7 +327,13 @@ fn fig10<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs, afte
     let yr = range_of(p.validation_w.iter().map(|v| v.y), 0.05);
     let emax = after.iter().copied().fold(0.0, f64::max).max(1e-9);
     let title = format!("Fig. 10: error after calibration (n = {n}, task {task}), top view; max {emax:.3} mm");
-    let mut chart = ChartBuilder::on(root).caption(title, (FAMILY, 20)).margin(15).x_label_area_size(45).y_label_area_size(65).build_cartesian_2d(xr, yr).map_err(e2s)?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(xr, yr)
+        .map_err(e2s)?;
     chart.configure_mesh().x_desc("x in {W} (mm)").y_desc("y in {W} (mm)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
     chart.draw_series(p.validation_w.iter().zip(after).map(|(v, e)| Circle::new((v.x, v.y), 3, heat(e / emax).filled()))).map_err(e2s)?;
     let mut order: Vec<usize> = (0..after.len()).collect();
@@ -283,16 +365,33 @@ fn regression<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, d: &[f64], e: &
     let yr = 0f64.min(yr.start)..yr.end;
     let r = pearson(d, e);
     let (intercept, slope) = least_squares_line(d, e);
-    let mut chart = ChartBuilder::on(root).caption(title, (FAMILY, 20)).margin(15).x_label_area_size(45).y_label_area_size(65).build_cartesian_2d(xr.clone(), yr).map_err(e2s)?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(xr.clone(), yr)
+        .map_err(e2s)?;
     chart.configure_mesh().x_desc(xlabel).y_desc("error after calibration (mm)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
-    chart.draw_series(d.iter().zip(e).map(|(&x, &y)| Circle::new((x, y), 2, BLUE.mix(0.6).filled()))).map_err(e2s)?.label("validation pose").legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
+    chart
+        .draw_series(d.iter().zip(e).map(|(&x, &y)| Circle::new((x, y), 2, BLUE.mix(0.6).filled())))
+        .map_err(e2s)?
+        .label("validation pose")
+        .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
     let line = [xr.start, xr.end].map(|x| (x, intercept + slope * x));
     chart
         .draw_series(LineSeries::new(line, RED.stroke_width(2)))
         .map_err(e2s)?
         .label(format!("least squares: {:.2e} mm/mm, r = {r:.3}, r^2 = {:.3}", slope, r * r))
         .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
-    chart.configure_series_labels().position(SeriesLabelPosition::UpperLeft).background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 13)).draw().map_err(e2s)?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
     Ok(())
 }
 
@@ -300,7 +399,9 @@ fn fig13<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, before: &[f64], afte
     root.fill(&WHITE).map_err(e2s)?;
     let root = root.titled("Fig. 13: distribution of the position errors", (FAMILY, 22)).map_err(e2s)?;
     let panels = root.split_evenly((1, 2));
-    for (area, (name, v, colour)) in panels.iter().zip([("before calibration".to_string(), before, RED), (format!("after calibration (n = {n})"), after, BLUE)]) {
+    for (area, (name, v, colour)) in
+        panels.iter().zip([("before calibration".to_string(), before, RED), (format!("after calibration (n = {n})"), after, BLUE)])
+    {
         let s = ErrorStats::of(v);
         let bins = 25usize;
         let hi = s.max.max(1e-9) * 1.0001;
@@ -310,9 +411,22 @@ fn fig13<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, before: &[f64], afte
             counts[((x / w) as usize).min(bins - 1)] += 1;
         }
         let cmax = counts.iter().copied().max().unwrap_or(1) as f64;
-        let mut chart = ChartBuilder::on(area).caption(&name, (FAMILY, 16)).margin(10).x_label_area_size(40).y_label_area_size(50).build_cartesian_2d(0.0..hi, 0.0..cmax * 1.45).map_err(e2s)?;
+        let mut chart = ChartBuilder::on(area)
+            .caption(&name, (FAMILY, 16))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..hi, 0.0..cmax * 1.45)
+            .map_err(e2s)?;
         chart.configure_mesh().x_desc("position error (mm)").y_desc("validation poses").label_style((FAMILY, 12)).draw().map_err(e2s)?;
-        chart.draw_series(counts.iter().enumerate().map(|(k, &c)| Rectangle::new([(k as f64 * w, 0.0), ((k + 1) as f64 * w, c as f64)], colour.mix(0.6).filled()))).map_err(e2s)?;
+        chart
+            .draw_series(
+                counts
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &c)| Rectangle::new([(k as f64 * w, 0.0), ((k + 1) as f64 * w, c as f64)], colour.mix(0.6).filled())),
+            )
+            .map_err(e2s)?;
         let text = [
             format!("poses {}", v.len()),
             format!("mean {:.3} mm", s.mean),
@@ -322,7 +436,9 @@ fn fig13<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, before: &[f64], afte
             format!("max {:.3} mm", s.max),
         ];
         for (i, t) in text.iter().enumerate() {
-            chart.draw_series(std::iter::once(Text::new(t.clone(), (0.55 * hi, cmax * (1.4 - 0.07 * i as f64)), (FAMILY, 13)))).map_err(e2s)?;
+            chart
+                .draw_series(std::iter::once(Text::new(t.clone(), (0.55 * hi, cmax * (1.4 - 0.07 * i as f64)), (FAMILY, 13))))
+                .map_err(e2s)?;
         }
     }
     Ok(())
@@ -372,25 +488,49 @@ pub fn write_spms(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, St
         "|SPMS - tracker| (mm)",
         Some((0.034, "paper mean 0.034 mm"))
     ));
-    out.push(Written { stem: "spms_fig06_measuring_error".into(), caption: "Fig. 6: measuring error of each sphere measurement against the laser tracker (Table 3)".into() });
+    out.push(Written {
+        stem: "spms_fig06_measuring_error".into(),
+        caption: "Fig. 6: measuring error of each sphere measurement against the laser tracker (Table 3)".into(),
+    });
     both!(dir, "spms_table6_ap_per_point", |root| ap_bars(root, p));
     out.push(Written {
         stem: "spms_table6_ap_per_point".into(),
         caption: format!("Table 6: ISO 9283 AP per test point before and after calibration, published and calsim (after: median over the repetitions with sets of {})", p.table_n),
     });
     let colours = [BLUE, RGBColor(230, 120, 0), RGBColor(0, 140, 60)];
-    let series: Vec<(&str, RGBColor, BySize)> = p.ap_mean_by_size.iter().enumerate().map(|(i, (l, d))| (l.as_str(), colours[i % 3], d.clone())).collect();
-    both!(dir, "spms_ap_by_set_size", |root| boxplots(root, &series, "Mean AP over P1-P5 after calibration per identification", "mean AP after calibration (mm)"));
-    out.push(Written { stem: "spms_ap_by_set_size".into(), caption: "Mean ISO 9283 AP over P1-P5 after each identification, per set size: random sets (the paper) and DETMAX sets on O1".into() });
+    let series: Vec<(&str, RGBColor, BySize)> =
+        p.ap_mean_by_size.iter().enumerate().map(|(i, (l, d))| (l.as_str(), colours[i % 3], d.clone())).collect();
+    both!(dir, "spms_ap_by_set_size", |root| boxplots(
+        root,
+        &series,
+        "Mean AP over P1-P5 after calibration per identification",
+        "mean AP after calibration (mm)"
+    ));
+    out.push(Written {
+        stem: "spms_ap_by_set_size".into(),
+        caption: "Mean ISO 9283 AP over P1-P5 after each identification, per set size: random sets (the paper) and DETMAX sets on O1"
+            .into(),
+    });
     Ok(out)
 }
 
-fn per_sample<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, v: &[&[f64]; 2], title: &str, ylabel: &str, line: Option<(f64, &str)>) -> DrawResult {
+fn per_sample<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    v: &[&[f64]; 2],
+    title: &str,
+    ylabel: &str,
+    line: Option<(f64, &str)>,
+) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
     let n = v[0].len().max(v[1].len()).max(1);
     let top = v.iter().flat_map(|s| s.iter().copied()).chain(line.map(|l| l.0)).fold(0.0, f64::max) * 1.15;
-    let mut chart =
-        ChartBuilder::on(root).caption(title, (FAMILY, 22)).margin(15).x_label_area_size(45).y_label_area_size(65).build_cartesian_2d(0.0..(n as f64 + 1.0), 0.0..top.max(1e-6)).map_err(e2s)?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 22))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(0.0..(n as f64 + 1.0), 0.0..top.max(1e-6))
+        .map_err(e2s)?;
     chart.configure_mesh().x_desc("measurement").y_desc(ylabel).light_line_style(WHITE).label_style((FAMILY, 13)).draw().map_err(e2s)?;
     for (s, (label, colour)) in v.iter().zip([("PSO + LM, paper's 6K+3 form", BLUE), ("LM, minimal 5K+3 form", RGBColor(230, 120, 0))]) {
         chart
@@ -429,7 +569,16 @@ fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs
         .y_label_area_size(65)
         .build_cartesian_2d(0.5..5.5, 0.0..top.max(1e-6))
         .map_err(e2s)?;
-    chart.configure_mesh().x_desc("test point").y_desc("AP (mm)").x_labels(5).x_label_formatter(&|x| format!("P{x:.0}")).light_line_style(WHITE).label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc("test point")
+        .y_desc("AP (mm)")
+        .x_labels(5)
+        .x_label_formatter(&|x| format!("P{x:.0}"))
+        .light_line_style(WHITE)
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
     let w = 0.8 / bars.len() as f64;
     for (i, (label, colour, v)) in bars.iter().enumerate() {
         let c = *colour;
@@ -442,6 +591,13 @@ fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs
             .label(label.as_str())
             .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
     }
-    chart.configure_series_labels().position(SeriesLabelPosition::UpperRight).background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(e2s)?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FAMILY, 14))
+        .draw()
+        .map_err(e2s)?;
     Ok(())
 }

@@ -21,9 +21,10 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use rerun::blueprint::{Blueprint, BlueprintActivation, Horizontal, Spatial3DView, Tabs, TimePanel, TimeSeriesView};
 use rerun::{Arrows3D, Boxes3D, Capsules3D, Color, Points3D, RecordingStream, Scalars, SeriesLines};
 
-use crate::campaign::{Solid, cell_solids, trical_capsules};
 use crate::cell::collision::{CapsuleSpec, irb120_link_capsules};
+use crate::cell::solids::{Solid, cell_solids};
 use crate::experiment::Experiment;
+use crate::instrument::trical::trical_capsules;
 use crate::robot::{JOINTS, KinState, RobotModel, forward, world_from_base};
 use crate::study::StudyResults;
 
@@ -56,7 +57,12 @@ fn capsules(ends: &[(Vector3<f64>, Vector3<f64>, f64)]) -> Capsules3D {
     let translations: Vec<[f32; 3]> = ends.iter().map(|(a, _, _)| p3(a)).collect();
     let rotations: Vec<rerun::Quaternion> = ends
         .iter()
-        .map(|(a, b, _)| quat(&UnitQuaternion::rotation_between(&Vector3::z(), &(b - a)).unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI))))
+        .map(|(a, b, _)| {
+            quat(
+                &UnitQuaternion::rotation_between(&Vector3::z(), &(b - a))
+                    .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)),
+            )
+        })
         .collect();
     Capsules3D::from_lengths_and_radii(lengths, radii).with_translations(translations).with_quaternions(rotations)
 }
@@ -91,18 +97,29 @@ fn robot_capsules(
 /// The identified model of task `index`, or `None` when it identified nothing.
 fn identified(results: &StudyResults, before: &RobotModel, index: usize) -> Option<RobotModel> {
     let t = results.tasks.iter().find(|t| t.task.index == index)?;
-    let values: Option<Vec<f64>> = t.values.iter().copied().collect();
+    let values: Option<Vec<f64>> = t.id.values.iter().copied().collect();
     results.set.unpack(before, &values?).ok()
 }
 
 /// Writes the recording of `experiment` and `results` to `path`; `representative` is the task of
-/// the after-calibration views (see [`crate::io::plots::representative`]).
-pub fn write(path: &Path, name: &str, experiment: &Experiment, before: &RobotModel, results: &StudyResults, representative: Option<usize>) -> Result<(), String> {
+/// the after-calibration views (see [`crate::study::figures::representative`]).
+pub fn write(
+    path: &Path,
+    name: &str,
+    experiment: &Experiment,
+    before: &RobotModel,
+    results: &StudyResults,
+    representative: Option<usize>,
+) -> Result<(), String> {
     let rec = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).save(path).map_err(|e| e.to_string())?;
     log_all(&rec, experiment, before, results, representative).map_err(|e| e.to_string())?;
-    blueprint(&["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"], ("TriCal centring: indicator readings", "/pool/centring"), "study: validation error and O1 per task (timeline `task`)")
-        .send(&rec, BlueprintActivation { make_active: true, make_default: true })
-        .map_err(|e| e.to_string())?;
+    blueprint(
+        &["/cell/**", "/pool/tcp", "/pool/robot", "/validation/**"],
+        ("TriCal centring: indicator readings", "/pool/centring"),
+        "study: validation error and O1 per task (timeline `task`)",
+    )
+    .send(&rec, BlueprintActivation { make_active: true, make_default: true })
+    .map_err(|e| e.to_string())?;
     rec.flush_blocking().map_err(|e| e.to_string())?;
     Ok(())
 }
@@ -114,7 +131,11 @@ fn blueprint(cell_contents: &[&str], first_series: (&str, &str), study_title: &s
     Blueprint::new(
         Horizontal::new([
             Spatial3DView::new("cell").with_origin("/").with_contents(cell_contents.iter().copied()).into(),
-            Tabs::new([TimeSeriesView::new(first_series.0).with_origin(first_series.1).into(), TimeSeriesView::new(study_title).with_origin("/study").into()]).into(),
+            Tabs::new([
+                TimeSeriesView::new(first_series.0).with_origin(first_series.1).into(),
+                TimeSeriesView::new(study_title).with_origin("/study").into(),
+            ])
+            .into(),
         ])
         .with_column_shares([3.0, 2.0]),
     )
@@ -125,7 +146,14 @@ fn blueprint(cell_contents: &[&str], first_series: (&str, &str), study_title: &s
 fn log_axes(rec: &RecordingStream, path: &str, frame: &Isometry3<f64>, len: f64) -> Rr {
     let o = frame.translation.vector;
     let v: Vec<[f32; 3]> = (0..3).map(|k| p3(&(frame.rotation * Vector3::ith(k, len)))).collect();
-    rec.log_static(path, &Arrows3D::from_vectors(v).with_origins([p3(&o); 3]).with_colors([Color::from_rgb(230, 40, 40), Color::from_rgb(40, 200, 40), Color::from_rgb(40, 80, 230)]))
+    rec.log_static(
+        path,
+        &Arrows3D::from_vectors(v).with_origins([p3(&o); 3]).with_colors([
+            Color::from_rgb(230, 40, 40),
+            Color::from_rgb(40, 200, 40),
+            Color::from_rgb(40, 80, 230),
+        ]),
+    )
 }
 
 fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: &StudyResults, representative: Option<usize>) -> Rr {
@@ -138,18 +166,21 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     let r_ball = e.cell.spec.ball_diameter_mm as f32 / 2.0;
     rec.log_static(
         "cell/spheres",
-        &Points3D::new(e.cell.spheres_w.iter().map(p3)).with_radii([r_ball]).with_labels((1..=e.cell.spheres_w.len()).map(|k| format!("sphere {k}"))).with_colors(
-            e.cell.spheres_w.iter().enumerate().map(|(k, _)| {
+        &Points3D::new(e.cell.spheres_w.iter().map(p3))
+            .with_radii([r_ball])
+            .with_labels((1..=e.cell.spheres_w.len()).map(|k| format!("sphere {k}")))
+            .with_colors(e.cell.spheres_w.iter().enumerate().map(|(k, _)| {
                 let c = SPHERE_COLOURS[k % SPHERE_COLOURS.len()];
                 Color::from_rgb(c[0], c[1], c[2])
-            }),
-        ),
+            })),
     )?;
     let solids = cell_solids(&e.cell, &base_from_world);
     let risers: Vec<_> = solids
         .iter()
         .filter_map(|s| match s {
-            Solid::Capsule { a, b, radius, .. } => Some(((world_from_base_true * Point3::from(*a)).coords, (world_from_base_true * Point3::from(*b)).coords, *radius)),
+            Solid::Capsule { a, b, radius, .. } => {
+                Some(((world_from_base_true * Point3::from(*a)).coords, (world_from_base_true * Point3::from(*b)).coords, *radius))
+            }
             _ => None,
         })
         .collect();
@@ -166,9 +197,17 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
         &Boxes3D::from_centers_and_half_sizes(boxes.iter().map(|(_, _, p)| p3(&p.translation.vector)), boxes.iter().map(|(_, h, _)| p3(h)))
             .with_quaternions(boxes.iter().map(|(_, _, p)| quat(&p.rotation)))
             .with_labels(boxes.iter().map(|(n, _, _)| n.to_string()))
-            .with_colors(boxes.iter().map(|(n, _, _)| if *n == "table" { Color::from_unmultiplied_rgba(120, 100, 80, 60) } else { Color::from_rgb(170, 170, 180) })),
+            .with_colors(boxes.iter().map(|(n, _, _)| {
+                if *n == "table" { Color::from_unmultiplied_rgba(120, 100, 80, 60) } else { Color::from_rgb(170, 170, 180) }
+            })),
     )?;
-    rec.log_static("cell/tracker", &Points3D::new([p3(&e.tracker.position_w)]).with_radii([40.0f32]).with_labels(["laser tracker"]).with_colors([Color::from_rgb(240, 200, 0)]))?;
+    rec.log_static(
+        "cell/tracker",
+        &Points3D::new([p3(&e.tracker.position_w)])
+            .with_radii([40.0f32])
+            .with_labels(["laser tracker"])
+            .with_colors([Color::from_rgb(240, 200, 0)]),
+    )?;
     for (path, frame) in [("cell/frames/world", Isometry3::identity()), ("cell/frames/base", world_from_base_true)] {
         log_axes(rec, path, &frame, 150.0)?;
     }
@@ -194,7 +233,11 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     for (k, p) in pool.iter().enumerate() {
         rec.set_time_sequence("pool_configuration", k as i64);
         let c = SPHERE_COLOURS[p.sphere % SPHERE_COLOURS.len()];
-        rec.log("pool/robot", &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &p.q, &links, &tool)).with_colors([Color::from_rgb(c[0], c[1], c[2])]))?;
+        rec.log(
+            "pool/robot",
+            &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &p.q, &links, &tool))
+                .with_colors([Color::from_rgb(c[0], c[1], c[2])]),
+        )?;
         for r in &p.readings {
             rec.set_time_sequence("centring_reading", reading);
             reading += 1;
@@ -209,7 +252,11 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     let validation = &e.campaign.validation;
     for (k, v) in validation.iter().enumerate() {
         rec.set_time_sequence("validation_pose", k as i64);
-        rec.log("validation/robot", &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &v.q, &links, &tool)).with_colors([Color::from_rgb(120, 120, 200)]))?;
+        rec.log(
+            "validation/robot",
+            &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &v.q, &links, &tool))
+                .with_colors([Color::from_rgb(120, 120, 200)]),
+        )?;
     }
     rec.reset_time();
     let points: Vec<[f32; 3]> = validation.iter().map(|v| p3(&v.measured_w)).collect();
@@ -227,11 +274,16 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
         let amax = errors.iter().map(|x| x.norm()).fold(0.0, f64::max).max(1e-9);
         rec.log_static(
             "validation/after",
-            &Points3D::new(points.clone()).with_radii([5.0f32]).with_colors(errors.iter().map(|x| heat(x.norm() / amax))).with_labels(errors.iter().map(|x| format!("{:.3} mm after", x.norm()))),
+            &Points3D::new(points.clone())
+                .with_radii([5.0f32])
+                .with_colors(errors.iter().map(|x| heat(x.norm() / amax)))
+                .with_labels(errors.iter().map(|x| format!("{:.3} mm after", x.norm()))),
         )?;
         rec.log_static(
             "validation/error_vectors",
-            &Arrows3D::from_vectors(errors.iter().map(|x| p3(&(x * ERROR_MAGNIFICATION)))).with_origins(points).with_colors(errors.iter().map(|x| heat(x.norm() / amax))),
+            &Arrows3D::from_vectors(errors.iter().map(|x| p3(&(x * ERROR_MAGNIFICATION))))
+                .with_origins(points)
+                .with_colors(errors.iter().map(|x| heat(x.norm() / amax))),
         )?;
     }
 
@@ -245,7 +297,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
         rec.set_time_sequence("repetition", t.task.repetition as i64);
         rec.log("study/validation_mean_mm", &Scalars::new([t.validation.mean]))?;
         rec.log("study/validation_max_mm", &Scalars::new([t.validation.max]))?;
-        rec.log("study/o1", &Scalars::new([t.observability.o1]))?;
+        rec.log("study/o1", &Scalars::new([t.id.observability.o1]))?;
     }
     rec.reset_time();
     Ok(())
@@ -278,9 +330,22 @@ fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crat
     log_axes(rec, "cell/frames/base", &Isometry3::identity(), 300.0)?;
     let cell = &r.cell;
     for (k, s) in cell.stations.iter().enumerate() {
-        let strips: Vec<Vec<[f32; 3]>> =
-            r.head.spms.sensors.iter().map(|sn| vec![p3(&(s.base_from_head * Point3::from(sn.beam.p)).coords), p3(&(s.base_from_head * Point3::from(sn.beam.point(130.0))).coords)]).collect();
-        rec.log_static(format!("cell/heads/{k}/beams"), &LineStrips3D::new(strips).with_colors([Color::from_rgb(220, 30, 30)]).with_radii([1.0f32]))?;
+        let strips: Vec<Vec<[f32; 3]>> = r
+            .head
+            .spms
+            .sensors
+            .iter()
+            .map(|sn| {
+                vec![
+                    p3(&(s.base_from_head * Point3::from(sn.beam.p)).coords),
+                    p3(&(s.base_from_head * Point3::from(sn.beam.point(130.0))).coords),
+                ]
+            })
+            .collect();
+        rec.log_static(
+            format!("cell/heads/{k}/beams"),
+            &LineStrips3D::new(strips).with_colors([Color::from_rgb(220, 30, 30)]).with_radii([1.0f32]),
+        )?;
         log_axes(rec, &format!("cell/heads/{k}/frame"), &s.base_from_head, 80.0)?;
     }
     let truth = cell.robot.truth.edited(|d| d.world_from_base = crate::robot::XyzZyx::default()).expect("valid");
@@ -310,7 +375,11 @@ fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crat
     let iso = &spec.iso9283;
     let points = crate::spms::calibration::iso_points(iso);
     let h = iso.cube_mm as f32 / 2.0;
-    rec.log_static("iso9283/cube", &Boxes3D::from_centers_and_half_sizes([p3(&Vector3::from(iso.cube_centre_base_mm))], [[h, h, h]]).with_colors([Color::from_unmultiplied_rgba(120, 120, 120, 40)]))?;
+    rec.log_static(
+        "iso9283/cube",
+        &Boxes3D::from_centers_and_half_sizes([p3(&Vector3::from(iso.cube_centre_base_mm))], [[h, h, h]])
+            .with_colors([Color::from_unmultiplied_rgba(120, 120, 120, 40)]),
+    )?;
     let amax = r.before.ap_mm.iter().copied().fold(0.0, f64::max).max(1e-9);
     // Before: large points with their labels; after: smaller points inside them, labels on hover.
     let log_ap = |path: &str, ap: &[f64; 5], label: &str| {
@@ -326,12 +395,15 @@ fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crat
     };
     log_ap("iso9283/before", &r.before.ap_mm, "before")?;
     let n = spec.study.table_set_size as usize;
-    let mut at_n: Vec<_> = r.tasks.iter().filter(|t| t.selection == crate::spms::study::Selection::Random && t.set_size == n && t.iso.is_some()).collect();
-    at_n.sort_by(|a, b| a.iso.as_ref().map(|i| i.ap_summary().1).unwrap_or(0.0).total_cmp(&b.iso.as_ref().map(|i| i.ap_summary().1).unwrap_or(0.0)));
+    let mut at_n: Vec<_> =
+        r.tasks.iter().filter(|t| t.task.selection == crate::study::Selection::Random && t.task.set_size == n && t.iso.is_some()).collect();
+    at_n.sort_by(|a, b| {
+        a.iso.as_ref().map(|i| i.ap_summary().1).unwrap_or(0.0).total_cmp(&b.iso.as_ref().map(|i| i.ap_summary().1).unwrap_or(0.0))
+    });
     if let Some(t) = at_n.get(at_n.len().saturating_sub(1) / 2)
         && let Some(i) = &t.iso
     {
-        log_ap("iso9283/after", &i.ap_mm, &format!("after (task {})", t.index))?;
+        log_ap("iso9283/after", &i.ap_mm, &format!("after (task {})", t.task.index))?;
     }
 
     for sel in ["random", "detmax"] {
@@ -340,16 +412,16 @@ fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crat
         rec.log_static(format!("study/{sel}/o1"), &SeriesLines::new().with_names([format!("{sel}: O1")]))?;
     }
     for t in &r.tasks {
-        rec.set_time_sequence("task", t.index as i64);
-        rec.set_time_sequence("set_size", t.set_size as i64);
-        rec.set_time_sequence("repetition", t.repetition as i64);
-        let sel = t.selection.label();
+        rec.set_time_sequence("task", t.task.index as i64);
+        rec.set_time_sequence("set_size", t.task.set_size as i64);
+        rec.set_time_sequence("repetition", t.task.repetition as i64);
+        let sel = t.task.selection.label();
         if let Some(i) = &t.iso {
             let (mx, mean, _) = i.ap_summary();
             rec.log(format!("study/{sel}/ap_mean_mm"), &Scalars::new([mean]))?;
             rec.log(format!("study/{sel}/ap_max_mm"), &Scalars::new([mx]))?;
         }
-        rec.log(format!("study/{sel}/o1"), &Scalars::new([t.observability.o1]))?;
+        rec.log(format!("study/{sel}/o1"), &Scalars::new([t.id.observability.o1]))?;
     }
     rec.reset_time();
     Ok(())

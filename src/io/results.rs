@@ -12,9 +12,11 @@ use serde::Serialize;
 use sha2::{Digest, Sha256};
 
 use crate::io::plots::{PlotInputs, Written};
-use crate::io::report::{Check, Figures};
 use crate::io::scenario::Scenario;
-use crate::study::StudyResults;
+use crate::robot::{ParamSet, RobotModel};
+use crate::study::check::Check;
+use crate::study::figures::Figures;
+use crate::study::{Identified, StudyResults, Task};
 
 /// Wall times of a run, s.
 #[derive(Clone, Debug, Default, Serialize)]
@@ -58,10 +60,25 @@ impl<'a> Provenance<'a> {
     }
 }
 
+/// The sha256 of every result table (`*.parquet`) in `dir`, by file name: two runs gave the same
+/// results when these agree (the tables carry no wall-clock value).
+pub(crate) fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<String, String>> {
+    let mut out = std::collections::BTreeMap::new();
+    for entry in fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.extension().is_some_and(|e| e == "parquet") {
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            out.insert(name, format!("{:x}", Sha256::digest(fs::read(&path)?)));
+        }
+    }
+    Ok(out)
+}
+
 #[derive(Serialize)]
 struct Manifest<'a> {
     #[serde(flatten)]
     provenance: Provenance<'a>,
+    tables_sha256: std::collections::BTreeMap<String, String>,
     tasks: usize,
     set_sizes: Vec<u32>,
     repetitions: u32,
@@ -83,6 +100,67 @@ pub(crate) fn err(e: impl std::fmt::Display) -> std::io::Error {
     std::io::Error::other(e.to_string())
 }
 
+/// The columns every study's `tasks.parquet` starts with: where the task sits in the grid, the set
+/// chosen and how the fit ended.
+pub(crate) fn task_columns<'a>(rows: impl Iterator<Item = (&'a Task, &'a Identified)> + Clone) -> Vec<Column> {
+    let u32c = |name: &str, f: &dyn Fn(&Task, &Identified) -> u32| {
+        Column::new(name.into(), rows.clone().map(|(t, i)| f(t, i)).collect::<Vec<_>>())
+    };
+    let f64c = |name: &str, f: &dyn Fn(&Identified) -> f64| Column::new(name.into(), rows.clone().map(|(_, i)| f(i)).collect::<Vec<_>>());
+    let strc = |name: &str, f: &dyn Fn(&Task, &Identified) -> String| {
+        Column::new(name.into(), rows.clone().map(|(t, i)| f(t, i)).collect::<Vec<_>>())
+    };
+    vec![
+        u32c("task", &|t, _| t.index as u32),
+        strc("selection", &|t, _| t.selection.label().to_string()),
+        u32c("set_size", &|t, _| t.set_size as u32),
+        u32c("repetition", &|t, _| t.repetition as u32),
+        f64c("o1", &|i| i.observability.o1),
+        f64c("o2", &|i| i.observability.o2),
+        f64c("o3", &|i| i.observability.o3),
+        f64c("o4", &|i| i.observability.o4),
+        f64c("o5", &|i| i.observability.o5),
+        f64c("condition_number", &|i| i.condition_number),
+        strc("outcome", &|_, i| i.outcome.label().to_string()),
+        strc("unidentifiable", &|_, i| i.outcome.unidentifiable().join(" ")),
+        u32c("iterations", &|_, i| i.iterations as u32),
+        u32c("detmax_steps", &|_, i| i.detmax_steps as u32),
+        f64c("residual_rms_mm", &|i| i.residual_rms_mm),
+    ]
+}
+
+/// `parameters.parquet` of any study: one row per task and identified parameter, in the unit of the
+/// paper's tables, beside the truth and the nominal (start) value.
+pub(crate) fn parameter_columns<'a>(
+    set: &ParamSet,
+    rows: impl Iterator<Item = (&'a Task, &'a Identified)>,
+    truth: &RobotModel,
+    nominal: &RobotModel,
+) -> Vec<Column> {
+    let ids = set.ids();
+    let in_unit = |id: &crate::robot::ParamId, m: &RobotModel| id.unit().from_internal(id.get(m.data()));
+    let (truth_v, nominal_v): (Vec<f64>, Vec<f64>) = ids.iter().map(|id| (in_unit(id, truth), in_unit(id, nominal))).unzip();
+    let (mut task, mut param, mut unit, mut value, mut tv, mut nv) = (vec![], vec![], vec![], vec![], vec![], vec![]);
+    for (t, x) in rows {
+        for (j, id) in ids.iter().enumerate() {
+            task.push(t.index as u32);
+            param.push(id.name());
+            unit.push(id.unit().symbol().to_string());
+            value.push(x.values[j].map(|v| id.unit().from_internal(v)));
+            tv.push(truth_v[j]);
+            nv.push(nominal_v[j]);
+        }
+    }
+    vec![
+        Column::new("task".into(), task),
+        Column::new("parameter".into(), param),
+        Column::new("unit".into(), unit),
+        Column::new("identified".into(), value),
+        Column::new("truth".into(), tv),
+        Column::new("nominal".into(), nv),
+    ]
+}
+
 pub(crate) fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
     let mut df = DataFrame::new_infer_height(columns).map_err(err)?;
     let file = fs::File::create(dir.join(name))?;
@@ -102,12 +180,23 @@ pub struct Extras<'a> {
     pub recording: Option<Recorder<'a>>,
 }
 
+/// What a run adds to its results: the figures and their checks, how it ran, optional outputs.
+pub struct Report<'a> {
+    /// The paper's figures.
+    pub figures: &'a Figures,
+    /// Their checks.
+    pub checks: &'a [Check],
+    /// Worker threads.
+    pub threads: usize,
+    /// Wall times.
+    pub timings: &'a Timings,
+    /// The figures (PNG and SVG, embedded in `summary.md`) and the recording.
+    pub extras: Extras<'a>,
+}
+
 /// Writes every result file of `results` into `out/<scenario name>`, replacing what was there.
-///
-/// `extras` adds the figures (PNG and SVG, embedded in `summary.md`) and the recording.
-#[allow(clippy::too_many_arguments)]
-pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, figures: &Figures, checks: &[Check], threads: usize, timings: &Timings, extras: &Extras<'_>) -> std::io::Result<PathBuf> {
-    write_atomically(out, &scenario.name, |tmp| write_into(tmp, scenario, results, figures, checks, threads, timings, extras))
+pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, report: &Report<'_>) -> std::io::Result<PathBuf> {
+    write_atomically(out, &scenario.name, |tmp| write_into(tmp, scenario, results, report))
 }
 
 /// Runs `fill` on a fresh temporary directory beside `out/<name>` and renames it into place;
@@ -135,56 +224,21 @@ pub(crate) fn write_atomically(out: &Path, name: &str, fill: impl FnOnce(&Path) 
     Ok(dest)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], threads: usize, timings: &Timings, extras: &Extras<'_>) -> std::io::Result<()> {
+fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
+    let Report { figures: f, checks, threads, timings, ref extras } = *report;
     let t = &r.tasks;
-    let col_u32 = |name: &str, v: Vec<u32>| Column::new(name.into(), v);
-    let col_f64 = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
-    parquet(
-        dir,
-        "tasks.parquet",
-        vec![
-            col_u32("task", t.iter().map(|x| x.task.index as u32).collect()),
-            col_u32("set_size", t.iter().map(|x| x.task.set_size as u32).collect()),
-            col_u32("repetition", t.iter().map(|x| x.task.repetition as u32).collect()),
-            col_f64("o1", t.iter().map(|x| x.observability.o1).collect()),
-            col_f64("o2", t.iter().map(|x| x.observability.o2).collect()),
-            col_f64("o3", t.iter().map(|x| x.observability.o3).collect()),
-            col_f64("o4", t.iter().map(|x| x.observability.o4).collect()),
-            col_f64("o5", t.iter().map(|x| x.observability.o5).collect()),
-            col_f64("condition_number", t.iter().map(|x| x.condition_number).collect()),
-            Column::new("outcome".into(), t.iter().map(|x| x.outcome.clone()).collect::<Vec<_>>()),
-            Column::new("unidentifiable".into(), t.iter().map(|x| x.unidentifiable.join(" ")).collect::<Vec<_>>()),
-            col_u32("iterations", t.iter().map(|x| x.iterations as u32).collect()),
-            col_u32("detmax_steps", t.iter().map(|x| x.detmax_steps as u32).collect()),
-            col_f64("residual_rms_mm", t.iter().map(|x| x.residual_rms_mm).collect()),
-            col_f64("validation_mean_mm", t.iter().map(|x| x.validation.mean).collect()),
-            col_f64("validation_median_mm", t.iter().map(|x| x.validation.median).collect()),
-            col_f64("validation_std_mm", t.iter().map(|x| x.validation.std).collect()),
-            col_f64("validation_p95_mm", t.iter().map(|x| x.validation.p95).collect()),
-            col_f64("validation_max_mm", t.iter().map(|x| x.validation.max).collect()),
-            col_f64("validation_rms_mm", t.iter().map(|x| x.validation.rms).collect()),
-            col_f64("seconds", t.iter().map(|x| x.seconds).collect()),
-        ],
-    )?;
-
-    let ids = r.set.ids();
-    let truth = &f.table7;
-    let (mut task, mut param, mut unit, mut value, mut truth_v) = (vec![], vec![], vec![], vec![], vec![]);
-    for x in t {
-        for (j, id) in ids.iter().enumerate() {
-            task.push(x.task.index as u32);
-            param.push(id.name());
-            unit.push(id.unit().symbol().to_string());
-            value.push(x.values[j].map(|v| id.unit().from_internal(v)));
-            truth_v.push(truth[j].truth);
-        }
-    }
-    parquet(
-        dir,
-        "parameters.parquet",
-        vec![Column::new("task".into(), task), Column::new("parameter".into(), param), Column::new("unit".into(), unit), Column::new("identified".into(), value), Column::new("truth".into(), truth_v)],
-    )?;
+    let f64c = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
+    let mut cols = task_columns(t.iter().map(|x| (&x.task, &x.id)));
+    cols.extend([
+        f64c("validation_mean_mm", t.iter().map(|x| x.validation.mean).collect()),
+        f64c("validation_median_mm", t.iter().map(|x| x.validation.median).collect()),
+        f64c("validation_std_mm", t.iter().map(|x| x.validation.std).collect()),
+        f64c("validation_p95_mm", t.iter().map(|x| x.validation.p95).collect()),
+        f64c("validation_max_mm", t.iter().map(|x| x.validation.max).collect()),
+        f64c("validation_rms_mm", t.iter().map(|x| x.validation.rms).collect()),
+    ]);
+    parquet(dir, "tasks.parquet", cols)?;
+    parquet(dir, "parameters.parquet", parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.truth, &r.start))?;
 
     let (mut which, mut task, mut pose, mut error, mut dbase, mut dccz) = (vec![], vec![], vec![], vec![], vec![], vec![]);
     let mut push = |label: &str, tk: Option<u32>, errs: &[f64]| {
@@ -218,6 +272,7 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, f: &Figures, ch
 
     let manifest = Manifest {
         provenance: Provenance::new(&scenario.name, &scenario.path, &scenario.text, scenario.seed, threads),
+        tables_sha256: table_hashes(dir)?,
         tasks: t.len(),
         set_sizes: scenario.study.set_sizes.clone(),
         repetitions: scenario.study.repetitions,
@@ -258,15 +313,30 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
         };
         let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
     }
-    let _ =
-        writeln!(s, "\nAfter-calibration figures are medians over the {} repetitions at n = {} of each identification's statistic over the validation poses.", scenario.study.repetitions, f.table_n);
+    let _ = writeln!(
+        s,
+        "\nAfter-calibration figures are medians over the {} repetitions at n = {} of each identification's statistic over the validation poses.",
+        scenario.study.repetitions, f.table_n
+    );
     let _ = writeln!(
         s,
         "\n## Errors before and after calibration (mm)\n\n| | mean | median | std | p95 | max |\n|---|---|---|---|---|---|\n| before (paper: mean 2.628, max 6.282) | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |\n| after, n = {} (median over repetitions; paper Table 8: median 0.208, std 0.084, max 0.482) | {:.3} | {:.3} | {:.3} | - | {:.3} |",
-        f.before.mean, f.before.median, f.before.std, f.before.p95, f.before.max, f.table_n, f.after_mean, f.after_median, f.after_std, f.after_max
+        f.before.mean,
+        f.before.median,
+        f.before.std,
+        f.before.p95,
+        f.before.max,
+        f.table_n,
+        f.after_mean,
+        f.after_median,
+        f.after_std,
+        f.after_max
     );
     let _ = writeln!(s, "\n## Table 7: identified parameters over the sets of {}\n", f.table_n);
-    let _ = writeln!(s, "| parameter | unit | truth | mean | std | min | max | paper mean | paper std | std within x3 | mean within 3 std |\n|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "| parameter | unit | truth | mean | std | min | max | paper mean | paper std | std within x3 | mean within 3 std |\n|---|---|---|---|---|---|---|---|---|---|---|"
+    );
     for p in &f.table7 {
         let (pm, ps) = p.published.map(|(m, sd)| (format!("{m:.3}"), format!("{sd:.3}"))).unwrap_or(("-".into(), "-".into()));
         let yes = |b: Option<bool>| match b {
@@ -290,14 +360,24 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
             yes(p.mean_within_3std())
         );
     }
-    let _ = writeln!(s, "\n## Figs. 8-9: validation error per set size\n\n| n | median of mean (mm) | IQR of mean (mm) | median of std (mm) | not converged |\n|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "\n## Figs. 8-9: validation error per set size\n\n| n | median of mean (mm) | IQR of mean (mm) | median of std (mm) | not converged |\n|---|---|---|---|---|"
+    );
     for z in &f.sizes {
-        let _ = writeln!(s, "| {} | {:.4} | {:.4} | {:.4} | {} |", z.n, z.median_of_means, z.iqr_of_means, z.median_of_stds, z.not_converged);
+        let _ =
+            writeln!(s, "| {} | {:.4} | {:.4} | {:.4} | {} |", z.n, z.median_of_means, z.iqr_of_means, z.median_of_stds, z.not_converged);
     }
     let _ = writeln!(
         s,
-        "\nFig. 11: Pearson r of the error after calibration against the distance to the base: {:.3}. Fig. 12: against the distance to the centre of the calibration zone: {:.3}.",
-        f.r_base, f.r_ccz
+        "\nPearson r of the error after calibration over the representative set of {n} (the paper's Figs. 11-12 show one set): \
+         against the distance to the base (Fig. 11) {:.3}, against the distance to the centre of the calibration zone (Fig. 12) {:.3}. \
+         Over every set of {n} pooled: {:.3} and {:.3}.",
+        f.r_base,
+        f.r_ccz,
+        f.r_base_pooled,
+        f.r_ccz_pooled,
+        n = f.table_n
     );
     if !drawn.is_empty() {
         let _ = writeln!(s, "\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n");

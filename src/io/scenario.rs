@@ -11,55 +11,17 @@ use crate::experiment::{ExperimentSpec, RobotSpec};
 use crate::instrument::laser_tracker::LaserTrackerSpec;
 use crate::instrument::trical::TriCalSpec;
 use crate::study::StudySpec;
-
-/// A figure with its published value and the relative band the reproduction must fall in.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Band {
-    /// Published value.
-    pub value: f64,
-    /// Allowed relative deviation (0.2 = +-20 %).
-    pub tolerance: f64,
-}
-
-impl Band {
-    /// Whether `x` lies in the band.
-    pub fn contains(&self, x: f64) -> bool {
-        (x - self.value).abs() <= self.tolerance * self.value.abs()
-    }
-}
-
-/// The `[expect]` table: the published figures a study is checked against.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct ExpectSpec {
-    /// Mean error over the validation poses before calibration, mm.
-    pub before_mean_mm: Option<Band>,
-    /// Largest error before calibration, mm.
-    pub before_max_mm: Option<Band>,
-    /// Median error after calibration with sets of the table size (median over repetitions), mm.
-    pub after_median_mm: Option<Band>,
-    /// Standard deviation of the error after calibration (median over repetitions), mm.
-    pub after_std_mm: Option<Band>,
-    /// Largest error after calibration (median over repetitions), mm.
-    pub after_max_mm: Option<Band>,
-    /// Least number of Table 7 parameters whose spread is within a factor 3 of the published one.
-    pub table7_std_within_factor3_min: Option<u32>,
-    /// Least number of Table 7 parameters whose mean is within 3 published std of the truth.
-    pub table7_mean_within_3std_min: Option<u32>,
-    /// Largest rise allowed between consecutive set sizes of the median of the mean error
-    /// (Fig. 8: the median does not rise with n), relative.
-    pub fig8_max_rise: Option<f64>,
-    /// Least ratio of the spread (IQR) of the mean error at the smallest over the largest set size.
-    pub fig9_spread_ratio_min: Option<f64>,
-    /// Largest |Pearson r| between error and distance to the centre of the calibration zone (Fig. 12).
-    pub fig12_abs_r_max: Option<f64>,
-}
+use crate::study::check::Band;
+use crate::study::figures::ExpectSpec;
 
 /// A scenario file as written.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ScenarioFile {
+    /// `"trical"` or absent (checked by [`load_any`]).
+    #[serde(default)]
+    #[allow(dead_code)]
+    kind: Option<String>,
     seed: u64,
     #[serde(default)]
     study: StudySpec,
@@ -142,8 +104,12 @@ pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
 
 /// Parses and checks scenario text; `path` names it in errors.
 pub fn parse(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
+    parse_table(text, table(text, &path.display().to_string())?, path)
+}
+
+fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<Scenario, ScenarioError> {
     let shown = path.display().to_string();
-    let file: ScenarioFile = deserialize(text, &shown)?;
+    let file: ScenarioFile = deserialize(t, &shown)?;
     check(&file, &shown)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
     Ok(Scenario {
@@ -151,7 +117,13 @@ pub fn parse(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
         path: path.to_path_buf(),
         text: text.to_string(),
         seed: file.seed,
-        experiment: ExperimentSpec { robot: file.robot, cell: file.cell, trical: file.trical, tracker: file.tracker, campaign: file.campaign },
+        experiment: ExperimentSpec {
+            robot: file.robot,
+            cell: file.cell,
+            trical: file.trical,
+            tracker: file.tracker,
+            campaign: file.campaign,
+        },
         study: file.study,
         expect: file.expect,
     })
@@ -160,6 +132,7 @@ pub fn parse(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
 /// Checks a scenario again after command-line overrides.
 pub fn check_overrides(s: &Scenario) -> Result<(), ScenarioError> {
     let file = ScenarioFile {
+        kind: None,
         seed: s.seed,
         study: s.study.clone(),
         robot: s.experiment.robot.clone(),
@@ -172,13 +145,67 @@ pub fn check_overrides(s: &Scenario) -> Result<(), ScenarioError> {
     check(&file, &format!("{} (with command-line overrides)", s.path.display()))
 }
 
-/// Deserializes scenario text, naming the offending key (or line) in the error.
-fn deserialize<T: serde::de::DeserializeOwned>(text: &str, shown: &str) -> Result<T, ScenarioError> {
-    let de = toml::Deserializer::parse(text).map_err(|e| ScenarioError::Parse { path: shown.into(), key: position(text, e.span()), message: e.message().to_string() })?;
-    serde_path_to_error::deserialize(de).map_err(|e| {
+/// Parses scenario text into its TOML table, naming the line of a syntax error; every number in it
+/// must be finite (TOML allows `nan` and `inf`, which no key of calsim takes).
+fn table(text: &str, shown: &str) -> Result<toml::Table, ScenarioError> {
+    let t: toml::Table = toml::from_str(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
+        path: shown.into(),
+        key: position(text, e.span()),
+        message: e.message().to_string(),
+    })?;
+    for (k, v) in &t {
+        finite(v, &mut vec![k.clone()], shown)?;
+    }
+    Ok(t)
+}
+
+/// Refuses a non-finite float anywhere under `v`, naming its dotted key (`cell.spheres_w_mm[3][0]`).
+fn finite(v: &toml::Value, path: &mut Vec<String>, shown: &str) -> Result<(), ScenarioError> {
+    match v {
+        toml::Value::Float(x) if !x.is_finite() => {
+            let (key, section) = path.split_last().map(|(k, s)| (k.clone(), s.join("."))).unwrap_or_default();
+            Err(ScenarioError::Range { path: shown.into(), section, key, value: x.to_string(), why: "must be a finite number".into() })
+        }
+        toml::Value::Table(t) => t.iter().try_for_each(|(k, v)| {
+            path.push(k.clone());
+            let r = finite(v, path, shown);
+            path.pop();
+            r
+        }),
+        toml::Value::Array(a) => a.iter().enumerate().try_for_each(|(i, v)| {
+            let last = path.pop().unwrap_or_default();
+            path.push(format!("{last}[{i}]"));
+            let r = finite(v, path, shown);
+            path.pop();
+            path.push(last);
+            r
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// Fills the keys of `section` that `t` leaves out from `defaults` (TOML text): how a device gives
+/// a common section its own defaults.
+fn with_defaults(mut t: toml::Table, section: &str, defaults: &str) -> toml::Table {
+    let defaults: toml::Table = toml::from_str(defaults).expect("device defaults are valid TOML");
+    let entry = t.entry(section.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let toml::Value::Table(given) = entry {
+        for (k, v) in defaults {
+            given.entry(k).or_insert(v);
+        }
+    }
+    t
+}
+
+/// Deserializes a scenario table, naming the offending key in the error.
+fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) -> Result<T, ScenarioError> {
+    serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
         let key = e.path().to_string();
-        let inner = e.into_inner();
-        ScenarioError::Parse { path: shown.into(), key: if key == "." { position(text, inner.span()) } else { key }, message: inner.message().to_string() }
+        ScenarioError::Parse {
+            path: shown.into(),
+            key: if key == "." { "(file)".into() } else { key },
+            message: e.into_inner().message().to_string(),
+        }
     })
 }
 
@@ -201,10 +228,6 @@ impl Checker<'_> {
         ScenarioError::Range { path: self.path.into(), section: section.into(), key: key.into(), value: value.to_string(), why: why.into() }
     }
 
-    fn positive(&self, section: &str, key: &str, v: f64, what: &str) -> Result<(), ScenarioError> {
-        if v.is_finite() && v > 0.0 { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be > 0 ({what})"))) }
-    }
-
     fn non_negative(&self, section: &str, key: &str, v: f64, what: &str) -> Result<(), ScenarioError> {
         if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be >= 0 ({what})"))) }
     }
@@ -218,112 +241,225 @@ impl Checker<'_> {
         if let Some([lo, hi]) = u.transmission_high_orders
             && (lo == 0 || lo > hi)
         {
-            return Err(self.fail("robot.unmodelled", "transmission_high_orders", format!("[{lo}, {hi}]"), "must be [min, max] with 1 <= min <= max"));
+            return Err(self.fail(
+                "robot.unmodelled",
+                "transmission_high_orders",
+                format!("[{lo}, {hi}]"),
+                "must be [min, max] with 1 <= min <= max",
+            ));
         }
         Ok(())
     }
 
+    /// The `[study]` table, the same for every device: `pool` configurations to choose from and the
+    /// device's default parameter set.
+    fn study(&self, s: &StudySpec, pool: usize, default_set: fn() -> crate::robot::ParamSet) -> Result<(), ScenarioError> {
+        let set = s
+            .parameter_set(default_set)
+            .map_err(|e| self.fail("study", "parameters", format!("{:?}", s.parameters.clone().unwrap_or_default()), &e.to_string()))?;
+        let m = set.len();
+        if s.set_sizes.is_empty() {
+            return Err(self.fail("study", "set_sizes", "[]", "needs at least one set size"));
+        }
+        if s.set_sizes.len() > crate::study::MAX_SET_SIZES {
+            return Err(self.fail("study", "set_sizes", s.set_sizes.len(), &format!("at most {} set sizes", crate::study::MAX_SET_SIZES)));
+        }
+        for &n in &s.set_sizes {
+            if (n as usize) * 3 < m || n as usize >= pool {
+                return Err(self.fail(
+                    "study",
+                    "set_sizes",
+                    n,
+                    &format!("each size must give at least {m} equations (3 per configuration) and stay below the pool of {pool}"),
+                ));
+            }
+        }
+        self.count("study", "repetitions", s.repetitions.into(), 1, crate::study::MAX_REPETITIONS.into(), "identifications per set size")?;
+        if !s.set_sizes.contains(&s.table_set_size) {
+            return Err(self.fail("study", "table_set_size", s.table_set_size, "must be one of set_sizes"));
+        }
+        if s.selections.is_empty() || s.selections.len() > 2 {
+            return Err(self.fail("study", "selections", format!("{:?}", s.selections), "needs one or both of \"random\" and \"detmax\""));
+        }
+        let tasks = s.selections.len() as u64 * s.set_sizes.len() as u64 * u64::from(s.repetitions);
+        if tasks > crate::study::MAX_TASKS {
+            return Err(self.fail("study", "repetitions", s.repetitions, &format!("{tasks} identifications in all: at most {}", crate::study::MAX_TASKS)));
+        }
+        self.within("study", "detmax_max_excursion", s.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
+        self.within("study", "rank_rtol", s.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
+        Ok(())
+    }
+
+    /// A count within `[lo, hi]`: the upper bound keeps every run within memory and time.
+    fn count(&self, section: &str, key: &str, v: u64, lo: u64, hi: u64, what: &str) -> Result<(), ScenarioError> {
+        if (lo..=hi).contains(&v) { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})"))) }
+    }
+
+    /// A band of `[expect]`: a finite published value and a tolerance in [0, 10].
+    fn band(&self, key: &str, b: &Option<Band>) -> Result<(), ScenarioError> {
+        if let Some(b) = b {
+            if !b.value.is_finite() {
+                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be a finite published value"));
+            }
+            if !(b.tolerance.is_finite() && (0.0..=10.0).contains(&b.tolerance)) {
+                return Err(self.fail("expect", &format!("{key}.tolerance"), b.tolerance, "must be a relative tolerance within [0, 10] (0.2 = +-20 %)"));
+            }
+        }
+        Ok(())
+    }
+
+    /// A bound of `[expect]` that is a plain number: finite and within `[lo, hi]`.
+    fn bound(&self, key: &str, v: Option<f64>, lo: f64, hi: f64) -> Result<(), ScenarioError> {
+        v.map_or(Ok(()), |v| self.within("expect", key, v, lo, hi, "bound of the check"))
+    }
+
+    /// Every parameter of the identified set must be separable on `model` by some set of
+    /// configurations: a parameter with a zero column (theta_offs6 with the TCP on the joint-6 axis)
+    /// or a redundancy (theta_offs1 with the base's alpha) is refused here, not found 510 times.
+    fn identifiable(&self, model: &crate::robot::RobotModel, set: &crate::robot::ParamSet, hint: &str) -> Result<(), ScenarioError> {
+        let hidden = crate::identify::observability::structurally_unidentifiable(model, set);
+        if hidden.is_empty() {
+            Ok(())
+        } else {
+            Err(self.fail(
+                "study",
+                "parameters",
+                hidden.join(" "),
+                &format!("no set of configurations can separate these on this robot ({hint}): remove one of each redundant group or change the tool"),
+            ))
+        }
+    }
+
     fn within(&self, section: &str, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<(), ScenarioError> {
-        if v.is_finite() && v >= lo && v <= hi { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})"))) }
+        if v.is_finite() && v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})")))
+        }
     }
 }
 
 fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     let c = Checker { path };
-    let s = &f.study;
-    if s.set_sizes.is_empty() {
-        return Err(c.fail("study", "set_sizes", "[]", "needs at least one set size"));
-    }
-    let pool = f.campaign.pool_per_sphere as usize * f.cell.spheres_w_mm.len();
-    let m = s.parameter_set().map_err(|e| c.fail("study", "parameters", format!("{:?}", s.parameters.clone().unwrap_or_default()), &e.to_string()))?.len();
-    for &n in &s.set_sizes {
-        if (n as usize) * 3 < m || n as usize >= pool {
-            return Err(c.fail("study", "set_sizes", n, &format!("each size must give at least {m} equations (3 per configuration) and stay below the pool of {pool}")));
-        }
-    }
-    if s.repetitions == 0 {
-        return Err(c.fail("study", "repetitions", 0, "must be >= 1"));
-    }
-    if !s.set_sizes.contains(&s.table_set_size) {
-        return Err(c.fail("study", "table_set_size", s.table_set_size, "must be one of set_sizes"));
-    }
-    if s.solver != "gauss_newton" && s.solver != "levenberg_marquardt" {
-        return Err(c.fail("study", "solver", &s.solver, "must be \"gauss_newton\" or \"levenberg_marquardt\""));
-    }
-    c.within("study", "detmax_max_excursion", s.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
-
     let r = &f.robot;
-    c.non_negative("robot", "repeatability_mm", r.repeatability_mm, "ISO 9283 RP")?;
     c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
-    c.non_negative("robot", "payload_kg", r.payload_kg, "device mass")?;
-    for (k, v) in r.tcp_mm.iter().chain(&r.payload_com_mm).chain(&r.repeatability_reference_q_deg).enumerate() {
-        if !v.is_finite() {
-            return Err(c.fail("robot", "tcp_mm / payload_com_mm / repeatability_reference_q_deg", v, &format!("entry {k} must be finite")));
+    c.within("robot", "payload_kg", r.payload_kg, 0.0, 3.0, "device mass; the IRB 120 carries 3 kg")?;
+    for (k, v) in r.tcp_mm.iter().enumerate() {
+        c.within("robot", &format!("tcp_mm[{k}]"), *v, -500.0, 500.0, "TCP in the flange frame")?;
+    }
+    for (k, v) in r.payload_com_mm.iter().enumerate() {
+        c.within("robot", &format!("payload_com_mm[{k}]"), *v, -500.0, 500.0, "centre of mass in the flange frame")?;
+    }
+    for (k, v) in r.repeatability_reference_q_deg.iter().enumerate() {
+        c.within("robot", &format!("repeatability_reference_q_deg[{k}]"), *v, -400.0, 400.0, "joint angle")?;
+    }
+    if let Some(base) = r.nominal_base_mm_deg {
+        for (k, v) in base.iter().enumerate() {
+            let (lo, hi) = if k < 3 { (-5000.0, 5000.0) } else { (-360.0, 360.0) };
+            c.within("robot", &format!("nominal_base_mm_deg[{k}]"), *v, lo, hi, "x, y, z in mm then alpha, beta, gamma in deg")?;
         }
     }
     c.unmodelled(&r.unmodelled)?;
 
     let cell = &f.cell;
-    if cell.spheres_w_mm.len() < 3 {
-        return Err(c.fail("cell", "spheres_w_mm", cell.spheres_w_mm.len(), "at least three datum spheres define {W}"));
+    if !(3..=12).contains(&cell.spheres_w_mm.len()) {
+        return Err(c.fail("cell", "spheres_w_mm", cell.spheres_w_mm.len(), "three to twelve datum spheres (the first three define {W})"));
     }
     let p = &cell.spheres_w_mm;
     if p[0] != [0.0, 0.0, 0.0] || p[1][1] != 0.0 || p[1][2] != 0.0 || p[1][0] <= 0.0 || p[2][2] != 0.0 || p[2][1] <= 0.0 {
-        return Err(c.fail("cell", "spheres_w_mm", format!("{:?}", &p[..3]), "the first three define {W} (eqs. 1-5): [0,0,0], then [d12,0,0] with d12 > 0, then [x,y,0] with y > 0"));
+        return Err(c.fail(
+            "cell",
+            "spheres_w_mm",
+            format!("{:?}", &p[..3]),
+            "the first three define {W} (eqs. 1-5): [0,0,0], then [d12,0,0] with d12 > 0, then [x,y,0] with y > 0",
+        ));
     }
-    c.positive("cell", "ball_diameter_mm", cell.ball_diameter_mm, "datum ball")?;
-    c.non_negative("cell", "ball_diameter_tolerance_um", cell.ball_diameter_tolerance_um, "tolerance")?;
-    c.positive("cell", "riser_height_mm", cell.riser_height_mm, "riser")?;
-    c.positive("cell", "riser_radius_mm", cell.riser_radius_mm, "riser")?;
-    c.positive("cell", "plate_thickness_mm", cell.plate_thickness_mm, "plate")?;
-    c.non_negative("cell", "plate_margin_mm", cell.plate_margin_mm, "plate")?;
-    c.non_negative("cell", "ballbar_sigma_um", cell.ballbar_sigma_um, "ballbar noise")?;
+    c.within("cell", "ball_diameter_mm", cell.ball_diameter_mm, 1.0, 100.0, "datum ball")?;
+    for (i, a) in p.iter().enumerate() {
+        for (k, v) in a.iter().enumerate() {
+            c.within("cell", &format!("spheres_w_mm[{i}][{k}]"), *v, -2000.0, 2000.0, "sphere centre in {W}, within the robot's reach")?;
+        }
+        for (j, b) in p.iter().enumerate().take(i) {
+            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+            if d < 2.0 * cell.ball_diameter_mm + 2.0 * cell.riser_radius_mm {
+                return Err(c.fail(
+                    "cell",
+                    "spheres_w_mm",
+                    format!("{:?} and {:?}", b, a),
+                    &format!("spheres {} and {} are {d:.1} mm apart: datum spheres on their risers need at least two ball diameters plus a riser between them", j + 1, i + 1),
+                ));
+            }
+        }
+    }
+    c.within("cell", "ball_diameter_tolerance_um", cell.ball_diameter_tolerance_um, 0.0, 100.0, "tolerance")?;
+    c.within("cell", "riser_height_mm", cell.riser_height_mm, 1.0, 1000.0, "riser")?;
+    c.within("cell", "riser_radius_mm", cell.riser_radius_mm, 0.5, 100.0, "riser")?;
+    c.within("cell", "plate_thickness_mm", cell.plate_thickness_mm, 1.0, 200.0, "plate")?;
+    c.within("cell", "plate_margin_mm", cell.plate_margin_mm, 0.0, 500.0, "plate")?;
+    c.within("cell", "ballbar_sigma_um", cell.ballbar_sigma_um, 0.0, 1000.0, "ballbar noise")?;
+    c.within("cell", "table_z_base_mm", cell.table_z_base_mm, -2000.0, 0.0, "table height below the base")?;
 
     let t = &f.trical;
-    c.non_negative("trical", "indicator_accuracy_um", t.indicator_accuracy_um, "indicator")?;
-    c.non_negative("trical", "indicator_resolution_um", t.indicator_resolution_um, "indicator")?;
+    c.within("trical", "indicator_accuracy_um", t.indicator_accuracy_um, 0.0, 1000.0, "indicator")?;
+    c.within("trical", "indicator_resolution_um", t.indicator_resolution_um, 0.0, 1000.0, "indicator")?;
     c.within("trical", "indicator_misalignment_deg", t.indicator_misalignment_deg, 0.0, 10.0, "axis tilt")?;
-    c.positive("trical", "indicator_range_mm", t.indicator_range_mm, "stroke")?;
-    c.non_negative("trical", "tip_radius_mm", t.tip_radius_mm, "contact tip")?;
-    c.positive("trical", "epsilon_mm", t.epsilon_mm, "the centring tolerance")?;
-    if t.max_iterations == 0 {
-        return Err(c.fail("trical", "max_iterations", 0, "must be >= 1"));
-    }
-    c.non_negative("trical", "wait_s", t.wait_s, "time")?;
-    c.non_negative("trical", "correction_move_s", t.correction_move_s, "time")?;
-    c.non_negative("trical", "approach_move_s", t.approach_move_s, "time")?;
-    c.non_negative("trical", "cmm_sigma_um", t.cmm_sigma_um, "CMM noise")?;
+    c.within("trical", "indicator_range_mm", t.indicator_range_mm, 0.1, 100.0, "stroke")?;
+    c.within("trical", "tip_radius_mm", t.tip_radius_mm, 0.0, 10.0, "contact tip")?;
+    c.within("trical", "epsilon_mm", t.epsilon_mm, 1e-4, 0.5, "the centring tolerance: the paper uses 0.010 mm; above 0.5 mm the device no longer centres")?;
+    c.count("trical", "max_iterations", t.max_iterations.into(), 1, 1000, "centring iterations")?;
+    c.within("trical", "wait_s", t.wait_s, 0.0, 3600.0, "time")?;
+    c.within("trical", "correction_move_s", t.correction_move_s, 0.0, 3600.0, "time")?;
+    c.within("trical", "approach_move_s", t.approach_move_s, 0.0, 3600.0, "time")?;
+    c.within("trical", "cmm_sigma_um", t.cmm_sigma_um, 0.0, 1000.0, "CMM noise")?;
 
     let tr = &f.tracker;
-    c.positive("tracker", "distance_from_sphere3_mm", tr.distance_from_sphere3_mm, "placement")?;
+    c.within("tracker", "distance_from_sphere3_mm", tr.distance_from_sphere3_mm, 100.0, 20_000.0, "placement")?;
+    c.within("tracker", "height_above_spheres_mm", tr.height_above_spheres_mm, -2000.0, 5000.0, "placement")?;
     for (k, v) in [
         ("range_sigma_um", tr.range_sigma_um),
         ("range_sigma_um_per_m", tr.range_sigma_um_per_m),
         ("transverse_sigma_um", tr.transverse_sigma_um),
         ("transverse_sigma_um_per_m", tr.transverse_sigma_um_per_m),
     ] {
-        c.non_negative("tracker", k, v, "noise")?;
+        c.within("tracker", k, v, 0.0, 10_000.0, "noise")?;
     }
-    c.positive("tracker", "max_range_mm", tr.max_range_mm, "range")?;
+    c.within("tracker", "max_range_mm", tr.max_range_mm, 100.0, 100_000.0, "range")?;
     c.within("tracker", "smr_acceptance_deg", tr.smr_acceptance_deg, 0.0, 90.0, "SMR acceptance half-angle")?;
-    if tr.registration_samples == 0 {
-        return Err(c.fail("tracker", "registration_samples", 0, "must be >= 1"));
-    }
+    c.count("tracker", "registration_samples", tr.registration_samples.into(), 1, 10_000, "samples per nest")?;
 
     let cp = &f.campaign;
-    if cp.pool_per_sphere == 0 {
-        return Err(c.fail("campaign", "pool_per_sphere", 0, "must be >= 1"));
-    }
+    c.count("campaign", "pool_per_sphere", cp.pool_per_sphere.into(), 1, 10_000, "identification configurations per datum sphere")?;
     c.within("campaign", "approach_cone_deg", cp.approach_cone_deg, 0.0, 90.0, "half-angle around the vertical")?;
-    if cp.validation_poses == 0 {
-        return Err(c.fail("campaign", "validation_poses", 0, "must be >= 1"));
-    }
+    c.count("campaign", "validation_poses", cp.validation_poses.into(), 1, 100_000, "validation configurations")?;
     c.within("campaign", "validation_margin", cp.validation_margin, 0.0, 0.45, "fraction of each joint range")?;
-    c.non_negative("campaign", "jog_error_mm", cp.jog_error_mm, "jog distance")?;
-    if cp.max_tries_per_configuration == 0 {
-        return Err(c.fail("campaign", "max_tries_per_configuration", 0, "must be >= 1"));
+    c.count("campaign", "tcp_check_configurations", cp.tcp_check_configurations.into(), 2, 100, "the TCP check needs two orientations at least")?;
+    c.within("campaign", "jog_error_mm", cp.jog_error_mm, 0.0, 5.0, "jog distance: the indicators must touch the ball")?;
+    c.count("campaign", "max_tries_per_configuration", cp.max_tries_per_configuration.into(), 1, 100_000, "tries per kept configuration")?;
+
+    let pool = cp.pool_per_sphere as usize * cell.spheres_w_mm.len();
+    c.study(&f.study, pool, crate::robot::ParamSet::trical_31)?;
+    let set = f.study.parameter_set(crate::robot::ParamSet::trical_31).expect("checked by study()");
+    let spec = ExperimentSpec { robot: r.clone(), cell: cell.clone(), trical: t.clone(), tracker: tr.clone(), campaign: cp.clone() };
+    c.identifiable(&spec.nominal(), &set, "robot.tcp_mm on the joint-6 axis hides theta_offs6")?;
+    expect(&c, &f.expect)
+}
+
+/// The `[expect]` table of a TriCal scenario.
+fn expect(c: &Checker<'_>, e: &ExpectSpec) -> Result<(), ScenarioError> {
+    for (k, b) in [
+        ("before_mean_mm", &e.before_mean_mm),
+        ("before_max_mm", &e.before_max_mm),
+        ("after_median_mm", &e.after_median_mm),
+        ("after_std_mm", &e.after_std_mm),
+        ("after_max_mm", &e.after_max_mm),
+    ] {
+        c.band(k, b)?;
     }
-    Ok(())
+    c.bound("table7_std_within_factor3_min", e.table7_std_within_factor3_min.map(f64::from), 0.0, 31.0)?;
+    c.bound("table7_mean_within_3std_min", e.table7_mean_within_3std_min.map(f64::from), 0.0, 31.0)?;
+    c.bound("fig8_max_rise", e.fig8_max_rise, -1.0, 10.0)?;
+    c.bound("fig9_spread_ratio_min", e.fig9_spread_ratio_min, 0.0, 1000.0)?;
+    c.bound("fig12_abs_r_max", e.fig12_abs_r_max, 0.0, 1.0)
 }
 
 /// A scenario of either kind.
@@ -339,12 +475,16 @@ pub enum Loaded {
 pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
     let shown = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
-    let table: toml::Table = toml::from_str(&text).map_err(|e| ScenarioError::Parse { path: shown.clone(), key: position(&text, e.span()), message: e.message().to_string() })?;
+    let table = table(&text, &shown)?;
     match table.get("kind") {
-        None => parse(&text, path).map(|s| Loaded::Trical(Box::new(s))),
-        Some(toml::Value::String(k)) if k == "trical" => parse(&text, path).map(|s| Loaded::Trical(Box::new(s))),
-        Some(toml::Value::String(k)) if k == "spms" => parse_spms(&text, path).map(|s| Loaded::Spms(Box::new(s))),
-        Some(v) => Err(ScenarioError::Parse { path: shown, key: "kind".into(), message: format!("{v} is not a study kind (\"trical\" or \"spms\")") }),
+        None => parse_table(&text, table, path).map(|s| Loaded::Trical(Box::new(s))),
+        Some(toml::Value::String(k)) if k == "trical" => parse_table(&text, table, path).map(|s| Loaded::Trical(Box::new(s))),
+        Some(toml::Value::String(k)) if k == "spms" => parse_spms_table(&text, table, path).map(|s| Loaded::Spms(Box::new(s))),
+        Some(v) => Err(ScenarioError::Parse {
+            path: shown,
+            key: "kind".into(),
+            message: format!("{v} is not a study kind (\"trical\" or \"spms\")"),
+        }),
     }
 }
 
@@ -366,7 +506,7 @@ struct SpmsFile {
     #[serde(default)]
     iso9283: crate::spms::calibration::IsoSpec,
     #[serde(default)]
-    study: crate::spms::study::SpmsStudySpec,
+    study: StudySpec,
     #[serde(default)]
     expect: crate::spms::study::SpmsExpect,
 }
@@ -397,10 +537,22 @@ pub fn load_spms(path: &Path) -> Result<SpmsScenario, ScenarioError> {
 
 /// Parses and checks SPMS scenario text; `path` names it in errors.
 pub fn parse_spms(text: &str, path: &Path) -> Result<SpmsScenario, ScenarioError> {
+    parse_spms_table(text, table(text, &path.display().to_string())?, path)
+}
+
+fn parse_spms_table(text: &str, t: toml::Table, path: &Path) -> Result<SpmsScenario, ScenarioError> {
     let shown = path.display().to_string();
-    let file: SpmsFile = deserialize(text, &shown)?;
-    let spec = crate::spms::study::SpmsSpec { head: file.head, beams: file.beams, robot: file.robot, station: file.station, iso9283: file.iso9283, study: file.study };
+    let file: SpmsFile = deserialize(with_defaults(t, "study", crate::spms::study::STUDY_DEFAULTS), &shown)?;
+    let spec = crate::spms::study::SpmsSpec {
+        head: file.head,
+        beams: file.beams,
+        robot: file.robot,
+        station: file.station,
+        iso9283: file.iso9283,
+        study: file.study,
+    };
     check_spms(&spec, &shown)?;
+    expect_spms(&Checker { path: &shown }, &file.expect)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
     Ok(SpmsScenario { name, path: path.to_path_buf(), text: text.to_string(), seed: file.seed, spec, expect: file.expect })
 }
@@ -409,14 +561,12 @@ pub fn parse_spms(text: &str, path: &Path) -> Result<SpmsScenario, ScenarioError
 pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), ScenarioError> {
     let c = Checker { path };
     let h = &f.head;
-    c.positive("head", "sphere_diameter_mm", h.sphere_diameter_mm, "reference sphere")?;
+    c.within("head", "sphere_diameter_mm", h.sphere_diameter_mm, 5.0, 200.0, "reference sphere")?;
     c.within("head", "assembly_error_mm", h.assembly_error_mm, 0.0, 5.0, "beam point error")?;
     c.within("head", "assembly_error_deg", h.assembly_error_deg, 0.0, 5.0, "beam direction error")?;
     let s = &h.sensor;
-    c.positive("head.sensor", "range_min_mm", s.range_min_mm, "sensor range")?;
-    if s.range_max_mm.is_nan() || s.range_max_mm <= s.range_min_mm {
-        return Err(c.fail("head.sensor", "range_max_mm", s.range_max_mm, "must be above range_min_mm"));
-    }
+    c.within("head.sensor", "range_min_mm", s.range_min_mm, 1.0, 1000.0, "sensor range")?;
+    c.within("head.sensor", "range_max_mm", s.range_max_mm, s.range_min_mm + 1.0, 2000.0, "above range_min_mm")?;
     c.within("head.sensor", "linearity_pct_fs", s.linearity_pct_fs, 0.0, 5.0, "% of full scale")?;
     c.within("head.sensor", "repeatability_um", s.repeatability_um, 0.0, 1000.0, "one standard deviation")?;
     c.within("head.sensor", "temperature_pct_fs_per_c", s.temperature_pct_fs_per_c, 0.0, 1.0, "% of full scale per degree")?;
@@ -424,87 +574,94 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
 
     let b = &f.beams;
     // The paper's form has 6K + 3 unknowns and each pose gives K equations.
-    if b.poses < 8 {
-        return Err(c.fail("beams", "poses", b.poses, "must be >= 8 (6K + 3 unknowns, K equations per pose)"));
-    }
-    if b.accuracy_samples == 0 {
-        return Err(c.fail("beams", "accuracy_samples", 0, "must be >= 1"));
-    }
+    c.count("beams", "poses", b.poses as u64, 8, 10_000, "6K + 3 unknowns, K equations per pose")?;
+    c.count("beams", "accuracy_samples", b.accuracy_samples as u64, 1, 100_000, "accuracy measurements")?;
     c.within("beams", "head_tilt_deg", b.head_tilt_deg, 0.0, 45.0, "tilt of the head")?;
     c.within("beams", "sphere_across_mm", b.sphere_across_mm, 0.0, 20.0, "travel across the beams")?;
     c.within("beams", "sphere_along_mm", b.sphere_along_mm, 0.0, 50.0, "travel along the beams")?;
-    c.non_negative("beams", "tracker_sigma_um", b.tracker_sigma_um, "tracker noise")?;
-    if b.pso_population < 2 || b.pso_iterations == 0 {
-        return Err(c.fail("beams", "pso_population / pso_iterations", format!("{} / {}", b.pso_population, b.pso_iterations), "need a population >= 2 and >= 1 iteration"));
+    for (k, v) in b.sphere_centre_head_mm.iter().enumerate() {
+        c.within("beams", &format!("sphere_centre_head_mm[{k}]"), *v, -1000.0, 1000.0, "sphere centre in the head frame")?;
     }
-    c.positive("beams", "pso_half_width_mm", b.pso_half_width_mm, "search box")?;
-    c.positive("beams", "pso_half_width_dir", b.pso_half_width_dir, "search box")?;
-    c.positive("beams", "pso_half_width_centre_mm", b.pso_half_width_centre_mm, "search box")?;
-    c.non_negative("beams", "rough_centre_error_mm", b.rough_centre_error_mm, "start error")?;
-    c.positive("beams", "lm_tau", b.lm_tau, "LM damping")?;
-    if b.lm_max_iterations == 0 {
-        return Err(c.fail("beams", "lm_max_iterations", 0, "must be >= 1"));
+    c.within("beams", "tracker_sigma_um", b.tracker_sigma_um, 0.0, 1000.0, "tracker noise")?;
+    c.count("beams", "pso_population", b.pso_population as u64, 2, 100_000, "particles")?;
+    c.count("beams", "pso_iterations", b.pso_iterations as u64, 1, 10_000, "iterations")?;
+    let evaluations = b.pso_population as u64 * b.pso_iterations as u64;
+    if evaluations > 100_000_000 {
+        return Err(c.fail("beams", "pso_iterations", b.pso_iterations, &format!("{evaluations} swarm evaluations: at most 1e8 (population x iterations)")));
     }
-    if b.form().is_none() {
-        return Err(c.fail("beams", "calibration_form", &b.calibration_form, "must be \"paper\" or \"minimal\""));
-    }
+    c.within("beams", "pso_half_width_mm", b.pso_half_width_mm, 1e-6, 100.0, "search box")?;
+    c.within("beams", "pso_half_width_dir", b.pso_half_width_dir, 1e-9, 1.0, "search box")?;
+    c.within("beams", "pso_half_width_centre_mm", b.pso_half_width_centre_mm, 1e-6, 100.0, "search box")?;
+    c.within("beams", "rough_centre_error_mm", b.rough_centre_error_mm, 0.0, 50.0, "start error")?;
+    c.within("beams", "lm_tau", b.lm_tau, 1e-15, 1e3, "LM damping")?;
+    c.count("beams", "lm_max_iterations", b.lm_max_iterations as u64, 1, 100_000, "LM iterations")?;
 
     let r = &f.robot;
-    if r.truth_model().is_none() {
-        return Err(c.fail("robot", "truth", &r.truth, "must be \"table5_without_dtheta2\", \"table5\" or \"table4\""));
+    for (k, v) in r.sphere_flange_mm.iter().enumerate() {
+        c.within("robot", &format!("sphere_flange_mm[{k}]"), *v, -500.0, 500.0, "sphere centre in the flange frame")?;
     }
     c.within("robot", "sphere_flange_error_mm", r.sphere_flange_error_mm, 0.0, 10.0, "tool error")?;
     c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
+    for (k, v) in r.repeatability_reference_q_deg.iter().enumerate() {
+        c.within("robot", &format!("repeatability_reference_q_deg[{k}]"), *v, -400.0, 400.0, "joint angle")?;
+    }
     c.unmodelled(&r.unmodelled)?;
 
     let st = &f.station;
-    if st.sphere_points_base_mm.is_empty() {
-        return Err(c.fail("station", "sphere_points_base_mm", "[]", "needs at least one station"));
+    if !(1..=20).contains(&st.sphere_points_base_mm.len()) {
+        return Err(c.fail("station", "sphere_points_base_mm", st.sphere_points_base_mm.len(), "one to twenty stations"));
     }
-    for p in &st.sphere_points_base_mm {
+    for (i, p) in st.sphere_points_base_mm.iter().enumerate() {
+        for (k, v) in p.iter().enumerate() {
+            c.within("station", &format!("sphere_points_base_mm[{i}][{k}]"), *v, -3000.0, 3000.0, "within the ER20-C10's reach")?;
+        }
         if p[0].hypot(p[1]) < 300.0 {
             return Err(c.fail("station", "sphere_points_base_mm", format!("{p:?}"), "a station must stand at least 300 mm from the base axis"));
         }
     }
+    for (k, v) in st.sphere_centre_head_mm.iter().enumerate() {
+        c.within("station", &format!("sphere_centre_head_mm[{k}]"), *v, -1000.0, 1000.0, "sphere centre in the head frame")?;
+    }
     c.within("station", "placement_error_mm", st.placement_error_mm, 0.0, 50.0, "placement")?;
     c.within("station", "placement_error_deg", st.placement_error_deg, 0.0, 10.0, "placement")?;
-    c.non_negative("station", "tracker_sigma_um", st.tracker_sigma_um, "tracker noise")?;
+    c.within("station", "tracker_sigma_um", st.tracker_sigma_um, 0.0, 1000.0, "tracker noise")?;
     c.within("station", "approach_cone_deg", st.approach_cone_deg, 0.0, 80.0, "half-angle")?;
     c.within("station", "spin_deg", st.spin_deg, 0.0, 180.0, "rotation about the flange axis")?;
-    for v in st.sphere_travel_mm {
-        c.within("station", "sphere_travel_mm", v, 0.0, 30.0, "travel in the head")?;
+    for (k, v) in st.sphere_travel_mm.iter().enumerate() {
+        c.within("station", &format!("sphere_travel_mm[{k}]"), *v, 0.0, 30.0, "travel in the head")?;
     }
-    let sd = &f.study;
-    let m = sd.parameter_set().map_err(|e| c.fail("study", "parameters", format!("{:?}", sd.parameters.clone().unwrap_or_default()), &e.to_string()))?.len();
-    if sd.set_sizes.is_empty() {
-        return Err(c.fail("study", "set_sizes", "[]", "needs at least one set size"));
-    }
-    for &n in &sd.set_sizes {
-        if (n as usize) * 3 < m || n as usize > st.pool {
-            return Err(c.fail("study", "set_sizes", n, &format!("each size must give at least {m} equations (3 per configuration) and not exceed the pool of {}", st.pool)));
-        }
-    }
-    if sd.repetitions == 0 {
-        return Err(c.fail("study", "repetitions", 0, "must be >= 1"));
-    }
-    if !sd.set_sizes.contains(&sd.table_set_size) {
-        return Err(c.fail("study", "table_set_size", sd.table_set_size, "must be one of set_sizes"));
-    }
-    if let Err(bad) = sd.parsed_selections() {
-        return Err(c.fail("study", "selections", bad, "must be \"random\" or \"detmax\""));
-    }
-    if sd.selections.is_empty() {
-        return Err(c.fail("study", "selections", "[]", "needs at least one selection"));
-    }
-    c.within("study", "detmax_max_excursion", sd.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
-    c.within("study", "rank_rtol", sd.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
+    c.count("station", "pool", st.pool as u64, 1, 100_000, "candidate configurations")?;
 
     let iso = &f.iso9283;
-    c.positive("iso9283", "cube_mm", iso.cube_mm, "cube side")?;
-    c.within("iso9283", "corner_fraction", iso.corner_fraction, 0.0, 0.5, "fraction of the diagonal")?;
-    if iso.cycles == 0 {
-        return Err(c.fail("iso9283", "cycles", 0, "must be >= 1"));
+    for (k, v) in iso.cube_centre_base_mm.iter().enumerate() {
+        c.within("iso9283", &format!("cube_centre_base_mm[{k}]"), *v, -3000.0, 3000.0, "within the ER20-C10's reach")?;
     }
-    c.non_negative("iso9283", "tracker_sigma_um", iso.tracker_sigma_um, "tracker noise")?;
-    Ok(())
+    c.within("iso9283", "cube_mm", iso.cube_mm, 1.0, 2000.0, "cube side")?;
+    c.within("iso9283", "corner_fraction", iso.corner_fraction, 0.0, 0.5, "fraction of the diagonal")?;
+    c.count("iso9283", "cycles", iso.cycles as u64, 1, 10_000, "cycles")?;
+    c.within("iso9283", "tracker_sigma_um", iso.tracker_sigma_um, 0.0, 1000.0, "tracker noise")?;
+
+    c.study(&f.study, st.pool, crate::spms::calibration::default_parameters)?;
+    let set = f.study.parameter_set(crate::spms::calibration::default_parameters).expect("checked by study()");
+    let tool = nalgebra::Vector3::from(r.sphere_flange_mm);
+    let nominal = crate::robot::builtin::er20c10_table4().edited(|d| d.flange_tcp_mm = tool).expect("a finite tool");
+    c.identifiable(&nominal, &set, "robot.sphere_flange_mm on the joint-6 axis hides theta_offs6")
+}
+
+/// The `[expect]` table of an SPMS scenario.
+fn expect_spms(c: &Checker<'_>, e: &crate::spms::study::SpmsExpect) -> Result<(), ScenarioError> {
+    for (k, b) in [
+        ("measuring_max_mm", &e.measuring_max_mm),
+        ("measuring_mean_mm", &e.measuring_mean_mm),
+        ("measuring_rms_mm", &e.measuring_rms_mm),
+        ("ap_before_max_mm", &e.ap_before_max_mm),
+        ("ap_before_mean_mm", &e.ap_before_mean_mm),
+        ("ap_before_rms_mm", &e.ap_before_rms_mm),
+        ("ap_after_max_mm", &e.ap_after_max_mm),
+        ("ap_after_mean_mm", &e.ap_after_mean_mm),
+        ("ap_after_rms_mm", &e.ap_after_rms_mm),
+    ] {
+        c.band(k, b)?;
+    }
+    c.bound("fit_residual_below_003_min", e.fit_residual_below_003_min, 0.0, 1.0)
 }

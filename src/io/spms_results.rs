@@ -10,58 +10,20 @@ use polars::prelude::*;
 use serde::Serialize;
 
 use crate::io::plots::{SpmsPlotInputs, Written};
-use crate::io::report::{Check, band_row, display_name};
-use crate::io::results::{Provenance, Recorder, err, parquet, write_atomically};
+use crate::io::report::display_name;
+use crate::io::results::{Provenance, Recorder, err, parameter_columns, parquet, table_hashes, task_columns, write_atomically};
 use crate::io::scenario::SpmsScenario;
-use crate::spms::study::{Selection, SpmsExpect, SpmsFigures, SpmsResults, SpmsTimings};
-
-/// Published figures of the SPMS paper (`shared/reference/published-figures.toml`, `spms_2023`).
-pub mod published {
-    /// Table 3: max, mean, RMS measuring error, mm.
-    pub const TABLE3: (f64, f64, f64) = (0.091, 0.034, 0.039);
-    /// Table 6: AP per point before calibration, mm.
-    pub const AP_BEFORE: [f64; 5] = [0.336, 1.462, 0.997, 1.454, 1.030];
-    /// Table 6: AP per point after calibration, mm.
-    pub const AP_AFTER: [f64; 5] = [0.167, 0.712, 0.496, 0.620, 0.311];
-    /// Table 6 text: max, mean, "RMS" before, mm.
-    pub const BEFORE: (f64, f64, f64) = (1.462, 1.056, 0.829);
-    /// Table 6 text: max, mean, "RMS" after, mm.
-    pub const AFTER: (f64, f64, f64) = (0.712, 0.461, 0.388);
-}
-
-/// The comparison rows for an SPMS scenario's `[expect]` table.
-pub fn checks(f: &SpmsFigures, e: &SpmsExpect) -> Vec<Check> {
-    let (m, b) = (f.measuring, f.before.1);
-    let mut rows = vec![
-        band_row("Table 3: max measuring error, mm", published::TABLE3.0, m.0, e.measuring_max_mm),
-        band_row("Table 3: mean measuring error, mm", published::TABLE3.1, m.1, e.measuring_mean_mm),
-        band_row("Table 3: RMS measuring error, mm", published::TABLE3.2, m.2, e.measuring_rms_mm),
-        Check {
-            figure: "Fig. 5: share of fits with residuals < 0.03 mm".into(),
-            published: "nearly all".into(),
-            reproduced: format!("{:.0} %", 100.0 * f.residual_below_003),
-            band: e.fit_residual_below_003_min.map(|v| format!(">= {:.0} %", 100.0 * v)).unwrap_or_else(|| "-".into()),
-            pass: e.fit_residual_below_003_min.map(|v| f.residual_below_003 >= v),
-        },
-        band_row("Table 6 before: max AP, mm", published::BEFORE.0, b.0, e.ap_before_max_mm),
-        band_row("Table 6 before: mean AP, mm", published::BEFORE.1, b.1, e.ap_before_mean_mm),
-        band_row("Table 6 before: RMS AP, mm", published::BEFORE.2, b.2, e.ap_before_rms_mm),
-    ];
-    for a in &f.after {
-        let checked = a.selection == Selection::Random;
-        let pick = |band: Option<crate::io::scenario::Band>| if checked { band } else { None };
-        let l = format!("{} sets of {}", a.selection.label(), f.table_n);
-        rows.push(band_row(&format!("Table 6 after ({l}): max AP, mm"), published::AFTER.0, a.summary.0, pick(e.ap_after_max_mm)));
-        rows.push(band_row(&format!("Table 6 after ({l}): mean AP, mm"), published::AFTER.1, a.summary.1, pick(e.ap_after_mean_mm)));
-        rows.push(band_row(&format!("Table 6 after ({l}): RMS AP, mm"), published::AFTER.2, a.summary.2, pick(e.ap_after_rms_mm)));
-    }
-    rows
-}
+use crate::spms::study::{SpmsFigures, SpmsResults, SpmsTimings};
+use crate::study::Selection;
+use crate::study::check::Check;
+use crate::study::published::published;
+use crate::study::stats::median;
 
 #[derive(Serialize)]
 struct Manifest<'a> {
     #[serde(flatten)]
     provenance: Provenance<'a>,
+    tables_sha256: std::collections::BTreeMap<String, String>,
     kind: &'static str,
     tasks: usize,
     set_sizes: Vec<u32>,
@@ -80,14 +42,31 @@ pub struct SpmsExtras<'a> {
 }
 
 /// Writes every result file of `r` into `out/<scenario name>`, replacing what was there.
-pub fn write(out: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], threads: usize, extras: &SpmsExtras<'_>) -> std::io::Result<PathBuf> {
+pub fn write(
+    out: &Path,
+    s: &SpmsScenario,
+    r: &SpmsResults,
+    f: &SpmsFigures,
+    checks: &[Check],
+    threads: usize,
+    extras: &SpmsExtras<'_>,
+) -> std::io::Result<PathBuf> {
     write_atomically(out, &s.name, |dir| write_into(dir, s, r, f, checks, threads, extras))
 }
 
-fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], threads: usize, extras: &SpmsExtras<'_>) -> std::io::Result<()> {
+fn write_into(
+    dir: &Path,
+    s: &SpmsScenario,
+    r: &SpmsResults,
+    f: &SpmsFigures,
+    checks: &[Check],
+    threads: usize,
+    extras: &SpmsExtras<'_>,
+) -> std::io::Result<()> {
     let h = &r.head;
     // Beams: truth and both identifications.
-    let (mut which, mut beam, mut px, mut py, mut pz, mut dx, mut dy, mut dz, mut gain, mut perr, mut aerr) = (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+    let (mut which, mut beam, mut px, mut py, mut pz, mut dx, mut dy, mut dz, mut gain, mut perr, mut aerr) =
+        (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
     let truth: Vec<_> = h.spms.sensors.iter().map(|s| s.beam).collect();
     let mut push = |label: &str, beams: &[crate::spms::Beam], gains: &[f64], pe: &[f64], ae: &[f64]| {
         for (k, b) in beams.iter().enumerate() {
@@ -137,22 +116,20 @@ fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, ch
             resid.push(*res);
         }
     }
-    parquet(dir, "measurements.parquet", vec![Column::new("head".into(), which), Column::new("sample".into(), sample), c("measuring_error_mm", error), c("fit_residual_max_mm", resid)])?;
+    parquet(
+        dir,
+        "measurements.parquet",
+        vec![
+            Column::new("head".into(), which),
+            Column::new("sample".into(), sample),
+            c("measuring_error_mm", error),
+            c("fit_residual_max_mm", resid),
+        ],
+    )?;
 
     let t = &r.tasks;
-    let u32c = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
     let opt = |n: &str, v: Vec<Option<f64>>| Column::new(n.into(), v);
-    let mut cols = vec![
-        u32c("task", t.iter().map(|x| x.index as u32).collect()),
-        Column::new("selection".into(), t.iter().map(|x| x.selection.label().to_string()).collect::<Vec<_>>()),
-        u32c("set_size", t.iter().map(|x| x.set_size as u32).collect()),
-        u32c("repetition", t.iter().map(|x| x.repetition as u32).collect()),
-        c("o1", t.iter().map(|x| x.observability.o1).collect()),
-        c("condition_number", t.iter().map(|x| x.condition_number).collect()),
-        Column::new("outcome".into(), t.iter().map(|x| x.outcome.clone()).collect::<Vec<_>>()),
-        Column::new("unidentifiable".into(), t.iter().map(|x| x.unidentifiable.join(" ")).collect::<Vec<_>>()),
-        c("residual_rms_mm", t.iter().map(|x| x.residual_rms_mm).collect()),
-    ];
+    let mut cols = task_columns(t.iter().map(|x| (&x.task, &x.id)));
     for k in 0..5 {
         cols.push(opt(&format!("ap_p{}_mm", k + 1), t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_mm[k])).collect()));
     }
@@ -162,24 +139,12 @@ fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, ch
     cols.push(opt("ap_max_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().0)).collect()));
     cols.push(opt("ap_mean_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().1)).collect()));
     cols.push(opt("ap_rms_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().2)).collect()));
-    cols.push(c("seconds", t.iter().map(|x| x.seconds).collect()));
     parquet(dir, "tasks.parquet", cols)?;
-
-    let ids = r.set.ids();
-    let truth_v: Vec<f64> = ids.iter().map(|id| id.unit().from_internal(id.get(r.cell.robot.truth.data()))).collect();
-    let nominal_v: Vec<f64> = ids.iter().map(|id| id.unit().from_internal(id.get(r.cell.nominal.data()))).collect();
-    let (mut task, mut param, mut unit, mut value, mut tv, mut nv) = (vec![], vec![], vec![], vec![], vec![], vec![]);
-    for x in t {
-        for (j, id) in ids.iter().enumerate() {
-            task.push(x.index as u32);
-            param.push(id.name());
-            unit.push(id.unit().symbol().to_string());
-            value.push(x.values[j].map(|v| id.unit().from_internal(v)));
-            tv.push(truth_v[j]);
-            nv.push(nominal_v[j]);
-        }
-    }
-    parquet(dir, "parameters.parquet", vec![u32c("task", task), Column::new("parameter".into(), param), Column::new("unit".into(), unit), opt("identified", value), c("truth", tv), c("nominal", nv)])?;
+    parquet(
+        dir,
+        "parameters.parquet",
+        parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.cell.robot.truth, &r.cell.nominal),
+    )?;
     let (mut which, mut point, mut ap, mut rp) = (vec![], vec![], vec![], vec![]);
     for k in 0..5 {
         which.push("before".to_string());
@@ -187,15 +152,20 @@ fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, ch
         ap.push(r.before.ap_mm[k]);
         rp.push(r.before.rp_mm[k]);
     }
-    parquet(dir, "iso9283_before.parquet", vec![Column::new("calibration".into(), which), Column::new("point".into(), point), c("ap_mm", ap), c("rp_mm", rp)])?;
+    parquet(
+        dir,
+        "iso9283_before.parquet",
+        vec![Column::new("calibration".into(), which), Column::new("point".into(), point), c("ap_mm", ap), c("rp_mm", rp)],
+    )?;
 
     let manifest = Manifest {
         provenance: Provenance::new(&s.name, &s.path, &s.text, s.seed, threads),
+        tables_sha256: table_hashes(dir)?,
         kind: "spms",
         tasks: t.len(),
         set_sizes: s.spec.study.set_sizes.clone(),
         repetitions: s.spec.study.repetitions,
-        selections: s.spec.study.selections.clone(),
+        selections: s.spec.study.selections.iter().map(|s| s.label().to_string()).collect(),
         timings: &r.timings,
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
@@ -203,16 +173,27 @@ fn write_into(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, ch
         record(&dir.join("study.rrd")).map_err(|e| std::io::Error::other(format!("recording: {e}")))?;
     }
     let drawn = if extras.plots {
-        let mut sizes: Vec<usize> = t.iter().map(|x| x.set_size).collect();
+        let mut sizes: Vec<usize> = t.iter().map(|x| x.task.set_size).collect();
         sizes.sort_unstable();
         sizes.dedup();
         let by_size = |sel: Selection| -> Vec<(usize, Vec<f64>)> {
-            sizes.iter().map(|&n| (n, t.iter().filter(|x| x.selection == sel && x.set_size == n).filter_map(|x| x.iso.as_ref().map(|i| i.ap_summary().1)).collect())).collect()
+            sizes
+                .iter()
+                .map(|&n| {
+                    (
+                        n,
+                        t.iter()
+                            .filter(|x| x.task.selection == sel && x.task.set_size == n)
+                            .filter_map(|x| x.iso.as_ref().map(|i| i.ap_summary().1))
+                            .collect(),
+                    )
+                })
+                .collect()
         };
         let inputs = SpmsPlotInputs {
             residuals: [&h.paper.fit_residual_max_mm, &h.minimal.fit_residual_max_mm],
             measuring: [&h.paper.measuring_error_mm, &h.minimal.measuring_error_mm],
-            ap_published: [published::AP_BEFORE, published::AP_AFTER],
+            ap_published: [published().spms_2023.iso9283.ap_before_mm, published().spms_2023.iso9283.ap_after_mm],
             ap_before: r.before.ap_mm,
             ap_after: f.after.iter().map(|a| (a.selection.label().to_string(), a.ap_mm)).collect(),
             ap_mean_by_size: f.after.iter().map(|a| (a.selection.label().to_string(), by_size(a.selection))).collect(),
@@ -255,7 +236,13 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         };
         let _ = writeln!(o, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, res);
     }
-    let _ = writeln!(o, "\nTable 6 prints an RMS (0.829 before, 0.388 after) that is not the RMS of its own five AP values (1.133 and 0.517); calsim's RMS is that of the five values.\n");
+    let t6 = &published().spms_2023.iso9283;
+    let (own_before, own_after) = (crate::spms::iso9283::summary(&t6.ap_before_mm).2, crate::spms::iso9283::summary(&t6.ap_after_mm).2);
+    let _ = writeln!(
+        o,
+        "\nTable 6 prints an RMS ({:.3} before, {:.3} after) that is not the RMS of its own five AP values ({own_before:.3} and {own_after:.3}); calsim's RMS is that of the five values.\n",
+        t6.rms_before_mm, t6.rms_after_mm
+    );
 
     let _ = writeln!(o, "## Beam identification (Table 2) and measuring accuracy (Table 3)\n");
     let _ = writeln!(
@@ -288,7 +275,11 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     let _ = writeln!(
         o,
         "\nPSO alone ({} particles, {} iterations): rms {:.4} mm in {:.3} s. Published Table 3: 0.091 / 0.034 / 0.039 mm. The robot calibration measures with the `{}` head.\n",
-        s.spec.beams.pso_population, s.spec.beams.pso_iterations, h.pso_rms_mm, h.pso_s, s.spec.beams.calibration_form
+        s.spec.beams.pso_population,
+        s.spec.beams.pso_iterations,
+        h.pso_rms_mm,
+        h.pso_s,
+        s.spec.beams.calibration_form.label()
     );
 
     let _ = writeln!(o, "## ISO 9283 absolute positioning (Table 6)\n");
@@ -302,7 +293,7 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     }
     let _ = writeln!(o);
     for k in 0..5 {
-        let _ = write!(o, "| P{} | {:.3} | {} | {:.3} |", k + 1, published::AP_BEFORE[k], f3(f.before.0[k]), published::AP_AFTER[k]);
+        let _ = write!(o, "| P{} | {:.3} | {} | {:.3} |", k + 1, t6.ap_before_mm[k], f3(f.before.0[k]), t6.ap_after_mm[k]);
         for a in &f.after {
             let _ = write!(o, " {} |", f3(a.ap_mm[k]));
         }
@@ -319,12 +310,12 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         o,
         "## Random sets and DETMAX sets\n\n| selection | n | identified | median O1 | median condition | median mean AP, mm | IQR mean AP, mm | worst mean AP, mm |\n|---|---|---|---|---|---|---|---|"
     );
-    let mut sizes: Vec<usize> = r.tasks.iter().map(|t| t.set_size).collect();
+    let mut sizes: Vec<usize> = r.tasks.iter().map(|t| t.task.set_size).collect();
     sizes.sort_unstable();
     sizes.dedup();
     for a in &f.after {
         for &n in &sizes {
-            let ts: Vec<_> = r.tasks.iter().filter(|t| t.selection == a.selection && t.set_size == n).collect();
+            let ts: Vec<_> = r.tasks.iter().filter(|t| t.task.selection == a.selection && t.task.set_size == n).collect();
             let means: Vec<f64> = ts.iter().filter_map(|t| t.iso.as_ref().map(|i| i.ap_summary().1)).collect();
             let mut sorted = means.clone();
             sorted.sort_by(f64::total_cmp);
@@ -336,8 +327,8 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
                 n,
                 means.len(),
                 ts.len(),
-                crate::spms::study::median(&ts.iter().map(|t| t.observability.o1).collect::<Vec<_>>()),
-                crate::spms::study::median(&ts.iter().map(|t| t.condition_number).collect::<Vec<_>>()),
+                median(&ts.iter().map(|t| t.id.observability.o1).collect::<Vec<_>>()),
+                median(&ts.iter().map(|t| t.id.condition_number).collect::<Vec<_>>()),
                 f3(q(0.5)),
                 f3(q(0.75) - q(0.25)),
                 f3(sorted.last().copied().unwrap_or(f64::NAN))
@@ -352,11 +343,26 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     );
     for (j, id) in ids.iter().enumerate() {
         let unit = id.unit();
-        let vals: Vec<f64> = r.tasks.iter().filter(|t| t.selection == Selection::Random && t.set_size == tn).filter_map(|t| t.values[j]).map(|v| unit.from_internal(v)).collect();
-        let med = crate::spms::study::median(&vals);
+        let vals: Vec<f64> = r
+            .tasks
+            .iter()
+            .filter(|t| t.task.selection == Selection::Random && t.task.set_size == tn)
+            .filter_map(|t| t.id.values[j])
+            .map(|v| unit.from_internal(v))
+            .collect();
+        let med = median(&vals);
         let truth = unit.from_internal(id.get(r.cell.robot.truth.data()));
         let nominal = unit.from_internal(id.get(r.cell.nominal.data()));
-        let _ = writeln!(o, "| {} | {} | {:.4} | {:.4} | {:.4} | {:+.4} |", display_name(&id.name()), unit.symbol(), nominal, truth, med, med - truth);
+        let _ = writeln!(
+            o,
+            "| {} | {} | {:.4} | {:.4} | {:.4} | {:+.4} |",
+            display_name(&id.name()),
+            unit.symbol(),
+            nominal,
+            truth,
+            med,
+            med - truth
+        );
     }
     let t = &r.timings;
     let _ = writeln!(

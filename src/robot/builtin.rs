@@ -28,14 +28,29 @@ const IRB120_INERTIALS: [(f64, [f64; 3]); 6] = [
 ];
 
 /// Joint limits, deg (irb120.toml `q_min_deg`, `q_max_deg`, from the URDF).
-const IRB120_LIMITS_DEG: [(f64, f64); 6] = [(-165.0, 165.0), (-110.0, 110.0), (-110.0, 70.0), (-160.0, 160.0), (-120.0, 120.0), (-400.0, 400.0)];
+const IRB120_LIMITS_DEG: [(f64, f64); 6] =
+    [(-165.0, 165.0), (-110.0, 110.0), (-110.0, 70.0), (-160.0, 160.0), (-120.0, 120.0), (-400.0, 400.0)];
 
 /// Table 3 of the 2018 paper: (alpha_{i-1} deg, a_{i-1} mm, d_i mm, theta_offs_i deg).
-const IRB120_MDH: [(f64, f64, f64, f64); 6] = [(0.0, 0.0, 290.0, 0.0), (-90.0, 0.0, 0.0, -90.0), (0.0, 270.0, 0.0, 0.0), (-90.0, 70.0, 302.0, 0.0), (90.0, 0.0, 0.0, 0.0), (-90.0, 0.0, 72.0, 180.0)];
+const IRB120_MDH: [(f64, f64, f64, f64); 6] = [
+    (0.0, 0.0, 290.0, 0.0),
+    (-90.0, 0.0, 0.0, -90.0),
+    (0.0, 270.0, 0.0, 0.0),
+    (-90.0, 70.0, 302.0, 0.0),
+    (90.0, 0.0, 0.0, 0.0),
+    (-90.0, 0.0, 72.0, 180.0),
+];
 
 /// The nominal IRB 120: Table 3, base frame = world frame, TCP on the flange, no payload.
 pub fn irb120() -> RobotModel {
-    let links = IRB120_MDH.map(|(alpha, a, d, off)| Link { alpha: alpha.to_radians(), a, beta: 0.0, theta_offset: off.to_radians(), d, compliance: 0.0 });
+    let links = IRB120_MDH.map(|(alpha, a, d, off)| Link {
+        alpha: alpha.to_radians(),
+        a,
+        beta: 0.0,
+        theta_offset: off.to_radians(),
+        d,
+        compliance: 0.0,
+    });
     let data = RobotData {
         name: "ABB IRB 120-3/0.58".into(),
         links,
@@ -115,7 +130,8 @@ pub fn trical_2018_nominal() -> RobotModel {
 /// Table 7 means (compliance included).
 pub fn trical_2018_table7() -> RobotModel {
     let set = ParamSet::trical_31();
-    let values: Vec<f64> = TABLE7_MEANS.iter().map(|(name, v)| ParamId::parse(name).expect("Table 7 names are valid").unit().to_internal(*v)).collect();
+    let values: Vec<f64> =
+        TABLE7_MEANS.iter().map(|(name, v)| ParamId::parse(name).expect("Table 7 names are valid").unit().to_internal(*v)).collect();
     debug_assert_eq!(set.names(), TABLE7_MEANS.iter().map(|(n, _)| n.to_string()).collect::<Vec<_>>());
     set.unpack(&trical_2018_nominal(), &values).expect("valid")
 }
@@ -123,13 +139,14 @@ pub fn trical_2018_table7() -> RobotModel {
 /// Table 7 standard deviations over 30 optimised sets of 75, in the order and units of
 /// [`TABLE7_MEANS`] (printed to three decimals: 0.000 means below 0.0005).
 pub const TABLE7_STD: [f64; 31] = [
-    0.001, 0.001, 0.001, 0.000, 0.001, 0.008, 0.004, 0.007, 0.001, 0.003, 0.004, 0.011, 0.002, 0.003, 0.004, 0.002, 0.001, 0.001, 0.001, 0.099, 0.149, 0.611, 0.527, 3.047, 0.001, 0.006, 0.013, 0.017,
-    0.001, 0.003, 0.000,
+    0.001, 0.001, 0.001, 0.000, 0.001, 0.008, 0.004, 0.007, 0.001, 0.003, 0.004, 0.011, 0.002, 0.003, 0.004, 0.002, 0.001, 0.001, 0.001,
+    0.099, 0.149, 0.611, 0.527, 3.047, 0.001, 0.006, 0.013, 0.017, 0.001, 0.003, 0.000,
 ];
 
 /// ER20-C10 modified-DH rows 1-5 as printed in Table 4 of the SPMS paper (before calibration):
 /// (alpha_{i-1} rad, a_{i-1} mm, d_i mm). Row 6 is not printed: see [`ER20C10_ROW6`].
-const ER20C10_TABLE4: [(f64, f64, f64); 5] = [(0.0, 0.0, 504.0), (-FRAC_PI_2, 166.605, 0.0), (0.0, -782.270, 0.0), (-FRAC_PI_2, 138.826, 761.350), (FRAC_PI_2, 0.0, 0.0)];
+const ER20C10_TABLE4: [(f64, f64, f64); 5] =
+    [(0.0, 0.0, 504.0), (-FRAC_PI_2, 166.605, 0.0), (0.0, -782.270, 0.0), (-FRAC_PI_2, 138.826, 761.350), (FRAC_PI_2, 0.0, 0.0)];
 
 /// Row 6 of the ER20-C10 (alpha5 rad, a5 mm, d6 mm). ASSUMED: the paper prints joints 1-5 only;
 /// alpha5 = -pi/2 completes the usual spherical wrist and d6 = 100 mm puts frame 6 on the flange
@@ -137,7 +154,8 @@ const ER20C10_TABLE4: [(f64, f64, f64); 5] = [(0.0, 0.0, 504.0), (-FRAC_PI_2, 16
 pub const ER20C10_ROW6: (f64, f64, f64) = (-FRAC_PI_2, 0.0, 100.0);
 
 /// Table 5 (after calibration): a_{i-1} mm, d_i mm and delta theta_i rad of joints 1-5.
-pub const ER20C10_TABLE5: [(f64, f64, f64); 5] = [(0.0, 504.0, 0.0), (167.648, 0.0, 1.39e-2), (-780.753, 0.0, 1.92e-4), (139.918, 759.330, 3.84e-4), (0.0, 0.0, 6.63e-4)];
+pub const ER20C10_TABLE5: [(f64, f64, f64); 5] =
+    [(0.0, 504.0, 0.0), (167.648, 0.0, 1.39e-2), (-780.753, 0.0, 1.92e-4), (139.918, 759.330, 3.84e-4), (0.0, 0.0, 6.63e-4)];
 
 /// Joint zero of the ER20-C10, rad: theta_i = q_i + offset_i + delta theta_i. ASSUMED: Table 4 prints
 /// only the deviations delta theta (zero before calibration), not the zero convention; with these
@@ -146,7 +164,8 @@ pub const ER20C10_ZERO_RAD: [f64; 6] = [0.0, FRAC_PI_2, PI, 0.0, 0.0, 0.0];
 
 /// ER20-C10 joint limits, deg, from q = 0 at [`ER20C10_ZERO_RAD`]. ASSUMED: the paper prints none;
 /// typical of 20 kg, 1.7 m arms.
-const ER20C10_LIMITS_DEG: [(f64, f64); 6] = [(-170.0, 170.0), (-90.0, 150.0), (-80.0, 170.0), (-180.0, 180.0), (-125.0, 125.0), (-360.0, 360.0)];
+const ER20C10_LIMITS_DEG: [(f64, f64); 6] =
+    [(-170.0, 170.0), (-90.0, 150.0), (-80.0, 170.0), (-180.0, 180.0), (-125.0, 125.0), (-360.0, 360.0)];
 
 /// The ER20-C10 as its controller believes it before calibration: Table 4, joint 6 completed by
 /// [`ER20C10_ROW6`]. Rigid (no compliance), no masses: the SPMS paper identifies kinematics only,

@@ -7,76 +7,12 @@
 //! The TCP position is `p = world_from_base * base_from_6(theta) * tcp`, with
 //! `theta = theta0 + c * tau(theta0)` and `theta0 = q + theta_offs` (paper eqs. 6-10, Table 5).
 
-use nalgebra::{Isometry3, Matrix3, Matrix3xX, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Matrix3xX, Vector3};
 
 use super::model::{JOINTS, Joints, RobotModel};
 use super::params::{BaseParam, LinkParam, ParamId, ParamSet};
+use super::state::{KinState, isometry};
 use super::statics::{gravity_pass, torque_sensitivities};
-
-/// Per-evaluation scratch: the frames of the last forward pass, in the base frame {0}.
-///
-/// Index 0 is the base frame itself, index i is MDH frame i; frame 6 is the flange.
-#[derive(Clone, Debug)]
-pub struct KinState {
-    pub(crate) rot0: [Matrix3<f64>; JOINTS + 1],
-    pub(crate) org0: [Vector3<f64>; JOINTS + 1],
-    pub(crate) rot: [Matrix3<f64>; JOINTS + 1],
-    pub(crate) org: [Vector3<f64>; JOINTS + 1],
-    pub(crate) sincos0: [(f64, f64); JOINTS],
-    pub(crate) theta: Joints,
-    pub(crate) tau: Joints,
-    /// Mass moment of links k..6 plus payload, kg mm, at theta0.
-    pub(crate) moment: [Vector3<f64>; JOINTS + 1],
-    /// Mass of links k..6 plus payload, kg.
-    pub(crate) mass: [f64; JOINTS + 1],
-    pub(crate) tcp_base: Vector3<f64>,
-    pub(crate) tcp_world: Vector3<f64>,
-}
-
-impl Default for KinState {
-    fn default() -> Self {
-        Self {
-            rot0: [Matrix3::identity(); JOINTS + 1],
-            org0: [Vector3::zeros(); JOINTS + 1],
-            rot: [Matrix3::identity(); JOINTS + 1],
-            org: [Vector3::zeros(); JOINTS + 1],
-            sincos0: [(0.0, 1.0); JOINTS],
-            theta: [0.0; JOINTS],
-            tau: [0.0; JOINTS],
-            moment: [Vector3::zeros(); JOINTS + 1],
-            mass: [0.0; JOINTS + 1],
-            tcp_base: Vector3::zeros(),
-            tcp_world: Vector3::zeros(),
-        }
-    }
-}
-
-impl KinState {
-    /// Holding torques of the last evaluation, N m.
-    pub fn torques(&self) -> &Joints {
-        &self.tau
-    }
-
-    /// Joint angles of the last evaluation including offsets and deflections, rad.
-    pub fn theta(&self) -> &Joints {
-        &self.theta
-    }
-
-    /// TCP in {W} of the last evaluation, mm.
-    pub fn tcp_world(&self) -> Vector3<f64> {
-        self.tcp_world
-    }
-
-    /// `base_from_frame_i` of the last evaluation (i = 0..=6, deflected configuration), mm.
-    pub fn base_from_frame(&self, i: usize) -> Isometry3<f64> {
-        isometry(&self.rot[i], &self.org[i])
-    }
-}
-
-fn isometry(r: &Matrix3<f64>, p: &Vector3<f64>) -> Isometry3<f64> {
-    let rot = UnitQuaternion::from_matrix(r);
-    Isometry3::from_parts(Translation3::from(*p), rot)
-}
 
 /// Builds frames 1..=6 for MDH angles given by their sines and cosines.
 #[inline(always)]
@@ -173,12 +109,20 @@ impl Motion {
 
 /// The motion caused by a unit change of link parameter `kind` of joint `i`, in the frames `rot/org`.
 #[inline(always)]
-fn link_motion(model: &RobotModel, rot: &[Matrix3<f64>; JOINTS + 1], org: &[Vector3<f64>; JOINTS + 1], i: usize, kind: LinkParam) -> Option<Motion> {
+fn link_motion(
+    model: &RobotModel,
+    rot: &[Matrix3<f64>; JOINTS + 1],
+    org: &[Vector3<f64>; JOINTS + 1],
+    i: usize,
+    kind: LinkParam,
+) -> Option<Motion> {
     let prev_x = rot[i - 1].column(0).into_owned();
     Some(match kind {
         LinkParam::Alpha => Motion::Rotation { axis: prev_x, point: org[i - 1] },
         LinkParam::A => Motion::Translation(prev_x),
-        LinkParam::Beta => Motion::Rotation { axis: rot[i - 1] * model.joint[i - 1].beta_axis, point: org[i - 1] + prev_x * model.data().links[i - 1].a },
+        LinkParam::Beta => {
+            Motion::Rotation { axis: rot[i - 1] * model.joint[i - 1].beta_axis, point: org[i - 1] + prev_x * model.data().links[i - 1].a }
+        }
         LinkParam::ThetaOffset => Motion::Rotation { axis: rot[i].column(2).into_owned(), point: org[i] },
         LinkParam::D => Motion::Translation(rot[i].column(2).into_owned()),
         LinkParam::Compliance => return None,
@@ -225,7 +169,9 @@ pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &Par
                 };
                 if compliant && let Some(m0) = link_motion(model, &st.rot0, &st.org0, i, kind) {
                     dp += match m0 {
-                        Motion::Rotation { axis, point } => w_suffix[i] * axis + u_prefix[i] * axis.cross(&(st.moment[i] - point * st.mass[i])),
+                        Motion::Rotation { axis, point } => {
+                            w_suffix[i] * axis + u_prefix[i] * axis.cross(&(st.moment[i] - point * st.mass[i]))
+                        }
                         Motion::Translation(t) => u_prefix[i] * (t * st.mass[i]),
                     };
                 }

@@ -5,14 +5,16 @@ pub mod ik;
 pub mod kinematics;
 pub mod model;
 pub mod params;
+pub mod state;
 pub mod statics;
 pub mod truth;
 pub mod virtual_robot;
 
 pub use ik::{IkError, inverse};
-pub use kinematics::{KinState, forward, tcp_jacobian, tcp_jacobian_matrix, tcp_world, world_from_base, world_from_flange};
+pub use kinematics::{forward, tcp_jacobian, tcp_jacobian_matrix, tcp_world, world_from_base, world_from_flange};
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
+pub use state::KinState;
 pub use statics::gravity_torques;
 pub use truth::{DeviationSpec, deviate};
 pub use virtual_robot::{UnmodelledSpec, VirtualRobot};

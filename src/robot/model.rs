@@ -215,7 +215,8 @@ fn validate(d: &RobotData) -> Result<(), ModelError> {
     };
     for (i, l) in d.links.iter().enumerate() {
         let j = i + 1;
-        let named = [("alpha", l.alpha), ("a", l.a), ("beta", l.beta), ("theta_offset", l.theta_offset), ("d", l.d), ("compliance", l.compliance)];
+        let named =
+            [("alpha", l.alpha), ("a", l.a), ("beta", l.beta), ("theta_offset", l.theta_offset), ("d", l.d), ("compliance", l.compliance)];
         for (name, v) in named {
             finite(&|| format!("joint {j} {name}"), v)?;
         }
@@ -247,4 +248,18 @@ fn validate(d: &RobotData) -> Result<(), ModelError> {
         }
     }
     Ok(())
+}
+
+impl XyzZyx {
+    /// The eq. 7 parameters of a rigid transform: `T = Dx Dy Dz Rz(alpha) Ry(beta) Rx(gamma)`.
+    pub fn from_isometry(t: &nalgebra::Isometry3<f64>) -> Self {
+        let r = t.rotation.to_rotation_matrix();
+        // Rz(a) Ry(b) Rx(g): r20 = -sin b, r21 = cos b sin g, r22 = cos b cos g, r10 = sin a cos b, r00 = cos a cos b.
+        let m = r.matrix();
+        let beta = (-m[(2, 0)]).asin();
+        let gamma = m[(2, 1)].atan2(m[(2, 2)]);
+        let alpha = m[(1, 0)].atan2(m[(0, 0)]);
+        let p = t.translation.vector;
+        Self { x: p.x, y: p.y, z: p.z, alpha, beta, gamma }
+    }
 }

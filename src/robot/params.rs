@@ -100,8 +100,14 @@ impl Unit {
     }
 }
 
-const BASE_NAMES: [(&str, BaseParam); 6] =
-    [("x0W", BaseParam::X), ("y0W", BaseParam::Y), ("z0W", BaseParam::Z), ("alpha0W", BaseParam::Alpha), ("beta0W", BaseParam::Beta), ("gamma0W", BaseParam::Gamma)];
+const BASE_NAMES: [(&str, BaseParam); 6] = [
+    ("x0W", BaseParam::X),
+    ("y0W", BaseParam::Y),
+    ("z0W", BaseParam::Z),
+    ("alpha0W", BaseParam::Alpha),
+    ("beta0W", BaseParam::Beta),
+    ("gamma0W", BaseParam::Gamma),
+];
 const TOOL_NAMES: [&str; 3] = ["xT6", "yT6", "zT6"];
 
 impl ParamId {
@@ -135,8 +141,14 @@ impl ParamId {
             return Some(ParamId::Tool(k));
         }
         // Longest prefixes first: "alpha" before "a", "theta_offs" before nothing else.
-        let table: [(&str, LinkParam, usize); 6] =
-            [("theta_offs", LinkParam::ThetaOffset, 0), ("alpha", LinkParam::Alpha, 1), ("beta", LinkParam::Beta, 1), ("a", LinkParam::A, 1), ("d", LinkParam::D, 0), ("c", LinkParam::Compliance, 0)];
+        let table: [(&str, LinkParam, usize); 6] = [
+            ("theta_offs", LinkParam::ThetaOffset, 0),
+            ("alpha", LinkParam::Alpha, 1),
+            ("beta", LinkParam::Beta, 1),
+            ("a", LinkParam::A, 1),
+            ("d", LinkParam::D, 0),
+            ("c", LinkParam::Compliance, 0),
+        ];
         for (prefix, kind, shift) in table {
             if let Some(rest) = name.strip_prefix(prefix) {
                 let index: usize = rest.parse().ok()?;
@@ -274,7 +286,10 @@ impl ParamSet {
 
     /// A set from names in the paper's notation.
     pub fn from_names<S: AsRef<str>>(names: &[S]) -> Result<Self, ParamError> {
-        let ids = names.iter().map(|n| ParamId::parse(n.as_ref()).ok_or_else(|| ParamError::Unknown(n.as_ref().to_string()))).collect::<Result<Vec<_>, _>>()?;
+        let ids = names
+            .iter()
+            .map(|n| ParamId::parse(n.as_ref()).ok_or_else(|| ParamError::Unknown(n.as_ref().to_string())))
+            .collect::<Result<Vec<_>, _>>()?;
         Self::new(ids)
     }
 

@@ -13,8 +13,8 @@
 
 use nalgebra::Vector3;
 
-use super::kinematics::KinState;
 use super::model::{JOINTS, Joints, RobotModel};
+use super::state::KinState;
 
 /// Fills `st.tau` (N m), `st.moment` and `st.mass` from the frames at `theta0` already in `st`.
 pub(crate) fn gravity_pass(model: &RobotModel, st: &mut KinState) {

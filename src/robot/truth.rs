@@ -36,7 +36,9 @@ pub fn deviate<R: Rng + ?Sized>(nominal: &RobotModel, set: &ParamSet, spec: &Dev
             let z: f64 = std.sample(rng);
             let current = id.get(nominal.data());
             let delta = match (id, id.unit()) {
-                (ParamId::Link { kind: LinkParam::Compliance, .. }, _) => Unit::MdegPerNm.to_internal(-(z * spec.compliance_mdeg_per_nm).abs()),
+                (ParamId::Link { kind: LinkParam::Compliance, .. }, _) => {
+                    Unit::MdegPerNm.to_internal(-(z * spec.compliance_mdeg_per_nm).abs())
+                }
                 (_, Unit::Mm) => z * spec.length_mm,
                 (_, Unit::Deg) => Unit::Deg.to_internal(z * spec.angle_deg),
                 (_, Unit::MdegPerNm) => Unit::MdegPerNm.to_internal(z * spec.compliance_mdeg_per_nm),

@@ -11,8 +11,9 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
 
-use super::kinematics::{KinState, forward};
+use super::kinematics::forward;
 use super::model::{JOINTS, Joints, RobotModel};
+use super::state::KinState;
 
 /// Effects outside the identified model, as a scenario describes them. Every amplitude defaults
 /// to zero (off).
@@ -59,7 +60,13 @@ pub struct VirtualRobot {
 impl VirtualRobot {
     /// Draws the unmodelled effects of `spec` and scales the joint noise so that the ISO 9283
     /// repeatability at `reference_q` is `repeatability_mm`.
-    pub fn new<R: Rng + ?Sized>(truth: RobotModel, spec: &UnmodelledSpec, repeatability_mm: f64, reference_q: &Joints, rng: &mut R) -> Self {
+    pub fn new<R: Rng + ?Sized>(
+        truth: RobotModel,
+        spec: &UnmodelledSpec,
+        repeatability_mm: f64,
+        reference_q: &Joints,
+        rng: &mut R,
+    ) -> Self {
         let phase = Uniform::new(0.0, 2.0 * PI).expect("range");
         let harmonics = std::array::from_fn(|_| {
             let mut h = Vec::new();

@@ -10,26 +10,25 @@
 //! robot's base frame.
 
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
-use rand::{Rng, RngExt};
+use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
 
 use super::head::IdentifiedHead;
 use super::{Spms, iso9283};
-use crate::campaign::xyz_zyx;
-use crate::experiment::stream;
 use crate::identify::least_squares::{FitOptions, Observation, identify};
 use crate::robot::builtin::{er20c10_table4, er20c10_table5};
 use crate::robot::ik::refine;
 use crate::robot::{Joints, KinState, ParamSet, RobotModel, UnmodelledSpec, VirtualRobot, XyzZyx, forward};
+use crate::instrument::laser_tracker::AxisNoise;
+use crate::seeds::{spms_cell as streams, stream};
 
 /// The robot, as a scenario describes it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ArmSpec {
-    /// The true geometry: `table5_without_dtheta2` (Table 5 with delta theta_2 left out),
-    /// `table5` (all of Table 5) or `table4` (the nominal: only unmodelled effects remain).
-    pub truth: String,
+    /// The true geometry.
+    pub truth: TruthTable,
     /// Nominal reference-sphere centre in the flange frame, mm.
     pub sphere_flange_mm: [f64; 3],
     /// Error of the true sphere centre from the nominal, per axis (normal std), mm.
@@ -45,7 +44,7 @@ pub struct ArmSpec {
 impl Default for ArmSpec {
     fn default() -> Self {
         Self {
-            truth: "table5_without_dtheta2".into(),
+            truth: TruthTable::Table5WithoutDtheta2,
             sphere_flange_mm: [40.0, 0.0, 150.0],
             sphere_flange_error_mm: 0.2,
             repeatability_mm: 0.05,
@@ -55,14 +54,26 @@ impl Default for ArmSpec {
     }
 }
 
+/// Which published table the true ER20-C10 geometry is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TruthTable {
+    /// Table 5 with delta theta_2 left out.
+    #[serde(rename = "table5_without_dtheta2")]
+    Table5WithoutDtheta2,
+    /// All of Table 5.
+    Table5,
+    /// Table 4, the nominal: only unmodelled effects remain.
+    Table4,
+}
+
 impl ArmSpec {
     /// The true model for the truth named in the spec (base and tool not yet placed).
-    pub fn truth_model(&self) -> Option<RobotModel> {
-        match self.truth.as_str() {
-            "table5_without_dtheta2" => Some(er20c10_table5(false)),
-            "table5" => Some(er20c10_table5(true)),
-            "table4" => Some(er20c10_table4()),
-            _ => None,
+    pub fn truth_model(&self) -> RobotModel {
+        match self.truth {
+            TruthTable::Table5WithoutDtheta2 => er20c10_table5(false),
+            TruthTable::Table5 => er20c10_table5(true),
+            TruthTable::Table4 => er20c10_table4(),
         }
     }
 }
@@ -192,9 +203,6 @@ pub struct Cell {
 /// Why the cell cannot be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CellError {
-    /// The truth name is not known.
-    #[error("unknown truth {0:?} (table5_without_dtheta2, table5, table4)")]
-    Truth(String),
     /// The station pose cannot be reached.
     #[error("the sphere point {0:?} cannot be reached with the flange facing the head")]
     Station([f64; 3]),
@@ -212,12 +220,6 @@ pub enum CellError {
         /// P1..P5.
         point: String,
     },
-}
-
-mod streams {
-    pub const TRUTH: u64 = 0x4552_3230_0001;
-    pub const POOL: u64 = 0x4552_3230_0100;
-    pub const ISO: u64 = 0x4552_3230_0002;
 }
 
 /// The flange orientation that faces the head, spun and tilted.
@@ -243,10 +245,10 @@ fn facing_head(sphere_base: &Vector3<f64>, c_head: &Vector3<f64>) -> Isometry3<f
 /// Builds the cell and measures the pool with `head` (the identified beams) on `spms` (the
 /// physical head).
 pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &IdentifiedHead, seed: u64) -> Result<Cell, CellError> {
-    let truth0 = arm.truth_model().ok_or_else(|| CellError::Truth(arm.truth.clone()))?;
+    let truth0 = arm.truth_model();
     let mut rng = stream(seed, streams::TRUTH);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
-    let tracker = Normal::new(0.0, station.tracker_sigma_um * 1e-3).expect("finite sigma");
+    let tracker = AxisNoise::new(station.tracker_sigma_um);
     let c_head = Vector3::from(station.sphere_centre_head_mm);
     let mut nominal_heads = Vec::new();
     let mut true_heads = Vec::new();
@@ -254,24 +256,28 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
         let nominal = facing_head(&Vector3::from(*p), &c_head);
         let dp = Vector3::from_fn(|_, _| normal.sample(&mut rng) * station.placement_error_mm);
         let da = Vector3::from_fn(|_, _| normal.sample(&mut rng) * station.placement_error_deg.to_radians());
-        true_heads.push(Isometry3::from_parts(Translation3::from(nominal.translation.vector + dp), UnitQuaternion::from_scaled_axis(da) * nominal.rotation));
+        true_heads.push(Isometry3::from_parts(
+            Translation3::from(nominal.translation.vector + dp),
+            UnitQuaternion::from_scaled_axis(da) * nominal.rotation,
+        ));
         nominal_heads.push(nominal);
     }
     // The tracker measures every head's A1-A3 in its own frame; the heads' frames are then
     // expressed in the first one's as measured.
-    let measured_tracker_from_head: Vec<Isometry3<f64>> = true_heads.iter().map(|t| super::measured_frame(t, &tracker, &mut rng).expect("A1-A3 are not collinear")).collect();
+    let measured_tracker_from_head: Vec<Isometry3<f64>> =
+        true_heads.iter().map(|t| super::measured_frame(t, &tracker, &mut rng).expect("A1-A3 are not collinear")).collect();
     let world_from_tracker = measured_tracker_from_head[0].inverse();
     let tool_nominal = Vector3::from(arm.sphere_flange_mm);
     let tool_true = tool_nominal + Vector3::from_fn(|_, _| normal.sample(&mut rng) * arm.sphere_flange_error_mm);
     let nominal = er20c10_table4()
         .edited(|d| {
-            d.world_from_base = xyz_zyx(&nominal_heads[0].inverse());
+            d.world_from_base = crate::robot::XyzZyx::from_isometry(&nominal_heads[0].inverse());
             d.flange_tcp_mm = tool_nominal;
         })
         .expect("valid");
     let truth = truth0
         .edited(|d| {
-            d.world_from_base = xyz_zyx(&true_heads[0].inverse());
+            d.world_from_base = crate::robot::XyzZyx::from_isometry(&true_heads[0].inverse());
             d.flange_tcp_mm = tool_true;
         })
         .expect("valid");
@@ -302,8 +308,12 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
         for _ in 0..3 {
             let seen = true_head_from_s.transform_point(&Point3::from(forward(&robot.truth, &mut KinState::default(), &q))).coords;
             shift += seen - c_head;
-            let corrected = Isometry3::from_parts(Translation3::from(nominal_s_from_base * nom * Point3::from(c_head - shift)), reference.rotation);
-            q = refine(&nominal, &corrected, &q).ok().filter(|q| nominal.within_limits(q)).ok_or(CellError::Station(station.sphere_points_base_mm[k]))?;
+            let corrected =
+                Isometry3::from_parts(Translation3::from(nominal_s_from_base * nom * Point3::from(c_head - shift)), reference.rotation);
+            q = refine(&nominal, &corrected, &q)
+                .ok()
+                .filter(|q| nominal.within_limits(q))
+                .ok_or(CellError::Station(station.sphere_points_base_mm[k]))?;
         }
         let world_from_head = world_from_tracker * measured_tracker_from_head[k];
         stations.push(Station { base_from_head: *tru, world_from_head, q, taught_shift_mm: shift });
@@ -329,14 +339,21 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
             let cos_t = 1.0 - r.random::<f64>() * (1.0 - cone.cos());
             let tilt = cos_t.clamp(-1.0, 1.0).acos();
             let facing = nominal_s_from_head.rotation * -Vector3::y();
-            let orient = presentation(&facing, tilt, r.random_range(0.0..std::f64::consts::TAU), if spin > 0.0 { r.random_range(-spin..spin) } else { 0.0 });
+            let orient = presentation(
+                &facing,
+                tilt,
+                r.random_range(0.0..std::f64::consts::TAU),
+                if spin > 0.0 { r.random_range(-spin..spin) } else { 0.0 },
+            );
             let t = station.sphere_travel_mm;
             let jitter = |r: &mut rand_chacha::ChaCha8Rng, h: f64| {
                 if h > 0.0 { r.random_range(-h..h) } else { 0.0 }
             };
             let c = c_head + Vector3::new(jitter(&mut r, t[0]), jitter(&mut r, t[1]), jitter(&mut r, t[2]));
             let aim = c - stn.taught_shift_mm;
-            let Ok(q) = refine(&nominal, &Isometry3::from_parts(Translation3::from(nominal_s_from_head * Point3::from(aim)), orient), &stn.q) else {
+            let Ok(q) =
+                refine(&nominal, &Isometry3::from_parts(Translation3::from(nominal_s_from_head * Point3::from(aim)), orient), &stn.q)
+            else {
                 rejected += 1;
                 continue;
             };
@@ -399,34 +416,34 @@ pub fn iso_test(cell: &Cell, controller: &RobotModel, iso: &IsoSpec, seed: u64) 
     let mut seed_q: Joints = [0.0, 0.3, 0.3, 0.0, 1.0, 0.0];
     let mut qs = Vec::with_capacity(5);
     for (k, p) in points.iter().enumerate() {
-        let q = refine(&ctrl, &Isometry3::from_parts(Translation3::from(*p), down), &seed_q).ok().filter(|q| ctrl.within_limits(q)).ok_or(CellError::Iso { point: format!("P{}", k + 1) })?;
+        let q = refine(&ctrl, &Isometry3::from_parts(Translation3::from(*p), down), &seed_q)
+            .ok()
+            .filter(|q| ctrl.within_limits(q))
+            .ok_or(CellError::Iso { point: format!("P{}", k + 1) })?;
         seed_q = q;
         qs.push(q);
     }
     let mut rng = stream(seed, streams::ISO);
-    let tracker = Normal::new(0.0, iso.tracker_sigma_um * 1e-3).expect("finite sigma");
+    let tracker = AxisNoise::new(iso.tracker_sigma_um);
     let mut attained: [Vec<Vector3<f64>>; 5] = Default::default();
     let mut st = KinState::default();
     let mut from = qs[4];
     for _ in 0..iso.cycles {
         for (k, q) in qs.iter().enumerate() {
             let p = robot.tcp_after_move(&mut st, q, &from, &mut rng);
-            attained[k].push(p + Vector3::from_fn(|_, _| tracker.sample(&mut rng)));
+            attained[k].push(tracker.measure(&p, &mut rng));
             from = *q;
         }
     }
-    Ok(IsoResult { ap_mm: std::array::from_fn(|k| iso9283::ap(&points[k], &attained[k])), rp_mm: std::array::from_fn(|k| iso9283::rp(&attained[k])) })
+    Ok(IsoResult {
+        ap_mm: std::array::from_fn(|k| iso9283::ap(&points[k], &attained[k])),
+        rp_mm: std::array::from_fn(|k| iso9283::rp(&attained[k])),
+    })
 }
 
 /// One identification from the pool entries `selection`, world = head frame.
 pub fn identify_from(cell: &Cell, set: &ParamSet, selection: &[usize], opts: &FitOptions) -> crate::identify::least_squares::Fit {
-    let obs: Vec<Observation> = selection.iter().map(|&i| Observation { q: cell.pool[i].q, tcp_world_mm: cell.pool[i].measured_world_mm }).collect();
+    let obs: Vec<Observation> =
+        selection.iter().map(|&i| Observation { q: cell.pool[i].q, tcp_world_mm: cell.pool[i].measured_world_mm }).collect();
     identify(&cell.nominal, set, &obs, opts)
-}
-
-/// `n` distinct pool indices drawn uniformly, ascending.
-pub fn random_selection<R: Rng + ?Sized>(pool: usize, n: usize, rng: &mut R) -> Vec<usize> {
-    let mut s = rand::seq::index::sample(rng, pool, n.min(pool)).into_vec();
-    s.sort_unstable();
-    s
 }

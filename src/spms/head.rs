@@ -11,12 +11,12 @@ use std::time::Instant;
 
 use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
-use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
 
 use super::identify::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
 use super::{Beam, ReadingError, SensorSpec, Spms, fit_centre, table2_beams};
-use crate::experiment::stream;
+use crate::instrument::laser_tracker::AxisNoise;
+use crate::seeds::{spms_head as streams, stream};
 
 /// The head and its reference sphere, as a scenario describes them.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -74,7 +74,7 @@ pub struct BeamIdSpec {
     /// LM iteration cap.
     pub lm_max_iterations: usize,
     /// Which identified head the robot calibration measures with: `paper` or `minimal`.
-    pub calibration_form: String,
+    pub calibration_form: Form,
 }
 
 impl Default for BeamIdSpec {
@@ -95,18 +95,7 @@ impl Default for BeamIdSpec {
             rough_centre_error_mm: 4.0,
             lm_tau: 1e-8,
             lm_max_iterations: 500,
-            calibration_form: "paper".into(),
-        }
-    }
-}
-
-impl BeamIdSpec {
-    /// The form the calibration measures with.
-    pub fn form(&self) -> Option<Form> {
-        match self.calibration_form.as_str() {
-            "paper" => Some(Form::Paper),
-            "minimal" => Some(Form::Minimal),
-            _ => None,
+            calibration_form: Form::Paper,
         }
     }
 }
@@ -176,13 +165,6 @@ impl HeadExperiment {
 }
 
 /// Stream parts of the head experiment.
-mod streams {
-    pub const BUILD: u64 = 0x4845_4144_0001;
-    pub const IDENT_POSES: u64 = 0x4845_4144_0002;
-    pub const PSO: u64 = 0x4845_4144_0003;
-    pub const ACCURACY: u64 = 0x4845_4144_0004;
-}
-
 /// Where the tracker and head stand in the accuracy and identification experiments, tracker frame.
 const SPHERE_TRACKER_MM: [f64; 3] = [1500.0, 200.0, 800.0];
 
@@ -204,7 +186,7 @@ pub fn build_head(spec: &HeadSpec, seed: u64) -> Spms {
 /// `n` poses of the head around the fixed sphere: readings and the head frame as the tracker
 /// measures it. A pose whose readings fail (a miss, out of range) is drawn again.
 fn poses<R: Rng + ?Sized>(spms: &Spms, id: &BeamIdSpec, n: usize, rng: &mut R) -> BeamData {
-    let tracker = Normal::new(0.0, id.tracker_sigma_um * 1e-3).expect("finite sigma");
+    let tracker = AxisNoise::new(id.tracker_sigma_um);
     let c_head = Vector3::from(id.sphere_centre_head_mm);
     let sphere = Vector3::from(SPHERE_TRACKER_MM);
     let tilt = id.head_tilt_deg.to_radians();
@@ -274,7 +256,14 @@ pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment
     });
     let mut pso_rng = stream(seed, streams::PSO);
     let t0 = Instant::now();
-    let start = pso(&data, Form::Paper, &nominal, &half, &PsoOptions { population: id.pso_population, iterations: id.pso_iterations, ..PsoOptions::default() }, &mut pso_rng);
+    let start = pso(
+        &data,
+        Form::Paper,
+        &nominal,
+        &half,
+        &PsoOptions { population: id.pso_population, iterations: id.pso_iterations, ..PsoOptions::default() },
+        &mut pso_rng,
+    );
     let pso_s = t0.elapsed().as_secs_f64();
     let paper = levenberg_marquardt(&data, Form::Paper, &start.x, id.lm_tau, id.lm_max_iterations);
     let paper_s = t0.elapsed().as_secs_f64();
@@ -286,8 +275,9 @@ pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment
     let minimal_s = t1.elapsed().as_secs_f64();
 
     let mut acc_rng = stream(seed, streams::ACCURACY);
-    let tracker = Normal::new(0.0, id.tracker_sigma_um * 1e-3).expect("finite sigma");
-    let tracker_centre: Vec<Vector3<f64>> = check.frames.iter().map(|_| Vector3::from(SPHERE_TRACKER_MM) + Vector3::from_fn(|_, _| tracker.sample(&mut acc_rng))).collect();
+    let tracker = AxisNoise::new(id.tracker_sigma_um);
+    let tracker_centre: Vec<Vector3<f64>> =
+        check.frames.iter().map(|_| tracker.measure(&Vector3::from(SPHERE_TRACKER_MM), &mut acc_rng)).collect();
     let k = spms.sensors.len();
     let make = |form: Form, label: &'static str, sol: &super::identify::Solution, seconds: f64| {
         let beams = form.unpack(&sol.x, k);

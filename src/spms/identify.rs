@@ -12,13 +12,15 @@
 //! max diag(J^T J)`, gain ratio `rho`, `lambda *= max(1/3, 1 - (2 rho - 1)^3)` on success, `lambda
 //! *= nu, nu *= 2` on failure), and particle swarm optimisation (eqs. 15-16) for a start.
 
+use crate::identify::damping::Damping;
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
 use rand::{Rng, RngExt};
 
 use super::Beam;
 
 /// The parametrisation of the beams.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Form {
     /// The paper's `P_k`, `gamma_k` (6 per beam), sphere centre.
     Paper,
@@ -27,6 +29,14 @@ pub enum Form {
 }
 
 impl Form {
+    /// Label for tables (`paper`, `minimal`), as a scenario names it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::Minimal => "minimal",
+        }
+    }
+
     /// Unknowns per beam.
     pub fn per_beam(self) -> usize {
         match self {
@@ -163,18 +173,16 @@ pub fn levenberg_marquardt(data: &BeamData, form: Form, x0: &DVector<f64>, tau: 
     let mut j = data.jacobian(form, &x);
     let mut a = j.transpose() * &j;
     let mut g = j.transpose() * &r;
-    let mut lambda = tau * a.diagonal().max();
-    let mut nu = 2.0;
+    let mut damping = Damping::start(tau, a.diagonal().max());
     let mut iterations = 0;
     while iterations < max_iterations {
         iterations += 1;
         let mut damped = a.clone();
         for i in 0..damped.nrows() {
-            damped[(i, i)] += lambda;
+            damped[(i, i)] += damping.mu;
         }
         let Some(step) = damped.cholesky().map(|c| c.solve(&(-&g))) else {
-            lambda *= nu;
-            nu *= 2.0;
+            damping.reject();
             continue;
         };
         if step.norm() <= 1e-12 * (x.norm() + 1e-12) {
@@ -183,25 +191,20 @@ pub fn levenberg_marquardt(data: &BeamData, form: Form, x0: &DVector<f64>, tau: 
         let xn = &x + &step;
         let rn = data.residuals(form, &xn);
         // Gain ratio: actual over predicted decrease (eq. 21).
-        let predicted = step.dot(&(lambda * &step - &g)) / 2.0;
+        let predicted = step.dot(&(damping.mu * &step - &g)) / 2.0;
         let rho = (r.norm_squared() - rn.norm_squared()) / 2.0 / predicted.max(f64::MIN_POSITIVE);
-        if rho > 0.0 {
+        if damping.update(rho) {
             x = xn;
             r = rn;
             j = data.jacobian(form, &x);
             a = j.transpose() * &j;
             g = j.transpose() * &r;
-            lambda *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
-            nu = 2.0;
             if g.amax() < 1e-14 {
                 break;
             }
-        } else {
-            lambda *= nu;
-            nu *= 2.0;
         }
     }
-    let singular_values = j.clone().svd(false, false).singular_values.as_slice().to_vec();
+    let singular_values = crate::numeric::svd(j.clone(), false, false).map(|s| s.singular_values.as_slice().to_vec()).unwrap_or_default();
     Solution { rms_mm: (r.norm_squared() / r.len().max(1) as f64).sqrt(), x, iterations, singular_values }
 }
 
@@ -230,9 +233,17 @@ impl Default for PsoOptions {
 
 /// Particle swarm over the box `centre +- half_width` (eq. 15), inertia `w_n = w_max - (w_max -
 /// w_min) n^2 / g^2` (eq. 16); velocities clamped to the box width.
-pub fn pso<R: Rng + ?Sized>(data: &BeamData, form: Form, centre: &DVector<f64>, half_width: &DVector<f64>, opts: &PsoOptions, rng: &mut R) -> Solution {
+pub fn pso<R: Rng + ?Sized>(
+    data: &BeamData,
+    form: Form,
+    centre: &DVector<f64>,
+    half_width: &DVector<f64>,
+    opts: &PsoOptions,
+    rng: &mut R,
+) -> Solution {
     let d = centre.len();
-    let mut xs: Vec<DVector<f64>> = (0..opts.population).map(|_| DVector::from_fn(d, |i, _| centre[i] + half_width[i] * rng.random_range(-1.0..=1.0))).collect();
+    let mut xs: Vec<DVector<f64>> =
+        (0..opts.population).map(|_| DVector::from_fn(d, |i, _| centre[i] + half_width[i] * rng.random_range(-1.0..=1.0))).collect();
     let mut vs: Vec<DVector<f64>> = (0..opts.population).map(|_| DVector::zeros(d)).collect();
     let mut pbest = xs.clone();
     let mut pcost: Vec<f64> = xs.iter().map(|x| data.cost(form, x)).collect();

@@ -17,6 +17,8 @@ use rand::{Rng, RngExt};
 use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
 
+use crate::instrument::laser_tracker::AxisNoise;
+
 /// One laser beam in the head frame: origin `p` (the zero of the reading) and unit direction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Beam {
@@ -83,7 +85,14 @@ pub struct SensorSpec {
 
 impl Default for SensorSpec {
     fn default() -> Self {
-        Self { range_min_mm: 75.0, range_max_mm: 130.0, linearity_pct_fs: 0.15, repeatability_um: 10.0, temperature_pct_fs_per_c: 0.06, temperature_delta_c: 0.0 }
+        Self {
+            range_min_mm: 75.0,
+            range_max_mm: 130.0,
+            linearity_pct_fs: 0.15,
+            repeatability_um: 10.0,
+            temperature_pct_fs_per_c: 0.06,
+            temperature_delta_c: 0.0,
+        }
     }
 }
 
@@ -181,9 +190,9 @@ impl Spms {
 pub const FRAME_POINTS_MM: [[f64; 3]; 3] = [[0.0, 0.0, 0.0], [120.0, 0.0, 0.0], [35.0, 80.0, 0.0]];
 
 /// `tracker_from_head` as a tracker measures it: A1-A3 ([`FRAME_POINTS_MM`]) placed by the true
-/// `tracker_from_head`, each coordinate with a draw of `noise`, then Gram-Schmidt (eqs. 4-7).
-pub fn measured_frame<R: Rng + ?Sized>(tracker_from_head: &Isometry3<f64>, noise: &Normal<f64>, rng: &mut R) -> Option<Isometry3<f64>> {
-    let a = FRAME_POINTS_MM.map(|p| tracker_from_head.transform_point(&nalgebra::Point3::from(p)).coords + Vector3::from_fn(|_, _| noise.sample(rng)));
+/// `tracker_from_head`, each measured by `tracker`, then Gram-Schmidt (eqs. 4-7).
+pub fn measured_frame<R: Rng + ?Sized>(tracker_from_head: &Isometry3<f64>, tracker: &AxisNoise, rng: &mut R) -> Option<Isometry3<f64>> {
+    let a = FRAME_POINTS_MM.map(|p| tracker.measure(&tracker_from_head.transform_point(&nalgebra::Point3::from(p)).coords, rng));
     frame_from_points(&a[0], &a[1], &a[2])
 }
 

@@ -28,7 +28,14 @@ impl ErrorStats {
         let var = if values.len() > 1 { values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
         let mut sorted = values.to_vec();
         sorted.sort_by(f64::total_cmp);
-        Self { mean, median: quantile(&sorted, 0.5), std: var.sqrt(), p95: quantile(&sorted, 0.95), max: sorted[sorted.len() - 1], rms: (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt() }
+        Self {
+            mean,
+            median: quantile(&sorted, 0.5),
+            std: var.sqrt(),
+            p95: quantile(&sorted, 0.95),
+            max: sorted[sorted.len() - 1],
+            rms: (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt(),
+        }
     }
 }
 
@@ -42,17 +49,24 @@ pub fn quantile(sorted: &[f64], p: f64) -> f64 {
     sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
 }
 
-/// Median of an unsorted sample.
-pub fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
+/// The finite values of a sample, ascending: the sample every order statistic below is taken of.
+/// A value that is NaN or infinite (a condition number of a rank-deficient fit, a figure of a run
+/// that produced none) is not a draw of the quantity and is left out.
+pub fn finite_sorted(values: &[f64]) -> Vec<f64> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     v.sort_by(f64::total_cmp);
-    quantile(&v, 0.5)
+    v
 }
 
-/// Interquartile range of an unsorted sample.
+/// Median of the finite values of an unsorted sample (mean of the middle two for even sizes);
+/// NaN when there are none.
+pub fn median(values: &[f64]) -> f64 {
+    quantile(&finite_sorted(values), 0.5)
+}
+
+/// Interquartile range of the finite values of an unsorted sample; NaN when there are none.
 pub fn iqr(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
+    let v = finite_sorted(values);
     quantile(&v, 0.75) - quantile(&v, 0.25)
 }
 

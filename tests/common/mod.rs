@@ -8,9 +8,15 @@ use calsim::robot::{Joints, RobotModel};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-/// `shared/reference/<name>`, beside the clone.
+/// `reference/<name>`: the repository's copy of the reference data.
 pub fn reference(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("reference").join(name)
+}
+
+/// `shared/reference/<name>` beside the clone, when it is there (the project's upstream copy).
+pub fn shared_reference(name: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference").join(name);
+    p.exists().then_some(p)
 }
 
 /// A seeded RNG for a test.

@@ -1,0 +1,98 @@
+//! Every random stream of calsim and the key that seeds it: the common-random-numbers scheme at a
+//! glance.
+//!
+//! A stream is a ChaCha8 generator seeded from the scenario seed and a key naming *what* it draws
+//! (a sphere's pool targets, a validation pose's noise, a study task), never *where* it is drawn
+//! from. Two scenarios that differ in one amplitude or one design choice therefore draw the same
+//! targets, noise and poses for everything else, and a task's result does not depend on which
+//! thread or shard ran it.
+//!
+//! Keys are composed in two levels: a part of the experiment is `stream(seed, part)` or, where the
+//! part has its own sub-streams, `split_seed(seed, part)` becomes the seed of those (the campaign's
+//! streams below are keyed under [`experiment::CAMPAIGN`]). The numeric values are part of the
+//! results: changing one changes every table drawn from it.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// A stream of its own for the part `part` of whatever `seed` seeds.
+pub fn stream(seed: u64, part: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(split_seed(seed, part))
+}
+
+/// Mixes a seed and an index into an independent seed (SplitMix64 finaliser).
+pub fn split_seed(seed: u64, index: u64) -> u64 {
+    let mut z = seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x632B_E59B_D9B4_E019);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The parts of the virtual TriCal experiment, keyed under the scenario seed.
+pub mod experiment {
+    /// Cell: ball tolerances, ballbar noise, the measured sphere centres.
+    pub const CELL: u64 = 1;
+    /// Physical robot: harmonic orders and phases, joint noise.
+    pub const ROBOT: u64 = 2;
+    /// TriCal device: indicator errors and misalignments.
+    pub const TRICAL: u64 = 3;
+    /// Laser tracker: placement and registration.
+    pub const TRACKER: u64 = 4;
+    /// Campaign: the seed of the streams in [`super::campaign`].
+    pub const CAMPAIGN: u64 = 5;
+}
+
+/// The campaign's streams, keyed under `split_seed(seed, experiment::CAMPAIGN)`.
+pub mod campaign {
+    /// CMM measurement of the TCP.
+    pub const CMM: u64 = 1;
+    /// Semi-automatic steps (TCP check, locating the spheres).
+    pub const SEMI_AUTOMATIC: u64 = 2;
+    /// Validation configurations.
+    pub const VALIDATION_POSES: u64 = 3;
+    /// Pool targets of sphere k: `POOL_TARGETS + k`.
+    pub const POOL_TARGETS: u64 = 100;
+    /// Centring of pool attempt t of sphere k: `POOL_CENTRING + k * 2^32 + t`.
+    pub const POOL_CENTRING: u64 = 1 << 40;
+    /// Move and tracker noise of validation pose i: `VALIDATION_NOISE + i`.
+    pub const VALIDATION_NOISE: u64 = 1 << 41;
+}
+
+/// The SPMS head's streams, keyed under the scenario seed.
+pub mod spms_head {
+    /// Assembly errors of the beams and the sensors' error curves.
+    pub const BUILD: u64 = 0x4845_4144_0001;
+    /// Poses of the beam identification.
+    pub const IDENT_POSES: u64 = 0x4845_4144_0002;
+    /// Particle swarm.
+    pub const PSO: u64 = 0x4845_4144_0003;
+    /// Accuracy experiment against the tracker.
+    pub const ACCURACY: u64 = 0x4845_4144_0004;
+}
+
+/// The SPMS calibration cell's streams, keyed under the scenario seed.
+pub mod spms_cell {
+    /// Physical robot, stations and tool.
+    pub const TRUTH: u64 = 0x4552_3230_0001;
+    /// Pool candidate `index` at station k: `POOL + k * 2^32 + index`.
+    pub const POOL: u64 = 0x4552_3230_0100;
+    /// ISO 9283 cycles.
+    pub const ISO: u64 = 0x4552_3230_0002;
+}
+
+/// Study tasks: task i of a study draws from `stream(split_seed(seed, salt), i)`.
+pub mod study {
+    /// TriCal study tasks.
+    pub const TRICAL: u64 = 0x5354_5544_5900_0000;
+    /// SPMS study tasks.
+    pub const SPMS: u64 = 0x5350_4d53_5441_534b;
+}
+
+/// The stream of task `index` of a study whose tasks are salted with `salt` (see [`study`]).
+pub fn task_stream(seed: u64, salt: u64, index: usize) -> ChaCha8Rng {
+    stream(split_seed(seed, salt), index as u64)
+}
+
+/// The configurations of the load-time identifiability check (keyed under seed 0: the same for
+/// every scenario).
+pub const STRUCTURAL_CHECK: u64 = 0x4f42_5345_5256;
