@@ -15,12 +15,14 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::campaign::uniform_configuration;
+use crate::identify::FitOutcome;
 use crate::identify::{FitOptions, Observation, Solver, identify};
 use crate::io::report;
 use crate::io::results::Timings;
 use crate::io::scenario;
 use crate::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use crate::robot::{KinState, ParamSet, forward};
+use crate::study::Identified;
 use crate::study::check::{Check, tally};
 use crate::study::figures::{self, Figures};
 
@@ -59,7 +61,7 @@ struct RunArgs {
     #[arg(long, value_parser = parse_sizes)]
     set_sizes: Option<SetSizes>,
     /// Repetitions per set size, replacing the scenario's.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_REPETITIONS as i64))]
     repetitions: Option<u32>,
     /// Skip the figures (PNG and SVG of the paper's Figs. 7-13).
     #[arg(long)]
@@ -84,6 +86,9 @@ fn parse_sizes(s: &str) -> Result<SetSizes, String> {
     };
     if step == 0 || a > b {
         return Err(format!("{s}: needs start <= end and a step > 0"));
+    }
+    if ((b - a) / step) as usize >= crate::study::MAX_SET_SIZES {
+        return Err(format!("{s}: more than {} set sizes", crate::study::MAX_SET_SIZES));
     }
     Ok(SetSizes((a..=b).step_by(step as usize).collect()))
 }
@@ -167,6 +172,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     // Re-check what the overrides changed (sizes against the pool and the parameters).
     let text = scenario.text.clone();
     scenario::check_overrides(&scenario).map_err(|e| e.to_string())?;
+    crate::io::out_dir::prepare(&args.out, &scenario.name).map_err(|e| e.to_string())?;
     let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
 
@@ -175,7 +181,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     let experiment = spec.build(scenario.seed).map_err(|e| format!("{}: campaign: {e}", args.scenario.display()))?;
     let campaign_s = t0.elapsed().as_secs_f64();
     let before = spec.before_model(&experiment.campaign);
-    let n_tasks = scenario.study.set_sizes.len() * scenario.study.repetitions as usize;
+    let n_tasks = scenario.study.tasks().len();
     let bar = ProgressBar::new(n_tasks as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} identifications, {elapsed} elapsed, ETA {eta}").expect("template"));
     let results = pool
@@ -215,6 +221,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     debug_assert_eq!(text, scenario.text);
 
     println!("{}", report::terminal_table(&rows));
+    fit_health(results.tasks.iter().map(|t| &t.id))?;
     println!(
         "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",
         study_s,
@@ -227,6 +234,35 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         dest.display()
     );
     Ok(verdict(&rows, check))
+}
+
+/// One line at the terminal when identifications failed: how many gave no model (and which
+/// parameters they could not separate), how many stopped at the iteration cap. A study in which
+/// no identification gave a model is an error.
+fn fit_health<'a>(ids: impl Iterator<Item = &'a Identified>) -> Result<(), String> {
+    let (mut total, mut no_model, mut capped) = (0, 0, 0);
+    let mut names: Vec<&str> = Vec::new();
+    for id in ids {
+        total += 1;
+        match &id.outcome {
+            FitOutcome::RankDeficient { .. } | FitOutcome::NotFinite => no_model += 1,
+            FitOutcome::IterationCap { .. } => capped += 1,
+            _ => {}
+        }
+        for n in id.outcome.unidentifiable() {
+            if !names.contains(&n.as_str()) {
+                names.push(n);
+            }
+        }
+    }
+    let hidden = if names.is_empty() { String::new() } else { format!(" (could not separate: {})", names.join(" ")) };
+    if no_model == total && total > 0 {
+        return Err(format!("every one of the {total} identifications failed{hidden}: no set of the pool identifies this parameter set"));
+    }
+    if no_model > 0 || capped > 0 {
+        eprintln!("warning: {no_model} of {total} identifications gave no model{hidden}; {capped} stopped at the iteration cap");
+    }
+    Ok(())
 }
 
 /// The exit code of `run` (success) or `check` (1 when a figure misses its band), with the
@@ -245,6 +281,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
     let st = &mut sc.spec.study;
     apply_overrides(args, &mut sc.seed, &mut st.set_sizes, &mut st.table_set_size, &mut st.repetitions);
     scenario::check_spms(&sc.spec, &format!("{} (with command-line overrides)", args.scenario.display())).map_err(|e| e.to_string())?;
+    crate::io::out_dir::prepare(&args.out, &sc.name).map_err(|e| e.to_string())?;
     let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
     eprintln!("calsim {}: {} (SPMS, seed {}), {} threads", if check { "check" } else { "run" }, sc.name, sc.seed, threads);
@@ -275,6 +312,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         .map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     println!("{}", report::terminal_table(&rows));
+    fit_health(results.tasks.iter().map(|t| &t.id))?;
     let t = &results.timings;
     println!(
         "timing: study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",

@@ -400,12 +400,11 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     let smax = singular_values.first().copied().unwrap_or(0.0);
     let smin = singular_values.last().copied().unwrap_or(0.0);
     // Eigenvectors only when some singular value is numerically zero: they name the parameters.
-    let hidden =
-        if smin < opts.rank_rtol * smax || smax == 0.0 {
-            Spectrum::new(&ne.n).map_or_else(|| (0..p).collect(), |s| s.unidentifiable(set, opts.rank_rtol))
-        } else {
-            Vec::new()
-        };
+    let hidden = if smin < opts.rank_rtol * smax || smax == 0.0 {
+        Spectrum::new(&ne.n).map_or_else(|| (0..p).collect(), |s| s.unidentifiable(set, opts.rank_rtol))
+    } else {
+        Vec::new()
+    };
     let condition_number = if hidden.is_empty() && smin > 0.0 { smax / smin } else { f64::INFINITY };
     if !hidden.is_empty() && opts.truncate {
         let names = set.names();

@@ -199,30 +199,7 @@ pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, report: &R
     write_atomically(out, &scenario.name, |tmp| write_into(tmp, scenario, results, report))
 }
 
-/// Runs `fill` on a fresh temporary directory beside `out/<name>` and renames it into place;
-/// on failure the temporary directory is removed and `out/<name>` is left as it was.
-pub(crate) fn write_atomically(out: &Path, name: &str, fill: impl FnOnce(&Path) -> std::io::Result<()>) -> std::io::Result<PathBuf> {
-    fs::create_dir_all(out)?;
-    let dest = out.join(name);
-    let tmp = out.join(format!(".{name}.tmp-{}", std::process::id()));
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp)?;
-    }
-    fs::create_dir_all(&tmp)?;
-    if let Err(e) = fill(&tmp) {
-        let _ = fs::remove_dir_all(&tmp);
-        return Err(e);
-    }
-    let old = out.join(format!(".{name}.old-{}", std::process::id()));
-    if dest.exists() {
-        fs::rename(&dest, &old)?;
-    }
-    fs::rename(&tmp, &dest)?;
-    if old.exists() {
-        fs::remove_dir_all(&old)?;
-    }
-    Ok(dest)
-}
+pub(crate) use crate::io::out_dir::write_atomically;
 
 fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
     let Report { figures: f, checks, threads, timings, ref extras } = *report;

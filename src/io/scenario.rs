@@ -283,7 +283,12 @@ impl Checker<'_> {
         }
         let tasks = s.selections.len() as u64 * s.set_sizes.len() as u64 * u64::from(s.repetitions);
         if tasks > crate::study::MAX_TASKS {
-            return Err(self.fail("study", "repetitions", s.repetitions, &format!("{tasks} identifications in all: at most {}", crate::study::MAX_TASKS)));
+            return Err(self.fail(
+                "study",
+                "repetitions",
+                s.repetitions,
+                &format!("{tasks} identifications in all: at most {}", crate::study::MAX_TASKS),
+            ));
         }
         self.within("study", "detmax_max_excursion", s.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
         self.within("study", "rank_rtol", s.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
@@ -302,7 +307,12 @@ impl Checker<'_> {
                 return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be a finite published value"));
             }
             if !(b.tolerance.is_finite() && (0.0..=10.0).contains(&b.tolerance)) {
-                return Err(self.fail("expect", &format!("{key}.tolerance"), b.tolerance, "must be a relative tolerance within [0, 10] (0.2 = +-20 %)"));
+                return Err(self.fail(
+                    "expect",
+                    &format!("{key}.tolerance"),
+                    b.tolerance,
+                    "must be a relative tolerance within [0, 10] (0.2 = +-20 %)",
+                ));
             }
         }
         Ok(())
@@ -405,7 +415,14 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     c.within("trical", "indicator_misalignment_deg", t.indicator_misalignment_deg, 0.0, 10.0, "axis tilt")?;
     c.within("trical", "indicator_range_mm", t.indicator_range_mm, 0.1, 100.0, "stroke")?;
     c.within("trical", "tip_radius_mm", t.tip_radius_mm, 0.0, 10.0, "contact tip")?;
-    c.within("trical", "epsilon_mm", t.epsilon_mm, 1e-4, 0.5, "the centring tolerance: the paper uses 0.010 mm; above 0.5 mm the device no longer centres")?;
+    c.within(
+        "trical",
+        "epsilon_mm",
+        t.epsilon_mm,
+        1e-4,
+        0.5,
+        "the centring tolerance: the paper uses 0.010 mm; above 0.5 mm the device no longer centres",
+    )?;
     c.count("trical", "max_iterations", t.max_iterations.into(), 1, 1000, "centring iterations")?;
     c.within("trical", "wait_s", t.wait_s, 0.0, 3600.0, "time")?;
     c.within("trical", "correction_move_s", t.correction_move_s, 0.0, 3600.0, "time")?;
@@ -432,7 +449,14 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     c.within("campaign", "approach_cone_deg", cp.approach_cone_deg, 0.0, 90.0, "half-angle around the vertical")?;
     c.count("campaign", "validation_poses", cp.validation_poses.into(), 1, 100_000, "validation configurations")?;
     c.within("campaign", "validation_margin", cp.validation_margin, 0.0, 0.45, "fraction of each joint range")?;
-    c.count("campaign", "tcp_check_configurations", cp.tcp_check_configurations.into(), 2, 100, "the TCP check needs two orientations at least")?;
+    c.count(
+        "campaign",
+        "tcp_check_configurations",
+        cp.tcp_check_configurations.into(),
+        2,
+        100,
+        "the TCP check needs two orientations at least",
+    )?;
     c.within("campaign", "jog_error_mm", cp.jog_error_mm, 0.0, 5.0, "jog distance: the indicators must touch the ball")?;
     c.count("campaign", "max_tries_per_configuration", cp.max_tries_per_configuration.into(), 1, 100_000, "tries per kept configuration")?;
 
@@ -587,7 +611,12 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
     c.count("beams", "pso_iterations", b.pso_iterations as u64, 1, 10_000, "iterations")?;
     let evaluations = b.pso_population as u64 * b.pso_iterations as u64;
     if evaluations > 100_000_000 {
-        return Err(c.fail("beams", "pso_iterations", b.pso_iterations, &format!("{evaluations} swarm evaluations: at most 1e8 (population x iterations)")));
+        return Err(c.fail(
+            "beams",
+            "pso_iterations",
+            b.pso_iterations,
+            &format!("{evaluations} swarm evaluations: at most 1e8 (population x iterations)"),
+        ));
     }
     c.within("beams", "pso_half_width_mm", b.pso_half_width_mm, 1e-6, 100.0, "search box")?;
     c.within("beams", "pso_half_width_dir", b.pso_half_width_dir, 1e-9, 1.0, "search box")?;
@@ -616,7 +645,12 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
             c.within("station", &format!("sphere_points_base_mm[{i}][{k}]"), *v, -3000.0, 3000.0, "within the ER20-C10's reach")?;
         }
         if p[0].hypot(p[1]) < 300.0 {
-            return Err(c.fail("station", "sphere_points_base_mm", format!("{p:?}"), "a station must stand at least 300 mm from the base axis"));
+            return Err(c.fail(
+                "station",
+                "sphere_points_base_mm",
+                format!("{p:?}"),
+                "a station must stand at least 300 mm from the base axis",
+            ));
         }
     }
     for (k, v) in st.sphere_centre_head_mm.iter().enumerate() {

@@ -17,10 +17,10 @@ use serde::Deserialize;
 use super::head::IdentifiedHead;
 use super::{Spms, iso9283};
 use crate::identify::least_squares::{FitOptions, Observation, identify};
+use crate::instrument::laser_tracker::AxisNoise;
 use crate::robot::builtin::{er20c10_table4, er20c10_table5};
 use crate::robot::ik::refine;
 use crate::robot::{Joints, KinState, ParamSet, RobotModel, UnmodelledSpec, VirtualRobot, XyzZyx, forward};
-use crate::instrument::laser_tracker::AxisNoise;
 use crate::seeds::{spms_cell as streams, stream};
 
 /// The robot, as a scenario describes it.

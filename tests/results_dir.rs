@@ -1,0 +1,67 @@
+//! The results directory: problems with --out are found before the study, a non-directory in the
+//! way is left alone, a kill -9 at any instant leaves the old or the new complete results, and
+//! what killed runs left is removed by the next run.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::{calsim, scratch};
+
+/// A short run of the reduced scenario into `out`.
+fn quick(out: &std::path::Path) -> std::process::Command {
+    let mut c = calsim();
+    c.args(["run", "scenarios/ci_quick.toml", "--set-sizes", "20:30:10", "--repetitions", "2", "--no-plots", "--no-recording", "--out"])
+        .arg(out);
+    c
+}
+
+fn complete(dir: &std::path::Path) -> bool {
+    ["tasks.parquet", "parameters.parquet", "validation_errors.parquet", "manifest.json", "summary.md"]
+        .iter()
+        .all(|f| std::fs::metadata(dir.join(f)).map(|m| m.len() > 0).unwrap_or(false))
+}
+
+#[test]
+fn a_file_in_the_way_is_an_error_before_the_study_and_is_left_alone() {
+    let dir = scratch("out-file");
+    std::fs::write(dir.join("ci_quick"), b"keep me").unwrap();
+    let t = Instant::now();
+    let out = quick(&dir).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("ci_quick") && err.contains("not a directory"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert_eq!(std::fs::read(dir.join("ci_quick")).unwrap(), b"keep me");
+    // Found before the campaign ran (the campaign alone takes seconds in the test profile).
+    assert!(t.elapsed() < Duration::from_secs(20));
+
+    let file_out = dir.join("not_a_dir");
+    std::fs::write(&file_out, b"x").unwrap();
+    let out = quick(&file_out).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("not_a_dir") && err.contains("is not a directory"), "{err}");
+}
+
+#[test]
+fn kill_at_any_instant_leaves_old_or_new_results_and_the_next_run_cleans_up() {
+    let dir = scratch("out-kill");
+    assert!(quick(&dir).status().unwrap().success());
+    let dest = dir.join("ci_quick");
+    assert!(complete(&dest));
+    // Kill runs at staggered instants: before, during and after the write.
+    let first = Instant::now();
+    assert!(quick(&dir).status().unwrap().success());
+    let full = first.elapsed();
+    for k in 0..8u32 {
+        let mut child = quick(&dir).stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().unwrap();
+        std::thread::sleep(full.mul_f64(0.5 + 0.08 * f64::from(k)));
+        let _ = child.kill(); // SIGKILL
+        let _ = child.wait();
+        assert!(complete(&dest), "after a kill at {k}: {:?}", std::fs::read_dir(&dest).map(|d| d.count()));
+    }
+    assert!(quick(&dir).status().unwrap().success());
+    let entries: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert_eq!(entries, vec!["ci_quick".to_string()], "what killed runs left is removed: {entries:?}");
+}
