@@ -1,7 +1,7 @@
 //! Command-line interface: argument parsing and the terminal report. Errors are printed as one
 //! line and exit with code 2 (bad input) or 1 (a check that failed).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -42,6 +42,48 @@ enum Command {
     Check(RunArgs),
     /// Identify the paper's IRB 120 (Table 7 truth) from simulated TCP positions and validate it.
     Demo(DemoArgs),
+    /// Run a design sweep (grid points x realisations), or one shard of it; unsharded, merge it too.
+    Sweep(SweepArgs),
+    /// Merge the shard directories of one sweep into its results.
+    Merge(MergeArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct SweepArgs {
+    /// Sweep file (TOML), e.g. scenarios/sweeps/epsilon_time.toml.
+    sweep: PathBuf,
+    /// Directory of the shard directories and of the merged results.
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// Run only every K-th work unit starting at k (k/K, 0 <= k < K); merge the shards afterwards.
+    #[arg(long, value_parser = parse_shard)]
+    shard: Option<(usize, usize)>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
+}
+
+#[derive(clap::Args, Debug)]
+struct MergeArgs {
+    /// Shard directories of one sweep (`<out>/<sweep>.shard-k-of-K`).
+    #[arg(required = true)]
+    shards: Vec<PathBuf>,
+    /// Directory the merged results go in (a subdirectory named after the sweep).
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+}
+
+fn parse_shard(s: &str) -> Result<(usize, usize), String> {
+    let (k, n) = s.split_once('/').ok_or("expected k/K, e.g. 0/4")?;
+    let k: usize = k.trim().parse().map_err(|_| format!("`{k}` is not a whole number"))?;
+    let n: usize = n.trim().parse().map_err(|_| format!("`{n}` is not a whole number"))?;
+    if n == 0 || n > 100_000 {
+        return Err(format!("{s}: K must be within [1, 100000]"));
+    }
+    if k >= n {
+        return Err(format!("{s}: k must be below K (shards are numbered 0 to K-1)"));
+    }
+    Ok((k, n))
 }
 
 #[derive(clap::Args, Debug)]
@@ -134,6 +176,8 @@ pub fn main() -> ExitCode {
         Command::Run(args) => study(args, false),
         Command::Check(args) => study(args, true),
         Command::Demo(args) => demo(args).map(|()| ExitCode::SUCCESS),
+        Command::Sweep(args) => sweep(args),
+        Command::Merge(args) => merge(&args.shards, &args.out),
     };
     match result {
         Ok(code) => code,
@@ -223,7 +267,8 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     println!("{}", report::terminal_table(&rows));
     fit_health(results.tasks.iter().map(|t| &t.id))?;
     println!(
-        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",
+        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results \
+             written in {:.3} s (recording {:.3} s) to {}",
         study_s,
         campaign_s,
         experiment.campaign.pool_wall_s,
@@ -315,7 +360,8 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
     fit_health(results.tasks.iter().map(|t| &t.id))?;
     let t = &results.timings;
     println!(
-        "timing: study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",
+        "timing: study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests \
+             {:.3} s), results written in {:.3} s (recording {:.3} s) to {}",
         t.study_s,
         t.head_s,
         t.cell_s,
@@ -326,6 +372,71 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         dest.display()
     );
     Ok(verdict(&rows, check))
+}
+
+fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
+    let t0 = Instant::now();
+    let sweep = crate::sweep::spec::load(&args.sweep).map_err(|e| e.to_string())?;
+    let (k, count) = args.shard.unwrap_or((0, 1));
+    crate::io::out_dir::prepare(&args.out, &crate::sweep::shard_dir(Path::new(""), &sweep.name, k, count).display().to_string())
+        .map_err(|e| e.to_string())?;
+    if count == 1 {
+        crate::io::out_dir::prepare(&args.out, &sweep.name).map_err(|e| e.to_string())?;
+    }
+    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    let units = sweep.points.len() * sweep.realisations as usize;
+    eprintln!(
+        "calsim sweep: {} ({} grid points x {} realisations = {units} work units{}), {threads} threads",
+        sweep.name,
+        sweep.points.len(),
+        sweep.realisations,
+        if count > 1 { format!(", shard {k} of {count}") } else { String::new() }
+    );
+    let bar = ProgressBar::new(0);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} work units, {elapsed} elapsed, ETA {eta}").expect("template"));
+    let dir = pool
+        .install(|| {
+            crate::sweep::run_shard(&sweep, &args.out, k, count, &|done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64)
+            })
+        })
+        .map_err(|e| format!("{}: {e}", args.out.display()))?;
+    bar.finish_and_clear();
+    let run_s = t0.elapsed().as_secs_f64();
+    println!(
+        "timing: {} work units of shard {k}/{count} in {run_s:.3} s ({:.3} s per unit) to {}",
+        units.div_ceil(count),
+        run_s / units.div_ceil(count).max(1) as f64,
+        dir.display()
+    );
+    if count > 1 {
+        println!(
+            "merge the shards with: calsim merge {}/{}.shard-*-of-{count} --out {}",
+            args.out.display(),
+            sweep.name,
+            args.out.display()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
+    let code = merge(&[dir.clone()], &args.out)?;
+    std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    Ok(code)
+}
+
+fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
+    let (info, units) = crate::sweep::read_shards(shards).map_err(|e| e.to_string())?;
+    crate::io::out_dir::prepare(out, &info.name).map_err(|e| e.to_string())?;
+    let points = crate::sweep::aggregate(&info, &units);
+    let dest = crate::io::sweep_results::write(out, &info, &units, &points).map_err(|e| format!("{}: {e}", out.display()))?;
+    let failed = units.iter().filter(|u| u.error.is_some()).count();
+    println!("{}", crate::io::sweep_results::summary(&info, &units, &points));
+    println!("merged {} work units ({failed} failed) into {}", units.len(), dest.display());
+    if failed == units.len() {
+        return Err(format!("{}: every work unit failed (see {}/summary.md)", info.name, dest.display()));
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn demo(args: &DemoArgs) -> Result<(), String> {

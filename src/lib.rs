@@ -12,3 +12,4 @@ pub mod robot;
 pub mod seeds;
 pub mod spms;
 pub mod study;
+pub mod sweep;

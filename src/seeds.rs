@@ -96,3 +96,7 @@ pub fn task_stream(seed: u64, salt: u64, index: usize) -> ChaCha8Rng {
 /// The configurations of the load-time identifiability check (keyed under seed 0: the same for
 /// every scenario).
 pub const STRUCTURAL_CHECK: u64 = 0x4f42_5345_5256;
+
+/// Realisation r > 0 of a scenario seeded s is the world seeded `split_seed(s, REALISATION + r)`
+/// (realisation 0 is the scenario's own seed): the same world whatever a sweep varies.
+pub const REALISATION: u64 = 0x5245_414c_0000_0000;

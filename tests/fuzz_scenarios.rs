@@ -77,7 +77,7 @@ fn mutate(doc: &toml::Value, path: &[Seg], m: usize) -> toml::Value {
     let (last, parent) = path.split_last().expect("a leaf has a path");
     match m {
         // Shorten, empty or lengthen an array (or, for a scalar, drop its key / element).
-        11 | 12 | 13 => match at(&mut doc, path) {
+        11..=13 => match at(&mut doc, path) {
             toml::Value::Array(a) if m == 11 => {
                 a.pop();
             }

@@ -2,7 +2,7 @@
 
 mod common;
 
-use calsim::spms::identify::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
+use calsim::instrument::spms::beams::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
 use calsim::spms::iso9283::{ap, rp, summary, test_points};
 use calsim::spms::{ReadingError, SensorSpec, Spms, fit_centre, frame_from_points, table2_beams};
 use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};

@@ -212,26 +212,43 @@ pub struct Setup<'a> {
     pub spec: &'a CampaignSpec,
 }
 
-/// Random streams of the campaign. Each step draws from its own stream, keyed by what it is (the
-/// sphere, the attempt, the pose index), never from one shared sequence: a centring loop that takes
-/// one iteration more in a what-if scenario then changes that configuration only, and two scenarios
-/// that differ in one amplitude are compared on the same targets, noise and validation poses
-/// (common random numbers).
-/// Runs the semi-automatic steps, measures the pool and the validation set, drawing every random
-/// quantity from streams derived from `seed`.
+/// Runs the semi-automatic steps, measures the pool and the validation set.
+///
+/// Random streams of the campaign: each step draws from its own stream, keyed by what it is (the
+/// sphere, the attempt, the pose index; [`crate::seeds::campaign`]), never from one shared
+/// sequence: a centring loop that takes one iteration more in a what-if scenario then changes that
+/// configuration only, and two scenarios that differ in one amplitude are compared on the same
+/// targets, noise and validation poses (common random numbers).
 pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
-    let Setup { cell, robot, robot_validation, trical, tracker, nominal, spec } = *setup;
-    let truth_base = world_from_base(&robot.truth);
-    let tcp_true = robot.truth.data().flange_tcp_mm;
-    let tcp_cmm = trical.cmm_tcp(&tcp_true, &mut stream(seed, streams::CMM));
-    let rng = &mut stream(seed, streams::SEMI_AUTOMATIC);
-    let world = collision_world(cell, nominal, &truth_base, &tcp_cmm);
-    let down = -Vector3::z();
+    let truth_base = world_from_base(&setup.robot.truth);
+    let tcp_cmm = setup.trical.cmm_tcp(&setup.robot.truth.data().flange_tcp_mm, &mut stream(seed, streams::CMM));
+    let world = collision_world(setup.cell, setup.nominal, &truth_base, &tcp_cmm);
+    let (semi_automatic, nominal_model) = semi_automatic(setup, &tcp_cmm, seed)?;
+    let t0 = Instant::now();
+    let (pool, pool_rejected, centring_failures) = measure_pool(setup, &world, &nominal_model, &semi_automatic.located_q, seed)?;
+    let pool_wall_s = t0.elapsed().as_secs_f64();
+    let (validation, validation_rejected) = measure_validation(setup, &world, &nominal_model, semi_automatic.located_q[0], seed)?;
+    Ok(Campaign {
+        nominal: nominal_model,
+        semi_automatic,
+        pool,
+        validation,
+        pool_wall_s,
+        pool_rejected,
+        centring_failures,
+        validation_rejected,
+    })
+}
 
-    // Semi-automatic steps. The operator jogs the device onto each ball (simulated with the true
-    // robot), then Algorithm 1 centres it; the controller still believes the nominal model with
-    // the base frame at the world origin and the CMM tool.
-    let jogging = nominal.edited(|d| d.flange_tcp_mm = tcp_cmm).expect("valid");
+/// The semi-automatic steps: the operator jogs the device onto each ball (simulated with the true
+/// robot), then Algorithm 1 centres it, the controller believing the nominal model with the base
+/// frame at the world origin and the CMM tool; then the TCP check and the nominal base fitted to
+/// the located spheres. Returns the steps and the model before calibration.
+fn semi_automatic(setup: &Setup<'_>, tcp_cmm: &Vector3<f64>, seed: u64) -> Result<(SemiAutomatic, RobotModel), CampaignError> {
+    let Setup { cell, robot, trical, nominal, spec, .. } = *setup;
+    let rng = &mut stream(seed, streams::SEMI_AUTOMATIC);
+    let down = -Vector3::z();
+    let jogging = nominal.edited(|d| d.flange_tcp_mm = *tcp_cmm).expect("valid");
     let mut located_q = Vec::new();
     let mut check_q = Vec::new();
     let mut last_q = [0.0; JOINTS];
@@ -267,7 +284,7 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         d.world_from_base = Default::default();
     });
     let flange_only = flange_only.expect("valid");
-    let tcp_check_mm = tcp_check(&flange_only, &check_q).unwrap_or(tcp_cmm);
+    let tcp_check_mm = tcp_check(&flange_only, &check_q).unwrap_or(*tcp_cmm);
     let base_model = flange_only.edited(|d| d.flange_tcp_mm = tcp_check_mm).expect("valid");
     let spheres_base: Vec<Vector3<f64>> = located_q.iter().map(|q| forward(&base_model, &mut KinState::default(), q)).collect();
     // The nominal base: the rigid transform that maps the located spheres onto their {W} coordinates.
@@ -275,13 +292,25 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         .ok_or_else(|| CampaignError::Sphere { sphere: 1, reason: "the located spheres give no finite base frame".into() })?;
     let nominal_model = nominal
         .edited(|d| {
-            d.flange_tcp_mm = tcp_cmm;
+            d.flange_tcp_mm = *tcp_cmm;
             d.world_from_base = crate::robot::XyzZyx::from_isometry(&world_from_base_fit);
         })
         .expect("valid");
+    Ok((SemiAutomatic { tcp_check_mm, tcp_cmm_mm: *tcp_cmm, spheres_base, located_q }, nominal_model))
+}
 
-    // Identification pool.
-    let t0 = Instant::now();
+/// The identification pool: per sphere, targets in the approach cone, IK on the nominal model, no
+/// collision, then Algorithm 1 centring. Returns the pool, the candidates rejected (IK or
+/// collision) and the centring failures.
+fn measure_pool(
+    setup: &Setup<'_>,
+    world: &CollisionWorld,
+    nominal_model: &RobotModel,
+    located_q: &[Joints],
+    seed: u64,
+) -> Result<(Vec<PoolEntry>, u32, u32), CampaignError> {
+    let Setup { cell, robot, trical, spec, .. } = *setup;
+    let down = -Vector3::z();
     let mut pool = Vec::new();
     let mut rejected = 0;
     let mut centring_failures = 0;
@@ -299,17 +328,17 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
             }
             let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
             let pose = tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU));
-            let Ok(q) = inverse(&nominal_model, &pose, seed_q) else {
+            let Ok(q) = inverse(nominal_model, &pose, seed_q) else {
                 rejected += 1;
                 continue;
             };
-            forward(&nominal_model, &mut st, &q);
+            forward(nominal_model, &mut st, &q);
             if world.first_collision(&st).is_some() {
                 rejected += 1;
                 continue;
             }
             let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries);
-            match centre(&nominal_model, robot, trical, cell, Approach { sphere: k, q0: q, from: last }, centring_rng) {
+            match centre(nominal_model, robot, trical, cell, Approach { sphere: k, q0: q, from: last }, centring_rng) {
                 Ok(res) => {
                     last = res.q;
                     pool.push(PoolEntry {
@@ -327,14 +356,25 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
             }
         }
     }
-    let pool_wall_s = t0.elapsed().as_secs_f64();
+    Ok((pool, rejected, centring_failures))
+}
 
-    // Validation: random configurations, collision-free, the SMR in sight of the tracker.
-    let base_from_world = truth_base.inverse();
+/// The validation set: random configurations, collision-free, the SMR in sight of the tracker,
+/// measured by the tracker on the robot of setup 2. Returns the poses and the candidates rejected.
+fn measure_validation(
+    setup: &Setup<'_>,
+    world: &CollisionWorld,
+    nominal_model: &RobotModel,
+    start: Joints,
+    seed: u64,
+) -> Result<(Vec<ValidationPose>, u32), CampaignError> {
+    let Setup { robot, robot_validation, tracker, spec, .. } = *setup;
+    let base_from_world = world_from_base(&robot.truth).inverse();
     let tracker_base = (base_from_world * nalgebra::Point3::from(tracker.position_w)).coords;
+    let mut st = KinState::default();
     let mut validation = Vec::new();
     let mut validation_rejected = 0;
-    let mut from = located_q[0];
+    let mut from = start;
     let mut tries = 0;
     let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
     let rng = &mut stream(seed, streams::VALIDATION_POSES);
@@ -343,8 +383,8 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.validation_poses.max(1)) {
             return Err(CampaignError::Exhausted { what: "validation set".into(), tries });
         }
-        let q = uniform_configuration(&nominal_model, spec.validation_margin, rng);
-        forward(&nominal_model, &mut st, &q);
+        let q = uniform_configuration(nominal_model, spec.validation_margin, rng);
+        forward(nominal_model, &mut st, &q);
         let tcp = st.tcp_base;
         let sight = tracker_base - tcp;
         let facing = st.base_from_frame(JOINTS).rotation * Vector3::z();
@@ -361,17 +401,7 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
         from = q;
         validation.push(ValidationPose { q, measured_w: tracker.measure(&true_w, noise) });
     }
-
-    Ok(Campaign {
-        nominal: nominal_model,
-        semi_automatic: SemiAutomatic { tcp_check_mm, tcp_cmm_mm: tcp_cmm, spheres_base, located_q },
-        pool,
-        validation,
-        pool_wall_s,
-        pool_rejected: rejected,
-        centring_failures,
-        validation_rejected,
-    })
+    Ok((validation, validation_rejected))
 }
 
 /// TCP in the flange frame from configurations centred on one ball: least squares on

@@ -380,6 +380,24 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     }
 
     let residual_rms_mm = (cost(&model, obs, &mut ws.st) / obs.len().max(1) as f64).sqrt();
+    conclude(set, opts, Iterate { model, x, iterations, converged, residual_rms_mm, history }, last_normal)
+}
+
+/// Where the iterations of [`identify`] stopped.
+struct Iterate {
+    model: RobotModel,
+    x: DVector<f64>,
+    iterations: usize,
+    converged: bool,
+    residual_rms_mm: f64,
+    history: Vec<Iteration>,
+}
+
+/// The outcome of a fit from its last iterate and normal equations: the rank test on the scaled
+/// normal matrix names the parameters the configurations cannot separate.
+fn conclude(set: &ParamSet, opts: &FitOptions, it: Iterate, last_normal: Option<Normal>) -> Fit {
+    let Iterate { model, x, iterations, converged, residual_rms_mm, history } = it;
+    let p = set.len();
     let Some(ne) = last_normal else {
         return Fit {
             outcome: FitOutcome::IterationCap { iterations },

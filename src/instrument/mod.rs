@@ -2,4 +2,5 @@
 
 pub mod laser_tracker;
 pub mod optical_cmm;
+pub mod spms;
 pub mod trical;

@@ -7,3 +7,4 @@ pub mod report;
 pub mod results;
 pub mod scenario;
 pub mod spms_results;
+pub mod sweep_results;

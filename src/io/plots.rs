@@ -65,6 +65,8 @@ macro_rules! both {
 }
 
 /// Writes every figure into `dir`; returns what was written.
+///
+/// Long by design: one call per figure of the paper, in the paper's order, each a few lines.
 pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Result<Vec<Written>, String> {
     static REGISTER: Once = Once::new();
     REGISTER.call_once(|| {
@@ -129,7 +131,10 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     both!(dir, "fig10_error_map", |root| fig10(root, inputs, after, n, task));
     out.push(Written {
         stem: "fig10_error_map".into(),
-        caption: format!("Fig. 10: error after calibration at each validation pose (set of {n}, task {task}: the median of the repetitions), the 10 largest circled"),
+        caption: format!(
+            "Fig. 10: error after calibration at each validation pose (set of {n}, task {task}: the median of the \
+             repetitions), the 10 largest circled"
+        ),
     });
     let db = &results.distance_to_base_mm;
     let dc = &results.distance_to_ccz_mm;
@@ -479,7 +484,9 @@ pub fn write_spms(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, St
     ));
     out.push(Written {
         stem: "spms_fig05_fit_residuals".into(),
-        caption: "Fig. 5: largest sphere-fit residual of each accuracy measurement, head identified by PSO + LM (paper's form) and by LM on the minimal form".into(),
+        caption: "Fig. 5: largest sphere-fit residual of each accuracy measurement, head identified by PSO + LM \
+             (paper's form) and by LM on the minimal form"
+            .into(),
     });
     both!(dir, "spms_fig06_measuring_error", |root| per_sample(
         root,
@@ -495,7 +502,11 @@ pub fn write_spms(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, St
     both!(dir, "spms_table6_ap_per_point", |root| ap_bars(root, p));
     out.push(Written {
         stem: "spms_table6_ap_per_point".into(),
-        caption: format!("Table 6: ISO 9283 AP per test point before and after calibration, published and calsim (after: median over the repetitions with sets of {})", p.table_n),
+        caption: format!(
+            "Table 6: ISO 9283 AP per test point before and after calibration, published and calsim (after: \
+             median over the repetitions with sets of {})",
+            p.table_n
+        ),
     });
     let colours = [BLUE, RGBColor(230, 120, 0), RGBColor(0, 140, 60)];
     let series: Vec<(&str, RGBColor, BySize)> =

@@ -156,6 +156,9 @@ fn log_axes(rec: &RecordingStream, path: &str, frame: &Isometry3<f64>, len: f64)
     )
 }
 
+///
+/// Long by design: one block per entity of the recording (cell, pool, centring readings,
+/// validation, study series), in the order of the blueprint.
 fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: &StudyResults, representative: Option<usize>) -> Rr {
     rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
     let truth = &e.robot.truth;
@@ -324,6 +327,8 @@ pub fn write_spms(path: &Path, name: &str, spec: &crate::spms::study::SpmsSpec, 
     Ok(())
 }
 
+///
+/// Long by design: one block per entity of the SPMS recording, in the order of its blueprint.
 fn log_spms(rec: &RecordingStream, spec: &crate::spms::study::SpmsSpec, r: &crate::spms::study::SpmsResults) -> Rr {
     use rerun::LineStrips3D;
     rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;

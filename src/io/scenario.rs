@@ -349,6 +349,9 @@ impl Checker<'_> {
     }
 }
 
+/// Checks a TriCal scenario file.
+///
+/// Long by design: one line per key of the scenario, section by section, as the file reads.
 fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     let c = Checker { path };
     let r = &f.robot;
@@ -396,7 +399,12 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
                     "cell",
                     "spheres_w_mm",
                     format!("{:?} and {:?}", b, a),
-                    &format!("spheres {} and {} are {d:.1} mm apart: datum spheres on their risers need at least two ball diameters plus a riser between them", j + 1, i + 1),
+                    &format!(
+                        "spheres {} and {} are {d:.1} mm apart: datum spheres on their risers need at least two ball \
+                         diameters plus a riser between them",
+                        j + 1,
+                        i + 1
+                    ),
                 ));
             }
         }
@@ -500,10 +508,29 @@ pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
     let shown = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     let table = table(&text, &shown)?;
+    from_table(&text, table, path)
+}
+
+/// Reads a scenario file into its TOML table (every number finite), for callers that edit keys
+/// before loading it with [`from_table`] (sweeps).
+pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let t = table(&text, &shown)?;
+    Ok((text, t))
+}
+
+/// Loads and checks a scenario of either kind from its TOML table; `text` is what the manifest
+/// hashes, `path` names it in errors.
+pub fn from_table(text: &str, table: toml::Table, path: &Path) -> Result<Loaded, ScenarioError> {
+    let shown = path.display().to_string();
+    for (k, v) in &table {
+        finite(v, &mut vec![k.clone()], &shown)?;
+    }
     match table.get("kind") {
-        None => parse_table(&text, table, path).map(|s| Loaded::Trical(Box::new(s))),
-        Some(toml::Value::String(k)) if k == "trical" => parse_table(&text, table, path).map(|s| Loaded::Trical(Box::new(s))),
-        Some(toml::Value::String(k)) if k == "spms" => parse_spms_table(&text, table, path).map(|s| Loaded::Spms(Box::new(s))),
+        None => parse_table(text, table, path).map(|s| Loaded::Trical(Box::new(s))),
+        Some(toml::Value::String(k)) if k == "trical" => parse_table(text, table, path).map(|s| Loaded::Trical(Box::new(s))),
+        Some(toml::Value::String(k)) if k == "spms" => parse_spms_table(text, table, path).map(|s| Loaded::Spms(Box::new(s))),
         Some(v) => Err(ScenarioError::Parse {
             path: shown,
             key: "kind".into(),
@@ -582,6 +609,8 @@ fn parse_spms_table(text: &str, t: toml::Table, path: &Path) -> Result<SpmsScena
 }
 
 /// Checks an SPMS spec (also after command-line overrides); `path` names it in errors.
+///
+/// Long by design: one line per key of the scenario, section by section, as the file reads.
 pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), ScenarioError> {
     let c = Checker { path };
     let h = &f.head;

@@ -54,6 +54,8 @@ pub fn write(
     write_atomically(out, &s.name, |dir| write_into(dir, s, r, f, checks, threads, extras))
 }
 
+///
+/// Long by design: one block per result table, in the order of results/README.md.
 fn write_into(
     dir: &Path,
     s: &SpmsScenario,
@@ -212,13 +214,17 @@ fn f3(x: f64) -> String {
 }
 
 /// The summary: Tables 3 and 6 next to calsim's, the two beam solvers, random vs DETMAX sets.
+///
+/// Long by design: the summary document top to bottom, one block per section.
 pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], drawn: &[Written]) -> String {
     let mut o = String::new();
     let h = &r.head;
     let _ = writeln!(o, "# {}: SPMS and ER20-C10 (Gao et al. 2023), seed {}\n", s.name, s.seed);
     let _ = writeln!(
         o,
-        "{} identifications ({} selections x {} set sizes x {} repetitions) from a pool of {} configurations at {} station(s); {} candidates rejected (no IK within limits, or a beam off the sphere or out of range).\n",
+        "{} identifications ({} selections x {} set sizes x {} repetitions) from a pool of {} configurations \
+             at {} station(s); {} candidates rejected (no IK within limits, or a beam off the sphere or out of \
+             range).\n",
         r.tasks.len(),
         s.spec.study.selections.len(),
         s.spec.study.set_sizes.len(),
@@ -240,14 +246,17 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     let (own_before, own_after) = (crate::spms::iso9283::summary(&t6.ap_before_mm).2, crate::spms::iso9283::summary(&t6.ap_after_mm).2);
     let _ = writeln!(
         o,
-        "\nTable 6 prints an RMS ({:.3} before, {:.3} after) that is not the RMS of its own five AP values ({own_before:.3} and {own_after:.3}); calsim's RMS is that of the five values.\n",
+        "\nTable 6 prints an RMS ({:.3} before, {:.3} after) that is not the RMS of its own five AP values \
+             ({own_before:.3} and {own_after:.3}); calsim's RMS is that of the five values.\n",
         t6.rms_before_mm, t6.rms_after_mm
     );
 
     let _ = writeln!(o, "## Beam identification (Table 2) and measuring accuracy (Table 3)\n");
     let _ = writeln!(
         o,
-        "| solver | unknowns | rms residual, mm | iterations | time, s | condition | worst beam point error at 100 mm, mm | worst direction error, deg | gains | measuring error max / mean / RMS, mm | fits with residual < 0.03 mm |"
+        "| solver | unknowns | rms residual, mm | iterations | time, s | condition | worst beam point error \
+             at 100 mm, mm | worst direction error, deg | gains | measuring error max / mean / RMS, mm | fits \
+             with residual < 0.03 mm |"
     );
     let _ = writeln!(o, "|---|---|---|---|---|---|---|---|---|---|---|");
     for id in [&h.paper, &h.paper_lm_only, &h.minimal] {
@@ -274,11 +283,15 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     }
     let _ = writeln!(
         o,
-        "\nPSO alone ({} particles, {} iterations): rms {:.4} mm in {:.3} s. Published Table 3: 0.091 / 0.034 / 0.039 mm. The robot calibration measures with the `{}` head.\n",
+        "\nPSO alone ({} particles, {} iterations): rms {:.4} mm in {:.3} s. Published Table 3: {} / {} / {} mm. \
+             The robot calibration measures with the `{}` head.\n",
         s.spec.beams.pso_population,
         s.spec.beams.pso_iterations,
         h.pso_rms_mm,
         h.pso_s,
+        published().spms_2023.measuring_error.max_mm,
+        published().spms_2023.measuring_error.mean_mm,
+        published().spms_2023.measuring_error.rms_mm,
         s.spec.beams.calibration_form.label()
     );
 
@@ -308,7 +321,8 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
 
     let _ = writeln!(
         o,
-        "## Random sets and DETMAX sets\n\n| selection | n | identified | median O1 | median condition | median mean AP, mm | IQR mean AP, mm | worst mean AP, mm |\n|---|---|---|---|---|---|---|---|"
+        "## Random sets and DETMAX sets\n\n| selection | n | identified | median O1 | median condition | \
+             median mean AP, mm | IQR mean AP, mm | worst mean AP, mm |\n|---|---|---|---|---|---|---|---|"
     );
     let mut sizes: Vec<usize> = r.tasks.iter().map(|t| t.task.set_size).collect();
     sizes.sort_unstable();
@@ -339,7 +353,8 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     let ids = r.set.ids();
     let _ = writeln!(
         o,
-        "\n## Identified parameters (random sets of {tn}: median over the repetitions)\n\n| parameter | unit | nominal (Table 4) | truth | identified (median) | identified - truth |\n|---|---|---|---|---|---|"
+        "\n## Identified parameters (random sets of {tn}: median over the repetitions)\n\n| parameter | unit \
+             | nominal (Table 4) | truth | identified (median) | identified - truth |\n|---|---|---|---|---|---|"
     );
     for (j, id) in ids.iter().enumerate() {
         let unit = id.unit();
@@ -367,7 +382,8 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     let t = &r.timings;
     let _ = writeln!(
         o,
-        "\n## Timing\n\nhead (build, PSO + LM, LM alone on both forms, accuracy) {:.3} s; cell and pool {:.3} s; pool Jacobian {:.3} s; {} identifications with their ISO 9283 tests {:.3} s; study {:.3} s.\n",
+        "\n## Timing\n\nhead (build, PSO + LM, LM alone on both forms, accuracy) {:.3} s; cell and pool {:.3} \
+             s; pool Jacobian {:.3} s; {} identifications with their ISO 9283 tests {:.3} s; study {:.3} s.\n",
         t.head_s,
         t.cell_s,
         t.pool_jacobian_s,

@@ -244,6 +244,10 @@ fn facing_head(sphere_base: &Vector3<f64>, c_head: &Vector3<f64>) -> Isometry3<f
 
 /// Builds the cell and measures the pool with `head` (the identified beams) on `spms` (the
 /// physical head).
+///
+/// Long by design: one pass in the order the cell is set up (stations placed and measured, the tool
+/// and the robot drawn, the pool measured station by station), each step drawing from the cell's
+/// one stream; split, the draws would have to be threaded through every piece in the same order.
 pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &IdentifiedHead, seed: u64) -> Result<Cell, CellError> {
     let truth0 = arm.truth_model();
     let mut rng = stream(seed, streams::TRUTH);

@@ -13,9 +13,9 @@ use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3
 use rand::{Rng, RngExt};
 use serde::Deserialize;
 
-use super::identify::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
 use super::{Beam, ReadingError, SensorSpec, Spms, fit_centre, table2_beams};
 use crate::instrument::laser_tracker::AxisNoise;
+use crate::instrument::spms::beams::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
 use crate::seeds::{spms_head as streams, stream};
 
 /// The head and its reference sphere, as a scenario describes them.
@@ -228,6 +228,9 @@ pub enum HeadError {
 }
 
 /// Builds the head, identifies its beams with both solvers and tests their measuring accuracy.
+///
+/// Long by design: the paper's section 5.1-5.2 in order (poses, PSO then LM, LM alone on both
+/// forms, the accuracy test), sharing the poses and the tracker between the three identifications.
 pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment, HeadError> {
     let spms = build_head(spec, seed);
     let mut rng = stream(seed, streams::IDENT_POSES);
@@ -279,7 +282,7 @@ pub fn run(spec: &HeadSpec, id: &BeamIdSpec, seed: u64) -> Result<HeadExperiment
     let tracker_centre: Vec<Vector3<f64>> =
         check.frames.iter().map(|_| tracker.measure(&Vector3::from(SPHERE_TRACKER_MM), &mut acc_rng)).collect();
     let k = spms.sensors.len();
-    let make = |form: Form, label: &'static str, sol: &super::identify::Solution, seconds: f64| {
+    let make = |form: Form, label: &'static str, sol: &crate::instrument::spms::beams::Solution, seconds: f64| {
         let beams = form.unpack(&sol.x, k);
         let gains = form.gains(&sol.x, k);
         let point_error_mm = beams.iter().zip(&spms.sensors).map(|(b, s)| (b.point(100.0) - s.beam.point(100.0)).norm()).collect();

@@ -1,0 +1,214 @@
+//! Result files of a sweep in `out/<sweep>/`: `sweep.parquet` (one row per grid point x
+//! realisation x selection x set size), `points.parquet` (the aggregates over realisations),
+//! `summary.md` (the design table ranked by the after-calibration p95 at the table set size, with
+//! the success probabilities) and `manifest.json` (the sha256 of every table). Written into a
+//! temporary directory exchanged with the old results atomically.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::*;
+use serde::Serialize;
+
+use crate::io::results::{err, parquet, table_hashes, write_atomically};
+use crate::sweep::{PointRow, ShardInfo, Unit};
+
+#[derive(Serialize)]
+struct Manifest<'a> {
+    sweep: &'a str,
+    identity: &'a str,
+    tables_sha256: std::collections::BTreeMap<String, String>,
+    points: usize,
+    realisations: u32,
+    units: usize,
+    failed_units: usize,
+    crate_version: &'static str,
+}
+
+/// The axis values of a point, `key = value, ...`.
+pub fn point_label(info: &ShardInfo, p: usize) -> String {
+    info.keys.iter().zip(&info.points[p]).map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
+}
+
+/// Writes the merged results of a sweep into `out/<name>`, replacing what was there.
+pub fn write(out: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow]) -> std::io::Result<PathBuf> {
+    write_atomically(out, &info.name, |dir| write_into(dir, info, units, points))
+}
+
+fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow]) -> std::io::Result<()> {
+    let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
+    let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
+    // Long form: one row per unit and (selection, set size); a failed unit has one row with its error.
+    let rows: Vec<(&Unit, Option<&crate::sweep::UnitRow>)> = units
+        .iter()
+        .flat_map(|x| if x.rows.is_empty() { vec![(x, None)] } else { x.rows.iter().map(|r| (x, Some(r))).collect() })
+        .collect();
+    let opt = |g: &dyn Fn(&crate::sweep::UnitRow) -> f64| rows.iter().map(|(_, r)| r.map_or(f64::NAN, g)).collect::<Vec<_>>();
+    let mut cols = vec![
+        u("unit", rows.iter().map(|(x, _)| x.unit as u32).collect()),
+        u("point", rows.iter().map(|(x, _)| x.point as u32).collect()),
+        u("realisation", rows.iter().map(|(x, _)| x.realisation).collect()),
+    ];
+    for (a, key) in info.keys.iter().enumerate() {
+        cols.push(Column::new(key.as_str().into(), rows.iter().map(|(x, _)| info.points[x.point][a].clone()).collect::<Vec<_>>()));
+    }
+    cols.extend([
+        Column::new("error".into(), rows.iter().map(|(x, _)| x.error.clone().unwrap_or_default()).collect::<Vec<_>>()),
+        Column::new("selection".into(), rows.iter().map(|(_, r)| r.map(|r| r.selection.clone()).unwrap_or_default()).collect::<Vec<_>>()),
+        u("set_size", rows.iter().map(|(_, r)| r.map_or(0, |r| r.set_size)).collect()),
+        Column::new("table_set_size".into(), rows.iter().map(|(_, r)| r.is_some_and(|r| r.table)).collect::<Vec<_>>()),
+        u("repetitions", rows.iter().map(|(_, r)| r.map_or(0, |r| r.repetitions)).collect()),
+        u("no_model", rows.iter().map(|(_, r)| r.map_or(0, |r| r.no_model)).collect()),
+        f("before_median_mm", rows.iter().map(|(x, _)| x.before_mm[0]).collect()),
+        f("before_p95_mm", rows.iter().map(|(x, _)| x.before_mm[1]).collect()),
+        f("before_max_mm", rows.iter().map(|(x, _)| x.before_mm[2]).collect()),
+        f("after_median_mm", opt(&|r| r.after_median_mm)),
+        f("after_p95_mm", opt(&|r| r.after_p95_mm)),
+        f("after_max_mm", opt(&|r| r.after_max_mm)),
+        f("after_mean_mm", opt(&|r| r.after_mean_mm)),
+        f("o1_median", opt(&|r| r.o1_median)),
+        f("campaign_s", rows.iter().map(|(x, _)| x.campaign_s).collect()),
+    ]);
+    for (t, th) in info.thresholds_mm.iter().enumerate() {
+        cols.push(u(&format!("max_within_{th}mm"), rows.iter().map(|(_, r)| r.map_or(0, |r| r.max_within[t])).collect()));
+        cols.push(u(&format!("mean_within_{th}mm"), rows.iter().map(|(_, r)| r.map_or(0, |r| r.mean_within[t])).collect()));
+    }
+    parquet(dir, "sweep.parquet", cols)?;
+
+    let mut cols = vec![u("point", points.iter().map(|p| p.point as u32).collect())];
+    for (a, key) in info.keys.iter().enumerate() {
+        cols.push(Column::new(key.as_str().into(), points.iter().map(|p| info.points[p.point][a].clone()).collect::<Vec<_>>()));
+    }
+    cols.extend([
+        Column::new("selection".into(), points.iter().map(|p| p.selection.clone()).collect::<Vec<_>>()),
+        u("set_size", points.iter().map(|p| p.set_size).collect()),
+        Column::new("table_set_size".into(), points.iter().map(|p| p.table).collect::<Vec<_>>()),
+        u("realisations", points.iter().map(|p| p.realisations).collect()),
+    ]);
+    for (m, name) in ["median", "p95", "max"].iter().enumerate() {
+        for (q, qn) in ["median", "p10", "p90"].iter().enumerate() {
+            cols.push(f(&format!("after_{name}_mm_{qn}"), points.iter().map(|p| p.after[m][q]).collect()));
+        }
+    }
+    cols.extend([
+        f("before_median_mm", points.iter().map(|p| p.before[0]).collect()),
+        f("before_p95_mm", points.iter().map(|p| p.before[1]).collect()),
+        f("before_max_mm", points.iter().map(|p| p.before[2]).collect()),
+    ]);
+    for (t, th) in info.thresholds_mm.iter().enumerate() {
+        cols.push(f(&format!("p_max_within_{th}mm"), points.iter().map(|p| p.success[t].0).collect()));
+        cols.push(f(&format!("p_mean_within_{th}mm"), points.iter().map(|p| p.success[t].1).collect()));
+    }
+    cols.extend([
+        u("no_model", points.iter().map(|p| p.no_model).collect()),
+        f("o1_median", points.iter().map(|p| p.o1).collect()),
+        f("campaign_s_median", points.iter().map(|p| p.campaign_s).collect()),
+    ]);
+    parquet(dir, "points.parquet", cols)?;
+
+    let manifest = Manifest {
+        sweep: &info.name,
+        identity: &info.identity,
+        tables_sha256: table_hashes(dir)?,
+        points: info.points.len(),
+        realisations: info.realisations,
+        units: units.len(),
+        failed_units: units.iter().filter(|x| x.error.is_some()).count(),
+        crate_version: env!("CARGO_PKG_VERSION"),
+    };
+    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    fs::write(dir.join("summary.md"), summary(info, units, points))?;
+    Ok(())
+}
+
+fn f3(x: f64) -> String {
+    if x.is_finite() { format!("{x:.3}") } else { "-".into() }
+}
+
+/// The design table: the points at their table set size ranked by the median over realisations of
+/// the after-calibration p95, then the success probability per set size.
+pub fn summary(info: &ShardInfo, units: &[Unit], points: &[PointRow]) -> String {
+    let mut s = String::new();
+    let failed = units.iter().filter(|u| u.error.is_some()).count();
+    let _ = writeln!(
+        s,
+        "# {}: {} grid points x {} realisations ({} work units, {failed} failed)\n",
+        info.name,
+        info.points.len(),
+        info.realisations,
+        units.len()
+    );
+    let _ = writeln!(
+        s,
+        "Errors after calibration at each point's table set size: the median over realisations with its P10-P90 range, of each \
+         realisation's median (over repetitions) of the validation errors' median, p95 and max (SPMS: ISO 9283 AP over P1-P5). \
+         Ranked by the p95 column.\n"
+    );
+    let mut table: Vec<&PointRow> = points.iter().filter(|p| p.table).collect();
+    table.sort_by(|a, b| a.after[1][0].total_cmp(&b.after[1][0]).then(a.point.cmp(&b.point)));
+    let th = &info.thresholds_mm;
+    let _ = write!(s, "| rank | point | design | selection | n | after median, mm | after p95, mm | after max, mm | before median, mm |");
+    for t in th {
+        let _ = write!(s, " P(max <= {t} mm) |");
+    }
+    let _ = writeln!(s, " campaign, s | realisations |");
+    let _ = writeln!(s, "|{}", "---|".repeat(11 + th.len()));
+    for (rank, p) in table.iter().enumerate() {
+        let band = |m: [f64; 3]| format!("{} ({}-{})", f3(m[0]), f3(m[1]), f3(m[2]));
+        let _ = write!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            rank + 1,
+            p.point,
+            point_label(info, p.point),
+            p.selection,
+            p.set_size,
+            band(p.after[0]),
+            band(p.after[1]),
+            band(p.after[2]),
+            f3(p.before[0])
+        );
+        for (m, _) in &p.success {
+            let _ = write!(s, " {:.2} |", m);
+        }
+        let _ = writeln!(s, " {:.0} | {} |", p.campaign_s, p.realisations);
+    }
+    if !th.is_empty() {
+        let _ = writeln!(s, "\n## P(max error <= {} mm) by set size\n", th[0]);
+        let mut sizes: Vec<u32> = points.iter().map(|p| p.set_size).collect();
+        sizes.sort_unstable();
+        sizes.dedup();
+        let _ = writeln!(s, "| point | selection | {} |", sizes.iter().map(|n| format!("n = {n}")).collect::<Vec<_>>().join(" | "));
+        let _ = writeln!(s, "|---|---|{}", "---|".repeat(sizes.len()));
+        let mut keys: Vec<(usize, &str)> = points.iter().map(|p| (p.point, p.selection.as_str())).collect();
+        keys.dedup();
+        for (pt, sel) in keys {
+            let cells: Vec<String> = sizes
+                .iter()
+                .map(|n| {
+                    points
+                        .iter()
+                        .find(|p| p.point == pt && p.selection == sel && p.set_size == *n)
+                        .map_or("-".into(), |p| format!("{:.2}", p.success[0].0))
+                })
+                .collect();
+            let _ = writeln!(s, "| {pt} | {sel} | {} |", cells.join(" | "));
+        }
+    }
+    let failures: Vec<&Unit> = units.iter().filter(|u| u.error.is_some()).take(10).collect();
+    if !failures.is_empty() {
+        let _ = writeln!(s, "\n## Units that could not run\n");
+        for u in failures {
+            let _ = writeln!(
+                s,
+                "- point {} ({}), realisation {}: {}",
+                u.point,
+                point_label(info, u.point),
+                u.realisation,
+                u.error.as_deref().unwrap_or("")
+            );
+        }
+    }
+    s
+}

@@ -1,0 +1,388 @@
+//! Design studies: a sweep over a cell's design (grid points), many realisations each, sharded
+//! onto a cluster and merged.
+//!
+//! A **work unit** is one grid point in one realisation: the whole study of that point's scenario
+//! (campaign, set sizes x repetitions) in the physical world of that realisation. Realisation `r`
+//! of a scenario with seed `s` draws every random quantity from the seed [`realisation_seed`]`(s,
+//! r)`, which depends on neither the grid point nor the shard: two designs are compared on the
+//! same worlds (common random numbers), and realisation 0 is the plain `calsim run` of the point.
+//!
+//! A shard (`--shard k/K`) runs the units `u` with `u % K == k` and writes each as
+//! `units/uNNNNNN.json` of its shard directory, atomically: a shard re-run after a kill keeps the
+//! units it finished. `merge` reads the units of every shard, in unit order, and writes the
+//! tables: any sharding and any thread count give the same bytes.
+
+pub mod spec;
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::io::scenario::Loaded;
+use crate::study::ErrorStats;
+use crate::study::stats::{finite_sorted, median, quantile};
+pub use spec::{Sweep, SweepError};
+
+/// The seed of realisation `r` of a scenario seeded `seed`: the seed itself for realisation 0 (the
+/// plain run), an independent one for every other.
+pub fn realisation_seed(seed: u64, r: u32) -> u64 {
+    if r == 0 { seed } else { crate::seeds::split_seed(seed, crate::seeds::REALISATION + u64::from(r)) }
+}
+
+/// One set size of one selection in one work unit: the statistics over its repetitions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UnitRow {
+    /// How sets were chosen.
+    pub selection: String,
+    /// Set size.
+    pub set_size: u32,
+    /// Whether this is the point's table set size.
+    pub table: bool,
+    /// Repetitions run.
+    pub repetitions: u32,
+    /// Repetitions that gave no model.
+    pub no_model: u32,
+    /// Median over repetitions of the validation error's median, p95, max and mean, mm (SPMS: of
+    /// the ISO 9283 AP over P1-P5).
+    pub after_median_mm: f64,
+    /// See `after_median_mm`.
+    pub after_p95_mm: f64,
+    /// See `after_median_mm`.
+    pub after_max_mm: f64,
+    /// See `after_median_mm`.
+    pub after_mean_mm: f64,
+    /// Per threshold of the sweep: repetitions whose max error is within it.
+    pub max_within: Vec<u32>,
+    /// Per threshold: repetitions whose mean error is within it.
+    pub mean_within: Vec<u32>,
+    /// Median O1 of the chosen sets.
+    pub o1_median: f64,
+}
+
+/// What one work unit gave.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Unit {
+    /// Unit index: `point * realisations + realisation`.
+    pub unit: usize,
+    /// Grid point.
+    pub point: usize,
+    /// Realisation.
+    pub realisation: u32,
+    /// Why the unit could not run (the campaign failed in this world), if it could not.
+    pub error: Option<String>,
+    /// Error before calibration: median, p95 and max, mm.
+    pub before_mm: [f64; 3],
+    /// Modelled campaign time (centring of the pool), s.
+    pub campaign_s: f64,
+    /// Per selection and set size.
+    pub rows: Vec<UnitRow>,
+}
+
+/// Statistics over repetitions of one selection and set size.
+fn row(selection: &str, n: usize, table: bool, per_rep: &[Option<ErrorStats>], o1: &[f64], thresholds: &[f64]) -> UnitRow {
+    let ok: Vec<&ErrorStats> = per_rep.iter().flatten().collect();
+    let med = |f: fn(&ErrorStats) -> f64| median(&ok.iter().map(|s| f(s)).collect::<Vec<_>>());
+    UnitRow {
+        selection: selection.into(),
+        set_size: n as u32,
+        table,
+        repetitions: per_rep.len() as u32,
+        no_model: (per_rep.len() - ok.len()) as u32,
+        after_median_mm: med(|s| s.median),
+        after_p95_mm: med(|s| s.p95),
+        after_max_mm: med(|s| s.max),
+        after_mean_mm: med(|s| s.mean),
+        max_within: thresholds.iter().map(|t| ok.iter().filter(|s| s.max <= *t).count() as u32).collect(),
+        mean_within: thresholds.iter().map(|t| ok.iter().filter(|s| s.mean <= *t).count() as u32).collect(),
+        o1_median: median(o1),
+    }
+}
+
+/// Groups per-task results by (selection, set size), in grid order.
+fn grouped<T>(tasks: &[T], key: impl Fn(&T) -> (crate::study::Selection, usize)) -> Vec<((crate::study::Selection, usize), Vec<&T>)> {
+    let mut out: Vec<((crate::study::Selection, usize), Vec<&T>)> = Vec::new();
+    for t in tasks {
+        let k = key(t);
+        match out.iter_mut().find(|(g, _)| *g == k) {
+            Some((_, v)) => v.push(t),
+            None => out.push((k, vec![t])),
+        }
+    }
+    out
+}
+
+/// Runs one work unit.
+pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
+    let (point, realisation) = (unit / sweep.realisations as usize, (unit % sweep.realisations as usize) as u32);
+    let th = &sweep.thresholds_mm;
+    let quiet = |_: usize, _: usize| {};
+    let mut out = Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new() };
+    match &sweep.points[point].scenario {
+        Loaded::Trical(s) => {
+            let seed = realisation_seed(s.seed, realisation);
+            let experiment = match s.experiment.build(seed) {
+                Ok(e) => e,
+                Err(e) => {
+                    out.error = Some(format!("campaign: {e}"));
+                    return out;
+                }
+            };
+            let before = s.experiment.before_model(&experiment.campaign);
+            let results = match crate::study::run(&experiment, &before, &s.study, seed, &quiet) {
+                Ok(r) => r,
+                Err(e) => {
+                    out.error = Some(e.to_string());
+                    return out;
+                }
+            };
+            let b = ErrorStats::of(&results.before_errors);
+            out.before_mm = [b.median, b.p95, b.max];
+            out.campaign_s = experiment.campaign.pool.iter().map(|p| p.seconds).sum();
+            for ((sel, n), ts) in grouped(&results.tasks, |t| (t.task.selection, t.task.set_size)) {
+                let per: Vec<Option<ErrorStats>> = ts.iter().map(|t| (!t.id.outcome.is_rank_deficient()).then_some(t.validation)).collect();
+                let o1: Vec<f64> = ts.iter().map(|t| t.id.observability.o1).collect();
+                out.rows.push(row(sel.label(), n, n == s.study.table_set_size as usize, &per, &o1, th));
+            }
+        }
+        Loaded::Spms(s) => {
+            let seed = realisation_seed(s.seed, realisation);
+            let results = match crate::spms::study::run(&s.spec, seed, &quiet) {
+                Ok(r) => r,
+                Err(e) => {
+                    out.error = Some(e.to_string());
+                    return out;
+                }
+            };
+            let b = ErrorStats::of(&results.before.ap_mm);
+            out.before_mm = [b.median, b.p95, b.max];
+            for ((sel, n), ts) in grouped(&results.tasks, |t| (t.task.selection, t.task.set_size)) {
+                let per: Vec<Option<ErrorStats>> = ts.iter().map(|t| t.iso.as_ref().map(|i| ErrorStats::of(&i.ap_mm))).collect();
+                let o1: Vec<f64> = ts.iter().map(|t| t.id.observability.o1).collect();
+                out.rows.push(row(sel.label(), n, n == s.spec.study.table_set_size as usize, &per, &o1, th));
+            }
+        }
+    }
+    out
+}
+
+/// What a shard directory records of its sweep, so that `merge` needs only the shards.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShardInfo {
+    /// The sweep's name.
+    pub name: String,
+    /// sha256 of the sweep file and its base scenario.
+    pub identity: String,
+    /// Realisations per point.
+    pub realisations: u32,
+    /// Thresholds, mm.
+    pub thresholds_mm: Vec<f64>,
+    /// The axes' keys.
+    pub keys: Vec<String>,
+    /// Per grid point, its axis values as written.
+    pub points: Vec<Vec<String>>,
+    /// This shard, `k` of `count`.
+    pub shard: usize,
+    /// Shards in all.
+    pub count: usize,
+}
+
+/// The shard directory of shard `k` of `count` of `sweep` under `out`.
+pub fn shard_dir(out: &Path, name: &str, k: usize, count: usize) -> PathBuf {
+    out.join(format!("{name}.shard-{k}-of-{count}"))
+}
+
+fn unit_file(dir: &Path, unit: usize) -> PathBuf {
+    dir.join("units").join(format!("u{unit:07}.json"))
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename: a reader sees all or nothing.
+fn write_file_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
+    fs::write(&tmp, bytes)?;
+    fs::rename(&tmp, path)
+}
+
+/// Runs the units of shard `k` of `count` not yet in its directory, in parallel, calling
+/// `progress(done, total)` after each; returns the shard directory.
+pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(dyn Fn(usize, usize) + Sync)) -> std::io::Result<PathBuf> {
+    let dir = shard_dir(out, &sweep.name, k, count);
+    fs::create_dir_all(dir.join("units"))?;
+    let info = ShardInfo {
+        name: sweep.name.clone(),
+        identity: sweep.identity.clone(),
+        realisations: sweep.realisations,
+        thresholds_mm: sweep.thresholds_mm.clone(),
+        keys: sweep.keys.clone(),
+        points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
+        shard: k,
+        count,
+    };
+    let info_path = dir.join("sweep.json");
+    if let Ok(old) = fs::read(&info_path) {
+        let old: ShardInfo = serde_json::from_slice(&old).map_err(std::io::Error::other)?;
+        if old != info {
+            return Err(std::io::Error::other(format!(
+                "{} holds units of another sweep or sharding: remove it or choose another --out",
+                dir.display()
+            )));
+        }
+    }
+    write_file_atomically(&info_path, &serde_json::to_vec_pretty(&info).map_err(std::io::Error::other)?)?;
+    // Temporary files of killed runs are not units: remove them.
+    for e in fs::read_dir(dir.join("units"))? {
+        let p = e?.path();
+        if p.extension().is_some_and(|x| x != "json") {
+            let _ = fs::remove_file(&p);
+        }
+    }
+    let total = sweep.points.len() * sweep.realisations as usize;
+    let mine: Vec<usize> = (k..total).step_by(count).collect();
+    let pending: Vec<usize> = mine.iter().copied().filter(|&u| !unit_file(&dir, u).exists()).collect();
+    let done = std::sync::atomic::AtomicUsize::new(mine.len() - pending.len());
+    progress(done.load(std::sync::atomic::Ordering::Relaxed), mine.len());
+    pending.par_iter().try_for_each(|&u| -> std::io::Result<()> {
+        let unit = run_unit(sweep, u);
+        write_file_atomically(&unit_file(&dir, u), &serde_json::to_vec(&unit).map_err(std::io::Error::other)?)?;
+        progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, mine.len());
+        Ok(())
+    })?;
+    Ok(dir)
+}
+
+/// Why shards cannot be merged.
+#[derive(Debug, thiserror::Error)]
+pub enum MergeError {
+    /// A shard directory is unreadable or not a shard.
+    #[error("{path}: {why}")]
+    Shard {
+        /// The directory.
+        path: String,
+        /// What is wrong.
+        why: String,
+    },
+}
+
+fn shard_err(p: &Path, why: impl Into<String>) -> MergeError {
+    MergeError::Shard { path: p.display().to_string(), why: why.into() }
+}
+
+/// Reads the shards `dirs` of one sweep: their common record and every unit, in unit order.
+pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeError> {
+    let mut info: Option<(ShardInfo, &Path)> = None;
+    let mut units: BTreeMap<usize, Unit> = BTreeMap::new();
+    for d in dirs {
+        let bytes = fs::read(d.join("sweep.json")).map_err(|e| shard_err(d, format!("not a shard directory (sweep.json: {e})")))?;
+        let this: ShardInfo = serde_json::from_slice(&bytes).map_err(|e| shard_err(d, format!("sweep.json: {e}")))?;
+        match &info {
+            Some((first, fp)) if first.identity != this.identity || first.name != this.name => {
+                return Err(shard_err(d, format!("a shard of another sweep than {} ({} against {})", fp.display(), this.name, first.name)));
+            }
+            Some(_) => {}
+            None => info = Some((this.clone(), d)),
+        }
+        let entries = fs::read_dir(d.join("units")).map_err(|e| shard_err(d, format!("units: {e}")))?;
+        for e in entries {
+            let p = e.map_err(|e| shard_err(d, e.to_string()))?.path();
+            if p.extension().is_none_or(|x| x != "json") {
+                continue;
+            }
+            let u: Unit = serde_json::from_slice(&fs::read(&p).map_err(|e| shard_err(&p, e.to_string()))?)
+                .map_err(|e| shard_err(&p, e.to_string()))?;
+            units.insert(u.unit, u);
+        }
+    }
+    let (info, _) = info.ok_or_else(|| shard_err(Path::new("merge"), "no shard directories given"))?;
+    let total = info.points.len() * info.realisations as usize;
+    let missing: Vec<usize> = (0..total).filter(|u| !units.contains_key(u)).collect();
+    if !missing.is_empty() {
+        return Err(shard_err(
+            Path::new(&info.name),
+            format!(
+                "{} of {total} work units missing (first: {}): run the missing shards or give every shard directory",
+                missing.len(),
+                missing[0]
+            ),
+        ));
+    }
+    Ok((info, units.into_values().collect()))
+}
+
+/// Aggregates over realisations: one row per grid point, selection and set size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointRow {
+    /// Grid point.
+    pub point: usize,
+    /// Selection.
+    pub selection: String,
+    /// Set size.
+    pub set_size: u32,
+    /// Whether this is the point's table set size.
+    pub table: bool,
+    /// Realisations that ran.
+    pub realisations: u32,
+    /// Median, P10 and P90 over realisations of the after-calibration median, p95 and max, mm.
+    pub after: [[f64; 3]; 3],
+    /// Median over realisations of the before-calibration median, p95, max, mm.
+    pub before: [f64; 3],
+    /// Per threshold: P(max <= t) and P(mean <= t) over realisations x repetitions.
+    pub success: Vec<(f64, f64)>,
+    /// Identifications without a model.
+    pub no_model: u32,
+    /// Median O1.
+    pub o1: f64,
+    /// Median modelled campaign time, s.
+    pub campaign_s: f64,
+}
+
+fn spread(v: &[f64]) -> [f64; 3] {
+    let s = finite_sorted(v);
+    [quantile(&s, 0.5), quantile(&s, 0.1), quantile(&s, 0.9)]
+}
+
+/// The per-point aggregates of `units` (in unit order).
+pub fn aggregate(info: &ShardInfo, units: &[Unit]) -> Vec<PointRow> {
+    let mut out = Vec::new();
+    for p in 0..info.points.len() {
+        let us: Vec<&Unit> = units.iter().filter(|u| u.point == p && u.error.is_none()).collect();
+        let mut keys: Vec<(String, u32, bool)> = Vec::new();
+        for u in &us {
+            for r in &u.rows {
+                if !keys.iter().any(|k| k.0 == r.selection && k.1 == r.set_size) {
+                    keys.push((r.selection.clone(), r.set_size, r.table));
+                }
+            }
+        }
+        for (sel, n, table) in keys {
+            let rows: Vec<&UnitRow> = us.iter().filter_map(|u| u.rows.iter().find(|r| r.selection == sel && r.set_size == n)).collect();
+            let reps: u32 = rows.iter().map(|r| r.repetitions).sum();
+            let success = (0..info.thresholds_mm.len())
+                .map(|t| {
+                    let m: u32 = rows.iter().map(|r| r.max_within[t]).sum();
+                    let a: u32 = rows.iter().map(|r| r.mean_within[t]).sum();
+                    (f64::from(m) / f64::from(reps.max(1)), f64::from(a) / f64::from(reps.max(1)))
+                })
+                .collect();
+            out.push(PointRow {
+                point: p,
+                selection: sel,
+                set_size: n,
+                table,
+                realisations: rows.len() as u32,
+                after: [
+                    spread(&rows.iter().map(|r| r.after_median_mm).collect::<Vec<_>>()),
+                    spread(&rows.iter().map(|r| r.after_p95_mm).collect::<Vec<_>>()),
+                    spread(&rows.iter().map(|r| r.after_max_mm).collect::<Vec<_>>()),
+                ],
+                before: [0, 1, 2].map(|k| median(&us.iter().map(|u| u.before_mm[k]).collect::<Vec<_>>())),
+                success,
+                no_model: rows.iter().map(|r| r.no_model).sum(),
+                o1: median(&rows.iter().map(|r| r.o1_median).collect::<Vec<_>>()),
+                campaign_s: median(&us.iter().map(|u| u.campaign_s).collect::<Vec<_>>()),
+            });
+        }
+    }
+    out
+}

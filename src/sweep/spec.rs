@@ -1,0 +1,307 @@
+//! A sweep file: a base scenario, axes over its keys by dotted path, the number of realisations,
+//! the success thresholds; expanded into grid points, each a scenario validated like any other
+//! before anything runs.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::io::scenario::{self, Loaded, ScenarioError};
+
+/// Most grid points of a sweep, and most realisations per point.
+pub const MAX_POINTS: usize = 10_000;
+/// Most realisations per grid point.
+pub const MAX_REALISATIONS: u32 = 10_000;
+
+/// How the axes combine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Combine {
+    /// Every combination of the axes' values.
+    #[default]
+    Product,
+    /// The axes' values side by side (all axes of one length).
+    Zip,
+}
+
+/// A range of numbers, both ends included.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Range {
+    /// First value.
+    pub start: f64,
+    /// Last value (included when the steps land on it).
+    pub stop: f64,
+    /// Step, > 0.
+    pub step: f64,
+}
+
+/// One axis: a scenario key and its values.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Axis {
+    /// Dotted key of the scenario (`trical.epsilon_mm`, `cell.spheres_w_mm`), or `cell.layout`
+    /// for a named sphere layout (`{ n = 4, spacing_mm = 300 }`: n spheres on a circle).
+    pub key: String,
+    /// The values, as TOML values of the key's type.
+    pub values: Option<Vec<toml::Value>>,
+    /// Or a range of numbers.
+    pub range: Option<Range>,
+}
+
+/// The sweep file as written.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepFile {
+    base: PathBuf,
+    #[serde(default = "one")]
+    realisations: u32,
+    #[serde(default)]
+    combine: Combine,
+    #[serde(default)]
+    thresholds_mm: Vec<f64>,
+    /// Keys set at every grid point (dotted, quoted: `"study.set_sizes" = [75]`).
+    #[serde(default)]
+    fixed: toml::Table,
+    #[serde(default, rename = "axis")]
+    axes: Vec<Axis>,
+}
+
+fn one() -> u32 {
+    1
+}
+
+/// One grid point: its axis values and its checked scenario.
+#[derive(Clone, Debug)]
+pub struct Point {
+    /// The axis values, as written (`key = value`).
+    pub values: Vec<(String, String)>,
+    /// The scenario of the point.
+    pub scenario: Loaded,
+}
+
+/// A loaded, checked sweep.
+#[derive(Clone, Debug)]
+pub struct Sweep {
+    /// Name (the sweep file's stem).
+    pub name: String,
+    /// Realisations per grid point.
+    pub realisations: u32,
+    /// Success thresholds on the after-calibration error, mm.
+    pub thresholds_mm: Vec<f64>,
+    /// The axes' keys.
+    pub keys: Vec<String>,
+    /// The grid.
+    pub points: Vec<Point>,
+    /// sha256 of the sweep file and the base scenario: shards of one sweep carry the same.
+    pub identity: String,
+}
+
+/// A sweep that cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// The sweep file itself.
+    #[error("{path}: {key}: {message}")]
+    File {
+        /// Sweep file.
+        path: String,
+        /// Key.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A grid point is not a valid scenario.
+    #[error("{path}: axis {axis}: {error}")]
+    Point {
+        /// Sweep file.
+        path: String,
+        /// The axis values of the point.
+        axis: String,
+        /// The scenario error.
+        error: ScenarioError,
+    },
+}
+
+fn file_err(path: &Path, key: &str, message: impl Into<String>) -> SweepError {
+    SweepError::File { path: path.display().to_string(), key: key.into(), message: message.into() }
+}
+
+/// Sets `key` (dotted) of `t` to `v`, making the tables on the way; a key under a value that is not
+/// a table is an error.
+pub fn set_dotted(t: &mut toml::Table, key: &str, v: toml::Value) -> Result<(), String> {
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(format!("{key:?} is not a dotted key"));
+    }
+    let (last, parents) = parts.split_last().expect("split gives one part at least");
+    let mut cur = t;
+    for p in parents {
+        let entry = cur.entry(p.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        cur = entry.as_table_mut().ok_or_else(|| format!("{p} in {key} is not a table"))?;
+    }
+    cur.insert(last.to_string(), v);
+    Ok(())
+}
+
+/// The sphere centres of a named layout: `n` spheres on a circle whose neighbours are `spacing_mm`
+/// apart, sphere 1 at the origin of {W}, sphere 2 on +x, the rest counter-clockwise (eqs. 1-5).
+pub fn circle_layout(n: usize, spacing_mm: f64) -> Vec<[f64; 3]> {
+    let step = std::f64::consts::TAU / n as f64;
+    let r = spacing_mm / (2.0 * (step / 2.0).sin());
+    // Points on the circle, rotated so that sphere 1 -> sphere 2 runs along +x from the origin.
+    let p: Vec<(f64, f64)> = (0..n).map(|k| (r * (k as f64 * step).cos(), r * (k as f64 * step).sin())).collect();
+    let (dx, dy) = (p[1].0 - p[0].0, p[1].1 - p[0].1);
+    let a = dy.atan2(dx);
+    let (c, s) = (a.cos(), a.sin());
+    p.iter()
+        .map(|&(x, y)| {
+            let (x, y) = (x - p[0].0, y - p[0].1);
+            let (xr, yr) = (c * x + s * y, -s * x + c * y);
+            // Round off the last bits so that sphere 2 lies exactly on +x and sphere 1 at 0.
+            let snap = |v: f64| if v.abs() < 1e-9 { 0.0 } else { v };
+            [snap(xr), snap(yr), 0.0]
+        })
+        .collect()
+}
+
+/// The value an axis puts at its key: a named layout becomes `cell.spheres_w_mm`.
+fn resolve(key: &str, v: &toml::Value) -> Result<(String, toml::Value), String> {
+    if key != "cell.layout" {
+        return Ok((key.to_string(), v.clone()));
+    }
+    let t = v.as_table().ok_or("a layout is a table { n = ..., spacing_mm = ... }")?;
+    let n = t.get("n").and_then(toml::Value::as_integer).ok_or("layout.n: the number of spheres, 3 to 6")?;
+    let s = t.get("spacing_mm").and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64))).ok_or("layout.spacing_mm: a number")?;
+    if t.keys().any(|k| k != "n" && k != "spacing_mm") {
+        return Err("a layout has the keys n and spacing_mm only".into());
+    }
+    if !(3..=6).contains(&n) {
+        return Err(format!("layout.n = {n}: 3 to 6 spheres"));
+    }
+    if !(s.is_finite() && (50.0..=2000.0).contains(&s)) {
+        return Err(format!("layout.spacing_mm = {s}: within [50, 2000] mm"));
+    }
+    let pts = circle_layout(n as usize, s);
+    Ok((
+        "cell.spheres_w_mm".into(),
+        toml::Value::Array(pts.iter().map(|p| toml::Value::Array(p.iter().map(|x| toml::Value::Float(*x)).collect())).collect()),
+    ))
+}
+
+fn axis_values(path: &Path, i: usize, a: &Axis) -> Result<Vec<toml::Value>, SweepError> {
+    let key = format!("axis[{i}] ({})", a.key);
+    let values = match (&a.values, &a.range) {
+        (Some(v), None) => v.clone(),
+        (None, Some(r)) => {
+            if !(r.start.is_finite() && r.stop.is_finite() && r.step.is_finite() && r.step > 0.0 && r.stop >= r.start) {
+                return Err(file_err(path, &key, "range needs finite start <= stop and a step > 0"));
+            }
+            let n = ((r.stop - r.start) / r.step + 1e-9).floor() as usize + 1;
+            if n > MAX_POINTS {
+                return Err(file_err(path, &key, format!("range gives {n} values: at most {MAX_POINTS}")));
+            }
+            (0..n).map(|k| toml::Value::Float(r.start + k as f64 * r.step)).collect()
+        }
+        _ => return Err(file_err(path, &key, "give either values = [...] or range = { start, stop, step }")),
+    };
+    if values.is_empty() {
+        return Err(file_err(path, &key, "an axis needs at least one value"));
+    }
+    Ok(values)
+}
+
+/// The grid's index tuples (one value index per axis) for the axes' lengths.
+pub fn grid(lengths: &[usize], combine: Combine) -> Result<Vec<Vec<usize>>, String> {
+    match combine {
+        Combine::Zip => {
+            let n = lengths.first().copied().unwrap_or(1);
+            if lengths.iter().any(|&l| l != n) {
+                return Err(format!("zip needs axes of one length, not {lengths:?}"));
+            }
+            Ok((0..n).map(|k| vec![k; lengths.len()]).collect())
+        }
+        Combine::Product => {
+            let total = lengths.iter().try_fold(1usize, |acc, &l| acc.checked_mul(l)).filter(|&t| t <= MAX_POINTS);
+            let Some(total) = total else {
+                return Err(format!("the product of the axes has more than {MAX_POINTS} points"));
+            };
+            Ok((0..total)
+                .map(|mut k| {
+                    let mut idx = vec![0; lengths.len()];
+                    for a in (0..lengths.len()).rev() {
+                        idx[a] = k % lengths[a];
+                        k /= lengths[a];
+                    }
+                    idx
+                })
+                .collect())
+        }
+    }
+}
+
+/// Reads and checks a sweep file: every grid point is loaded and checked as a scenario.
+pub fn load(path: &Path) -> Result<Sweep, SweepError> {
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
+    let file: SweepFile = {
+        let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, "(file)", e.message()))?;
+        serde_path_to_error::deserialize(de).map_err(|e| {
+            let key = e.path().to_string();
+            file_err(path, &key, e.into_inner().message())
+        })?
+    };
+    if !(1..=MAX_REALISATIONS).contains(&file.realisations) {
+        return Err(file_err(path, "realisations", format!("{}: within [1, {MAX_REALISATIONS}]", file.realisations)));
+    }
+    if file.thresholds_mm.len() > 16 || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
+        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 thresholds, each within (0, 1000) mm", file.thresholds_mm)));
+    }
+    let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
+    let (base_text, mut base_table) =
+        scenario::read_table(&base_path).map_err(|e| SweepError::Point { path: shown.clone(), axis: "base".into(), error: e })?;
+    for (k, v) in &file.fixed {
+        let (target, value) = resolve(k, v).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
+        set_dotted(&mut base_table, &target, value).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
+    }
+    let values: Vec<Vec<toml::Value>> = file.axes.iter().enumerate().map(|(i, a)| axis_values(path, i, a)).collect::<Result<_, _>>()?;
+    let lengths: Vec<usize> = values.iter().map(Vec::len).collect();
+    let tuples = grid(&lengths, file.combine).map_err(|m| file_err(path, "axis", m))?;
+    let units = tuples.len() as u64 * u64::from(file.realisations);
+    if units > 1_000_000 {
+        return Err(file_err(path, "realisations", format!("{units} work units (points x realisations): at most 1e6")));
+    }
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "sweep".into());
+    let mut points = Vec::with_capacity(tuples.len());
+    for (p, idx) in tuples.iter().enumerate() {
+        let mut t = base_table.clone();
+        let mut shown_values = Vec::new();
+        for (a, &k) in idx.iter().enumerate() {
+            let key = &file.axes[a].key;
+            let v = &values[a][k];
+            let label = format!("{key} = {v}");
+            let (target, value) = resolve(key, v).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), format!("value {v}: {m}")))?;
+            set_dotted(&mut t, &target, value).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), m))?;
+            shown_values.push((key.clone(), v.to_string()));
+            let _ = label;
+        }
+        let axis = shown_values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ");
+        let point_path = PathBuf::from(format!("{stem}#{p}"));
+        let text = toml::to_string(&t).unwrap_or_default();
+        let scenario = scenario::from_table(&text, t, &point_path).map_err(|e| SweepError::Point {
+            path: shown.clone(),
+            axis: if axis.is_empty() { "(base)".into() } else { axis.clone() },
+            error: e,
+        })?;
+        points.push(Point { values: shown_values, scenario });
+    }
+    use sha2::Digest;
+    let identity = format!("{:x}", sha2::Sha256::digest(format!("{text}\u{0}{base_text}")));
+    Ok(Sweep {
+        name: stem,
+        realisations: file.realisations,
+        thresholds_mm: file.thresholds_mm,
+        keys: file.axes.iter().map(|a| a.key.clone()).collect(),
+        points,
+        identity,
+    })
+}
