@@ -167,9 +167,15 @@ pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
-            let code = if e.use_stderr() { 2 } else { 0 };
-            let _ = e.print();
-            return ExitCode::from(code);
+            if !e.use_stderr() {
+                // --help and --version.
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            // Bad command line: the one line that says what is wrong (clap adds a usage hint below it).
+            let text = e.render().to_string();
+            eprintln!("{}", text.lines().find(|l| !l.trim().is_empty()).unwrap_or("error: bad command line"));
+            return ExitCode::from(2);
         }
     };
     let result = match &cli.command {
@@ -380,7 +386,7 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
     let (k, count) = args.shard.unwrap_or((0, 1));
     crate::io::out_dir::prepare(&args.out, &crate::sweep::shard_dir(Path::new(""), &sweep.name, k, count).display().to_string())
         .map_err(|e| e.to_string())?;
-    if count == 1 {
+    if args.shard.is_none() {
         crate::io::out_dir::prepare(&args.out, &sweep.name).map_err(|e| e.to_string())?;
     }
     let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
@@ -411,7 +417,7 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
         run_s / units.div_ceil(count).max(1) as f64,
         dir.display()
     );
-    if count > 1 {
+    if args.shard.is_some() {
         println!(
             "merge the shards with: calsim merge {}/{}.shard-*-of-{count} --out {}",
             args.out.display(),

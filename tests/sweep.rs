@@ -1,0 +1,195 @@
+//! Design sweeps: grid expansion, common random numbers, shard/merge identity, resume after a
+//! kill, and bad sweep input.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use calsim::sweep::spec::{Combine, circle_layout, grid};
+use common::{calsim, repo, scratch};
+
+#[test]
+fn product_and_zip_grids() {
+    let g = grid(&[2, 3], Combine::Product).unwrap();
+    assert_eq!(g, vec![vec![0, 0], vec![0, 1], vec![0, 2], vec![1, 0], vec![1, 1], vec![1, 2]]);
+    assert_eq!(grid(&[3, 3], Combine::Zip).unwrap(), vec![vec![0, 0], vec![1, 1], vec![2, 2]]);
+    assert!(grid(&[2, 3], Combine::Zip).is_err());
+    assert!(grid(&[100_000, 100_000], Combine::Product).is_err(), "a grid beyond the bound is refused, not allocated");
+    assert_eq!(grid(&[], Combine::Product).unwrap(), vec![Vec::<usize>::new()], "no axis: the base scenario alone");
+}
+
+#[test]
+fn circle_layouts_define_w_and_keep_their_spacing() {
+    for n in 3..=6 {
+        let p = circle_layout(n, 300.0);
+        assert_eq!(p.len(), n);
+        assert_eq!(p[0], [0.0, 0.0, 0.0]);
+        assert!(p[1][0] > 0.0 && p[1][1] == 0.0 && p[1][2] == 0.0, "{:?}", p[1]);
+        assert!(p[2][1] > 0.0, "sphere 3 on the +y side: {:?}", p[2]);
+        for k in 0..n {
+            let (a, b) = (p[k], p[(k + 1) % n]);
+            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+            assert!((d - 300.0).abs() < 1e-9, "n = {n}, neighbours {k}: {d}");
+        }
+    }
+}
+
+/// A sweep file over the reduced CI scenario (2 set sizes x 2 repetitions) in `dir`.
+fn sweep_file(dir: &Path, name: &str, realisations: u32, axes: &str) -> PathBuf {
+    let base = repo().join("scenarios/ci_quick.toml");
+    let text = format!(
+        "base = {base:?}\nrealisations = {realisations}\nthresholds_mm = [0.5, 1.0]\n\n[fixed]\n\"study.set_sizes\" = [20, 30]\n\"study.table_set_size\" = 30\n\"study.repetitions\" = 2\n\n{axes}\n",
+        base = base.display().to_string()
+    );
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn run(args: &[&str], out: &Path) -> std::process::Output {
+    let o = calsim().args(args).arg("--out").arg(out).output().unwrap();
+    assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
+fn tables(dir: &Path) -> Vec<Vec<u8>> {
+    ["sweep.parquet", "points.parquet"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect()
+}
+
+const AXIS: &str = "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010, 0.020]\n";
+
+#[test]
+fn sharded_and_threaded_runs_merge_to_the_same_bytes() {
+    let dir = scratch("sweep-shards");
+    let f = sweep_file(&dir, "s.toml", 3, AXIS);
+    let fs = f.to_str().unwrap();
+    let one = dir.join("one");
+    run(&["sweep", fs, "--threads", "1"], &one);
+    let two = dir.join("two");
+    run(&["sweep", fs, "--threads", "2"], &two);
+    let sharded = dir.join("sharded");
+    for k in 0..3 {
+        run(&["sweep", fs, "--shard", &format!("{k}/3")], &sharded);
+    }
+    let shards: Vec<String> = (0..3).map(|k| sharded.join(format!("s.shard-{k}-of-3")).display().to_string()).collect();
+    let mut args = vec!["merge"];
+    args.extend(shards.iter().map(String::as_str));
+    run(&args, &sharded);
+    let reference = tables(&one.join("s"));
+    assert!(reference[0].len() > 1000, "a sweep.parquet with rows");
+    assert_eq!(tables(&two.join("s")), reference, "1 vs 2 threads");
+    assert_eq!(tables(&sharded.join("s")), reference, "1 vs 3 shards");
+    // Every unit ran (6 = 2 points x 3 realisations); the unsharded run removes its shard directory.
+    let manifest = std::fs::read_to_string(one.join("s/manifest.json")).unwrap();
+    assert!(manifest.contains("\"units\": 6") && manifest.contains("\"failed_units\": 0"), "{manifest}");
+    assert!(!one.join("s.shard-0-of-1").exists());
+}
+
+#[test]
+fn a_point_equal_to_the_base_is_the_plain_run_at_realisation_0_and_worlds_are_shared() {
+    use calsim::io::scenario::Loaded;
+    let dir = scratch("sweep-crn");
+    // Two points that differ in the repetitions only: the same worlds, so the same errors before
+    // calibration in each realisation; realisation 0 of point 0 is the plain run.
+    let f = sweep_file(&dir, "crn.toml", 2, "[[axis]]\nkey = \"study.repetitions\"\nvalues = [2, 3]\n");
+    let sweep = calsim::sweep::spec::load(&f).unwrap();
+    let units: Vec<_> = (0..4).map(|u| calsim::sweep::run_unit(&sweep, u)).collect();
+    assert_eq!(units[0].before_mm, units[2].before_mm, "realisation 0 of both points: one world");
+    assert_eq!(units[1].before_mm, units[3].before_mm, "realisation 1 of both points: one world");
+    assert_ne!(units[0].before_mm, units[1].before_mm, "two realisations: two worlds");
+
+    let Loaded::Trical(s) = &sweep.points[0].scenario else { panic!("a TriCal sweep") };
+    let experiment = s.experiment.build(s.seed).unwrap();
+    let before = s.experiment.before_model(&experiment.campaign);
+    let plain = calsim::study::run(&experiment, &before, &s.study, s.seed, &|_, _| {}).unwrap();
+    let b = calsim::study::ErrorStats::of(&plain.before_errors);
+    assert_eq!(units[0].before_mm, [b.median, b.p95, b.max]);
+    let at30: Vec<_> = plain.tasks.iter().filter(|t| t.task.set_size == 30).collect();
+    let med = calsim::study::stats::median(&at30.iter().map(|t| t.validation.median).collect::<Vec<_>>());
+    let row = units[0].rows.iter().find(|r| r.set_size == 30).unwrap();
+    assert_eq!(row.after_median_mm, med, "the sweep's unit is the plain run, bit for bit");
+}
+
+#[test]
+fn a_killed_shard_resumes_and_merges_to_the_same_bytes() {
+    let dir = scratch("sweep-resume");
+    let f = sweep_file(&dir, "r.toml", 4, AXIS);
+    let fs = f.to_str().unwrap();
+    let whole = dir.join("whole");
+    let t = std::time::Instant::now();
+    run(&["sweep", fs], &whole);
+    let full = t.elapsed();
+    let part = dir.join("part");
+    let mut child = calsim()
+        .args(["sweep", fs, "--shard", "0/1", "--out"])
+        .arg(&part)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(full.mul_f64(0.6));
+    let _ = child.kill();
+    let _ = child.wait();
+    let units = part.join("r.shard-0-of-1/units");
+    let kept = std::fs::read_dir(&units)
+        .map(|d| d.filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "json")).count())
+        .unwrap_or(0);
+    eprintln!("{kept} of 8 units kept after the kill");
+    run(&["sweep", fs, "--shard", "0/1"], &part);
+    run(&["merge", part.join("r.shard-0-of-1").to_str().unwrap()], &part);
+    assert_eq!(tables(&part.join("r")), tables(&whole.join("r")));
+}
+
+/// `calsim` with `args` must exit 2 with one line containing every one of `expect`.
+fn bad(args: &[&str], expect: &[&str]) {
+    let o = calsim().args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: one line: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for e in expect {
+        assert!(err.contains(e), "{args:?}: {e:?} not in {err}");
+    }
+}
+
+#[test]
+fn bad_sweep_input_is_one_line_and_exit_2() {
+    let dir = scratch("sweep-bad");
+    let out = dir.join("out");
+    let o = out.to_str().unwrap();
+    for (name, axes, expect) in [
+        (
+            "unknown.toml",
+            "[[axis]]\nkey = \"trical.epsilonmm\"\nvalues = [0.01]\n",
+            vec!["unknown.toml", "trical.epsilonmm = 0.01", "unknown field"],
+        ),
+        ("type.toml", "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [\"small\"]\n", vec!["type.toml", "trical.epsilon_mm", "small"]),
+        (
+            "range.toml",
+            "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.01, 10.0]\n",
+            vec!["range.toml", "trical.epsilon_mm = 10.0", "epsilon_mm"],
+        ),
+        ("empty.toml", "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = []\n", vec!["empty.toml", "axis[0]", "at least one value"]),
+        ("layout.toml", "[[axis]]\nkey = \"cell.layout\"\nvalues = [{ n = 9, spacing_mm = 300 }]\n", vec!["layout.toml", "layout.n = 9"]),
+        ("nan.toml", "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [nan]\n", vec!["nan.toml", "epsilon_mm", "finite"]),
+    ] {
+        let f = sweep_file(&dir, name, 1, axes);
+        bad(&["sweep", f.to_str().unwrap(), "--out", o], &expect);
+    }
+    let good = sweep_file(&dir, "good.toml", 1, AXIS);
+    let g = good.to_str().unwrap();
+    bad(&["sweep", g, "--shard", "0/0", "--out", o], &["0/0", "K must be"]);
+    bad(&["sweep", g, "--shard", "3/3", "--out", o], &["3/3", "k must be below K"]);
+    // Shards of two different sweeps.
+    let other = sweep_file(&dir, "good2.toml", 1, "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.03]\n");
+    let s1 = dir.join("s1");
+    let s2 = dir.join("s2");
+    run(&["sweep", g, "--shard", "0/2"], &s1);
+    run(&["sweep", other.to_str().unwrap(), "--shard", "1/2"], &s2);
+    bad(
+        &["merge", s1.join("good.shard-0-of-2").to_str().unwrap(), s2.join("good2.shard-1-of-2").to_str().unwrap(), "--out", o],
+        &["good2.shard-1-of-2", "another sweep"],
+    );
+    // A missing shard.
+    bad(&["merge", s1.join("good.shard-0-of-2").to_str().unwrap(), "--out", o], &["work units missing"]);
+}
