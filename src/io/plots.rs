@@ -612,3 +612,100 @@ fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs
         .map_err(e2s)?;
     Ok(())
 }
+
+/// What the sweep figures draw: per design (point and selection) the after-calibration p95 at the
+/// table set size (median, P10, P90 over realisations) and the success probability per set size.
+pub struct SweepPlotInputs {
+    /// Per design: label, x value (the axis value where there is one numeric axis, else the point
+    /// index), (median, P10, P90) of the p95, campaign time (s).
+    pub designs: Vec<(String, f64, [f64; 3], f64)>,
+    /// x-axis label.
+    pub xlabel: String,
+    /// Per design: label and (set size, P(max <= threshold)).
+    pub success: Vec<(String, Vec<(f64, f64)>)>,
+    /// The threshold of `success`, mm.
+    pub threshold_mm: f64,
+}
+
+/// Writes the sweep's figures into `dir`.
+pub fn write_sweep(dir: &Path, p: &SweepPlotInputs) -> Result<Vec<Written>, String> {
+    static REGISTER: Once = Once::new();
+    REGISTER.call_once(|| {
+        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
+    });
+    let mut out = Vec::new();
+    both!(dir, "sweep_p95_by_design", |root| sweep_band(root, p));
+    out.push(Written {
+        stem: "sweep_p95_by_design".into(),
+        caption: "p95 of the validation error after calibration at the table set size per design: median over realisations, bar P10-P90"
+            .into(),
+    });
+    both!(dir, "sweep_success_by_set_size", |root| sweep_success(root, p));
+    out.push(Written {
+        stem: "sweep_success_by_set_size".into(),
+        caption: format!("P(max error <= {} mm) per set size, one curve per design (over realisations x repetitions)", p.threshold_mm),
+    });
+    Ok(out)
+}
+
+fn sweep_band<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlotInputs) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let xr = range_of(p.designs.iter().map(|d| d.1), 0.08);
+    let yr = range_of(p.designs.iter().flat_map(|d| [d.2[1], d.2[2]]), 0.1);
+    let mut chart = ChartBuilder::on(root)
+        .caption("After calibration: p95 of the validation error, median and P10-P90 over realisations", (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(xr, 0f64.min(yr.start)..yr.end)
+        .map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc(p.xlabel.as_str())
+        .y_desc("p95 error after calibration (mm)")
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
+    chart
+        .draw_series(p.designs.iter().map(|d| PathElement::new(vec![(d.1, d.2[1]), (d.1, d.2[2])], BLUE.stroke_width(2))))
+        .map_err(e2s)?
+        .label("P10-P90 over realisations")
+        .legend(|(x, y)| PathElement::new(vec![(x, y - 6), (x, y + 6)], BLUE.stroke_width(2)));
+    chart
+        .draw_series(p.designs.iter().map(|d| Circle::new((d.1, d.2[0]), 4, RED.filled())))
+        .map_err(e2s)?
+        .label("median")
+        .legend(|(x, y)| Circle::new((x, y), 4, RED.filled()));
+    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 13)).draw().map_err(e2s)?;
+    Ok(())
+}
+
+fn sweep_success<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlotInputs) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let xr = range_of(p.success.iter().flat_map(|s| s.1.iter().map(|v| v.0)), 0.05);
+    let mut chart = ChartBuilder::on(root)
+        .caption(format!("Probability of a successful calibration: max error <= {} mm", p.threshold_mm), (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(xr, 0f64..1.05)
+        .map_err(e2s)?;
+    chart.configure_mesh().x_desc("set size n").y_desc("P(max error <= threshold)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    for (i, (label, pts)) in p.success.iter().take(12).enumerate() {
+        let c = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)).point_size(3))
+            .map_err(e2s)?
+            .label(label.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], c.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FAMILY, 11))
+        .draw()
+        .map_err(e2s)?;
+    Ok(())
+}

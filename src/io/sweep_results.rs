@@ -118,8 +118,40 @@ fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow])
         crate_version: env!("CARGO_PKG_VERSION"),
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
-    fs::write(dir.join("summary.md"), summary(info, units, points))?;
+    let drawn = crate::io::plots::write_sweep(dir, &plot_inputs(info, points)).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
+    let mut text = summary(info, units, points);
+    let _ = writeln!(text, "\n## Figures\n");
+    for w in drawn {
+        let _ = writeln!(text, "![{}]({}.png)\n\n{} ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
+    }
+    fs::write(dir.join("summary.md"), text)?;
     Ok(())
+}
+
+/// The figures' inputs: x is the axis value where the sweep has one numeric axis, else the point.
+fn plot_inputs(info: &ShardInfo, points: &[PointRow]) -> crate::io::plots::SweepPlotInputs {
+    let numeric: Option<Vec<f64>> =
+        if info.keys.len() == 1 { info.points.iter().map(|v| v[0].parse::<f64>().ok()).collect() } else { None };
+    let x = |p: usize| numeric.as_ref().map_or(p as f64, |v| v[p]);
+    let label = |p: &PointRow| format!("{} {}", p.point, p.selection);
+    let designs = points.iter().filter(|p| p.table).map(|p| (label(p), x(p.point), p.after[1], p.campaign_s)).collect();
+    let mut success: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    if !info.thresholds_mm.is_empty() {
+        for p in points {
+            let l = label(p);
+            let v = (f64::from(p.set_size), p.success[0].0);
+            match success.iter_mut().find(|s| s.0 == l) {
+                Some(s) => s.1.push(v),
+                None => success.push((l, vec![v])),
+            }
+        }
+    }
+    crate::io::plots::SweepPlotInputs {
+        designs,
+        xlabel: if numeric.is_some() { info.keys[0].clone() } else { "grid point (see the design table)".into() },
+        success,
+        threshold_mm: info.thresholds_mm.first().copied().unwrap_or(f64::NAN),
+    }
 }
 
 fn f3(x: f64) -> String {
@@ -174,40 +206,39 @@ pub fn summary(info: &ShardInfo, units: &[Unit], points: &[PointRow]) -> String 
         }
         let _ = writeln!(s, " {:.0} | {} |", p.campaign_s, p.realisations);
     }
-    if !th.is_empty() {
-        let _ = writeln!(s, "\n## P(max error <= {} mm) by set size\n", th[0]);
-        let mut sizes: Vec<u32> = points.iter().map(|p| p.set_size).collect();
-        sizes.sort_unstable();
-        sizes.dedup();
+    let mut sizes: Vec<u32> = points.iter().map(|p| p.set_size).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let mut keys: Vec<(usize, &str)> = points.iter().map(|p| (p.point, p.selection.as_str())).collect();
+    keys.dedup();
+    for (t, limit) in th.iter().enumerate() {
+        let _ = writeln!(s, "\n## P(max error <= {limit} mm) by set size (over realisations x repetitions)\n");
         let _ = writeln!(s, "| point | selection | {} |", sizes.iter().map(|n| format!("n = {n}")).collect::<Vec<_>>().join(" | "));
         let _ = writeln!(s, "|---|---|{}", "---|".repeat(sizes.len()));
-        let mut keys: Vec<(usize, &str)> = points.iter().map(|p| (p.point, p.selection.as_str())).collect();
-        keys.dedup();
-        for (pt, sel) in keys {
+        for &(pt, sel) in &keys {
             let cells: Vec<String> = sizes
                 .iter()
                 .map(|n| {
                     points
                         .iter()
                         .find(|p| p.point == pt && p.selection == sel && p.set_size == *n)
-                        .map_or("-".into(), |p| format!("{:.2}", p.success[0].0))
+                        .map_or("-".into(), |p| format!("{:.2}", p.success[t].0))
                 })
                 .collect();
             let _ = writeln!(s, "| {pt} | {sel} | {} |", cells.join(" | "));
         }
     }
-    let failures: Vec<&Unit> = units.iter().filter(|u| u.error.is_some()).take(10).collect();
-    if !failures.is_empty() {
-        let _ = writeln!(s, "\n## Units that could not run\n");
-        for u in failures {
-            let _ = writeln!(
-                s,
-                "- point {} ({}), realisation {}: {}",
-                u.point,
-                point_label(info, u.point),
-                u.realisation,
-                u.error.as_deref().unwrap_or("")
-            );
+    let failing: Vec<usize> = (0..info.points.len()).filter(|p| units.iter().any(|u| u.point == *p && u.error.is_some())).collect();
+    if !failing.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n## Designs whose campaign failed in some realisations\n\n| point | design | failed | first reason |\n|---|---|---|---|"
+        );
+        for p in failing {
+            let fails: Vec<&Unit> = units.iter().filter(|u| u.point == p && u.error.is_some()).collect();
+            let of = units.iter().filter(|u| u.point == p).count();
+            let _ =
+                writeln!(s, "| {p} | {} | {} of {of} | {} |", point_label(info, p), fails.len(), fails[0].error.as_deref().unwrap_or(""));
         }
     }
     s

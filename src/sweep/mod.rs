@@ -32,6 +32,38 @@ pub fn realisation_seed(seed: u64, r: u32) -> u64 {
     if r == 0 { seed } else { crate::seeds::split_seed(seed, crate::seeds::REALISATION + u64::from(r)) }
 }
 
+/// JSON has no NaN: a number that is not finite (a median of nothing, a unit that could not run) is
+/// written as `null` and read back as NaN.
+mod nan_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() { s.serialize_f64(*v) } else { s.serialize_none() }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+
+    /// The same for arrays of three.
+    pub mod three {
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &[f64; 3], s: S) -> Result<S::Ok, S::Error> {
+            use serde::ser::SerializeTuple;
+            let mut t = s.serialize_tuple(3)?;
+            for x in v {
+                t.serialize_element(&x.is_finite().then_some(*x))?;
+            }
+            t.end()
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+            Ok(<[Option<f64>; 3]>::deserialize(d)?.map(|x| x.unwrap_or(f64::NAN)))
+        }
+    }
+}
+
 /// One set size of one selection in one work unit: the statistics over its repetitions.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UnitRow {
@@ -47,18 +79,23 @@ pub struct UnitRow {
     pub no_model: u32,
     /// Median over repetitions of the validation error's median, p95, max and mean, mm (SPMS: of
     /// the ISO 9283 AP over P1-P5).
+    #[serde(with = "nan_as_null")]
     pub after_median_mm: f64,
     /// See `after_median_mm`.
+    #[serde(with = "nan_as_null")]
     pub after_p95_mm: f64,
     /// See `after_median_mm`.
+    #[serde(with = "nan_as_null")]
     pub after_max_mm: f64,
     /// See `after_median_mm`.
+    #[serde(with = "nan_as_null")]
     pub after_mean_mm: f64,
     /// Per threshold of the sweep: repetitions whose max error is within it.
     pub max_within: Vec<u32>,
     /// Per threshold: repetitions whose mean error is within it.
     pub mean_within: Vec<u32>,
     /// Median O1 of the chosen sets.
+    #[serde(with = "nan_as_null")]
     pub o1_median: f64,
 }
 
@@ -74,8 +111,10 @@ pub struct Unit {
     /// Why the unit could not run (the campaign failed in this world), if it could not.
     pub error: Option<String>,
     /// Error before calibration: median, p95 and max, mm.
+    #[serde(with = "nan_as_null::three")]
     pub before_mm: [f64; 3],
     /// Modelled campaign time (centring of the pool), s.
+    #[serde(with = "nan_as_null")]
     pub campaign_s: f64,
     /// Per selection and set size.
     pub rows: Vec<UnitRow>,
