@@ -29,6 +29,8 @@ pub struct RobotSpec {
     pub payload_com_mm: [f64; 3],
     /// Effects outside the identified model.
     pub unmodelled: UnmodelledSpec,
+    /// Spread of the true parameters around Table 7, drawn per world (zero: Table 7 itself).
+    pub spread: crate::robot::SpreadSpec,
     /// `world_from_base` of the model before calibration, `[x, y, z]` mm then `[alpha, beta, gamma]`
     /// deg (eq. 7). Absent: the base the semi-automatic steps fit to the located spheres.
     pub nominal_base_mm_deg: Option<[f64; 6]>,
@@ -43,6 +45,7 @@ impl Default for RobotSpec {
             payload_kg: TRICAL_PAYLOAD.0,
             payload_com_mm: TRICAL_PAYLOAD.1,
             unmodelled: UnmodelledSpec::default(),
+            spread: crate::robot::SpreadSpec::default(),
             nominal_base_mm_deg: Some(crate::robot::builtin::TRICAL_NOMINAL_BASE),
         }
     }
@@ -127,8 +130,14 @@ impl ExperimentSpec {
     pub fn build(&self, seed: u64) -> Result<Experiment, ExperimentError> {
         let cell = Cell::build(&self.cell, &mut stream(seed, seeds::experiment::CELL))?;
         let reference = self.robot.repeatability_reference_q_deg.map(f64::to_radians);
+        let truth = crate::robot::perturb(
+            &self.truth(),
+            &crate::robot::ParamSet::trical_31(),
+            &self.robot.spread,
+            &mut stream(seed, seeds::experiment::SPREAD),
+        );
         let robot = VirtualRobot::new(
-            self.truth(),
+            truth,
             &self.robot.unmodelled,
             self.robot.repeatability_mm,
             &reference,

@@ -40,6 +40,8 @@ pub mod experiment {
     pub const TRACKER: u64 = 4;
     /// Campaign: the seed of the streams in [`super::campaign`].
     pub const CAMPAIGN: u64 = 5;
+    /// The robot's parameters around the truth (`[robot.spread]`), when they spread.
+    pub const SPREAD: u64 = 6;
 }
 
 /// The campaign's streams, keyed under `split_seed(seed, experiment::CAMPAIGN)`.
@@ -78,6 +80,8 @@ pub mod spms_cell {
     pub const POOL: u64 = 0x4552_3230_0100;
     /// ISO 9283 cycles.
     pub const ISO: u64 = 0x4552_3230_0002;
+    /// The robot's parameters around the truth table (`[robot.spread]`), when they spread.
+    pub const SPREAD: u64 = 0x4552_3230_0003;
 }
 
 /// Study tasks: task i of a study draws from `stream(split_seed(seed, salt), i)`.

@@ -193,3 +193,31 @@ fn bad_sweep_input_is_one_line_and_exit_2() {
     // A missing shard.
     bad(&["merge", s1.join("good.shard-0-of-2").to_str().unwrap(), "--out", o], &["work units missing"]);
 }
+
+#[test]
+fn a_robot_spread_draws_one_robot_per_world_and_none_without_it() {
+    use calsim::robot::{ParamSet, SpreadSpec, perturb};
+    let truth = calsim::robot::builtin::trical_2018_table7();
+    let set = ParamSet::trical_31();
+    let zero = perturb(&truth, &set, &SpreadSpec::default(), &mut common::rng(1));
+    assert_eq!(set.pack(&zero), set.pack(&truth), "zero spread: the truth itself");
+    let spread = SpreadSpec { length_mm: 0.1, angle_deg: 0.01, compliance_mdeg_per_nm: 1.0 };
+    // 31 parameters x 400 worlds = 12,400 draws: the sample std of the scaled deviations is within
+    // 3 % of 1 (its standard error is 1 / sqrt(2 x 12,400) = 0.6 %).
+    let mut z = Vec::new();
+    for seed in 0..400 {
+        let a = perturb(&truth, &set, &spread, &mut common::rng(seed));
+        for (id, (x, t)) in set.ids().iter().zip(set.pack(&a).iter().zip(set.pack(&truth).iter())) {
+            let s = match id.unit() {
+                calsim::robot::Unit::Mm => spread.length_mm,
+                calsim::robot::Unit::Deg => spread.angle_deg.to_radians(),
+                calsim::robot::Unit::MdegPerNm => calsim::robot::Unit::MdegPerNm.to_internal(spread.compliance_mdeg_per_nm),
+            };
+            z.push((x - t) / s);
+        }
+    }
+    let n = z.len() as f64;
+    let mean = z.iter().sum::<f64>() / n;
+    let std = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    assert!(mean.abs() < 0.03 && (std - 1.0).abs() < 0.03, "mean {mean}, std {std} over {n} draws");
+}

@@ -42,6 +42,15 @@ type DrawResult = Result<(), String>;
 /// Values per set size: `(n, values)`.
 pub type BySize = Vec<(usize, Vec<f64>)>;
 
+/// Registers the embedded font once per process.
+fn register_font() {
+    static REGISTER: Once = Once::new();
+    REGISTER.call_once(|| {
+        // The font is a fixed asset: a failure here is a build defect, reported by the first text drawn.
+        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
+    });
+}
+
 fn e2s<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
 }
@@ -68,11 +77,7 @@ macro_rules! both {
 ///
 /// Long by design: one call per figure of the paper, in the paper's order, each a few lines.
 pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Result<Vec<Written>, String> {
-    static REGISTER: Once = Once::new();
-    REGISTER.call_once(|| {
-        // The font is a fixed asset: a failure here is a build defect, reported by the first text drawn.
-        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
-    });
+    register_font();
     let mut out = Vec::new();
 
     both!(dir, "fig07_validation_poses", |root| fig07(root, inputs));
@@ -470,10 +475,7 @@ pub struct SpmsPlotInputs<'a> {
 
 /// Writes the SPMS figures into `dir`; returns what was written.
 pub fn write_spms(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, String> {
-    static REGISTER: Once = Once::new();
-    REGISTER.call_once(|| {
-        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
-    });
+    register_font();
     let mut out = Vec::new();
     both!(dir, "spms_fig05_fit_residuals", |root| per_sample(
         root,
@@ -629,10 +631,7 @@ pub struct SweepPlotInputs {
 
 /// Writes the sweep's figures into `dir`.
 pub fn write_sweep(dir: &Path, p: &SweepPlotInputs) -> Result<Vec<Written>, String> {
-    static REGISTER: Once = Once::new();
-    REGISTER.call_once(|| {
-        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
-    });
+    register_font();
     let mut out = Vec::new();
     both!(dir, "sweep_p95_by_design", |root| sweep_band(root, p));
     out.push(Written {

@@ -162,6 +162,16 @@ pub(crate) fn parameter_columns<'a>(
     ]
 }
 
+/// The published-versus-reproduced table of a summary, under a heading.
+pub(crate) fn checks_markdown(heading: &str, checks: &[Check]) -> String {
+    let mut s = format!("## {heading}\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|\n");
+    for c in checks {
+        let v = if c.pass == Some(false) { "**miss**" } else { c.verdict() };
+        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
+    }
+    s
+}
+
 pub(crate) fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
     let mut df = DataFrame::new_infer_height(columns).map_err(err)?;
     let file = fs::File::create(dir.join(name))?;
@@ -284,15 +294,7 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
         scenario.experiment.campaign.pool_per_sphere as usize * scenario.experiment.cell.spheres_w_mm.len(),
         r.before_errors.len()
     );
-    let _ = writeln!(s, "## Published versus reproduced\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|");
-    for c in checks {
-        let v = match c.pass {
-            Some(true) => "pass",
-            Some(false) => "**miss**",
-            None => "-",
-        };
-        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
-    }
+    s.push_str(&checks_markdown("Published versus reproduced", checks));
     let _ = writeln!(
         s,
         "\nAfter-calibration figures are medians over the {} repetitions at n = {} of each identification's statistic over the validation poses.",

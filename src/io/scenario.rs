@@ -232,6 +232,20 @@ impl Checker<'_> {
         if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be >= 0 ({what})"))) }
     }
 
+    /// The `[robot.spread]` table, the same in both kinds of scenario.
+    fn spread(&self, s: &crate::robot::SpreadSpec) -> Result<(), ScenarioError> {
+        self.within("robot.spread", "length_mm", s.length_mm, 0.0, 10.0, "one standard deviation of every length")?;
+        self.within("robot.spread", "angle_deg", s.angle_deg, 0.0, 5.0, "one standard deviation of every angle")?;
+        self.within(
+            "robot.spread",
+            "compliance_mdeg_per_nm",
+            s.compliance_mdeg_per_nm,
+            0.0,
+            100.0,
+            "one standard deviation of every compliance",
+        )
+    }
+
     /// The `[robot.unmodelled]` table, the same in both kinds of scenario.
     fn unmodelled(&self, u: &crate::robot::UnmodelledSpec) -> Result<(), ScenarioError> {
         self.non_negative("robot.unmodelled", "transmission_low_mdeg", u.transmission_low_mdeg, "amplitude")?;
@@ -373,6 +387,7 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
         }
     }
     c.unmodelled(&r.unmodelled)?;
+    c.spread(&r.spread)?;
 
     let cell = &f.cell;
     if !(3..=12).contains(&cell.spheres_w_mm.len()) {
@@ -664,6 +679,7 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
         c.within("robot", &format!("repeatability_reference_q_deg[{k}]"), *v, -400.0, 400.0, "joint angle")?;
     }
     c.unmodelled(&r.unmodelled)?;
+    c.spread(&r.spread)?;
 
     let st = &f.station;
     if !(1..=20).contains(&st.sphere_points_base_mm.len()) {

@@ -233,15 +233,7 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         r.cell.stations.len(),
         r.cell.rejected
     );
-    let _ = writeln!(o, "## Published figures\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|");
-    for c in checks {
-        let res = match c.pass {
-            Some(true) => "pass",
-            Some(false) => "miss",
-            None => "-",
-        };
-        let _ = writeln!(o, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, res);
-    }
+    o.push_str(&crate::io::results::checks_markdown("Published figures", checks));
     let t6 = &published().spms_2023.iso9283;
     let (own_before, own_after) = (crate::spms::iso9283::summary(&t6.ap_before_mm).2, crate::spms::iso9283::summary(&t6.ap_after_mm).2);
     let _ = writeln!(

@@ -16,5 +16,5 @@ pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotDat
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use state::KinState;
 pub use statics::gravity_torques;
-pub use truth::{DeviationSpec, deviate};
+pub use truth::{DeviationSpec, SpreadSpec, deviate, perturb};
 pub use virtual_robot::{UnmodelledSpec, VirtualRobot};

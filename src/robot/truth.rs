@@ -5,6 +5,7 @@
 
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
+use serde::Deserialize;
 
 use super::model::RobotModel;
 use super::params::{LinkParam, ParamId, ParamSet, Unit};
@@ -47,4 +48,51 @@ pub fn deviate<R: Rng + ?Sized>(nominal: &RobotModel, set: &ParamSet, spec: &Dev
         })
         .collect();
     set.unpack(nominal, &values).expect("finite deviations keep the model valid")
+}
+
+/// The spread of a robot's parameters around the scenario's truth, one standard deviation per
+/// parameter type (`[robot.spread]`): each world (realisation) of a study draws its own robot.
+/// Zero everywhere (the default) keeps the scenario's truth.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SpreadSpec {
+    /// Lengths (a, d, base x y z, tool), mm.
+    pub length_mm: f64,
+    /// Angles (alpha, beta, theta_offs, base angles), deg.
+    pub angle_deg: f64,
+    /// Joint compliances, mdeg/(N m).
+    pub compliance_mdeg_per_nm: f64,
+}
+
+impl SpreadSpec {
+    /// Whether every spread is zero.
+    pub fn is_zero(&self) -> bool {
+        self.length_mm == 0.0 && self.angle_deg == 0.0 && self.compliance_mdeg_per_nm == 0.0
+    }
+}
+
+/// `truth` with every parameter of `set` moved by a zero-mean normal draw of its type's spread
+/// (symmetric, unlike [`deviate`], which builds populations away from a nominal); `truth` itself
+/// when the spread is zero, without drawing.
+pub fn perturb<R: Rng + ?Sized>(truth: &RobotModel, set: &ParamSet, spread: &SpreadSpec, rng: &mut R) -> RobotModel {
+    if spread.is_zero() {
+        return truth.clone();
+    }
+    let std = Normal::new(0.0, 1.0).expect("unit normal");
+    let values: Vec<f64> = set
+        .ids()
+        .iter()
+        .map(|id| {
+            let z: f64 = std.sample(rng);
+            let delta = match (id, id.unit()) {
+                (ParamId::Link { kind: LinkParam::Compliance, .. }, _) | (_, Unit::MdegPerNm) => {
+                    Unit::MdegPerNm.to_internal(z * spread.compliance_mdeg_per_nm)
+                }
+                (_, Unit::Mm) => z * spread.length_mm,
+                (_, Unit::Deg) => Unit::Deg.to_internal(z * spread.angle_deg),
+            };
+            id.get(truth.data()) + delta
+        })
+        .collect();
+    set.unpack(truth, &values).expect("finite spreads keep the model valid")
 }

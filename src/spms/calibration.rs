@@ -39,6 +39,8 @@ pub struct ArmSpec {
     pub repeatability_reference_q_deg: [f64; 6],
     /// Effects outside the kinematic model.
     pub unmodelled: UnmodelledSpec,
+    /// Spread of the true parameters around the truth table, drawn per world (zero: the table).
+    pub spread: crate::robot::SpreadSpec,
 }
 
 impl Default for ArmSpec {
@@ -50,6 +52,7 @@ impl Default for ArmSpec {
             repeatability_mm: 0.05,
             repeatability_reference_q_deg: [0.0, 30.0, 30.0, 0.0, 30.0, 0.0],
             unmodelled: UnmodelledSpec::default(),
+            spread: crate::robot::SpreadSpec::default(),
         }
     }
 }
@@ -249,7 +252,7 @@ fn facing_head(sphere_base: &Vector3<f64>, c_head: &Vector3<f64>) -> Isometry3<f
 /// and the robot drawn, the pool measured station by station), each step drawing from the cell's
 /// one stream; split, the draws would have to be threaded through every piece in the same order.
 pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &IdentifiedHead, seed: u64) -> Result<Cell, CellError> {
-    let truth0 = arm.truth_model();
+    let truth0 = crate::robot::perturb(&arm.truth_model(), &default_parameters(), &arm.spread, &mut stream(seed, streams::SPREAD));
     let mut rng = stream(seed, streams::TRUTH);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
     let tracker = AxisNoise::new(station.tracker_sigma_um);
