@@ -627,6 +627,9 @@ pub struct SweepPlotInputs {
     pub success: Vec<(String, Vec<(f64, f64)>)>,
     /// The threshold of `success`, mm.
     pub threshold_mm: f64,
+    /// Per design of a sweep that moves the datum spheres: a title, the spheres in {W} (mm) and
+    /// whether its campaign ran; empty otherwise.
+    pub layouts: Vec<(String, Vec<[f64; 3]>, bool)>,
 }
 
 /// Writes the sweep's figures into `dir`.
@@ -639,6 +642,16 @@ pub fn write_sweep(dir: &Path, p: &SweepPlotInputs) -> Result<Vec<Written>, Stri
         caption: "p95 of the validation error after calibration at the table set size per design: median over realisations, bar P10-P90"
             .into(),
     });
+    if !p.layouts.is_empty() {
+        both!(dir, "sweep_layouts", |root| sweep_layouts(root, p));
+        out.push(Written {
+            stem: "sweep_layouts".into(),
+            caption:
+                "The datum spheres of each design seen from above in {W} (sphere 1 at the origin), with the median p95 after calibration; \
+                      grey: the campaign could not measure it"
+                    .into(),
+        });
+    }
     both!(dir, "sweep_success_by_set_size", |root| sweep_success(root, p));
     out.push(Written {
         stem: "sweep_success_by_set_size".into(),
@@ -706,5 +719,26 @@ fn sweep_success<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlo
         .label_font((FAMILY, 11))
         .draw()
         .map_err(e2s)?;
+    Ok(())
+}
+
+fn sweep_layouts<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlotInputs) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let n = p.layouts.len();
+    let cols = (n as f64).sqrt().ceil() as usize;
+    let rows = n.div_ceil(cols);
+    let all = || p.layouts.iter().flat_map(|l| l.1.iter());
+    let xr = range_of(all().map(|s| s[0]), 0.15);
+    let yr = range_of(all().map(|s| s[1]), 0.15);
+    for (panel, (title, spheres, ran)) in root.split_evenly((rows, cols)).iter().zip(&p.layouts) {
+        let colour = if *ran { BLUE } else { RGBColor(170, 170, 170) };
+        let mut chart = ChartBuilder::on(panel)
+            .caption(title.as_str(), (FAMILY, 12))
+            .margin(6)
+            .build_cartesian_2d(xr.clone(), yr.clone())
+            .map_err(e2s)?;
+        chart.configure_mesh().disable_mesh().x_labels(3).y_labels(3).label_style((FAMILY, 9)).draw().map_err(e2s)?;
+        chart.draw_series(spheres.iter().map(|s| Circle::new((s[0], s[1]), 4, colour.filled()))).map_err(e2s)?;
+    }
     Ok(())
 }

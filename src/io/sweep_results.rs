@@ -146,7 +146,24 @@ fn plot_inputs(info: &ShardInfo, points: &[PointRow]) -> crate::io::plots::Sweep
             }
         }
     }
+    // The cell from above, one panel per design, when the sweep moves the spheres.
+    let moves_spheres = info.keys.iter().any(|k| k == "cell.layout" || k == "cell.spheres_w_mm");
+    let layouts = if moves_spheres && info.layouts.len() == info.points.len() {
+        (0..info.points.len())
+            .map(|p| {
+                let at = points.iter().find(|r| r.point == p && r.table);
+                let title = match at {
+                    Some(r) => format!("{p}: p95 {:.3} mm", r.after[1][0]),
+                    None => format!("{p}: campaign failed"),
+                };
+                (title, info.layouts[p].clone(), at.is_some())
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     crate::io::plots::SweepPlotInputs {
+        layouts,
         designs,
         xlabel: if numeric.is_some() { info.keys[0].clone() } else { "grid point (see the design table)".into() },
         success,

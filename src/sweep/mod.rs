@@ -222,6 +222,9 @@ pub struct ShardInfo {
     pub keys: Vec<String>,
     /// Per grid point, its axis values as written.
     pub points: Vec<Vec<String>>,
+    /// Per grid point, the datum spheres in {W}, mm (TriCal; empty for other devices).
+    #[serde(default)]
+    pub layouts: Vec<Vec<[f64; 3]>>,
     /// This shard, `k` of `count`.
     pub shard: usize,
     /// Shards in all.
@@ -256,6 +259,14 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
         thresholds_mm: sweep.thresholds_mm.clone(),
         keys: sweep.keys.clone(),
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
+        layouts: sweep
+            .points
+            .iter()
+            .map(|p| match &p.scenario {
+                Loaded::Trical(s) => s.experiment.cell.spheres_w_mm.clone(),
+                Loaded::Spms(_) => Vec::new(),
+            })
+            .collect(),
         shard: k,
         count,
     };
