@@ -426,7 +426,7 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
         );
         return Ok(ExitCode::SUCCESS);
     }
-    let code = merge(&[dir.clone()], &args.out)?;
+    let code = merge(std::slice::from_ref(&dir), &args.out)?;
     std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     Ok(code)
 }

@@ -118,7 +118,7 @@ pub enum SweepError {
         /// The axis values of the point.
         axis: String,
         /// The scenario error.
-        error: ScenarioError,
+        error: Box<ScenarioError>,
     },
 }
 
@@ -258,7 +258,7 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
     }
     let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
     let (base_text, mut base_table) =
-        scenario::read_table(&base_path).map_err(|e| SweepError::Point { path: shown.clone(), axis: "base".into(), error: e })?;
+        scenario::read_table(&base_path).map_err(|e| SweepError::Point { path: shown.clone(), axis: "base".into(), error: Box::new(e) })?;
     for (k, v) in &file.fixed {
         let (target, value) = resolve(k, v).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
         set_dotted(&mut base_table, &target, value).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
@@ -290,7 +290,7 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
         let scenario = scenario::from_table(&text, t, &point_path).map_err(|e| SweepError::Point {
             path: shown.clone(),
             axis: if axis.is_empty() { "(base)".into() } else { axis.clone() },
-            error: e,
+            error: Box::new(e),
         })?;
         points.push(Point { values: shown_values, scenario });
     }
