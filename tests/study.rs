@@ -146,3 +146,23 @@ fn no_plots_skips_the_figures() {
     assert!(names.iter().all(|n| !n.ends_with(".png") && !n.ends_with(".svg")), "{names:?}");
     assert!(names.contains(&"summary.md".to_string()));
 }
+
+/// Parameter sets that no configurations can separate are refused at load, naming the parameters:
+/// a redundancy with the base (theta_offs1 with alpha0W), the wrist group a TCP on the joint-6 axis
+/// leaves, and an empty set.
+#[test]
+fn unidentifiable_parameter_sets_are_refused_at_load() {
+    let dir = scratch("unidentifiable");
+    let base = base_text();
+    let all31 = "\"alpha1\",\"alpha2\",\"alpha3\",\"alpha4\",\"alpha5\",\"a1\",\"a2\",\"a3\",\"a4\",\"a5\",\"d3\",\"d4\",\"d5\",\"d6\",\"theta_offs2\",\"theta_offs3\",\"theta_offs4\",\"theta_offs5\",\"theta_offs6\",\"c2\",\"c3\",\"c4\",\"c5\",\"c6\",\"beta2\",\"x0W\",\"y0W\",\"z0W\",\"alpha0W\",\"beta0W\",\"gamma0W\"";
+    let redundant = base.replacen("[study]\n", &format!("[study]\nparameters = [\"theta_offs1\", {all31}]\n"), 1);
+    let err = bad_input(&scenario_file(&dir, "redundant.toml", &redundant));
+    assert!(err.contains("[study] parameters = theta_offs1 alpha0W") && err.contains("fix all but one"), "{err}");
+    let on_axis = base.replace("tcp_mm = [35.0, 0.0, 125.0]", "tcp_mm = [0.0, 0.0, 125.0]");
+    assert_ne!(on_axis, base);
+    let err = bad_input(&scenario_file(&dir, "on_axis.toml", &on_axis));
+    assert!(err.contains("[study] parameters = ") && err.contains("theta_offs5") && err.contains("robot.tcp_mm"), "{err}");
+    let empty = base.replacen("[study]\n", "[study]\nparameters = []\n", 1);
+    let err = bad_input(&scenario_file(&dir, "empty.toml", &empty));
+    assert!(err.contains("[study] parameters = []") && err.contains("at least one parameter"), "{err}");
+}

@@ -113,12 +113,16 @@ impl Observability {
 }
 
 /// Parameters of `set` that no set of configurations can separate on `model`: the information
-/// matrix of 200 configurations drawn across the joint ranges (a fixed stream, so the answer is the
-/// same every time), column-scaled; the eigenvectors of its numerically zero eigenvalues (singular
-/// value below 1e-8 of the largest) name the parameters with at least 10 % of the vector's largest
-/// component. A zero column (a parameter that moves nothing) and an exact redundancy (two
-/// parameters that move the TCP alike everywhere) are both found.
+/// Jacobian of 200 configurations drawn across the joint ranges (a fixed stream, so the answer is the
+/// same every time), column-scaled; a parameter is named when its unit vector has at least 1 % of
+/// its squared length in the numerical null space (singular values below 1e-9 of the largest), a
+/// test that does not depend on which basis of a repeated null space the eigen-solver returns. A
+/// zero column (a parameter that moves nothing) and an exact redundancy (two parameters that move
+/// the TCP alike everywhere) are both found.
 pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::ParamSet) -> Vec<String> {
+    if set.is_empty() {
+        return Vec::new();
+    }
     use rand::RngExt;
     let mut rng = crate::seeds::stream(0, crate::seeds::STRUCTURAL_CHECK);
     let qs: Vec<crate::robot::Joints> = (0..200)
@@ -131,25 +135,17 @@ pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::Param
         })
         .collect();
     let pool = PoolJacobian::new(model, set, &qs);
-    let all: Vec<usize> = (0..qs.len()).collect();
     let names = set.names();
-    let Some(eig) = crate::numeric::symmetric_eigen(pool.information(&all)) else {
+    // The SVD of the scaled Jacobian itself (not of J^T J, which would square its condition).
+    let Some(svd) = crate::numeric::svd(pool.j.clone(), false, true) else {
         return names;
     };
-    let smax = eig.eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l)).max(0.0).sqrt();
-    let mut hidden = Vec::new();
-    for (k, l) in eig.eigenvalues.iter().enumerate() {
-        if l.max(0.0).sqrt() >= 1e-8 * smax && smax > 0.0 {
-            continue;
-        }
-        let v = eig.eigenvectors.column(k);
-        let vmax = v.amax();
-        for (j, x) in v.iter().enumerate() {
-            if x.abs() >= 0.1 * vmax && !hidden.contains(&j) {
-                hidden.push(j);
-            }
-        }
-    }
-    hidden.sort_unstable();
-    hidden.into_iter().map(|j| names[j].clone()).collect()
+    let Some(v_t) = svd.v_t else {
+        return names;
+    };
+    let s = &svd.singular_values;
+    let smax = s.iter().fold(0.0_f64, |m, &x| m.max(x));
+    let null: Vec<usize> = (0..s.len()).filter(|&k| !(smax > 0.0 && s[k] >= 1e-9 * smax)).collect();
+    // Diagonal of the projector onto the null space (rows of V^T are the right singular vectors).
+    (0..names.len()).filter(|&j| null.iter().map(|&k| v_t[(k, j)].powi(2)).sum::<f64>() >= 0.01).map(|j| names[j].clone()).collect()
 }

@@ -272,6 +272,9 @@ impl Checker<'_> {
             .parameter_set(default_set)
             .map_err(|e| self.fail("study", "parameters", format!("{:?}", s.parameters.clone().unwrap_or_default()), &e.to_string()))?;
         let m = set.len();
+        if m == 0 {
+            return Err(self.fail("study", "parameters", "[]", "needs at least one parameter (absent: the device's default set)"));
+        }
         if s.set_sizes.is_empty() {
             return Err(self.fail("study", "set_sizes", "[]", "needs at least one set size"));
         }
@@ -340,18 +343,24 @@ impl Checker<'_> {
     /// Every parameter of the identified set must be separable on `model` by some set of
     /// configurations: a parameter with a zero column (theta_offs6 with the TCP on the joint-6 axis)
     /// or a redundancy (theta_offs1 with the base's alpha) is refused here, not found 510 times.
-    fn identifiable(&self, model: &crate::robot::RobotModel, set: &crate::robot::ParamSet, hint: &str) -> Result<(), ScenarioError> {
+    fn identifiable(&self, model: &crate::robot::RobotModel, set: &crate::robot::ParamSet, tool_key: &str) -> Result<(), ScenarioError> {
         let hidden = crate::identify::observability::structurally_unidentifiable(model, set);
         if hidden.is_empty() {
-            Ok(())
-        } else {
-            Err(self.fail(
-                "study",
-                "parameters",
-                hidden.join(" "),
-                &format!("no set of configurations can separate these on this robot ({hint}): remove one of each redundant group or change the tool"),
-            ))
+            return Ok(());
         }
+        let fix = if hidden.iter().any(|n| n == "theta_offs6") {
+            format!("theta_offs6 moves nothing while {tool_key} lies on the joint-6 axis: move the tool off the axis or fix theta_offs6")
+        } else {
+            format!(
+                "they move the tool alike in every configuration with this tool ({tool_key}): fix all but one of them, or move the tool"
+            )
+        };
+        Err(self.fail(
+            "study",
+            "parameters",
+            hidden.join(" "),
+            &format!("no set of configurations can separate these on this robot; {fix}"),
+        ))
     }
 
     fn within(&self, section: &str, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<(), ScenarioError> {
@@ -487,7 +496,7 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     c.study(&f.study, pool, crate::robot::ParamSet::trical_31)?;
     let set = f.study.parameter_set(crate::robot::ParamSet::trical_31).expect("checked by study()");
     let spec = ExperimentSpec { robot: r.clone(), cell: cell.clone(), trical: t.clone(), tracker: tr.clone(), campaign: cp.clone() };
-    c.identifiable(&spec.nominal(), &set, "robot.tcp_mm on the joint-6 axis hides theta_offs6")?;
+    c.identifiable(&spec.nominal(), &set, "robot.tcp_mm")?;
     expect(&c, &f.expect)
 }
 
@@ -724,7 +733,7 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
     let set = f.study.parameter_set(crate::spms::calibration::default_parameters).expect("checked by study()");
     let tool = nalgebra::Vector3::from(r.sphere_flange_mm);
     let nominal = crate::robot::builtin::er20c10_table4().edited(|d| d.flange_tcp_mm = tool).expect("a finite tool");
-    c.identifiable(&nominal, &set, "robot.sphere_flange_mm on the joint-6 axis hides theta_offs6")
+    c.identifiable(&nominal, &set, "robot.sphere_flange_mm")
 }
 
 /// The `[expect]` table of an SPMS scenario.
