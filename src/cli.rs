@@ -111,6 +111,11 @@ struct RunArgs {
     /// Skip the Rerun recording (study.rrd).
     #[arg(long)]
     no_recording: bool,
+    /// Judge every figure over this many realisations (worlds) of the scenario: a figure passes
+    /// when its median over them is within the band and the published value within their P10-P90.
+    /// Realisation 0 is the run whose results are written.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    realisations: u32,
 }
 
 /// Set sizes given on the command line.
@@ -284,6 +289,16 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         record_s.get(),
         dest.display()
     );
+    if args.realisations > 1 {
+        let others = realisations(args.realisations, |r| {
+            let seed = crate::sweep::realisation_seed(scenario.seed, r);
+            let e = spec.build(seed).map_err(|e| format!("campaign: {e}"))?;
+            let b = spec.before_model(&e.campaign);
+            let res = pool.install(|| crate::study::run(&e, &b, &scenario.study, seed, &|_, _| {})).map_err(|e| e.to_string())?;
+            Ok(figures::checks(&Figures::of(&res, &e.robot.truth, scenario.study.table_set_size as usize), &scenario.expect))
+        });
+        return Ok(distribution_verdict(rows, others, check));
+    }
     Ok(verdict(&rows, check))
 }
 
@@ -314,6 +329,49 @@ fn fit_health<'a>(ids: impl Iterator<Item = &'a Identified>) -> Result<(), Strin
         eprintln!("warning: {no_model} of {total} identifications gave no model{hidden}; {capped} stopped at the iteration cap");
     }
     Ok(())
+}
+
+/// The checks of realisations 1..count (realisation 0 is the plain run), with a progress bar; a
+/// realisation whose campaign fails is left out with a warning line.
+fn realisations(count: u32, one: impl Fn(u32) -> Result<Vec<Check>, String>) -> Vec<Vec<Check>> {
+    let bar = ProgressBar::new(u64::from(count - 1));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} further realisations, {elapsed} elapsed, ETA {eta}").expect("template"),
+    );
+    let mut out = Vec::new();
+    let mut failed = Vec::new();
+    for r in 1..count {
+        match one(r) {
+            Ok(rows) => out.push(rows),
+            Err(e) => failed.push(format!("{r}: {e}")),
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if !failed.is_empty() {
+        eprintln!("warning: {} realisations left out ({})", failed.len(), failed.join("; "));
+    }
+    out
+}
+
+/// The figures over realisations (realisation 0 first) as a table, and the exit code of `run`
+/// (success) or `check` (1 when a figure misses the distribution rule).
+fn distribution_verdict(first: Vec<Check>, others: Vec<Vec<Check>>, check: bool) -> ExitCode {
+    let mut runs = vec![first];
+    runs.extend(others);
+    let dist = crate::study::check::over_realisations(&runs);
+    println!(
+        "\nover {} realisations (realisation 0 is the run above; pass: the median within the band, the published value within P10-P90):",
+        runs.len()
+    );
+    println!("{}", report::distribution_table(&dist));
+    if !check {
+        return ExitCode::SUCCESS;
+    }
+    let checked = dist.iter().filter(|d| d.pass.is_some()).count();
+    let missed = dist.iter().filter(|d| d.pass == Some(false)).count();
+    println!("check: {} of {checked} figures within their bands over {} realisations", checked - missed, runs.len());
+    if missed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS }
 }
 
 /// The exit code of `run` (success) or `check` (1 when a figure misses its band), with the
@@ -377,6 +435,15 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         record_s.get(),
         dest.display()
     );
+    if args.realisations > 1 {
+        let table_n = sc.spec.study.table_set_size as usize;
+        let others = realisations(args.realisations, |r| {
+            let seed = crate::sweep::realisation_seed(sc.seed, r);
+            let res = pool.install(|| crate::spms::study::run(&sc.spec, seed, &|_, _| {})).map_err(|e| e.to_string())?;
+            Ok(crate::spms::study::checks(&crate::spms::study::SpmsFigures::of(&res, table_n), &sc.expect))
+        });
+        return Ok(distribution_verdict(rows, others, check));
+    }
     Ok(verdict(&rows, check))
 }
 

@@ -166,3 +166,34 @@ fn unidentifiable_parameter_sets_are_refused_at_load() {
     let err = bad_input(&scenario_file(&dir, "empty.toml", &empty));
     assert!(err.contains("[study] parameters = []") && err.contains("at least one parameter"), "{err}");
 }
+
+/// The distribution rule of `check --realisations`: the median within the band and the published
+/// value within P10-P90; rules apply to the median; rows without a bound are reported only.
+#[test]
+fn distribution_checks_need_the_median_in_the_band_and_the_published_value_in_p10_p90() {
+    use calsim::study::check::{Band, Bound, Check, over_realisations};
+    let band = Some(Band { value: 1.0, tolerance: 0.2 });
+    let runs = |values: &[f64]| -> Vec<Vec<Check>> {
+        values
+            .iter()
+            .map(|&v| {
+                vec![
+                    Check::band("banded", 1.0, v, band),
+                    Check::rule("rule", "-", v, format!("{v}"), Some(Bound::AtMost(1.1)), |_| "<= 1.1".into()),
+                    Check::report("reported", "-", v, format!("{v}")),
+                ]
+            })
+            .collect()
+    };
+    // Median 1.1 in the band, 1.0 inside P10-P90 of 0.9..1.3: both pass.
+    let d = over_realisations(&runs(&[0.9, 1.0, 1.1, 1.2, 1.3]));
+    assert_eq!((d[0].pass, d[1].pass, d[2].pass), (Some(true), Some(true), None));
+    assert!((d[0].median - 1.1).abs() < 1e-12 && d[0].count == 5);
+    // Median 1.15 in the band but the published 1.0 below P10 (1.104): the band row misses.
+    let d = over_realisations(&runs(&[1.1, 1.1, 1.15, 1.19, 1.19]));
+    assert_eq!(d[0].pass, Some(false), "p10 {} p90 {}", d[0].p10, d[0].p90);
+    assert_eq!(d[1].pass, Some(false), "median 1.15 > 1.1");
+    // A realisation without a value (NaN) is left out of the order statistics.
+    let d = over_realisations(&runs(&[0.9, f64::NAN, 1.1]));
+    assert_eq!(d[0].count, 2);
+}

@@ -19,6 +19,31 @@ impl Band {
     }
 }
 
+/// What a figure must satisfy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Bound {
+    /// Within a relative band of the published value.
+    Band(Band),
+    /// At least this.
+    AtLeast(f64),
+    /// At most this.
+    AtMost(f64),
+    /// Strictly below this.
+    Below(f64),
+}
+
+impl Bound {
+    /// Whether `x` satisfies the bound.
+    pub fn holds(&self, x: f64) -> bool {
+        match *self {
+            Bound::Band(b) => b.contains(x),
+            Bound::AtLeast(m) => x >= m,
+            Bound::AtMost(m) => x <= m,
+            Bound::Below(m) => x < m,
+        }
+    }
+}
+
 /// One line of the published-versus-reproduced comparison.
 #[derive(Clone, Debug)]
 pub struct Check {
@@ -26,10 +51,16 @@ pub struct Check {
     pub figure: String,
     /// Published value (or rule).
     pub published: String,
+    /// The published value as a number, where the paper prints one.
+    pub published_value: Option<f64>,
     /// Reproduced value.
     pub reproduced: String,
+    /// The reproduced value as a number (the quantity the bound applies to).
+    pub value: f64,
     /// Band or rule.
     pub band: String,
+    /// The bound the scenario sets, if any.
+    pub bound: Option<Bound>,
     /// Passed, or `None` when the scenario sets no band for it.
     pub pass: Option<bool>,
 }
@@ -40,33 +71,48 @@ impl Check {
         Self {
             figure: figure.into(),
             published: format!("{published:.3}"),
+            published_value: Some(published),
             reproduced: format!("{value:.3}"),
+            value,
             band: band.map(|b| format!("{:.3} +-{:.0} %", b.value, b.tolerance * 100.0)).unwrap_or_else(|| "-".into()),
+            bound: band.map(Bound::Band),
             pass: band.map(|b| b.contains(value)),
         }
     }
 
-    /// A figure checked by a rule: `rule` describes the bound when one is set, `pass` applies it.
-    pub fn rule<T: Copy>(
+    /// A figure checked by a rule: `describe` writes the bound when one is set.
+    pub fn rule(
         figure: &str,
         published: &str,
+        value: f64,
         reproduced: String,
-        bound: Option<T>,
-        describe: impl Fn(T) -> String,
-        pass: impl Fn(T) -> bool,
+        bound: Option<Bound>,
+        describe: impl Fn(&Bound) -> String,
     ) -> Self {
         Self {
             figure: figure.into(),
             published: published.into(),
+            published_value: None,
             reproduced,
-            band: bound.map(&describe).unwrap_or_else(|| "-".into()),
-            pass: bound.map(pass),
+            value,
+            band: bound.as_ref().map(&describe).unwrap_or_else(|| "-".into()),
+            bound,
+            pass: bound.map(|b| b.holds(value)),
         }
     }
 
     /// A figure reported without a check.
-    pub fn report(figure: &str, published: &str, reproduced: String) -> Self {
-        Self { figure: figure.into(), published: published.into(), reproduced, band: "-".into(), pass: None }
+    pub fn report(figure: &str, published: &str, value: f64, reproduced: String) -> Self {
+        Self {
+            figure: figure.into(),
+            published: published.into(),
+            published_value: None,
+            reproduced,
+            value,
+            band: "-".into(),
+            bound: None,
+            pass: None,
+        }
     }
 
     /// The verdict as a word: `pass`, `miss` or `-`.
@@ -82,4 +128,46 @@ impl Check {
 /// Figures checked and figures missed.
 pub fn tally(rows: &[Check]) -> (usize, usize) {
     (rows.iter().filter(|r| r.pass.is_some()).count(), rows.iter().filter(|r| r.pass == Some(false)).count())
+}
+
+/// One figure over realisations: the rule of a distribution check.
+#[derive(Clone, Debug)]
+pub struct DistributionCheck {
+    /// The row of realisation 0 (the plain run): figure, published value, bound.
+    pub row: Check,
+    /// Median, P10 and P90 of the figure over the realisations.
+    pub median: f64,
+    /// See `median`.
+    pub p10: f64,
+    /// See `median`.
+    pub p90: f64,
+    /// Realisations with a finite value.
+    pub count: usize,
+    /// Passed: the median within the bound, and the published value (where the paper prints one
+    /// and the row has a band) within P10-P90; `None` without a bound.
+    pub pass: Option<bool>,
+}
+
+/// The distribution checks of the same rows computed in several realisations (`runs[r][i]` is row
+/// i of realisation r; every realisation has the rows of the first).
+pub fn over_realisations(runs: &[Vec<Check>]) -> Vec<DistributionCheck> {
+    let Some(first) = runs.first() else { return Vec::new() };
+    first
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let values: Vec<f64> = runs.iter().filter_map(|r| r.get(i)).map(|c| c.value).collect();
+            let sorted = crate::study::stats::finite_sorted(&values);
+            let q = |p: f64| crate::study::stats::quantile(&sorted, p);
+            let (median, p10, p90) = (q(0.5), q(0.1), q(0.9));
+            let pass = row.bound.map(|b| {
+                let covered = match (b, row.published_value) {
+                    (Bound::Band(_), Some(p)) => p10 <= p && p <= p90,
+                    _ => true,
+                };
+                b.holds(median) && covered
+            });
+            DistributionCheck { row: row.clone(), median, p10, p90, count: sorted.len(), pass }
+        })
+        .collect()
 }
