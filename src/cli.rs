@@ -46,6 +46,34 @@ enum Command {
     Sweep(SweepArgs),
     /// Merge the shard directories of one sweep into its results.
     Merge(MergeArgs),
+    /// Uncertainty budget: every error source of the scenario alone, off and scaled, over realisations.
+    Budget(BudgetArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct BudgetArgs {
+    /// Scenario file (TOML) of either device.
+    scenario: PathBuf,
+    /// Directory the budget goes to (in `<scenario>.budget`).
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// Realisations (worlds) per configuration.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    realisations: u32,
+    /// What-if factors applied to each source in turn, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [0.5, 2.0], value_parser = parse_factor)]
+    factors: Vec<f64>,
+    /// Repetitions per configuration and realisation, replacing the scenario's.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_REPETITIONS as i64))]
+    repetitions: Option<u32>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
+}
+
+fn parse_factor(s: &str) -> Result<f64, String> {
+    let f: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if f.is_finite() && (0.0..=100.0).contains(&f) { Ok(f) } else { Err(format!("{s}: a factor within [0, 100]")) }
 }
 
 #[derive(clap::Args, Debug)]
@@ -189,6 +217,7 @@ pub fn main() -> ExitCode {
         Command::Demo(args) => demo(args).map(|()| ExitCode::SUCCESS),
         Command::Sweep(args) => sweep(args),
         Command::Merge(args) => merge(&args.shards, &args.out),
+        Command::Budget(args) => budget(args),
     };
     match result {
         Ok(code) => code,
@@ -509,6 +538,58 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
     if failed == units.len() {
         return Err(format!("{}: every work unit failed (see {}/summary.md)", info.name, dest.display()));
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
+    let t0 = Instant::now();
+    if args.factors.len() > 8 {
+        return Err(format!("--factors: {} factors, at most 8", args.factors.len()));
+    }
+    let (sources, configs, sweep) =
+        crate::budget::plan(&args.scenario, args.realisations, &args.factors, args.repetitions).map_err(|e| e.to_string())?;
+    crate::io::out_dir::prepare(&args.out, &sweep.name).map_err(|e| e.to_string())?;
+    crate::io::out_dir::prepare(&args.out, &crate::sweep::shard_dir(Path::new(""), &sweep.name, 0, 1).display().to_string())
+        .map_err(|e| e.to_string())?;
+    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    eprintln!(
+        "calsim budget: {} ({} sources, {} configurations x {} realisations), {threads} threads",
+        sweep.name,
+        sources.len(),
+        configs.len(),
+        args.realisations
+    );
+    let bar = ProgressBar::new(0);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} work units, {elapsed} elapsed, ETA {eta}").expect("template"));
+    let dir = pool
+        .install(|| {
+            crate::sweep::run_shard(&sweep, &args.out, 0, 1, &|done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64)
+            })
+        })
+        .map_err(|e| format!("{}: {e}", args.out.display()))?;
+    bar.finish_and_clear();
+    let (info, units) = crate::sweep::read_shards(std::slice::from_ref(&dir)).map_err(|e| e.to_string())?;
+    let points = crate::sweep::aggregate(&info, &units);
+    let rows: Vec<Option<&crate::sweep::PointRow>> = (0..configs.len()).map(|i| points.iter().find(|p| p.point == i && p.table)).collect();
+    let p95: Vec<f64> = rows.iter().map(|r| r.map_or(f64::NAN, |r| r.after[1][0])).collect();
+    let (all_mm, none_mm, lines) = crate::budget::lines(&sources, &configs, &p95);
+    let report = crate::io::budget_results::BudgetReport {
+        name: &sweep.name,
+        realisations: args.realisations,
+        sources: &sources,
+        configs: &configs,
+        rows,
+        all_mm,
+        none_mm,
+        lines: &lines,
+    };
+    let dest = crate::io::budget_results::write(&args.out, &report).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    println!("{}", crate::io::budget_results::summary(&report));
+    println!("timing: budget {:.3} s ({} work units) to {}", t0.elapsed().as_secs_f64(), units.len(), dest.display());
     Ok(ExitCode::SUCCESS)
 }
 

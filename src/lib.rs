@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub mod budget;
 pub mod campaign;
 pub mod cell;
 pub mod cli;

@@ -1,5 +1,6 @@
 //! Files: scenarios in, result tables, summaries and manifests out.
 
+pub mod budget_results;
 pub mod out_dir;
 pub mod plots;
 pub mod recording;

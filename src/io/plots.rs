@@ -742,3 +742,78 @@ fn sweep_layouts<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlo
     }
     Ok(())
 }
+
+/// Writes the budget's tornado plot: per source (largest share first), the p95 after calibration
+/// without it and at each what-if factor, against the p95 with every source (`all_mm`).
+pub fn write_tornado(dir: &Path, lines: &[(String, f64, Vec<(f64, f64)>)], all_mm: f64) -> Result<Vec<Written>, String> {
+    register_font();
+    both!(dir, "budget_tornado", |root| tornado(root, lines, all_mm));
+    Ok(vec![Written {
+        stem: "budget_tornado".into(),
+        caption: format!(
+            "p95 after calibration with each source off or scaled (every other source as in the scenario); line: all sources, {all_mm:.3} mm"
+        ),
+    }])
+}
+
+fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[(String, f64, Vec<(f64, f64)>)], all_mm: f64) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let values = || lines.iter().flat_map(|l| std::iter::once(l.1).chain(l.2.iter().map(|x| x.1))).chain(std::iter::once(all_mm));
+    let xr = range_of(values(), 0.1);
+    let n = lines.len().max(1);
+    let mut chart = ChartBuilder::on(root)
+        .caption("Uncertainty budget: p95 after calibration per source", (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(220)
+        .build_cartesian_2d(xr.clone(), -0.5..(n as f64 - 0.5))
+        .map_err(e2s)?;
+    let labels: Vec<String> = lines.iter().map(|l| l.0.clone()).collect();
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(n)
+        .y_label_formatter(&|y| {
+            let k = y.round();
+            if (y - k).abs() < 1e-6 && k >= 0.0 { labels.get(n - 1 - k as usize).cloned().unwrap_or_default() } else { String::new() }
+        })
+        .x_desc("p95 of the validation error after calibration (mm)")
+        .label_style((FAMILY, 12))
+        .draw()
+        .map_err(e2s)?;
+    let y = |k: usize| (n - 1 - k) as f64;
+    let colours = [RGBColor(0, 140, 60), RGBColor(230, 120, 0), RGBColor(200, 30, 30)];
+    chart
+        .draw_series(
+            lines
+                .iter()
+                .enumerate()
+                .map(|(k, l)| Rectangle::new([(all_mm.min(l.1), y(k) - 0.3), (all_mm.max(l.1), y(k) + 0.3)], BLUE.mix(0.35).filled())),
+        )
+        .map_err(e2s)?
+        .label("source off")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], BLUE.mix(0.35).filled()));
+    let factors: Vec<f64> = lines.first().map(|l| l.2.iter().map(|x| x.0).collect()).unwrap_or_default();
+    for (j, f) in factors.iter().enumerate() {
+        let c = colours[j % colours.len()];
+        chart
+            .draw_series(lines.iter().enumerate().filter_map(|(k, l)| l.2.get(j).map(|v| Circle::new((v.1, y(k)), 5, c.filled()))))
+            .map_err(e2s)?
+            .label(format!("source x{f}"))
+            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+    }
+    chart
+        .draw_series(std::iter::once(PathElement::new(vec![(all_mm, -0.5), (all_mm, n as f64 - 0.5)], BLACK.stroke_width(2))))
+        .map_err(e2s)?
+        .label("all sources")
+        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FAMILY, 12))
+        .draw()
+        .map_err(e2s)?;
+    Ok(())
+}

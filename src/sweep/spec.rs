@@ -305,3 +305,34 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
         identity,
     })
 }
+
+/// A sweep built from scenario tables directly (a budget's configurations): each point is
+/// `(axis values, table)`, checked as a scenario; `identity` names the sweep's inputs.
+pub fn from_tables(
+    name: &str,
+    identity: String,
+    realisations: u32,
+    thresholds_mm: Vec<f64>,
+    keys: Vec<String>,
+    points: Vec<(Vec<(String, String)>, toml::Table)>,
+) -> Result<Sweep, SweepError> {
+    let mut out = Vec::with_capacity(points.len());
+    for (p, (values, t)) in points.into_iter().enumerate() {
+        let axis = values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ");
+        let text = toml::to_string(&t).unwrap_or_default();
+        let scenario = scenario::from_table(&text, t, &PathBuf::from(format!("{name}#{p}"))).map_err(|e| SweepError::Point {
+            path: name.into(),
+            axis: if axis.is_empty() { "(base)".into() } else { axis },
+            error: Box::new(e),
+        })?;
+        out.push(Point { values, scenario });
+    }
+    Ok(Sweep { name: name.into(), realisations, thresholds_mm, keys, points: out, identity })
+}
+
+/// The value at dotted `key` of `t`, if there is one.
+pub fn get_dotted<'a>(t: &'a toml::Table, key: &str) -> Option<&'a toml::Value> {
+    let mut parts = key.split('.');
+    let first = parts.next()?;
+    parts.try_fold(t.get(first)?, |v, p| v.as_table()?.get(p))
+}

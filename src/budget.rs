@@ -1,0 +1,223 @@
+//! Uncertainty budget by ablation with common random numbers: which error source limits the
+//! calibrated accuracy, and what a better (or worse) one buys.
+//!
+//! The sources are the scenario's own error terms: of the device's noise and effect keys, those the
+//! scenario sets to a non-zero value. A budget is a sweep whose grid points are configurations of
+//! scale factors on the sources (every source on; every source off, the solver's floor; each source
+//! alone; each source off; each source scaled by each what-if factor), run over the same
+//! realisations (the same worlds and draws for every configuration), at the scenario's table set
+//! size. The p95 of the validation error after calibration (median over realisations) is the
+//! figure of merit; a source's share is the square of what it adds alone over the floor, and,
+//! beside it, the square of what removing it saves from the whole; the two disagree when sources
+//! interact.
+
+use std::path::Path;
+
+use crate::io::scenario::{self, ScenarioError};
+use crate::sweep::spec::{Sweep, SweepError, from_tables, get_dotted, set_dotted};
+
+/// An error source: a label, the scenario keys it scales together, their unit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Source {
+    /// Name in the budget.
+    pub label: &'static str,
+    /// Dotted keys scaled together.
+    pub keys: &'static [&'static str],
+    /// Unit of the first key.
+    pub unit: &'static str,
+    /// The scenario's values of the keys.
+    pub values: Vec<f64>,
+}
+
+type Candidate = (&'static str, &'static [&'static str], &'static str);
+
+const UNMODELLED: [Candidate; 4] = [
+    ("transmission errors, high orders", &["robot.unmodelled.transmission_high_mdeg"], "mdeg"),
+    ("transmission errors, low orders", &["robot.unmodelled.transmission_low_mdeg"], "mdeg"),
+    ("backlash", &["robot.unmodelled.backlash_mdeg"], "mdeg"),
+    ("thermal drift", &["robot.unmodelled.thermal_drift_ppm"], "ppm"),
+];
+
+const TRICAL: [Candidate; 8] = [
+    ("indicator accuracy", &["trical.indicator_accuracy_um"], "um"),
+    ("indicator resolution", &["trical.indicator_resolution_um"], "um"),
+    ("indicator misalignment", &["trical.indicator_misalignment_deg"], "deg"),
+    ("ball diameter tolerance", &["cell.ball_diameter_tolerance_um"], "um"),
+    ("ballbar", &["cell.ballbar_sigma_um"], "um"),
+    ("CMM (TCP)", &["trical.cmm_sigma_um"], "um"),
+    ("robot repeatability", &["robot.repeatability_mm"], "mm"),
+    (
+        "laser tracker (validation)",
+        &["tracker.range_sigma_um", "tracker.range_sigma_um_per_m", "tracker.transverse_sigma_um", "tracker.transverse_sigma_um_per_m"],
+        "um",
+    ),
+];
+
+const SPMS: [Candidate; 10] = [
+    ("sensor linearity", &["head.sensor.linearity_pct_fs"], "% FS"),
+    ("sensor repeatability", &["head.sensor.repeatability_um"], "um"),
+    ("sensor temperature", &["head.sensor.temperature_delta_c"], "C"),
+    ("head assembly", &["head.assembly_error_mm", "head.assembly_error_deg"], "mm, deg"),
+    ("tracker, beam experiment", &["beams.tracker_sigma_um"], "um"),
+    ("tracker, station frames (A1-A3)", &["station.tracker_sigma_um"], "um"),
+    ("station placement", &["station.placement_error_mm", "station.placement_error_deg"], "mm, deg"),
+    ("sphere offset on the flange", &["robot.sphere_flange_error_mm"], "mm"),
+    ("robot repeatability", &["robot.repeatability_mm"], "mm"),
+    ("tracker, ISO 9283 test", &["iso9283.tracker_sigma_um"], "um"),
+];
+
+fn number(v: &toml::Value) -> Option<f64> {
+    v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
+}
+
+/// The sources of a scenario table: the device's error keys the scenario sets non-zero.
+pub fn sources(t: &toml::Table) -> Vec<Source> {
+    let spms = matches!(t.get("kind"), Some(toml::Value::String(k)) if k == "spms");
+    let device: &[Candidate] = if spms { &SPMS } else { &TRICAL };
+    device
+        .iter()
+        .chain(UNMODELLED.iter())
+        .filter_map(|&(label, keys, unit)| {
+            let values: Vec<f64> = keys.iter().map(|k| get_dotted(t, k).and_then(number).unwrap_or(0.0)).collect();
+            values.iter().any(|v| *v != 0.0).then_some(Source { label, keys, unit, values })
+        })
+        .collect()
+}
+
+/// One configuration of a budget: a label and a factor per source.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    /// `all on`, `all off`, `<source> alone`, `<source> off`, `<source> x0.5`.
+    pub label: String,
+    /// The source it is about (`None` for all on / all off).
+    pub source: Option<usize>,
+    /// `all`, `none`, `alone`, `off` or `scaled`.
+    pub mode: &'static str,
+    /// The factor of the source it is about (1 for all on, 0 for all off).
+    pub factor: f64,
+    /// Factor per source.
+    pub factors: Vec<f64>,
+}
+
+/// The configurations for `n` sources and the what-if factors.
+pub fn configs(sources: &[Source], what_if: &[f64]) -> Vec<Config> {
+    let n = sources.len();
+    let mut out = vec![
+        Config { label: "all on".into(), source: None, mode: "all", factor: 1.0, factors: vec![1.0; n] },
+        Config { label: "all off".into(), source: None, mode: "none", factor: 0.0, factors: vec![0.0; n] },
+    ];
+    for (s, src) in sources.iter().enumerate() {
+        let unit = |f: f64| (0..n).map(|k| if k == s { f } else { 1.0 }).collect::<Vec<_>>();
+        out.push(Config {
+            label: format!("{} alone", src.label),
+            source: Some(s),
+            mode: "alone",
+            factor: 1.0,
+            factors: (0..n).map(|k| if k == s { 1.0 } else { 0.0 }).collect(),
+        });
+        out.push(Config { label: format!("{} off", src.label), source: Some(s), mode: "off", factor: 0.0, factors: unit(0.0) });
+        for &f in what_if {
+            out.push(Config { label: format!("{} x{f}", src.label), source: Some(s), mode: "scaled", factor: f, factors: unit(f) });
+        }
+    }
+    out
+}
+
+/// A budget that cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum BudgetError {
+    /// The scenario cannot be read.
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    /// A configuration is not a valid scenario.
+    #[error(transparent)]
+    Sweep(#[from] SweepError),
+    /// Nothing to budget.
+    #[error("{0}: no error source of the device is set non-zero in the scenario")]
+    NoSource(String),
+}
+
+/// The budget's sweep: every configuration of `what_if` over `realisations`, at the table set size
+/// with `repetitions` (the scenario's when `None`).
+pub fn plan(
+    path: &Path,
+    realisations: u32,
+    what_if: &[f64],
+    repetitions: Option<u32>,
+) -> Result<(Vec<Source>, Vec<Config>, Sweep), BudgetError> {
+    let (text, base) = scenario::read_table(path)?;
+    let sources = sources(&base);
+    if sources.is_empty() {
+        return Err(BudgetError::NoSource(path.display().to_string()));
+    }
+    let configs = configs(&sources, what_if);
+    // The table set size alone (checked with the scenario).
+    let table_n = get_dotted(&base, "study.table_set_size").cloned();
+    let mut points = Vec::with_capacity(configs.len());
+    for c in &configs {
+        let mut t = base.clone();
+        if let Some(n) = &table_n {
+            let _ = set_dotted(&mut t, "study.set_sizes", toml::Value::Array(vec![n.clone()]));
+        }
+        if let Some(r) = repetitions {
+            let _ = set_dotted(&mut t, "study.repetitions", toml::Value::Integer(i64::from(r)));
+        }
+        for (s, src) in sources.iter().enumerate() {
+            for (k, v) in src.keys.iter().zip(&src.values) {
+                let _ = set_dotted(&mut t, k, toml::Value::Float(v * c.factors[s]));
+            }
+        }
+        points.push((vec![("configuration".to_string(), c.label.clone())], t));
+    }
+    use sha2::Digest;
+    let identity = format!("{:x}", sha2::Sha256::digest(format!("budget\u{0}{text}\u{0}{what_if:?}\u{0}{repetitions:?}")));
+    let name = format!("{}.budget", path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into()));
+    let sweep = from_tables(&name, identity, realisations, vec![0.5, 1.0], vec!["configuration".into()], points)?;
+    Ok((sources, configs, sweep))
+}
+
+/// One source's line of the budget.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Line {
+    /// Index of the source.
+    pub source: usize,
+    /// Its share of the after-calibration p95 from what it adds alone over the floor.
+    pub share_alone: f64,
+    /// Its share from what removing it saves from the whole.
+    pub share_removed: f64,
+    /// p95 (median over realisations) with the source alone, off, mm.
+    pub alone_mm: f64,
+    /// See `alone_mm`.
+    pub off_mm: f64,
+    /// p95 at each what-if factor, mm.
+    pub scaled_mm: Vec<(f64, f64)>,
+}
+
+/// The budget lines, sorted by share (largest first), from the p95 of each configuration (median
+/// over realisations, mm; NaN where the configuration could not run).
+pub fn lines(sources: &[Source], configs: &[Config], p95: &[f64]) -> (f64, f64, Vec<Line>) {
+    let find = |mode: &str, s: Option<usize>, f: Option<f64>| {
+        configs.iter().position(|c| c.mode == mode && c.source == s && f.is_none_or(|f| c.factor == f)).map_or(f64::NAN, |i| p95[i])
+    };
+    let (all, none) = (find("all", None, None), find("none", None, None));
+    let added: Vec<f64> = (0..sources.len()).map(|s| (find("alone", Some(s), None).powi(2) - none.powi(2)).max(0.0)).collect();
+    let saved: Vec<f64> = (0..sources.len()).map(|s| (all.powi(2) - find("off", Some(s), None).powi(2)).max(0.0)).collect();
+    let (sa, ss) = (added.iter().sum::<f64>(), saved.iter().sum::<f64>());
+    let mut out: Vec<Line> = (0..sources.len())
+        .map(|s| Line {
+            source: s,
+            share_alone: if sa > 0.0 { added[s] / sa } else { f64::NAN },
+            share_removed: if ss > 0.0 { saved[s] / ss } else { f64::NAN },
+            alone_mm: find("alone", Some(s), None),
+            off_mm: find("off", Some(s), None),
+            scaled_mm: configs
+                .iter()
+                .zip(p95)
+                .filter(|(c, _)| c.mode == "scaled" && c.source == Some(s))
+                .map(|(c, v)| (c.factor, *v))
+                .collect(),
+        })
+        .collect();
+    out.sort_by(|a, b| b.share_alone.total_cmp(&a.share_alone).then(a.source.cmp(&b.source)));
+    (all, none, out)
+}
