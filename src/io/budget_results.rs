@@ -78,7 +78,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
         crate_version: env!("CARGO_PKG_VERSION"),
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
-    let tornado: Vec<(String, f64, Vec<(f64, f64)>)> =
+    let tornado: Vec<crate::io::plots::TornadoLine> =
         b.lines.iter().map(|l| (b.sources[l.source].label.to_string(), l.off_mm, l.scaled_mm.clone())).collect();
     let drawn = crate::io::plots::write_tornado(dir, &tornado, b.all_mm).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
     let mut text = summary(b);

@@ -743,9 +743,12 @@ fn sweep_layouts<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlo
     Ok(())
 }
 
+/// One bar of the tornado: the source, the p95 without it, and the p95 at each what-if factor.
+pub type TornadoLine = (String, f64, Vec<(f64, f64)>);
+
 /// Writes the budget's tornado plot: per source (largest share first), the p95 after calibration
 /// without it and at each what-if factor, against the p95 with every source (`all_mm`).
-pub fn write_tornado(dir: &Path, lines: &[(String, f64, Vec<(f64, f64)>)], all_mm: f64) -> Result<Vec<Written>, String> {
+pub fn write_tornado(dir: &Path, lines: &[TornadoLine], all_mm: f64) -> Result<Vec<Written>, String> {
     register_font();
     both!(dir, "budget_tornado", |root| tornado(root, lines, all_mm));
     Ok(vec![Written {
@@ -756,7 +759,7 @@ pub fn write_tornado(dir: &Path, lines: &[(String, f64, Vec<(f64, f64)>)], all_m
     }])
 }
 
-fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[(String, f64, Vec<(f64, f64)>)], all_mm: f64) -> DrawResult {
+fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLine], all_mm: f64) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
     let values = || lines.iter().flat_map(|l| std::iter::once(l.1).chain(l.2.iter().map(|x| x.1))).chain(std::iter::once(all_mm));
     let xr = range_of(values(), 0.1);
