@@ -149,3 +149,30 @@ pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::Param
     // Diagonal of the projector onto the null space (rows of V^T are the right singular vectors).
     (0..names.len()).filter(|&j| null.iter().map(|&k| v_t[(k, j)].powi(2)).sum::<f64>() >= 0.01).map(|j| names[j].clone()).collect()
 }
+
+/// First-order standard deviations of the identified parameters (internal units) when every
+/// measured coordinate carries independent noise of `sigma_mm`: the square roots of the diagonal of
+/// `sigma^2 (J^T J)^-1`, with `J` the identification Jacobian of the configurations `qs` at
+/// `model`. `None` when `J^T J` is singular (the set cannot separate the parameters).
+pub fn predicted_std(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate::robot::Joints], sigma_mm: f64) -> Option<Vec<f64>> {
+    let m = set.len();
+    let mut st = KinState::default();
+    let mut cols = vec![Vector3::zeros(); m];
+    let mut j = DMatrix::zeros(3 * qs.len(), m);
+    for (k, q) in qs.iter().enumerate() {
+        tcp_jacobian(model, &mut st, q, set, &mut cols);
+        for (c, col) in cols.iter().enumerate() {
+            j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
+        }
+    }
+    // Column scaling keeps the inverse well conditioned across mm and rad columns.
+    let scale: Vec<f64> = j.column_iter().map(|c| c.norm()).collect();
+    if scale.iter().any(|s| *s == 0.0 || !s.is_finite()) {
+        return None;
+    }
+    for (c, s) in scale.iter().enumerate() {
+        j.column_mut(c).unscale_mut(*s);
+    }
+    let inv = (j.tr_mul(&j)).try_inverse()?;
+    Some((0..m).map(|i| sigma_mm * inv[(i, i)].max(0.0).sqrt() / scale[i]).collect())
+}
