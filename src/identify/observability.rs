@@ -12,6 +12,21 @@ use nalgebra::{DMatrix, Vector3};
 
 use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
 
+/// The identification Jacobians of `qs` at `model` for `set`, stacked: rows 3k..3k+3 are
+/// configuration k (unscaled).
+pub fn stacked_jacobian(model: &RobotModel, set: &ParamSet, qs: &[Joints]) -> DMatrix<f64> {
+    let mut st = KinState::default();
+    let mut cols = vec![Vector3::zeros(); set.len()];
+    let mut j = DMatrix::zeros(3 * qs.len(), set.len());
+    for (k, q) in qs.iter().enumerate() {
+        tcp_jacobian(model, &mut st, q, set, &mut cols);
+        for (c, col) in cols.iter().enumerate() {
+            j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
+        }
+    }
+    j
+}
+
 /// The pool's identification Jacobians, column-scaled, stacked: rows 3k..3k+3 are configuration k.
 #[derive(Clone, Debug)]
 pub struct PoolJacobian {
@@ -34,15 +49,7 @@ impl PoolJacobian {
     /// Evaluates and scales the Jacobians of `qs` at `model` for `set`.
     pub fn new(model: &RobotModel, set: &ParamSet, qs: &[Joints]) -> Self {
         let m = set.len();
-        let mut st = KinState::default();
-        let mut cols = vec![Vector3::zeros(); m];
-        let mut j = DMatrix::zeros(3 * qs.len(), m);
-        for (k, q) in qs.iter().enumerate() {
-            tcp_jacobian(model, &mut st, q, set, &mut cols);
-            for (c, col) in cols.iter().enumerate() {
-                j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
-            }
-        }
+        let mut j = stacked_jacobian(model, set, qs);
         let n = qs.len().max(1) as f64;
         let scale: Vec<f64> = j.column_iter().map(|c| (c.norm_squared() / n).sqrt()).collect();
         for (c, s) in scale.iter().enumerate() {
@@ -156,15 +163,7 @@ pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::Param
 /// `model`. `None` when `J^T J` is singular (the set cannot separate the parameters).
 pub fn predicted_std(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate::robot::Joints], sigma_mm: f64) -> Option<Vec<f64>> {
     let m = set.len();
-    let mut st = KinState::default();
-    let mut cols = vec![Vector3::zeros(); m];
-    let mut j = DMatrix::zeros(3 * qs.len(), m);
-    for (k, q) in qs.iter().enumerate() {
-        tcp_jacobian(model, &mut st, q, set, &mut cols);
-        for (c, col) in cols.iter().enumerate() {
-            j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
-        }
-    }
+    let mut j = stacked_jacobian(model, set, qs);
     // Column scaling keeps the inverse well conditioned across mm and rad columns.
     let scale: Vec<f64> = j.column_iter().map(|c| c.norm()).collect();
     if scale.iter().any(|s| *s == 0.0 || !s.is_finite()) {

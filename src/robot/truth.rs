@@ -29,25 +29,27 @@ impl DeviationSpec {
 
 /// `nominal` with every parameter of `set` moved by a random deviation drawn from `spec`.
 pub fn deviate<R: Rng + ?Sized>(nominal: &RobotModel, set: &ParamSet, spec: &DeviationSpec, rng: &mut R) -> RobotModel {
+    moved(nominal, set, rng, |id, z| match (id, id.unit()) {
+        (ParamId::Link { kind: LinkParam::Compliance, .. }, _) => Unit::MdegPerNm.to_internal(-(z * spec.compliance_mdeg_per_nm).abs()),
+        (_, Unit::Mm) => z * spec.length_mm,
+        (_, Unit::Deg) => Unit::Deg.to_internal(z * spec.angle_deg),
+        (_, Unit::MdegPerNm) => Unit::MdegPerNm.to_internal(z * spec.compliance_mdeg_per_nm),
+    })
+}
+
+/// `model` with every parameter of `set` moved by `delta(parameter, z)`, `z` a standard normal
+/// draw per parameter in the order of the set.
+fn moved<R: Rng + ?Sized>(model: &RobotModel, set: &ParamSet, rng: &mut R, delta: impl Fn(&ParamId, f64) -> f64) -> RobotModel {
     let std = Normal::new(0.0, 1.0).expect("unit normal");
     let values: Vec<f64> = set
         .ids()
         .iter()
         .map(|id| {
             let z: f64 = std.sample(rng);
-            let current = id.get(nominal.data());
-            let delta = match (id, id.unit()) {
-                (ParamId::Link { kind: LinkParam::Compliance, .. }, _) => {
-                    Unit::MdegPerNm.to_internal(-(z * spec.compliance_mdeg_per_nm).abs())
-                }
-                (_, Unit::Mm) => z * spec.length_mm,
-                (_, Unit::Deg) => Unit::Deg.to_internal(z * spec.angle_deg),
-                (_, Unit::MdegPerNm) => Unit::MdegPerNm.to_internal(z * spec.compliance_mdeg_per_nm),
-            };
-            current + delta
+            id.get(model.data()) + delta(id, z)
         })
         .collect();
-    set.unpack(nominal, &values).expect("finite deviations keep the model valid")
+    set.unpack(model, &values).expect("finite deviations keep the model valid")
 }
 
 /// The spread of a robot's parameters around the scenario's truth, one standard deviation per
@@ -78,21 +80,11 @@ pub fn perturb<R: Rng + ?Sized>(truth: &RobotModel, set: &ParamSet, spread: &Spr
     if spread.is_zero() {
         return truth.clone();
     }
-    let std = Normal::new(0.0, 1.0).expect("unit normal");
-    let values: Vec<f64> = set
-        .ids()
-        .iter()
-        .map(|id| {
-            let z: f64 = std.sample(rng);
-            let delta = match (id, id.unit()) {
-                (ParamId::Link { kind: LinkParam::Compliance, .. }, _) | (_, Unit::MdegPerNm) => {
-                    Unit::MdegPerNm.to_internal(z * spread.compliance_mdeg_per_nm)
-                }
-                (_, Unit::Mm) => z * spread.length_mm,
-                (_, Unit::Deg) => Unit::Deg.to_internal(z * spread.angle_deg),
-            };
-            id.get(truth.data()) + delta
-        })
-        .collect();
-    set.unpack(truth, &values).expect("finite spreads keep the model valid")
+    moved(truth, set, rng, |id, z| match (id, id.unit()) {
+        (ParamId::Link { kind: LinkParam::Compliance, .. }, _) | (_, Unit::MdegPerNm) => {
+            Unit::MdegPerNm.to_internal(z * spread.compliance_mdeg_per_nm)
+        }
+        (_, Unit::Mm) => z * spread.length_mm,
+        (_, Unit::Deg) => Unit::Deg.to_internal(z * spread.angle_deg),
+    })
 }
