@@ -48,6 +48,23 @@ enum Command {
     Merge(MergeArgs),
     /// Uncertainty budget: every error source of the scenario alone, off and scaled, over realisations.
     Budget(BudgetArgs),
+    /// Table 8 of the TriCal paper: the same robot calibrated with the TriCal, a laser tracker and an optical CMM.
+    Table8(Table8Args),
+}
+
+#[derive(clap::Args, Debug)]
+struct Table8Args {
+    /// A TriCal scenario file.
+    scenario: PathBuf,
+    /// Realisations (worlds): the medians over them, with P10-P90, beside the published rows.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    realisations: u32,
+    /// Configurations of each external instrument's pool (random in the workspace, in its view).
+    #[arg(long, default_value_t = 360, value_parser = clap::value_parser!(u32).range(100..=100_000))]
+    pool: u32,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -218,6 +235,7 @@ pub fn main() -> ExitCode {
         Command::Sweep(args) => sweep(args),
         Command::Merge(args) => merge(&args.shards, &args.out),
         Command::Budget(args) => budget(args),
+        Command::Table8(args) => table8(args),
     };
     match result {
         Ok(code) => code,
@@ -590,6 +608,87 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
     std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     println!("{}", crate::io::budget_results::summary(&report));
     println!("timing: budget {:.3} s ({} work units) to {}", t0.elapsed().as_secs_f64(), units.len(), dest.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Median, std and max after calibration (medians over the repetitions at the table set size) of
+/// the TriCal, the laser tracker and the optical CMM in one world.
+fn table8_world(s: &scenario::Scenario, seed: u64, pool_size: u32) -> Result<[[f64; 3]; 3], String> {
+    use crate::instrument::optical_cmm::{OpticalCmm, OpticalCmmSpec};
+    let spec = &s.experiment;
+    let e = spec.build(seed).map_err(|e| format!("campaign: {e}"))?;
+    let before = spec.before_model(&e.campaign);
+    let mut study = s.study.clone();
+    study.set_sizes = vec![study.table_set_size];
+    let n = study.table_set_size as usize;
+    let stats = |r: &crate::study::StudyResults| {
+        let f = Figures::of(r, &e.robot.truth, n);
+        [f.after_median, f.after_std, f.after_max]
+    };
+    let quiet = |_: usize, _: usize| {};
+    let trical = crate::study::run(&e, &before, &study, seed, &quiet).map_err(|e| e.to_string())?;
+    let cmm = OpticalCmm::new(&OpticalCmmSpec::default(), e.tracker.position_w);
+    let tracker_pool =
+        spec.instrument_pool(&e, seed, pool_size, &|p, rng| Some(e.tracker.measure(p, rng))).map_err(|e| format!("tracker pool: {e}"))?;
+    let cmm_pool =
+        spec.instrument_pool(&e, seed, pool_size, &|p, rng| cmm.measure(p, rng)).map_err(|e| format!("optical CMM pool: {e}"))?;
+    let run = |pool: &[crate::campaign::ValidationPose]| -> Result<[f64; 3], String> {
+        let obs: Vec<Observation> = pool.iter().map(|v| Observation { q: v.q, tcp_world_mm: v.measured_w }).collect();
+        crate::study::run_on_pool(&e, &before, &study, seed, &obs, &quiet).map(|r| stats(&r)).map_err(|e| e.to_string())
+    };
+    Ok([stats(&trical), run(&tracker_pool)?, run(&cmm_pool)?])
+}
+
+fn table8(args: &Table8Args) -> Result<ExitCode, String> {
+    let t0 = Instant::now();
+    let s = match scenario::load_any(&args.scenario).map_err(|e| e.to_string())? {
+        scenario::Loaded::Trical(s) => *s,
+        scenario::Loaded::Spms(_) => {
+            return Err(format!("{}: kind: Table 8 is the TriCal paper's (a TriCal scenario)", args.scenario.display()));
+        }
+    };
+    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    eprintln!("calsim table8: {} (seed {}), {} realisations, {threads} threads", s.name, s.seed, args.realisations);
+    let bar = ProgressBar::new(u64::from(args.realisations));
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} realisations, {elapsed} elapsed, ETA {eta}").expect("template"));
+    let mut worlds = Vec::new();
+    for r in 0..args.realisations {
+        match pool.install(|| table8_world(&s, crate::sweep::realisation_seed(s.seed, r), args.pool)) {
+            Ok(w) => worlds.push(w),
+            Err(e) => eprintln!("warning: realisation {r} left out: {e}"),
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if worlds.is_empty() {
+        return Err(format!("{}: no realisation could be calibrated", args.scenario.display()));
+    }
+    let p = &crate::study::published::published().trical_2018;
+    println!(
+        "{:<16} {:>26} {:>44}",
+        "instrument",
+        "published median / std / max",
+        format!("calsim median / std / max (median of {} worlds; P10-P90 of the median)", worlds.len())
+    );
+    for (k, name) in ["TriCal", "laser tracker", "optical CMM"].iter().enumerate() {
+        let row = p.table8(name);
+        let col = |m: usize| crate::study::stats::median(&worlds.iter().map(|w| w[k][m]).collect::<Vec<_>>());
+        let meds = crate::study::stats::finite_sorted(&worlds.iter().map(|w| w[k][0]).collect::<Vec<_>>());
+        let q = |x: f64| crate::study::stats::quantile(&meds, x);
+        println!(
+            "{name:<16} {:>10.3} / {:.3} / {:.3} {:>14.3} / {:.3} / {:.3}  ({:.3}-{:.3})",
+            row.median_mm,
+            row.std_mm,
+            row.max_mm,
+            col(0),
+            col(1),
+            col(2),
+            q(0.1),
+            q(0.9)
+        );
+    }
+    println!("timing: {:.3} s", t0.elapsed().as_secs_f64());
     Ok(ExitCode::SUCCESS)
 }
 

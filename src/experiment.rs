@@ -169,6 +169,28 @@ impl ExperimentSpec {
         Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign })
     }
 
+    /// An identification pool of `count` random configurations measured by an external instrument
+    /// (`measure`: the tracker, the optical CMM) on the experiment's robot, for Table 8.
+    pub fn instrument_pool(
+        &self,
+        e: &Experiment,
+        seed: u64,
+        count: u32,
+        measure: &dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>,
+    ) -> Result<Vec<crate::campaign::ValidationPose>, CampaignError> {
+        let nominal = self.nominal();
+        let setup = Setup {
+            cell: &e.cell,
+            robot: &e.robot,
+            robot_validation: &e.robot_validation,
+            trical: &e.trical,
+            tracker: &e.tracker,
+            nominal: &nominal,
+            spec: &self.campaign,
+        };
+        campaign::instrument_pool(&setup, &e.campaign, count, split_seed(seed, seeds::experiment::CAMPAIGN), measure)
+    }
+
     /// This experiment without any noise or unmodelled effect, centred to `epsilon_mm`: measurements
     /// are exact up to the centring tolerance.
     pub fn noise_free(&self, epsilon_mm: f64) -> Self {

@@ -58,6 +58,10 @@ pub mod campaign {
     pub const POOL_CENTRING: u64 = 1 << 40;
     /// Move and tracker noise of validation pose i: `VALIDATION_NOISE + i`.
     pub const VALIDATION_NOISE: u64 = 1 << 41;
+    /// Configurations of an instrument's identification pool (Table 8).
+    pub const INSTRUMENT_POSES: u64 = 4;
+    /// Move and instrument noise of pool pose i: `INSTRUMENT_NOISE + i`.
+    pub const INSTRUMENT_NOISE: u64 = 1 << 42;
 }
 
 /// The SPMS head's streams, keyed under the scenario seed.

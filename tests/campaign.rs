@@ -136,3 +136,26 @@ fn the_tcp_pose_helper_points_the_flange_axis_where_asked() {
     let p = tcp_pose(&Vector3::new(1.0, 2.0, 3.0), &axis, 0.7);
     assert!((p.rotation * Vector3::z() - axis).norm() < 1e-12);
 }
+
+/// Table 8's plumbing, noise-free: a pool measured by an exact external instrument over the
+/// workspace identifies the robot, and the validation error falls to nothing.
+#[test]
+fn an_exact_instrument_pool_recovers_the_robot() {
+    let s = calsim::io::scenario::load(&common::repo().join("scenarios/ci_quick.toml")).unwrap();
+    let spec = s.experiment.noise_free(0.001);
+    let e = spec.build(s.seed).unwrap();
+    let before = spec.before_model(&e.campaign);
+    let pool = spec.instrument_pool(&e, s.seed, 150, &|p, _| Some(*p)).unwrap();
+    assert_eq!(pool.len(), 150);
+    let obs: Vec<calsim::identify::Observation> =
+        pool.iter().map(|v| calsim::identify::Observation { q: v.q, tcp_world_mm: v.measured_w }).collect();
+    let mut study = s.study.clone();
+    study.set_sizes = vec![75];
+    study.table_set_size = 75;
+    study.repetitions = 2;
+    let r = calsim::study::run_on_pool(&e, &before, &study, s.seed, &obs, &|_, _| {}).unwrap();
+    for t in &r.tasks {
+        assert!(t.id.outcome.is_converged(), "{:?}", t.id.outcome);
+        assert!(t.validation.max < 1e-4, "max validation error {} mm", t.validation.max);
+    }
+}

@@ -368,20 +368,54 @@ fn measure_validation(
     start: Joints,
     seed: u64,
 ) -> Result<(Vec<ValidationPose>, u32), CampaignError> {
-    let Setup { robot, robot_validation, tracker, spec, .. } = *setup;
+    let poses = RandomPoses {
+        what: "validation set",
+        count: setup.spec.validation_poses,
+        robot: setup.robot_validation,
+        keys: (streams::VALIDATION_POSES, streams::VALIDATION_NOISE),
+    };
+    measure_random_poses(setup, world, nominal_model, start, seed, &poses, &|p, rng| Some(setup.tracker.measure(p, rng)))
+}
+
+/// A set of random configurations measured by an instrument: what it is for (in errors), how many,
+/// on which physical robot, and the stream keys of its poses and of each pose's noise.
+pub struct RandomPoses<'a> {
+    /// Name in errors.
+    pub what: &'static str,
+    /// Poses to keep.
+    pub count: u32,
+    /// The physical robot measured.
+    pub robot: &'a VirtualRobot,
+    /// Stream keys: the configurations, then `noise + i` for pose i.
+    pub keys: (u64, u64),
+}
+
+/// Random configurations within the joint limits (the validation margin), collision-free, the
+/// target facing and in sight of the tracker's place, each measured by `measure` (which may refuse
+/// a target out of its view). Returns the poses and the candidates rejected.
+fn measure_random_poses(
+    setup: &Setup<'_>,
+    world: &CollisionWorld,
+    nominal_model: &RobotModel,
+    start: Joints,
+    seed: u64,
+    poses: &RandomPoses<'_>,
+    measure: &dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>,
+) -> Result<(Vec<ValidationPose>, u32), CampaignError> {
+    let Setup { robot, tracker, spec, .. } = *setup;
     let base_from_world = world_from_base(&robot.truth).inverse();
     let tracker_base = (base_from_world * nalgebra::Point3::from(tracker.position_w)).coords;
     let mut st = KinState::default();
-    let mut validation = Vec::new();
-    let mut validation_rejected = 0;
+    let mut out = Vec::new();
+    let mut rejected = 0;
     let mut from = start;
     let mut tries = 0;
     let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
-    let rng = &mut stream(seed, streams::VALIDATION_POSES);
-    while validation.len() < spec.validation_poses as usize {
+    let rng = &mut stream(seed, poses.keys.0);
+    while out.len() < poses.count as usize {
         tries += 1;
-        if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.validation_poses.max(1)) {
-            return Err(CampaignError::Exhausted { what: "validation set".into(), tries });
+        if tries > u64::from(spec.max_tries_per_configuration) * u64::from(poses.count.max(1)) {
+            return Err(CampaignError::Exhausted { what: poses.what.into(), tries });
         }
         let q = uniform_configuration(nominal_model, spec.validation_margin, rng);
         forward(nominal_model, &mut st, &q);
@@ -393,15 +427,36 @@ fn measure_validation(
             && facing.dot(&sight.normalize()) >= accept_cos
             && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
         if !ok {
-            validation_rejected += 1;
+            rejected += 1;
             continue;
         }
-        let noise = &mut stream(seed, streams::VALIDATION_NOISE + validation.len() as u64);
-        let true_w = robot_validation.tcp_after_move(&mut st, &q, &from, noise);
+        let noise = &mut stream(seed, poses.keys.1 + out.len() as u64);
+        let true_w = poses.robot.tcp_after_move(&mut st, &q, &from, noise);
+        let Some(measured_w) = measure(&true_w, noise) else {
+            rejected += 1;
+            continue;
+        };
         from = q;
-        validation.push(ValidationPose { q, measured_w: tracker.measure(&true_w, noise) });
+        out.push(ValidationPose { q, measured_w });
     }
-    Ok((validation, validation_rejected))
+    Ok((out, rejected))
+}
+
+/// An identification pool measured by an external instrument on the robot of setup 1 (Table 8:
+/// the laser tracker with an SMR, the optical CMM with a target at the TCP), from random
+/// configurations of the whole workspace that the instrument sees, not tied to the spheres.
+pub fn instrument_pool(
+    setup: &Setup<'_>,
+    campaign: &Campaign,
+    count: u32,
+    seed: u64,
+    measure: &dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>,
+) -> Result<Vec<ValidationPose>, CampaignError> {
+    let truth_base = world_from_base(&setup.robot.truth);
+    let world = collision_world(setup.cell, setup.nominal, &truth_base, &campaign.semi_automatic.tcp_cmm_mm);
+    let poses =
+        RandomPoses { what: "instrument pool", count, robot: setup.robot, keys: (streams::INSTRUMENT_POSES, streams::INSTRUMENT_NOISE) };
+    measure_random_poses(setup, &world, &campaign.nominal, campaign.semi_automatic.located_q[0], seed, &poses, measure).map(|(p, _)| p)
 }
 
 /// TCP in the flange frame from configurations centred on one ball: least squares on

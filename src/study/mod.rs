@@ -148,13 +148,26 @@ pub fn run(
     seed: u64,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<StudyResults, crate::robot::ParamError> {
-    let set = spec.parameter_set(ParamSet::trical_31)?;
-    let t0 = Instant::now();
-    let qs: Vec<_> = experiment.campaign.pool.iter().map(|p| p.q).collect();
-    let pool = PoolJacobian::new(before, &set, &qs);
-    let pool_jacobian_s = t0.elapsed().as_secs_f64();
     let observations: Vec<Observation> =
         experiment.campaign.pool.iter().map(|p| experiment.campaign.observation(&experiment.cell, p)).collect();
+    run_on_pool(experiment, before, spec, seed, &observations, progress)
+}
+
+/// The study on any measured pool (`observations`: the TriCal's centred configurations, or a pool
+/// measured by an external instrument for Table 8), validated on the experiment's tracker poses.
+pub fn run_on_pool(
+    experiment: &Experiment,
+    before: &RobotModel,
+    spec: &StudySpec,
+    seed: u64,
+    observations: &[Observation],
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<StudyResults, crate::robot::ParamError> {
+    let set = spec.parameter_set(ParamSet::trical_31)?;
+    let t0 = Instant::now();
+    let qs: Vec<_> = observations.iter().map(|o| o.q).collect();
+    let pool = PoolJacobian::new(before, &set, &qs);
+    let pool_jacobian_s = t0.elapsed().as_secs_f64();
     let (opts, dopts) = (spec.fit_options(), spec.detmax_options());
     let table_n = spec.table_set_size as usize;
     let t1 = Instant::now();
