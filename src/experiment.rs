@@ -176,7 +176,7 @@ impl ExperimentSpec {
         e: &Experiment,
         seed: u64,
         count: u32,
-        measure: &dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>,
+        measure: crate::campaign::Measure<'_>,
     ) -> Result<Vec<crate::campaign::ValidationPose>, CampaignError> {
         let nominal = self.nominal();
         let setup = Setup {

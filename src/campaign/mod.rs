@@ -377,6 +377,10 @@ fn measure_validation(
     measure_random_poses(setup, world, nominal_model, start, seed, &poses, &|p, rng| Some(setup.tracker.measure(p, rng)))
 }
 
+/// An instrument measuring a true point in {W} with a stream of its own; `None` when the point is
+/// out of its view.
+pub type Measure<'a> = &'a dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>;
+
 /// A set of random configurations measured by an instrument: what it is for (in errors), how many,
 /// on which physical robot, and the stream keys of its poses and of each pose's noise.
 pub struct RandomPoses<'a> {
@@ -400,7 +404,7 @@ fn measure_random_poses(
     start: Joints,
     seed: u64,
     poses: &RandomPoses<'_>,
-    measure: &dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>,
+    measure: Measure<'_>,
 ) -> Result<(Vec<ValidationPose>, u32), CampaignError> {
     let Setup { robot, tracker, spec, .. } = *setup;
     let base_from_world = world_from_base(&robot.truth).inverse();
@@ -450,7 +454,7 @@ pub fn instrument_pool(
     campaign: &Campaign,
     count: u32,
     seed: u64,
-    measure: &dyn Fn(&Vector3<f64>, &mut rand_chacha::ChaCha8Rng) -> Option<Vector3<f64>>,
+    measure: Measure<'_>,
 ) -> Result<Vec<ValidationPose>, CampaignError> {
     let truth_base = world_from_base(&setup.robot.truth);
     let world = collision_world(setup.cell, setup.nominal, &truth_base, &campaign.semi_automatic.tcp_cmm_mm);
