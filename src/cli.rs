@@ -292,7 +292,15 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     bar.finish_and_clear();
     let study_s = t0.elapsed().as_secs_f64();
     let figures = Figures::of(&results, &experiment.robot.truth, scenario.study.table_set_size as usize);
-    let rows = figures::checks(&figures, &scenario.expect);
+    let mut rows = figures::checks(&figures, &scenario.expect);
+    let t_table8 = Instant::now();
+    if scenario.expect.wants_table8() {
+        let [tracker, cmm] = pool
+            .install(|| crate::study::external_instruments(spec, &experiment, &before, &scenario.study, scenario.seed, 360))
+            .map_err(|e| format!("{}: Table 8: {e}", args.scenario.display()))?;
+        rows.extend(figures::table8_checks(tracker, cmm, &scenario.expect));
+    }
+    let table8_s = t_table8.elapsed().as_secs_f64();
     let t_write = Instant::now();
     let timings = Timings {
         campaign_s,
@@ -325,13 +333,18 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     println!("{}", report::terminal_table(&rows));
     fit_health(results.tasks.iter().map(|t| &t.id))?;
     println!(
-        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s), results \
+        "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s){}, results \
              written in {:.3} s (recording {:.3} s) to {}",
         study_s,
         campaign_s,
         experiment.campaign.pool_wall_s,
         n_tasks,
         results.tasks_s,
+        if scenario.expect.wants_table8() {
+            format!("; Table 8's tracker and optical CMM calibrations {table8_s:.3} s")
+        } else {
+            String::new()
+        },
         write_s,
         record_s.get(),
         dest.display()
@@ -342,7 +355,12 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
             let e = spec.build(seed).map_err(|e| format!("campaign: {e}"))?;
             let b = spec.before_model(&e.campaign);
             let res = pool.install(|| crate::study::run(&e, &b, &scenario.study, seed, &|_, _| {})).map_err(|e| e.to_string())?;
-            Ok(figures::checks(&Figures::of(&res, &e.robot.truth, scenario.study.table_set_size as usize), &scenario.expect))
+            let mut rows = figures::checks(&Figures::of(&res, &e.robot.truth, scenario.study.table_set_size as usize), &scenario.expect);
+            if scenario.expect.wants_table8() {
+                let [tracker, cmm] = pool.install(|| crate::study::external_instruments(spec, &e, &b, &scenario.study, seed, 360))?;
+                rows.extend(figures::table8_checks(tracker, cmm, &scenario.expect));
+            }
+            Ok(rows)
         });
         return Ok(distribution_verdict(rows, others, check));
     }
@@ -614,29 +632,15 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
 /// Median, std and max after calibration (medians over the repetitions at the table set size) of
 /// the TriCal, the laser tracker and the optical CMM in one world.
 fn table8_world(s: &scenario::Scenario, seed: u64, pool_size: u32) -> Result<[[f64; 3]; 3], String> {
-    use crate::instrument::optical_cmm::{OpticalCmm, OpticalCmmSpec};
     let spec = &s.experiment;
     let e = spec.build(seed).map_err(|e| format!("campaign: {e}"))?;
     let before = spec.before_model(&e.campaign);
     let mut study = s.study.clone();
     study.set_sizes = vec![study.table_set_size];
-    let n = study.table_set_size as usize;
-    let stats = |r: &crate::study::StudyResults| {
-        let f = Figures::of(r, &e.robot.truth, n);
-        [f.after_median, f.after_std, f.after_max]
-    };
-    let quiet = |_: usize, _: usize| {};
-    let trical = crate::study::run(&e, &before, &study, seed, &quiet).map_err(|e| e.to_string())?;
-    let cmm = OpticalCmm::new(&OpticalCmmSpec::default(), e.tracker.position_w);
-    let tracker_pool =
-        spec.instrument_pool(&e, seed, pool_size, &|p, rng| Some(e.tracker.measure(p, rng))).map_err(|e| format!("tracker pool: {e}"))?;
-    let cmm_pool =
-        spec.instrument_pool(&e, seed, pool_size, &|p, rng| cmm.measure(p, rng)).map_err(|e| format!("optical CMM pool: {e}"))?;
-    let run = |pool: &[crate::campaign::ValidationPose]| -> Result<[f64; 3], String> {
-        let obs: Vec<Observation> = pool.iter().map(|v| Observation { q: v.q, tcp_world_mm: v.measured_w }).collect();
-        crate::study::run_on_pool(&e, &before, &study, seed, &obs, &quiet).map(|r| stats(&r)).map_err(|e| e.to_string())
-    };
-    Ok([stats(&trical), run(&tracker_pool)?, run(&cmm_pool)?])
+    let trical = crate::study::run(&e, &before, &study, seed, &|_, _| {}).map_err(|e| e.to_string())?;
+    let f = Figures::of(&trical, &e.robot.truth, study.table_set_size as usize);
+    let [tracker, cmm] = crate::study::external_instruments(spec, &e, &before, &s.study, seed, pool_size)?;
+    Ok([[f.after_median, f.after_std, f.after_max], tracker, cmm])
 }
 
 fn table8(args: &Table8Args) -> Result<ExitCode, String> {

@@ -508,6 +508,8 @@ fn expect(c: &Checker<'_>, e: &ExpectSpec) -> Result<(), ScenarioError> {
         ("after_median_mm", &e.after_median_mm),
         ("after_std_mm", &e.after_std_mm),
         ("after_max_mm", &e.after_max_mm),
+        ("table8_tracker_median_mm", &e.table8_tracker_median_mm),
+        ("table8_cmm_median_mm", &e.table8_cmm_median_mm),
     ] {
         c.band(k, b)?;
     }

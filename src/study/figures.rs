@@ -36,6 +36,33 @@ pub struct ExpectSpec {
     /// Largest |Pearson r| between error and distance to the centre of the calibration zone, over
     /// the representative set of the table size (Fig. 12, as the paper computed it).
     pub fig12_abs_r_max: Option<f64>,
+    /// Table 8, laser tracker row: median error after calibrating from a tracker-measured pool of
+    /// the workspace, mm (set: the two instruments are calibrated too, which costs about 0.3 s).
+    pub table8_tracker_median_mm: Option<Band>,
+    /// Table 8, optical CMM row, likewise.
+    pub table8_cmm_median_mm: Option<Band>,
+}
+
+impl ExpectSpec {
+    /// Whether the Table 8 rows of the external instruments are checked.
+    pub fn wants_table8(&self) -> bool {
+        self.table8_tracker_median_mm.is_some() || self.table8_cmm_median_mm.is_some()
+    }
+}
+
+/// The Table 8 rows of the external instruments: median, std and max after calibration (medians
+/// over repetitions at the table set size) with the tracker and with the optical CMM.
+pub fn table8_checks(tracker: [f64; 3], cmm: [f64; 3], expect: &ExpectSpec) -> Vec<Check> {
+    let p = &published().trical_2018;
+    let mut rows = Vec::new();
+    for (name, v, band) in [("laser tracker", tracker, expect.table8_tracker_median_mm), ("optical CMM", cmm, expect.table8_cmm_median_mm)]
+    {
+        let row = p.table8(name);
+        rows.push(Check::band(&format!("Table 8, {name}: median error after calibration, mm"), row.median_mm, v[0], band));
+        rows.push(Check::band(&format!("Table 8, {name}: std, mm"), row.std_mm, v[1], None));
+        rows.push(Check::band(&format!("Table 8, {name}: max, mm"), row.max_mm, v[2], None));
+    }
+    rows
 }
 
 /// The representative identification at set size `n` (the median of the mean validation error,
