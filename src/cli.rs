@@ -224,7 +224,13 @@ pub fn main() -> ExitCode {
             }
             // Bad command line: the one line that says what is wrong (clap adds a usage hint below it).
             let text = e.render().to_string();
-            eprintln!("{}", text.lines().find(|l| !l.trim().is_empty()).unwrap_or("error: bad command line"));
+            let said: Vec<&str> = text
+                .lines()
+                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
+                .map(str::trim)
+                .filter(|l| !l.is_empty() && !l.starts_with("tip:"))
+                .collect();
+            eprintln!("{}", if said.is_empty() { "error: bad command line".to_string() } else { said.join(" ") });
             return ExitCode::from(2);
         }
     };
