@@ -26,6 +26,30 @@ struct Manifest<'a> {
     crate_version: &'static str,
 }
 
+/// The best and the worst design (by the median p95 at the table set size) as scenario files of
+/// their own, `best_design.toml` and `worst_design.toml`: `calsim run` on one redoes realisation 0
+/// of that design with its figures and Rerun recording.
+fn write_extremes(dir: &Path, info: &ShardInfo, points: &[PointRow]) -> std::io::Result<()> {
+    let mut ranked: Vec<&PointRow> = points.iter().filter(|p| p.table && p.after[1][0].is_finite()).collect();
+    ranked.sort_by(|a, b| a.after[1][0].total_cmp(&b.after[1][0]).then(a.point.cmp(&b.point)));
+    if ranked.len() < 2 || info.scenarios.len() != info.points.len() {
+        return Ok(());
+    }
+    for (file, p) in [("best_design.toml", ranked[0]), ("worst_design.toml", ranked[ranked.len() - 1])] {
+        let head = format!(
+            "# {}: grid point {} ({}), {} sets; p95 after calibration {:.3} mm (median over {} realisations).\n# `calsim run {file}` redoes its realisation 0 with the figures and the Rerun recording.\n",
+            info.name,
+            p.point,
+            point_label(info, p.point),
+            p.selection,
+            p.after[1][0],
+            p.realisations
+        );
+        fs::write(dir.join(file), head + &info.scenarios[p.point])?;
+    }
+    Ok(())
+}
+
 /// The axis values of a point, `key = value, ...`.
 pub fn point_label(info: &ShardInfo, p: usize) -> String {
     info.keys.iter().zip(&info.points[p]).map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
@@ -118,6 +142,7 @@ fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow])
         crate_version: env!("CARGO_PKG_VERSION"),
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    write_extremes(dir, info, points)?;
     let drawn = crate::io::plots::write_sweep(dir, &plot_inputs(info, points)).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
     let mut text = summary(info, units, points);
     let _ = writeln!(text, "\n## Figures\n");

@@ -225,6 +225,10 @@ pub struct ShardInfo {
     /// Per grid point, the datum spheres in {W}, mm (TriCal; empty for other devices).
     #[serde(default)]
     pub layouts: Vec<Vec<[f64; 3]>>,
+    /// Per grid point, its whole scenario as TOML (what `calsim run` takes to redo it, recording
+    /// included).
+    #[serde(default)]
+    pub scenarios: Vec<String>,
     /// This shard, `k` of `count`.
     pub shard: usize,
     /// Shards in all.
@@ -265,6 +269,14 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
             .map(|p| match &p.scenario {
                 Loaded::Trical(s) => s.experiment.cell.spheres_w_mm.clone(),
                 Loaded::Spms(_) => Vec::new(),
+            })
+            .collect(),
+        scenarios: sweep
+            .points
+            .iter()
+            .map(|p| match &p.scenario {
+                Loaded::Trical(s) => s.text.clone(),
+                Loaded::Spms(s) => s.text.clone(),
             })
             .collect(),
         shard: k,
