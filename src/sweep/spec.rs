@@ -278,11 +278,9 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
         for (a, &k) in idx.iter().enumerate() {
             let key = &file.axes[a].key;
             let v = &values[a][k];
-            let label = format!("{key} = {v}");
             let (target, value) = resolve(key, v).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), format!("value {v}: {m}")))?;
             set_dotted(&mut t, &target, value).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), m))?;
             shown_values.push((key.clone(), v.to_string()));
-            let _ = label;
         }
         let axis = shown_values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ");
         let point_path = PathBuf::from(format!("{stem}#{p}"));
