@@ -269,6 +269,10 @@ fn apply_overrides(args: &RunArgs, seed: &mut u64, set_sizes: &mut Vec<u32>, tab
     }
 }
 
+/// `run` / `check` of a TriCal scenario (an SPMS one goes to [`spms_study`]).
+///
+/// Long by design: the run in the order the terminal shows it (campaign, identifications, checks,
+/// results written, the comparison and the timing line, then the other realisations).
 fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     let t0 = Instant::now();
     let mut scenario = match scenario::load_any(&args.scenario).map_err(|e| e.to_string())? {
@@ -298,14 +302,9 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     bar.finish_and_clear();
     let study_s = t0.elapsed().as_secs_f64();
     let figures = Figures::of(&results, &experiment.robot.truth, scenario.study.table_set_size as usize);
-    let mut rows = figures::checks(&figures, &scenario.expect);
     let t_table8 = Instant::now();
-    if scenario.expect.wants_table8() {
-        let [tracker, cmm] = pool
-            .install(|| crate::study::external_instruments(spec, &experiment, &before, &scenario.study, scenario.seed, 360))
-            .map_err(|e| format!("{}: Table 8: {e}", args.scenario.display()))?;
-        rows.extend(figures::table8_checks(tracker, cmm, &scenario.expect));
-    }
+    let rows = trical_checks(&scenario, &experiment, &before, &figures, scenario.seed, &pool)
+        .map_err(|e| format!("{}: Table 8: {e}", args.scenario.display()))?;
     let table8_s = t_table8.elapsed().as_secs_f64();
     let t_write = Instant::now();
     let timings = Timings {
@@ -361,16 +360,29 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
             let e = spec.build(seed).map_err(|e| format!("campaign: {e}"))?;
             let b = spec.before_model(&e.campaign);
             let res = pool.install(|| crate::study::run(&e, &b, &scenario.study, seed, &|_, _| {})).map_err(|e| e.to_string())?;
-            let mut rows = figures::checks(&Figures::of(&res, &e.robot.truth, scenario.study.table_set_size as usize), &scenario.expect);
-            if scenario.expect.wants_table8() {
-                let [tracker, cmm] = pool.install(|| crate::study::external_instruments(spec, &e, &b, &scenario.study, seed, 360))?;
-                rows.extend(figures::table8_checks(tracker, cmm, &scenario.expect));
-            }
-            Ok(rows)
+            trical_checks(&scenario, &e, &b, &Figures::of(&res, &e.robot.truth, scenario.study.table_set_size as usize), seed, &pool)
         });
         return Ok(distribution_verdict(rows, others, check));
     }
     Ok(verdict(&rows, check))
+}
+
+/// The checks of one TriCal world: the paper's figures, and Table 8's external instruments when
+/// the scenario checks them.
+fn trical_checks(
+    s: &scenario::Scenario,
+    e: &crate::experiment::Experiment,
+    before: &crate::robot::RobotModel,
+    f: &Figures,
+    seed: u64,
+    pool: &rayon::ThreadPool,
+) -> Result<Vec<Check>, String> {
+    let mut rows = figures::checks(f, &s.expect);
+    if s.expect.wants_table8() {
+        let [tracker, cmm] = pool.install(|| crate::study::external_instruments(&s.experiment, e, before, &s.study, seed, 360))?;
+        rows.extend(figures::table8_checks(tracker, cmm, &s.expect));
+    }
+    Ok(rows)
 }
 
 /// One line at the terminal when identifications failed: how many gave no model (and which

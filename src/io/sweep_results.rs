@@ -60,6 +60,7 @@ pub fn write(out: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow]) 
     write_atomically(out, &info.name, |dir| write_into(dir, info, units, points))
 }
 
+/// Long by design: one block per result file, in the order of the module doc.
 fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow]) -> std::io::Result<()> {
     let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
@@ -202,6 +203,8 @@ fn f3(x: f64) -> String {
 
 /// The design table: the points at their table set size ranked by the median over realisations of
 /// the after-calibration p95, then the success probability per set size.
+///
+/// Long by design: the summary document top to bottom, one block per section.
 pub fn summary(info: &ShardInfo, units: &[Unit], points: &[PointRow]) -> String {
     let mut s = String::new();
     let failed = units.iter().filter(|u| u.error.is_some()).count();
