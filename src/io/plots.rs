@@ -51,6 +51,22 @@ fn register_font() {
     });
 }
 
+/// The legend of a chart: a white box with a black border, labels in `size` points at `pos`.
+fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    pos: SeriesLabelPosition,
+    size: u32,
+) -> DrawResult {
+    chart
+        .configure_series_labels()
+        .position(pos)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FAMILY, size))
+        .draw()
+        .map_err(e2s)
+}
+
 fn e2s<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
 }
@@ -308,13 +324,7 @@ fn boxplots<DB: DrawingBackend>(
         }
     }
     if series.iter().any(|s| !s.0.is_empty()) {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FAMILY, 14))
-            .draw()
-            .map_err(e2s)?;
+        legend(&mut chart, SeriesLabelPosition::MiddleRight, 14)?;
     }
     Ok(())
 }
@@ -363,7 +373,7 @@ fn fig10<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs, afte
         .map_err(e2s)?
         .label(format!("colour: 0 mm (blue) to {emax:.3} mm (red)"))
         .legend(|(x, y)| Rectangle::new([(x - 6, y - 4), (x + 6, y + 4)], heat(1.0).filled()));
-    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 12)).draw().map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::MiddleRight, 12)?;
     Ok(())
 }
 
@@ -394,14 +404,7 @@ fn regression<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, d: &[f64], e: &
         .map_err(e2s)?
         .label(format!("least squares: {:.2e} mm/mm, r = {r:.3}, r^2 = {:.3}", slope, r * r))
         .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 13))
-        .draw()
-        .map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::UpperLeft, 13)?;
     Ok(())
 }
 
@@ -559,7 +562,7 @@ fn per_sample<DB: DrawingBackend>(
             .label(label)
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(1)));
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::MiddleRight, 14)?;
     Ok(())
 }
 
@@ -604,14 +607,7 @@ fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs
             .label(label.as_str())
             .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 14))
-        .draw()
-        .map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight, 14)?;
     Ok(())
 }
 
@@ -688,7 +684,7 @@ fn sweep_band<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlotIn
         .map_err(e2s)?
         .label("median")
         .legend(|(x, y)| Circle::new((x, y), 4, RED.filled()));
-    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font((FAMILY, 13)).draw().map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::MiddleRight, 13)?;
     Ok(())
 }
 
@@ -711,14 +707,7 @@ fn sweep_success<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SweepPlo
             .label(label.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], c.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 11))
-        .draw()
-        .map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::LowerRight, 11)?;
     Ok(())
 }
 
@@ -810,13 +799,6 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
         .map_err(e2s)?
         .label("all sources")
         .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 12))
-        .draw()
-        .map_err(e2s)?;
+    legend(&mut chart, SeriesLabelPosition::LowerRight, 12)?;
     Ok(())
 }

@@ -145,18 +145,13 @@ pub fn check_overrides(s: &Scenario) -> Result<(), ScenarioError> {
     check(&file, &format!("{} (with command-line overrides)", s.path.display()))
 }
 
-/// Parses scenario text into its TOML table, naming the line of a syntax error; every number in it
-/// must be finite (TOML allows `nan` and `inf`, which no key of calsim takes).
+/// Parses scenario text into its TOML table, naming the line of a syntax error.
 fn table(text: &str, shown: &str) -> Result<toml::Table, ScenarioError> {
-    let t: toml::Table = toml::from_str(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
+    toml::from_str(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
         path: shown.into(),
         key: position(text, e.span()),
         message: e.message().to_string(),
-    })?;
-    for (k, v) in &t {
-        finite(v, &mut vec![k.clone()], shown)?;
-    }
-    Ok(t)
+    })
 }
 
 /// Refuses a non-finite float anywhere under `v`, naming its dotted key (`cell.spheres_w_mm[3][0]`).
@@ -197,8 +192,12 @@ fn with_defaults(mut t: toml::Table, section: &str, defaults: &str) -> toml::Tab
     t
 }
 
-/// Deserializes a scenario table, naming the offending key in the error.
+/// Deserializes a scenario table, naming the offending key in the error. Every number in it must be
+/// finite first (TOML allows `nan` and `inf`, which no key of calsim takes).
 fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) -> Result<T, ScenarioError> {
+    for (k, v) in &t {
+        finite(v, &mut vec![k.clone()], shown)?;
+    }
     serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
         let key = e.path().to_string();
         ScenarioError::Parse {
@@ -320,8 +319,8 @@ impl Checker<'_> {
     /// A band of `[expect]`: a finite published value and a tolerance in [0, 10].
     fn band(&self, key: &str, b: &Option<Band>) -> Result<(), ScenarioError> {
         if let Some(b) = b {
-            if !b.value.is_finite() {
-                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be a finite published value"));
+            if !(b.value.is_finite() && b.value > 0.0) {
+                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be the published value, finite and > 0"));
             }
             if !(b.tolerance.is_finite() && (0.0..=10.0).contains(&b.tolerance)) {
                 return Err(self.fail(
@@ -537,7 +536,7 @@ pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
     from_table(&text, table, path)
 }
 
-/// Reads a scenario file into its TOML table (every number finite), for callers that edit keys
+/// Reads a scenario file into its TOML table, for callers that edit keys
 /// before loading it with [`from_table`] (sweeps).
 pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
     let shown = path.display().to_string();
@@ -550,9 +549,6 @@ pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
 /// hashes, `path` names it in errors.
 pub fn from_table(text: &str, table: toml::Table, path: &Path) -> Result<Loaded, ScenarioError> {
     let shown = path.display().to_string();
-    for (k, v) in &table {
-        finite(v, &mut vec![k.clone()], &shown)?;
-    }
     match table.get("kind") {
         None => parse_table(text, table, path).map(|s| Loaded::Trical(Box::new(s))),
         Some(toml::Value::String(k)) if k == "trical" => parse_table(text, table, path).map(|s| Loaded::Trical(Box::new(s))),

@@ -69,14 +69,12 @@ impl Check {
     /// A figure compared with its published value within an optional relative band.
     pub fn band(figure: &str, published: f64, value: f64, band: Option<Band>) -> Self {
         Self {
-            figure: figure.into(),
             published: format!("{published:.3}"),
             published_value: Some(published),
-            reproduced: format!("{value:.3}"),
-            value,
-            band: band.map(|b| format!("{:.3} +-{:.0} %", b.value, b.tolerance * 100.0)).unwrap_or_else(|| "-".into()),
-            bound: band.map(Bound::Band),
-            pass: band.map(|b| b.contains(value)),
+            ..Self::rule(figure, "", value, format!("{value:.3}"), band.map(Bound::Band), |b| match b {
+                Bound::Band(b) => format!("{:.3} +-{:.0} %", b.value, b.tolerance * 100.0),
+                other => format!("{other:?}"),
+            })
         }
     }
 
