@@ -3,7 +3,7 @@
 //! its risers and pedestal, and the table. Static queries only: intersection tests for collisions
 //! and ray casts for line of sight.
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, Rotation3, UnitQuaternion, Vector3};
 use rapier3d_f64::parry::math::{Pose, Vector};
 use rapier3d_f64::parry::query::{Ray, RayCast, intersection_test};
 use rapier3d_f64::parry::shape::{Capsule, Cuboid, Shape};
@@ -96,6 +96,15 @@ fn pose(iso: &Isometry3<f64>) -> Pose {
     Pose::from_parts(Vector::new(t.x, t.y, t.z), rapier3d_f64::parry::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w))
 }
 
+/// Frame i of the last forward pass as a parry pose. The rotation is a product of rotations,
+/// orthonormal to rounding, so it is converted directly (Shepperd's method) rather than through
+/// `UnitQuaternion::from_matrix`'s iterative orthonormalisation (7 frames per collision query).
+fn frame_pose(st: &KinState, i: usize) -> Pose {
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(st.rot[i]));
+    let t = st.org[i];
+    Pose::from_parts(Vector::new(t.x, t.y, t.z), rapier3d_f64::parry::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w))
+}
+
 fn body_name(i: usize) -> String {
     if i == JOINTS + 1 { "device".to_string() } else { format!("link {i}") }
 }
@@ -138,7 +147,7 @@ impl CollisionWorld {
     }
 
     fn first_self_collision(&self, st: &KinState) -> Option<(usize, usize)> {
-        let frames: Vec<Pose> = (0..=JOINTS).map(|i| pose(&st.base_from_frame(i))).collect();
+        let frames: Vec<Pose> = (0..=JOINTS).map(|i| frame_pose(st, i)).collect();
         let bodies = self.bodies(&frames);
         for i in 0..bodies.len() {
             for j in i + 2..bodies.len() {
@@ -163,7 +172,7 @@ impl CollisionWorld {
     /// links 1..6 and the device against the obstacles, then bodies two or more apart (the device
     /// counts as the body after link 6) except the allowed pairs. `None` when the configuration is free.
     pub fn first_collision(&self, st: &KinState) -> Option<Collision> {
-        let frames: Vec<Pose> = (0..=JOINTS).map(|i| pose(&st.base_from_frame(i))).collect();
+        let frames: Vec<Pose> = (0..=JOINTS).map(|i| frame_pose(st, i)).collect();
         for (i, (caps, p)) in self.bodies(&frames).iter().enumerate().skip(1) {
             for o in &self.obstacles {
                 if caps.iter().any(|c| Self::hits(c, p, o.shape.as_ref(), &o.pose)) {
@@ -181,7 +190,7 @@ impl CollisionWorld {
         let len = d.norm();
         let ray = Ray::new(vec(from), vec(&(d / len)));
         let max = (len - clearance_mm).max(0.0);
-        let frames: Vec<Pose> = (0..=JOINTS).map(|i| pose(&st.base_from_frame(i))).collect();
+        let frames: Vec<Pose> = (0..=JOINTS).map(|i| frame_pose(st, i)).collect();
         let blocked_by_links =
             self.links.iter().enumerate().any(|(i, caps)| caps.iter().any(|c| c.cast_ray(&frames[i], &ray, max, true).is_some()));
         let blocked_by_device = self.device.iter().any(|c| c.cast_ray(&frames[JOINTS], &ray, max, true).is_some());

@@ -70,10 +70,27 @@ struct State<'a> {
     /// `M^-1`.
     minv: DMatrix<f64>,
     logdet: f64,
-    /// `D_k = J_k M^-1 J_k^T` for every pool configuration.
+    /// `D_k = J_k M^-1 J_k^T` for every pool configuration, after the first `applied[k]` updates
+    /// of `pending`.
     d: Vec<Matrix3<f64>>,
+    /// How many of the pending updates each `D_k` has taken.
+    applied: Vec<usize>,
+    /// Rank-3 updates made since every `D_k` was last current, in order. A pick reads only the
+    /// `D_k` it scores (additions the non-members, removals the members), so only those are brought
+    /// up to date; an excursion that is rejected never pays for the rest. Each `D_k` takes the same
+    /// updates in the same order as an eager update would, so the numbers are the same.
+    pending: Vec<Pending>,
     member: Vec<bool>,
     size: usize,
+}
+
+/// One rank-3 update of every `D_k`: `D_k -= P_k ws P_k^T` with `P_k = J_k U`.
+#[derive(Clone)]
+struct Pending {
+    /// The columns of `U = M^-1 J_a^T`, zero-padded to the pool's stride.
+    u_cols: [Vec<f64>; 3],
+    /// `sign (I + sign D_a)^-1`.
+    ws: Matrix3<f64>,
 }
 
 /// Buffers reused by every update.
@@ -82,65 +99,138 @@ struct Scratch {
     u: DMatrix<f64>,
     /// `U W`, m x 3.
     v: DMatrix<f64>,
-    /// The columns of U, zero-padded to the pool's stride.
-    u_cols: [Vec<f64>; 3],
-    /// `J_pool U`, one row of three per pool row.
-    p: Vec<[f64; 3]>,
 }
 
 impl Scratch {
     fn new(pool: &PoolJacobian) -> Self {
-        Self {
-            u: DMatrix::zeros(pool.m, 3),
-            v: DMatrix::zeros(pool.m, 3),
-            u_cols: std::array::from_fn(|_| vec![0.0; pool.stride]),
-            p: vec![[0.0; 3]; 3 * pool.len],
-        }
+        Self { u: DMatrix::zeros(pool.m, 3), v: DMatrix::zeros(pool.m, 3) }
     }
 }
 
-/// `out[i] = row_i . (u0, u1, u2)` for every padded row of `rows`: the product J U, written so
-/// that it vectorises (nalgebra's GEMM takes a scalar path when a dimension is below 6).
-fn rows_times_columns(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
+/// Which `D_k` a pick reads.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Rows {
+    Members,
+    NonMembers,
+    All,
+}
+
+/// Brings `d[k]` up to date for every k that `want` selects: the pending updates it has not taken,
+/// in order. The product `J_k U` is written so that it vectorises (nalgebra's GEMM takes a scalar
+/// path when a dimension is below 6).
+fn catch_up(pool: &PoolJacobian, pending: &[Pending], d: &mut [Matrix3<f64>], applied: &mut [usize], want: impl Fn(usize) -> bool) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU was just found to support AVX2 and FMA, the only requirement of
-        // `rows_times_columns_avx2` (it holds no other unsafe operation).
+        // `catch_up_avx2` (it holds no other unsafe operation).
         #[allow(unsafe_code)]
         unsafe {
-            rows_times_columns_avx2(rows, stride, u, out)
+            catch_up_avx2(pool, pending, d, applied, want)
         };
         return;
     }
-    rows_times_columns_kernel::<false>(rows, stride, u, out);
+    catch_up_kernel::<false>(pool, pending, d, applied, want);
 }
 
-/// The hot product of DETMAX compiled for AVX2 with fused multiply-adds: 4-wide vectors instead of
-/// the 2-wide SSE2 of the x86-64 baseline (chosen at run time by `rows_times_columns`).
+/// The hot loop of DETMAX compiled for AVX2 with fused multiply-adds: 4-wide vectors instead of
+/// the 2-wide SSE2 of the x86-64 baseline (chosen at run time by `catch_up`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn rows_times_columns_avx2(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
-    rows_times_columns_kernel::<true>(rows, stride, u, out);
+fn catch_up_avx2(pool: &PoolJacobian, pending: &[Pending], d: &mut [Matrix3<f64>], applied: &mut [usize], want: impl Fn(usize) -> bool) {
+    catch_up_kernel::<true>(pool, pending, d, applied, want);
 }
 
-/// `out[r] = (row_r . u0, row_r . u1, row_r . u2)` over padded rows, with four independent partial
-/// sums per column so that the compiler vectorises it. `FMA` selects fused multiply-adds (only
-/// where the target has them; elsewhere `mul_add` would be a slow library call).
 #[inline(always)]
-fn rows_times_columns_kernel<const FMA: bool>(rows: &[f64], stride: usize, u: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
-    let [u0, u1, u2] = u;
-    let madd = |a: f64, x: f64, y: f64| if FMA { x.mul_add(y, a) } else { a + x * y };
-    for (row, o) in rows.chunks_exact(stride).zip(out.iter_mut()) {
-        let (mut a0, mut a1, mut a2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
-        for (((x, y0), y1), y2) in row.chunks_exact(4).zip(u0.chunks_exact(4)).zip(u1.chunks_exact(4)).zip(u2.chunks_exact(4)) {
-            for i in 0..4 {
-                a0[i] = madd(a0[i], x[i], y0[i]);
-                a1[i] = madd(a1[i], x[i], y1[i]);
-                a2[i] = madd(a2[i], x[i], y2[i]);
+fn catch_up_kernel<const FMA: bool>(
+    pool: &PoolJacobian,
+    pending: &[Pending],
+    d: &mut [Matrix3<f64>],
+    applied: &mut [usize],
+    want: impl Fn(usize) -> bool,
+) {
+    let stride = pool.stride;
+    for (k, (dk, done)) in d.iter_mut().zip(applied.iter_mut()).enumerate() {
+        if *done == pending.len() || !want(k) {
+            continue;
+        }
+        let rows = &pool.rows[3 * k * stride..3 * (k + 1) * stride];
+        for up in &pending[*done..] {
+            #[cfg(target_arch = "x86_64")]
+            let p = if FMA {
+                // SAFETY: `FMA` is true only inside `catch_up_avx2`, on a CPU found to support AVX2
+                // and FMA, the only requirement of `config_times_columns_avx2`.
+                #[allow(unsafe_code)]
+                unsafe {
+                    config_times_columns_avx2(rows, stride, &up.u_cols)
+                }
+            } else {
+                config_times_columns(rows, stride, &up.u_cols)
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let p = config_times_columns(rows, stride, &up.u_cols);
+            let pk = Matrix3::new(p[0][0], p[0][1], p[0][2], p[1][0], p[1][1], p[1][2], p[2][0], p[2][1], p[2][2]);
+            *dk -= pk * up.ws * pk.transpose();
+        }
+        *done = pending.len();
+    }
+}
+
+/// `P_k = J_k U` for the three padded rows of one configuration: `p[r][c] = row_r . u_c`, with
+/// four independent partial sums per entry (lane i sums the terms 4j + i), added as
+/// `(s0 + s1) + (s2 + s3)`.
+fn config_times_columns(rows: &[f64], stride: usize, u: &[Vec<f64>; 3]) -> [[f64; 3]; 3] {
+    let mut p = [[0.0; 3]; 3];
+    for (row, pr) in rows.chunks_exact(stride).zip(p.iter_mut()) {
+        for (v, col) in pr.iter_mut().zip(u) {
+            let mut a = [0.0; 4];
+            for (x, y) in row.chunks_exact(4).zip(col.chunks_exact(4)) {
+                for i in 0..4 {
+                    a[i] += x[i] * y[i];
+                }
+            }
+            *v = (a[0] + a[1]) + (a[2] + a[3]);
+        }
+    }
+    p
+}
+
+/// The same products with AVX2 fused multiply-adds (one rounding per term, so the sums differ from
+/// `config_times_columns` in the last bits): the nine 4-lane partial sums stay in registers and
+/// each loaded chunk of U serves the three rows.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn config_times_columns_avx2(rows: &[f64], stride: usize, u: &[Vec<f64>; 3]) -> [[f64; 3]; 3] {
+    use std::arch::x86_64::{__m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_setzero_pd, _mm256_storeu_pd};
+    assert!(stride % 4 == 0 && rows.len() >= 3 * stride && u.iter().all(|c| c.len() >= stride));
+    let mut acc: [__m256d; 9] = [_mm256_setzero_pd(); 9];
+    for j in (0..stride).step_by(4) {
+        // SAFETY: j + 4 <= stride, and the three rows and the three columns hold `stride` values
+        // each (asserted above); unaligned loads.
+        #[allow(unsafe_code)]
+        let (x, y) = unsafe {
+            let x = [0, 1, 2].map(|r| _mm256_loadu_pd(rows.as_ptr().add(r * stride + j)));
+            let y = [0, 1, 2].map(|c| _mm256_loadu_pd(u[c].as_ptr().add(j)));
+            (x, y)
+        };
+        for r in 0..3 {
+            for c in 0..3 {
+                acc[3 * r + c] = _mm256_fmadd_pd(x[r], y[c], acc[3 * r + c]);
             }
         }
-        *o = [(a0[0] + a0[1]) + (a0[2] + a0[3]), (a1[0] + a1[1]) + (a1[2] + a1[3]), (a2[0] + a2[1]) + (a2[2] + a2[3])];
     }
+    let mut p = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            let mut a = [0.0; 4];
+            // SAFETY: `a` holds four values.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm256_storeu_pd(a.as_mut_ptr(), acc[3 * r + c])
+            };
+            p[r][c] = (a[0] + a[1]) + (a[2] + a[3]);
+        }
+    }
+    p
 }
 
 impl<'a> State<'a> {
@@ -162,11 +252,12 @@ impl<'a> State<'a> {
             .map(|k| jm.rows(3 * k, 3) * pool.j.rows(3 * k, 3).transpose())
             .map(|x| Matrix3::from_iterator(x.iter().copied()))
             .collect();
-        Some(Self { pool, minv, logdet, d, member, size: set.len() })
+        Some(Self { pool, minv, logdet, d, applied: vec![0; pool.len], pending: Vec::new(), member, size: set.len() })
     }
 
-    /// Adds (sign = 1) or removes (sign = -1) configuration a.
+    /// Adds (sign = 1) or removes (sign = -1) configuration a; its `D_a` must be current.
     fn update(&mut self, a: usize, sign: f64, sc: &mut Scratch) -> bool {
+        debug_assert_eq!(self.applied[a], self.pending.len());
         let s = Matrix3::identity() + self.d[a] * sign;
         let det = s.determinant();
         if det <= 0.0 {
@@ -181,29 +272,41 @@ impl<'a> State<'a> {
         // M'^-1 = M^-1 - sign U W U^T.
         sc.v.gemm(1.0, &sc.u, &w, 0.0);
         self.minv.gemm(-sign, &sc.v, &sc.u.transpose(), 1.0);
-        // Every D_k: P = J U, D_k -= sign P_k W P_k^T.
-        for c in 0..3 {
+        // Every D_k, when next read: P = J U, D_k -= sign P_k W P_k^T.
+        let mut u_cols: [Vec<f64>; 3] = std::array::from_fn(|_| vec![0.0; self.pool.stride]);
+        for (c, col) in u_cols.iter_mut().enumerate() {
             for l in 0..self.pool.m {
-                sc.u_cols[c][l] = sc.u[(l, c)];
+                col[l] = sc.u[(l, c)];
             }
         }
-        rows_times_columns(&self.pool.rows, self.pool.stride, &sc.u_cols, &mut sc.p);
-        let ws = w * sign;
-        for (dk, pk) in self.d.iter_mut().zip(sc.p.chunks_exact(3)) {
-            let pk = Matrix3::new(pk[0][0], pk[0][1], pk[0][2], pk[1][0], pk[1][1], pk[1][2], pk[2][0], pk[2][1], pk[2][2]);
-            *dk -= pk * ws * pk.transpose();
-        }
+        self.pending.push(Pending { u_cols, ws: w * sign });
         self.logdet += det.ln();
         self.member[a] = sign > 0.0;
         self.size = (self.size as isize + sign as isize) as usize;
         true
     }
 
-    fn best_addition(&self) -> Option<usize> {
+    /// Brings the `D_k` of `rows` up to date; with `Rows::All` the pending list is emptied.
+    fn catch_up(&mut self, rows: Rows) {
+        let member = &self.member;
+        catch_up(self.pool, &self.pending, &mut self.d, &mut self.applied, |k| match rows {
+            Rows::All => true,
+            Rows::Members => member[k],
+            Rows::NonMembers => !member[k],
+        });
+        if rows == Rows::All {
+            self.pending.clear();
+            self.applied.fill(0);
+        }
+    }
+
+    fn best_addition(&mut self) -> Option<usize> {
+        self.catch_up(Rows::NonMembers);
         (0..self.d.len()).filter(|&k| !self.member[k]).max_by(|&a, &b| score(&self.d[a], 1.0).total_cmp(&score(&self.d[b], 1.0)))
     }
 
-    fn best_removal(&self) -> Option<usize> {
+    fn best_removal(&mut self) -> Option<usize> {
+        self.catch_up(Rows::Members);
         (0..self.d.len()).filter(|&k| self.member[k]).max_by(|&a, &b| score(&self.d[a], -1.0).total_cmp(&score(&self.d[b], -1.0)))
     }
 
@@ -264,6 +367,7 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
                 }
             }
             if ok && trial.logdet > state.logdet + 1e-9 {
+                trial.catch_up(Rows::All);
                 state = trial;
                 improved = true;
                 break;
