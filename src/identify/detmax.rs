@@ -201,7 +201,7 @@ fn config_times_columns(rows: &[f64], stride: usize, u: &[Vec<f64>; 3]) -> [[f64
 #[target_feature(enable = "avx2,fma")]
 fn config_times_columns_avx2(rows: &[f64], stride: usize, u: &[Vec<f64>; 3]) -> [[f64; 3]; 3] {
     use std::arch::x86_64::{__m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_setzero_pd, _mm256_storeu_pd};
-    assert!(stride % 4 == 0 && rows.len() >= 3 * stride && u.iter().all(|c| c.len() >= stride));
+    assert!(stride.is_multiple_of(4) && rows.len() >= 3 * stride && u.iter().all(|c| c.len() >= stride));
     let mut acc: [__m256d; 9] = [_mm256_setzero_pd(); 9];
     for j in (0..stride).step_by(4) {
         // SAFETY: j + 4 <= stride, and the three rows and the three columns hold `stride` values
