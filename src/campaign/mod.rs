@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, RngExt};
+use rayon::prelude::*;
 use serde::Deserialize;
 
 use crate::cell::Cell;
@@ -416,32 +417,45 @@ fn measure_random_poses(
     let mut tries = 0;
     let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
     let rng = &mut stream(seed, poses.keys.0);
-    while out.len() < poses.count as usize {
-        tries += 1;
-        if tries > u64::from(spec.max_tries_per_configuration) * u64::from(poses.count.max(1)) {
-            return Err(CampaignError::Exhausted { what: poses.what.into(), tries });
-        }
-        let q = uniform_configuration(nominal_model, spec.validation_margin, rng);
-        forward(nominal_model, &mut st, &q);
+    // Whether a candidate can be measured: in range, facing the tracker, collision-free, in sight.
+    let feasible = |st: &mut KinState, q: &Joints| {
+        forward(nominal_model, st, q);
         let tcp = st.tcp_base;
         let sight = tracker_base - tcp;
-        let facing = st.base_from_frame(JOINTS).rotation * Vector3::z();
-        let ok = world.first_collision(&st).is_none()
-            && sight.norm() <= tracker.spec.max_range_mm
+        let facing = st.rot[JOINTS] * Vector3::z();
+        sight.norm() <= tracker.spec.max_range_mm
             && facing.dot(&sight.normalize()) >= accept_cos
-            && world.line_of_sight(&st, &tracker_base, &tcp, 30.0);
-        if !ok {
-            rejected += 1;
-            continue;
+            && world.first_collision(st).is_none()
+            && world.line_of_sight(st, &tracker_base, &tcp, 30.0)
+    };
+    let limit = u64::from(spec.max_tries_per_configuration) * u64::from(poses.count.max(1));
+    // The candidates are drawn from their own stream whatever is accepted, so they are drawn and
+    // tested in batches in parallel, then taken in order: the same poses as one by one.
+    const BATCH: usize = 128;
+    'batches: while out.len() < poses.count as usize {
+        let candidates: Vec<Joints> = (0..BATCH).map(|_| uniform_configuration(nominal_model, spec.validation_margin, rng)).collect();
+        let ok: Vec<bool> = candidates.par_iter().map_init(KinState::default, |st, q| feasible(st, q)).collect();
+        for (q, ok) in candidates.into_iter().zip(ok) {
+            tries += 1;
+            if tries > limit {
+                return Err(CampaignError::Exhausted { what: poses.what.into(), tries });
+            }
+            if !ok {
+                rejected += 1;
+                continue;
+            }
+            let noise = &mut stream(seed, poses.keys.1 + out.len() as u64);
+            let true_w = poses.robot.tcp_after_move(&mut st, &q, &from, noise);
+            let Some(measured_w) = measure(&true_w, noise) else {
+                rejected += 1;
+                continue;
+            };
+            from = q;
+            out.push(ValidationPose { q, measured_w });
+            if out.len() == poses.count as usize {
+                break 'batches;
+            }
         }
-        let noise = &mut stream(seed, poses.keys.1 + out.len() as u64);
-        let true_w = poses.robot.tcp_after_move(&mut st, &q, &from, noise);
-        let Some(measured_w) = measure(&true_w, noise) else {
-            rejected += 1;
-            continue;
-        };
-        from = q;
-        out.push(ValidationPose { q, measured_w });
     }
     Ok((out, rejected))
 }
