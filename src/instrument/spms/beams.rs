@@ -117,22 +117,35 @@ pub struct BeamData {
 impl BeamData {
     /// Residuals `|T_i (P_k + gamma_k L_ki) - P_Bw| - R`, pose-major.
     pub fn residuals(&self, form: Form, x: &DVector<f64>) -> DVector<f64> {
+        let mut scratch = CostScratch::default();
+        self.fill_residuals(form, x, &mut scratch);
+        DVector::from_vec(scratch.r)
+    }
+
+    /// The residuals into `scratch.r` (no allocation once the scratch has grown).
+    fn fill_residuals(&self, form: Form, x: &DVector<f64>, scratch: &mut CostScratch) {
         let k = self.readings.first().map(|r| r.len()).unwrap_or(0);
         let c = form.centre(x);
-        let beams: Vec<_> = (0..k).map(|j| form.beam(x, j)).collect();
-        let mut out = Vec::with_capacity(self.frames.len() * k);
+        scratch.beams.clear();
+        scratch.beams.extend((0..k).map(|j| form.beam(x, j)));
+        scratch.r.clear();
         for (t, ls) in self.frames.iter().zip(&self.readings) {
-            for ((p, g), l) in beams.iter().zip(ls) {
+            for ((p, g), l) in scratch.beams.iter().zip(ls) {
                 let f = t * Point3::from(p + g * *l);
-                out.push((f.coords - c).norm() - self.radius_mm);
+                scratch.r.push((f.coords - c).norm() - self.radius_mm);
             }
         }
-        DVector::from_vec(out)
     }
 
     /// Sum of squared residuals.
     pub fn cost(&self, form: Form, x: &DVector<f64>) -> f64 {
-        self.residuals(form, x).norm_squared()
+        self.cost_with(form, x, &mut CostScratch::default())
+    }
+
+    /// Sum of squared residuals with buffers of the caller's.
+    fn cost_with(&self, form: Form, x: &DVector<f64>, scratch: &mut CostScratch) -> f64 {
+        self.fill_residuals(form, x, scratch);
+        nalgebra::DVectorView::from_slice(&scratch.r, scratch.r.len()).norm_squared()
     }
 
     /// Jacobian of the residuals by central differences (step 1e-6 of the parameter scale).
@@ -151,6 +164,148 @@ impl BeamData {
         }
         j
     }
+}
+
+/// The data of a beam identification laid out for the particle swarm's many cost evaluations:
+/// structure of arrays over the poses (frame quaternion and translation, each beam's readings),
+/// padded to a multiple of four poses with identity frames and zero readings.
+struct Packed {
+    poses: usize,
+    beams: usize,
+    /// Quaternion (x, y, z, w), then translation (x, y, z) of `tracker_from_head`, per pose.
+    frame: [Vec<f64>; 7],
+    /// Readings per beam, per pose.
+    readings: Vec<Vec<f64>>,
+    radius_mm: f64,
+}
+
+impl Packed {
+    fn new(data: &BeamData) -> Self {
+        let poses = data.frames.len();
+        let beams = data.readings.first().map(|r| r.len()).unwrap_or(0);
+        let padded = poses.div_ceil(4) * 4;
+        let mut frame: [Vec<f64>; 7] = std::array::from_fn(|i| vec![if i == 3 { 1.0 } else { 0.0 }; padded]);
+        for (j, t) in data.frames.iter().enumerate() {
+            let q = t.rotation.quaternion();
+            let v = t.translation.vector;
+            for (i, x) in [q.i, q.j, q.k, q.w, v.x, v.y, v.z].into_iter().enumerate() {
+                frame[i][j] = x;
+            }
+        }
+        let readings = (0..beams)
+            .map(|b| {
+                let mut l = vec![0.0; padded];
+                for (j, ls) in data.readings.iter().enumerate() {
+                    l[j] = ls.get(b).copied().unwrap_or(f64::NAN);
+                }
+                l
+            })
+            .collect();
+        Self { poses, beams, frame, readings, radius_mm: data.radius_mm }
+    }
+
+    /// `BeamData::cost`, the same numbers.
+    fn cost(&self, form: Form, x: &DVector<f64>, scratch: &mut CostScratch) -> f64 {
+        let c = form.centre(x);
+        scratch.beams.clear();
+        scratch.beams.extend((0..self.beams).map(|j| form.beam(x, j)));
+        scratch.r.clear();
+        scratch.r.resize(self.poses * self.beams, 0.0);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU was just found to support AVX2, the only requirement of
+            // `residuals_avx2`.
+            #[allow(unsafe_code)]
+            unsafe {
+                residuals_avx2(self, &scratch.beams, &c, &mut scratch.r)
+            };
+            return nalgebra::DVectorView::from_slice(&scratch.r, scratch.r.len()).norm_squared();
+        }
+        residuals_by_lanes(self, &scratch.beams, &c, &mut scratch.r);
+        nalgebra::DVectorView::from_slice(&scratch.r, scratch.r.len()).norm_squared()
+    }
+}
+
+/// `residuals_by_lanes` with AVX2 vectors over four poses: separate multiplies and adds (no fused
+/// multiply-add) and a correctly rounded square root, so each lane is the same number.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn residuals_avx2(pk: &Packed, beams: &[(Vector3<f64>, Vector3<f64>)], c: &Vector3<f64>, r: &mut [f64]) {
+    use std::arch::x86_64::{
+        _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_sqrt_pd, _mm256_storeu_pd, _mm256_sub_pd,
+    };
+    let k = pk.beams;
+    let padded = pk.poses.div_ceil(4) * 4;
+    assert!(pk.frame.iter().chain(&pk.readings).all(|v| v.len() >= padded) && r.len() >= pk.poses * k);
+    let (two, radius) = (_mm256_set1_pd(2.0), _mm256_set1_pd(pk.radius_mm));
+    let (cx, cy, cz) = (_mm256_set1_pd(c.x), _mm256_set1_pd(c.y), _mm256_set1_pd(c.z));
+    for (b, ((p, g), ls)) in beams.iter().zip(&pk.readings).enumerate() {
+        let (px, py, pz) = (_mm256_set1_pd(p.x), _mm256_set1_pd(p.y), _mm256_set1_pd(p.z));
+        let (gx, gy, gz) = (_mm256_set1_pd(g.x), _mm256_set1_pd(g.y), _mm256_set1_pd(g.z));
+        for j0 in (0..pk.poses).step_by(4) {
+            // SAFETY: j0 + 4 <= padded, the length of every array (asserted above).
+            #[allow(unsafe_code)]
+            let (f, l) = unsafe {
+                let f = [0, 1, 2, 3, 4, 5, 6].map(|i| _mm256_loadu_pd(pk.frame[i].as_ptr().add(j0)));
+                (f, _mm256_loadu_pd(ls.as_ptr().add(j0)))
+            };
+            let [ax, ay, az, w, tx, ty, tz] = f;
+            let (add, mul, sub) = (_mm256_add_pd, _mm256_mul_pd, _mm256_sub_pd);
+            let (vx, vy, vz) = (add(px, mul(gx, l)), add(py, mul(gy, l)), add(pz, mul(gz, l)));
+            let t0 = mul(sub(mul(ay, vz), mul(az, vy)), two);
+            let t1 = mul(sub(mul(az, vx), mul(ax, vz)), two);
+            let t2 = mul(sub(mul(ax, vy), mul(ay, vx)), two);
+            let c0 = sub(mul(ay, t2), mul(az, t1));
+            let c1 = sub(mul(az, t0), mul(ax, t2));
+            let c2 = sub(mul(ax, t1), mul(ay, t0));
+            let dx = sub(add(add(add(mul(t0, w), c0), vx), tx), cx);
+            let dy = sub(add(add(add(mul(t1, w), c1), vy), ty), cy);
+            let dz = sub(add(add(add(mul(t2, w), c2), vz), tz), cz);
+            let norm = _mm256_sqrt_pd(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
+            let mut out = [0.0; 4];
+            // SAFETY: `out` holds four values.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm256_storeu_pd(out.as_mut_ptr(), sub(norm, radius))
+            };
+            for (i, o) in out.into_iter().enumerate().take(pk.poses - j0) {
+                r[(j0 + i) * k + b] = o;
+            }
+        }
+    }
+}
+
+/// The residuals of `BeamData::residuals`, each the same operations in the same order as
+/// nalgebra's `Isometry3 * Point3` (`t = 2 q_v x v`, `v' = (t w + q_v x t) + v`, plus the
+/// translation) and `norm`.
+fn residuals_by_lanes(pk: &Packed, beams: &[(Vector3<f64>, Vector3<f64>)], c: &Vector3<f64>, r: &mut [f64]) {
+    let [qx, qy, qz, qw, tx, ty, tz] = &pk.frame;
+    let k = pk.beams;
+    for (b, ((p, g), ls)) in beams.iter().zip(&pk.readings).enumerate() {
+        for j in 0..pk.poses {
+            let l = ls[j];
+            let (vx, vy, vz) = (p.x + g.x * l, p.y + g.y * l, p.z + g.z * l);
+            let (ax, ay, az) = (qx[j], qy[j], qz[j]);
+            let t0 = (ay * vz - az * vy) * 2.0;
+            let t1 = (az * vx - ax * vz) * 2.0;
+            let t2 = (ax * vy - ay * vx) * 2.0;
+            let c0 = ay * t2 - az * t1;
+            let c1 = az * t0 - ax * t2;
+            let c2 = ax * t1 - ay * t0;
+            let fx = ((t0 * qw[j] + c0) + vx) + tx[j];
+            let fy = ((t1 * qw[j] + c1) + vy) + ty[j];
+            let fz = ((t2 * qw[j] + c2) + vz) + tz[j];
+            let (dx, dy, dz) = (fx - c.x, fy - c.y, fz - c.z);
+            r[j * k + b] = ((dx * dx + dy * dy) + dz * dz).sqrt() - pk.radius_mm;
+        }
+    }
+}
+
+/// Buffers of one cost evaluation.
+#[derive(Default)]
+struct CostScratch {
+    beams: Vec<(Vector3<f64>, Vector3<f64>)>,
+    r: Vec<f64>,
 }
 
 /// What a solver reached.
@@ -233,6 +388,12 @@ impl Default for PsoOptions {
 
 /// Particle swarm over the box `centre +- half_width` (eq. 15), inertia `w_n = w_max - (w_max -
 /// w_min) n^2 / g^2` (eq. 16); velocities clamped to the box width.
+///
+/// The swarm is asynchronous: particle p moves towards the global best as it stands after particle
+/// p - 1. Its particles are still moved and evaluated in parallel, speculatively: a chunk moves
+/// towards the current global best and is then taken in order up to the first particle that
+/// improves it, and the rest of the chunk is moved again from there. The random factors are drawn
+/// up front in the sequential order, so the result is the sequential swarm's for any thread count.
 pub fn pso<R: Rng + ?Sized>(
     data: &BeamData,
     form: Form,
@@ -241,36 +402,98 @@ pub fn pso<R: Rng + ?Sized>(
     opts: &PsoOptions,
     rng: &mut R,
 ) -> Solution {
+    use rayon::prelude::*;
+    /// Particles moved together before the global best is looked at again.
+    const CHUNK: usize = 256;
     let d = centre.len();
+    let population = opts.population;
     let mut xs: Vec<DVector<f64>> =
-        (0..opts.population).map(|_| DVector::from_fn(d, |i, _| centre[i] + half_width[i] * rng.random_range(-1.0..=1.0))).collect();
-    let mut vs: Vec<DVector<f64>> = (0..opts.population).map(|_| DVector::zeros(d)).collect();
+        (0..population).map(|_| DVector::from_fn(d, |i, _| centre[i] + half_width[i] * rng.random_range(-1.0..=1.0))).collect();
+    let mut vs: Vec<DVector<f64>> = (0..population).map(|_| DVector::zeros(d)).collect();
     let mut pbest = xs.clone();
-    let mut pcost: Vec<f64> = xs.iter().map(|x| data.cost(form, x)).collect();
+    let packed = Packed::new(data);
+    let mut pcost: Vec<f64> = xs.par_iter().map_init(CostScratch::default, |sc, x| packed.cost(form, x, sc)).collect();
     let first = pcost.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
     let mut gbest = pbest[first].clone();
     let mut gcost = pcost[first];
     let g2 = (opts.iterations.max(1) as f64).powi(2);
     for n in 0..opts.iterations {
         let w = opts.w_max - (opts.w_max - opts.w_min) * (n as f64).powi(2) / g2;
-        for p in 0..opts.population {
-            for i in 0..d {
-                let (r1, r2): (f64, f64) = (rng.random(), rng.random());
-                let v = w * vs[p][i] + opts.c1 * r1 * (pbest[p][i] - xs[p][i]) + opts.c2 * r2 * (gbest[i] - xs[p][i]);
-                vs[p][i] = v.clamp(-2.0 * half_width[i], 2.0 * half_width[i]);
-                xs[p][i] += vs[p][i];
-            }
-            let c = data.cost(form, &xs[p]);
-            if c < pcost[p] {
-                pcost[p] = c;
-                pbest[p] = xs[p].clone();
-                if c < gcost {
-                    gcost = c;
-                    gbest = xs[p].clone();
+        // (r1, r2) of particle p, dimension i at p d + i.
+        let factors: Vec<(f64, f64)> = (0..population * d).map(|_| (rng.random(), rng.random())).collect();
+        let mut p0 = 0;
+        while p0 < population {
+            let end = (p0 + CHUNK).min(population);
+            let gb = &gbest;
+            let moved: Vec<(DVector<f64>, DVector<f64>, f64)> = (p0..end)
+                .into_par_iter()
+                .map_init(CostScratch::default, |sc, p| {
+                    let (mut x, mut v) = (xs[p].clone(), vs[p].clone());
+                    for i in 0..d {
+                        let (r1, r2) = factors[p * d + i];
+                        let vi = w * v[i] + opts.c1 * r1 * (pbest[p][i] - x[i]) + opts.c2 * r2 * (gb[i] - x[i]);
+                        v[i] = vi.clamp(-2.0 * half_width[i], 2.0 * half_width[i]);
+                        x[i] += v[i];
+                    }
+                    let c = packed.cost(form, &x, sc);
+                    (x, v, c)
+                })
+                .collect();
+            p0 = end;
+            for (p, (x, v, c)) in (p0 - moved.len()..).zip(moved) {
+                xs[p] = x;
+                vs[p] = v;
+                if c < pcost[p] {
+                    pcost[p] = c;
+                    pbest[p] = xs[p].clone();
+                    if c < gcost {
+                        gcost = c;
+                        gbest = xs[p].clone();
+                        // The particles after p moved towards the old global best: move them again.
+                        p0 = p + 1;
+                        break;
+                    }
                 }
             }
         }
     }
     let n = data.frames.len() * data.readings.first().map(|r| r.len()).unwrap_or(0);
     Solution { x: gbest, iterations: opts.iterations, rms_mm: (gcost / n.max(1) as f64).sqrt(), singular_values: Vec::new() }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+
+    /// The packed cost is `BeamData::cost` to the bit: 23 poses (not a multiple of four), 5 beams,
+    /// 50 random parameter vectors, both forms.
+    #[test]
+    fn packed_cost_is_the_cost_to_the_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut v = || Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        let frames: Vec<Isometry3<f64>> =
+            (0..23).map(|_| Isometry3::from_parts(Translation3::from(v() * 500.0), UnitQuaternion::from_scaled_axis(v() * 3.0))).collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let readings: Vec<Vec<f64>> = (0..23).map(|_| (0..5).map(|_| rng.random_range(20.0..80.0)).collect()).collect();
+        let data = BeamData { frames, readings, radius_mm: 12.7 };
+        let packed = Packed::new(&data);
+        let mut sc = CostScratch::default();
+        for form in [Form::Paper, Form::Minimal] {
+            let n = form.per_beam() * 5 + 3;
+            for _ in 0..50 {
+                let x = DVector::from_fn(n, |_, _| rng.random_range(-100.0..100.0));
+                let want = data.cost(form, &x);
+                assert_eq!(packed.cost(form, &x, &mut sc).to_bits(), want.to_bits());
+                let c = form.centre(&x);
+                let beams: Vec<_> = (0..5).map(|j| form.beam(&x, j)).collect();
+                let mut r = vec![0.0; 23 * 5];
+                residuals_by_lanes(&packed, &beams, &c, &mut r);
+                assert_eq!(nalgebra::DVectorView::from_slice(&r, r.len()).norm_squared().to_bits(), want.to_bits());
+            }
+        }
+    }
 }
