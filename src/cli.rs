@@ -600,8 +600,9 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
     if args.factors.len() > 8 {
         return Err(format!("--factors: {} factors, at most 8", args.factors.len()));
     }
-    let (sources, configs, sweep) =
+    let (sources, configs, mut sweep) =
         crate::budget::plan(&args.scenario, args.realisations, &args.factors, args.repetitions).map_err(|e| e.to_string())?;
+    sweep.predict = true;
     crate::io::out_dir::prepare(&args.out, &sweep.name).map_err(|e| e.to_string())?;
     crate::io::out_dir::prepare(&args.out, &crate::sweep::shard_dir(Path::new(""), &sweep.name, 0, 1).display().to_string())
         .map_err(|e| e.to_string())?;
@@ -630,6 +631,16 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
     let rows: Vec<Option<&crate::sweep::PointRow>> = (0..configs.len()).map(|i| points.iter().find(|p| p.point == i && p.table)).collect();
     let p95: Vec<f64> = rows.iter().map(|r| r.map_or(f64::NAN, |r| r.after[1][0])).collect();
     let (all_mm, none_mm, lines) = crate::budget::lines(&sources, &configs, &p95);
+    // The linear prediction per configuration, merged over realisations in unit order.
+    let predictions: Vec<Option<crate::study::prediction::Prediction>> = (0..configs.len())
+        .map(|i| {
+            units.iter().filter(|u| u.point == i).filter_map(|u| u.prediction.as_ref()).fold(None, |acc, p| {
+                let mut acc: crate::study::prediction::Prediction = acc.unwrap_or_default();
+                acc.merge(p);
+                Some(acc)
+            })
+        })
+        .collect();
     let report = crate::io::budget_results::BudgetReport {
         name: &sweep.name,
         realisations: args.realisations,
@@ -639,6 +650,7 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
         all_mm,
         none_mm,
         lines: &lines,
+        predictions: &predictions,
     };
     let dest = crate::io::budget_results::write(&args.out, &report).map_err(|e| format!("{}: {e}", args.out.display()))?;
     std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;

@@ -108,3 +108,6 @@ pub const STRUCTURAL_CHECK: u64 = 0x4f42_5345_5256;
 /// Realisation r > 0 of a scenario seeded s is the world seeded `split_seed(s, REALISATION + r)`
 /// (realisation 0 is the scenario's own seed): the same world whatever a sweep varies.
 pub const REALISATION: u64 = 0x5245_414c_0000_0000;
+
+/// The draws of the linear prediction's validation errors, keyed per task (under the study's seed).
+pub const PREDICTION: u64 = 0x5052_4544_4943_5400;

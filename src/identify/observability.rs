@@ -162,9 +162,27 @@ pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::Param
 /// `sigma^2 (J^T J)^-1`, with `J` the identification Jacobian of the configurations `qs` at
 /// `model`. `None` when `J^T J` is singular (the set cannot separate the parameters).
 pub fn predicted_std(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate::robot::Joints], sigma_mm: f64) -> Option<Vec<f64>> {
-    let m = set.len();
+    let (inv, scale) = scaled_inverse(model, set, qs)?;
+    Some((0..set.len()).map(|i| sigma_mm * inv[(i, i)].max(0.0).sqrt() / scale[i]).collect())
+}
+
+/// The first-order covariance `sigma^2 (J^T J)^-1` of the identified parameters (internal units)
+/// whose diagonal [`predicted_std`] gives. `None` when `J^T J` is singular.
+pub fn parameter_covariance(
+    model: &RobotModel,
+    set: &crate::robot::ParamSet,
+    qs: &[crate::robot::Joints],
+    sigma_mm: f64,
+) -> Option<DMatrix<f64>> {
+    let (inv, scale) = scaled_inverse(model, set, qs)?;
+    let s2 = sigma_mm * sigma_mm;
+    Some(DMatrix::from_fn(set.len(), set.len(), |i, j| s2 * inv[(i, j)] / (scale[i] * scale[j])))
+}
+
+/// `(J_s^T J_s)^-1` of the column-scaled identification Jacobian and the column scales (scaling
+/// keeps the inverse well conditioned across mm and rad columns).
+fn scaled_inverse(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate::robot::Joints]) -> Option<(DMatrix<f64>, Vec<f64>)> {
     let mut j = stacked_jacobian(model, set, qs);
-    // Column scaling keeps the inverse well conditioned across mm and rad columns.
     let scale: Vec<f64> = j.column_iter().map(|c| c.norm()).collect();
     if scale.iter().any(|s| *s == 0.0 || !s.is_finite()) {
         return None;
@@ -172,6 +190,5 @@ pub fn predicted_std(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[cra
     for (c, s) in scale.iter().enumerate() {
         j.column_mut(c).unscale_mut(*s);
     }
-    let inv = (j.tr_mul(&j)).try_inverse()?;
-    Some((0..m).map(|i| sigma_mm * inv[(i, i)].max(0.0).sqrt() / scale[i]).collect())
+    Some((j.tr_mul(&j).try_inverse()?, scale))
 }

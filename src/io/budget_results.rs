@@ -11,6 +11,7 @@ use polars::prelude::*;
 
 use crate::budget::{Config, Line, Source};
 use crate::io::results::{err, parquet, table_hashes, write_atomically};
+use crate::study::prediction::Prediction;
 use crate::sweep::PointRow;
 
 /// Everything a budget's files show.
@@ -31,6 +32,9 @@ pub struct BudgetReport<'a> {
     pub none_mm: f64,
     /// See `all_mm`.
     pub lines: &'a [Line],
+    /// Per configuration, the linear prediction beside the Monte Carlo (TriCal; `None` where there
+    /// is none).
+    pub predictions: &'a [Option<Prediction>],
 }
 
 /// Writes the budget into `out/<name>`, replacing what was there.
@@ -62,6 +66,20 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
             f("after_p95_mm_p90", (0..n).map(|i| q(i, 1, 2)).collect()),
         ],
     )?;
+    if let Some(rows) = prediction_rows(b) {
+        parquet(
+            dir,
+            "prediction.parquet",
+            vec![
+                Column::new("configuration".into(), rows.iter().map(|r| r.0.clone()).collect::<Vec<_>>()),
+                Column::new("parameter".into(), rows.iter().map(|r| r.1.clone()).collect::<Vec<_>>()),
+                f("predicted_std", rows.iter().map(|r| r.2).collect()),
+                f("simulated_rms", rows.iter().map(|r| r.3).collect()),
+                f("ratio", rows.iter().map(|r| r.3 / r.2).collect()),
+                Column::new("identifications".into(), rows.iter().map(|r| r.4).collect::<Vec<_>>()),
+            ],
+        )?;
+    }
     #[derive(serde::Serialize)]
     struct Manifest<'a> {
         budget: &'a str,
@@ -80,7 +98,14 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
     let tornado: Vec<crate::io::plots::TornadoLine> =
         b.lines.iter().map(|l| (b.sources[l.source].label.to_string(), l.off_mm, l.scaled_mm.clone())).collect();
-    let drawn = crate::io::plots::write_tornado(dir, &tornado, b.all_mm).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
+    let mut drawn = crate::io::plots::write_tornado(dir, &tornado, b.all_mm).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
+    let spreads = |mode: &str| {
+        b.configs.iter().zip(b.predictions).find(|(c, _)| c.mode == mode).and_then(|(_, p)| p.as_ref()).map(|p| p.parameter_spreads())
+    };
+    if let Some(all) = spreads("all") {
+        let none = spreads("none").unwrap_or_default();
+        drawn.extend(crate::io::plots::write_prediction(dir, &all, &none).map_err(|e| std::io::Error::other(format!("plots: {e}")))?);
+    }
     let mut text = summary(b);
     for w in drawn {
         let _ = writeln!(text, "\n![{}]({}.png)\n\n{} ([SVG]({}.svg))", w.caption, w.stem, w.caption, w.stem);
@@ -92,6 +117,111 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
 fn f3(x: f64) -> String {
     if x.is_finite() { format!("{x:.3}") } else { "-".into() }
 }
+
+/// A row of `prediction.parquet`.
+type PredictionRow = (String, String, f64, f64, u32);
+
+/// Per configuration and parameter: configuration, parameter, predicted std, simulated RMS error
+/// (internal units), identifications. `None` when no configuration has a prediction.
+fn prediction_rows(b: &BudgetReport<'_>) -> Option<Vec<PredictionRow>> {
+    let rows: Vec<_> = b
+        .configs
+        .iter()
+        .zip(b.predictions)
+        .filter_map(|(c, p)| p.as_ref().map(|p| (c, p)))
+        .flat_map(|(c, p)| {
+            p.names.iter().zip(p.parameter_spreads()).map(move |(name, (pr, sim))| (c.label.clone(), name.clone(), pr, sim, p.tasks))
+        })
+        .collect();
+    (!rows.is_empty()).then_some(rows)
+}
+
+/// Where the simulated parameter errors exceed the linear prediction by more than this factor
+/// (median over parameters), the prediction misses the configuration's sources.
+const MISSED_RATIO: f64 = 1.5;
+
+/// The section on the linear prediction against the Monte Carlo.
+fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
+    let rows: Vec<(&Config, &Prediction)> = b
+        .configs
+        .iter()
+        .zip(b.predictions)
+        .filter(|(c, _)| c.mode != "off" && c.mode != "scaled")
+        .filter_map(|(c, p)| p.as_ref().map(|p| (c, p)))
+        .collect();
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\n## Predicted (linear, from one fit) versus Monte Carlo\n\n\
+         What a calibration tool reports from one run: the parameter covariance sigma^2 (J^T J)^-1, with sigma the fit's own \
+         noise estimate (SSR / (3n - m) per coordinate) and J the identification Jacobian of the chosen set; the predicted \
+         validation errors |J_v d| with d drawn from it. Beside it what the simulated worlds gave: the RMS error of each \
+         identified parameter against the truth and the validation errors, over every identification at the table set size and \
+         every realisation. Ratio: simulated RMS over predicted std, median over the parameters (per-parameter values in \
+         `prediction.parquet`, internal units mm, rad, rad/(N m)). A ratio near 1 means the source acts as white noise and one run's covariance is right; above \
+         {MISSED_RATIO} the linear prediction misses the source: it is a bias (the same in every configuration of a set) that \
+         the parameters absorb while the residuals stay small.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| configuration | identifications | sigma (fit), um | ratio, parameters | predicted median / p95, mm | simulated median / p95, mm |\n|---|---|---|---|---|---|"
+    );
+    for (c, p) in &rows {
+        let e = p.errors_mm();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.2} | {:.2} | {} / {} | {} / {} |",
+            c.label,
+            p.tasks,
+            e[4] * 1e3,
+            p.median_ratio(),
+            f3(e[0]),
+            f3(e[1]),
+            f3(e[2]),
+            f3(e[3])
+        );
+    }
+    let mut missed = Vec::new();
+    let mut held = Vec::new();
+    for (c, p) in rows.iter().filter(|(c, _)| c.mode == "alone") {
+        let Some(k) = c.source else { continue };
+        let (ratio, e) = (p.median_ratio(), p.errors_mm());
+        let mut why = Vec::new();
+        if ratio > MISSED_RATIO {
+            why.push(format!("its parameter errors are {ratio:.1} times the predicted std: a bias the parameters absorb"));
+        }
+        if e[3] > VALIDATION_MISSED * e[1] && e[3] - e[1] > 0.01 {
+            why.push(format!(
+                "the simulated validation p95 is {:.2} mm against {:.2} mm predicted: error at the validation poses themselves, which \
+                 no parameter carries",
+                e[3], e[1]
+            ));
+        }
+        let label = b.sources[k].label;
+        if why.is_empty() { held.push(format!("{label} ({ratio:.1})")) } else { missed.push(format!("**{label}**: {}", why.join("; "))) }
+    }
+    if !missed.is_empty() {
+        let _ = writeln!(s, "\nThe linear prediction misses:\n");
+        for m in &missed {
+            let _ = writeln!(s, "- {m}");
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\nIt holds (white noise, parameter ratio in brackets) for: {}.{}",
+        if held.is_empty() { "none of the sources".to_string() } else { held.join(", ") },
+        rows.iter().find(|(c, _)| c.mode == "all").map_or(String::new(), |(_, p)| format!(
+            " With every source on, the simulated parameter errors are {:.1} times the predicted std (median over parameters).",
+            p.median_ratio()
+        ))
+    );
+}
+
+/// Where the simulated validation p95 exceeds the predicted one by more than this factor (and by
+/// more than 0.01 mm), the prediction misses error that is not in the parameters.
+const VALIDATION_MISSED: f64 = 1.25;
 
 /// The budget table, sorted by share, and every configuration.
 pub fn summary(b: &BudgetReport<'_>) -> String {
@@ -132,6 +262,7 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
         let interacts = (l.share_alone - l.share_removed).abs() > 0.15;
         let _ = writeln!(s, " {} |", if interacts { "yes" } else { "" });
     }
+    prediction_section(b, &mut s);
     let _ = writeln!(
         s,
         "\n## Every configuration\n\n| configuration | realisations | after median, mm (P10-P90) | after p95, mm (P10-P90) |\n|---|---|---|---|"

@@ -802,3 +802,59 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
     legend(&mut chart, SeriesLabelPosition::LowerRight, 12)?;
     Ok(())
 }
+
+/// Writes the budget's predicted-versus-simulated plot: per parameter, the linear prediction's std
+/// against the simulated RMS error (internal units, log-log), with every source on and with none.
+pub fn write_prediction(dir: &Path, all: &[(f64, f64)], none: &[(f64, f64)]) -> Result<Vec<Written>, String> {
+    register_font();
+    both!(dir, "budget_predicted_vs_simulated", |root| prediction(root, all, none));
+    Ok(vec![Written {
+        stem: "budget_predicted_vs_simulated".into(),
+        caption: "Per identified parameter: the linear prediction's std (sigma^2 (J^T J)^-1, sigma from the fit) against the \
+                  simulated RMS error over identifications and realisations; on the line the prediction is right"
+            .into(),
+    }])
+}
+
+fn prediction<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, all: &[(f64, f64)], none: &[(f64, f64)]) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let ok = |v: &&(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
+    let values: Vec<f64> = all.iter().chain(none).filter(ok).flat_map(|v| [v.0, v.1]).collect();
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = if lo.is_finite() && hi > lo { (lo / 2.0, hi * 2.0) } else { (1e-6, 1.0) };
+    let mut chart = ChartBuilder::on(root)
+        .caption("Parameter errors: linear prediction against Monte Carlo", (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((lo..hi).log_scale(), (lo..hi).log_scale())
+        .map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc("predicted std (internal units: mm, rad, rad/(N m))")
+        .y_desc("simulated RMS error")
+        .x_label_formatter(&|x| format!("{x:.0e}"))
+        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .label_style((FAMILY, 12))
+        .draw()
+        .map_err(e2s)?;
+    chart
+        .draw_series(std::iter::once(PathElement::new(vec![(lo, lo), (hi, hi)], BLACK.stroke_width(1))))
+        .map_err(e2s)?
+        .label("simulated = predicted")
+        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(1)));
+    let series = [(all, RGBColor(200, 30, 30), "every source on"), (none, RGBColor(0, 90, 200), "every source off (solver floor)")];
+    for (points, colour, label) in series {
+        if points.iter().filter(ok).count() == 0 {
+            continue;
+        }
+        chart
+            .draw_series(points.iter().filter(ok).map(|v| Circle::new((v.0, v.1), 4, colour.filled())))
+            .map_err(e2s)?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
+    }
+    legend(&mut chart, SeriesLabelPosition::UpperLeft, 12)?;
+    Ok(())
+}

@@ -6,6 +6,7 @@
 pub mod check;
 pub mod engine;
 pub mod figures;
+pub mod prediction;
 pub mod published;
 pub mod stats;
 

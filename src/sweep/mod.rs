@@ -118,6 +118,9 @@ pub struct Unit {
     pub campaign_s: f64,
     /// Per selection and set size.
     pub rows: Vec<UnitRow>,
+    /// The linear prediction at the table set size, when the sweep asks for it (TriCal).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prediction: Option<crate::study::prediction::Prediction>,
 }
 
 /// Statistics over repetitions of one selection and set size.
@@ -158,7 +161,8 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
     let (point, realisation) = (unit / sweep.realisations as usize, (unit % sweep.realisations as usize) as u32);
     let th = &sweep.thresholds_mm;
     let quiet = |_: usize, _: usize| {};
-    let mut out = Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new() };
+    let mut out =
+        Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None };
     match &sweep.points[point].scenario {
         Loaded::Trical(s) => {
             let seed = realisation_seed(s.seed, realisation);
@@ -184,6 +188,11 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
                 let per: Vec<Option<ErrorStats>> = ts.iter().map(|t| (!t.id.outcome.is_rank_deficient()).then_some(t.validation)).collect();
                 let o1: Vec<f64> = ts.iter().map(|t| t.id.observability.o1).collect();
                 out.rows.push(row(sel.label(), n, n == s.study.table_set_size as usize, &per, &o1, th));
+            }
+            if sweep.predict {
+                let pool: Vec<_> = experiment.campaign.pool.iter().map(|p| p.q).collect();
+                let validation: Vec<_> = experiment.campaign.validation.iter().map(|v| v.q).collect();
+                out.prediction = crate::study::prediction::predict(&results, &pool, &validation, s.study.table_set_size as usize, seed);
             }
         }
         Loaded::Spms(s) => {

@@ -95,6 +95,8 @@ pub struct Sweep {
     pub points: Vec<Point>,
     /// sha256 of the sweep file and the base scenario: shards of one sweep carry the same.
     pub identity: String,
+    /// Whether each unit also makes the linear prediction at the table set size (the budget's).
+    pub predict: bool,
 }
 
 /// A sweep that cannot run.
@@ -301,6 +303,7 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
         keys: file.axes.iter().map(|a| a.key.clone()).collect(),
         points,
         identity,
+        predict: false,
     })
 }
 
@@ -325,7 +328,7 @@ pub fn from_tables(
         })?;
         out.push(Point { values, scenario });
     }
-    Ok(Sweep { name: name.into(), realisations, thresholds_mm, keys, points: out, identity })
+    Ok(Sweep { name: name.into(), realisations, thresholds_mm, keys, points: out, identity, predict: false })
 }
 
 /// The value at dotted `key` of `t`, if there is one.
