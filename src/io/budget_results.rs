@@ -165,6 +165,13 @@ fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
          {MISSED_RATIO} the linear prediction misses the source: it is a bias (the same in every configuration of a set) that \
          the parameters absorb while the residuals stay small.\n"
     );
+    if rows.iter().all(|(_, p)| p.predicted_mm.is_empty()) {
+        let _ = writeln!(
+            s,
+            "Here the figure of merit (ISO 9283 AP over P1-P5, after the controller's inverse kinematics, in the base frame) is \
+             not predicted: the comparison covers the parameters; the simulated columns give the AP's median and p95.\n"
+        );
+    }
     let _ = writeln!(
         s,
         "| configuration | identifications | sigma (fit), um | ratio, parameters | predicted median / p95, mm | simulated median / p95, mm |\n|---|---|---|---|---|---|"

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use super::StudyResults;
 use super::stats::{finite_sorted, median, quantile};
 use crate::identify::observability::parameter_covariance;
-use crate::robot::Joints;
+use crate::robot::{Joints, ParamSet, RobotModel};
 
 /// Draws of the parameter error per task for the predicted validation-error distribution.
 const DRAWS: usize = 8;
@@ -87,28 +87,65 @@ pub fn noise_estimate(residual_rms_mm: f64, n: usize, m: usize) -> f64 {
     if dof == 0 { f64::NAN } else { residual_rms_mm * (n as f64 / dof as f64).sqrt() }
 }
 
-/// The prediction of every identification of `results` at set size `n` that separated the
+/// What the prediction needs of one identification.
+pub struct TaskView<'a> {
+    /// Task index (keys the draws).
+    pub index: usize,
+    /// Chosen pool indices.
+    pub chosen: &'a [usize],
+    /// Identified values (`None`: not identified).
+    pub values: &'a [Option<f64>],
+    /// The fit's residual RMS per configuration, mm.
+    pub residual_rms_mm: f64,
+    /// The simulated figure of merit after calibration: median and p95, mm.
+    pub simulated_mm: [f64; 2],
+}
+
+/// The prediction of every identification of a TriCal study at set size `n` that separated the
 /// parameters; `pool_qs` are the configurations the sets index, `validation_qs` the validation
 /// poses; `seed` keys the draws. `None` when no task qualifies.
 pub fn predict(results: &StudyResults, pool_qs: &[Joints], validation_qs: &[Joints], n: usize, seed: u64) -> Option<Prediction> {
-    let set = &results.set;
+    let tasks = results.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()).map(|t| TaskView {
+        index: t.task.index,
+        chosen: &t.id.chosen,
+        values: &t.id.values,
+        residual_rms_mm: t.id.residual_rms_mm,
+        simulated_mm: [t.validation.median, t.validation.p95],
+    });
+    predict_tasks(&results.set, &results.truth, tasks, pool_qs, validation_qs, seed)
+}
+
+/// The prediction over `tasks` (identifications of `set` from `truth`'s configurations
+/// `pool_qs`); the predicted validation errors at `validation_qs` (none when empty).
+pub fn predict_tasks<'a>(
+    set: &ParamSet,
+    truth: &RobotModel,
+    tasks: impl Iterator<Item = TaskView<'a>>,
+    pool_qs: &[Joints],
+    validation_qs: &[Joints],
+    seed: u64,
+) -> Option<Prediction> {
     let m = set.len();
-    let truth = set.pack(&results.truth);
-    let jv = crate::identify::observability::stacked_jacobian(&results.truth, set, validation_qs);
+    let truth_values = set.pack(truth);
+    let jv = crate::identify::observability::stacked_jacobian(truth, set, validation_qs);
     let mut out = Prediction { names: set.names(), simulated_sq: vec![0.0; m], predicted_var: vec![0.0; m], ..Prediction::default() };
-    for t in results.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()) {
-        let Some(values) = t.id.values.iter().copied().collect::<Option<Vec<f64>>>() else {
+    for t in tasks {
+        let n = t.chosen.len();
+        if !t.simulated_mm.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        let Some(values) = t.values.iter().copied().collect::<Option<Vec<f64>>>() else {
             continue;
         };
         if values.len() != m {
             continue;
         }
-        let sigma = noise_estimate(t.id.residual_rms_mm, n, m);
+        let sigma = noise_estimate(t.residual_rms_mm, n, m);
         if !(sigma.is_finite() && sigma > 0.0) {
             continue;
         }
-        let qs: Vec<Joints> = t.id.chosen.iter().map(|&k| pool_qs[k]).collect();
-        let Some(cov) = parameter_covariance(&results.truth, set, &qs, sigma) else {
+        let qs: Vec<Joints> = t.chosen.iter().map(|&k| pool_qs[k]).collect();
+        let Some(cov) = parameter_covariance(truth, set, &qs, sigma) else {
             continue;
         };
         if !cov.iter().all(|c| c.is_finite()) {
@@ -117,7 +154,7 @@ pub fn predict(results: &StudyResults, pool_qs: &[Joints], validation_qs: &[Join
         let Some(chol) = cov.clone().cholesky() else {
             continue;
         };
-        let errors = DVector::from_vec(values) - &truth;
+        let errors = DVector::from_vec(values) - &truth_values;
         if !errors.iter().all(|e| e.is_finite()) {
             continue;
         }
@@ -125,17 +162,19 @@ pub fn predict(results: &StudyResults, pool_qs: &[Joints], validation_qs: &[Join
             out.simulated_sq[j] += errors[j] * errors[j];
             out.predicted_var[j] += cov[(j, j)];
         }
-        // The validation errors of DRAWS parameter errors drawn from N(0, C).
-        let rng = &mut crate::seeds::task_stream(seed, crate::seeds::PREDICTION, t.task.index);
-        let z = DMatrix::from_fn(m, DRAWS, |_, _| StandardNormal.sample(rng));
-        let moved = &jv * (chol.l() * z);
-        let e: Vec<f64> = (0..DRAWS)
-            .flat_map(|d| (0..validation_qs.len()).map(move |v| (d, v)))
-            .map(|(d, v)| moved.fixed_view::<3, 1>(3 * v, d).norm())
-            .collect();
-        let sorted = finite_sorted(&e);
-        out.predicted_mm.push([quantile(&sorted, 0.5), quantile(&sorted, 0.95)]);
-        out.simulated_mm.push([t.validation.median, t.validation.p95]);
+        if !validation_qs.is_empty() {
+            // The validation errors of DRAWS parameter errors drawn from N(0, C).
+            let rng = &mut crate::seeds::task_stream(seed, crate::seeds::PREDICTION, t.index);
+            let z = DMatrix::from_fn(m, DRAWS, |_, _| StandardNormal.sample(rng));
+            let moved = &jv * (chol.l() * z);
+            let e: Vec<f64> = (0..DRAWS)
+                .flat_map(|d| (0..validation_qs.len()).map(move |v| (d, v)))
+                .map(|(d, v)| moved.fixed_view::<3, 1>(3 * v, d).norm())
+                .collect();
+            let sorted = finite_sorted(&e);
+            out.predicted_mm.push([quantile(&sorted, 0.5), quantile(&sorted, 0.95)]);
+        }
+        out.simulated_mm.push(t.simulated_mm);
         out.sigma_mm.push(sigma);
         out.tasks += 1;
     }

@@ -211,6 +211,24 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
                 let o1: Vec<f64> = ts.iter().map(|t| t.id.observability.o1).collect();
                 out.rows.push(row(sel.label(), n, n == s.spec.study.table_set_size as usize, &per, &o1, th));
             }
+            if sweep.predict {
+                use crate::study::prediction::{TaskView, predict_tasks};
+                let pool: Vec<_> = results.cell.pool.iter().map(|p| p.q).collect();
+                let n = s.spec.study.table_set_size as usize;
+                let tasks = results.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()).filter_map(|t| {
+                    let ap = ErrorStats::of(&t.iso.as_ref()?.ap_mm);
+                    Some(TaskView {
+                        index: t.task.index,
+                        chosen: &t.id.chosen,
+                        values: &t.id.values,
+                        residual_rms_mm: t.id.residual_rms_mm,
+                        simulated_mm: [ap.median, ap.p95],
+                    })
+                });
+                // The figure of merit (ISO 9283 AP after the controller's inverse kinematics, in the
+                // base frame) is not predicted: the parameters only.
+                out.prediction = predict_tasks(&results.set, &results.cell.robot.truth, tasks, &pool, &[], seed);
+            }
         }
     }
     out
