@@ -99,7 +99,12 @@ pub enum ExperimentError {
 impl ExperimentSpec {
     /// The true robot: Table 7 means, with this device as tool and payload.
     pub fn truth(&self) -> RobotModel {
-        trical_2018_table7().edited(|d| self.apply_device(d)).expect("valid device")
+        trical_2018_table7()
+            .edited(|d| {
+                self.apply_device(d);
+                d.world_from_base = self.cell.base_in_moved_world(d.world_from_base);
+            })
+            .expect("valid device")
     }
 
     /// The nominal robot: Table 3 with this device (the base is fitted by the campaign).
@@ -119,7 +124,14 @@ impl ExperimentSpec {
             Some([x, y, z, a, b, g]) => campaign
                 .nominal
                 .edited(|d| {
-                    d.world_from_base = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() }
+                    d.world_from_base = self.cell.base_in_moved_world(crate::robot::XyzZyx {
+                        x,
+                        y,
+                        z,
+                        alpha: a.to_radians(),
+                        beta: b.to_radians(),
+                        gamma: g.to_radians(),
+                    })
                 })
                 .expect("finite base"),
             None => campaign.nominal.clone(),

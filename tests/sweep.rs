@@ -172,6 +172,21 @@ fn bad_sweep_input_is_one_line_and_exit_2() {
         ("empty.toml", "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = []\n", vec!["empty.toml", "axis[0]", "at least one value"]),
         ("layout.toml", "[[axis]]\nkey = \"cell.layout\"\nvalues = [{ n = 9, spacing_mm = 300 }]\n", vec!["layout.toml", "layout.n = 9"]),
         ("nan.toml", "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [nan]\n", vec!["nan.toml", "epsilon_mm", "finite"]),
+        (
+            "line.toml",
+            "[[axis]]\nkey = \"cell.layout\"\nvalues = [{ n = 3, spacing_mm = 300, shape = \"line\" }]\n",
+            vec!["line.toml", "shape = \"line\"", "define {W}"],
+        ),
+        (
+            "height.toml",
+            "[[axis]]\nkey = \"cell.layout\"\nvalues = [{ n = 3, spacing_mm = 300, height_mm = 5000 }]\n",
+            vec!["height.toml", "layout.height_mm = 5000", "within"],
+        ),
+        (
+            "shape.toml",
+            "[[axis]]\nkey = \"cell.layout\"\nvalues = [{ n = 3, spacing_mm = 300, shape = \"square\" }]\n",
+            vec!["shape.toml", "layout.shape", "circle"],
+        ),
     ] {
         let f = sweep_file(&dir, name, 1, axes);
         bad(&["sweep", f.to_str().unwrap(), "--out", o], &expect);

@@ -34,6 +34,11 @@ pub struct CellSpec {
     pub table_z_base_mm: f64,
     /// Standard deviation of a ballbar distance, um (Table 2: 3.7 um).
     pub ballbar_sigma_um: f64,
+    /// Where the plate (and {W} with it) stands relative to the scenario's cell: `[x, y, z]` mm
+    /// then `[alpha, beta, gamma]` deg about z, y, x of {W} (eq. 7), e.g. `[0, 0, 100, 0, 0, 10]`
+    /// raises the spheres 100 mm and tilts the plate 10 deg about the line of spheres 1 and 2. The
+    /// robot's true and nominal bases in {W} move by the inverse; zero: the scenario's cell.
+    pub plate_offset_mm_deg: [f64; 6],
 }
 
 impl Default for CellSpec {
@@ -49,7 +54,27 @@ impl Default for CellSpec {
             plate_margin_mm: 40.0,
             table_z_base_mm: 0.0,
             ballbar_sigma_um: 3.7,
+            plate_offset_mm_deg: [0.0; 6],
         }
+    }
+}
+
+impl CellSpec {
+    /// `world_from_base` of a robot whose base sat at `base` in the scenario's {W}, once the plate
+    /// has moved by `plate_offset_mm_deg` (unchanged when the offset is zero).
+    pub fn base_in_moved_world(&self, base: crate::robot::XyzZyx) -> crate::robot::XyzZyx {
+        if self.plate_offset_mm_deg == [0.0; 6] {
+            return base;
+        }
+        let iso = |t: &crate::robot::XyzZyx| {
+            nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::new(t.x, t.y, t.z),
+                nalgebra::UnitQuaternion::from_euler_angles(t.gamma, t.beta, t.alpha),
+            )
+        };
+        let [x, y, z, a, b, g] = self.plate_offset_mm_deg;
+        let plate = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
+        crate::robot::XyzZyx::from_isometry(&(iso(&plate).inverse() * iso(&base)))
     }
 }
 
@@ -99,5 +124,46 @@ impl Cell {
     /// Centre of the calibration zone: the centroid of the sphere centres in {W}, mm (paper 3.2).
     pub fn calibration_zone_centre(&self) -> Vector3<f64> {
         self.spheres_w.iter().sum::<Vector3<f64>>() / self.spheres_w.len() as f64
+    }
+}
+
+#[cfg(test)]
+mod plate_offset_tests {
+    use super::CellSpec;
+    use crate::robot::XyzZyx;
+
+    fn base() -> XyzZyx {
+        XyzZyx { x: 160.2, y: -255.7, z: -220.5, alpha: 91.6_f64.to_radians(), beta: 0.5_f64.to_radians(), gamma: -1.4_f64.to_radians() }
+    }
+
+    #[test]
+    fn zero_offset_leaves_the_base_as_it_was() {
+        assert_eq!(CellSpec::default().base_in_moved_world(base()), base());
+    }
+
+    /// Raising the plate 100 mm lowers the base 100 mm in {W}; tilting it about x and back, or
+    /// moving it and moving it back, returns the base (to rounding).
+    #[test]
+    fn the_base_moves_by_the_inverse_of_the_plate() {
+        let raised = CellSpec { plate_offset_mm_deg: [0.0, 0.0, 100.0, 0.0, 0.0, 0.0], ..CellSpec::default() }.base_in_moved_world(base());
+        assert!((raised.z - (base().z - 100.0)).abs() < 1e-9 && (raised.x - base().x).abs() < 1e-9);
+        assert!((raised.alpha - base().alpha).abs() < 1e-12 && (raised.gamma - base().gamma).abs() < 1e-12);
+        let offset = [30.0, -20.0, 100.0, 5.0, -3.0, 10.0];
+        let moved = CellSpec { plate_offset_mm_deg: offset, ..CellSpec::default() }.base_in_moved_world(base());
+        let iso = |t: &XyzZyx| {
+            nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::new(t.x, t.y, t.z),
+                nalgebra::UnitQuaternion::from_euler_angles(t.gamma, t.beta, t.alpha),
+            )
+        };
+        let [x, y, z, a, b, g] = offset;
+        let plate = XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
+        let back = XyzZyx::from_isometry(&(iso(&plate) * iso(&moved)));
+        for (u, v) in [(back.x, base().x), (back.y, base().y), (back.z, base().z)] {
+            assert!((u - v).abs() < 1e-9, "{u} vs {v}");
+        }
+        for (u, v) in [(back.alpha, base().alpha), (back.beta, base().beta), (back.gamma, base().gamma)] {
+            assert!((u - v).abs() < 1e-12, "{u} vs {v}");
+        }
     }
 }

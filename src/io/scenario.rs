@@ -439,6 +439,10 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     c.within("cell", "plate_margin_mm", cell.plate_margin_mm, 0.0, 500.0, "plate")?;
     c.within("cell", "ballbar_sigma_um", cell.ballbar_sigma_um, 0.0, 1000.0, "ballbar noise")?;
     c.within("cell", "table_z_base_mm", cell.table_z_base_mm, -2000.0, 0.0, "table height below the base")?;
+    for (k, v) in cell.plate_offset_mm_deg.iter().enumerate() {
+        let (lo, hi, what) = if k < 3 { (-2000.0, 2000.0, "plate displacement, mm") } else { (-90.0, 90.0, "plate rotation, deg") };
+        c.within("cell", &format!("plate_offset_mm_deg[{k}]"), *v, lo, hi, what)?;
+    }
 
     let t = &f.trical;
     c.within("trical", "indicator_accuracy_um", t.indicator_accuracy_um, 0.0, 1000.0, "indicator")?;

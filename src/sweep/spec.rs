@@ -166,16 +166,28 @@ pub fn circle_layout(n: usize, spacing_mm: f64) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// The value an axis puts at its key: a named layout becomes `cell.spheres_w_mm`.
-fn resolve(key: &str, v: &toml::Value) -> Result<(String, toml::Value), String> {
+/// The sphere centres of `n` spheres on a line along +x, neighbours `spacing_mm` apart.
+pub fn line_layout(n: usize, spacing_mm: f64) -> Vec<[f64; 3]> {
+    (0..n).map(|k| [k as f64 * spacing_mm, 0.0, 0.0]).collect()
+}
+
+/// The keys a named layout takes.
+const LAYOUT_KEYS: [&str; 5] = ["n", "spacing_mm", "shape", "height_mm", "tilt_deg"];
+
+/// The values an axis puts at its key: a named layout (`{ n, spacing_mm, shape = "circle" |
+/// "line", height_mm = 0, tilt_deg = 0 }`) becomes `cell.spheres_w_mm`, and, when it raises or
+/// tilts the plate, `cell.plate_offset_mm_deg` (the spheres `height_mm` higher relative to the
+/// robot, the plate turned `tilt_deg` about the line of spheres 1 and 2).
+fn resolve(key: &str, v: &toml::Value) -> Result<Vec<(String, toml::Value)>, String> {
     if key != "cell.layout" {
-        return Ok((key.to_string(), v.clone()));
+        return Ok(vec![(key.to_string(), v.clone())]);
     }
     let t = v.as_table().ok_or("a layout is a table { n = ..., spacing_mm = ... }")?;
+    let num = |k: &str| t.get(k).and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)));
     let n = t.get("n").and_then(toml::Value::as_integer).ok_or("layout.n: the number of spheres, 3 to 6")?;
-    let s = t.get("spacing_mm").and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64))).ok_or("layout.spacing_mm: a number")?;
-    if t.keys().any(|k| k != "n" && k != "spacing_mm") {
-        return Err("a layout has the keys n and spacing_mm only".into());
+    let s = num("spacing_mm").ok_or("layout.spacing_mm: a number")?;
+    if let Some(k) = t.keys().find(|k| !LAYOUT_KEYS.contains(&k.as_str())) {
+        return Err(format!("layout.{k}: unknown (a layout has the keys {})", LAYOUT_KEYS.join(", ")));
     }
     if !(3..=6).contains(&n) {
         return Err(format!("layout.n = {n}: 3 to 6 spheres"));
@@ -183,11 +195,25 @@ fn resolve(key: &str, v: &toml::Value) -> Result<(String, toml::Value), String> 
     if !(s.is_finite() && (50.0..=2000.0).contains(&s)) {
         return Err(format!("layout.spacing_mm = {s}: within [50, 2000] mm"));
     }
-    let pts = circle_layout(n as usize, s);
-    Ok((
-        "cell.spheres_w_mm".into(),
-        toml::Value::Array(pts.iter().map(|p| toml::Value::Array(p.iter().map(|x| toml::Value::Float(*x)).collect())).collect()),
-    ))
+    let optional = |k: &str, lo: f64, hi: f64| -> Result<f64, String> {
+        match (t.get(k), num(k)) {
+            (None, _) => Ok(0.0),
+            (Some(_), Some(x)) if x.is_finite() && (lo..=hi).contains(&x) => Ok(x),
+            (Some(v), _) => Err(format!("layout.{k} = {v}: a number within [{lo}, {hi}]")),
+        }
+    };
+    let (height, tilt) = (optional("height_mm", -1000.0, 1000.0)?, optional("tilt_deg", -60.0, 60.0)?);
+    let pts = match t.get("shape").map(|v| v.as_str()) {
+        None | Some(Some("circle")) => circle_layout(n as usize, s),
+        Some(Some("line")) => line_layout(n as usize, s),
+        Some(_) => return Err(format!("layout.shape = {}: \"circle\" or \"line\"", t["shape"])),
+    };
+    let floats = |v: &[f64]| toml::Value::Array(v.iter().map(|x| toml::Value::Float(*x)).collect());
+    let mut out = vec![("cell.spheres_w_mm".to_string(), toml::Value::Array(pts.iter().map(|p| floats(p)).collect()))];
+    if height != 0.0 || tilt != 0.0 {
+        out.push(("cell.plate_offset_mm_deg".to_string(), floats(&[0.0, 0.0, height, 0.0, 0.0, tilt])));
+    }
+    Ok(out)
 }
 
 fn axis_values(path: &Path, i: usize, a: &Axis) -> Result<Vec<toml::Value>, SweepError> {
@@ -262,8 +288,9 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
     let (base_text, mut base_table) =
         scenario::read_table(&base_path).map_err(|e| SweepError::Point { path: shown.clone(), axis: "base".into(), error: Box::new(e) })?;
     for (k, v) in &file.fixed {
-        let (target, value) = resolve(k, v).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
-        set_dotted(&mut base_table, &target, value).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
+        for (target, value) in resolve(k, v).map_err(|m| file_err(path, &format!("fixed.{k}"), m))? {
+            set_dotted(&mut base_table, &target, value).map_err(|m| file_err(path, &format!("fixed.{k}"), m))?;
+        }
     }
     let values: Vec<Vec<toml::Value>> = file.axes.iter().enumerate().map(|(i, a)| axis_values(path, i, a)).collect::<Result<_, _>>()?;
     let lengths: Vec<usize> = values.iter().map(Vec::len).collect();
@@ -280,8 +307,10 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
         for (a, &k) in idx.iter().enumerate() {
             let key = &file.axes[a].key;
             let v = &values[a][k];
-            let (target, value) = resolve(key, v).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), format!("value {v}: {m}")))?;
-            set_dotted(&mut t, &target, value).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), m))?;
+            let resolved = resolve(key, v).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), format!("value {v}: {m}")))?;
+            for (target, value) in resolved {
+                set_dotted(&mut t, &target, value).map_err(|m| file_err(path, &format!("axis[{a}] ({key})"), m))?;
+            }
             shown_values.push((key.clone(), v.to_string()));
         }
         let axis = shown_values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ");
