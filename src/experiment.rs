@@ -34,6 +34,21 @@ pub struct RobotSpec {
     /// `world_from_base` of the model before calibration, `[x, y, z]` mm then `[alpha, beta, gamma]`
     /// deg (eq. 7). Absent: the base the semi-automatic steps fit to the located spheres.
     pub nominal_base_mm_deg: Option<[f64; 6]>,
+    /// The arm's robot file, relative to the scenario (absent: the built-in IRB 120 with Table 7).
+    pub file: Option<std::path::PathBuf>,
+    /// The loaded robot file (filled by the scenario loader).
+    #[serde(skip)]
+    pub arm: Option<Arm>,
+}
+
+/// A loaded robot file shared by the copies of a scenario (equal when read from the same path).
+#[derive(Clone, Debug)]
+pub struct Arm(pub std::sync::Arc<crate::robot::file::RobotFile>);
+
+impl PartialEq for Arm {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.path == other.0.path
+    }
 }
 
 impl Default for RobotSpec {
@@ -47,6 +62,8 @@ impl Default for RobotSpec {
             unmodelled: UnmodelledSpec::default(),
             spread: crate::robot::SpreadSpec::default(),
             nominal_base_mm_deg: Some(crate::robot::builtin::TRICAL_NOMINAL_BASE),
+            file: None,
+            arm: None,
         }
     }
 }
@@ -99,7 +116,23 @@ pub enum ExperimentError {
 impl ExperimentSpec {
     /// The true robot: Table 7 means, with this device as tool and payload.
     pub fn truth(&self) -> RobotModel {
-        trical_2018_table7()
+        let table7 = match &self.robot.arm {
+            // The file's arm at the scenario's nominal base with the device, then its truth.
+            Some(Arm(arm)) => {
+                let [x, y, z, a, b, g] = self.robot.nominal_base_mm_deg.unwrap_or_default();
+                let placed = arm
+                    .nominal
+                    .edited(|d| {
+                        d.world_from_base =
+                            crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
+                        self.apply_device(d);
+                    })
+                    .expect("valid device");
+                arm.truth_on(&placed).expect("checked when the robot file was loaded")
+            }
+            None => trical_2018_table7(),
+        };
+        table7
             .edited(|d| {
                 self.apply_device(d);
                 d.world_from_base = self.cell.base_in_moved_world(d.world_from_base);
@@ -109,7 +142,8 @@ impl ExperimentSpec {
 
     /// The nominal robot: Table 3 with this device (the base is fitted by the campaign).
     pub fn nominal(&self) -> RobotModel {
-        irb120().edited(|d| self.apply_device(d)).expect("valid device")
+        let arm = self.robot.arm.as_ref().map_or_else(irb120, |Arm(a)| a.nominal.clone());
+        arm.edited(|d| self.apply_device(d)).expect("valid device")
     }
 
     fn apply_device(&self, d: &mut crate::robot::RobotData) {

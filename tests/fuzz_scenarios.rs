@@ -144,7 +144,8 @@ fn run_case(doc: &toml::Value, dir: &Path, name: &str) -> Result<(), TestCaseErr
 }
 
 fn base(path: &str, edit: impl Fn(&mut toml::Table)) -> toml::Value {
-    let mut t: toml::Table = toml::from_str(&std::fs::read_to_string(common::repo().join(path)).unwrap()).unwrap();
+    let name = path.strip_prefix("scenarios/").expect("a scenario of the repo");
+    let mut t: toml::Table = toml::from_str(&common::scenario_text_anywhere(name)).unwrap();
     edit(&mut t);
     toml::Value::Table(t)
 }

@@ -44,7 +44,7 @@ fn scenario_file(dir: &Path, name: &str, text: &str) -> PathBuf {
 }
 
 fn base_text() -> String {
-    std::fs::read_to_string(repo().join("scenarios/ci_quick.toml")).unwrap()
+    common::scenario_text_anywhere("ci_quick.toml")
 }
 
 /// Runs `calsim run` on a bad scenario and returns its stderr after checking the exit code 2.

@@ -109,7 +109,15 @@ pub fn parse(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
 
 fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<Scenario, ScenarioError> {
     let shown = path.display().to_string();
-    let file: ScenarioFile = deserialize(t, &shown)?;
+    let mut file: ScenarioFile = deserialize(t, &shown)?;
+    if let Some(f) = &file.robot.file {
+        let arm = crate::robot::file::RobotFile::load(&relative_to(path, f)).map_err(|e| ScenarioError::Parse {
+            path: shown.clone(),
+            key: "robot.file".into(),
+            message: e.to_string(),
+        })?;
+        file.robot.arm = Some(crate::experiment::Arm(std::sync::Arc::new(arm)));
+    }
     check(&file, &shown)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
     Ok(Scenario {
@@ -545,8 +553,21 @@ pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
 pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
     let shown = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
-    let t = table(&text, &shown)?;
+    let mut t = table(&text, &shown)?;
+    // A robot file is named relative to its scenario; the table may be loaded under another name
+    // (a sweep point), so it carries the path from here on.
+    if let Some(toml::Value::Table(robot)) = t.get_mut("robot")
+        && let Some(toml::Value::String(f)) = robot.get("file")
+    {
+        let resolved = relative_to(path, Path::new(f)).display().to_string();
+        robot.insert("file".into(), toml::Value::String(resolved));
+    }
     Ok((text, t))
+}
+
+/// `file` as named in the scenario at `scenario`: relative paths from the scenario's directory.
+fn relative_to(scenario: &Path, file: &Path) -> PathBuf {
+    if file.is_absolute() { file.to_path_buf() } else { scenario.parent().unwrap_or(Path::new("")).join(file) }
 }
 
 /// Loads and checks a scenario of either kind from its TOML table; `text` is what the manifest

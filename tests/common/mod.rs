@@ -48,3 +48,11 @@ pub fn scratch(name: &str) -> PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+
+/// The text of the repo's scenario `name` with its robot file named by absolute path, so that a
+/// copy written elsewhere still finds it.
+#[allow(dead_code)]
+pub fn scenario_text_anywhere(name: &str) -> String {
+    let text = std::fs::read_to_string(repo().join("scenarios").join(name)).unwrap();
+    text.replace("file = \"../robots/", &format!("file = \"{}/robots/", repo().display()))
+}

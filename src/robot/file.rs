@@ -1,0 +1,221 @@
+//! Robots as data: a robot file (TOML) with the modified-DH table (plus a Hayati beta where two
+//! consecutive axes are parallel), joint limits, link masses and centres of mass, and the truth a
+//! study simulates as named parameter values. `robots/irb120.toml` and `robots/er20c10.toml` are the
+//! two built-in arms as files (a test checks them against [`super::builtin`] bit for bit).
+//!
+//! Units at the edge: mm, deg, kg, mdeg/(N m) for compliance; a `[truth]` entry is in its
+//! parameter's unit (mm, deg, mdeg/(N m), as Table 7 prints them), or in rad when its name ends
+//! in `_rad` (`theta_offs2_rad`), for values given in radians by their source.
+//!
+//! ```toml
+//! name = "ABB IRB 120-3/0.58"
+//! source = "TriCal paper Table 3; limits and masses from the ROS-Industrial URDF"
+//! gravity_m_s2 = 9.81
+//!
+//! [[joint]]            # one per joint, 6, joint 1 first
+//! alpha_deg = 0.0      # alpha_{i-1}
+//! a_mm = 0.0           # a_{i-1}
+//! beta_deg = 0.0       # beta_{i-1} (Hayati), only where alpha_{i-1} is 0 or 180 deg
+//! theta_offset_deg = 0.0
+//! d_mm = 290.0
+//! compliance_mdeg_per_nm = 0.0
+//! limits_deg = [-165.0, 165.0]
+//! mass_kg = 3.067
+//! com_mm = [0.098, -0.12, -51.59]   # in MDH frame i
+//!
+//! [truth]              # the robot a study simulates: named values (absent: the nominal)
+//! a2 = 270.146
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+use serde::Deserialize;
+
+use super::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
+use super::params::{ParamId, ParamSet, Unit};
+
+/// A robot file that cannot be used: the file, the field, what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{path}: {field}: {message}")]
+pub struct RobotFileError {
+    /// The file.
+    pub path: PathBuf,
+    /// The field (`joint[3].limits_deg`, `truth.a2`).
+    pub field: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    name: String,
+    #[serde(default)]
+    source: Option<String>,
+    gravity_m_s2: f64,
+    joint: Vec<JointRow>,
+    #[serde(default)]
+    truth: BTreeMap<String, f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct JointRow {
+    alpha_deg: f64,
+    a_mm: f64,
+    #[serde(default)]
+    beta_deg: f64,
+    theta_offset_deg: f64,
+    d_mm: f64,
+    #[serde(default)]
+    compliance_mdeg_per_nm: f64,
+    limits_deg: [f64; 2],
+    #[serde(default)]
+    mass_kg: f64,
+    #[serde(default)]
+    com_mm: [f64; 3],
+}
+
+/// A loaded robot file: the nominal arm (base at the world origin, TCP on the flange, no payload)
+/// and the truth as named values.
+#[derive(Clone, Debug)]
+pub struct RobotFile {
+    /// The file it came from.
+    pub path: PathBuf,
+    /// Where its values come from.
+    pub source: Option<String>,
+    /// The nominal arm.
+    pub nominal: RobotModel,
+    /// The truth: parameter and its value in internal units, by name.
+    pub truth: Vec<(ParamId, f64)>,
+}
+
+impl RobotFile {
+    /// Reads and checks `path`.
+    pub fn load(path: &Path) -> Result<Self, RobotFileError> {
+        let err = |field: &str, message: String| RobotFileError { path: path.to_path_buf(), field: field.into(), message };
+        let text = std::fs::read_to_string(path).map_err(|e| err("(file)", e.to_string()))?;
+        Self::parse(path, &text).map_err(|(field, message)| err(&field, message))
+    }
+
+    fn parse(path: &Path, text: &str) -> Result<Self, (String, String)> {
+        let f: File = toml::from_str(text).map_err(|e| {
+            let msg = e.message().to_string();
+            // toml names the table or key when it can; the span's line otherwise.
+            let at = e.span().map(|s| format!("line {}", text[..s.start.min(text.len())].lines().count().max(1))).unwrap_or_default();
+            (if at.is_empty() { "(file)".to_string() } else { at }, msg)
+        })?;
+        let finite = |field: String, v: f64| if v.is_finite() { Ok(v) } else { Err((field, format!("{v} is not a finite number"))) };
+        finite("gravity_m_s2".into(), f.gravity_m_s2)?;
+        if !(0.0..=100.0).contains(&f.gravity_m_s2) {
+            return Err(("gravity_m_s2".into(), format!("{}: within [0, 100] m/s^2", f.gravity_m_s2)));
+        }
+        if f.joint.len() != JOINTS {
+            return Err((
+                "joint".into(),
+                format!("{} joint rows: calsim's arms are serial with {JOINTS} revolute joints, joint 1 first", f.joint.len()),
+            ));
+        }
+        for (i, j) in f.joint.iter().enumerate() {
+            let at = |k: &str| format!("joint[{}].{k}", i + 1);
+            for (k, v) in [
+                ("alpha_deg", j.alpha_deg),
+                ("a_mm", j.a_mm),
+                ("beta_deg", j.beta_deg),
+                ("theta_offset_deg", j.theta_offset_deg),
+                ("d_mm", j.d_mm),
+                ("compliance_mdeg_per_nm", j.compliance_mdeg_per_nm),
+                ("mass_kg", j.mass_kg),
+            ] {
+                finite(at(k), v)?;
+            }
+            for (k, v) in j.limits_deg.iter().chain(&j.com_mm).enumerate() {
+                finite(if k < 2 { format!("{}[{k}]", at("limits_deg")) } else { format!("{}[{}]", at("com_mm"), k - 2) }, *v)?;
+            }
+            if j.limits_deg[0] >= j.limits_deg[1] {
+                return Err((at("limits_deg"), format!("{:?}: the lower limit must be below the upper", j.limits_deg)));
+            }
+            for (k, v, lim) in
+                [("a_mm", j.a_mm, 1e5), ("d_mm", j.d_mm, 1e5), ("alpha_deg", j.alpha_deg, 360.0), ("beta_deg", j.beta_deg, 360.0)]
+            {
+                if v.abs() > lim {
+                    return Err((at(k), format!("{v}: beyond +-{lim}")));
+                }
+            }
+            if j.mass_kg < 0.0 {
+                return Err((at("mass_kg"), format!("{}: a mass cannot be negative", j.mass_kg)));
+            }
+            // A Hayati beta turns about the y axis of frame i-1; it is the parameter of choice
+            // where the axes of joints i-1 and i are parallel (alpha_{i-1} = 0 or 180 deg), and
+            // redundant with alpha, a and d elsewhere.
+            let parallel = (j.alpha_deg.rem_euclid(180.0)).min(180.0 - j.alpha_deg.rem_euclid(180.0)) < 1.0;
+            if j.beta_deg != 0.0 && !parallel {
+                return Err((
+                    at("beta_deg"),
+                    format!(
+                        "{}: a beta needs the axes of joints {} and {} parallel (alpha = 0 or 180 deg), here alpha = {} deg",
+                        j.beta_deg,
+                        i,
+                        i + 1,
+                        j.alpha_deg
+                    ),
+                ));
+            }
+        }
+        let links: [Link; JOINTS] = std::array::from_fn(|i| {
+            let j = &f.joint[i];
+            Link {
+                alpha: j.alpha_deg.to_radians(),
+                a: j.a_mm,
+                beta: j.beta_deg.to_radians(),
+                theta_offset: j.theta_offset_deg.to_radians(),
+                d: j.d_mm,
+                compliance: Unit::MdegPerNm.to_internal(j.compliance_mdeg_per_nm),
+            }
+        });
+        let data = RobotData {
+            name: f.name.clone(),
+            links,
+            world_from_base: XyzZyx::default(),
+            flange_tcp_mm: Vector3::zeros(),
+            limits: std::array::from_fn(|i| JointLimit {
+                min: f.joint[i].limits_deg[0].to_radians(),
+                max: f.joint[i].limits_deg[1].to_radians(),
+            }),
+            links_inertial: std::array::from_fn(|i| Inertial { mass_kg: f.joint[i].mass_kg, com_mm: Vector3::from(f.joint[i].com_mm) }),
+            payload: Inertial::NONE,
+            gravity_base: Vector3::new(0.0, 0.0, -f.gravity_m_s2),
+        };
+        let nominal = RobotModel::new(data).map_err(|e| ("joint".to_string(), e.to_string()))?;
+        let mut truth = Vec::with_capacity(f.truth.len());
+        for (name, &v) in &f.truth {
+            let field = format!("truth.{name}");
+            finite(field.clone(), v)?;
+            let (base, rad) = match name.strip_suffix("_rad") {
+                Some(b) => (b, true),
+                None => (name.as_str(), false),
+            };
+            let id = ParamId::parse(base).ok_or_else(|| (field.clone(), format!("unknown parameter `{base}`")))?;
+            let unit = id.unit();
+            if rad && unit != Unit::Deg {
+                return Err((field, format!("`_rad` is for angles; {base} is in {}", unit.symbol())));
+            }
+            truth.push((id, if rad { v } else { unit.to_internal(v) }));
+        }
+        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth };
+        file.truth_on(&file.nominal).map_err(|e| ("truth".to_string(), e))?;
+        Ok(file)
+    }
+
+    /// `model` (this arm with a scenario's base, tool and payload) with the truth's values set.
+    pub fn truth_on(&self, model: &RobotModel) -> Result<RobotModel, String> {
+        if self.truth.is_empty() {
+            return Ok(model.clone());
+        }
+        let set = ParamSet::new(self.truth.iter().map(|(id, _)| *id).collect()).map_err(|e| e.to_string())?;
+        let values: Vec<f64> = self.truth.iter().map(|(_, v)| *v).collect();
+        set.unpack(model, &values).map_err(|e| e.to_string())
+    }
+}
