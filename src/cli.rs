@@ -50,6 +50,33 @@ enum Command {
     Budget(BudgetArgs),
     /// Table 8 of the TriCal paper: the same robot calibrated with the TriCal, a laser tracker and an optical CMM.
     Table8(Table8Args),
+    /// Export an identified model of a TriCal results directory: a robot file and a YAML overlay.
+    Export(ExportArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct ExportArgs {
+    /// A results directory of `calsim run` (with its manifest.json and tasks.parquet).
+    results: PathBuf,
+    /// The task to export, by index (see tasks.parquet).
+    #[arg(long, conflicts_with_all = ["set_size", "pick"])]
+    task: Option<usize>,
+    /// Set size to pick from (default: the scenario's table set size, 75 in the paper).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    set_size: Option<u32>,
+    /// Which task of that set size: the median, best or worst validation median.
+    #[arg(long, value_enum, default_value_t = PickArg::Median)]
+    pick: PickArg,
+    /// Directory the export goes to (in `<scenario>.task-<N>`; default: beside the results).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq)]
+enum PickArg {
+    Median,
+    Best,
+    Worst,
 }
 
 #[derive(clap::Args, Debug)]
@@ -242,6 +269,7 @@ pub fn main() -> ExitCode {
         Command::Merge(args) => merge(&args.shards, &args.out),
         Command::Budget(args) => budget(args),
         Command::Table8(args) => table8(args),
+        Command::Export(args) => export(args),
     };
     match result {
         Ok(code) => code,
@@ -592,6 +620,43 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
     if failed == units.len() {
         return Err(format!("{}: every work unit failed (see {}/summary.md)", info.name, dest.display()));
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn export(args: &ExportArgs) -> Result<ExitCode, String> {
+    use crate::export::Pick;
+    let n = match args.set_size {
+        Some(n) => n as usize,
+        None => {
+            // The table set size of the results' scenario.
+            let m: serde_json::Value = std::fs::read(args.results.join("manifest.json"))
+                .ok()
+                .and_then(|b| serde_json::from_slice(&b).ok())
+                .ok_or_else(|| format!("{}: manifest.json: not a results directory of `calsim run`", args.results.display()))?;
+            let path = m.get("scenario_path").and_then(|p| p.as_str()).map(PathBuf::from).unwrap_or_default();
+            match crate::io::scenario::load_any(&path).map_err(|e| e.to_string())? {
+                crate::io::scenario::Loaded::Trical(s) => s.study.table_set_size as usize,
+                crate::io::scenario::Loaded::Spms(s) => s.spec.study.table_set_size as usize,
+            }
+        }
+    };
+    let pick = match (args.task, args.pick) {
+        (Some(t), _) => Pick::Task(t),
+        (None, PickArg::Median) => Pick::Median(n),
+        (None, PickArg::Best) => Pick::Best(n),
+        (None, PickArg::Worst) => Pick::Worst(n),
+    };
+    let e = crate::export::identification(&args.results, pick)?;
+    let out = args.out.clone().unwrap_or_else(|| args.results.parent().map(Path::to_path_buf).unwrap_or_default());
+    let name = format!("{}.task-{}", e.scenario, e.task);
+    let dest = crate::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;
+    println!(
+        "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, calibration.yaml",
+        e.task,
+        e.set_size,
+        e.validation_median_mm,
+        dest.display()
+    );
     Ok(ExitCode::SUCCESS)
 }
 

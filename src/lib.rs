@@ -5,6 +5,7 @@ pub mod campaign;
 pub mod cell;
 pub mod cli;
 pub mod experiment;
+pub mod export;
 pub mod identify;
 pub mod instrument;
 pub mod io;

@@ -31,7 +31,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
 use super::params::{ParamId, ParamSet, Unit};
@@ -48,19 +48,38 @@ pub struct RobotFileError {
     pub message: String,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct File {
     name: String,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     source: Option<String>,
     gravity_m_s2: f64,
+    /// `world_from_base` (eq. 7): `[x, y, z]` mm, `[alpha, beta, gamma]` deg about z, y, x.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    base_mm_deg: Option<[f64; 6]>,
+    /// TCP in the flange frame, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tool_mm: Option<[f64; 3]>,
+    /// Payload in the flange frame: kg, then its centre of mass in mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    payload: Option<Payload>,
     joint: Vec<JointRow>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     truth: BTreeMap<String, f64>,
+    /// Standard deviation of identified parameters, in their units (an exported calibration).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    std: BTreeMap<String, f64>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct Payload {
+    mass_kg: f64,
+    com_mm: [f64; 3],
+}
+
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct JointRow {
     alpha_deg: f64,
@@ -90,6 +109,43 @@ pub struct RobotFile {
     pub nominal: RobotModel,
     /// The truth: parameter and its value in internal units, by name.
     pub truth: Vec<(ParamId, f64)>,
+    /// Standard deviations of an exported calibration, in each parameter's unit, by name.
+    pub std: Vec<(ParamId, f64)>,
+}
+
+/// The robot file text of `model` (every value of its data: the joints, base, tool and payload),
+/// with `std` (parameter and standard deviation in internal units) and `source` as provenance.
+pub fn to_text(model: &RobotModel, source: &str, std: &[(ParamId, f64)]) -> String {
+    let d = model.data();
+    let b = d.world_from_base;
+    let f = File {
+        name: d.name.clone(),
+        source: Some(source.to_string()),
+        gravity_m_s2: -d.gravity_base.z,
+        base_mm_deg: Some([b.x, b.y, b.z, b.alpha.to_degrees(), b.beta.to_degrees(), b.gamma.to_degrees()]),
+        tool_mm: Some(d.flange_tcp_mm.into()),
+        payload: Some(Payload { mass_kg: d.payload.mass_kg, com_mm: d.payload.com_mm.into() }),
+        joint: (0..JOINTS)
+            .map(|i| {
+                let (l, lim, m) = (&d.links[i], &d.limits[i], &d.links_inertial[i]);
+                JointRow {
+                    alpha_deg: l.alpha.to_degrees(),
+                    a_mm: l.a,
+                    beta_deg: l.beta.to_degrees(),
+                    theta_offset_deg: l.theta_offset.to_degrees(),
+                    d_mm: l.d,
+                    compliance_mdeg_per_nm: Unit::MdegPerNm.from_internal(l.compliance),
+                    limits_deg: [lim.min.to_degrees(), lim.max.to_degrees()],
+                    mass_kg: m.mass_kg,
+                    com_mm: m.com_mm.into(),
+                }
+            })
+            .collect(),
+        truth: BTreeMap::new(),
+        std: std.iter().map(|(id, v)| (id.name(), id.unit().from_internal(*v))).collect(),
+    };
+    let body = toml::to_string(&f).unwrap_or_default();
+    format!("# A calsim robot file (format: src/robot/file.rs); units mm, deg, kg, mdeg/(N m).\n{body}")
 }
 
 impl RobotFile {
@@ -175,17 +231,37 @@ impl RobotFile {
                 compliance: Unit::MdegPerNm.to_internal(j.compliance_mdeg_per_nm),
             }
         });
+        for (k, v) in f.base_mm_deg.iter().flatten().enumerate() {
+            finite(format!("base_mm_deg[{k}]"), *v)?;
+        }
+        for (k, v) in f.tool_mm.iter().flatten().enumerate() {
+            finite(format!("tool_mm[{k}]"), *v)?;
+        }
+        if let Some(p) = &f.payload {
+            finite("payload.mass_kg".into(), p.mass_kg)?;
+            for (k, v) in p.com_mm.iter().enumerate() {
+                finite(format!("payload.com_mm[{k}]"), *v)?;
+            }
+        }
+        let base = f.base_mm_deg.map_or_else(XyzZyx::default, |[x, y, z, a, b, g]| XyzZyx {
+            x,
+            y,
+            z,
+            alpha: a.to_radians(),
+            beta: b.to_radians(),
+            gamma: g.to_radians(),
+        });
         let data = RobotData {
             name: f.name.clone(),
             links,
-            world_from_base: XyzZyx::default(),
-            flange_tcp_mm: Vector3::zeros(),
+            world_from_base: base,
+            flange_tcp_mm: f.tool_mm.map_or_else(Vector3::zeros, Vector3::from),
             limits: std::array::from_fn(|i| JointLimit {
                 min: f.joint[i].limits_deg[0].to_radians(),
                 max: f.joint[i].limits_deg[1].to_radians(),
             }),
             links_inertial: std::array::from_fn(|i| Inertial { mass_kg: f.joint[i].mass_kg, com_mm: Vector3::from(f.joint[i].com_mm) }),
-            payload: Inertial::NONE,
+            payload: f.payload.as_ref().map_or(Inertial::NONE, |p| Inertial { mass_kg: p.mass_kg, com_mm: Vector3::from(p.com_mm) }),
             gravity_base: Vector3::new(0.0, 0.0, -f.gravity_m_s2),
         };
         let nominal = RobotModel::new(data).map_err(|e| ("joint".to_string(), e.to_string()))?;
@@ -204,7 +280,14 @@ impl RobotFile {
             }
             truth.push((id, if rad { v } else { unit.to_internal(v) }));
         }
-        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth };
+        let mut std = Vec::with_capacity(f.std.len());
+        for (name, &v) in &f.std {
+            let field = format!("std.{name}");
+            finite(field.clone(), v)?;
+            let id = ParamId::parse(name).ok_or_else(|| (field.clone(), format!("unknown parameter `{name}`")))?;
+            std.push((id, v));
+        }
+        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std };
         file.truth_on(&file.nominal).map_err(|e| ("truth".to_string(), e))?;
         Ok(file)
     }

@@ -169,18 +169,9 @@ pub fn run_on_pool(
     let qs: Vec<_> = observations.iter().map(|o| o.q).collect();
     let pool = PoolJacobian::new(before, &set, &qs);
     let pool_jacobian_s = t0.elapsed().as_secs_f64();
-    let (opts, dopts) = (spec.fit_options(), spec.detmax_options());
-    let table_n = spec.table_set_size as usize;
+    let cx = TaskContext { experiment, before, set: &set, observations, pool: &pool, spec };
     let t1 = Instant::now();
-    let results = engine::run_tasks(&spec.tasks(), seed, crate::seeds::study::TRICAL, progress, |task, rng| {
-        let (id, model) = engine::select_and_identify(task, &pool, &dopts, rng, |chosen| {
-            let obs: Vec<Observation> = chosen.iter().map(|&k| observations[k]).collect();
-            identify(before, &set, &obs, &opts)
-        });
-        let errors = model.as_ref().map(|m| validation_errors(m, experiment, &mut KinState::default()));
-        let validation = errors.as_deref().map(ErrorStats::of).unwrap_or_default();
-        TaskResult { task: task.clone(), id, validation, errors: if task.set_size == table_n { errors } else { None } }
-    });
+    let results = engine::run_tasks(&spec.tasks(), seed, crate::seeds::study::TRICAL, progress, |task, rng| cx.run(task, rng).0);
     let tasks_s = t1.elapsed().as_secs_f64();
 
     let mut st = KinState::default();
@@ -200,6 +191,66 @@ pub fn run_on_pool(
         pool_jacobian_s,
         tasks_s,
     })
+}
+
+/// What every task of a TriCal study shares.
+struct TaskContext<'a> {
+    experiment: &'a Experiment,
+    before: &'a RobotModel,
+    set: &'a ParamSet,
+    observations: &'a [Observation],
+    pool: &'a PoolJacobian,
+    spec: &'a StudySpec,
+}
+
+impl TaskContext<'_> {
+    /// One task: its set, its fit, its validation; and the identified model.
+    fn run(&self, task: &Task, rng: &mut rand_chacha::ChaCha8Rng) -> (TaskResult, Option<RobotModel>) {
+        let opts = self.spec.fit_options();
+        let (id, model) = engine::select_and_identify(task, self.pool, &self.spec.detmax_options(), rng, |chosen| {
+            let obs: Vec<Observation> = chosen.iter().map(|&k| self.observations[k]).collect();
+            identify(self.before, self.set, &obs, &opts)
+        });
+        let errors = model.as_ref().map(|m| validation_errors(m, self.experiment, &mut KinState::default()));
+        let validation = errors.as_deref().map(ErrorStats::of).unwrap_or_default();
+        let keep = task.set_size == self.spec.table_set_size as usize;
+        (TaskResult { task: task.clone(), id, validation, errors: if keep { errors } else { None } }, model)
+    }
+}
+
+/// One task of a TriCal study redone on its own (the same stream, so the same set and fit as in
+/// the whole study).
+pub struct Recomputed {
+    /// The task's record.
+    pub result: TaskResult,
+    /// The identified model (`None`: the set could not separate the parameters).
+    pub model: Option<RobotModel>,
+    /// The identified parameter set.
+    pub set: ParamSet,
+    /// The chosen set's observations.
+    pub observations: Vec<Observation>,
+}
+
+/// Redoes task `index` of the study `spec` on `experiment` (`None`: no such task).
+pub fn recompute_task(
+    experiment: &Experiment,
+    before: &RobotModel,
+    spec: &StudySpec,
+    seed: u64,
+    index: usize,
+) -> Result<Option<Recomputed>, crate::robot::ParamError> {
+    let set = spec.parameter_set(ParamSet::trical_31)?;
+    let observations: Vec<Observation> =
+        experiment.campaign.pool.iter().map(|p| experiment.campaign.observation(&experiment.cell, p)).collect();
+    let qs: Vec<_> = observations.iter().map(|o| o.q).collect();
+    let pool = PoolJacobian::new(before, &set, &qs);
+    let Some(task) = spec.tasks().into_iter().find(|t| t.index == index) else {
+        return Ok(None);
+    };
+    let cx = TaskContext { experiment, before, set: &set, observations: &observations, pool: &pool, spec };
+    let (result, model) = cx.run(&task, &mut crate::seeds::task_stream(seed, crate::seeds::study::TRICAL, index));
+    let chosen = result.id.chosen.iter().map(|&k| observations[k]).collect();
+    Ok(Some(Recomputed { result, model, set, observations: chosen }))
 }
 
 /// Most identifications per set size a study takes, in a file and on the command line alike.

@@ -1,0 +1,186 @@
+//! The calibrated model out of calsim: one identification of a results directory, redone from its
+//! scenario and seed (the same stream, so the same set and fit, checked against the results), as a
+//! robot file (every value of the identified model, each identified parameter's standard deviation
+//! from the fit's covariance) and a YAML overlay of per-joint corrections against the model before
+//! calibration.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::*;
+use sha2::Digest;
+
+use crate::identify::observability::parameter_covariance;
+use crate::io::scenario::{Loaded, load_any};
+use crate::robot::{ParamId, RobotModel};
+use crate::study::prediction::noise_estimate;
+
+/// Which identification of the results to export.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pick {
+    /// Task by index.
+    Task(usize),
+    /// At a set size: the task whose validation median is the median (the lower middle of an even
+    /// count), the lowest or the highest.
+    Median(usize),
+    /// See `Median`.
+    Best(usize),
+    /// See `Median`.
+    Worst(usize),
+}
+
+/// An identification redone for export.
+pub struct Export {
+    /// The scenario's name.
+    pub scenario: String,
+    /// Task index.
+    pub task: usize,
+    /// Its set size.
+    pub set_size: usize,
+    /// Validation median of the task, mm.
+    pub validation_median_mm: f64,
+    /// The model before calibration.
+    pub before: RobotModel,
+    /// The identified model.
+    pub model: RobotModel,
+    /// Identified parameters and their standard deviation (internal units).
+    pub std: Vec<(ParamId, f64)>,
+}
+
+fn err(dir: &Path, what: impl std::fmt::Display) -> String {
+    format!("{}: {what}", dir.display())
+}
+
+/// Redoes the identification `pick` of the TriCal results in `dir`.
+pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
+    #[derive(serde::Deserialize)]
+    struct Manifest {
+        scenario_path: PathBuf,
+        scenario_sha256: String,
+        seed: u64,
+    }
+    let manifest: Manifest = std::fs::read(dir.join("manifest.json"))
+        .map_err(|e| err(dir, format!("manifest.json: {e} (not a results directory of `calsim run`)")))
+        .and_then(|b| serde_json::from_slice(&b).map_err(|e| err(dir, format!("manifest.json: {e}"))))?;
+    let text =
+        std::fs::read_to_string(&manifest.scenario_path).map_err(|e| err(dir, format!("{}: {e}", manifest.scenario_path.display())))?;
+    if format!("{:x}", sha2::Sha256::digest(text.as_bytes())) != manifest.scenario_sha256 {
+        return Err(err(dir, format!("{} changed since these results were written: run it again", manifest.scenario_path.display())));
+    }
+    let s = match load_any(&manifest.scenario_path).map_err(|e| e.to_string())? {
+        Loaded::Trical(s) => s,
+        Loaded::Spms(_) => return Err(err(dir, "export takes TriCal results (the SPMS robot calibration is not exported yet)")),
+    };
+    let tasks = tasks_table(dir)?;
+    let index = match pick {
+        Pick::Task(t) => t,
+        Pick::Median(n) | Pick::Best(n) | Pick::Worst(n) => {
+            let mut at: Vec<(f64, usize)> = tasks.iter().filter(|t| t.1 == n && t.2.is_finite()).map(|t| (t.2, t.0)).collect();
+            at.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let k = match pick {
+                Pick::Best(_) => 0,
+                Pick::Worst(_) => at.len().saturating_sub(1),
+                _ => (at.len().saturating_sub(1)) / 2,
+            };
+            at.get(k).map(|x| x.1).ok_or_else(|| err(dir, format!("--set-size {n}: no identified task of that size in tasks.parquet")))?
+        }
+    };
+    let row = tasks.iter().find(|t| t.0 == index).ok_or_else(|| err(dir, format!("--task {index}: no such task in tasks.parquet")))?;
+    let experiment = s.experiment.build(manifest.seed).map_err(|e| err(dir, format!("campaign: {e}")))?;
+    let before = s.experiment.before_model(&experiment.campaign);
+    let r = crate::study::recompute_task(&experiment, &before, &s.study, manifest.seed, index)
+        .map_err(|e| err(dir, e))?
+        .ok_or_else(|| err(dir, format!("task {index} is not in the scenario's study")))?;
+    let model = r.model.ok_or_else(|| err(dir, format!("task {index}: its set could not separate the parameters: no model")))?;
+    if r.result.validation.median.to_bits() != row.2.to_bits() {
+        return Err(err(
+            dir,
+            format!("task {index}: redone it gives a validation median of {} mm, the results say {} mm", r.result.validation.median, row.2),
+        ));
+    }
+    let (n, m) = (r.observations.len(), r.set.len());
+    let sigma = noise_estimate(r.result.id.residual_rms_mm, n, m);
+    let qs: Vec<_> = r.observations.iter().map(|o| o.q).collect();
+    let cov = parameter_covariance(&model, &r.set, &qs, sigma);
+    let std = r.set.ids().iter().enumerate().map(|(j, id)| (*id, cov.as_ref().map_or(f64::NAN, |c| c[(j, j)].max(0.0).sqrt()))).collect();
+    Ok(Export {
+        scenario: s.name.clone(),
+        task: index,
+        set_size: r.result.task.set_size,
+        validation_median_mm: r.result.validation.median,
+        before,
+        model,
+        std,
+    })
+}
+
+/// (task, set size, validation median) of every row of `dir/tasks.parquet`.
+fn tasks_table(dir: &Path) -> Result<Vec<(usize, usize, f64)>, String> {
+    let path = dir.join("tasks.parquet");
+    let file = std::fs::File::open(&path).map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
+    let df = ParquetReader::new(file).finish().map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
+    let col = |name: &str| df.column(name).map_err(|e| err(dir, format!("tasks.parquet: {e}")));
+    let task = col("task")?.cast(&DataType::UInt64).map_err(|e| err(dir, e))?;
+    let size = col("set_size")?.cast(&DataType::UInt64).map_err(|e| err(dir, e))?;
+    let median = col("validation_median_mm")?.cast(&DataType::Float64).map_err(|e| err(dir, e))?;
+    let (task, size, median) =
+        (task.u64().map_err(|e| err(dir, e))?, size.u64().map_err(|e| err(dir, e))?, median.f64().map_err(|e| err(dir, e))?);
+    Ok(task
+        .iter()
+        .zip(size.iter())
+        .zip(median.iter())
+        .filter_map(|((t, s), m)| Some((t? as usize, s? as usize, m.unwrap_or(f64::NAN))))
+        .collect())
+}
+
+/// The YAML overlay: the identified model's corrections against the model before calibration, per
+/// joint (the joint-zero offset first, as drivers apply it), then the base and the tool. Lengths
+/// in metres and angles in radians (ROS conventions).
+pub fn yaml_overlay(e: &Export) -> String {
+    let (b, m) = (e.before.data(), e.model.data());
+    let mut y = String::new();
+    let _ = writeln!(y, "# calsim calibration of {} (scenario {}, task {}, n = {}).", m.name, e.scenario, e.task, e.set_size);
+    let _ = writeln!(y, "# Identified minus before calibration, modified DH (alpha_{{i-1}}, a_{{i-1}}, beta_{{i-1}}, theta_i, d_i);");
+    let _ = writeln!(y, "# offset: add to each joint's zero. Metres, radians, rad/(N m). The full model: robot.toml.");
+    let _ = writeln!(y, "joints:");
+    for (i, (lb, lm)) in b.links.iter().zip(&m.links).enumerate() {
+        let _ = writeln!(y, "  joint_{}:", i + 1);
+        let _ = writeln!(y, "    offset: {:e}", lm.theta_offset - lb.theta_offset);
+        let _ = writeln!(y, "    alpha: {:e}", lm.alpha - lb.alpha);
+        let _ = writeln!(y, "    a: {:e}", (lm.a - lb.a) * 1e-3);
+        let _ = writeln!(y, "    beta: {:e}", lm.beta - lb.beta);
+        let _ = writeln!(y, "    d: {:e}", (lm.d - lb.d) * 1e-3);
+        let _ = writeln!(y, "    compliance: {:e}", lm.compliance - lb.compliance);
+    }
+    let (wb, wm) = (b.world_from_base, m.world_from_base);
+    let _ = writeln!(y, "base:   # world_from_base, eq. 7: translation, then rotations about z, y, x");
+    for (k, v) in [("x", wm.x - wb.x), ("y", wm.y - wb.y), ("z", wm.z - wb.z)] {
+        let _ = writeln!(y, "  {k}: {:e}", v * 1e-3);
+    }
+    for (k, v) in [("yaw", wm.alpha - wb.alpha), ("pitch", wm.beta - wb.beta), ("roll", wm.gamma - wb.gamma)] {
+        let _ = writeln!(y, "  {k}: {v:e}");
+    }
+    let _ = writeln!(y, "tool:   # TCP in the flange frame");
+    for (k, v) in ["x", "y", "z"].iter().zip((m.flange_tcp_mm - b.flange_tcp_mm).iter()) {
+        let _ = writeln!(y, "  {k}: {:e}", v * 1e-3);
+    }
+    y
+}
+
+/// Writes `robot.toml` and `calibration.yaml` of `e` into `out/<name>` atomically.
+pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
+    let source = format!(
+        "calsim {} export: scenario {}, task {} (n = {}), validation median {:.4} mm",
+        env!("CARGO_PKG_VERSION"),
+        e.scenario,
+        e.task,
+        e.set_size,
+        e.validation_median_mm
+    );
+    let robot = crate::robot::file::to_text(&e.model, &source, &e.std);
+    let yaml = yaml_overlay(e);
+    crate::io::out_dir::write_atomically(out, name, |dir| {
+        std::fs::write(dir.join("robot.toml"), &robot)?;
+        std::fs::write(dir.join("calibration.yaml"), &yaml)
+    })
+}

@@ -1,0 +1,60 @@
+//! The calibrated model out: `calsim export` writes the identified model as a robot file whose
+//! forward kinematics is the identified model's, with every identified parameter's std.
+
+mod common;
+
+use calsim::campaign::uniform_configuration;
+use calsim::io::scenario::{Loaded, load_any};
+use calsim::robot::file::RobotFile;
+use calsim::robot::{KinState, forward};
+use common::{calsim, repo, scratch};
+
+#[test]
+fn an_exported_robot_file_is_the_identified_model() {
+    let dir = scratch("export");
+    let scenario = repo().join("scenarios/ci_quick.toml");
+    let out = dir.join("out");
+    let o = calsim().args(["run", scenario.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let results = out.join("ci_quick");
+    let o = calsim().args(["export", results.to_str().unwrap(), "--out", dir.join("export").to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let exported = std::fs::read_dir(dir.join("export")).unwrap().map(|e| e.unwrap().path()).find(|p| p.is_dir()).expect("an export");
+    let task: usize = exported.to_str().unwrap().rsplit("task-").next().unwrap().parse().unwrap();
+    let file = RobotFile::load(&exported.join("robot.toml")).expect("the exported robot file loads");
+    assert!(std::fs::read_to_string(exported.join("calibration.yaml")).unwrap().contains("joint_6:"));
+
+    // The identified model, redone from the scenario.
+    let Loaded::Trical(s) = load_any(&scenario).unwrap() else { panic!("a TriCal scenario") };
+    let e = s.experiment.build(s.seed).unwrap();
+    let before = s.experiment.before_model(&e.campaign);
+    let r = calsim::study::recompute_task(&e, &before, &s.study, s.seed, task).unwrap().expect("the task exists");
+    let model = r.model.expect("an identified model");
+    assert_eq!(file.std.len(), r.set.len(), "a std per identified parameter");
+    assert!(file.std.iter().all(|(_, v)| v.is_finite() && *v > 0.0));
+    // 1,000 configurations within the limits: the TCPs agree to 1e-9 mm (the file holds degrees,
+    // so the angles come back to within their rounding).
+    let mut rng = common::rng(1000);
+    let (mut a, mut b) = (KinState::default(), KinState::default());
+    let worst = (0..1000)
+        .map(|_| {
+            let q = uniform_configuration(&model, 0.0, &mut rng);
+            (forward(&model, &mut a, &q) - forward(&file.nominal, &mut b, &q)).norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "largest TCP difference {worst:e} mm");
+}
+
+#[test]
+fn bad_export_input_is_one_line_and_exit_2() {
+    let dir = scratch("export-bad");
+    for (args, expect) in
+        [(vec!["export", dir.to_str().unwrap()], "manifest.json"), (vec!["export", dir.to_str().unwrap(), "--task", "x"], "--task")]
+    {
+        let o = calsim().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(expect), "{args:?}: {err}");
+    }
+}
