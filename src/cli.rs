@@ -651,7 +651,7 @@ fn export(args: &ExportArgs) -> Result<ExitCode, String> {
     let name = format!("{}.task-{}", e.scenario, e.task);
     let dest = crate::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;
     println!(
-        "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, calibration.yaml",
+        "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, robot.urdf, calibration.yaml",
         e.task,
         e.set_size,
         e.validation_median_mm,

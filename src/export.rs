@@ -167,7 +167,7 @@ pub fn yaml_overlay(e: &Export) -> String {
     y
 }
 
-/// Writes `robot.toml` and `calibration.yaml` of `e` into `out/<name>` atomically.
+/// Writes `robot.toml`, `robot.urdf` and `calibration.yaml` of `e` into `out/<name>` atomically.
 pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
     let source = format!(
         "calsim {} export: scenario {}, task {} (n = {}), validation median {:.4} mm",
@@ -179,8 +179,94 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
     );
     let robot = crate::robot::file::to_text(&e.model, &source, &e.std);
     let yaml = yaml_overlay(e);
+    let urdf = urdf(e).map_err(std::io::Error::other)?;
     crate::io::out_dir::write_atomically(out, name, |dir| {
         std::fs::write(dir.join("robot.toml"), &robot)?;
+        std::fs::write(dir.join("robot.urdf"), &urdf)?;
         std::fs::write(dir.join("calibration.yaml"), &yaml)
     })
+}
+
+/// The URDF of the identified model: `world` -> fixed `base` joint (world_from_base) -> `base_link`
+/// -> revolute `joint_1`..`joint_6` -> `link_6` -> fixed `tcp` joint -> `tcp`. Each revolute joint's
+/// origin is the identified modified-DH transform `Tx(a) Rx(alpha) Ry(beta) Tz(d) Rz(theta_offset)`
+/// (rotating about z by q after it gives MDH frame i, so `link_i` is MDH frame i and its inertial
+/// origin the centre of mass): **the origins carry the joint offsets**; `<calibration rising>`
+/// repeats each offset's correction against the model before calibration, for tools that keep
+/// corrections apart. The joint compliance, which URDF has no element for, is written as
+/// `<calsim_compliance joint="joint_i" rad_per_nm="..."/>` elements (ignored by URDF parsers).
+/// Metres and radians.
+pub fn urdf(e: &Export) -> Result<String, String> {
+    use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+    use urdf_rs::{Axis, Calibration, Joint, JointLimit, JointType, Link, LinkName, Pose, Robot, Vec3};
+    let (b, m) = (e.before.data(), e.model.data());
+    let pose = |t: &Isometry3<f64>| {
+        let (r, p, y) = t.rotation.euler_angles();
+        let v = t.translation.vector * 1e-3;
+        Pose { xyz: Vec3([v.x, v.y, v.z]), rpy: Vec3([r, p, y]) }
+    };
+    let link = |name: &str, inertial: Option<&crate::robot::Inertial>| {
+        let mut l = Link { name: name.into(), inertial: urdf_rs::Inertial::default(), visual: Vec::new(), collision: Vec::new() };
+        if let Some(i) = inertial {
+            let c = i.com_mm * 1e-3;
+            l.inertial.mass.value = i.mass_kg;
+            l.inertial.origin = Pose { xyz: Vec3([c.x, c.y, c.z]), rpy: Vec3([0.0; 3]) };
+        }
+        l
+    };
+    let fixed = |name: &str, parent: &str, child: &str, origin: Pose| Joint {
+        name: name.into(),
+        joint_type: JointType::Fixed,
+        origin,
+        parent: LinkName { link: parent.into() },
+        child: LinkName { link: child.into() },
+        axis: Axis::default(),
+        limit: JointLimit::default(),
+        calibration: None,
+        dynamics: None,
+        mimic: None,
+        safety_controller: None,
+    };
+    let wb = m.world_from_base;
+    let base = Isometry3::from_parts(
+        Translation3::from(wb.translation()),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(wb.rotation())),
+    );
+    let mut links = vec![link("world", None), link("base_link", None)];
+    let mut joints = vec![fixed("base", "world", "base_link", pose(&base))];
+    for (i, (l, lb)) in m.links.iter().zip(&b.links).enumerate() {
+        let t = Isometry3::translation(l.a, 0.0, 0.0)
+            * Isometry3::rotation(Vector3::x() * l.alpha)
+            * Isometry3::rotation(Vector3::y() * l.beta)
+            * Isometry3::translation(0.0, 0.0, l.d)
+            * Isometry3::rotation(Vector3::z() * l.theta_offset);
+        let parent = if i == 0 { "base_link".to_string() } else { format!("link_{i}") };
+        let child = format!("link_{}", i + 1);
+        links.push(link(&child, Some(&m.links_inertial[i])));
+        let lim = m.limits[i];
+        joints.push(Joint {
+            joint_type: JointType::Revolute,
+            axis: Axis { xyz: Vec3([0.0, 0.0, 1.0]) },
+            limit: JointLimit { lower: lim.min, upper: lim.max, effort: 0.0, velocity: 1.0, ..JointLimit::default() },
+            calibration: Some(Calibration { rising: Some(l.theta_offset - lb.theta_offset), falling: None }),
+            ..fixed(&format!("joint_{}", i + 1), &parent, &child, pose(&t))
+        });
+    }
+    let tcp = m.flange_tcp_mm * 1e-3;
+    links.push(link("tcp", None));
+    joints.push(fixed("tcp", "link_6", "tcp", Pose { xyz: Vec3([tcp.x, tcp.y, tcp.z]), rpy: Vec3([0.0; 3]) }));
+    let robot = Robot { name: m.name.clone(), version: None, links, joints, materials: Vec::new() };
+    let text = urdf_rs::write_to_string(&robot).map_err(|err| format!("URDF: {err}"))?;
+    let extension: String = m
+        .links
+        .iter()
+        .enumerate()
+        .map(|(i, l)| format!("  <calsim_compliance joint=\"joint_{}\" rad_per_nm=\"{:e}\"/>\n", i + 1, l.compliance))
+        .collect();
+    let close = text.rfind("</robot>").ok_or("URDF: no closing </robot>")?;
+    Ok(format!(
+        "{}  <!-- calsim: joint compliance (rad/(N m)), theta = q + offset + c tau; not part of URDF -->\n{extension}{}",
+        &text[..close],
+        &text[close..]
+    ))
 }
