@@ -155,7 +155,7 @@ fn ci_check_of_the_spms_scenario_passes_and_writes_every_result() {
 #[test]
 fn a_bad_spms_scenario_is_a_clear_error() {
     let dir = scratch("spms-bad");
-    let text = std::fs::read_to_string(repo().join("scenarios/er20c10_spms.toml")).unwrap();
+    let text = common::scenario_text_anywhere("er20c10_spms.toml");
     for (name, edited, expect) in [
         ("unknown_key.toml", text.replace("cycles = 30", "cycles = 30\ncycle_count = 3"), "iso9283.cycle_count"),
         ("range.toml", text.replace("cube_mm = 400.0", "cube_mm = -400.0"), "[iso9283] cube_mm = -400"),

@@ -640,7 +640,15 @@ pub fn parse_spms(text: &str, path: &Path) -> Result<SpmsScenario, ScenarioError
 
 fn parse_spms_table(text: &str, t: toml::Table, path: &Path) -> Result<SpmsScenario, ScenarioError> {
     let shown = path.display().to_string();
-    let file: SpmsFile = deserialize(with_defaults(t, "study", crate::spms::study::STUDY_DEFAULTS), &shown)?;
+    let mut file: SpmsFile = deserialize(with_defaults(t, "study", crate::spms::study::STUDY_DEFAULTS), &shown)?;
+    if let Some(f) = &file.robot.file {
+        let arm = crate::robot::file::RobotFile::load(&relative_to(path, f)).map_err(|e| ScenarioError::Parse {
+            path: shown.clone(),
+            key: "robot.file".into(),
+            message: e.to_string(),
+        })?;
+        file.robot.arm = Some(crate::experiment::Arm(std::sync::Arc::new(arm)));
+    }
     let spec = crate::spms::study::SpmsSpec {
         head: file.head,
         beams: file.beams,
@@ -755,7 +763,7 @@ pub fn check_spms(f: &crate::spms::study::SpmsSpec, path: &str) -> Result<(), Sc
     c.study(&f.study, st.pool, crate::spms::calibration::default_parameters)?;
     let set = f.study.parameter_set(crate::spms::calibration::default_parameters).expect("checked by study()");
     let tool = nalgebra::Vector3::from(r.sphere_flange_mm);
-    let nominal = crate::robot::builtin::er20c10_table4().edited(|d| d.flange_tcp_mm = tool).expect("a finite tool");
+    let nominal = f.robot.nominal_model().edited(|d| d.flange_tcp_mm = tool).expect("a finite tool");
     c.identifiable(&nominal, &set, "robot.sphere_flange_mm")
 }
 

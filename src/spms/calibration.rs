@@ -41,6 +41,11 @@ pub struct ArmSpec {
     pub unmodelled: UnmodelledSpec,
     /// Spread of the true parameters around the truth table, drawn per world (zero: the table).
     pub spread: crate::robot::SpreadSpec,
+    /// The arm's robot file, relative to the scenario (absent: the built-in ER20-C10, Tables 4-5).
+    pub file: Option<std::path::PathBuf>,
+    /// The loaded robot file (filled by the scenario loader).
+    #[serde(skip)]
+    pub arm: Option<crate::experiment::Arm>,
 }
 
 impl Default for ArmSpec {
@@ -53,6 +58,8 @@ impl Default for ArmSpec {
             repeatability_reference_q_deg: [0.0, 30.0, 30.0, 0.0, 30.0, 0.0],
             unmodelled: UnmodelledSpec::default(),
             spread: crate::robot::SpreadSpec::default(),
+            file: None,
+            arm: None,
         }
     }
 }
@@ -61,23 +68,39 @@ impl Default for ArmSpec {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TruthTable {
-    /// Table 5 with delta theta_2 left out.
+    /// Table 5 (the robot file's truth) with delta theta_2 left out.
     #[serde(rename = "table5_without_dtheta2")]
     Table5WithoutDtheta2,
-    /// All of Table 5.
+    /// All of Table 5 (the robot file's truth).
     Table5,
-    /// Table 4, the nominal: only unmodelled effects remain.
+    /// Table 4 (the robot file's nominal): only unmodelled effects remain.
     Table4,
 }
 
 impl ArmSpec {
     /// The true model for the truth named in the spec (base and tool not yet placed).
     pub fn truth_model(&self) -> RobotModel {
+        let Some(crate::experiment::Arm(arm)) = &self.arm else {
+            return match self.truth {
+                TruthTable::Table5WithoutDtheta2 => er20c10_table5(false),
+                TruthTable::Table5 => er20c10_table5(true),
+                TruthTable::Table4 => er20c10_table4(),
+            };
+        };
+        let full = || arm.truth_on(&arm.nominal).expect("checked when the robot file was loaded");
         match self.truth {
-            TruthTable::Table5WithoutDtheta2 => er20c10_table5(false),
-            TruthTable::Table5 => er20c10_table5(true),
-            TruthTable::Table4 => er20c10_table4(),
+            TruthTable::Table5WithoutDtheta2 => {
+                let nominal_offset = arm.nominal.data().links[1].theta_offset;
+                full().edited(|d| d.links[1].theta_offset = nominal_offset).expect("valid")
+            }
+            TruthTable::Table5 => full(),
+            TruthTable::Table4 => arm.nominal.clone(),
         }
+    }
+
+    /// The arm as its controller believes it before calibration (base and tool not yet placed).
+    pub fn nominal_model(&self) -> RobotModel {
+        self.arm.as_ref().map_or_else(er20c10_table4, |crate::experiment::Arm(a)| a.nominal.clone())
     }
 }
 
@@ -276,7 +299,8 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
     let world_from_tracker = measured_tracker_from_head[0].inverse();
     let tool_nominal = Vector3::from(arm.sphere_flange_mm);
     let tool_true = tool_nominal + Vector3::from_fn(|_, _| normal.sample(&mut rng) * arm.sphere_flange_error_mm);
-    let nominal = er20c10_table4()
+    let nominal = arm
+        .nominal_model()
         .edited(|d| {
             d.world_from_base = crate::robot::XyzZyx::from_isometry(&nominal_heads[0].inverse());
             d.flange_tcp_mm = tool_nominal;
