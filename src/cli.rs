@@ -50,8 +50,25 @@ enum Command {
     Budget(BudgetArgs),
     /// Table 8 of the TriCal paper: the same robot calibrated with the TriCal, a laser tracker and an optical CMM.
     Table8(Table8Args),
-    /// Export an identified model of a TriCal results directory: a robot file and a YAML overlay.
+    /// Export an identified model of a TriCal results directory: a robot file, a URDF and a YAML overlay.
     Export(ExportArgs),
+    /// Joint targets (and corrected Cartesian targets for a nominal-only controller) for TCP targets.
+    Compensate(CompensateArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct CompensateArgs {
+    /// The calibrated model: a robot file (e.g. robot.toml of `calsim export`).
+    model: PathBuf,
+    /// TCP targets in {W}: CSV with the header x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg.
+    targets: PathBuf,
+    /// The controller's nominal model (e.g. before.toml of `calsim export`): also write the
+    /// Cartesian targets to command it.
+    #[arg(long)]
+    nominal: Option<PathBuf>,
+    /// Output CSV (default: standard output).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -270,6 +287,7 @@ pub fn main() -> ExitCode {
         Command::Budget(args) => budget(args),
         Command::Table8(args) => table8(args),
         Command::Export(args) => export(args),
+        Command::Compensate(args) => compensate(args),
     };
     match result {
         Ok(code) => code,
@@ -623,6 +641,28 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
     Ok(ExitCode::SUCCESS)
 }
 
+fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
+    let load = |p: &Path| crate::robot::file::RobotFile::load(p).map(|f| f.nominal).map_err(|e| e.to_string());
+    let model = load(&args.model)?;
+    let nominal = args.nominal.as_deref().map(load).transpose()?;
+    let targets = crate::compensate::read_targets(&args.targets)?;
+    let rows = crate::compensate::compensate(&model, nominal.as_ref(), &targets);
+    let text = crate::compensate::to_csv(&rows)?;
+    match &args.out {
+        Some(out) => {
+            // Written beside and renamed: never a half-written file.
+            let tmp = out.with_extension("csv.partial");
+            std::fs::write(&tmp, &text).and_then(|()| std::fs::rename(&tmp, out)).map_err(|e| format!("{}: {e}", out.display()))?;
+        }
+        None => print!("{text}"),
+    }
+    let unreachable = rows.iter().filter(|r| r.q.is_none()).count();
+    if unreachable > 0 {
+        eprintln!("calsim compensate: {unreachable} of {} targets cannot be reached by the model", rows.len());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn export(args: &ExportArgs) -> Result<ExitCode, String> {
     use crate::export::Pick;
     let n = match args.set_size {
@@ -651,7 +691,7 @@ fn export(args: &ExportArgs) -> Result<ExitCode, String> {
     let name = format!("{}.task-{}", e.scenario, e.task);
     let dest = crate::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;
     println!(
-        "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, robot.urdf, calibration.yaml",
+        "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, robot.urdf, calibration.yaml, before.toml",
         e.task,
         e.set_size,
         e.validation_median_mm,

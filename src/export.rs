@@ -167,7 +167,8 @@ pub fn yaml_overlay(e: &Export) -> String {
     y
 }
 
-/// Writes `robot.toml`, `robot.urdf` and `calibration.yaml` of `e` into `out/<name>` atomically.
+/// Writes `robot.toml`, `before.toml` (the model before calibration), `robot.urdf` and
+/// `calibration.yaml` of `e` into `out/<name>` atomically.
 pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
     let source = format!(
         "calsim {} export: scenario {}, task {} (n = {}), validation median {:.4} mm",
@@ -180,8 +181,10 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
     let robot = crate::robot::file::to_text(&e.model, &source, &e.std);
     let yaml = yaml_overlay(e);
     let urdf = urdf(e).map_err(std::io::Error::other)?;
+    let before = crate::robot::file::to_text(&e.before, &format!("the model before calibration of {}", e.scenario), &[]);
     crate::io::out_dir::write_atomically(out, name, |dir| {
         std::fs::write(dir.join("robot.toml"), &robot)?;
+        std::fs::write(dir.join("before.toml"), &before)?;
         std::fs::write(dir.join("robot.urdf"), &urdf)?;
         std::fs::write(dir.join("calibration.yaml"), &yaml)
     })

@@ -4,6 +4,7 @@ pub mod budget;
 pub mod campaign;
 pub mod cell;
 pub mod cli;
+pub mod compensate;
 pub mod experiment;
 pub mod export;
 pub mod identify;

@@ -66,6 +66,43 @@ fn an_exported_robot_file_is_the_identified_model() {
         })
         .fold(0.0, f64::max);
     assert!(worst < 1e-6, "URDF through k: largest TCP difference {worst:e} mm");
+
+    // Compensation: TCP targets the identified model reaches (20 random configurations); the joint
+    // targets calsim compensate gives put the model's TCP on them, and its corrected Cartesian
+    // targets are the nominal model's TCP at those joints.
+    let mut targets = String::from("x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n");
+    for _ in 0..20 {
+        let q = uniform_configuration(&model, 0.1, &mut rng);
+        let f = calsim::robot::world_from_flange(&model, &mut a, &q);
+        let p = f * nalgebra::Point3::from(model.data().flange_tcp_mm);
+        let t = calsim::robot::XyzZyx::from_isometry(&f);
+        targets.push_str(&format!("{},{},{},{},{},{}\n", p.x, p.y, p.z, t.alpha.to_degrees(), t.beta.to_degrees(), t.gamma.to_degrees()));
+    }
+    let targets_path = dir.join("targets.csv");
+    std::fs::write(&targets_path, targets).unwrap();
+    let out_csv = dir.join("joints.csv");
+    let o = calsim()
+        .args(["compensate", exported.join("robot.toml").to_str().unwrap(), targets_path.to_str().unwrap()])
+        .args(["--nominal", exported.join("before.toml").to_str().unwrap(), "--out", out_csv.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let before = RobotFile::load(&exported.join("before.toml")).expect("before.toml loads").nominal;
+    let text = std::fs::read_to_string(&out_csv).unwrap();
+    let mut rows = 0;
+    for (line, target) in text.lines().skip(1).zip(std::fs::read_to_string(&targets_path).unwrap().lines().skip(1)) {
+        let v: Vec<f64> = line.split(',').map(|x| x.parse().expect("a number")).collect();
+        let t: Vec<f64> = target.split(',').map(|x| x.parse().unwrap()).collect();
+        let q: [f64; 6] = std::array::from_fn(|i| v[i].to_radians());
+        let p = forward(&file.nominal, &mut a, &q);
+        let miss = ((p.x - t[0]).powi(2) + (p.y - t[1]).powi(2) + (p.z - t[2]).powi(2)).sqrt();
+        assert!(miss < 1e-6 && v[6] < 1e-6, "the model's TCP misses the target by {miss:e} mm");
+        let n = forward(&before, &mut b, &q);
+        let corrected = ((n.x - v[7]).powi(2) + (n.y - v[8]).powi(2) + (n.z - v[9]).powi(2)).sqrt();
+        assert!(corrected < 1e-6, "the nominal target is the nominal TCP at q: {corrected:e} mm");
+        rows += 1;
+    }
+    assert_eq!(rows, 20);
 }
 
 #[test]
@@ -79,5 +116,26 @@ fn bad_export_input_is_one_line_and_exit_2() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
         assert!(err.contains(expect), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn bad_targets_are_one_line_naming_the_file_and_line() {
+    let dir = scratch("compensate-bad");
+    let robot = repo().join("robots/irb120.toml");
+    for (name, text, expect) in [
+        ("nan.csv", "x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n300,0,400,0,180,0\n300,nan,400,0,180,0\n", "line 3"),
+        ("header.csv", "x,y,z\n300,0,400\n", "line 1"),
+        ("text.csv", "x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n300,zero,400,0,180,0\n", "y_mm"),
+        ("short.csv", "x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n300,0,400\n", "line 2"),
+        ("empty.csv", "x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n", "no targets"),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        let o = calsim().args(["compensate", robot.to_str().unwrap(), p.to_str().unwrap()]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        assert!(err.contains(name) && err.contains(expect), "{name}: {err}");
     }
 }
