@@ -54,6 +54,17 @@ enum Command {
     Export(ExportArgs),
     /// Joint targets (and corrected Cartesian targets for a nominal-only controller) for TCP targets.
     Compensate(CompensateArgs),
+    /// Convert a URDF arm (a serial chain of six revolute joints) into a calsim robot file.
+    ImportUrdf(ImportUrdfArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct ImportUrdfArgs {
+    /// The URDF file.
+    urdf: PathBuf,
+    /// The robot file to write.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -288,6 +299,7 @@ pub fn main() -> ExitCode {
         Command::Table8(args) => table8(args),
         Command::Export(args) => export(args),
         Command::Compensate(args) => compensate(args),
+        Command::ImportUrdf(args) => import_urdf(args),
     };
     match result {
         Ok(code) => code,
@@ -638,6 +650,25 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
     if failed == units.len() {
         return Err(format!("{}: every work unit failed (see {}/summary.md)", info.name, dest.display()));
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
+    let model = crate::robot::urdf::load(&args.urdf).map_err(|e| e.to_string())?;
+    let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), args.urdf.display());
+    let text = crate::robot::file::to_text(&model, &source, &[]);
+    // Written beside and renamed: never a half-written file.
+    let tmp = args.out.with_extension("toml.partial");
+    std::fs::write(&tmp, &text).and_then(|()| std::fs::rename(&tmp, &args.out)).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let l = &model.data().links;
+    println!(
+        "{}: {} as modified DH (a_i-1 mm: {}; d_i mm: {}) to {}",
+        args.urdf.display(),
+        model.data().name,
+        l.iter().map(|l| format!("{:.3}", l.a)).collect::<Vec<_>>().join(", "),
+        l.iter().map(|l| format!("{:.3}", l.d)).collect::<Vec<_>>().join(", "),
+        args.out.display()
+    );
     Ok(ExitCode::SUCCESS)
 }
 

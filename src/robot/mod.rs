@@ -9,6 +9,7 @@ pub mod params;
 pub mod state;
 pub mod statics;
 pub mod truth;
+pub mod urdf;
 pub mod virtual_robot;
 
 pub use ik::{IkError, inverse};

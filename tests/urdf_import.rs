@@ -1,0 +1,114 @@
+//! A URDF arm into calsim's MDH form: the ROS-Industrial IRB 120 (joint origins as pure
+//! translations, axes along z, y and x; values as cited in reference/irb120.toml) gives the
+//! built-in Table 3 arm's flange position at every configuration; a URDF calsim cannot take is one
+//! error naming the joint or link.
+
+mod common;
+
+use calsim::campaign::uniform_configuration;
+use calsim::robot::builtin::irb120;
+use calsim::robot::{KinState, forward};
+
+/// The ROS-Industrial abb_irb120_support irb120_3_58 chain (base_link to tool0), with `edit`
+/// applied to its text.
+fn irb120_urdf(edit: impl Fn(&str) -> String) -> String {
+    let joint = |i: usize, xyz: &str, axis: &str, lo: f64, hi: f64| {
+        let parent = if i == 1 { "base_link".to_string() } else { format!("link_{}", i - 1) };
+        format!(
+            r#"<joint name="joint_{i}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><parent link="{parent}"/><child link="link_{i}"/><axis xyz="{axis}"/><limit lower="{lo}" upper="{hi}" effort="0" velocity="4.3"/></joint>"#
+        )
+    };
+    let links: String = (1..=6).map(|i| format!(r#"<link name="link_{i}"/>"#)).collect();
+    let text = format!(
+        r#"<robot name="abb_irb120_3_58"><link name="base_link"/>{links}<link name="tool0"/>{}{}{}{}{}{}<joint name="joint_6-tool0" type="fixed"><origin xyz="0 0 0" rpy="0 1.5708 0"/><parent link="link_6"/><child link="tool0"/></joint></robot>"#,
+        joint(1, "0 0 0", "0 0 1", -2.87979, 2.87979),
+        joint(2, "0 0 0.29", "0 1 0", -1.91986, 1.91986),
+        joint(3, "0 0 0.27", "0 1 0", -1.91986, 1.22173),
+        joint(4, "0 0 0.07", "1 0 0", -2.79253, 2.79253),
+        joint(5, "0.302 0 0", "0 1 0", -2.094395, 2.094395),
+        joint(6, "0.072 0 0", "1 0 0", -6.98132, 6.98132),
+    );
+    edit(&text)
+}
+
+fn write(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = common::scratch(&format!("urdf-import-{name}"));
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn the_ros_industrial_irb120_is_the_table3_arm() {
+    let model = calsim::robot::urdf::load(&write("irb120.urdf", &irb120_urdf(str::to_string))).expect("the URDF converts");
+    let table3 = irb120();
+    let (mut a, mut b) = (KinState::default(), KinState::default());
+    let mut rng = common::rng(120);
+    // 1,000 configurations within the limits: the flange positions agree to 1e-6 mm.
+    let worst = (0..1000)
+        .map(|_| {
+            let q = uniform_configuration(&table3, 0.0, &mut rng);
+            (forward(&model, &mut a, &q) - forward(&table3, &mut b, &q)).norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-6, "largest flange difference {worst:e} mm");
+    // The MDH geometry: a2 = 270, a3 = 70, d4 = 302 (Table 3), joints 2 and 3 parallel.
+    let l = &model.data().links;
+    assert!((l[2].a - 270.0).abs() < 1e-9 && (l[3].a - 70.0).abs() < 1e-9 && (l[3].d - 302.0).abs() < 1e-9, "{l:?}");
+    assert!(l[2].alpha.abs() < 1e-12, "joints 2 and 3 are parallel");
+
+    // Through the command line into a robot file, and back: the same flange positions.
+    let dir = common::scratch("urdf-import-cli");
+    let out = dir.join("irb120_from_urdf.toml");
+    let urdf = write("irb120_cli.urdf", &irb120_urdf(str::to_string));
+    let o = common::calsim().args(["import-urdf", urdf.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let file = calsim::robot::file::RobotFile::load(&out).expect("the robot file loads");
+    let worst = (0..1000)
+        .map(|_| {
+            let q = uniform_configuration(&table3, 0.0, &mut rng);
+            (forward(&file.nominal, &mut a, &q) - forward(&model, &mut b, &q)).norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "robot file against the converted model: {worst:e} mm");
+}
+
+#[test]
+fn a_urdf_calsim_cannot_take_is_one_error_naming_the_joint_or_link() {
+    for (name, edit, expect) in [
+        ("prismatic.urdf", ("name=\"joint_3\" type=\"revolute\"", "name=\"joint_3\" type=\"prismatic\""), "joint `joint_3` is Prismatic"),
+        ("reversed.urdf", ("lower=\"-1.91986\" upper=\"1.22173\"", "lower=\"1.22173\" upper=\"-1.91986\""), "joint `joint_3`: limits"),
+        ("axis.urdf", ("<axis xyz=\"1 0 0\"/>", "<axis xyz=\"0 0 0\"/>"), "joint `joint_4`: axis"),
+        (
+            "branch.urdf",
+            (
+                "<link name=\"tool0\"/>",
+                "<link name=\"tool0\"/><link name=\"extra\"/><joint name=\"joint_x\" type=\"revolute\"><parent link=\"link_2\"/><child link=\"extra\"/><axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" effort=\"0\" velocity=\"1\"/></joint>",
+            ),
+            "link `link_2` branches",
+        ),
+        ("five.urdf", ("name=\"joint_6\" type=\"revolute\"", "name=\"joint_6\" type=\"fixed\""), "5 revolute joints"),
+    ] {
+        let p = write(name, &irb120_urdf(|t| t.replacen(edit.0, edit.1, 1)));
+        let e = calsim::robot::urdf::load(&p).expect_err(name).to_string();
+        assert!(e.contains(name) && e.contains(expect), "{name}: {e}");
+        assert_eq!(e.lines().count(), 1, "{name}: {e}");
+        let o = common::calsim().args(["import-urdf", p.to_str().unwrap(), "--out", "/dev/null/x.toml"]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+    }
+}
+
+#[test]
+fn a_malformed_or_missing_urdf_is_one_line_and_exit_2() {
+    let broken = write("broken.urdf", &irb120_urdf(|t| t.replace("</robot>", "")));
+    let missing = broken.with_file_name("missing.urdf");
+    for p in [broken, missing] {
+        let o = common::calsim().args(["import-urdf", p.to_str().unwrap(), "--out", "/tmp/never-written.toml"]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(err.contains(p.file_name().unwrap().to_str().unwrap()), "{err}");
+    }
+}
