@@ -110,14 +110,7 @@ pub fn parse(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
 fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<Scenario, ScenarioError> {
     let shown = path.display().to_string();
     let mut file: ScenarioFile = deserialize(t, &shown)?;
-    if let Some(f) = &file.robot.file {
-        let arm = crate::robot::file::RobotFile::load(&relative_to(path, f)).map_err(|e| ScenarioError::Parse {
-            path: shown.clone(),
-            key: "robot.file".into(),
-            message: e.to_string(),
-        })?;
-        file.robot.arm = Some(crate::experiment::Arm(std::sync::Arc::new(arm)));
-    }
+    file.robot.arm = load_arm(path, file.robot.file.as_deref())?;
     check(&file, &shown)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
     Ok(Scenario {
@@ -565,6 +558,18 @@ pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
     Ok((text, t))
 }
 
+/// The robot file a scenario at `scenario` names (`None`: the built-in arm); an error names the
+/// scenario, `robot.file`, the robot file and its field.
+fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::experiment::Arm>, ScenarioError> {
+    let Some(f) = file else { return Ok(None) };
+    let arm = crate::robot::file::RobotFile::load(&relative_to(scenario, f)).map_err(|e| ScenarioError::Parse {
+        path: scenario.display().to_string(),
+        key: "robot.file".into(),
+        message: e.to_string(),
+    })?;
+    Ok(Some(crate::experiment::Arm(std::sync::Arc::new(arm))))
+}
+
 /// `file` as named in the scenario at `scenario`: relative paths from the scenario's directory.
 fn relative_to(scenario: &Path, file: &Path) -> PathBuf {
     if file.is_absolute() { file.to_path_buf() } else { scenario.parent().unwrap_or(Path::new("")).join(file) }
@@ -641,14 +646,7 @@ pub fn parse_spms(text: &str, path: &Path) -> Result<SpmsScenario, ScenarioError
 fn parse_spms_table(text: &str, t: toml::Table, path: &Path) -> Result<SpmsScenario, ScenarioError> {
     let shown = path.display().to_string();
     let mut file: SpmsFile = deserialize(with_defaults(t, "study", crate::spms::study::STUDY_DEFAULTS), &shown)?;
-    if let Some(f) = &file.robot.file {
-        let arm = crate::robot::file::RobotFile::load(&relative_to(path, f)).map_err(|e| ScenarioError::Parse {
-            path: shown.clone(),
-            key: "robot.file".into(),
-            message: e.to_string(),
-        })?;
-        file.robot.arm = Some(crate::experiment::Arm(std::sync::Arc::new(arm)));
-    }
+    file.robot.arm = load_arm(path, file.robot.file.as_deref())?;
     let spec = crate::spms::study::SpmsSpec {
         head: file.head,
         beams: file.beams,
