@@ -55,6 +55,10 @@ struct File {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     source: Option<String>,
     gravity_m_s2: f64,
+    /// Gravity in the base frame {0}, m/s^2, where it is not along -z of {0} (a URDF whose first
+    /// axis points down gives a {0} upside down); `gravity_m_s2` is then its norm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    gravity_base_m_s2: Option<[f64; 3]>,
     /// `world_from_base` (eq. 7): `[x, y, z]` mm, `[alpha, beta, gamma]` deg about z, y, x.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     base_mm_deg: Option<[f64; 6]>,
@@ -121,7 +125,8 @@ pub fn to_text(model: &RobotModel, source: &str, std: &[(ParamId, f64)]) -> Stri
     let f = File {
         name: d.name.clone(),
         source: Some(source.to_string()),
-        gravity_m_s2: -d.gravity_base.z,
+        gravity_m_s2: d.gravity_base.norm(),
+        gravity_base_m_s2: (d.gravity_base.x != 0.0 || d.gravity_base.y != 0.0 || d.gravity_base.z > 0.0).then(|| d.gravity_base.into()),
         base_mm_deg: Some([b.x, b.y, b.z, b.alpha.to_degrees(), b.beta.to_degrees(), b.gamma.to_degrees()]),
         tool_mm: Some(d.flange_tcp_mm.into()),
         payload: Some(Payload { mass_kg: d.payload.mass_kg, com_mm: d.payload.com_mm.into() }),
@@ -168,6 +173,19 @@ impl RobotFile {
         if !(0.0..=100.0).contains(&f.gravity_m_s2) {
             return Err(("gravity_m_s2".into(), format!("{}: within [0, 100] m/s^2", f.gravity_m_s2)));
         }
+        let gravity = match f.gravity_base_m_s2 {
+            None => Vector3::new(0.0, 0.0, -f.gravity_m_s2),
+            Some(g) => {
+                for (k, v) in g.iter().enumerate() {
+                    finite(format!("gravity_base_m_s2[{k}]"), *v)?;
+                }
+                let g = Vector3::from(g);
+                if (g.norm() - f.gravity_m_s2).abs() > 1e-6 * f.gravity_m_s2.max(1.0) {
+                    return Err(("gravity_base_m_s2".into(), format!("its norm {} is not gravity_m_s2 = {}", g.norm(), f.gravity_m_s2)));
+                }
+                g
+            }
+        };
         if f.joint.len() != JOINTS {
             return Err((
                 "joint".into(),
@@ -262,7 +280,7 @@ impl RobotFile {
             }),
             links_inertial: std::array::from_fn(|i| Inertial { mass_kg: f.joint[i].mass_kg, com_mm: Vector3::from(f.joint[i].com_mm) }),
             payload: f.payload.as_ref().map_or(Inertial::NONE, |p| Inertial { mass_kg: p.mass_kg, com_mm: Vector3::from(p.com_mm) }),
-            gravity_base: Vector3::new(0.0, 0.0, -f.gravity_m_s2),
+            gravity_base: gravity,
         };
         let nominal = RobotModel::new(data).map_err(|e| ("joint".to_string(), e.to_string()))?;
         let mut truth = Vec::with_capacity(f.truth.len());
