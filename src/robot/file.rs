@@ -36,6 +36,11 @@ use serde::{Deserialize, Serialize};
 use super::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
 use super::params::{ParamId, ParamSet, Unit};
 
+/// Largest length a robot file takes, mm (and bound of every other value in its units).
+const LENGTH_MM: f64 = 1e5;
+/// Largest mass a robot file takes, kg.
+const MASS_KG: f64 = 1e4;
+
 /// A robot file that cannot be used: the file, the field, what is wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{path}: {field}: {message}")]
@@ -169,6 +174,15 @@ impl RobotFile {
             (if at.is_empty() { "(file)".to_string() } else { at }, msg)
         })?;
         let finite = |field: String, v: f64| if v.is_finite() { Ok(v) } else { Err((field, format!("{v} is not a finite number"))) };
+        let within = |field: String, v: f64, lo: f64, hi: f64| {
+            if !v.is_finite() {
+                Err((field, format!("{v} is not a finite number")))
+            } else if v < lo || v > hi {
+                Err((field, format!("{v}: within [{lo}, {hi}]")))
+            } else {
+                Ok(v)
+            }
+        };
         finite("gravity_m_s2".into(), f.gravity_m_s2)?;
         if !(0.0..=100.0).contains(&f.gravity_m_s2) {
             return Err(("gravity_m_s2".into(), format!("{}: within [0, 100] m/s^2", f.gravity_m_s2)));
@@ -177,7 +191,7 @@ impl RobotFile {
             None => Vector3::new(0.0, 0.0, -f.gravity_m_s2),
             Some(g) => {
                 for (k, v) in g.iter().enumerate() {
-                    finite(format!("gravity_base_m_s2[{k}]"), *v)?;
+                    within(format!("gravity_base_m_s2[{k}]"), *v, -100.0, 100.0)?;
                 }
                 let g = Vector3::from(g);
                 if (g.norm() - f.gravity_m_s2).abs() > 1e-6 * f.gravity_m_s2.max(1.0) {
@@ -194,32 +208,25 @@ impl RobotFile {
         }
         for (i, j) in f.joint.iter().enumerate() {
             let at = |k: &str| format!("joint[{}].{k}", i + 1);
-            for (k, v) in [
-                ("alpha_deg", j.alpha_deg),
-                ("a_mm", j.a_mm),
-                ("beta_deg", j.beta_deg),
-                ("theta_offset_deg", j.theta_offset_deg),
-                ("d_mm", j.d_mm),
-                ("compliance_mdeg_per_nm", j.compliance_mdeg_per_nm),
-                ("mass_kg", j.mass_kg),
+            for (k, v, lo, hi) in [
+                ("alpha_deg", j.alpha_deg, -360.0, 360.0),
+                ("a_mm", j.a_mm, -LENGTH_MM, LENGTH_MM),
+                ("beta_deg", j.beta_deg, -360.0, 360.0),
+                ("theta_offset_deg", j.theta_offset_deg, -720.0, 720.0),
+                ("d_mm", j.d_mm, -LENGTH_MM, LENGTH_MM),
+                ("compliance_mdeg_per_nm", j.compliance_mdeg_per_nm, -1e5, 1e5),
+                ("mass_kg", j.mass_kg, 0.0, MASS_KG),
             ] {
-                finite(at(k), v)?;
+                within(at(k), v, lo, hi)?;
             }
-            for (k, v) in j.limits_deg.iter().chain(&j.com_mm).enumerate() {
-                finite(if k < 2 { format!("{}[{k}]", at("limits_deg")) } else { format!("{}[{}]", at("com_mm"), k - 2) }, *v)?;
+            for (k, v) in j.limits_deg.iter().enumerate() {
+                within(format!("{}[{k}]", at("limits_deg")), *v, -1080.0, 1080.0)?;
+            }
+            for (k, v) in j.com_mm.iter().enumerate() {
+                within(format!("{}[{k}]", at("com_mm")), *v, -LENGTH_MM, LENGTH_MM)?;
             }
             if j.limits_deg[0] >= j.limits_deg[1] {
                 return Err((at("limits_deg"), format!("{:?}: the lower limit must be below the upper", j.limits_deg)));
-            }
-            for (k, v, lim) in
-                [("a_mm", j.a_mm, 1e5), ("d_mm", j.d_mm, 1e5), ("alpha_deg", j.alpha_deg, 360.0), ("beta_deg", j.beta_deg, 360.0)]
-            {
-                if v.abs() > lim {
-                    return Err((at(k), format!("{v}: beyond +-{lim}")));
-                }
-            }
-            if j.mass_kg < 0.0 {
-                return Err((at("mass_kg"), format!("{}: a mass cannot be negative", j.mass_kg)));
             }
             // A Hayati beta turns about the y axis of frame i-1; it is the parameter of choice
             // where the axes of joints i-1 and i are parallel (alpha_{i-1} = 0 or 180 deg), and
@@ -250,15 +257,16 @@ impl RobotFile {
             }
         });
         for (k, v) in f.base_mm_deg.iter().flatten().enumerate() {
-            finite(format!("base_mm_deg[{k}]"), *v)?;
+            let lim = if k < 3 { LENGTH_MM } else { 360.0 };
+            within(format!("base_mm_deg[{k}]"), *v, -lim, lim)?;
         }
         for (k, v) in f.tool_mm.iter().flatten().enumerate() {
-            finite(format!("tool_mm[{k}]"), *v)?;
+            within(format!("tool_mm[{k}]"), *v, -LENGTH_MM, LENGTH_MM)?;
         }
         if let Some(p) = &f.payload {
-            finite("payload.mass_kg".into(), p.mass_kg)?;
+            within("payload.mass_kg".into(), p.mass_kg, 0.0, MASS_KG)?;
             for (k, v) in p.com_mm.iter().enumerate() {
-                finite(format!("payload.com_mm[{k}]"), *v)?;
+                within(format!("payload.com_mm[{k}]"), *v, -LENGTH_MM, LENGTH_MM)?;
             }
         }
         let base = f.base_mm_deg.map_or_else(XyzZyx::default, |[x, y, z, a, b, g]| XyzZyx {
@@ -286,7 +294,7 @@ impl RobotFile {
         let mut truth = Vec::with_capacity(f.truth.len());
         for (name, &v) in &f.truth {
             let field = format!("truth.{name}");
-            finite(field.clone(), v)?;
+            within(field.clone(), v, -LENGTH_MM, LENGTH_MM)?;
             let (base, rad) = match name.strip_suffix("_rad") {
                 Some(b) => (b, true),
                 None => (name.as_str(), false),
@@ -301,7 +309,7 @@ impl RobotFile {
         let mut std = Vec::with_capacity(f.std.len());
         for (name, &v) in &f.std {
             let field = format!("std.{name}");
-            finite(field.clone(), v)?;
+            within(field.clone(), v, 0.0, LENGTH_MM)?;
             let id = ParamId::parse(name).ok_or_else(|| (field.clone(), format!("unknown parameter `{name}`")))?;
             std.push((id, v));
         }

@@ -96,6 +96,10 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<RobotModel, String> {
                 ));
             }
         };
+        let (xyz, rpy) = (j.origin.xyz.0, j.origin.rpy.0);
+        if !(xyz.iter().all(|v| v.is_finite() && v.abs() <= 100.0) && rpy.iter().all(|v| v.is_finite() && v.abs() <= 100.0)) {
+            return Err(format!("joint `{}`: origin xyz {xyz:?} m, rpy {rpy:?} rad: finite numbers within +-100", j.name));
+        }
         frame *= iso(&j.origin);
         match j.joint_type {
             urdf_rs::JointType::Fixed => {}
@@ -112,8 +116,9 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<RobotModel, String> {
                 } else {
                     (j.limit.lower, j.limit.upper)
                 };
-                if !(limits.0.is_finite() && limits.1.is_finite() && limits.0 < limits.1) {
-                    return Err(format!("joint `{}`: limits [{}, {}] rad are not a range", j.name, limits.0, limits.1));
+                let bound = 6.0 * std::f64::consts::PI;
+                if !(limits.0.is_finite() && limits.1.is_finite() && limits.0 < limits.1 && limits.0 >= -bound && limits.1 <= bound) {
+                    return Err(format!("joint `{}`: limits [{}, {}] rad are not a range within +-6 pi", j.name, limits.0, limits.1));
                 }
                 let (mass_kg, com) = inertial(&j.child.link).unwrap_or((0.0, Isometry3::identity()));
                 axes.push(Axis {
