@@ -696,21 +696,7 @@ fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
 
 fn export(args: &ExportArgs) -> Result<ExitCode, String> {
     use crate::export::Pick;
-    let n = match args.set_size {
-        Some(n) => n as usize,
-        None => {
-            // The table set size of the results' scenario.
-            let m: serde_json::Value = std::fs::read(args.results.join("manifest.json"))
-                .ok()
-                .and_then(|b| serde_json::from_slice(&b).ok())
-                .ok_or_else(|| format!("{}: manifest.json: not a results directory of `calsim run`", args.results.display()))?;
-            let path = m.get("scenario_path").and_then(|p| p.as_str()).map(PathBuf::from).unwrap_or_default();
-            match crate::io::scenario::load_any(&path).map_err(|e| e.to_string())? {
-                crate::io::scenario::Loaded::Trical(s) => s.study.table_set_size as usize,
-                crate::io::scenario::Loaded::Spms(s) => s.spec.study.table_set_size as usize,
-            }
-        }
-    };
+    let n = args.set_size.map(|n| n as usize);
     let pick = match (args.task, args.pick) {
         (Some(t), _) => Pick::Task(t),
         (None, PickArg::Median) => Pick::Median(n),

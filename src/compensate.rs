@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Translation3};
 
 use crate::robot::{Joints, KinState, RobotModel, XyzZyx, inverse, world_from_flange};
 
@@ -44,10 +44,7 @@ pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, String> {
             }
             v[k] = x;
         }
-        let [x, y, z, a, b, g] = v;
-        let t = XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
-        let rot = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(t.rotation()));
-        out.push(Isometry3::from_parts(Translation3::from(t.translation()), rot));
+        out.push(XyzZyx::from_mm_deg(v).isometry());
     }
     if out.is_empty() {
         return Err(format!("{}: no targets", path.display()));

@@ -10,6 +10,7 @@ use crate::cell::{Cell, CellSpec};
 use crate::instrument::laser_tracker::{LaserTracker, LaserTrackerSpec};
 use crate::instrument::trical::{TriCal, TriCalSpec};
 use crate::robot::builtin::{TRICAL_PAYLOAD, TRICAL_TCP_MM, irb120, trical_2018_table7};
+use crate::robot::file::Arm;
 use crate::robot::{Inertial, RobotModel, UnmodelledSpec, VirtualRobot, world_from_base};
 use crate::seeds::{self, split_seed, stream};
 
@@ -39,16 +40,6 @@ pub struct RobotSpec {
     /// The loaded robot file (filled by the scenario loader).
     #[serde(skip)]
     pub arm: Option<Arm>,
-}
-
-/// A loaded robot file shared by the copies of a scenario (equal when read from the same path).
-#[derive(Clone, Debug)]
-pub struct Arm(pub std::sync::Arc<crate::robot::file::RobotFile>);
-
-impl PartialEq for Arm {
-    fn eq(&self, other: &Self) -> bool {
-        self.0.path == other.0.path
-    }
 }
 
 impl Default for RobotSpec {
@@ -119,12 +110,10 @@ impl ExperimentSpec {
         let table7 = match &self.robot.arm {
             // The file's arm at the scenario's nominal base with the device, then its truth.
             Some(Arm(arm)) => {
-                let [x, y, z, a, b, g] = self.robot.nominal_base_mm_deg.unwrap_or_default();
                 let placed = arm
                     .nominal
                     .edited(|d| {
-                        d.world_from_base =
-                            crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
+                        d.world_from_base = crate::robot::XyzZyx::from_mm_deg(self.robot.nominal_base_mm_deg.unwrap_or_default());
                         self.apply_device(d);
                     })
                     .expect("valid device");
@@ -155,18 +144,9 @@ impl ExperimentSpec {
     /// model with the scenario's nominal base if it gives one.
     pub fn before_model(&self, campaign: &Campaign) -> RobotModel {
         match self.robot.nominal_base_mm_deg {
-            Some([x, y, z, a, b, g]) => campaign
+            Some(base) => campaign
                 .nominal
-                .edited(|d| {
-                    d.world_from_base = self.cell.base_in_moved_world(crate::robot::XyzZyx {
-                        x,
-                        y,
-                        z,
-                        alpha: a.to_radians(),
-                        beta: b.to_radians(),
-                        gamma: g.to_radians(),
-                    })
-                })
+                .edited(|d| d.world_from_base = self.cell.base_in_moved_world(crate::robot::XyzZyx::from_mm_deg(base)))
                 .expect("finite base"),
             None => campaign.nominal.clone(),
         }

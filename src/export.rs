@@ -20,13 +20,13 @@ use crate::study::prediction::noise_estimate;
 pub enum Pick {
     /// Task by index.
     Task(usize),
-    /// At a set size: the task whose validation median is the median (the lower middle of an even
-    /// count), the lowest or the highest.
-    Median(usize),
+    /// At a set size (`None`: the scenario's table set size): the task whose validation median is
+    /// the median (the lower middle of an even count), the lowest or the highest.
+    Median(Option<usize>),
     /// See `Median`.
-    Best(usize),
+    Best(Option<usize>),
     /// See `Median`.
-    Worst(usize),
+    Worst(Option<usize>),
 }
 
 /// An identification redone for export.
@@ -75,6 +75,7 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
     let index = match pick {
         Pick::Task(t) => t,
         Pick::Median(n) | Pick::Best(n) | Pick::Worst(n) => {
+            let n = n.unwrap_or(s.study.table_set_size as usize);
             let mut at: Vec<(f64, usize)> = tasks.iter().filter(|t| t.1 == n && t.2.is_finite()).map(|t| (t.2, t.0)).collect();
             at.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             let k = match pick {
@@ -200,7 +201,7 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
 /// `<calsim_compliance joint="joint_i" rad_per_nm="..."/>` elements (ignored by URDF parsers).
 /// Metres and radians.
 pub fn urdf(e: &Export) -> Result<String, String> {
-    use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Isometry3, Vector3};
     use urdf_rs::{Axis, Calibration, Joint, JointLimit, JointType, Link, LinkName, Pose, Robot, Vec3};
     let (b, m) = (e.before.data(), e.model.data());
     let pose = |t: &Isometry3<f64>| {
@@ -230,11 +231,7 @@ pub fn urdf(e: &Export) -> Result<String, String> {
         mimic: None,
         safety_controller: None,
     };
-    let wb = m.world_from_base;
-    let base = Isometry3::from_parts(
-        Translation3::from(wb.translation()),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(wb.rotation())),
-    );
+    let base = m.world_from_base.isometry();
     let mut links = vec![link("world", None), link("base_link", None)];
     let mut joints = vec![fixed("base", "world", "base_link", pose(&base))];
     for (i, (l, lb)) in m.links.iter().zip(&b.links).enumerate() {

@@ -66,15 +66,8 @@ impl CellSpec {
         if self.plate_offset_mm_deg == [0.0; 6] {
             return base;
         }
-        let iso = |t: &crate::robot::XyzZyx| {
-            nalgebra::Isometry3::from_parts(
-                nalgebra::Translation3::new(t.x, t.y, t.z),
-                nalgebra::UnitQuaternion::from_euler_angles(t.gamma, t.beta, t.alpha),
-            )
-        };
-        let [x, y, z, a, b, g] = self.plate_offset_mm_deg;
-        let plate = crate::robot::XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
-        crate::robot::XyzZyx::from_isometry(&(iso(&plate).inverse() * iso(&base)))
+        let plate = crate::robot::XyzZyx::from_mm_deg(self.plate_offset_mm_deg);
+        crate::robot::XyzZyx::from_isometry(&(plate.isometry().inverse() * base.isometry()))
     }
 }
 

@@ -560,14 +560,14 @@ pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
 
 /// The robot file a scenario at `scenario` names (`None`: the built-in arm); an error names the
 /// scenario, `robot.file`, the robot file and its field.
-fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::experiment::Arm>, ScenarioError> {
+fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::robot::file::Arm>, ScenarioError> {
     let Some(f) = file else { return Ok(None) };
     let arm = crate::robot::file::RobotFile::load(&relative_to(scenario, f)).map_err(|e| ScenarioError::Parse {
         path: scenario.display().to_string(),
         key: "robot.file".into(),
         message: e.to_string(),
     })?;
-    Ok(Some(crate::experiment::Arm(std::sync::Arc::new(arm))))
+    Ok(Some(crate::robot::file::Arm(std::sync::Arc::new(arm))))
 }
 
 /// `file` as named in the scenario at `scenario`: relative paths from the scenario's directory.

@@ -118,8 +118,7 @@ pub const TABLE7_MEANS: [(&str, f64); 31] = [
 pub fn trical_2018_nominal() -> RobotModel {
     irb120()
         .edited(|d| {
-            let [x, y, z, a, b, g] = TRICAL_NOMINAL_BASE;
-            d.world_from_base = XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() };
+            d.world_from_base = XyzZyx::from_mm_deg(TRICAL_NOMINAL_BASE);
             d.flange_tcp_mm = Vector3::from(TRICAL_TCP_MM);
             d.payload = Inertial { mass_kg: TRICAL_PAYLOAD.0, com_mm: Vector3::from(TRICAL_PAYLOAD.1) };
         })

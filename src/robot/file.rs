@@ -122,6 +122,16 @@ pub struct RobotFile {
     pub std: Vec<(ParamId, f64)>,
 }
 
+/// A loaded robot file shared by the copies of a scenario (equal when read from the same path).
+#[derive(Clone, Debug)]
+pub struct Arm(pub std::sync::Arc<RobotFile>);
+
+impl PartialEq for Arm {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.path == other.0.path
+    }
+}
+
 /// The robot file text of `model` (every value of its data: the joints, base, tool and payload),
 /// with `std` (parameter and standard deviation in internal units) and `source` as provenance.
 pub fn to_text(model: &RobotModel, source: &str, std: &[(ParamId, f64)]) -> String {
@@ -269,14 +279,7 @@ impl RobotFile {
                 within(format!("payload.com_mm[{k}]"), *v, -LENGTH_MM, LENGTH_MM)?;
             }
         }
-        let base = f.base_mm_deg.map_or_else(XyzZyx::default, |[x, y, z, a, b, g]| XyzZyx {
-            x,
-            y,
-            z,
-            alpha: a.to_radians(),
-            beta: b.to_radians(),
-            gamma: g.to_radians(),
-        });
+        let base = f.base_mm_deg.map_or_else(XyzZyx::default, XyzZyx::from_mm_deg);
         let data = RobotData {
             name: f.name.clone(),
             links,

@@ -52,6 +52,19 @@ pub struct XyzZyx {
 }
 
 impl XyzZyx {
+    /// From `[x, y, z]` mm and `[alpha, beta, gamma]` deg, as scenario and robot files give it.
+    pub fn from_mm_deg([x, y, z, a, b, g]: [f64; 6]) -> Self {
+        Self { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() }
+    }
+
+    /// The rigid transform (translation, then `Rz(alpha) Ry(beta) Rx(gamma)`).
+    pub fn isometry(&self) -> nalgebra::Isometry3<f64> {
+        nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(self.translation()),
+            nalgebra::UnitQuaternion::from_euler_angles(self.gamma, self.beta, self.alpha),
+        )
+    }
+
     /// Rotation part `Rz(alpha) Ry(beta) Rx(gamma)`.
     pub fn rotation(&self) -> Matrix3<f64> {
         let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), self.alpha);

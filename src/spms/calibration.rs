@@ -45,7 +45,7 @@ pub struct ArmSpec {
     pub file: Option<std::path::PathBuf>,
     /// The loaded robot file (filled by the scenario loader).
     #[serde(skip)]
-    pub arm: Option<crate::experiment::Arm>,
+    pub arm: Option<crate::robot::file::Arm>,
 }
 
 impl Default for ArmSpec {
@@ -80,7 +80,7 @@ pub enum TruthTable {
 impl ArmSpec {
     /// The true model for the truth named in the spec (base and tool not yet placed).
     pub fn truth_model(&self) -> RobotModel {
-        let Some(crate::experiment::Arm(arm)) = &self.arm else {
+        let Some(crate::robot::file::Arm(arm)) = &self.arm else {
             return match self.truth {
                 TruthTable::Table5WithoutDtheta2 => er20c10_table5(false),
                 TruthTable::Table5 => er20c10_table5(true),
@@ -100,7 +100,7 @@ impl ArmSpec {
 
     /// The arm as its controller believes it before calibration (base and tool not yet placed).
     pub fn nominal_model(&self) -> RobotModel {
-        self.arm.as_ref().map_or_else(er20c10_table4, |crate::experiment::Arm(a)| a.nominal.clone())
+        self.arm.as_ref().map_or_else(er20c10_table4, |crate::robot::file::Arm(a)| a.nominal.clone())
     }
 }
 

@@ -101,16 +101,7 @@ impl Check {
 
     /// A figure reported without a check.
     pub fn report(figure: &str, published: &str, value: f64, reproduced: String) -> Self {
-        Self {
-            figure: figure.into(),
-            published: published.into(),
-            published_value: None,
-            reproduced,
-            value,
-            band: "-".into(),
-            bound: None,
-            pass: None,
-        }
+        Self::rule(figure, published, value, reproduced, None, |_| String::new())
     }
 
     /// The verdict as a word: `pass`, `miss` or `-`.

@@ -169,7 +169,7 @@ pub fn run_on_pool(
     let qs: Vec<_> = observations.iter().map(|o| o.q).collect();
     let pool = PoolJacobian::new(before, &set, &qs);
     let pool_jacobian_s = t0.elapsed().as_secs_f64();
-    let cx = TaskContext { experiment, before, set: &set, observations, pool: &pool, spec };
+    let cx = TaskContext::new(experiment, before, &set, observations, &pool, spec);
     let t1 = Instant::now();
     let results = engine::run_tasks(&spec.tasks(), seed, crate::seeds::study::TRICAL, progress, |task, rng| cx.run(task, rng).0);
     let tasks_s = t1.elapsed().as_secs_f64();
@@ -200,20 +200,35 @@ struct TaskContext<'a> {
     set: &'a ParamSet,
     observations: &'a [Observation],
     pool: &'a PoolJacobian,
-    spec: &'a StudySpec,
+    table_n: usize,
+    opts: FitOptions,
+    dopts: DetmaxOptions,
+}
+
+impl<'a> TaskContext<'a> {
+    fn new(
+        experiment: &'a Experiment,
+        before: &'a RobotModel,
+        set: &'a ParamSet,
+        observations: &'a [Observation],
+        pool: &'a PoolJacobian,
+        spec: &StudySpec,
+    ) -> Self {
+        let (opts, dopts, table_n) = (spec.fit_options(), spec.detmax_options(), spec.table_set_size as usize);
+        Self { experiment, before, set, observations, pool, table_n, opts, dopts }
+    }
 }
 
 impl TaskContext<'_> {
     /// One task: its set, its fit, its validation; and the identified model.
     fn run(&self, task: &Task, rng: &mut rand_chacha::ChaCha8Rng) -> (TaskResult, Option<RobotModel>) {
-        let opts = self.spec.fit_options();
-        let (id, model) = engine::select_and_identify(task, self.pool, &self.spec.detmax_options(), rng, |chosen| {
+        let (id, model) = engine::select_and_identify(task, self.pool, &self.dopts, rng, |chosen| {
             let obs: Vec<Observation> = chosen.iter().map(|&k| self.observations[k]).collect();
-            identify(self.before, self.set, &obs, &opts)
+            identify(self.before, self.set, &obs, &self.opts)
         });
         let errors = model.as_ref().map(|m| validation_errors(m, self.experiment, &mut KinState::default()));
         let validation = errors.as_deref().map(ErrorStats::of).unwrap_or_default();
-        let keep = task.set_size == self.spec.table_set_size as usize;
+        let keep = task.set_size == self.table_n;
         (TaskResult { task: task.clone(), id, validation, errors: if keep { errors } else { None } }, model)
     }
 }
@@ -247,7 +262,7 @@ pub fn recompute_task(
     let Some(task) = spec.tasks().into_iter().find(|t| t.index == index) else {
         return Ok(None);
     };
-    let cx = TaskContext { experiment, before, set: &set, observations: &observations, pool: &pool, spec };
+    let cx = TaskContext::new(experiment, before, &set, &observations, &pool, spec);
     let (result, model) = cx.run(&task, &mut crate::seeds::task_stream(seed, crate::seeds::study::TRICAL, index));
     let chosen = result.id.chosen.iter().map(|&k| observations[k]).collect();
     Ok(Some(Recomputed { result, model, set, observations: chosen }))
