@@ -436,6 +436,14 @@ fn trical_checks(
     pool: &rayon::ThreadPool,
 ) -> Result<Vec<Check>, String> {
     let mut rows = figures::checks(f, &s.expect);
+    // Another arm than the paper's: its figures are the IRB 120's, shown for scale, not compared.
+    if s.experiment.nominal().data().name != crate::robot::builtin::irb120().data().name {
+        for r in &mut rows {
+            if r.published_value.take().is_some() {
+                r.published = format!("IRB 120: {}", r.published);
+            }
+        }
+    }
     if s.expect.wants_table8() {
         let [tracker, cmm] = pool.install(|| crate::study::external_instruments(&s.experiment, e, before, &s.study, seed, 360))?;
         rows.extend(figures::table8_checks(tracker, cmm, &s.expect));
@@ -654,9 +662,10 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
 }
 
 fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
-    let model = crate::robot::urdf::load(&args.urdf).map_err(|e| e.to_string())?;
+    let converted = crate::robot::urdf::load_all(&args.urdf).map_err(|e| e.to_string())?;
+    let model = &converted.model;
     let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), args.urdf.display());
-    let text = crate::robot::file::to_text(&model, &source, &[]);
+    let text = crate::robot::file::to_text(model, &source, &[], converted.capsules.as_ref(), converted.flange.as_ref());
     // Written beside and renamed: never a half-written file.
     let tmp = args.out.with_extension("toml.partial");
     std::fs::write(&tmp, &text).and_then(|()| std::fs::rename(&tmp, &args.out)).map_err(|e| format!("{}: {e}", args.out.display()))?;
@@ -669,6 +678,15 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
         l.iter().map(|l| format!("{:.3}", l.d)).collect::<Vec<_>>().join(", "),
         args.out.display()
     );
+    match &converted.capsules {
+        Some(c) => println!("collision: {} capsules from the links' shapes", c.iter().map(Vec::len).sum::<usize>()),
+        None => {
+            println!("collision: none (the URDF has no cylinder, capsule, sphere or box): add [[collision]] capsules for a TriCal study")
+        }
+    }
+    if !converted.skipped.is_empty() {
+        println!("collision shapes left out: {}", converted.skipped.join(", "));
+    }
     Ok(ExitCode::SUCCESS)
 }
 

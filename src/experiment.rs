@@ -88,6 +88,8 @@ pub struct Experiment {
     pub tracker: LaserTracker,
     /// The campaign's measurements and models.
     pub campaign: Campaign,
+    /// The arm's link capsules.
+    pub links: crate::cell::collision::LinkCapsules,
 }
 
 /// Why an experiment could not be built.
@@ -135,9 +137,26 @@ impl ExperimentSpec {
         arm.edited(|d| self.apply_device(d)).expect("valid device")
     }
 
+    /// The arm's link capsules: the robot file's, or the built-in IRB 120's (a scenario naming a
+    /// robot file without capsules is refused when it is loaded).
+    pub fn link_capsules(&self) -> crate::cell::collision::LinkCapsules {
+        match &self.robot.arm {
+            Some(Arm(arm)) => arm.capsules.clone().unwrap_or_default(),
+            None => crate::cell::collision::irb120_link_capsules(),
+        }
+    }
+
+    /// The arm's flange frame in MDH frame 6 (`None`: frame 6 is the flange).
+    pub fn flange(&self) -> Option<nalgebra::Matrix3<f64>> {
+        self.robot.arm.as_ref().and_then(|Arm(a)| a.flange)
+    }
+
+    /// The device on the flange: its TCP and payload (given in the flange frame) in frame 6.
     fn apply_device(&self, d: &mut crate::robot::RobotData) {
-        d.flange_tcp_mm = Vector3::from(self.robot.tcp_mm);
-        d.payload = Inertial { mass_kg: self.robot.payload_kg, com_mm: Vector3::from(self.robot.payload_com_mm) };
+        let flange = self.flange();
+        let in_frame6 = |v: [f64; 3]| flange.map_or(Vector3::from(v), |r| r * Vector3::from(v));
+        d.flange_tcp_mm = in_frame6(self.robot.tcp_mm);
+        d.payload = Inertial { mass_kg: self.robot.payload_kg, com_mm: in_frame6(self.robot.payload_com_mm) };
     }
 
     /// The model before calibration (the start of every identification): the campaign's nominal
@@ -155,6 +174,7 @@ impl ExperimentSpec {
     /// Builds the physical world from `seed` and runs the campaign.
     pub fn build(&self, seed: u64) -> Result<Experiment, ExperimentError> {
         let cell = Cell::build(&self.cell, &mut stream(seed, seeds::experiment::CELL))?;
+        let links = self.link_capsules();
         let reference = self.robot.repeatability_reference_q_deg.map(f64::to_radians);
         let truth = crate::robot::perturb(
             &self.truth(),
@@ -170,7 +190,8 @@ impl ExperimentSpec {
             &mut stream(seed, seeds::experiment::ROBOT),
         );
         let robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
-        let trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, seeds::experiment::TRICAL));
+        let mut trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, seeds::experiment::TRICAL));
+        trical.frame6_from_flange = self.flange();
         let base_in_w = world_from_base(&robot.truth).transform_point(&Point3::origin()).coords;
         let sphere3 = cell.spheres_w[2.min(cell.spheres_w.len() - 1)];
         let tracker = LaserTracker::place(
@@ -189,10 +210,11 @@ impl ExperimentSpec {
             trical: &trical,
             tracker: &tracker,
             nominal: &self.nominal(),
+            links: &links,
             spec: &self.campaign,
         };
         let campaign = campaign::run(&setup, split_seed(seed, seeds::experiment::CAMPAIGN))?;
-        Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign })
+        Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign, links })
     }
 
     /// An identification pool of `count` random configurations measured by an external instrument
@@ -212,6 +234,7 @@ impl ExperimentSpec {
             trical: &e.trical,
             tracker: &e.tracker,
             nominal: &nominal,
+            links: &e.links,
             spec: &self.campaign,
         };
         campaign::instrument_pool(&setup, &e.campaign, count, split_seed(seed, seeds::experiment::CAMPAIGN), measure)

@@ -43,6 +43,8 @@ pub struct Export {
     pub before: RobotModel,
     /// The identified model.
     pub model: RobotModel,
+    /// The arm's link capsules (carried into the exported robot files).
+    pub links: crate::robot::file::LinkCapsules,
     /// Identified parameters and their standard deviation (internal units).
     pub std: Vec<(ParamId, f64)>,
 }
@@ -112,6 +114,7 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
         before,
         model,
         std,
+        links: experiment.links.clone(),
     })
 }
 
@@ -179,10 +182,11 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
         e.set_size,
         e.validation_median_mm
     );
-    let robot = crate::robot::file::to_text(&e.model, &source, &e.std);
+    let robot = crate::robot::file::to_text(&e.model, &source, &e.std, Some(&e.links), None);
     let yaml = yaml_overlay(e);
     let urdf = urdf(e).map_err(std::io::Error::other)?;
-    let before = crate::robot::file::to_text(&e.before, &format!("the model before calibration of {}", e.scenario), &[]);
+    let before =
+        crate::robot::file::to_text(&e.before, &format!("the model before calibration of {}", e.scenario), &[], Some(&e.links), None);
     crate::io::out_dir::write_atomically(out, name, |dir| {
         std::fs::write(dir.join("robot.toml"), &robot)?;
         std::fs::write(dir.join("before.toml"), &before)?;

@@ -19,6 +19,7 @@ fn the_shipped_irb120_is_the_built_in_bit_for_bit() {
     let truth = f.truth_on(&trical_2018_nominal()).expect("Table 7 applies");
     assert_eq!(truth.data(), trical_2018_table7().data());
     assert_eq!(f.truth.len(), 31);
+    assert_eq!(f.capsules.as_ref(), Some(&calsim::cell::collision::irb120_link_capsules()), "the link capsules");
 }
 
 #[test]
@@ -65,6 +66,34 @@ fn a_bad_robot_file_is_one_line_naming_the_file_and_the_field() {
     assert!(e.contains("truth.a9") && e.contains("unknown parameter"), "{e}");
     let e = bad("huge.toml", |t| t.replacen("d_mm = 302.0", "d_mm = 1e300", 1));
     assert!(e.contains("joint[4].d_mm"), "{e}");
+    let e = bad("capsule-link.toml", |t| t.replacen("link = 6", "link = 7", 1));
+    assert!(e.contains("collision[9].link"), "{e}");
+    let e = bad("capsule-radius.toml", |t| t.replacen("radius_mm = 21.2", "radius_mm = -1.0", 1));
+    assert!(e.contains("collision[9].radius_mm"), "{e}");
+    let e = bad("capsule-nan.toml", |t| t.replacen("a_mm = [0.0, -28.6, 0.0]", "a_mm = [0.0, nan, 0.0]", 1));
+    assert!(e.contains("collision[8].a_mm[1]"), "{e}");
+}
+
+/// A TriCal scenario whose robot file gives no collision capsules is refused before anything runs:
+/// one line naming the scenario, `robot.file`, the robot file and `collision`.
+#[test]
+fn a_trical_scenario_needs_the_arms_capsules() {
+    let dir = common::scratch("robot-file-no-capsules");
+    let robot = dir.join("bare.toml");
+    let text = std::fs::read_to_string(shipped("irb120.toml")).unwrap();
+    let cut = text.find("[[collision]]").unwrap();
+    let end = text.find("\n[truth]").unwrap();
+    std::fs::write(&robot, format!("{}{}", &text[..cut], &text[end..])).unwrap();
+    assert!(RobotFile::load(&robot).expect("loads without capsules").capsules.is_none());
+    let scenario = dir.join("s.toml");
+    std::fs::write(&scenario, format!("seed = 1\n[robot]\nfile = \"{}\"\n", robot.display())).unwrap();
+    let o = common::calsim().args(["run", scenario.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    for part in ["s.toml", "robot.file", "bare.toml", "collision"] {
+        assert!(err.contains(part), "{part} not in {err}");
+    }
 }
 
 /// A scenario naming a bad robot file: `calsim run` exits 2 with one line naming the scenario, the

@@ -9,7 +9,7 @@ use nalgebra::{Isometry3, Translation3, Vector3};
 use rand::Rng;
 
 use crate::cell::Cell;
-use crate::instrument::trical::{ReadingError, TriCal, flange_from_tool_rotation};
+use crate::instrument::trical::{ReadingError, TriCal};
 use crate::robot::ik::{IkError, refine};
 use crate::robot::{JOINTS, Joints, KinState, RobotModel, VirtualRobot, forward, world_from_flange};
 
@@ -64,7 +64,7 @@ pub fn centre<R: Rng + ?Sized>(
 ) -> Result<CentringResult, CentringError> {
     let Approach { sphere, q0, from } = approach;
     let spec = &trical.spec;
-    let r6t = flange_from_tool_rotation();
+    let r6t = trical.frame6_from_tool();
     let centre_w = cell.spheres_w[sphere];
     let radius = cell.ball_diameters_mm[sphere] / 2.0;
     let truth_rot = robot.truth.base_rot;

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::Deserialize;
 
 use crate::cell::Cell;
-use crate::cell::collision::{CollisionWorld, irb120_link_capsules};
+use crate::cell::collision::{CollisionWorld, LinkCapsules};
 use crate::cell::solids::obstacles;
 use crate::identify::Observation;
 use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
@@ -160,8 +160,17 @@ pub enum CampaignError {
 
 /// The collision world of a cell for a model: fixtures placed with `truth_base` (where they are).
 /// Self-collision pairs that touch at the zero configuration are allowed (see [`CollisionWorld`]).
-pub fn collision_world(cell: &Cell, model: &RobotModel, truth_base: &Isometry3<f64>, tcp: &Vector3<f64>) -> CollisionWorld {
-    let mut world = CollisionWorld::new(&irb120_link_capsules(), &trical_capsules(tcp), obstacles(cell, &truth_base.inverse()));
+pub fn collision_world(
+    cell: &Cell,
+    links: &LinkCapsules,
+    model: &RobotModel,
+    truth_base: &Isometry3<f64>,
+    tcp: &Vector3<f64>,
+    trical: &TriCal,
+) -> CollisionWorld {
+    let up = -model.data().gravity_base.normalize();
+    let device = trical_capsules(tcp, trical.frame6_from_flange.as_ref());
+    let mut world = CollisionWorld::new(links, &device, obstacles(cell, &truth_base.inverse(), &up));
     let mut st = KinState::default();
     forward(model, &mut st, &[0.0; JOINTS]);
     world.allow_pairs_touching_at(&st);
@@ -209,6 +218,8 @@ pub struct Setup<'a> {
     pub tracker: &'a LaserTracker,
     /// The nominal model (Table 3, payload), before the semi-automatic steps.
     pub nominal: &'a RobotModel,
+    /// The arm's link capsules (collision tests and lines of sight).
+    pub links: &'a LinkCapsules,
     /// What to measure.
     pub spec: &'a CampaignSpec,
 }
@@ -223,7 +234,7 @@ pub struct Setup<'a> {
 pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
     let truth_base = world_from_base(&setup.robot.truth);
     let tcp_cmm = setup.trical.cmm_tcp(&setup.robot.truth.data().flange_tcp_mm, &mut stream(seed, streams::CMM));
-    let world = collision_world(setup.cell, setup.nominal, &truth_base, &tcp_cmm);
+    let world = collision_world(setup.cell, setup.links, setup.nominal, &truth_base, &tcp_cmm, setup.trical);
     let (semi_automatic, nominal_model) = semi_automatic(setup, &tcp_cmm, seed)?;
     let t0 = Instant::now();
     let (pool, pool_rejected, centring_failures) = measure_pool(setup, &world, &nominal_model, &semi_automatic.located_q, seed)?;
@@ -260,7 +271,7 @@ fn semi_automatic(setup: &Setup<'_>, tcp_cmm: &Vector3<f64>, seed: u64) -> Resul
             let mut done = None;
             for _ in 0..spec.max_tries_per_configuration {
                 let jog = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize() * spec.jog_error_mm;
-                let target = tcp_pose(&(sphere_w + jog), &axis, rng.random_range(0.0..std::f64::consts::TAU));
+                let target = trical.frame6_pose(tcp_pose(&(sphere_w + jog), &axis, rng.random_range(0.0..std::f64::consts::TAU)));
                 let Ok(q) = inverse(&robot.truth, &target, &last_q) else {
                     continue;
                 };
@@ -328,7 +339,7 @@ fn measure_pool(
                 return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
             }
             let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
-            let pose = tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU));
+            let pose = trical.frame6_pose(tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU)));
             let Ok(q) = inverse(nominal_model, &pose, seed_q) else {
                 rejected += 1;
                 continue;
@@ -422,7 +433,7 @@ fn measure_random_poses(
         forward(nominal_model, st, q);
         let tcp = st.tcp_base;
         let sight = tracker_base - tcp;
-        let facing = st.rot[JOINTS] * Vector3::z();
+        let facing = st.rot[JOINTS] * setup.trical.frame6_from_flange.map_or_else(Vector3::z, |r| r.column(2).into_owned());
         sight.norm() <= tracker.spec.max_range_mm
             && facing.dot(&sight.normalize()) >= accept_cos
             && world.first_collision(st).is_none()
@@ -471,7 +482,7 @@ pub fn instrument_pool(
     measure: Measure<'_>,
 ) -> Result<Vec<ValidationPose>, CampaignError> {
     let truth_base = world_from_base(&setup.robot.truth);
-    let world = collision_world(setup.cell, setup.nominal, &truth_base, &campaign.semi_automatic.tcp_cmm_mm);
+    let world = collision_world(setup.cell, setup.links, setup.nominal, &truth_base, &campaign.semi_automatic.tcp_cmm_mm, setup.trical);
     let poses =
         RandomPoses { what: "instrument pool", count, robot: setup.robot, keys: (streams::INSTRUMENT_POSES, streams::INSTRUMENT_NOISE) };
     measure_random_poses(setup, &world, &campaign.nominal, campaign.semi_automatic.located_q[0], seed, &poses, measure).map(|(p, _)| p)

@@ -10,16 +10,7 @@ use rapier3d_f64::parry::shape::{Capsule, Cuboid, Shape};
 
 use crate::robot::{JOINTS, KinState};
 
-/// A capsule given by its end points and radius, in the frame it is attached to, mm.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CapsuleSpec {
-    /// First end, mm.
-    pub a: [f64; 3],
-    /// Second end, mm.
-    pub b: [f64; 3],
-    /// Radius, mm.
-    pub radius: f64,
-}
+pub use crate::robot::file::{CapsuleSpec, LinkCapsules};
 
 const fn cap(a: [f64; 3], b: [f64; 3], radius: f64) -> CapsuleSpec {
     CapsuleSpec { a, b, radius }
@@ -30,7 +21,7 @@ const fn cap(a: [f64; 3], b: [f64; 3], radius: f64) -> CapsuleSpec {
 /// capsule touches link 4 at the home pose), rewritten from the URDF link_2 frame into MDH frame 2
 /// (x2 = URDF z, y2 = URDF x, z2 = URDF y). Link 6's capsule is moved by -72 mm along z: frame 6 is
 /// the flange here (Table 3), the file's frame 6 sits at the wrist.
-pub fn irb120_link_capsules() -> [Vec<CapsuleSpec>; JOINTS + 1] {
+pub fn irb120_link_capsules() -> LinkCapsules {
     [
         vec![cap([-53.4, 1.0, 11.1], [-53.4, 1.0, 85.1], 167.2)],
         vec![cap([-0.7, 0.9, -119.0], [-0.7, 0.9, -32.9], 116.9)],
@@ -116,7 +107,7 @@ fn to_capsule(c: &CapsuleSpec) -> Capsule {
 impl CollisionWorld {
     /// A world of the given link capsules (per MDH frame 0..=6), device capsules (flange frame)
     /// and obstacles (base frame).
-    pub fn new(links: &[Vec<CapsuleSpec>; JOINTS + 1], device: &[CapsuleSpec], obstacles: Vec<Obstacle>) -> Self {
+    pub fn new(links: &LinkCapsules, device: &[CapsuleSpec], obstacles: Vec<Obstacle>) -> Self {
         Self {
             links: links.iter().map(|l| l.iter().map(to_capsule).collect()).collect(),
             device: device.iter().map(to_capsule).collect(),

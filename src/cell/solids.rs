@@ -32,8 +32,9 @@ pub enum Solid {
     },
 }
 
-/// The fixed solids of the cell (risers, plate, pedestal, table) in the base frame.
-pub fn cell_solids(cell: &Cell, base_from_world: &Isometry3<f64>) -> Vec<Solid> {
+/// The fixed solids of the cell (risers, plate, pedestal, table) in the base frame; `up_base` is the
+/// vertical in the base frame (against gravity): the table is level, at `table_z_base_mm` along it.
+pub fn cell_solids(cell: &Cell, base_from_world: &Isometry3<f64>, up_base: &Vector3<f64>) -> Vec<Solid> {
     let s = &cell.spec;
     let r = s.ball_diameter_mm / 2.0;
     let plate_top = -(s.riser_height_mm + r);
@@ -52,19 +53,30 @@ pub fn cell_solids(cell: &Cell, base_from_world: &Isometry3<f64>) -> Vec<Solid> 
     let centre_w = Vector3::new((hi.x + lo.x) / 2.0, (hi.y + lo.y) / 2.0, plate_top - s.plate_thickness_mm / 2.0);
     let plate = base_from_world * Isometry3::from_parts(Translation3::from(centre_w), UnitQuaternion::identity());
     out.push(Solid::Cuboid { name: "plate", half, pose: plate });
-    // Pedestal from the table to the plate (base frame is level with the table).
-    let plate_bottom_base = plate.translation.vector.z - s.plate_thickness_mm / 2.0;
+    // Pedestal from the table to the plate, table and pedestal in the level frame (the base frame
+    // turned so that z is up: itself for an upright base).
+    let level_from_base = (*up_base != Vector3::z()).then(|| {
+        UnitQuaternion::rotation_between(up_base, &Vector3::z())
+            .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI))
+    });
+    let to_base = |p: Isometry3<f64>| level_from_base.map_or(p, |r| r.inverse() * p);
+    let plate_level = level_from_base.map_or(plate, |r| r * plate);
+    let plate_bottom_base = plate_level.translation.vector.z - s.plate_thickness_mm / 2.0;
     let ped_h = (plate_bottom_base - s.table_z_base_mm).max(1.0);
-    let ped = Isometry3::translation(plate.translation.vector.x, plate.translation.vector.y, s.table_z_base_mm + ped_h / 2.0);
+    let ped = to_base(Isometry3::translation(
+        plate_level.translation.vector.x,
+        plate_level.translation.vector.y,
+        s.table_z_base_mm + ped_h / 2.0,
+    ));
     out.push(Solid::Cuboid { name: "pedestal", half: Vector3::new(50.0, 50.0, ped_h / 2.0 - 0.5), pose: ped });
-    let table = Isometry3::translation(0.0, 0.0, s.table_z_base_mm - 25.0);
+    let table = to_base(Isometry3::translation(0.0, 0.0, s.table_z_base_mm - 25.0));
     out.push(Solid::Cuboid { name: "table", half: Vector3::new(2000.0, 2000.0, 24.0), pose: table });
     out
 }
 
 /// The obstacles of the collision world: the cell's solids.
-pub fn obstacles(cell: &Cell, base_from_world: &Isometry3<f64>) -> Vec<Obstacle> {
-    cell_solids(cell, base_from_world)
+pub fn obstacles(cell: &Cell, base_from_world: &Isometry3<f64>, up_base: &Vector3<f64>) -> Vec<Obstacle> {
+    cell_solids(cell, base_from_world, up_base)
         .into_iter()
         .map(|s| match s {
             Solid::Capsule { name, a, b, radius } => Obstacle::capsule(name, a, b, radius),

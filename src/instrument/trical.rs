@@ -12,7 +12,7 @@
 //! `R` whose centre is at `c` from the TCP, which is `c . u_i` to first order.
 
 use crate::cell::collision::CapsuleSpec;
-use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Unit, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
@@ -110,6 +110,8 @@ pub struct TriCal {
     pub axes: [Vector3<f64>; 3],
     /// Radius of the reference ball the indicators were zeroed on, mm.
     pub reference_radius_mm: f64,
+    /// The flange frame in MDH frame 6 of the arm it is mounted on (`None`: frame 6 is the flange).
+    pub frame6_from_flange: Option<Matrix3<f64>>,
 }
 
 impl TriCal {
@@ -123,7 +125,24 @@ impl TriCal {
             let dir = Rotation3::from_axis_angle(&Unit::new_normalize(nominal), azimuth.sample(rng)) * perp;
             Rotation3::from_axis_angle(&Unit::new_normalize(dir), tilt.sample(rng)) * nominal
         });
-        Self { spec: spec.clone(), axes, reference_radius_mm: diameter_mm / 2.0 }
+        Self { spec: spec.clone(), axes, reference_radius_mm: diameter_mm / 2.0, frame6_from_flange: None }
+    }
+
+    /// Nominal orientation of {T} in MDH frame 6 ([`flange_from_tool_rotation`] on this arm's flange).
+    pub fn frame6_from_tool(&self) -> Matrix3<f64> {
+        self.frame6_from_flange.map_or_else(flange_from_tool_rotation, |r| r * flange_from_tool_rotation())
+    }
+
+    /// `world_from_tcp` with the device on the flange (the device axis along the flange's z) as the
+    /// pose of MDH frame 6 at the TCP that IK takes.
+    pub fn frame6_pose(&self, world_from_tcp: Isometry3<f64>) -> Isometry3<f64> {
+        match self.frame6_from_flange {
+            None => world_from_tcp,
+            Some(r) => {
+                let flange_from_frame6 = UnitQuaternion::from_matrix(&r.transpose());
+                Isometry3::from_parts(world_from_tcp.translation, world_from_tcp.rotation * flange_from_frame6)
+            }
+        }
     }
 
     /// Exact plunger travels for a ball of `radius_mm` centred at `c` (in {T}, mm), no noise.
@@ -163,9 +182,20 @@ impl TriCal {
     }
 }
 
-/// Capsules of the TriCal device in the flange frame: the conical bracket and the three indicator
-/// bodies behind their plungers (dimensions estimated from the paper's Figure 1).
-pub fn trical_capsules(tcp: &Vector3<f64>) -> Vec<CapsuleSpec> {
+/// Capsules of the TriCal device in MDH frame 6 (`tcp` there), mounted on a flange at
+/// `frame6_from_flange` (`None`: frame 6): the conical bracket and the three indicator bodies behind
+/// their plungers (dimensions estimated from the paper's Figure 1).
+pub fn trical_capsules(tcp: &Vector3<f64>, frame6_from_flange: Option<&Matrix3<f64>>) -> Vec<CapsuleSpec> {
+    let Some(r) = frame6_from_flange else { return trical_capsules_on_flange(tcp) };
+    let turn = |p: [f64; 3]| -> [f64; 3] { (r * Vector3::from(p)).into() };
+    trical_capsules_on_flange(&(r.transpose() * tcp))
+        .into_iter()
+        .map(|c| CapsuleSpec { a: turn(c.a), b: turn(c.b), radius: c.radius })
+        .collect()
+}
+
+/// Capsules of the TriCal device in the flange frame (`tcp` there).
+fn trical_capsules_on_flange(tcp: &Vector3<f64>) -> Vec<CapsuleSpec> {
     let r6t = flange_from_tool_rotation();
     let mut v = vec![CapsuleSpec { a: [0.0, 0.0, 15.0], b: [tcp.x * 0.5, tcp.y * 0.5, tcp.z * 0.55], radius: 30.0 }];
     for k in 0..3 {

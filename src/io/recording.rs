@@ -21,7 +21,7 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use rerun::blueprint::{Blueprint, BlueprintActivation, Horizontal, Spatial3DView, Tabs, TimePanel, TimeSeriesView};
 use rerun::{Arrows3D, Boxes3D, Capsules3D, Color, Points3D, RecordingStream, Scalars, SeriesLines};
 
-use crate::cell::collision::{CapsuleSpec, irb120_link_capsules};
+use crate::cell::collision::{CapsuleSpec, LinkCapsules};
 use crate::cell::solids::{Solid, cell_solids};
 use crate::experiment::Experiment;
 use crate::instrument::trical::trical_capsules;
@@ -73,7 +73,7 @@ fn robot_capsules(
     wb: &Isometry3<f64>,
     st: &mut KinState,
     q: &[f64; JOINTS],
-    links: &[Vec<CapsuleSpec>; JOINTS + 1],
+    links: &LinkCapsules,
     tool: &[CapsuleSpec],
 ) -> Vec<(Vector3<f64>, Vector3<f64>, f64)> {
     forward(model, st, q);
@@ -177,7 +177,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
                 Color::from_rgb(c[0], c[1], c[2])
             })),
     )?;
-    let solids = cell_solids(&e.cell, &base_from_world);
+    let solids = cell_solids(&e.cell, &base_from_world, &-e.robot.truth.data().gravity_base.normalize());
     let risers: Vec<_> = solids
         .iter()
         .filter_map(|s| match s {
@@ -217,8 +217,8 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
 
     // The pool: TCP targets coloured by sphere, the robot per configuration, the centring readings.
     let nominal = &e.campaign.nominal;
-    let links = irb120_link_capsules();
-    let tool = trical_capsules(&nominal.data().flange_tcp_mm);
+    let links = &e.links;
+    let tool = trical_capsules(&nominal.data().flange_tcp_mm, e.trical.frame6_from_flange.as_ref());
     let mut st = KinState::default();
     let pool = &e.campaign.pool;
     let pool_tcp: Vec<[f32; 3]> = pool.iter().map(|p| p3(&e.cell.spheres_w[p.sphere])).collect();
@@ -238,7 +238,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
         let c = SPHERE_COLOURS[p.sphere % SPHERE_COLOURS.len()];
         rec.log(
             "pool/robot",
-            &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &p.q, &links, &tool))
+            &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &p.q, links, &tool))
                 .with_colors([Color::from_rgb(c[0], c[1], c[2])]),
         )?;
         for r in &p.readings {
@@ -257,7 +257,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
         rec.set_time_sequence("validation_pose", k as i64);
         rec.log(
             "validation/robot",
-            &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &v.q, &links, &tool))
+            &capsules(&robot_capsules(truth, &world_from_base_true, &mut st, &v.q, links, &tool))
                 .with_colors([Color::from_rgb(120, 120, 200)]),
         )?;
     }

@@ -111,6 +111,18 @@ fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<Scenario, Scen
     let shown = path.display().to_string();
     let mut file: ScenarioFile = deserialize(t, &shown)?;
     file.robot.arm = load_arm(path, file.robot.file.as_deref())?;
+    if let Some(crate::robot::file::Arm(arm)) = &file.robot.arm
+        && arm.capsules.is_none()
+    {
+        return Err(ScenarioError::Parse {
+            path: shown,
+            key: "robot.file".into(),
+            message: format!(
+                "{}: collision: no [[collision]] capsules; a TriCal campaign tests every configuration against the links' shapes",
+                arm.path.display()
+            ),
+        });
+    }
     check(&file, &shown)?;
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
     Ok(Scenario {

@@ -11,6 +11,8 @@
 //! name = "ABB IRB 120-3/0.58"
 //! source = "TriCal paper Table 3; limits and masses from the ROS-Industrial URDF"
 //! gravity_m_s2 = 9.81
+//! # flange_rpy_deg = [0.0, 180.0, 0.0]   # the flange in MDH frame 6 where it is not frame 6
+//! # tool_mm = [0.0, 0.0, 0.0]            # the TCP in the flange frame
 //!
 //! [[joint]]            # one per joint, 6, joint 1 first
 //! alpha_deg = 0.0      # alpha_{i-1}
@@ -23,6 +25,12 @@
 //! mass_kg = 3.067
 //! com_mm = [0.098, -0.12, -51.59]   # in MDH frame i
 //!
+//! [[collision]]        # capsules of the links, in MDH frame `link` (0 the base, 6 the flange)
+//! link = 1
+//! a_mm = [-0.7, 0.9, -119.0]
+//! b_mm = [-0.7, 0.9, -32.9]
+//! radius_mm = 116.9
+//!
 //! [truth]              # the robot a study simulates: named values (absent: the nominal)
 //! a2 = 270.146
 //! ```
@@ -30,7 +38,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
@@ -67,6 +75,10 @@ struct File {
     /// `world_from_base` (eq. 7): `[x, y, z]` mm, `[alpha, beta, gamma]` deg about z, y, x.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     base_mm_deg: Option<[f64; 6]>,
+    /// The flange frame in MDH frame 6 (roll, pitch, yaw about fixed x, y, z as in a URDF origin),
+    /// where it is not frame 6 itself (a last joint axis pointing into the arm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    flange_rpy_deg: Option<[f64; 3]>,
     /// TCP in the flange frame, mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     tool_mm: Option<[f64; 3]>,
@@ -74,6 +86,9 @@ struct File {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     payload: Option<Payload>,
     joint: Vec<JointRow>,
+    /// Collision capsules of the links (absent: the arm cannot run a TriCal campaign).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    collision: Vec<CollisionRow>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     truth: BTreeMap<String, f64>,
     /// Standard deviation of identified parameters, in their units (an exported calibration).
@@ -106,6 +121,29 @@ struct JointRow {
     com_mm: [f64; 3],
 }
 
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct CollisionRow {
+    link: usize,
+    a_mm: [f64; 3],
+    b_mm: [f64; 3],
+    radius_mm: f64,
+}
+
+/// A capsule given by its end points and radius, in the frame it is attached to, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CapsuleSpec {
+    /// First end, mm.
+    pub a: [f64; 3],
+    /// Second end, mm.
+    pub b: [f64; 3],
+    /// Radius, mm.
+    pub radius: f64,
+}
+
+/// The capsules of each link, per MDH frame 0 (the base) to 6 (the flange).
+pub type LinkCapsules = [Vec<CapsuleSpec>; JOINTS + 1];
+
 /// A loaded robot file: the nominal arm (base at the world origin, TCP on the flange, no payload)
 /// and the truth as named values.
 #[derive(Clone, Debug)]
@@ -120,6 +158,10 @@ pub struct RobotFile {
     pub truth: Vec<(ParamId, f64)>,
     /// Standard deviations of an exported calibration, in each parameter's unit, by name.
     pub std: Vec<(ParamId, f64)>,
+    /// The links' collision capsules (`None`: the file gives none).
+    pub capsules: Option<LinkCapsules>,
+    /// The flange frame in MDH frame 6 (`None`: frame 6 is the flange).
+    pub flange: Option<Matrix3<f64>>,
 }
 
 /// A loaded robot file shared by the copies of a scenario (equal when read from the same path).
@@ -133,9 +175,17 @@ impl PartialEq for Arm {
 }
 
 /// The robot file text of `model` (every value of its data: the joints, base, tool and payload),
-/// with `std` (parameter and standard deviation in internal units) and `source` as provenance.
-pub fn to_text(model: &RobotModel, source: &str, std: &[(ParamId, f64)]) -> String {
+/// with `std` (parameter and standard deviation in internal units), the links' `capsules` and the
+/// `flange` frame in frame 6 if known, and `source` as provenance.
+pub fn to_text(
+    model: &RobotModel,
+    source: &str,
+    std: &[(ParamId, f64)],
+    capsules: Option<&LinkCapsules>,
+    flange: Option<&Matrix3<f64>>,
+) -> String {
     let d = model.data();
+    let to_flange = |v: &Vector3<f64>| -> [f64; 3] { flange.map_or(*v, |r| r.transpose() * v).into() };
     let b = d.world_from_base;
     let f = File {
         name: d.name.clone(),
@@ -143,8 +193,12 @@ pub fn to_text(model: &RobotModel, source: &str, std: &[(ParamId, f64)]) -> Stri
         gravity_m_s2: d.gravity_base.norm(),
         gravity_base_m_s2: (d.gravity_base.x != 0.0 || d.gravity_base.y != 0.0 || d.gravity_base.z > 0.0).then(|| d.gravity_base.into()),
         base_mm_deg: Some([b.x, b.y, b.z, b.alpha.to_degrees(), b.beta.to_degrees(), b.gamma.to_degrees()]),
-        tool_mm: Some(d.flange_tcp_mm.into()),
-        payload: Some(Payload { mass_kg: d.payload.mass_kg, com_mm: d.payload.com_mm.into() }),
+        flange_rpy_deg: flange.map(|r| {
+            let (x, y, z) = Rotation3::from_matrix_unchecked(*r).euler_angles();
+            [x.to_degrees(), y.to_degrees(), z.to_degrees()]
+        }),
+        tool_mm: Some(to_flange(&d.flange_tcp_mm)),
+        payload: Some(Payload { mass_kg: d.payload.mass_kg, com_mm: to_flange(&d.payload.com_mm) }),
         joint: (0..JOINTS)
             .map(|i| {
                 let (l, lim, m) = (&d.links[i], &d.limits[i], &d.links_inertial[i]);
@@ -160,6 +214,11 @@ pub fn to_text(model: &RobotModel, source: &str, std: &[(ParamId, f64)]) -> Stri
                     com_mm: m.com_mm.into(),
                 }
             })
+            .collect(),
+        collision: capsules
+            .iter()
+            .flat_map(|c| c.iter().enumerate())
+            .flat_map(|(link, caps)| caps.iter().map(move |c| CollisionRow { link, a_mm: c.a, b_mm: c.b, radius_mm: c.radius }))
             .collect(),
         truth: BTreeMap::new(),
         std: std.iter().map(|(id, v)| (id.name(), id.unit().from_internal(*v))).collect(),
@@ -279,18 +338,27 @@ impl RobotFile {
                 within(format!("payload.com_mm[{k}]"), *v, -LENGTH_MM, LENGTH_MM)?;
             }
         }
+        for (k, v) in f.flange_rpy_deg.iter().flatten().enumerate() {
+            within(format!("flange_rpy_deg[{k}]"), *v, -360.0, 360.0)?;
+        }
+        let flange =
+            f.flange_rpy_deg.map(|[x, y, z]| *Rotation3::from_euler_angles(x.to_radians(), y.to_radians(), z.to_radians()).matrix());
+        let in_frame6 = |v: Vector3<f64>| flange.map_or(v, |r| r * v);
         let base = f.base_mm_deg.map_or_else(XyzZyx::default, XyzZyx::from_mm_deg);
         let data = RobotData {
             name: f.name.clone(),
             links,
             world_from_base: base,
-            flange_tcp_mm: f.tool_mm.map_or_else(Vector3::zeros, Vector3::from),
+            flange_tcp_mm: in_frame6(f.tool_mm.map_or_else(Vector3::zeros, Vector3::from)),
             limits: std::array::from_fn(|i| JointLimit {
                 min: f.joint[i].limits_deg[0].to_radians(),
                 max: f.joint[i].limits_deg[1].to_radians(),
             }),
             links_inertial: std::array::from_fn(|i| Inertial { mass_kg: f.joint[i].mass_kg, com_mm: Vector3::from(f.joint[i].com_mm) }),
-            payload: f.payload.as_ref().map_or(Inertial::NONE, |p| Inertial { mass_kg: p.mass_kg, com_mm: Vector3::from(p.com_mm) }),
+            payload: f
+                .payload
+                .as_ref()
+                .map_or(Inertial::NONE, |p| Inertial { mass_kg: p.mass_kg, com_mm: in_frame6(Vector3::from(p.com_mm)) }),
             gravity_base: gravity,
         };
         let nominal = RobotModel::new(data).map_err(|e| ("joint".to_string(), e.to_string()))?;
@@ -316,7 +384,29 @@ impl RobotFile {
             let id = ParamId::parse(name).ok_or_else(|| (field.clone(), format!("unknown parameter `{name}`")))?;
             std.push((id, v));
         }
-        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std };
+        let capsules = if f.collision.is_empty() {
+            None
+        } else {
+            let mut caps: LinkCapsules = Default::default();
+            for (k, c) in f.collision.iter().enumerate() {
+                let at = |key: &str| format!("collision[{}].{key}", k + 1);
+                if c.link > JOINTS {
+                    return Err((at("link"), format!("{}: MDH frames are 0 (the base) to {JOINTS} (the flange)", c.link)));
+                }
+                for (key, p) in [("a_mm", &c.a_mm), ("b_mm", &c.b_mm)] {
+                    for (i, v) in p.iter().enumerate() {
+                        within(format!("{}[{i}]", at(key)), *v, -LENGTH_MM, LENGTH_MM)?;
+                    }
+                }
+                within(at("radius_mm"), c.radius_mm, 0.0, LENGTH_MM)?;
+                if c.radius_mm <= 0.0 {
+                    return Err((at("radius_mm"), format!("{}: a capsule needs a positive radius", c.radius_mm)));
+                }
+                caps[c.link].push(CapsuleSpec { a: c.a_mm, b: c.b_mm, radius: c.radius_mm });
+            }
+            Some(caps)
+        };
+        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std, capsules, flange };
         file.truth_on(&file.nominal).map_err(|e| ("truth".to_string(), e))?;
         Ok(file)
     }

@@ -8,6 +8,9 @@
 //!
 //! Choice among solutions: the one within the joint limits closest to the seed (Euclidean in joint
 //! space, joint 6 unwrapped to the seed's turn).
+//!
+//! Arms of another structure (a shoulder offset, other twists: the ER20-C10, the KR 6 of
+//! `robots/`) take [`numeric`]: damped least squares from the seed and a fixed set of starts.
 
 use std::f64::consts::PI;
 
@@ -119,8 +122,12 @@ pub fn base_from_flange_for_tcp(model: &RobotModel, world_from_tcp: &Isometry3<f
 }
 
 /// Joint values that put the TCP of `model` at `world_from_tcp` (position and flange orientation),
-/// nearest `seed` among the closed-form branches, refined by Newton's method on the full model.
+/// nearest `seed` among the closed-form branches, refined by Newton's method on the full model;
+/// for an arm without the closed form, [`numeric`].
 pub fn inverse(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joints) -> Result<Joints, IkError> {
+    if !has_closed_form(model) {
+        return numeric(model, world_from_tcp, seed);
+    }
     let target_flange = base_from_flange_for_tcp(model, world_from_tcp);
     let mut candidates = closed_form(model, &target_flange);
     if candidates.is_empty() {
@@ -151,30 +158,14 @@ fn distance(a: &Joints, b: &Joints) -> f64 {
 pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
     let mut st = KinState::default();
     let mut q = *q0;
-    let rb = super::kinematics::world_from_base(model).rotation.to_rotation_matrix().into_inner();
-    let target_p = world_from_tcp.translation.vector;
-    let target_r = world_from_tcp.rotation.to_rotation_matrix().into_inner();
+    let goal = Goal::new(model, world_from_tcp);
     let mut residual = f64::INFINITY;
     for _ in 0..60 {
-        let p = forward(model, &mut st, &q);
-        let r = rb * st.rot[JOINTS];
-        let dp = target_p - p;
-        // Orientation error as a rotation vector (first order), robust near the identity.
-        let dr = (0..3).map(|k| r.column(k).cross(&target_r.column(k))).fold(Vector3::zeros(), |a, v| a + v) * 0.5;
-        residual = dp.norm();
-        if residual < 1e-11 && dr.norm() < 1e-13 {
+        let (rhs, jac) = goal.error_and_jacobian(model, &mut st, &q);
+        residual = rhs.fixed_rows::<3>(0).norm();
+        if residual < 1e-11 && rhs.fixed_rows::<3>(3).norm() < 1e-13 {
             return Ok(q);
         }
-        let tcp = st.tcp_base;
-        let mut jac = Matrix6::zeros();
-        for k in 0..JOINTS {
-            let z = st.rot[k + 1].column(2).into_owned();
-            let v = rb * z.cross(&(tcp - st.org[k + 1]));
-            let w = rb * z;
-            jac.fixed_view_mut::<3, 1>(0, k).copy_from(&v);
-            jac.fixed_view_mut::<3, 1>(3, k).copy_from(&w);
-        }
-        let rhs = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
         let Some(step) = jac.lu().solve(&rhs) else {
             break;
         };
@@ -183,4 +174,149 @@ pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) 
         }
     }
     Err(IkError::NoConvergence { residual_mm: residual })
+}
+
+/// A TCP pose to reach, in the base orientation of the model.
+struct Goal {
+    rb: Matrix3<f64>,
+    p: Vector3<f64>,
+    r: Matrix3<f64>,
+}
+
+impl Goal {
+    fn new(model: &RobotModel, world_from_tcp: &Isometry3<f64>) -> Self {
+        Self {
+            rb: super::kinematics::world_from_base(model).rotation.to_rotation_matrix().into_inner(),
+            p: world_from_tcp.translation.vector,
+            r: world_from_tcp.rotation.to_rotation_matrix().into_inner(),
+        }
+    }
+
+    /// The pose error at `q` (position mm, then orientation as a first-order rotation vector, rad)
+    /// and the geometric Jacobian in {W}.
+    fn error_and_jacobian(&self, model: &RobotModel, st: &mut KinState, q: &Joints) -> (Vector6<f64>, Matrix6<f64>) {
+        let p = forward(model, st, q);
+        let r = self.rb * st.rot[JOINTS];
+        let dp = self.p - p;
+        // Orientation error as a rotation vector (first order), robust near the identity.
+        let dr = (0..3).map(|k| r.column(k).cross(&self.r.column(k))).fold(Vector3::zeros(), |a, v| a + v) * 0.5;
+        let tcp = st.tcp_base;
+        let mut jac = Matrix6::zeros();
+        for k in 0..JOINTS {
+            let z = st.rot[k + 1].column(2).into_owned();
+            let v = self.rb * z.cross(&(tcp - st.org[k + 1]));
+            let w = self.rb * z;
+            jac.fixed_view_mut::<3, 1>(0, k).copy_from(&v);
+            jac.fixed_view_mut::<3, 1>(3, k).copy_from(&w);
+        }
+        (Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z), jac)
+    }
+}
+
+/// Whether the closed form holds for `model`: the IRB 120's structure of Table 3 (twists 0, -90, 0,
+/// -90, 90, -90 deg, joint 2 offset by -90 deg, no shoulder or wrist offsets) up to the small
+/// errors a calibration identifies (0.5 deg, 1 mm).
+pub fn has_closed_form(model: &RobotModel) -> bool {
+    let l = model.links();
+    let deg = |x: f64, want: f64| (x.to_degrees() - want).abs() < 0.5;
+    let twists = [0.0, -90.0, 0.0, -90.0, 90.0, -90.0];
+    let offsets = [0.0, -90.0, 0.0, 0.0, 0.0];
+    (0..JOINTS).all(|i| deg(l[i].alpha, twists[i]))
+        && (0..5).all(|i| deg(l[i].theta_offset, offsets[i]))
+        && [l[0].a, l[1].a, l[4].a, l[5].a, l[1].d, l[2].d, l[4].d].iter().all(|v| v.abs() < 1.0)
+}
+
+/// IK of any six-joint arm by damped least squares from several starts (the seed first, then its
+/// wrist flipped, then the shoulder towards and away from the target with the elbow at a few
+/// angles), each polished by [`refine`]; the solution within the limits nearest the seed (each
+/// joint moved by whole turns towards the seed where its range allows).
+pub fn numeric(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joints) -> Result<Joints, IkError> {
+    let goal = Goal::new(model, world_from_tcp);
+    let base_target = super::kinematics::world_from_base(model).inverse_transform_point(&world_from_tcp.translation.vector.into());
+    let toward = base_target.y.atan2(base_target.x);
+    let mut starts = vec![*seed, [seed[0], seed[1], seed[2], wrap(seed[3] + PI), -seed[4], wrap(seed[5] + PI)]];
+    for q1 in [toward, wrap(toward + PI), -toward, wrap(PI - toward)] {
+        for (q2, q3) in [(0.0, 0.0), (-0.8, 0.8), (0.8, -0.8), (-0.8, -0.8), (0.8, 0.8), (-1.6, 1.6), (1.6, -1.6)] {
+            starts.push([q1, q2, q3, 0.0, 0.5, 0.0]);
+        }
+    }
+    let mut st = KinState::default();
+    let mut best: Option<(f64, Joints)> = None;
+    let mut last = IkError::Unreachable;
+    for (n, start) in starts.iter().enumerate() {
+        let Some(q) = damped(model, &goal, &mut st, start) else { continue };
+        match refine(model, world_from_tcp, &q) {
+            Ok(q) => {
+                let q = toward_seed(model, q, seed);
+                if !model.within_limits(&q) {
+                    last = IkError::Limits;
+                    continue;
+                }
+                let d = distance(&q, seed);
+                if best.is_none_or(|(b, _)| d < b) {
+                    best = Some((d, q));
+                }
+                // From the seed or its wrist flip: the branch the seed is on.
+                if n < 2 {
+                    break;
+                }
+            }
+            Err(e) => last = e,
+        }
+    }
+    best.map(|(_, q)| q).ok_or(last)
+}
+
+/// Damped least squares towards `goal` from `q0` (orientation weighted by 300 mm per rad, joint
+/// steps at most 0.3 rad); `None` when it stalls away from the goal.
+fn damped(model: &RobotModel, goal: &Goal, st: &mut KinState, q0: &Joints) -> Option<Joints> {
+    const W: f64 = 300.0;
+    let weight = Matrix6::from_diagonal(&Vector6::new(1.0, 1.0, 1.0, W, W, W));
+    let mut q = *q0;
+    let mut lambda = 10.0;
+    let (e, j) = goal.error_and_jacobian(model, st, &q);
+    let (mut e, mut j) = (weight * e, weight * j);
+    let mut cost = e.norm_squared();
+    for _ in 0..200 {
+        if cost < 1e-8 {
+            return Some(q);
+        }
+        let a = j * j.transpose() + Matrix6::identity() * (lambda * lambda);
+        let mut step = j.transpose() * a.lu().solve(&e)?;
+        let big = step.amax();
+        if big > 0.3 {
+            step *= 0.3 / big;
+        }
+        let trial: Joints = std::array::from_fn(|k| q[k] + step[k]);
+        let (te, tj) = goal.error_and_jacobian(model, st, &trial);
+        let (te, tj) = (weight * te, weight * tj);
+        if te.norm_squared() < cost {
+            (q, e, j, cost) = (trial, te, tj, te.norm_squared());
+            lambda = (lambda * 0.5).max(1e-3);
+        } else {
+            lambda *= 4.0;
+            if lambda > 1e6 {
+                return None;
+            }
+        }
+    }
+    (cost < 1.0).then_some(q)
+}
+
+/// `q` with each joint moved by whole turns to the value nearest the seed's within its limits.
+fn toward_seed(model: &RobotModel, mut q: Joints, seed: &Joints) -> Joints {
+    for (k, lim) in model.limits().iter().enumerate() {
+        let turns = ((seed[k] - q[k]) / (2.0 * PI)).round();
+        let mut best = q[k];
+        for t in [turns, turns - 1.0, turns + 1.0, 0.0] {
+            let c = q[k] + t * 2.0 * PI;
+            let inside = c >= lim.min && c <= lim.max;
+            let best_inside = best >= lim.min && best <= lim.max;
+            if (inside && !best_inside) || (inside && (c - seed[k]).abs() < (best - seed[k]).abs()) {
+                best = c;
+            }
+        }
+        q[k] = best;
+    }
+    q
 }

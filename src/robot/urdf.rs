@@ -5,12 +5,18 @@
 //! geometry), the root-to-{0} transform as the base, the tip (the last link of fixed joints after
 //! joint 6) as the tool, and the links' masses and centres of mass in MDH frames. The result is
 //! checked against the URDF's own chain at random configurations before it is returned.
+//!
+//! Collision shapes: each link's `<collision>` cylinders, capsules and spheres become capsules of
+//! the same size in the MDH frame of the body the link belongs to (the number of revolute joints
+//! between it and the root), a box the capsule that encloses it (its longest edge as the segment,
+//! the half-diagonal of the other two as the radius); meshes are left out and named.
 
 use std::collections::HashMap;
 use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
+use super::file::{CapsuleSpec, LinkCapsules};
 use super::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
 
 /// Why a URDF cannot be an arm of calsim: the file and what is wrong (joint or link named).
@@ -40,8 +46,26 @@ fn iso(p: &urdf_rs::Pose) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]))
 }
 
+/// A converted URDF: the arm, its links' collision capsules (`None`: the URDF has no shape calsim
+/// converts) and the collision elements left out (meshes: `link name`).
+pub struct Converted {
+    /// The arm.
+    pub model: RobotModel,
+    /// Collision capsules per MDH frame.
+    pub capsules: Option<LinkCapsules>,
+    /// Collision elements not converted, by link.
+    pub skipped: Vec<String>,
+    /// The tip link's frame (the flange) in MDH frame 6 where it is not frame 6's orientation.
+    pub flange: Option<nalgebra::Matrix3<f64>>,
+}
+
 /// Reads `path` and converts it (see the module).
 pub fn load(path: &Path) -> Result<RobotModel, UrdfError> {
+    load_all(path).map(|c| c.model)
+}
+
+/// Reads `path` and converts it with its collision shapes (see the module).
+pub fn load_all(path: &Path) -> Result<Converted, UrdfError> {
     let shown = path.display().to_string();
     let fail = |message: String| UrdfError { path: shown.clone(), message };
     let robot = urdf_rs::read_file(path).map_err(|e| fail(e.to_string()))?;
@@ -49,7 +73,7 @@ pub fn load(path: &Path) -> Result<RobotModel, UrdfError> {
 }
 
 /// Converts a parsed URDF (see the module).
-pub fn convert(robot: &urdf_rs::Robot) -> Result<RobotModel, String> {
+pub fn convert(robot: &urdf_rs::Robot) -> Result<Converted, String> {
     let mut by_child: HashMap<&str, &urdf_rs::Joint> = HashMap::new();
     for j in &robot.joints {
         if by_child.insert(j.child.link.as_str(), j).is_some() {
@@ -139,13 +163,78 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<RobotModel, String> {
         return Err(format!("{} revolute joints from `{root}`: calsim's arms have {JOINTS}", axes.len()));
     }
     let tip = frame.translation.vector;
-    let model = from_axes(&robot.name, &axes, &tip)?;
+    let (model, frames) = from_axes(&robot.name, &axes, &tip)?;
     check(&model, &axes, &tip)?;
-    Ok(model)
+    let (capsules, skipped) = capsules(robot, root, &frames)?;
+    // The tip's orientation in frame 6: where the URDF's last axis points into the arm, frame 6's z
+    // does too, and the flange (the tip) is turned from it.
+    let r = (frames[JOINTS].rotation.inverse() * frame.rotation).to_rotation_matrix().into_inner();
+    let flange = ((r - nalgebra::Matrix3::identity()).amax() > 1e-12).then_some(r);
+    Ok(Converted { model, capsules, skipped, flange })
 }
 
-/// The MDH frames {1}..{6} (origin, x, z) of the axes, {0} and the model.
-fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<RobotModel, String> {
+/// The collision shapes of every link as capsules in its body's MDH frame (`frames`: {0}..{6} in
+/// the root frame at the zero configuration, m), and the elements left out.
+fn capsules(
+    robot: &urdf_rs::Robot,
+    root: &str,
+    frames: &[Isometry3<f64>; JOINTS + 1],
+) -> Result<(Option<LinkCapsules>, Vec<String>), String> {
+    let mut caps: LinkCapsules = Default::default();
+    let mut skipped = Vec::new();
+    let mut any = false;
+    // Links from the root at q = 0: (name, root_from_link, body).
+    let mut stack = vec![(root.to_string(), Isometry3::identity(), 0usize)];
+    let mut seen = 0;
+    while let Some((name, pose, body)) = stack.pop() {
+        seen += 1;
+        if seen > 10_000 {
+            return Err("more than 10,000 links: not an arm".into());
+        }
+        let Some(link) = robot.links.iter().find(|l| l.name == name) else { continue };
+        for c in &link.collision {
+            let at = pose * iso(&c.origin);
+            let seg = |half: f64, r: f64| (Vector3::new(0.0, 0.0, -half), Vector3::new(0.0, 0.0, half), r);
+            let (a, b, r) = match &c.geometry {
+                urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
+                    seg(length / 2.0, *radius)
+                }
+                urdf_rs::Geometry::Sphere { radius } => seg(0.0, *radius),
+                urdf_rs::Geometry::Box { size } => {
+                    let h = [size[0] / 2.0, size[1] / 2.0, size[2] / 2.0];
+                    let k = (0..3).max_by(|&i, &j| h[i].total_cmp(&h[j])).unwrap_or(2);
+                    let mut e = Vector3::zeros();
+                    e[k] = h[k];
+                    (-e, e, h[(k + 1) % 3].hypot(h[(k + 2) % 3]))
+                }
+                urdf_rs::Geometry::Mesh { .. } => {
+                    skipped.push(format!("{name} (mesh)"));
+                    continue;
+                }
+            };
+            let to_body = frames[body].inverse() * at;
+            let (pa, pb) = (to_body * Point3::from(a), to_body * Point3::from(b));
+            let ok = pa.iter().chain(pb.iter()).all(|v| v.is_finite() && v.abs() <= 100.0) && r.is_finite() && r > 0.0 && r <= 100.0;
+            if !ok {
+                return Err(format!(
+                    "link `{name}`: collision shape of radius {r} m at {:?} m is not a finite shape within 100 m",
+                    at.translation.vector
+                ));
+            }
+            caps[body].push(CapsuleSpec { a: (pa.coords * 1e3).into(), b: (pb.coords * 1e3).into(), radius: r * 1e3 });
+            any = true;
+        }
+        for j in robot.joints.iter().filter(|j| j.parent.link == name) {
+            let moving = !matches!(j.joint_type, urdf_rs::JointType::Fixed);
+            stack.push((j.child.link.clone(), pose * iso(&j.origin), (body + usize::from(moving)).min(JOINTS)));
+        }
+    }
+    Ok((any.then_some(caps), skipped))
+}
+
+/// The MDH frames {1}..{6} (origin, x, z) of the axes, {0} and the model; with the frames {0}..{6}
+/// in the root frame at the zero configuration (m).
+fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<(RobotModel, [Isometry3<f64>; JOINTS + 1]), String> {
     let z: Vec<Vector3<f64>> = axes.iter().map(|a| a.dir).collect();
     let mut origin = [Vector3::zeros(); JOINTS];
     let mut x = [Vector3::zeros(); JOINTS];
@@ -232,7 +321,8 @@ fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<RobotModel
         payload: Inertial::NONE,
         gravity_base: b.rotation.inverse() * Vector3::new(0.0, 0.0, -9.81),
     };
-    RobotModel::new(data).map_err(|e| e.to_string())
+    let frames = std::array::from_fn(|i| if i == 0 { frame0 } else { mdh(i - 1) });
+    Ok((RobotModel::new(data).map_err(|e| e.to_string())?, frames))
 }
 
 /// The model's TCP against the URDF chain's tip (`tip`, root frame at q = 0, m) at 200
