@@ -94,6 +94,9 @@ pub mod study {
     pub const TRICAL: u64 = 0x5354_5544_5900_0000;
     /// SPMS study tasks.
     pub const SPMS: u64 = 0x5350_4d53_5441_534b;
+    /// The validation with compensated targets of TriCal task i (its own stream: the study's
+    /// sets, fits and validation do not move when it is added or changed).
+    pub const COMPENSATED: u64 = 0x434f_4d50_454e_5341;
 }
 
 /// The stream of task `index` of a study whose tasks are salted with `salt` (see [`study`]).

@@ -111,6 +111,51 @@ pub struct TaskResult {
     pub validation: ErrorStats,
     /// Per-pose validation errors, kept for the table set size only, mm.
     pub errors: Option<Vec<f64>>,
+    /// The validation with compensated targets (table set size only, see [`compensated_errors`]).
+    pub compensated: Option<Compensated>,
+}
+
+/// The validation as a user of the calibration meets it: each validation TCP of the model before
+/// calibration taken as a Cartesian target, the joint values that put the identified model there
+/// (Newton on the full model with compliance from the validation configuration, damped least
+/// squares where Newton fails), the physical
+/// robot of setup 2 moved there and measured by the tracker; the error is measured minus target.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Compensated {
+    /// Error statistics over the targets reached, mm.
+    pub stats: ErrorStats,
+    /// Targets the identified model found no joint values for (beyond its reach: near full stretch,
+    /// the model before calibration reaches farther than the identified one).
+    pub failed: usize,
+}
+
+/// The validation with compensated targets of `model` (see [`Compensated`]), the robot's and the
+/// tracker's noise from `rng`.
+pub fn compensated_errors(
+    model: &RobotModel,
+    before: &RobotModel,
+    experiment: &Experiment,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> Compensated {
+    let mut st = KinState::default();
+    let mut errors = Vec::with_capacity(experiment.campaign.validation.len());
+    let mut failed = 0;
+    let mut from = experiment.campaign.semi_automatic.located_q[0];
+    for v in &experiment.campaign.validation {
+        let target_w = forward(before, &mut st, &v.q);
+        let orientation = crate::robot::world_from_flange(model, &mut st, &v.q).rotation;
+        let target = nalgebra::Isometry3::from_parts(target_w.into(), orientation);
+        // Newton from the validation configuration; near the shoulder singularity (the wrist
+        // centre on axis 1) it diverges, and damped least squares takes over.
+        let Ok(q) = crate::robot::ik::refine(model, &target, &v.q).or_else(|_| crate::robot::ik::numeric(model, &target, &v.q)) else {
+            failed += 1;
+            continue;
+        };
+        let true_w = experiment.robot_validation.tcp_after_move(&mut st, &q, &from, rng);
+        from = q;
+        errors.push((experiment.tracker.measure(&true_w, rng) - target_w).norm());
+    }
+    Compensated { stats: if errors.is_empty() { ErrorStats::default() } else { ErrorStats::of(&errors) }, failed }
 }
 
 /// Everything a study produced.
@@ -169,7 +214,7 @@ pub fn run_on_pool(
     let qs: Vec<_> = observations.iter().map(|o| o.q).collect();
     let pool = PoolJacobian::new(before, &set, &qs);
     let pool_jacobian_s = t0.elapsed().as_secs_f64();
-    let cx = TaskContext::new(experiment, before, &set, observations, &pool, spec);
+    let cx = TaskContext::new(experiment, before, &set, observations, &pool, spec, seed);
     let t1 = Instant::now();
     let results = engine::run_tasks(&spec.tasks(), seed, crate::seeds::study::TRICAL, progress, |task, rng| cx.run(task, rng).0);
     let tasks_s = t1.elapsed().as_secs_f64();
@@ -203,6 +248,7 @@ struct TaskContext<'a> {
     table_n: usize,
     opts: FitOptions,
     dopts: DetmaxOptions,
+    seed: u64,
 }
 
 impl<'a> TaskContext<'a> {
@@ -213,9 +259,10 @@ impl<'a> TaskContext<'a> {
         observations: &'a [Observation],
         pool: &'a PoolJacobian,
         spec: &StudySpec,
+        seed: u64,
     ) -> Self {
         let (opts, dopts, table_n) = (spec.fit_options(), spec.detmax_options(), spec.table_set_size as usize);
-        Self { experiment, before, set, observations, pool, table_n, opts, dopts }
+        Self { experiment, before, set, observations, pool, table_n, opts, dopts, seed }
     }
 }
 
@@ -229,7 +276,14 @@ impl TaskContext<'_> {
         let errors = model.as_ref().map(|m| validation_errors(m, self.experiment, &mut KinState::default()));
         let validation = errors.as_deref().map(ErrorStats::of).unwrap_or_default();
         let keep = task.set_size == self.table_n;
-        (TaskResult { task: task.clone(), id, validation, errors: if keep { errors } else { None } }, model)
+        let compensated = match (&model, keep) {
+            (Some(m), true) => {
+                let rng = &mut crate::seeds::task_stream(self.seed, crate::seeds::study::COMPENSATED, task.index);
+                Some(compensated_errors(m, self.before, self.experiment, rng))
+            }
+            _ => None,
+        };
+        (TaskResult { task: task.clone(), id, validation, errors: if keep { errors } else { None }, compensated }, model)
     }
 }
 
@@ -262,7 +316,7 @@ pub fn recompute_task(
     let Some(task) = spec.tasks().into_iter().find(|t| t.index == index) else {
         return Ok(None);
     };
-    let cx = TaskContext::new(experiment, before, &set, &observations, &pool, spec);
+    let cx = TaskContext::new(experiment, before, &set, &observations, &pool, spec, seed);
     let (result, model) = cx.run(&task, &mut crate::seeds::task_stream(seed, crate::seeds::study::TRICAL, index));
     let chosen = result.id.chosen.iter().map(|&k| observations[k]).collect();
     Ok(Some(Recomputed { result, model, set, observations: chosen }))
