@@ -45,6 +45,8 @@ pub struct Export {
     pub model: RobotModel,
     /// The arm's link capsules (carried into the exported robot files).
     pub links: crate::robot::file::LinkCapsules,
+    /// The arm's flange in MDH frame 6 (carried into the exported robot files).
+    pub flange: Option<nalgebra::Matrix3<f64>>,
     /// Identified parameters and their standard deviation (internal units).
     pub std: Vec<(ParamId, f64)>,
 }
@@ -115,6 +117,7 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
         model,
         std,
         links: experiment.links.clone(),
+        flange: s.experiment.flange(),
     })
 }
 
@@ -182,11 +185,16 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
         e.set_size,
         e.validation_median_mm
     );
-    let robot = crate::robot::file::to_text(&e.model, &source, &e.std, Some(&e.links), None);
+    let robot = crate::robot::file::to_text(&e.model, &source, &e.std, Some(&e.links), e.flange.as_ref());
     let yaml = yaml_overlay(e);
     let urdf = urdf(e).map_err(std::io::Error::other)?;
-    let before =
-        crate::robot::file::to_text(&e.before, &format!("the model before calibration of {}", e.scenario), &[], Some(&e.links), None);
+    let before = crate::robot::file::to_text(
+        &e.before,
+        &format!("the model before calibration of {}", e.scenario),
+        &[],
+        Some(&e.links),
+        e.flange.as_ref(),
+    );
     crate::io::out_dir::write_atomically(out, name, |dir| {
         std::fs::write(dir.join("robot.toml"), &robot)?;
         std::fs::write(dir.join("before.toml"), &before)?;
