@@ -35,6 +35,9 @@ pub struct RobotSpec {
     /// `world_from_base` of the model before calibration, `[x, y, z]` mm then `[alpha, beta, gamma]`
     /// deg (eq. 7). Absent: the base the semi-automatic steps fit to the located spheres.
     pub nominal_base_mm_deg: Option<[f64; 6]>,
+    /// Mass on the flange during validation (setup 2: the indicators removed, an SMR in the
+    /// calibrator), kg, at the device's centre of mass; absent: the device's `payload_kg`.
+    pub validation_payload_kg: Option<f64>,
     /// The arm's robot file, relative to the scenario (absent: the built-in IRB 120 with Table 7).
     pub file: Option<std::path::PathBuf>,
     /// The loaded robot file (filled by the scenario loader).
@@ -53,6 +56,7 @@ impl Default for RobotSpec {
             unmodelled: UnmodelledSpec::default(),
             spread: crate::robot::SpreadSpec::default(),
             nominal_base_mm_deg: Some(crate::robot::builtin::TRICAL_NOMINAL_BASE),
+            validation_payload_kg: None,
             file: None,
             arm: None,
         }
@@ -189,7 +193,10 @@ impl ExperimentSpec {
             &reference,
             &mut stream(seed, seeds::experiment::ROBOT),
         );
-        let robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
+        let mut robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
+        if let Some(m) = self.robot.validation_payload_kg {
+            robot_validation.truth = robot_validation.truth.edited(|d| d.payload.mass_kg = m).expect("a checked mass");
+        }
         let mut trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, seeds::experiment::TRICAL));
         trical.frame6_from_flange = self.flange();
         let base_in_w = world_from_base(&robot.truth).transform_point(&Point3::origin()).coords;

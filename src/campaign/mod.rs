@@ -50,6 +50,9 @@ pub struct CampaignSpec {
     pub jog_error_mm: f64,
     /// Tries allowed per kept configuration before the campaign gives up.
     pub max_tries_per_configuration: u32,
+    /// Setup 2 without the indicators (as the paper's validation): the tracker's line of sight and
+    /// the collision tests of the validation poses see the bracket only.
+    pub validation_indicators_removed: bool,
 }
 
 impl Default for CampaignSpec {
@@ -62,6 +65,7 @@ impl Default for CampaignSpec {
             tcp_check_configurations: 4,
             jog_error_mm: 0.5,
             max_tries_per_configuration: 200,
+            validation_indicators_removed: false,
         }
     }
 }
@@ -239,7 +243,13 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
     let t0 = Instant::now();
     let (pool, pool_rejected, centring_failures) = measure_pool(setup, &world, &nominal_model, &semi_automatic.located_q, seed)?;
     let pool_wall_s = t0.elapsed().as_secs_f64();
-    let (validation, validation_rejected) = measure_validation(setup, &world, &nominal_model, semi_automatic.located_q[0], seed)?;
+    let setup2 = setup.spec.validation_indicators_removed.then(|| {
+        let mut w = collision_world(setup.cell, setup.links, setup.nominal, &truth_base, &tcp_cmm, setup.trical);
+        w.keep_device_parts(1);
+        w
+    });
+    let (validation, validation_rejected) =
+        measure_validation(setup, setup2.as_ref().unwrap_or(&world), &nominal_model, semi_automatic.located_q[0], seed)?;
     Ok(Campaign {
         nominal: nominal_model,
         semi_automatic,
@@ -471,9 +481,10 @@ fn measure_random_poses(
     Ok((out, rejected))
 }
 
-/// An identification pool measured by an external instrument on the robot of setup 1 (Table 8:
-/// the laser tracker with an SMR, the optical CMM with a target at the TCP), from random
-/// configurations of the whole workspace that the instrument sees, not tied to the spheres.
+/// An identification pool measured by an external instrument (Table 8: the laser tracker with an
+/// SMR, the optical CMM with a target at the TCP) on the robot as it carries that target, the
+/// robot of setup 2 (the validation's payload and drift), from random configurations of the whole
+/// workspace that the instrument sees, not tied to the spheres.
 pub fn instrument_pool(
     setup: &Setup<'_>,
     campaign: &Campaign,
@@ -483,8 +494,12 @@ pub fn instrument_pool(
 ) -> Result<Vec<ValidationPose>, CampaignError> {
     let truth_base = world_from_base(&setup.robot.truth);
     let world = collision_world(setup.cell, setup.links, setup.nominal, &truth_base, &campaign.semi_automatic.tcp_cmm_mm, setup.trical);
-    let poses =
-        RandomPoses { what: "instrument pool", count, robot: setup.robot, keys: (streams::INSTRUMENT_POSES, streams::INSTRUMENT_NOISE) };
+    let poses = RandomPoses {
+        what: "instrument pool",
+        count,
+        robot: setup.robot_validation,
+        keys: (streams::INSTRUMENT_POSES, streams::INSTRUMENT_NOISE),
+    };
     measure_random_poses(setup, &world, &campaign.nominal, campaign.semi_automatic.located_q[0], seed, &poses, measure).map(|(p, _)| p)
 }
 

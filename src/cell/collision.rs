@@ -116,6 +116,11 @@ impl CollisionWorld {
         }
     }
 
+    /// Keeps the first `n` capsules of the device (the TriCal's bracket without its indicators).
+    pub fn keep_device_parts(&mut self, n: usize) {
+        self.device.truncate(n);
+    }
+
     /// Leaves out of the self-collision test every pair of bodies that touch in the configuration
     /// whose frames are in `st` (the default pose); returns their names.
     pub fn allow_pairs_touching_at(&mut self, st: &KinState) -> Vec<(String, String)> {

@@ -264,15 +264,23 @@ impl Checker<'_> {
         self.non_negative("robot.unmodelled", "transmission_high_mdeg", u.transmission_high_mdeg, "amplitude")?;
         self.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
         self.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
-        if let Some([lo, hi]) = u.transmission_high_orders
-            && (lo == 0 || lo > hi)
+        self.within("robot.unmodelled", "encoder_mdeg", u.encoder_mdeg, 0.0, 1000.0, "amplitude of the encoder error")?;
+        if let Some(n) = u.transmission_high_count
+            && !(1..=100).contains(&n)
         {
-            return Err(self.fail(
-                "robot.unmodelled",
-                "transmission_high_orders",
-                format!("[{lo}, {hi}]"),
-                "must be [min, max] with 1 <= min <= max",
-            ));
+            return Err(self.fail("robot.unmodelled", "transmission_high_count", n, "must be 1 to 100 harmonics per joint"));
+        }
+        for (key, orders) in [("transmission_high_orders", u.transmission_high_orders), ("encoder_orders", u.encoder_orders)] {
+            if let Some([lo, hi]) = orders
+                && (lo == 0 || lo > hi || hi > 1_000_000)
+            {
+                return Err(self.fail(
+                    "robot.unmodelled",
+                    key,
+                    format!("[{lo}, {hi}]"),
+                    "must be [min, max] with 1 <= min <= max <= 1000000",
+                ));
+            }
         }
         Ok(())
     }
@@ -392,6 +400,9 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     let r = &f.robot;
     c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
     c.within("robot", "payload_kg", r.payload_kg, 0.0, 3.0, "device mass; the IRB 120 carries 3 kg")?;
+    if let Some(m) = r.validation_payload_kg {
+        c.within("robot", "validation_payload_kg", m, 0.0, 3.0, "mass on the flange in setup 2; the IRB 120 carries 3 kg")?;
+    }
     for (k, v) in r.tcp_mm.iter().enumerate() {
         c.within("robot", &format!("tcp_mm[{k}]"), *v, -500.0, 500.0, "TCP in the flange frame")?;
     }

@@ -25,8 +25,16 @@ pub struct UnmodelledSpec {
     pub transmission_low_mdeg: f64,
     /// Amplitude of the high-order harmonics (gear mesh, encoder cycles), mdeg.
     pub transmission_high_mdeg: f64,
-    /// Range of the high orders, periods per turn `[min, max]`; one order per joint drawn in it.
+    /// Range of the high orders, periods per turn `[min, max]`; the orders of each joint drawn in it.
     pub transmission_high_orders: Option<[u32; 2]>,
+    /// High-order harmonics per joint (several gear stages across the band), each of the amplitude
+    /// `transmission_high_mdeg`; absent: one.
+    pub transmission_high_count: Option<u32>,
+    /// Amplitude of the encoder interpolation error per joint, mdeg: a harmonic of order drawn in
+    /// `encoder_orders` (thousands of periods per turn: repeatable, yet random from pose to pose).
+    pub encoder_mdeg: f64,
+    /// Range of the encoder orders, periods per turn (absent: `[1000, 4000]`).
+    pub encoder_orders: Option<[u32; 2]>,
     /// Backlash per joint (full width), mdeg: the link lags by half of it behind the last motion.
     pub backlash_mdeg: f64,
     /// Thermal growth of every link length between identification and validation, ppm.
@@ -77,8 +85,15 @@ impl VirtualRobot {
             }
             if spec.transmission_high_mdeg > 0.0 {
                 let [lo, hi] = spec.transmission_high_orders.unwrap_or([20, 120]);
+                for _ in 0..spec.transmission_high_count.unwrap_or(1) {
+                    let order = rng.random_range(lo..=hi.max(lo)) as f64;
+                    h.push(Harmonic { order, amplitude: (spec.transmission_high_mdeg * 1e-3).to_radians(), phase: phase.sample(rng) });
+                }
+            }
+            if spec.encoder_mdeg > 0.0 {
+                let [lo, hi] = spec.encoder_orders.unwrap_or([1000, 4000]);
                 let order = rng.random_range(lo..=hi.max(lo)) as f64;
-                h.push(Harmonic { order, amplitude: (spec.transmission_high_mdeg * 1e-3).to_radians(), phase: phase.sample(rng) });
+                h.push(Harmonic { order, amplitude: (spec.encoder_mdeg * 1e-3).to_radians(), phase: phase.sample(rng) });
             }
             h
         });

@@ -1,0 +1,165 @@
+#!/usr/bin/env python3
+"""Candidate error models of the fidelity study, side by side, and the knob fits.
+
+Each candidate is the default TriCal scenario with some keys changed (a physical reading each,
+see README "Candidate physics"). For each, `calsim check --realisations N` judges every figure
+over N worlds; this prints one markdown row per candidate with the medians over the worlds.
+
+    python3 scripts/fidelity/candidates.py [--realisations 20] [--only NAME ...]
+    python3 scripts/fidelity/candidates.py --fit NAME KEY LO HI [--target 0.208]
+    python3 scripts/fidelity/candidates.py --fit-all [--realisations 10]
+
+`--fit` finds the value of KEY (a dotted scenario key, e.g. robot.unmodelled.encoder_mdeg) for
+which the median over the worlds of the after-calibration median (Table 8, TriCal row) meets the
+target, by the secant method from LO and HI (3 further evaluations). Stdlib only; needs the release
+binary (`cargo build --release`; CALSIM=path to use another).
+"""
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BASE = os.path.join(ROOT, "scenarios", "irb120_trical.toml")
+TARGET_DIR = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+CALSIM = os.environ.get("CALSIM", os.path.join(TARGET_DIR, "release", "calsim"))
+
+H = "robot.unmodelled.transmission_high_mdeg"
+OFF = {H: 0.0}
+# name: (keys, knob, bracket). The knob's value in `keys` is the fitted one (README, "Candidate
+# physics"; `--fit-all` refits every knob from its bracket).
+CANDIDATES = {
+    "one harmonic per joint (default)": ({}, H, (3.0, 4.0)),
+    "four harmonics per joint": ({"robot.unmodelled.transmission_high_count": 4, H: 1.9}, H, (1.5, 2.5)),
+    "encoder interpolation": ({**OFF, "robot.unmodelled.encoder_mdeg": 3.0}, "robot.unmodelled.encoder_mdeg", (2.5, 3.5)),
+    "backlash with the approach": ({**OFF, "robot.unmodelled.backlash_mdeg": 6.0}, "robot.unmodelled.backlash_mdeg", (4.0, 8.0)),
+    "joint noise beyond RP": ({**OFF, "robot.repeatability_mm": 0.08}, "robot.repeatability_mm", (0.05, 0.1)),
+    "setup 2 payload 0.7 kg": ({"robot.validation_payload_kg": 0.7}, H, (2.5, 3.5)),
+    "setup 2 without indicators": ({"campaign.validation_indicators_removed": True}, H, (3.0, 4.0)),
+    "validation margin 0.25": ({"campaign.validation_margin": 0.25}, H, (4.0, 5.0)),
+    "thermal drift 50 ppm": ({"robot.unmodelled.thermal_drift_ppm": 50.0}, H, (3.0, 4.0)),
+}
+
+FIGURES = [
+    ("before calibration: mean error", "before mean"),
+    ("before calibration: max error", "before max"),
+    ("after, sets of 75: median error", "after median"),
+    ("after, sets of 75: std of error", "after std"),
+    ("after, sets of 75: max error", "after max"),
+    ("Table 7: std within a factor 3", "T7 std x3"),
+    ("Table 7: mean within 3 published", "T7 mean 3sd"),
+    ("Fig. 8: largest rise", "Fig. 8 rise"),
+    ("Figs. 8-9: spread", "Fig. 9 ratio"),
+    ("Fig. 12: |r| error vs distance to the CCZ", "Fig. 12 abs r"),
+    ("Fig. 11: r error vs distance to the base", "Fig. 11 r"),
+    ("Table 8, laser tracker: median", "tracker median"),
+    ("Table 8, optical CMM: median", "CMM median"),
+]
+
+
+def toml_value(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v)
+
+
+def edit(text, dotted, value):
+    """`text` with `dotted` (section.key) set to `value`, replacing the key or adding it."""
+    section, key = dotted.rsplit(".", 1)
+    lines = text.split("\n")
+    start = next((i for i, l in enumerate(lines) if l.strip() == f"[{section}]"), None)
+    if start is None:
+        return text + f"\n[{section}]\n{key} = {toml_value(value)}\n"
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+    for i in range(start + 1, end):
+        if re.match(rf"\s*{re.escape(key)}\s*=", lines[i]):
+            lines[i] = f"{key} = {toml_value(value)}"
+            return "\n".join(lines)
+    lines.insert(start + 1, f"{key} = {toml_value(value)}")
+    return "\n".join(lines)
+
+
+def scenario(keys, tmp):
+    text = open(BASE).read().replace('"../robots/', f'"{ROOT}/robots/')
+    for k, v in keys.items():
+        text = edit(text, k, v)
+    path = os.path.join(tmp, "candidate.toml")
+    open(path, "w").write(text)
+    return path
+
+
+def run(keys, realisations):
+    """Medians over the worlds of every figure, and the figures passed."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = scenario(keys, tmp)
+        out = subprocess.run(
+            [CALSIM, "check", path, "--realisations", str(realisations), "--no-plots", "--no-recording", "--out", tmp],
+            capture_output=True, text=True)
+    if out.returncode not in (0, 1):
+        sys.exit(f"calsim check failed: {out.stderr.strip()}")
+    medians, passed = {}, 0
+    for line in out.stdout.splitlines():
+        for prefix, label in FIGURES:
+            if line.startswith(prefix):
+                tokens = line.split()
+                k = next((i for i, t in enumerate(tokens) if re.fullmatch(r"[-+]?[\d.]+-[-+]?[\d.]+", t)), None)
+                if k is None:  # the single run's table, printed first
+                    continue
+                medians[label] = float(tokens[k - 1])
+                passed += tokens[-1] == "pass"
+    return medians, passed
+
+
+def row(name, keys, realisations):
+    m, passed = run(keys, realisations)
+    cells = " | ".join(f"{m.get(label, float('nan')):.3f}" if "T7" not in label else f"{m.get(label, 0):.1f}" for _, label in FIGURES)
+    return f"| {name} | {cells} | {passed} of 12 |"
+
+
+def fit(name, key, lo, hi, target, realisations):
+    keys = dict(CANDIDATES[name][0])
+    def f(x):
+        keys[key] = x
+        v = run(keys, realisations)[0]["after median"]
+        print(f"{key} = {x:.4f}: after-calibration median {v:.4f} mm (median over {realisations} worlds)", flush=True)
+        return v - target
+    a, b = lo, hi
+    fa, fb = f(a), f(b)
+    for _ in range(3):
+        if fb == fa:
+            break
+        a, fa, b = b, fb, b - fb * (b - a) / (fb - fa)
+        fb = f(b)
+    print(f"FITTED {name}: {key} = {b:.3f} (after-calibration median {fb + target:.4f} mm against {target})", flush=True)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--realisations", type=int, default=20)
+    p.add_argument("--only", nargs="*")
+    p.add_argument("--fit", nargs=4, metavar=("NAME", "KEY", "LO", "HI"))
+    p.add_argument("--fit-all", action="store_true", help="refit every candidate's knob from its bracket")
+    p.add_argument("--target", type=float, default=0.208)
+    a = p.parse_args()
+    if a.fit:
+        name, key, lo, hi = a.fit
+        fit(name, key, float(lo), float(hi), a.target, a.realisations)
+        return
+    if a.fit_all:
+        for name, (_, key, (lo, hi)) in CANDIDATES.items():
+            if not a.only or name in a.only:
+                fit(name, key, lo, hi, a.target, a.realisations)
+        return
+    print("| candidate | " + " | ".join(l for _, l in FIGURES) + " | passed |")
+    print("|---" * (len(FIGURES) + 2) + "|")
+    print("| published | 2.628 | 6.282 | 0.208 | 0.084 | 0.482 | 31 | 31 | no rise | shrinks | no relation | weak | 0.146 | 0.176 | |")
+    for name, (keys, _, _) in CANDIDATES.items():
+        if a.only and name not in a.only:
+            continue
+        print(row(name, keys, a.realisations), flush=True)
+
+
+if __name__ == "__main__":
+    main()
