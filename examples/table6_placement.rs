@@ -26,8 +26,13 @@ fn main() {
     let score = |ap: &[f64; 5]| (ap.iter().zip(PUBLISHED).map(|(a, p)| (a - p).powi(2)).sum::<f64>() / 5.0).sqrt();
     let within = |ap: &[f64; 5]| ap.iter().zip(PUBLISHED).filter(|(a, p)| (*a / p - 1.0).abs() <= 0.25).count();
     let default = iso_test(&cell, &cell.nominal, &spec.iso9283, s.seed).expect("the scenario's cube");
-    println!("scenario cube at {:?}: AP {:?} mm, RMS difference {:.3} mm, {} of 5 points within 25 %",
-        spec.iso9283.cube_centre_base_mm, default.ap_mm.map(|v| (v * 1000.0).round() / 1000.0), score(&default.ap_mm), within(&default.ap_mm));
+    println!(
+        "scenario cube at {:?}: AP {:?} mm, RMS difference {:.3} mm, {} of 5 points within 25 %",
+        spec.iso9283.cube_centre_base_mm,
+        default.ap_mm.map(|v| (v * 1000.0).round() / 1000.0),
+        score(&default.ap_mm),
+        within(&default.ap_mm)
+    );
     let mut rows = Vec::new();
     let mut reachable = 0;
     for xi in 0..=12 {
@@ -44,7 +49,9 @@ fn main() {
     }
     rows.sort_by(|a, b| a.0.total_cmp(&b.0));
     let best_within = rows.iter().map(|r| r.1).max().unwrap_or(0);
-    println!("{reachable} reachable placements of 2197 (centre x 500-1700, y -600-600, z 200-1400 mm, step 100); most points within 25 %: {best_within} of 5");
+    println!(
+        "{reachable} reachable placements of 2197 (centre x 500-1700, y -600-600, z 200-1400 mm, step 100); most points within 25 %: {best_within} of 5"
+    );
     println!("| centre (mm) | AP P1-P5 (mm) | RMS difference (mm) | within 25 % |\n|---|---|---|---|");
     for (sc, w, c, ap) in rows.iter().take(8) {
         println!("| {c:?} | {} | {sc:.3} | {w} |", ap.map(|v| format!("{v:.3}")).join(", "));

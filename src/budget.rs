@@ -31,8 +31,10 @@ pub struct Source {
 
 type Candidate = (&'static str, &'static [&'static str], &'static str);
 
-const UNMODELLED: [Candidate; 4] = [
+const UNMODELLED: [Candidate; 6] = [
     ("transmission errors, high orders", &["robot.unmodelled.transmission_high_mdeg"], "mdeg"),
+    ("encoder interpolation", &["robot.unmodelled.encoder_mdeg"], "mdeg"),
+    ("payload change, setup 1 to setup 2", &["robot.validation_payload_change_kg"], "kg"),
     ("transmission errors, low orders", &["robot.unmodelled.transmission_low_mdeg"], "mdeg"),
     ("backlash", &["robot.unmodelled.backlash_mdeg"], "mdeg"),
     ("thermal drift", &["robot.unmodelled.thermal_drift_ppm"], "ppm"),

@@ -35,9 +35,10 @@ pub struct RobotSpec {
     /// `world_from_base` of the model before calibration, `[x, y, z]` mm then `[alpha, beta, gamma]`
     /// deg (eq. 7). Absent: the base the semi-automatic steps fit to the located spheres.
     pub nominal_base_mm_deg: Option<[f64; 6]>,
-    /// Mass on the flange during validation (setup 2: the indicators removed, an SMR in the
-    /// calibrator), kg, at the device's centre of mass; absent: the device's `payload_kg`.
-    pub validation_payload_kg: Option<f64>,
+    /// Change of the mass on the flange from identification to validation (setup 2: the
+    /// indicators removed, the calibrator with its SMR locked on), kg, at the device's centre of
+    /// mass; the identified model keeps `payload_kg`. Absent: no change.
+    pub validation_payload_change_kg: Option<f64>,
     /// The arm's robot file, relative to the scenario (absent: the built-in IRB 120 with Table 7).
     pub file: Option<std::path::PathBuf>,
     /// The loaded robot file (filled by the scenario loader).
@@ -56,7 +57,7 @@ impl Default for RobotSpec {
             unmodelled: UnmodelledSpec::default(),
             spread: crate::robot::SpreadSpec::default(),
             nominal_base_mm_deg: Some(crate::robot::builtin::TRICAL_NOMINAL_BASE),
-            validation_payload_kg: None,
+            validation_payload_change_kg: None,
             file: None,
             arm: None,
         }
@@ -194,8 +195,8 @@ impl ExperimentSpec {
             &mut stream(seed, seeds::experiment::ROBOT),
         );
         let mut robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
-        if let Some(m) = self.robot.validation_payload_kg {
-            robot_validation.truth = robot_validation.truth.edited(|d| d.payload.mass_kg = m).expect("a checked mass");
+        if let Some(dm) = self.robot.validation_payload_change_kg.filter(|dm| *dm != 0.0) {
+            robot_validation.truth = robot_validation.truth.edited(|d| d.payload.mass_kg += dm).expect("a checked mass");
         }
         let mut trical = TriCal::build(&self.trical, self.cell.ball_diameter_mm, &mut stream(seed, seeds::experiment::TRICAL));
         trical.frame6_from_flange = self.flange();
@@ -253,6 +254,7 @@ impl ExperimentSpec {
         let mut s = self.clone();
         s.robot.repeatability_mm = 0.0;
         s.robot.unmodelled = UnmodelledSpec::default();
+        s.robot.validation_payload_change_kg = None;
         s.cell.ball_diameter_tolerance_um = 0.0;
         s.cell.ballbar_sigma_um = 0.0;
         s.trical.indicator_accuracy_um = 0.0;

@@ -39,7 +39,9 @@ fn collisions_and_line_of_sight_are_detected() {
     let spec = ExperimentSpec::default();
     let model = spec.truth();
     let cell = Cell::build(&spec.cell, &mut common::rng(1)).unwrap();
-    let world = collision_world(&cell, &model, &world_from_base(&model), &Vector3::from(spec.robot.tcp_mm));
+    let trical = calsim::instrument::trical::TriCal::build(&spec.trical, spec.cell.ball_diameter_mm, &mut common::rng(2));
+    let links = spec.link_capsules();
+    let world = collision_world(&cell, &links, &model, &world_from_base(&model), &Vector3::from(spec.robot.tcp_mm), &trical);
     let mut st = KinState::default();
     // The calibration pose is free.
     forward(&model, &mut st, &[0.0; 6]);

@@ -64,12 +64,13 @@ fn the_encoder_error_is_repeatable_and_random_from_pose_to_pose() {
 fn the_setup2_payload_changes_the_validation_robot_only() {
     let mut s = scenario::load(&repo().join("scenarios/ci_quick.toml")).unwrap();
     s.study.set_sizes = vec![35];
+    s.experiment.robot.validation_payload_change_kg = None;
     let e = s.experiment.build(s.seed).unwrap();
     assert_eq!(e.robot.truth.data(), e.robot_validation.truth.data());
-    s.experiment.robot.validation_payload_kg = Some(0.4);
+    s.experiment.robot.validation_payload_change_kg = Some(-0.6);
     let e2 = s.experiment.build(s.seed).unwrap();
     assert_eq!(e2.robot.truth.data(), e.robot.truth.data());
-    assert_eq!(e2.robot_validation.truth.data().payload.mass_kg, 0.4);
+    assert!((e2.robot_validation.truth.data().payload.mass_kg - 0.4).abs() < 1e-12, "1.0 - 0.6 kg");
     assert_eq!(e2.campaign.pool, e.campaign.pool, "setup 1 is untouched");
 }
 
@@ -101,7 +102,8 @@ fn bad_candidate_values_are_one_line_naming_the_key() {
         ("encnan.toml", "[robot.unmodelled]", "[robot.unmodelled]\nencoder_mdeg = nan", "encoder_mdeg"),
         ("encneg.toml", "[robot.unmodelled]", "[robot.unmodelled]\nencoder_mdeg = -1.0", "encoder_mdeg"),
         ("encorders.toml", "[robot.unmodelled]", "[robot.unmodelled]\nencoder_orders = [4000, 1000]", "encoder_orders"),
-        ("payload.toml", "[robot]\n", "[robot]\nvalidation_payload_kg = 1e300\n", "validation_payload_kg"),
+        ("payload.toml", "validation_payload_change_kg = -0.3", "validation_payload_change_kg = 1e300", "validation_payload_change_kg"),
+        ("payload-neg.toml", "validation_payload_change_kg = -0.3", "validation_payload_change_kg = -1.5", "validation_payload_change_kg"),
         ("flag.toml", "[campaign]\n", "[campaign]\nvalidation_indicators_removed = 3\n", "validation_indicators_removed"),
     ] {
         assert!(base.contains(from), "{from}");

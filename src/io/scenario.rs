@@ -400,8 +400,15 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     let r = &f.robot;
     c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
     c.within("robot", "payload_kg", r.payload_kg, 0.0, 3.0, "device mass; the IRB 120 carries 3 kg")?;
-    if let Some(m) = r.validation_payload_kg {
-        c.within("robot", "validation_payload_kg", m, 0.0, 3.0, "mass on the flange in setup 2; the IRB 120 carries 3 kg")?;
+    if let Some(dm) = r.validation_payload_change_kg {
+        c.within(
+            "robot",
+            "validation_payload_change_kg",
+            dm,
+            -r.payload_kg,
+            3.0 - r.payload_kg,
+            "setup 2's mass on the flange within 0-3 kg",
+        )?;
     }
     for (k, v) in r.tcp_mm.iter().enumerate() {
         c.within("robot", &format!("tcp_mm[{k}]"), *v, -500.0, 500.0, "TCP in the flange frame")?;

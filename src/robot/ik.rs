@@ -267,6 +267,15 @@ pub fn numeric(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joint
     best.map(|(_, q)| q).ok_or(last)
 }
 
+/// Damped least squares from `q0` alone, polished by [`refine`]: the solution of the branch `q0`
+/// is on (near a singularity, where Newton from `q0` diverges), within the limits.
+pub fn damped_from(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
+    let goal = Goal::new(model, world_from_tcp);
+    let q = damped(model, &goal, &mut KinState::default(), q0).ok_or(IkError::Unreachable)?;
+    let q = refine(model, world_from_tcp, &q)?;
+    if model.within_limits(&q) { Ok(q) } else { Err(IkError::Limits) }
+}
+
 /// Damped least squares towards `goal` from `q0` (orientation weighted by 300 mm per rad, joint
 /// steps at most 0.3 rad); `None` when it stalls away from the goal.
 fn damped(model: &RobotModel, goal: &Goal, st: &mut KinState, q0: &Joints) -> Option<Joints> {

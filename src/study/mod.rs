@@ -147,7 +147,7 @@ pub fn compensated_errors(
         let target = nalgebra::Isometry3::from_parts(target_w.into(), orientation);
         // Newton from the validation configuration; near the shoulder singularity (the wrist
         // centre on axis 1) it diverges, and damped least squares takes over.
-        let Ok(q) = crate::robot::ik::refine(model, &target, &v.q).or_else(|_| crate::robot::ik::numeric(model, &target, &v.q)) else {
+        let Ok(q) = crate::robot::ik::refine(model, &target, &v.q).or_else(|_| crate::robot::ik::damped_from(model, &target, &v.q)) else {
             failed += 1;
             continue;
         };
