@@ -85,13 +85,19 @@ fn a_trical_scenario_needs_the_arms_capsules() {
     let end = text.find("\n[truth]").unwrap();
     std::fs::write(&robot, format!("{}{}", &text[..cut], &text[end..])).unwrap();
     assert!(RobotFile::load(&robot).expect("loads without capsules").capsules.is_none());
+    run_refused(&dir, &robot, &["s.toml", "robot.file", "bare.toml", "collision"]);
+}
+
+/// `calsim run` of a scenario in `dir` naming `robot` exits 2 with one line holding every one of
+/// `parts`.
+fn run_refused(dir: &Path, robot: &Path, parts: &[&str]) {
     let scenario = dir.join("s.toml");
     std::fs::write(&scenario, format!("seed = 1\n[robot]\nfile = \"{}\"\n", robot.display())).unwrap();
     let o = common::calsim().args(["run", scenario.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
-    for part in ["s.toml", "robot.file", "bare.toml", "collision"] {
+    for part in parts {
         assert!(err.contains(part), "{part} not in {err}");
     }
 }
@@ -104,19 +110,7 @@ fn a_scenario_with_a_bad_robot_file_exits_2_naming_it() {
     let robot = dir.join("arm.toml");
     let text = std::fs::read_to_string(shipped("irb120.toml")).unwrap();
     std::fs::write(&robot, text.replacen("limits_deg = [-110.0, 70.0]", "limits_deg = [70.0, -110.0]", 1)).unwrap();
-    let scenario = dir.join("s.toml");
-    std::fs::write(&scenario, format!("seed = 1\n[robot]\nfile = \"{}\"\n", robot.display())).unwrap();
-    let o = common::calsim().args(["run", scenario.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]).output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
-    for part in ["s.toml", "robot.file", "arm.toml", "joint[3].limits_deg"] {
-        assert!(err.contains(part), "{part} not in {err}");
-    }
+    run_refused(&dir, &robot, &["s.toml", "robot.file", "arm.toml", "joint[3].limits_deg"]);
     // A missing robot file.
-    std::fs::write(&scenario, "seed = 1\n[robot]\nfile = \"no-such-arm.toml\"\n").unwrap();
-    let o = common::calsim().args(["run", scenario.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]).output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(err.contains("no-such-arm.toml") && err.trim_end().lines().count() == 1, "{err}");
+    run_refused(&dir, Path::new("no-such-arm.toml"), &["s.toml", "robot.file", "no-such-arm.toml"]);
 }
