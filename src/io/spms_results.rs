@@ -55,7 +55,7 @@ pub fn write(
 }
 
 ///
-/// Long by design: one block per result table, in the order of results/README.md.
+/// Long by design: one block per result table, in the order of the README's list of result files.
 fn write_into(
     dir: &Path,
     s: &SpmsScenario,

@@ -174,7 +174,9 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
                 }
             };
             let before = s.experiment.before_model(&experiment.campaign);
-            let results = match crate::study::run(&experiment, &before, &s.study, seed, &quiet) {
+            // A unit's tables hold the plain validation: the compensated one is not computed.
+            let study = crate::study::StudySpec { compensated_validation: false, ..s.study.clone() };
+            let results = match crate::study::run(&experiment, &before, &study, seed, &quiet) {
                 Ok(r) => r,
                 Err(e) => {
                     out.error = Some(e.to_string());
