@@ -170,3 +170,28 @@ fn the_kr6_runs_the_trical_study() {
     eprintln!("KR 6: before mean {before_mean:.3} mm, after median of medians {median:.3} mm");
     assert!(median < before_mean / 3.0, "after {median} mm vs before {before_mean} mm");
 }
+
+/// The URDF's collision cylinders become capsules of the same size and place: the KR 6's upper-arm
+/// cylinder (link_2: radius 70 mm, 300 mm long, centred 227.5 mm along the link from joint 2,
+/// 25 mm out and 400 mm up in the root frame) lies, at q = 0, from (102.5, 0, 400) to
+/// (402.5, 0, 400) mm in the root frame; and a cylinder of negative radius is one error naming its
+/// link.
+#[test]
+fn urdf_collision_cylinders_become_capsules_in_place() {
+    let c = calsim::robot::urdf::load_all(&common::repo().join("robots/kr6r900sixx.urdf")).expect("converts");
+    let caps = c.capsules.expect("the KR 6 URDF has collision cylinders");
+    assert_eq!(caps.iter().map(Vec::len).sum::<usize>(), 7);
+    let mut st = KinState::default();
+    forward(&c.model, &mut st, &[0.0; 6]);
+    let root_from_2 = calsim::robot::world_from_base(&c.model) * st.base_from_frame(2);
+    let [cap] = caps[2].as_slice() else { panic!("one capsule on link 2: {:?}", caps[2]) };
+    let mut ends = [root_from_2 * nalgebra::Point3::from(cap.a), root_from_2 * nalgebra::Point3::from(cap.b)];
+    ends.sort_by(|p, q| p.x.total_cmp(&q.x));
+    assert!((ends[0].coords - nalgebra::Vector3::new(102.5, 0.0, 400.0)).norm() < 1e-9, "{}", ends[0]);
+    assert!((ends[1].coords - nalgebra::Vector3::new(402.5, 0.0, 400.0)).norm() < 1e-9, "{}", ends[1]);
+    assert_eq!(cap.radius, 70.0);
+    let text = std::fs::read_to_string(common::repo().join("robots/kr6r900sixx.urdf")).unwrap();
+    let bad = write("negative-radius.urdf", &text.replacen("<cylinder radius=\"0.07\"", "<cylinder radius=\"-0.07\"", 1));
+    let e = calsim::robot::urdf::load_all(&bad).err().expect("refused").to_string();
+    assert!(e.contains("negative-radius.urdf") && e.contains("link_2") && e.lines().count() == 1, "{e}");
+}

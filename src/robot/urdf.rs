@@ -217,7 +217,7 @@ fn capsules(
             let ok = pa.iter().chain(pb.iter()).all(|v| v.is_finite() && v.abs() <= 100.0) && r.is_finite() && r > 0.0 && r <= 100.0;
             if !ok {
                 return Err(format!(
-                    "link `{name}`: collision shape of radius {r} m at {:?} m is not a finite shape within 100 m",
+                    "link `{name}`: collision shape of radius {r} m at {:?} m: needs a radius above 0 and finite points, within 100 m",
                     at.translation.vector
                 ));
             }
