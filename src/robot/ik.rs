@@ -235,6 +235,8 @@ pub fn numeric(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joint
     let base_target = super::kinematics::world_from_base(model).inverse_transform_point(&world_from_tcp.translation.vector.into());
     let toward = base_target.y.atan2(base_target.x);
     let mut starts = vec![*seed, [seed[0], seed[1], seed[2], wrap(seed[3] + PI), -seed[4], wrap(seed[5] + PI)]];
+    // Joint 1 towards the target and away from it; mirrored too, for a first axis that points
+    // down (a {0} upside down turns the azimuth the other way).
     for q1 in [toward, wrap(toward + PI), -toward, wrap(PI - toward)] {
         for (q2, q3) in [(0.0, 0.0), (-0.8, 0.8), (0.8, -0.8), (-0.8, -0.8), (0.8, 0.8), (-1.6, 1.6), (1.6, -1.6)] {
             starts.push([q1, q2, q3, 0.0, 0.5, 0.0]);
