@@ -122,8 +122,8 @@ pub struct TaskResult {
 /// The validation as a user of the calibration meets it: each validation TCP of the model before
 /// calibration taken as a Cartesian target, the joint values that put the identified model there
 /// (Newton on the full model with compliance from the validation configuration, damped least
-/// squares where Newton fails), the physical
-/// robot of setup 2 moved there and measured by the tracker; the error is measured minus target.
+/// squares where Newton fails), the physical robot of setup 2 moved there and measured by the
+/// tracker; the error is measured minus target.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Compensated {
     /// Error statistics over the targets reached, mm.
