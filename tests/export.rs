@@ -139,3 +139,46 @@ fn bad_targets_are_one_line_naming_the_file_and_line() {
         assert!(err.contains(name) && err.contains(expect), "{name}: {err}");
     }
 }
+
+/// The third arm's calibration out: an export of a KR 6 study reloads as the identified model
+/// (TCP to 1e-9 mm at 1,000 configurations) with the arm's collision capsules and its turned
+/// flange, so the exported file can run a TriCal study of its own.
+#[test]
+fn an_exported_kr6_keeps_its_capsules_and_flange() {
+    let dir = scratch("export-kr6");
+    let text = common::scenario_text_anywhere("kr6r900sixx_trical.toml")
+        .replace("set_sizes = [20, 25, 30, 35, 40, 45, 50, 55, 60, 65, 70, 75, 80, 85, 90, 95, 100]", "set_sizes = [75]")
+        .replace("repetitions = 30 ", "repetitions = 3 ");
+    assert!(text.contains("set_sizes = [75]") && text.contains("repetitions = 3 "), "the study reduced");
+    let scenario = dir.join("kr6.toml");
+    std::fs::write(&scenario, &text).unwrap();
+    let out = dir.join("out");
+    let o = calsim()
+        .args(["run", scenario.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-plots", "--no-recording"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = calsim().args(["export", out.join("kr6").to_str().unwrap(), "--out", dir.join("export").to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let exported = std::fs::read_dir(dir.join("export")).unwrap().map(|e| e.unwrap().path()).find(|p| p.is_dir()).expect("an export");
+    let task: usize = exported.to_str().unwrap().rsplit("task-").next().unwrap().parse().unwrap();
+    let file = RobotFile::load(&exported.join("robot.toml")).expect("the exported robot file loads");
+    let arm = RobotFile::load(&repo().join("robots/kr6r900sixx.toml")).unwrap();
+    assert_eq!(file.capsules, arm.capsules, "the arm's capsules");
+    let (f, g) = (file.flange.expect("a flange"), arm.flange.unwrap());
+    assert!((f - g).amax() < 1e-12, "the arm's flange");
+
+    let Loaded::Trical(s) = load_any(&scenario).unwrap() else { panic!("a TriCal scenario") };
+    let e = s.experiment.build(s.seed).unwrap();
+    let before = s.experiment.before_model(&e.campaign);
+    let model = calsim::study::recompute_task(&e, &before, &s.study, s.seed, task).unwrap().expect("the task").model.expect("a model");
+    let mut rng = common::rng(1001);
+    let (mut a, mut b) = (KinState::default(), KinState::default());
+    let worst = (0..1000)
+        .map(|_| {
+            let q = uniform_configuration(&model, 0.0, &mut rng);
+            (forward(&model, &mut a, &q) - forward(&file.nominal, &mut b, &q)).norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "largest TCP difference {worst:e} mm");
+}
