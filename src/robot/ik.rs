@@ -156,9 +156,22 @@ fn distance(a: &Joints, b: &Joints) -> f64 {
 /// geometric Jacobian of the deflected configuration (the compliance term dtau/dq is left out of
 /// the Jacobian, which only slows convergence by a factor of order c * dtau/dq ~ 1e-3).
 pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
+    newton(model, &Goal::new(model, world_from_tcp), q0)
+}
+
+/// [`refine`] with the base orientation taken from the model as it is stored, not through the
+/// base's quaternion (whose iterative construction costs more than the Newton steps): the same
+/// solution to rounding, for callers that need many (the study's compensated validation).
+pub fn refine_direct(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
+    let goal =
+        Goal { rb: model.base_rot, p: world_from_tcp.translation.vector, r: world_from_tcp.rotation.to_rotation_matrix().into_inner() };
+    newton(model, &goal, q0)
+}
+
+/// Newton's method towards `goal` from `q0` (see [`refine`]).
+fn newton(model: &RobotModel, goal: &Goal, q0: &Joints) -> Result<Joints, IkError> {
     let mut st = KinState::default();
     let mut q = *q0;
-    let goal = Goal::new(model, world_from_tcp);
     let mut residual = f64::INFINITY;
     for _ in 0..60 {
         let (rhs, jac) = goal.error_and_jacobian(model, &mut st, &q);

@@ -145,13 +145,18 @@ pub fn compensated_errors(
     let mut errors = Vec::with_capacity(experiment.campaign.validation.len());
     let mut failed = 0;
     let mut from = experiment.campaign.semi_automatic.located_q[0];
+    let base_rot = model.base_rot;
     for v in &experiment.campaign.validation {
         let target_w = forward(before, &mut st, &v.q);
-        let orientation = crate::robot::world_from_flange(model, &mut st, &v.q).rotation;
-        let target = nalgebra::Isometry3::from_parts(target_w.into(), orientation);
+        // The identified model's flange orientation there (a product of rotations: converted
+        // directly, not through `from_matrix`'s iterative orthonormalisation).
+        forward(model, &mut st, &v.q);
+        let r = nalgebra::Rotation3::from_matrix_unchecked(base_rot * st.rot[crate::robot::JOINTS]);
+        let target = nalgebra::Isometry3::from_parts(target_w.into(), nalgebra::UnitQuaternion::from_rotation_matrix(&r));
         // Newton from the validation configuration; near the shoulder singularity (the wrist
         // centre on axis 1) it diverges, and damped least squares takes over.
-        let Ok(q) = crate::robot::ik::refine(model, &target, &v.q).or_else(|_| crate::robot::ik::damped_from(model, &target, &v.q)) else {
+        let Ok(q) = crate::robot::ik::refine_direct(model, &target, &v.q).or_else(|_| crate::robot::ik::damped_from(model, &target, &v.q))
+        else {
             failed += 1;
             continue;
         };
