@@ -35,13 +35,7 @@ fn an_exported_robot_file_is_the_identified_model() {
     // 1,000 configurations within the limits: the TCPs agree to 1e-9 mm (the file holds degrees,
     // so the angles come back to within their rounding).
     let mut rng = common::rng(1000);
-    let (mut a, mut b) = (KinState::default(), KinState::default());
-    let worst = (0..1000)
-        .map(|_| {
-            let q = uniform_configuration(&model, 0.0, &mut rng);
-            (forward(&model, &mut a, &q) - forward(&file.nominal, &mut b, &q)).norm()
-        })
-        .fold(0.0, f64::max);
+    let worst = common::largest_tcp_difference(&model, &file.nominal, &model, &mut rng);
     assert!(worst < 1e-9, "largest TCP difference {worst:e} mm");
 
     // The URDF through an independent kinematics (the `k` crate): the TCP of the identified model
@@ -53,6 +47,7 @@ fn an_exported_robot_file_is_the_identified_model() {
             }
         })
         .unwrap();
+    let (mut a, mut b) = (KinState::default(), KinState::default());
     let chain = k::Chain::<f64>::from_urdf_file(exported.join("robot.urdf")).expect("k reads the URDF");
     let tcp = chain.find_link("tcp").expect("a tcp link");
     let worst = (0..1000)
@@ -172,13 +167,6 @@ fn an_exported_kr6_keeps_its_capsules_and_flange() {
     let e = s.experiment.build(s.seed).unwrap();
     let before = s.experiment.before_model(&e.campaign);
     let model = calsim::study::recompute_task(&e, &before, &s.study, s.seed, task).unwrap().expect("the task").model.expect("a model");
-    let mut rng = common::rng(1001);
-    let (mut a, mut b) = (KinState::default(), KinState::default());
-    let worst = (0..1000)
-        .map(|_| {
-            let q = uniform_configuration(&model, 0.0, &mut rng);
-            (forward(&model, &mut a, &q) - forward(&file.nominal, &mut b, &q)).norm()
-        })
-        .fold(0.0, f64::max);
+    let worst = common::largest_tcp_difference(&model, &file.nominal, &model, &mut common::rng(1001));
     assert!(worst < 1e-9, "largest TCP difference {worst:e} mm");
 }

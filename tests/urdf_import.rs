@@ -5,7 +5,6 @@
 
 mod common;
 
-use calsim::campaign::uniform_configuration;
 use calsim::robot::builtin::irb120;
 use calsim::robot::{KinState, forward};
 
@@ -42,15 +41,9 @@ fn write(name: &str, text: &str) -> std::path::PathBuf {
 fn the_ros_industrial_irb120_is_the_table3_arm() {
     let model = calsim::robot::urdf::load(&write("irb120.urdf", &irb120_urdf(str::to_string))).expect("the URDF converts");
     let table3 = irb120();
-    let (mut a, mut b) = (KinState::default(), KinState::default());
     let mut rng = common::rng(120);
     // 1,000 configurations within the limits: the flange positions agree to 1e-6 mm.
-    let worst = (0..1000)
-        .map(|_| {
-            let q = uniform_configuration(&table3, 0.0, &mut rng);
-            (forward(&model, &mut a, &q) - forward(&table3, &mut b, &q)).norm()
-        })
-        .fold(0.0, f64::max);
+    let worst = common::largest_tcp_difference(&model, &table3, &table3, &mut rng);
     assert!(worst < 1e-6, "largest flange difference {worst:e} mm");
     // The MDH geometry: a2 = 270, a3 = 70, d4 = 302 (Table 3), joints 2 and 3 parallel.
     let l = &model.data().links;
@@ -64,12 +57,7 @@ fn the_ros_industrial_irb120_is_the_table3_arm() {
     let o = common::calsim().args(["import-urdf", urdf.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let file = calsim::robot::file::RobotFile::load(&out).expect("the robot file loads");
-    let worst = (0..1000)
-        .map(|_| {
-            let q = uniform_configuration(&table3, 0.0, &mut rng);
-            (forward(&file.nominal, &mut a, &q) - forward(&model, &mut b, &q)).norm()
-        })
-        .fold(0.0, f64::max);
+    let worst = common::largest_tcp_difference(&file.nominal, &model, &table3, &mut rng);
     assert!(worst < 1e-9, "robot file against the converted model: {worst:e} mm");
 }
 
@@ -121,14 +109,7 @@ fn the_shipped_kr6_file_is_its_urdf() {
     let root = common::repo().join("robots");
     let from_urdf = calsim::robot::urdf::load(&root.join("kr6r900sixx.urdf")).expect("the URDF converts");
     let file = calsim::robot::file::RobotFile::load(&root.join("kr6r900sixx.toml")).expect("the robot file loads");
-    let (mut a, mut b) = (KinState::default(), KinState::default());
-    let mut rng = common::rng(6);
-    let worst = (0..1000)
-        .map(|_| {
-            let q = uniform_configuration(&from_urdf, 0.0, &mut rng);
-            (forward(&from_urdf, &mut a, &q) - forward(&file.nominal, &mut b, &q)).norm()
-        })
-        .fold(0.0, f64::max);
+    let worst = common::largest_tcp_difference(&from_urdf, &file.nominal, &from_urdf, &mut common::rng(6));
     assert!(worst < 1e-9, "{worst:e} mm");
     let d = file.nominal.data();
     let down = d.world_from_base.rotation() * d.gravity_base;

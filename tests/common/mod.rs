@@ -56,3 +56,15 @@ pub fn scenario_text_anywhere(name: &str) -> String {
     let text = std::fs::read_to_string(repo().join("scenarios").join(name)).unwrap();
     text.replace("file = \"../robots/", &format!("file = \"{}/robots/", repo().display()))
 }
+
+/// The largest distance between the TCPs of `a` and `b` over 1,000 configurations drawn within the
+/// limits of `limits` from `rng`, mm.
+pub fn largest_tcp_difference(a: &RobotModel, b: &RobotModel, limits: &RobotModel, rng: &mut ChaCha8Rng) -> f64 {
+    let (mut sa, mut sb) = (calsim::robot::KinState::default(), calsim::robot::KinState::default());
+    (0..1000)
+        .map(|_| {
+            let q = calsim::campaign::uniform_configuration(limits, 0.0, rng);
+            (calsim::robot::forward(a, &mut sa, &q) - calsim::robot::forward(b, &mut sb, &q)).norm()
+        })
+        .fold(0.0, f64::max)
+}
