@@ -666,9 +666,7 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
     let model = &converted.model;
     let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), args.urdf.display());
     let text = crate::robot::file::to_text(model, &source, &[], converted.capsules.as_ref(), converted.flange.as_ref());
-    // Written beside and renamed: never a half-written file.
-    let tmp = args.out.with_extension("toml.partial");
-    std::fs::write(&tmp, &text).and_then(|()| std::fs::rename(&tmp, &args.out)).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    crate::io::out_dir::write_file_atomically(&args.out, &text).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let l = &model.data().links;
     println!(
         "{}: {} as modified DH (a_i-1 mm: {}; d_i mm: {}) to {}",
@@ -698,11 +696,7 @@ fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
     let rows = crate::compensate::compensate(&model, nominal.as_ref(), &targets);
     let text = crate::compensate::to_csv(&rows)?;
     match &args.out {
-        Some(out) => {
-            // Written beside and renamed: never a half-written file.
-            let tmp = out.with_extension("csv.partial");
-            std::fs::write(&tmp, &text).and_then(|()| std::fs::rename(&tmp, out)).map_err(|e| format!("{}: {e}", out.display()))?;
-        }
+        Some(out) => crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| format!("{}: {e}", out.display()))?,
         None => print!("{text}"),
     }
     let unreachable = rows.iter().filter(|r| r.q.is_none()).count();

@@ -16,7 +16,7 @@ use crate::cell::collision::{CollisionWorld, LinkCapsules};
 use crate::cell::solids::obstacles;
 use crate::identify::Observation;
 use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
-use crate::instrument::trical::{TriCal, trical_capsules};
+use crate::instrument::trical::TriCal;
 use crate::robot::{JOINTS, Joints, KinState, RobotModel, VirtualRobot, forward, inverse, world_from_base};
 use crate::seeds::{campaign as streams, stream};
 pub use centring::{Approach, CentringError, CentringResult, centre};
@@ -173,7 +173,7 @@ pub fn collision_world(
     trical: &TriCal,
 ) -> CollisionWorld {
     let up = -model.data().gravity_base.normalize();
-    let device = trical_capsules(tcp, trical.frame6_from_flange.as_ref());
+    let device = trical.capsules(tcp);
     let mut world = CollisionWorld::new(links, &device, obstacles(cell, &truth_base.inverse(), &up));
     let mut st = KinState::default();
     forward(model, &mut st, &[0.0; JOINTS]);
@@ -437,13 +437,14 @@ fn measure_random_poses(
     let mut from = start;
     let mut tries = 0;
     let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
+    let flange_axis = setup.trical.flange_axis();
     let rng = &mut stream(seed, poses.keys.0);
     // Whether a candidate can be measured: in range, facing the tracker, collision-free, in sight.
     let feasible = |st: &mut KinState, q: &Joints| {
         forward(nominal_model, st, q);
         let tcp = st.tcp_base;
         let sight = tracker_base - tcp;
-        let facing = st.rot[JOINTS] * setup.trical.frame6_from_flange.map_or_else(Vector3::z, |r| r.column(2).into_owned());
+        let facing = st.rot[JOINTS] * flange_axis;
         sight.norm() <= tracker.spec.max_range_mm
             && facing.dot(&sight.normalize()) >= accept_cos
             && world.first_collision(st).is_none()

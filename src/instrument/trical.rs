@@ -128,6 +128,16 @@ impl TriCal {
         Self { spec: spec.clone(), axes, reference_radius_mm: diameter_mm / 2.0, frame6_from_flange: None }
     }
 
+    /// The device's capsules in MDH frame 6 of the arm it is mounted on, for its TCP `tcp` there.
+    pub fn capsules(&self, tcp: &Vector3<f64>) -> Vec<CapsuleSpec> {
+        trical_capsules(tcp, self.frame6_from_flange.as_ref())
+    }
+
+    /// The flange's axis (the device's, from the flange to the TCP) in MDH frame 6.
+    pub fn flange_axis(&self) -> Vector3<f64> {
+        self.frame6_from_flange.map_or_else(Vector3::z, |r| r.column(2).into_owned())
+    }
+
     /// Nominal orientation of {T} in MDH frame 6 ([`flange_from_tool_rotation`] on this arm's flange).
     pub fn frame6_from_tool(&self) -> Matrix3<f64> {
         self.frame6_from_flange.map_or_else(flange_from_tool_rotation, |r| r * flange_from_tool_rotation())
@@ -185,7 +195,7 @@ impl TriCal {
 /// Capsules of the TriCal device in MDH frame 6 (`tcp` there), mounted on a flange at
 /// `frame6_from_flange` (`None`: frame 6): the conical bracket and the three indicator bodies behind
 /// their plungers (dimensions estimated from the paper's Figure 1).
-pub fn trical_capsules(tcp: &Vector3<f64>, frame6_from_flange: Option<&Matrix3<f64>>) -> Vec<CapsuleSpec> {
+fn trical_capsules(tcp: &Vector3<f64>, frame6_from_flange: Option<&Matrix3<f64>>) -> Vec<CapsuleSpec> {
     let Some(r) = frame6_from_flange else { return trical_capsules_on_flange(tcp) };
     let turn = |p: [f64; 3]| -> [f64; 3] { (r * Vector3::from(p)).into() };
     trical_capsules_on_flange(&(r.transpose() * tcp))

@@ -126,3 +126,16 @@ pub fn write_atomically(out: &Path, name: &str, fill: impl FnOnce(&Path) -> io::
     }
     Ok(dest)
 }
+
+/// Writes `text` to `path` through `<path>.partial` renamed into place: `path` holds the old or
+/// the new text, never a part; on failure the partial file is removed.
+pub fn write_file_atomically(path: &Path, text: &str) -> io::Result<()> {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let tmp = path.with_file_name(name);
+    let result = fs::write(&tmp, text).and_then(|()| fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}

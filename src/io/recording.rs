@@ -24,7 +24,6 @@ use rerun::{Arrows3D, Boxes3D, Capsules3D, Color, Points3D, RecordingStream, Sca
 use crate::cell::collision::{CapsuleSpec, LinkCapsules};
 use crate::cell::solids::{Solid, cell_solids};
 use crate::experiment::Experiment;
-use crate::instrument::trical::trical_capsules;
 use crate::robot::{JOINTS, KinState, RobotModel, forward, world_from_base};
 use crate::study::StudyResults;
 
@@ -218,7 +217,7 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     // The pool: TCP targets coloured by sphere, the robot per configuration, the centring readings.
     let nominal = &e.campaign.nominal;
     let links = &e.links;
-    let tool = trical_capsules(&nominal.data().flange_tcp_mm, e.trical.frame6_from_flange.as_ref());
+    let tool = e.trical.capsules(&nominal.data().flange_tcp_mm);
     let mut st = KinState::default();
     let pool = &e.campaign.pool;
     let pool_tcp: Vec<[f32; 3]> = pool.iter().map(|p| p3(&e.cell.spheres_w[p.sphere])).collect();
