@@ -115,15 +115,12 @@ impl ExperimentSpec {
     /// The true robot: Table 7 means, with this device as tool and payload.
     pub fn truth(&self) -> RobotModel {
         let table7 = match &self.robot.arm {
-            // The file's arm at the scenario's nominal base with the device, then its truth.
+            // The file's arm at the scenario's nominal base, then its truth (the device below).
             Some(Arm(arm)) => {
                 let placed = arm
                     .nominal
-                    .edited(|d| {
-                        d.world_from_base = crate::robot::XyzZyx::from_mm_deg(self.robot.nominal_base_mm_deg.unwrap_or_default());
-                        self.apply_device(d);
-                    })
-                    .expect("valid device");
+                    .edited(|d| d.world_from_base = crate::robot::XyzZyx::from_mm_deg(self.robot.nominal_base_mm_deg.unwrap_or_default()))
+                    .expect("a checked base");
                 arm.truth_on(&placed).expect("checked when the robot file was loaded")
             }
             None => trical_2018_table7(),
