@@ -118,15 +118,13 @@ struct Pending {
 
 /// Buffers reused by every update.
 struct Scratch {
-    /// `U = M^-1 J_a^T`, m x 3.
-    u: DMatrix<f64>,
-    /// `U W`, m x 3.
-    v: DMatrix<f64>,
+    /// The columns of `U W` (`U = M^-1 J_a^T`), m values each.
+    v: [Vec<f64>; 3],
 }
 
 impl Scratch {
     fn new(pool: &PoolJacobian) -> Self {
-        Self { u: DMatrix::zeros(pool.m, 3), v: DMatrix::zeros(pool.m, 3) }
+        Self { v: std::array::from_fn(|_| vec![0.0; pool.m]) }
     }
 }
 
@@ -141,6 +139,16 @@ enum Rows {
 /// Brings `d[k]` up to date for every k that `want` selects: the pending updates it has not taken,
 /// in order, `D_k -= P_k ws P_k^T` with `P_k = J_k U`.
 fn catch_up(pool: &PoolJacobian, pending: &[Pending], d: &mut [Block], applied: &mut [usize], want: impl Fn(usize) -> bool) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU was just found to support AVX-512F (which includes AVX2) and FMA, the
+        // only requirements of `avx512::catch_up`.
+        #[allow(unsafe_code)]
+        unsafe {
+            avx512::catch_up(pool, pending, d, applied, want)
+        };
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU was just found to support AVX2 and FMA, the only requirement of
@@ -224,7 +232,7 @@ mod avx2 {
     /// `(x_0 . 1, x_1 . 1, x_2 . 1, x_3 . 1)` with each sum taken as `(l0 + l1) + (l2 + l3)`.
     #[inline]
     #[target_feature(enable = "avx2")]
-    fn sums4(x0: __m256d, x1: __m256d, x2: __m256d, x3: __m256d) -> __m256d {
+    pub(super) fn sums4(x0: __m256d, x1: __m256d, x2: __m256d, x3: __m256d) -> __m256d {
         let h01 = _mm256_hadd_pd(x0, x1);
         let h23 = _mm256_hadd_pd(x2, x3);
         _mm256_add_pd(_mm256_permute2f128_pd::<0x20>(h01, h23), _mm256_permute2f128_pd::<0x31>(h01, h23))
@@ -233,7 +241,7 @@ mod avx2 {
     /// `D_k -= P_k ws P_k^T` for one configuration (its three padded rows) and one update.
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    fn update(dk: &mut Block, rows: &[f64], stride: usize, up: &Pending) {
+    pub(super) fn update(dk: &mut Block, rows: &[f64], stride: usize, up: &Pending) {
         // The caller asserted: `rows` holds 3 * stride values, each column of U stride values,
         // stride a multiple of 4.
         let mut acc: [__m256d; 9] = [_mm256_setzero_pd(); 9];
@@ -287,6 +295,193 @@ mod avx2 {
     }
 }
 
+/// The hot loop of DETMAX with AVX-512, chosen at run time by `catch_up`: two configurations at
+/// a time, the first in the low and the second in the high four lanes of every vector. Each lane
+/// takes exactly the operations of the AVX2 kernel (the same fused products in the same order, the
+/// same reduction and 3 x 3 products), so the two kernels give the same numbers to the bit; this
+/// one does the work of two configurations in the instructions of one. A configuration without a
+/// partner of the same pending count takes the AVX2 kernel.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use std::arch::x86_64::{
+        __m512d, _mm256_loadu_pd, _mm256_storeu_pd, _mm512_add_pd, _mm512_broadcast_f64x4, _mm512_castpd256_pd512, _mm512_castpd512_pd256,
+        _mm512_extractf64x4_pd, _mm512_fmadd_pd, _mm512_insertf64x4, _mm512_mul_pd, _mm512_permutex_pd, _mm512_permutex2var_pd,
+        _mm512_set1_pd, _mm512_setr_epi64, _mm512_setzero_pd, _mm512_shuffle_pd, _mm512_sub_pd,
+    };
+
+    use super::{Block, Pending, PoolJacobian};
+
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    pub(super) fn catch_up(pool: &PoolJacobian, pending: &[Pending], d: &mut [Block], applied: &mut [usize], want: impl Fn(usize) -> bool) {
+        let stride = pool.stride;
+        assert!(stride.is_multiple_of(4) && pool.rows.len() >= 3 * d.len() * stride);
+        assert!(pending.iter().all(|up| up.u_cols.iter().all(|c| c.len() >= stride)));
+        let rows = |k: usize| &pool.rows[3 * k * stride..3 * (k + 1) * stride];
+        // For every count of updates taken, a configuration waiting for a partner with that count.
+        let mut held: Vec<Option<usize>> = vec![None; pending.len()];
+        for k in 0..d.len() {
+            let done = applied[k];
+            if done == pending.len() || !want(k) {
+                continue;
+            }
+            match held[done].take() {
+                Some(h) => {
+                    let (lo, hi) = d.split_at_mut(k);
+                    for up in &pending[done..] {
+                        update_pair(&mut lo[h], &mut hi[0], rows(h), rows(k), stride, up);
+                    }
+                    applied[h] = pending.len();
+                    applied[k] = pending.len();
+                }
+                None => held[done] = Some(k),
+            }
+        }
+        for h in held.into_iter().flatten() {
+            for up in &pending[applied[h]..] {
+                super::avx2::update(&mut d[h], rows(h), stride, up);
+            }
+            applied[h] = pending.len();
+        }
+    }
+
+    /// The AVX2 `sums4` on both halves: `(x_0 . 1, x_1 . 1, x_2 . 1, 0)` per half, each sum
+    /// `(l0 + l1) + (l2 + l3)`.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn sums3(x0: __m512d, x1: __m512d, x2: __m512d) -> __m512d {
+        let z = _mm512_setzero_pd();
+        // hadd(a, b) per 256-bit half: (a0 + a1, b0 + b1, a2 + a3, b2 + b3).
+        let h01 = _mm512_add_pd(_mm512_shuffle_pd::<0x00>(x0, x1), _mm512_shuffle_pd::<0xFF>(x0, x1));
+        let h23 = _mm512_add_pd(_mm512_shuffle_pd::<0x00>(x2, z), _mm512_shuffle_pd::<0xFF>(x2, z));
+        // Per half: the low 128 bits of h01 and h23, then their high 128 bits.
+        let lo = _mm512_permutex2var_pd(h01, _mm512_setr_epi64(0, 1, 8, 9, 4, 5, 12, 13), h23);
+        let hi = _mm512_permutex2var_pd(h01, _mm512_setr_epi64(2, 3, 10, 11, 6, 7, 14, 15), h23);
+        _mm512_add_pd(lo, hi)
+    }
+
+    /// `D_a -= P_a ws P_a^T` and `D_b -= P_b ws P_b^T` for one update.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn update_pair(da: &mut Block, db: &mut Block, ra: &[f64], rb: &[f64], stride: usize, up: &Pending) {
+        // The caller asserted: `ra` and `rb` hold 3 * stride values, each column of U stride
+        // values, stride a multiple of 4.
+        let mut acc: [__m512d; 9] = [_mm512_setzero_pd(); 9];
+        for j in (0..stride).step_by(4) {
+            // SAFETY: j + 4 <= stride (see above); unaligned loads.
+            #[allow(unsafe_code)]
+            let (x, y) = unsafe {
+                let (pa, pb, u) = (ra.as_ptr(), rb.as_ptr(), &up.u_cols);
+                let pair = |o: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(pa.add(o))), _mm256_loadu_pd(pb.add(o)));
+                let x = [pair(j), pair(stride + j), pair(2 * stride + j)];
+                let y = [
+                    _mm512_broadcast_f64x4(_mm256_loadu_pd(u[0].as_ptr().add(j))),
+                    _mm512_broadcast_f64x4(_mm256_loadu_pd(u[1].as_ptr().add(j))),
+                    _mm512_broadcast_f64x4(_mm256_loadu_pd(u[2].as_ptr().add(j))),
+                ];
+                (x, y)
+            };
+            for r in 0..3 {
+                for c in 0..3 {
+                    acc[3 * r + c] = _mm512_fmadd_pd(x[r], y[c], acc[3 * r + c]);
+                }
+            }
+        }
+        let p = [sums3(acc[0], acc[3], acc[6]), sums3(acc[1], acc[4], acc[7]), sums3(acc[2], acc[5], acc[8])];
+        let ws = &up.ws;
+        let z = _mm512_setzero_pd();
+        let mut t = [z; 3];
+        for (j, tj) in t.iter_mut().enumerate() {
+            let a = _mm512_mul_pd(p[0], _mm512_set1_pd(ws[(0, j)]));
+            let b = _mm512_mul_pd(p[1], _mm512_set1_pd(ws[(1, j)]));
+            let c = _mm512_mul_pd(p[2], _mm512_set1_pd(ws[(2, j)]));
+            *tj = _mm512_add_pd(_mm512_add_pd(a, b), c);
+        }
+        let pt = [
+            [_mm512_permutex_pd::<0x00>(p[0]), _mm512_permutex_pd::<0x00>(p[1]), _mm512_permutex_pd::<0x00>(p[2])],
+            [_mm512_permutex_pd::<0x55>(p[0]), _mm512_permutex_pd::<0x55>(p[1]), _mm512_permutex_pd::<0x55>(p[2])],
+            [_mm512_permutex_pd::<0xAA>(p[0]), _mm512_permutex_pd::<0xAA>(p[1]), _mm512_permutex_pd::<0xAA>(p[2])],
+        ];
+        for (j, ptj) in pt.iter().enumerate() {
+            let a = _mm512_mul_pd(t[0], ptj[0]);
+            let b = _mm512_mul_pd(t[1], ptj[1]);
+            let c = _mm512_mul_pd(t[2], ptj[2]);
+            let r = _mm512_add_pd(_mm512_add_pd(a, b), c);
+            // SAFETY: column j of a block is the four values from 4 j.
+            #[allow(unsafe_code)]
+            unsafe {
+                let (ca, cb) = (da.0.as_mut_ptr().add(4 * j), db.0.as_mut_ptr().add(4 * j));
+                let cur = _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(ca)), _mm256_loadu_pd(cb));
+                let new = _mm512_sub_pd(cur, r);
+                _mm256_storeu_pd(ca, _mm512_castpd512_pd256(new));
+                _mm256_storeu_pd(cb, _mm512_extractf64x4_pd::<1>(new));
+            }
+        }
+    }
+}
+
+/// The arithmetic of an exchange step: `U = M^-1 J_a^T` (into the first m values of `u`, whose
+/// padding stays zero), `V = U W` and `M^-1 += ns V U^T`, with `ja` the three padded rows of `J_a`.
+///
+/// The products are written out in the order of nalgebra's small-matrix `gemm`, which the exchange
+/// used before (column by column, each an `axpy` over the inner index, separate multiplies and
+/// adds): the designs are the same to the bit. The loops over rows carry no dependency, so the
+/// AVX2 build of the same code (`woodbury_avx2`, chosen at run time) only widens them.
+fn woodbury(minv: &mut [f64], m: usize, ja: &[f64], w: &Matrix3<f64>, ns: f64, u: &mut [Vec<f64>; 3], v: &mut [Vec<f64>; 3]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU was just found to support AVX2, the only requirement of `woodbury_avx2`.
+        #[allow(unsafe_code)]
+        unsafe {
+            woodbury_avx2(minv, m, ja, w, ns, u, v)
+        };
+        return;
+    }
+    woodbury_body(minv, m, ja, w, ns, u, v);
+}
+
+/// `woodbury` compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn woodbury_avx2(minv: &mut [f64], m: usize, ja: &[f64], w: &Matrix3<f64>, ns: f64, u: &mut [Vec<f64>; 3], v: &mut [Vec<f64>; 3]) {
+    woodbury_body(minv, m, ja, w, ns, u, v);
+}
+
+#[inline(always)]
+fn woodbury_body(minv: &mut [f64], m: usize, ja: &[f64], w: &Matrix3<f64>, ns: f64, u: &mut [Vec<f64>; 3], v: &mut [Vec<f64>; 3]) {
+    let stride = ja.len() / 3;
+    let (jr0, jr1, jr2) = (&ja[..m], &ja[stride..stride + m], &ja[2 * stride..2 * stride + m]);
+    let [u0, u1, u2] = u;
+    let (u0, u1, u2) = (&mut u0[..m], &mut u1[..m], &mut u2[..m]);
+    // U's column c: the sum over j of M^-1's column j times J_a[c, j], in j order.
+    for (j, col) in minv.chunks_exact(m).enumerate() {
+        let (x0, x1, x2) = (jr0[j], jr1[j], jr2[j]);
+        if j == 0 {
+            for i in 0..m {
+                (u0[i], u1[i], u2[i]) = (col[i] * x0, col[i] * x1, col[i] * x2);
+            }
+        } else {
+            for i in 0..m {
+                (u0[i], u1[i], u2[i]) = (col[i] * x0 + u0[i], col[i] * x1 + u1[i], col[i] * x2 + u2[i]);
+            }
+        }
+    }
+    // V = U W, column c: ((U_0 w_0c) + U_1 w_1c) + U_2 w_2c.
+    for (c, vc) in v.iter_mut().enumerate() {
+        let vc = &mut vc[..m];
+        for i in 0..m {
+            vc[i] = u2[i] * w[(2, c)] + (u1[i] * w[(1, c)] + u0[i] * w[(0, c)]);
+        }
+    }
+    // M^-1's column l takes three axpys, in the order of V's columns.
+    let (v0, v1, v2) = (&v[0][..m], &v[1][..m], &v[2][..m]);
+    for (l, col) in minv.chunks_exact_mut(m).enumerate() {
+        let (x0, x1, x2) = (u0[l], u1[l], u2[l]);
+        for i in 0..m {
+            col[i] = (ns * v2[i]) * x2 + ((ns * v1[i]) * x1 + ((ns * v0[i]) * x0 + col[i]));
+        }
+    }
+}
+
 impl<'a> State<'a> {
     fn new(pool: &'a PoolJacobian, set: &[usize]) -> Option<Self> {
         let info = pool.information(set);
@@ -320,19 +515,11 @@ impl<'a> State<'a> {
         let Some(w) = s.try_inverse() else {
             return false;
         };
-        let ja_t = self.pool.j.rows(3 * a, 3).transpose();
-        // U = M^-1 J_a^T.
-        sc.u.gemm(1.0, &self.minv, &ja_t, 0.0);
-        // M'^-1 = M^-1 - sign U W U^T.
-        sc.v.gemm(1.0, &sc.u, &w, 0.0);
-        self.minv.gemm(-sign, &sc.v, &sc.u.transpose(), 1.0);
+        let stride = self.pool.stride;
+        let ja = &self.pool.rows[3 * a * stride..3 * (a + 1) * stride];
+        let mut u_cols: [Vec<f64>; 3] = std::array::from_fn(|_| vec![0.0; stride]);
+        woodbury(self.minv.as_mut_slice(), self.pool.m, ja, &w, -sign, &mut u_cols, &mut sc.v);
         // Every D_k, when next read: P = J U, D_k -= sign P_k W P_k^T.
-        let mut u_cols: [Vec<f64>; 3] = std::array::from_fn(|_| vec![0.0; self.pool.stride]);
-        for (c, col) in u_cols.iter_mut().enumerate() {
-            for l in 0..self.pool.m {
-                col[l] = sc.u[(l, c)];
-            }
-        }
         self.pending.push(Pending { u_cols, ws: w * sign });
         self.logdet += det.ln();
         self.member[a] = sign > 0.0;
@@ -472,6 +659,73 @@ mod tests {
             }
         }
         PoolJacobian { m, len, j, rows, stride, scale: vec![1.0; m] }
+    }
+
+    /// The AVX-512 kernel (two configurations a time) and the AVX2 kernel give the same numbers to
+    /// the bit, whatever the mix of pending counts: 41 configurations, 31 parameters, 5 updates
+    /// pending, taken by a third of the configurations before the rest (runs where the CPU has
+    /// AVX-512F and FMA; elsewhere the AVX2 kernel is the one that runs).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx512_kernel_equals_the_avx2_kernel_bit_for_bit() {
+        if !(std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma")) {
+            return;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let pool = random_pool(41, 31, &mut rng);
+        let start: Vec<usize> = (0..15).collect();
+        let mut state = State::new(&pool, &start).expect("non-singular start");
+        let mut sc = Scratch::new(&pool);
+        for (a, sign) in [(20, 1.0), (3, -1.0)] {
+            state.catch_up(Rows::All);
+            assert!(state.update(a, sign, &mut sc));
+        }
+        // Some configurations take the first pending updates now, so counts differ below.
+        catch_up(&pool, &state.pending, &mut state.d, &mut state.applied, |k| k % 3 == 0);
+        for (a, sign) in [(25, 1.0), (30, 1.0), (0, -1.0)] {
+            catch_up(&pool, &state.pending, &mut state.d, &mut state.applied, |k| k == a);
+            assert!(state.update(a, sign, &mut sc));
+        }
+        assert!(state.applied.iter().collect::<std::collections::BTreeSet<_>>().len() >= 3, "mixed pending counts");
+        let mut wide = (state.d.clone(), state.applied.clone());
+        let mut narrow = (state.d.clone(), state.applied.clone());
+        #[allow(unsafe_code)]
+        // SAFETY: the CPU supports AVX-512F and FMA (checked above).
+        unsafe {
+            avx512::catch_up(&pool, &state.pending, &mut wide.0, &mut wide.1, |_| true);
+            avx2::catch_up(&pool, &state.pending, &mut narrow.0, &mut narrow.1, |_| true);
+        }
+        assert_eq!(wide, narrow);
+    }
+
+    /// The exchange's Woodbury step equals nalgebra's `gemm` formulation it replaced, to the bit:
+    /// `U = M^-1 J_a^T`, `V = U W`, `M^-1 - sign V U^T` (31 parameters, both signs).
+    #[test]
+    fn woodbury_equals_the_gemm_formulation_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let pool = random_pool(40, 31, &mut rng);
+        let state = State::new(&pool, &(0..20).collect::<Vec<_>>()).expect("non-singular start");
+        for (a, sign) in [(30, 1.0), (4, -1.0)] {
+            let w = (Matrix3::identity() + state.d[a].matrix() * sign).try_inverse().expect("invertible");
+            let ja_t = pool.j.rows(3 * a, 3).transpose();
+            let mut u = DMatrix::zeros(pool.m, 3);
+            u.gemm(1.0, &state.minv, &ja_t, 0.0);
+            let mut v = DMatrix::zeros(pool.m, 3);
+            v.gemm(1.0, &u, &w, 0.0);
+            let mut expected = state.minv.clone();
+            expected.gemm(-sign, &v, &u.transpose(), 1.0);
+
+            let mut minv = state.minv.clone();
+            let mut u_cols: [Vec<f64>; 3] = std::array::from_fn(|_| vec![0.0; pool.stride]);
+            let mut sc = Scratch::new(&pool);
+            let ja = &pool.rows[3 * a * pool.stride..3 * (a + 1) * pool.stride];
+            woodbury(minv.as_mut_slice(), pool.m, ja, &w, -sign, &mut u_cols, &mut sc.v);
+            assert_eq!(minv, expected);
+            for c in 0..3 {
+                assert_eq!(&u_cols[c][..pool.m], u.column(c).as_slice());
+                assert!(u_cols[c][pool.m..].iter().all(|&x| x == 0.0), "padding stays zero");
+            }
+        }
     }
 
     /// The vectorised and the portable catch-up agree (to the rounding of the fused products) and

@@ -336,7 +336,7 @@ fn toward_seed(model: &RobotModel, mut q: Joints, seed: &Joints) -> Joints {
             let c = q[k] + t * 2.0 * PI;
             let inside = c >= lim.min && c <= lim.max;
             let best_inside = best >= lim.min && best <= lim.max;
-            if (inside && !best_inside) || (inside && (c - seed[k]).abs() < (best - seed[k]).abs()) {
+            if inside && (!best_inside || (c - seed[k]).abs() < (best - seed[k]).abs()) {
                 best = c;
             }
         }
