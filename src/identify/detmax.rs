@@ -327,8 +327,13 @@ mod avx512 {
             match held[done].take() {
                 Some(h) => {
                     let (lo, hi) = d.split_at_mut(k);
-                    for up in &pending[done..] {
-                        update_pair(&mut lo[h], &mut hi[0], rows(h), rows(k), stride, up);
+                    let (da, db) = (&mut lo[h], &mut hi[0]);
+                    let mut ups = pending[done..].chunks_exact(2);
+                    for two in ups.by_ref() {
+                        update_pair(da, db, rows(h), rows(k), stride, [&two[0], &two[1]]);
+                    }
+                    for up in ups.remainder() {
+                        update_pair(da, db, rows(h), rows(k), stride, [up]);
                     }
                     applied[h] = pending.len();
                     applied[k] = pending.len();
@@ -359,61 +364,70 @@ mod avx512 {
         _mm512_add_pd(lo, hi)
     }
 
-    /// `D_a -= P_a ws P_a^T` and `D_b -= P_b ws P_b^T` for one update.
+    /// `D_a -= P_a ws P_a^T` and `D_b -= P_b ws P_b^T` for U updates in order: their products
+    /// `P = J U` share the loads of the rows, then each update is applied in turn.
     #[inline]
     #[target_feature(enable = "avx512f,avx2,fma")]
-    fn update_pair(da: &mut Block, db: &mut Block, ra: &[f64], rb: &[f64], stride: usize, up: &Pending) {
+    fn update_pair<const U: usize>(da: &mut Block, db: &mut Block, ra: &[f64], rb: &[f64], stride: usize, ups: [&Pending; U]) {
         // The caller asserted: `ra` and `rb` hold 3 * stride values, each column of U stride
         // values, stride a multiple of 4.
-        let mut acc: [__m512d; 9] = [_mm512_setzero_pd(); 9];
+        let mut acc: [[__m512d; 9]; U] = [[_mm512_setzero_pd(); 9]; U];
         for j in (0..stride).step_by(4) {
             // SAFETY: j + 4 <= stride (see above); unaligned loads.
             #[allow(unsafe_code)]
-            let (x, y) = unsafe {
-                let (pa, pb, u) = (ra.as_ptr(), rb.as_ptr(), &up.u_cols);
+            let x = unsafe {
+                let (pa, pb) = (ra.as_ptr(), rb.as_ptr());
                 let pair = |o: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(pa.add(o))), _mm256_loadu_pd(pb.add(o)));
-                let x = [pair(j), pair(stride + j), pair(2 * stride + j)];
-                let y = [
-                    _mm512_broadcast_f64x4(_mm256_loadu_pd(u[0].as_ptr().add(j))),
-                    _mm512_broadcast_f64x4(_mm256_loadu_pd(u[1].as_ptr().add(j))),
-                    _mm512_broadcast_f64x4(_mm256_loadu_pd(u[2].as_ptr().add(j))),
-                ];
-                (x, y)
+                [pair(j), pair(stride + j), pair(2 * stride + j)]
             };
-            for r in 0..3 {
-                for c in 0..3 {
-                    acc[3 * r + c] = _mm512_fmadd_pd(x[r], y[c], acc[3 * r + c]);
+            for (acc, up) in acc.iter_mut().zip(ups) {
+                // SAFETY: as above.
+                #[allow(unsafe_code)]
+                let y = unsafe {
+                    let u = &up.u_cols;
+                    [
+                        _mm512_broadcast_f64x4(_mm256_loadu_pd(u[0].as_ptr().add(j))),
+                        _mm512_broadcast_f64x4(_mm256_loadu_pd(u[1].as_ptr().add(j))),
+                        _mm512_broadcast_f64x4(_mm256_loadu_pd(u[2].as_ptr().add(j))),
+                    ]
+                };
+                for r in 0..3 {
+                    for c in 0..3 {
+                        acc[3 * r + c] = _mm512_fmadd_pd(x[r], y[c], acc[3 * r + c]);
+                    }
                 }
             }
         }
-        let p = [sums3(acc[0], acc[3], acc[6]), sums3(acc[1], acc[4], acc[7]), sums3(acc[2], acc[5], acc[8])];
-        let ws = &up.ws;
-        let z = _mm512_setzero_pd();
-        let mut t = [z; 3];
-        for (j, tj) in t.iter_mut().enumerate() {
-            let a = _mm512_mul_pd(p[0], _mm512_set1_pd(ws[(0, j)]));
-            let b = _mm512_mul_pd(p[1], _mm512_set1_pd(ws[(1, j)]));
-            let c = _mm512_mul_pd(p[2], _mm512_set1_pd(ws[(2, j)]));
-            *tj = _mm512_add_pd(_mm512_add_pd(a, b), c);
-        }
-        let pt = [
-            [_mm512_permutex_pd::<0x00>(p[0]), _mm512_permutex_pd::<0x00>(p[1]), _mm512_permutex_pd::<0x00>(p[2])],
-            [_mm512_permutex_pd::<0x55>(p[0]), _mm512_permutex_pd::<0x55>(p[1]), _mm512_permutex_pd::<0x55>(p[2])],
-            [_mm512_permutex_pd::<0xAA>(p[0]), _mm512_permutex_pd::<0xAA>(p[1]), _mm512_permutex_pd::<0xAA>(p[2])],
-        ];
-        for (j, ptj) in pt.iter().enumerate() {
-            let a = _mm512_mul_pd(t[0], ptj[0]);
-            let b = _mm512_mul_pd(t[1], ptj[1]);
-            let c = _mm512_mul_pd(t[2], ptj[2]);
-            let r = _mm512_add_pd(_mm512_add_pd(a, b), c);
-            // SAFETY: column j of a block is the four values from 4 j.
-            #[allow(unsafe_code)]
-            unsafe {
-                let (ca, cb) = (da.0.as_mut_ptr().add(4 * j), db.0.as_mut_ptr().add(4 * j));
-                let cur = _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(ca)), _mm256_loadu_pd(cb));
-                let new = _mm512_sub_pd(cur, r);
-                _mm256_storeu_pd(ca, _mm512_castpd512_pd256(new));
-                _mm256_storeu_pd(cb, _mm512_extractf64x4_pd::<1>(new));
+        for (acc, up) in acc.iter().zip(ups) {
+            let p = [sums3(acc[0], acc[3], acc[6]), sums3(acc[1], acc[4], acc[7]), sums3(acc[2], acc[5], acc[8])];
+            let ws = &up.ws;
+            let z = _mm512_setzero_pd();
+            let mut t = [z; 3];
+            for (j, tj) in t.iter_mut().enumerate() {
+                let a = _mm512_mul_pd(p[0], _mm512_set1_pd(ws[(0, j)]));
+                let b = _mm512_mul_pd(p[1], _mm512_set1_pd(ws[(1, j)]));
+                let c = _mm512_mul_pd(p[2], _mm512_set1_pd(ws[(2, j)]));
+                *tj = _mm512_add_pd(_mm512_add_pd(a, b), c);
+            }
+            let pt = [
+                [_mm512_permutex_pd::<0x00>(p[0]), _mm512_permutex_pd::<0x00>(p[1]), _mm512_permutex_pd::<0x00>(p[2])],
+                [_mm512_permutex_pd::<0x55>(p[0]), _mm512_permutex_pd::<0x55>(p[1]), _mm512_permutex_pd::<0x55>(p[2])],
+                [_mm512_permutex_pd::<0xAA>(p[0]), _mm512_permutex_pd::<0xAA>(p[1]), _mm512_permutex_pd::<0xAA>(p[2])],
+            ];
+            for (j, ptj) in pt.iter().enumerate() {
+                let a = _mm512_mul_pd(t[0], ptj[0]);
+                let b = _mm512_mul_pd(t[1], ptj[1]);
+                let c = _mm512_mul_pd(t[2], ptj[2]);
+                let r = _mm512_add_pd(_mm512_add_pd(a, b), c);
+                // SAFETY: column j of a block is the four values from 4 j.
+                #[allow(unsafe_code)]
+                unsafe {
+                    let (ca, cb) = (da.0.as_mut_ptr().add(4 * j), db.0.as_mut_ptr().add(4 * j));
+                    let cur = _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(ca)), _mm256_loadu_pd(cb));
+                    let new = _mm512_sub_pd(cur, r);
+                    _mm256_storeu_pd(ca, _mm512_castpd512_pd256(new));
+                    _mm256_storeu_pd(cb, _mm512_extractf64x4_pd::<1>(new));
+                }
             }
         }
     }
