@@ -240,16 +240,21 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
     let tcp_cmm = setup.trical.cmm_tcp(&setup.robot.truth.data().flange_tcp_mm, &mut stream(seed, streams::CMM));
     let world = collision_world(setup.cell, setup.links, setup.nominal, &truth_base, &tcp_cmm, setup.trical);
     let (semi_automatic, nominal_model) = semi_automatic(setup, &tcp_cmm, seed)?;
-    let t0 = Instant::now();
-    let (pool, pool_rejected, centring_failures) = measure_pool(setup, &world, &nominal_model, &semi_automatic.located_q, seed)?;
-    let pool_wall_s = t0.elapsed().as_secs_f64();
     let setup2 = setup.spec.validation_indicators_removed.then(|| {
         let mut w = collision_world(setup.cell, setup.links, setup.nominal, &truth_base, &tcp_cmm, setup.trical);
         w.keep_device_parts(1);
         w
     });
-    let (validation, validation_rejected) =
-        measure_validation(setup, setup2.as_ref().unwrap_or(&world), &nominal_model, semi_automatic.located_q[0], seed)?;
+    // The pool and the validation set draw on their own streams: measured side by side.
+    let (pool, validation) = rayon::join(
+        || {
+            let t0 = Instant::now();
+            measure_pool(setup, &world, &nominal_model, &semi_automatic.located_q, seed).map(|p| (p, t0.elapsed().as_secs_f64()))
+        },
+        || measure_validation(setup, setup2.as_ref().unwrap_or(&world), &nominal_model, semi_automatic.located_q[0], seed),
+    );
+    let ((pool, pool_rejected, centring_failures), pool_wall_s) = pool?;
+    let (validation, validation_rejected) = validation?;
     Ok(Campaign {
         nominal: nominal_model,
         semi_automatic,
@@ -333,50 +338,65 @@ fn measure_pool(
 ) -> Result<(Vec<PoolEntry>, u32, u32), CampaignError> {
     let Setup { cell, robot, trical, spec, .. } = *setup;
     let down = -Vector3::z();
-    let mut pool = Vec::new();
-    let mut rejected = 0;
-    let mut centring_failures = 0;
-    let mut st = KinState::default();
-    for (k, seed_q) in located_q.iter().enumerate() {
-        let target_w = cell.spheres_w_measured[k];
-        let rng = &mut stream(seed, streams::POOL_TARGETS + k as u64);
-        let mut last = *seed_q;
-        let mut kept = 0;
-        let mut tries = 0;
-        while kept < spec.pool_per_sphere {
-            tries += 1;
-            if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.pool_per_sphere) {
-                return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
-            }
-            let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
-            let pose = trical.frame6_pose(tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU)));
-            let Ok(q) = inverse(nominal_model, &pose, seed_q) else {
-                rejected += 1;
-                continue;
-            };
-            forward(nominal_model, &mut st, &q);
-            if world.first_collision(&st).is_some() {
-                rejected += 1;
-                continue;
-            }
-            let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries);
-            match centre(nominal_model, robot, trical, cell, Approach { sphere: k, q0: q, from: last }, centring_rng) {
-                Ok(res) => {
-                    last = res.q;
-                    pool.push(PoolEntry {
-                        sphere: k,
-                        q_commanded: q,
-                        q: res.q,
-                        iterations: res.iterations,
-                        seconds: res.seconds,
-                        true_offset_mm: res.true_offset_mm,
-                        readings: res.readings,
-                    });
-                    kept += 1;
+    // The spheres' pools are independent (each its own streams), so they are measured in
+    // parallel and joined in sphere order: the same pool for any thread count.
+    let per_sphere: Vec<Result<(Vec<PoolEntry>, u32, u32), CampaignError>> = located_q
+        .par_iter()
+        .enumerate()
+        .map(|(k, seed_q)| {
+            let mut pool = Vec::new();
+            let mut rejected = 0;
+            let mut centring_failures = 0;
+            let mut st = KinState::default();
+            let target_w = cell.spheres_w_measured[k];
+            let rng = &mut stream(seed, streams::POOL_TARGETS + k as u64);
+            let mut last = *seed_q;
+            let mut kept = 0;
+            let mut tries = 0;
+            while kept < spec.pool_per_sphere {
+                tries += 1;
+                if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.pool_per_sphere) {
+                    return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
                 }
-                Err(_) => centring_failures += 1,
+                let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
+                let pose = trical.frame6_pose(tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU)));
+                let Ok(q) = inverse(nominal_model, &pose, seed_q) else {
+                    rejected += 1;
+                    continue;
+                };
+                forward(nominal_model, &mut st, &q);
+                if world.first_collision(&st).is_some() {
+                    rejected += 1;
+                    continue;
+                }
+                let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries);
+                match centre(nominal_model, robot, trical, cell, Approach { sphere: k, q0: q, from: last }, centring_rng) {
+                    Ok(res) => {
+                        last = res.q;
+                        pool.push(PoolEntry {
+                            sphere: k,
+                            q_commanded: q,
+                            q: res.q,
+                            iterations: res.iterations,
+                            seconds: res.seconds,
+                            true_offset_mm: res.true_offset_mm,
+                            readings: res.readings,
+                        });
+                        kept += 1;
+                    }
+                    Err(_) => centring_failures += 1,
+                }
             }
-        }
+            Ok((pool, rejected, centring_failures))
+        })
+        .collect();
+    let mut pool = Vec::new();
+    let (mut rejected, mut centring_failures) = (0, 0);
+    for sphere in per_sphere {
+        let (p, r, c) = sphere?;
+        pool.extend(p);
+        rejected += r;
+        centring_failures += c;
     }
     Ok((pool, rejected, centring_failures))
 }
