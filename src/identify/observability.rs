@@ -99,7 +99,8 @@ fn information_avx2(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
 }
 
 /// The information matrix of `set` into `out` (m x m, column-major), in the summation order of
-/// nalgebra's dot product.
+/// nalgebra's dot product. Entry (a, b) is summed once for b >= a and mirrored: the dot product of
+/// two columns sums the same products in the same order whichever comes first.
 #[inline(always)]
 fn information_body(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
     let (m, stride) = (pool.m, pool.stride);
@@ -109,33 +110,38 @@ fn information_body(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
     let mut acc = vec![0.0; 8 * stride];
     let mut res = vec![0.0; stride];
     for a in 0..m {
+        // Lanes from the aligned group of four holding a.
+        let from = a / 4 * 4;
+        let lanes = stride - from;
         acc.fill(0.0);
         for i in (0..blocks).step_by(8) {
             for (t, acc_t) in acc.chunks_exact_mut(stride).enumerate() {
                 let x = row(i + t);
                 let xa = x[a];
-                for (s, &xb) in acc_t.iter_mut().zip(x) {
+                for (s, &xb) in acc_t[..lanes].iter_mut().zip(&x[from..]) {
                     *s += xa * xb;
                 }
             }
         }
         res.fill(0.0);
         for (t, u) in [(0, 4), (1, 5), (2, 6), (3, 7)] {
-            let (at, au) = (&acc[t * stride..(t + 1) * stride], &acc[u * stride..(u + 1) * stride]);
-            for ((r, &p), &q) in res.iter_mut().zip(at).zip(au) {
+            let (at, au) = (&acc[t * stride..t * stride + lanes], &acc[u * stride..u * stride + lanes]);
+            for ((r, &p), &q) in res[..lanes].iter_mut().zip(at).zip(au) {
                 *r += p + q;
             }
         }
         for k in blocks..len {
             let x = row(k);
             let xa = x[a];
-            for (r, &xb) in res.iter_mut().zip(x) {
+            for (r, &xb) in res[..lanes].iter_mut().zip(&x[from..]) {
                 *r += xa * xb;
             }
         }
-        // Entry (a, b) for every b: row a of the matrix (column-major storage).
-        for (b, &r) in res[..m].iter().enumerate() {
+        // Entries (a, b) and (b, a) for b >= a (column-major storage).
+        for b in a..m {
+            let r = res[b - from];
             out[b * m + a] = r;
+            out[a * m + b] = r;
         }
     }
 }
