@@ -104,44 +104,41 @@ fn information_avx2(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
 #[inline(always)]
 fn information_body(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
     let (m, stride) = (pool.m, pool.stride);
-    let row = |r: usize| &pool.rows[(3 * set[r / 3] + r % 3) * stride..][..stride];
-    let len = 3 * set.len();
-    let blocks = len / 8 * 8;
-    let mut acc = vec![0.0; 8 * stride];
-    let mut res = vec![0.0; stride];
+    // The stacked Jacobian's rows, each padded to `stride`.
+    let rows: Vec<&[f64]> = set.iter().flat_map(|&k| (0..3).map(move |r| &pool.rows[(3 * k + r) * stride..][..stride])).collect();
+    let (full, rest) = rows.split_at(rows.len() / 8 * 8);
     for a in 0..m {
-        // Lanes from the aligned group of four holding a.
-        let from = a / 4 * 4;
-        let lanes = stride - from;
-        acc.fill(0.0);
-        for i in (0..blocks).step_by(8) {
-            for (t, acc_t) in acc.chunks_exact_mut(stride).enumerate() {
-                let x = row(i + t);
-                let xa = x[a];
-                for (s, &xb) in acc_t[..lanes].iter_mut().zip(&x[from..]) {
-                    *s += xa * xb;
+        // Four entries (a, c..c + 4) at a time, from the aligned group of four holding a.
+        for c in (a / 4 * 4..stride).step_by(4) {
+            let mut acc = [[0.0; 4]; 8];
+            for block in full.chunks_exact(8) {
+                for (acc_t, x) in acc.iter_mut().zip(block) {
+                    let (xa, xc): (f64, &[f64; 4]) = (x[a], x[c..c + 4].try_into().expect("four values"));
+                    for l in 0..4 {
+                        acc_t[l] += xa * xc[l];
+                    }
                 }
             }
-        }
-        res.fill(0.0);
-        for (t, u) in [(0, 4), (1, 5), (2, 6), (3, 7)] {
-            let (at, au) = (&acc[t * stride..t * stride + lanes], &acc[u * stride..u * stride + lanes]);
-            for ((r, &p), &q) in res[..lanes].iter_mut().zip(at).zip(au) {
-                *r += p + q;
+            let mut res = [0.0; 4];
+            for (t, u) in [(0, 4), (1, 5), (2, 6), (3, 7)] {
+                for l in 0..4 {
+                    res[l] += acc[t][l] + acc[u][l];
+                }
             }
-        }
-        for k in blocks..len {
-            let x = row(k);
-            let xa = x[a];
-            for (r, &xb) in res[..lanes].iter_mut().zip(&x[from..]) {
-                *r += xa * xb;
+            for x in rest {
+                let (xa, xc): (f64, &[f64; 4]) = (x[a], x[c..c + 4].try_into().expect("four values"));
+                for l in 0..4 {
+                    res[l] += xa * xc[l];
+                }
             }
-        }
-        // Entries (a, b) and (b, a) for b >= a (column-major storage).
-        for b in a..m {
-            let r = res[b - from];
-            out[b * m + a] = r;
-            out[a * m + b] = r;
+            // Entries (a, b) and (b, a) for b >= a (column-major storage).
+            for (l, &r) in res.iter().enumerate() {
+                let b = c + l;
+                if b >= a && b < m {
+                    out[b * m + a] = r;
+                    out[a * m + b] = r;
+                }
+            }
         }
     }
 }
