@@ -509,11 +509,25 @@ impl<'a> State<'a> {
         for &k in set {
             member[k] = true;
         }
-        // D_k for all k at once: the 3 x 3 diagonal blocks of J M^-1 J^T.
+        // D_k for all k at once: the 3 x 3 diagonal blocks of J M^-1 J^T, each entry summed over
+        // the parameters in order as nalgebra's small-matrix product sums it (the first product,
+        // then each next one added), without a matrix allocated per block.
         let jm = &pool.j * &minv;
         let d = (0..pool.len)
-            .map(|k| jm.rows(3 * k, 3) * pool.j.rows(3 * k, 3).transpose())
-            .map(|x| Block::from_matrix(&Matrix3::from_iterator(x.iter().copied())))
+            .map(|k| {
+                let mut b = [0.0; 12];
+                for c in 0..3 {
+                    let jc = &pool.rows[(3 * k + c) * pool.stride..][..pool.m];
+                    for i in 0..3 {
+                        let mut sum = jm[(3 * k + i, 0)] * jc[0];
+                        for (j, &x) in jc.iter().enumerate().skip(1) {
+                            sum = jm[(3 * k + i, j)] * x + sum;
+                        }
+                        b[4 * c + i] = sum;
+                    }
+                }
+                Block(b)
+            })
             .collect();
         Some(Self { pool, minv, logdet, d, applied: vec![0; pool.len], pending: Vec::new(), member, size: set.len() })
     }
