@@ -5,6 +5,7 @@
 
 use nalgebra::{Isometry3, Rotation3, UnitQuaternion, Vector3};
 use rapier3d_f64::parry::math::{Pose, Vector};
+use rapier3d_f64::parry::bounding_volume::BoundingVolume;
 use rapier3d_f64::parry::query::{Ray, RayCast, intersection_test};
 use rapier3d_f64::parry::shape::{Capsule, Cuboid, Shape};
 
@@ -100,6 +101,10 @@ fn body_name(i: usize) -> String {
     if i == JOINTS + 1 { "device".to_string() } else { format!("link {i}") }
 }
 
+/// Separation (mm) of two shapes' bounding boxes beyond which they are not tested further: far
+/// above GJK's tolerance, so only pairs that are certainly apart are skipped.
+const AABB_MARGIN_MM: f64 = 1.0;
+
 fn to_capsule(c: &CapsuleSpec) -> Capsule {
     Capsule::new(Vector::from_array(c.a), Vector::from_array(c.b), c.radius)
 }
@@ -160,7 +165,13 @@ impl CollisionWorld {
         None
     }
 
+    /// Whether two shapes intersect: parry's test, after its bounding boxes have ruled out the
+    /// pairs more than `AABB_MARGIN_MM` apart (which the exact test finds apart too, so the
+    /// answer is the same, without running GJK for them).
     fn hits(a: &Capsule, pa: &Pose, b: &dyn Shape, pb: &Pose) -> bool {
+        if !a.compute_aabb(pa).loosened(AABB_MARGIN_MM).intersects(&b.compute_aabb(pb)) {
+            return false;
+        }
         intersection_test(pa, a, pb, b).map(|r| r.intersecting).unwrap_or(true)
     }
 
