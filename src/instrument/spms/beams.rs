@@ -168,7 +168,7 @@ impl BeamData {
 
 /// The data of a beam identification laid out for the particle swarm's many cost evaluations:
 /// structure of arrays over the poses (frame quaternion and translation, each beam's readings),
-/// padded to a multiple of four poses with identity frames and zero readings.
+/// padded to a multiple of eight poses with identity frames and zero readings.
 struct Packed {
     poses: usize,
     beams: usize,
@@ -183,7 +183,7 @@ impl Packed {
     fn new(data: &BeamData) -> Self {
         let poses = data.frames.len();
         let beams = data.readings.first().map(|r| r.len()).unwrap_or(0);
-        let padded = poses.div_ceil(4) * 4;
+        let padded = poses.div_ceil(8) * 8;
         let mut frame: [Vec<f64>; 7] = std::array::from_fn(|i| vec![if i == 3 { 1.0 } else { 0.0 }; padded]);
         for (j, t) in data.frames.iter().enumerate() {
             let q = t.rotation.quaternion();
@@ -212,6 +212,16 @@ impl Packed {
         scratch.r.clear();
         scratch.r.resize(self.poses * self.beams, 0.0);
         #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU was just found to support AVX-512F, the only requirement of
+            // `residuals_avx512`.
+            #[allow(unsafe_code)]
+            unsafe {
+                residuals_avx512(self, &scratch.beams, &c, &mut scratch.r)
+            };
+            return nalgebra::DVectorView::from_slice(&scratch.r, scratch.r.len()).norm_squared();
+        }
+        #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU was just found to support AVX2, the only requirement of
             // `residuals_avx2`.
@@ -223,6 +233,54 @@ impl Packed {
         }
         residuals_by_lanes(self, &scratch.beams, &c, &mut scratch.r);
         nalgebra::DVectorView::from_slice(&scratch.r, scratch.r.len()).norm_squared()
+    }
+}
+
+/// `residuals_avx2` with AVX-512 vectors over eight poses: the same operations lane by lane.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn residuals_avx512(pk: &Packed, beams: &[(Vector3<f64>, Vector3<f64>)], c: &Vector3<f64>, r: &mut [f64]) {
+    use std::arch::x86_64::{
+        _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_sqrt_pd, _mm512_storeu_pd, _mm512_sub_pd,
+    };
+    let k = pk.beams;
+    let padded = pk.poses.div_ceil(8) * 8;
+    assert!(pk.frame.iter().chain(&pk.readings).all(|v| v.len() >= padded) && r.len() >= pk.poses * k);
+    let (two, radius) = (_mm512_set1_pd(2.0), _mm512_set1_pd(pk.radius_mm));
+    let (cx, cy, cz) = (_mm512_set1_pd(c.x), _mm512_set1_pd(c.y), _mm512_set1_pd(c.z));
+    for (b, ((p, g), ls)) in beams.iter().zip(&pk.readings).enumerate() {
+        let (px, py, pz) = (_mm512_set1_pd(p.x), _mm512_set1_pd(p.y), _mm512_set1_pd(p.z));
+        let (gx, gy, gz) = (_mm512_set1_pd(g.x), _mm512_set1_pd(g.y), _mm512_set1_pd(g.z));
+        for j0 in (0..pk.poses).step_by(8) {
+            // SAFETY: j0 + 8 <= padded, the length of every array (asserted above).
+            #[allow(unsafe_code)]
+            let (f, l) = unsafe {
+                let f = [0, 1, 2, 3, 4, 5, 6].map(|i| _mm512_loadu_pd(pk.frame[i].as_ptr().add(j0)));
+                (f, _mm512_loadu_pd(ls.as_ptr().add(j0)))
+            };
+            let [ax, ay, az, w, tx, ty, tz] = f;
+            let (add, mul, sub) = (_mm512_add_pd, _mm512_mul_pd, _mm512_sub_pd);
+            let (vx, vy, vz) = (add(px, mul(gx, l)), add(py, mul(gy, l)), add(pz, mul(gz, l)));
+            let t0 = mul(sub(mul(ay, vz), mul(az, vy)), two);
+            let t1 = mul(sub(mul(az, vx), mul(ax, vz)), two);
+            let t2 = mul(sub(mul(ax, vy), mul(ay, vx)), two);
+            let c0 = sub(mul(ay, t2), mul(az, t1));
+            let c1 = sub(mul(az, t0), mul(ax, t2));
+            let c2 = sub(mul(ax, t1), mul(ay, t0));
+            let dx = sub(add(add(add(mul(t0, w), c0), vx), tx), cx);
+            let dy = sub(add(add(add(mul(t1, w), c1), vy), ty), cy);
+            let dz = sub(add(add(add(mul(t2, w), c2), vz), tz), cz);
+            let norm = _mm512_sqrt_pd(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
+            let mut out = [0.0; 8];
+            // SAFETY: `out` holds eight values.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm512_storeu_pd(out.as_mut_ptr(), sub(norm, radius))
+            };
+            for (i, o) in out.into_iter().enumerate().take(pk.poses - j0) {
+                r[(j0 + i) * k + b] = o;
+            }
+        }
     }
 }
 
@@ -469,8 +527,9 @@ mod tests {
 
     use super::*;
 
-    /// The packed cost is `BeamData::cost` to the bit: 23 poses (not a multiple of four), 5 beams,
-    /// 50 random parameter vectors, both forms.
+    /// The packed cost is `BeamData::cost` to the bit, through every path this CPU has (AVX-512,
+    /// AVX2, portable): 23 poses (not a multiple of four or eight), 5 beams, 50 random parameter
+    /// vectors, both forms.
     #[test]
     fn packed_cost_is_the_cost_to_the_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -493,6 +552,16 @@ mod tests {
                 let mut r = vec![0.0; 23 * 5];
                 residuals_by_lanes(&packed, &beams, &c, &mut r);
                 assert_eq!(nalgebra::DVectorView::from_slice(&r, r.len()).norm_squared().to_bits(), want.to_bits());
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    let mut r2 = vec![0.0; 23 * 5];
+                    // SAFETY: the CPU supports AVX2 (checked).
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        residuals_avx2(&packed, &beams, &c, &mut r2)
+                    };
+                    assert_eq!(r2, r);
+                }
             }
         }
     }
