@@ -14,7 +14,7 @@
 
 use crate::identify::damping::Damping;
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
-use rand::{Rng, RngExt};
+use rand::RngExt;
 
 use super::Beam;
 
@@ -451,14 +451,15 @@ impl Default for PsoOptions {
 /// p - 1. Its particles are still moved and evaluated in parallel, speculatively: a chunk moves
 /// towards the current global best and is then taken in order up to the first particle that
 /// improves it, and the rest of the chunk is moved again from there. The random factors are drawn
-/// up front in the sequential order, so the result is the sequential swarm's for any thread count.
-pub fn pso<R: Rng + ?Sized>(
+/// up front, in parallel from their places in the stream (each factor takes two words of it), so
+/// the result is the sequential swarm's for any thread count.
+pub fn pso(
     data: &BeamData,
     form: Form,
     centre: &DVector<f64>,
     half_width: &DVector<f64>,
     opts: &PsoOptions,
-    rng: &mut R,
+    rng: &mut rand_chacha::ChaCha8Rng,
 ) -> Solution {
     use rayon::prelude::*;
     /// Particles moved together before the global best is looked at again.
@@ -475,10 +476,18 @@ pub fn pso<R: Rng + ?Sized>(
     let mut gbest = pbest[first].clone();
     let mut gcost = pcost[first];
     let g2 = (opts.iterations.max(1) as f64).powi(2);
+    let mut factors = vec![(0.0, 0.0); population * d];
     for n in 0..opts.iterations {
         let w = opts.w_max - (opts.w_max - opts.w_min) * (n as f64).powi(2) / g2;
-        // (r1, r2) of particle p, dimension i at p d + i.
-        let factors: Vec<(f64, f64)> = (0..population * d).map(|_| (rng.random(), rng.random())).collect();
+        // (r1, r2) of particle p, dimension i at p d + i: the pairs drawn in that order, each pair
+        // four words of the stream, so a block of them starts four words per pair further on.
+        let base = rng.get_word_pos();
+        factors.par_chunks_mut(CHUNK * d).enumerate().for_each(|(b, block)| {
+            let mut r = rng.clone();
+            r.set_word_pos(base + 4 * (b * CHUNK * d) as u128);
+            block.iter_mut().for_each(|f| *f = (r.random(), r.random()));
+        });
+        rng.set_word_pos(base + 4 * (population * d) as u128);
         let mut p0 = 0;
         while p0 < population {
             let end = (p0 + CHUNK).min(population);
@@ -526,6 +535,27 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
+
+    /// Factor pairs drawn from their word positions in the stream are the pairs drawn one after
+    /// another, and the stream continues where sequential draws leave it (1,000 pairs in blocks of
+    /// 96, from a stream one word in).
+    #[test]
+    fn factors_from_word_positions_are_the_sequential_draws() {
+        let mut seq = ChaCha8Rng::seed_from_u64(9);
+        let _ = seq.next_u32();
+        let mut par = seq.clone();
+        let want: Vec<(f64, f64)> = (0..1000).map(|_| (seq.random(), seq.random())).collect();
+        let base = par.get_word_pos();
+        let mut got = vec![(0.0, 0.0); 1000];
+        for (b, block) in got.chunks_mut(96).enumerate() {
+            let mut r = par.clone();
+            r.set_word_pos(base + 4 * (b * 96) as u128);
+            block.iter_mut().for_each(|f| *f = (r.random(), r.random()));
+        }
+        par.set_word_pos(base + 4 * 1000);
+        assert_eq!(got, want);
+        assert_eq!(par.next_u64(), seq.next_u64());
+    }
 
     /// The packed cost is `BeamData::cost` to the bit, through every path this CPU has (AVX-512,
     /// AVX2, portable): 23 poses (not a multiple of four or eight), 5 beams, 50 random parameter
