@@ -670,24 +670,11 @@ pub fn o1_of(pool: &PoolJacobian, set: &[usize]) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::DMatrix;
-    use rand::{RngExt, SeedableRng};
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-
-    /// A pool of `len` random 3 x m configurations (rows padded like `PoolJacobian::new`).
-    fn random_pool(len: usize, m: usize, rng: &mut ChaCha8Rng) -> PoolJacobian {
-        let j = DMatrix::from_fn(3 * len, m, |_, _| rng.random_range(-1.0..1.0));
-        let stride = m.div_ceil(4) * 4;
-        let mut rows = vec![0.0; 3 * len * stride];
-        for r in 0..3 * len {
-            for c in 0..m {
-                rows[r * stride + c] = j[(r, c)];
-            }
-        }
-        PoolJacobian { m, len, j, rows, stride, scale: vec![1.0; m] }
-    }
+    use crate::identify::observability::random_pool;
 
     /// The AVX-512 kernel (two configurations a time) and the AVX2 kernel give the same numbers to
     /// the bit, whatever the mix of pending counts: 41 configurations, 31 parameters, 5 updates

@@ -259,13 +259,28 @@ fn scaled_inverse(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate:
     Some((j.tr_mul(&j).try_inverse()?, scale))
 }
 
+/// A pool of `len` random 3 x m configurations, laid out like [`PoolJacobian::new`]'s, for tests.
+#[cfg(test)]
+pub(crate) fn random_pool(len: usize, m: usize, rng: &mut rand_chacha::ChaCha8Rng) -> PoolJacobian {
+    use rand::RngExt;
+    let j = DMatrix::from_fn(3 * len, m, |_, _| rng.random_range(-1.0..1.0));
+    let stride = m.div_ceil(4) * 4;
+    let mut rows = vec![0.0; 3 * len * stride];
+    for r in 0..3 * len {
+        for c in 0..m {
+            rows[r * stride + c] = j[(r, c)];
+        }
+    }
+    PoolJacobian { m, len, j, rows, stride, scale: vec![1.0; m] }
+}
+
 #[cfg(test)]
 mod tests {
     use nalgebra::DMatrix;
-    use rand::{RngExt, SeedableRng};
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
-    use super::PoolJacobian;
+    use super::random_pool;
 
     /// The information matrix equals the stacked Jacobian's `tr_mul` bit for bit, for sets whose
     /// row counts are and are not multiples of eight (1, 8, 25 and 120 configurations of a pool of
@@ -275,15 +290,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         for m in [31, 7] {
             let len = 150;
-            let j = DMatrix::from_fn(3 * len, m, |_, _| rng.random_range(-2.0..2.0));
-            let stride = m.div_ceil(4) * 4;
-            let mut rows = vec![0.0; 3 * len * stride];
-            for r in 0..3 * len {
-                for c in 0..m {
-                    rows[r * stride + c] = j[(r, c)];
-                }
-            }
-            let pool = PoolJacobian { m, len, j, rows, stride, scale: vec![1.0; m] };
+            let pool = random_pool(len, m, &mut rng);
             for n in [1, 8, 25, 120] {
                 let set: Vec<usize> = rand::seq::index::sample(&mut rng, len, n).into_vec();
                 let mut stacked = DMatrix::zeros(3 * n, m);

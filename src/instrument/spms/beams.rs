@@ -236,102 +236,70 @@ impl Packed {
     }
 }
 
-/// `residuals_avx2` with AVX-512 vectors over eight poses: the same operations lane by lane.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-fn residuals_avx512(pk: &Packed, beams: &[(Vector3<f64>, Vector3<f64>)], c: &Vector3<f64>, r: &mut [f64]) {
-    use std::arch::x86_64::{
-        _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_sqrt_pd, _mm512_storeu_pd, _mm512_sub_pd,
-    };
-    let k = pk.beams;
-    let padded = pk.poses.div_ceil(8) * 8;
-    assert!(pk.frame.iter().chain(&pk.readings).all(|v| v.len() >= padded) && r.len() >= pk.poses * k);
-    let (two, radius) = (_mm512_set1_pd(2.0), _mm512_set1_pd(pk.radius_mm));
-    let (cx, cy, cz) = (_mm512_set1_pd(c.x), _mm512_set1_pd(c.y), _mm512_set1_pd(c.z));
-    for (b, ((p, g), ls)) in beams.iter().zip(&pk.readings).enumerate() {
-        let (px, py, pz) = (_mm512_set1_pd(p.x), _mm512_set1_pd(p.y), _mm512_set1_pd(p.z));
-        let (gx, gy, gz) = (_mm512_set1_pd(g.x), _mm512_set1_pd(g.y), _mm512_set1_pd(g.z));
-        for j0 in (0..pk.poses).step_by(8) {
-            // SAFETY: j0 + 8 <= padded, the length of every array (asserted above).
-            #[allow(unsafe_code)]
-            let (f, l) = unsafe {
-                let f = [0, 1, 2, 3, 4, 5, 6].map(|i| _mm512_loadu_pd(pk.frame[i].as_ptr().add(j0)));
-                (f, _mm512_loadu_pd(ls.as_ptr().add(j0)))
-            };
-            let [ax, ay, az, w, tx, ty, tz] = f;
-            let (add, mul, sub) = (_mm512_add_pd, _mm512_mul_pd, _mm512_sub_pd);
-            let (vx, vy, vz) = (add(px, mul(gx, l)), add(py, mul(gy, l)), add(pz, mul(gz, l)));
-            let t0 = mul(sub(mul(ay, vz), mul(az, vy)), two);
-            let t1 = mul(sub(mul(az, vx), mul(ax, vz)), two);
-            let t2 = mul(sub(mul(ax, vy), mul(ay, vx)), two);
-            let c0 = sub(mul(ay, t2), mul(az, t1));
-            let c1 = sub(mul(az, t0), mul(ax, t2));
-            let c2 = sub(mul(ax, t1), mul(ay, t0));
-            let dx = sub(add(add(add(mul(t0, w), c0), vx), tx), cx);
-            let dy = sub(add(add(add(mul(t1, w), c1), vy), ty), cy);
-            let dz = sub(add(add(add(mul(t2, w), c2), vz), tz), cz);
-            let norm = _mm512_sqrt_pd(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
-            let mut out = [0.0; 8];
-            // SAFETY: `out` holds eight values.
-            #[allow(unsafe_code)]
-            unsafe {
-                _mm512_storeu_pd(out.as_mut_ptr(), sub(norm, radius))
-            };
-            for (i, o) in out.into_iter().enumerate().take(pk.poses - j0) {
-                r[(j0 + i) * k + b] = o;
+/// A residual kernel over `$lanes` poses per vector with the `$feature` intrinsics `$p*`: separate
+/// multiplies and adds (no fused multiply-add) and a correctly rounded square root, so each lane is
+/// the number of `residuals_by_lanes`.
+macro_rules! residuals_simd {
+    ($(#[$doc:meta])* $name:ident, $feature:literal, $lanes:literal, $vector:ident,
+     $load:ident, $store:ident, $set1:ident, $add:ident, $mul:ident, $sub:ident, $sqrt:ident) => {
+        $(#[$doc])*
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        fn $name(pk: &Packed, beams: &[(Vector3<f64>, Vector3<f64>)], c: &Vector3<f64>, r: &mut [f64]) {
+            use std::arch::x86_64::{$vector, $add, $load, $mul, $set1, $sqrt, $store, $sub};
+            let k = pk.beams;
+            let padded = pk.poses.div_ceil($lanes) * $lanes;
+            assert!(pk.frame.iter().chain(&pk.readings).all(|v| v.len() >= padded) && r.len() >= pk.poses * k);
+            let (two, radius) = ($set1(2.0), $set1(pk.radius_mm));
+            let (cx, cy, cz) = ($set1(c.x), $set1(c.y), $set1(c.z));
+            for (b, ((p, g), ls)) in beams.iter().zip(&pk.readings).enumerate() {
+                let (px, py, pz) = ($set1(p.x), $set1(p.y), $set1(p.z));
+                let (gx, gy, gz) = ($set1(g.x), $set1(g.y), $set1(g.z));
+                for j0 in (0..pk.poses).step_by($lanes) {
+                    // SAFETY: j0 + $lanes <= padded, the length of every array (asserted above).
+                    #[allow(unsafe_code)]
+                    let (f, l): ([$vector; 7], $vector) = unsafe {
+                        let f = [0, 1, 2, 3, 4, 5, 6].map(|i| $load(pk.frame[i].as_ptr().add(j0)));
+                        (f, $load(ls.as_ptr().add(j0)))
+                    };
+                    let [ax, ay, az, w, tx, ty, tz] = f;
+                    let (add, mul, sub) = ($add, $mul, $sub);
+                    let (vx, vy, vz) = (add(px, mul(gx, l)), add(py, mul(gy, l)), add(pz, mul(gz, l)));
+                    let t0 = mul(sub(mul(ay, vz), mul(az, vy)), two);
+                    let t1 = mul(sub(mul(az, vx), mul(ax, vz)), two);
+                    let t2 = mul(sub(mul(ax, vy), mul(ay, vx)), two);
+                    let c0 = sub(mul(ay, t2), mul(az, t1));
+                    let c1 = sub(mul(az, t0), mul(ax, t2));
+                    let c2 = sub(mul(ax, t1), mul(ay, t0));
+                    let dx = sub(add(add(add(mul(t0, w), c0), vx), tx), cx);
+                    let dy = sub(add(add(add(mul(t1, w), c1), vy), ty), cy);
+                    let dz = sub(add(add(add(mul(t2, w), c2), vz), tz), cz);
+                    let norm = $sqrt(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
+                    let mut out = [0.0; $lanes];
+                    // SAFETY: `out` holds $lanes values.
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        $store(out.as_mut_ptr(), sub(norm, radius))
+                    };
+                    for (i, o) in out.into_iter().enumerate().take(pk.poses - j0) {
+                        r[(j0 + i) * k + b] = o;
+                    }
+                }
             }
         }
-    }
+    };
 }
 
-/// `residuals_by_lanes` with AVX2 vectors over four poses: separate multiplies and adds (no fused
-/// multiply-add) and a correctly rounded square root, so each lane is the same number.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn residuals_avx2(pk: &Packed, beams: &[(Vector3<f64>, Vector3<f64>)], c: &Vector3<f64>, r: &mut [f64]) {
-    use std::arch::x86_64::{
-        _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_sqrt_pd, _mm256_storeu_pd, _mm256_sub_pd,
-    };
-    let k = pk.beams;
-    let padded = pk.poses.div_ceil(4) * 4;
-    assert!(pk.frame.iter().chain(&pk.readings).all(|v| v.len() >= padded) && r.len() >= pk.poses * k);
-    let (two, radius) = (_mm256_set1_pd(2.0), _mm256_set1_pd(pk.radius_mm));
-    let (cx, cy, cz) = (_mm256_set1_pd(c.x), _mm256_set1_pd(c.y), _mm256_set1_pd(c.z));
-    for (b, ((p, g), ls)) in beams.iter().zip(&pk.readings).enumerate() {
-        let (px, py, pz) = (_mm256_set1_pd(p.x), _mm256_set1_pd(p.y), _mm256_set1_pd(p.z));
-        let (gx, gy, gz) = (_mm256_set1_pd(g.x), _mm256_set1_pd(g.y), _mm256_set1_pd(g.z));
-        for j0 in (0..pk.poses).step_by(4) {
-            // SAFETY: j0 + 4 <= padded, the length of every array (asserted above).
-            #[allow(unsafe_code)]
-            let (f, l) = unsafe {
-                let f = [0, 1, 2, 3, 4, 5, 6].map(|i| _mm256_loadu_pd(pk.frame[i].as_ptr().add(j0)));
-                (f, _mm256_loadu_pd(ls.as_ptr().add(j0)))
-            };
-            let [ax, ay, az, w, tx, ty, tz] = f;
-            let (add, mul, sub) = (_mm256_add_pd, _mm256_mul_pd, _mm256_sub_pd);
-            let (vx, vy, vz) = (add(px, mul(gx, l)), add(py, mul(gy, l)), add(pz, mul(gz, l)));
-            let t0 = mul(sub(mul(ay, vz), mul(az, vy)), two);
-            let t1 = mul(sub(mul(az, vx), mul(ax, vz)), two);
-            let t2 = mul(sub(mul(ax, vy), mul(ay, vx)), two);
-            let c0 = sub(mul(ay, t2), mul(az, t1));
-            let c1 = sub(mul(az, t0), mul(ax, t2));
-            let c2 = sub(mul(ax, t1), mul(ay, t0));
-            let dx = sub(add(add(add(mul(t0, w), c0), vx), tx), cx);
-            let dy = sub(add(add(add(mul(t1, w), c1), vy), ty), cy);
-            let dz = sub(add(add(add(mul(t2, w), c2), vz), tz), cz);
-            let norm = _mm256_sqrt_pd(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
-            let mut out = [0.0; 4];
-            // SAFETY: `out` holds four values.
-            #[allow(unsafe_code)]
-            unsafe {
-                _mm256_storeu_pd(out.as_mut_ptr(), sub(norm, radius))
-            };
-            for (i, o) in out.into_iter().enumerate().take(pk.poses - j0) {
-                r[(j0 + i) * k + b] = o;
-            }
-        }
-    }
-}
+residuals_simd!(
+    /// `residuals_by_lanes` with AVX-512 vectors over eight poses.
+    residuals_avx512, "avx512f", 8, __m512d,
+    _mm512_loadu_pd, _mm512_storeu_pd, _mm512_set1_pd, _mm512_add_pd, _mm512_mul_pd, _mm512_sub_pd, _mm512_sqrt_pd
+);
+residuals_simd!(
+    /// `residuals_by_lanes` with AVX2 vectors over four poses.
+    residuals_avx2, "avx2", 4, __m256d,
+    _mm256_loadu_pd, _mm256_storeu_pd, _mm256_set1_pd, _mm256_add_pd, _mm256_mul_pd, _mm256_sub_pd, _mm256_sqrt_pd
+);
 
 /// The residuals of `BeamData::residuals`, each the same operations in the same order as
 /// nalgebra's `Isometry3 * Point3` (`t = 2 q_v x v`, `v' = (t w + q_v x t) + v`, plus the
@@ -531,7 +499,7 @@ pub fn pso(
 #[cfg(test)]
 mod tests {
     use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-    use rand::{RngExt, SeedableRng};
+    use rand::{Rng, RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
