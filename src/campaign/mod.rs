@@ -329,6 +329,9 @@ fn semi_automatic(setup: &Setup<'_>, tcp_cmm: &Vector3<f64>, seed: u64) -> Resul
 /// The identification pool: per sphere, targets in the approach cone, IK on the nominal model, no
 /// collision, then Algorithm 1 centring. Returns the pool, the candidates rejected (IK or
 /// collision) and the centring failures.
+/// One sphere's pool: its entries, the candidates rejected and the centring failures.
+type SpherePool = (Vec<PoolEntry>, u32, u32);
+
 fn measure_pool(
     setup: &Setup<'_>,
     world: &CollisionWorld,
@@ -340,7 +343,7 @@ fn measure_pool(
     let down = -Vector3::z();
     // The spheres' pools are independent (each its own streams), so they are measured in
     // parallel and joined in sphere order: the same pool for any thread count.
-    let per_sphere: Vec<Result<(Vec<PoolEntry>, u32, u32), CampaignError>> = located_q
+    let per_sphere: Vec<Result<SpherePool, CampaignError>> = located_q
         .par_iter()
         .enumerate()
         .map(|(k, seed_q)| {

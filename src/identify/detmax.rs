@@ -521,7 +521,7 @@ impl<'a> State<'a> {
                     for i in 0..3 {
                         let mut sum = jm[(3 * k + i, 0)] * jc[0];
                         for (j, &x) in jc.iter().enumerate().skip(1) {
-                            sum = jm[(3 * k + i, j)] * x + sum;
+                            sum += jm[(3 * k + i, j)] * x;
                         }
                         b[4 * c + i] = sum;
                     }
