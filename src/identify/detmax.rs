@@ -684,6 +684,7 @@ mod tests {
     #[test]
     fn avx512_kernel_equals_the_avx2_kernel_bit_for_bit() {
         if !(std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma")) {
+            eprintln!("avx512_kernel_equals_the_avx2_kernel_bit_for_bit: this CPU has no AVX-512F; its AVX2 kernel runs instead");
             return;
         }
         let mut rng = ChaCha8Rng::seed_from_u64(11);
