@@ -208,7 +208,7 @@ fn compensated_targets_round_trip_on_the_exact_model() {
     let quiet = s.experiment.noise_free(1e-4);
     let e = quiet.build(s.seed).unwrap();
     let before = quiet.before_model(&e.campaign);
-    let c = study::compensated_errors(&e.robot.truth, &before, &e, &mut common::rng(3));
+    let c = study::compensated_errors(&e.robot.truth, &study::compensation_targets(&before, &e), &e, &mut common::rng(3));
     assert!(c.failed <= 5, "{} targets unreachable", c.failed);
     assert!(c.stats.max < 1e-6, "worst target missed by {:e} mm", c.stats.max);
 

@@ -4,8 +4,8 @@
 //! and ray casts for line of sight.
 
 use nalgebra::{Isometry3, Rotation3, UnitQuaternion, Vector3};
-use rapier3d_f64::parry::math::{Pose, Vector};
 use rapier3d_f64::parry::bounding_volume::BoundingVolume;
+use rapier3d_f64::parry::math::{Pose, Vector};
 use rapier3d_f64::parry::query::{Ray, RayCast, intersection_test};
 use rapier3d_f64::parry::shape::{Capsule, Cuboid, Shape};
 

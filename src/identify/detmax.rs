@@ -377,7 +377,8 @@ mod avx512 {
             #[allow(unsafe_code)]
             let x = unsafe {
                 let (pa, pb) = (ra.as_ptr(), rb.as_ptr());
-                let pair = |o: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(pa.add(o))), _mm256_loadu_pd(pb.add(o)));
+                let pair =
+                    |o: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(_mm256_loadu_pd(pa.add(o))), _mm256_loadu_pd(pb.add(o)));
                 [pair(j), pair(stride + j), pair(2 * stride + j)]
             };
             for (acc, up) in acc.iter_mut().zip(ups) {

@@ -133,21 +133,30 @@ pub struct Compensated {
     pub failed: usize,
 }
 
-/// The validation with compensated targets of `model` (see [`Compensated`]), the robot's and the
-/// tracker's noise from `rng`.
+/// The compensated validation's Cartesian targets: the TCP of the model before calibration at
+/// every validation configuration, in {W}, mm (the same for every identified model: computed once
+/// per study).
+pub fn compensation_targets(before: &RobotModel, experiment: &Experiment) -> Vec<nalgebra::Vector3<f64>> {
+    let mut st = KinState::default();
+    experiment.campaign.validation.iter().map(|v| forward(before, &mut st, &v.q)).collect()
+}
+
+/// The validation with compensated targets of `model` (see [`Compensated`]) towards `targets`
+/// ([`compensation_targets`], one per validation pose), the robot's and the tracker's noise from
+/// `rng`.
 pub fn compensated_errors(
     model: &RobotModel,
-    before: &RobotModel,
+    targets: &[nalgebra::Vector3<f64>],
     experiment: &Experiment,
     rng: &mut rand_chacha::ChaCha8Rng,
 ) -> Compensated {
+    assert_eq!(targets.len(), experiment.campaign.validation.len(), "one target per validation pose");
     let mut st = KinState::default();
     let mut errors = Vec::with_capacity(experiment.campaign.validation.len());
     let mut failed = 0;
     let mut from = experiment.campaign.semi_automatic.located_q[0];
     let base_rot = model.base_rot;
-    for v in &experiment.campaign.validation {
-        let target_w = forward(before, &mut st, &v.q);
+    for (v, &target_w) in experiment.campaign.validation.iter().zip(targets) {
         // The identified model's flange orientation there (a product of rotations: converted
         // directly, not through `from_matrix`'s iterative orthonormalisation).
         forward(model, &mut st, &v.q);
@@ -258,7 +267,8 @@ struct TaskContext<'a> {
     opts: FitOptions,
     dopts: DetmaxOptions,
     seed: u64,
-    compensate: bool,
+    /// The compensated validation's targets, when the study runs it.
+    targets: Option<Vec<nalgebra::Vector3<f64>>>,
 }
 
 impl<'a> TaskContext<'a> {
@@ -272,7 +282,8 @@ impl<'a> TaskContext<'a> {
         seed: u64,
     ) -> Self {
         let (opts, dopts, table_n) = (spec.fit_options(), spec.detmax_options(), spec.table_set_size as usize);
-        Self { experiment, before, set, observations, pool, table_n, opts, dopts, seed, compensate: spec.compensated_validation }
+        let targets = spec.compensated_validation.then(|| compensation_targets(before, experiment));
+        Self { experiment, before, set, observations, pool, table_n, opts, dopts, seed, targets }
     }
 }
 
@@ -286,10 +297,10 @@ impl TaskContext<'_> {
         let errors = model.as_ref().map(|m| validation_errors(m, self.experiment, &mut KinState::default()));
         let validation = errors.as_deref().map(ErrorStats::of).unwrap_or_default();
         let keep = task.set_size == self.table_n;
-        let compensated = match (&model, keep && self.compensate) {
-            (Some(m), true) => {
+        let compensated = match (&model, &self.targets) {
+            (Some(m), Some(targets)) if keep => {
                 let rng = &mut crate::seeds::task_stream(self.seed, crate::seeds::study::COMPENSATED, task.index);
-                Some(compensated_errors(m, self.before, self.experiment, rng))
+                Some(compensated_errors(m, targets, self.experiment, rng))
             }
             _ => None,
         };
