@@ -45,6 +45,130 @@ pub fn symmetric_eigen(m: DMatrix<f64>) -> Option<SymmetricEigen<f64, nalgebra::
     SymmetricEigen::try_new(m, f64::EPSILON, MAX_ITERATIONS)
 }
 
+/// The second factor of [`gemm_product`]: `b[(l, j)] = data[l * row_stride + j * col_stride]`.
+#[derive(Clone, Copy)]
+pub struct Factor<'a> {
+    /// The entries.
+    pub data: &'a [f64],
+    /// Step between rows.
+    pub row_stride: usize,
+    /// Step between columns.
+    pub col_stride: usize,
+}
+
+/// `out = a * b` (a: column-major m x k, `out`: column-major m x n), the same to the bit as
+/// `out.gemm(1.0, a, b, 0.0)` with nalgebra, without its packing buffers (a fresh allocation per
+/// call, and page faults with it) or a transposed copy of `b`. `symmetric`: `a * b` is known to be
+/// symmetric (as `x x^T`), so each entry (i, j) with j >= i is summed once and mirrored.
+///
+/// nalgebra hands products with more than five rows and columns to matrixmultiply, whose kernels
+/// sum each entry's products in order from zero over blocks of 256 (its `kc`) and add the blocks in
+/// turn, with fused multiply-adds where its kernel uses them (AVX-512, AVX2 with FMA, aarch64) and
+/// separate products and sums otherwise; that order is followed here. Smaller products go through
+/// `gemm` itself (nalgebra's own loops).
+pub fn gemm_product(a: &DMatrix<f64>, b: Factor<'_>, n: usize, out: &mut DMatrix<f64>, symmetric: bool) {
+    let (m, k) = a.shape();
+    assert_eq!(out.shape(), (m, n), "output is m x n");
+    if m <= 5 || n <= 5 || k <= 5 {
+        let b = DMatrix::from_fn(k, n, |l, j| b.data[l * b.row_stride + j * b.col_stride]);
+        out.gemm(1.0, a, &b, 0.0);
+        return;
+    }
+    let (x, y) = (a.as_slice(), out.as_mut_slice());
+    #[cfg(target_arch = "x86_64")]
+    {
+        let avx512 = std::arch::is_x86_feature_detected!("avx512f");
+        if avx512 || (std::arch::is_x86_feature_detected!("fma") && std::arch::is_x86_feature_detected!("avx2")) {
+            // SAFETY: the CPU was just found to support AVX2 and FMA (matrixmultiply's AVX-512
+            // kernel runs only on CPUs that have both), or AVX-512F: the requirements of
+            // `product_fused_avx2` and `product_fused_avx512`.
+            #[allow(unsafe_code)]
+            unsafe {
+                if avx512 && m >= 8 && n >= 8 {
+                    product_fused_avx512(x, (m, k), b, n, y, symmetric);
+                } else {
+                    product_fused_avx2(x, (m, k), b, n, y, symmetric);
+                }
+            }
+        } else {
+            product_body::<false, 4, 4>(x, (m, k), b, n, y, symmetric);
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    product_body::<true, 4, 4>(x, (m, k), b, n, y, symmetric);
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    product_body::<false, 4, 4>(x, (m, k), b, n, y, symmetric);
+}
+
+/// [`product_body`] with fused multiply-adds, blocks of 8 x 8, compiled for AVX-512 (m, n >= 8).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn product_fused_avx512(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, out: &mut [f64], symmetric: bool) {
+    product_body::<true, 8, 8>(a, mk, b, n, out, symmetric);
+}
+
+/// [`product_body`] with fused multiply-adds, compiled for AVX2 and FMA: blocks of 8 x 4 (two
+/// vectors of rows, so eight independent sums), 4 x 4 for fewer than 8 rows.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn product_fused_avx2(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, out: &mut [f64], symmetric: bool) {
+    if mk.0 >= 8 {
+        product_body::<true, 8, 4>(a, mk, b, n, out, symmetric);
+    } else {
+        product_body::<true, 4, 4>(a, mk, b, n, out, symmetric);
+    }
+}
+
+/// The entries of `a * b` into `out` in matrixmultiply's summation order (see [`gemm_product`]):
+/// blocks of L rows (the lanes; `a` is column-major, so they are contiguous) by R columns, each entry
+/// its own running sum; a block that would pass the last row or column is shifted back to end at it
+/// (overlapping blocks recompute the same values). Needs m >= L and n >= R.
+#[inline(always)]
+fn product_body<const FUSED: bool, const L: usize, const R: usize>(
+    a: &[f64],
+    (m, k): (usize, usize),
+    b: Factor<'_>,
+    n: usize,
+    out: &mut [f64],
+    symmetric: bool,
+) {
+    /// matrixmultiply's `kc` for f64 (its default; it is a build-time setting of that crate).
+    const KC: usize = 256;
+    for c0 in (0..n).step_by(R) {
+        let c = c0.min(n - R);
+        let rows_end = if symmetric { (c + R).min(m) } else { m };
+        for r0 in (0..rows_end).step_by(L) {
+            let r = r0.min(m - L);
+            let mut total = [[0.0_f64; L]; R];
+            for kb in (0..k).step_by(KC) {
+                let mut acc = [[0.0_f64; L]; R];
+                for l in kb..(kb + KC).min(k) {
+                    let xa: &[f64; L] = a[l * m + r..][..L].try_into().expect("L values");
+                    for (t, acc_col) in acc.iter_mut().enumerate() {
+                        let xb = b.data[l * b.row_stride + (c + t) * b.col_stride];
+                        for (s, &xi) in acc_col.iter_mut().zip(xa) {
+                            *s = if FUSED { xi.mul_add(xb, *s) } else { *s + xi * xb };
+                        }
+                    }
+                }
+                for (t, a) in total.iter_mut().zip(&acc) {
+                    for (t, a) in t.iter_mut().zip(a) {
+                        *t = if kb == 0 { *a } else { *t + *a };
+                    }
+                }
+            }
+            for (t, col) in total.iter().enumerate() {
+                for (i, &v) in col.iter().enumerate() {
+                    out[(c + t) * m + r + i] = v;
+                    if symmetric {
+                        out[(r + i) * m + c + t] = v;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Eigenvalues of a symmetric matrix (see [`symmetric_eigen`]), the same to the bit as the
 /// eigenvalues of [`symmetric_eigen`] without forming the eigenvectors (their Householder product
 /// and rotations are most of the work).
@@ -188,5 +312,105 @@ mod tests {
         m[(2, 1)] = f64::INFINITY;
         assert!(symmetric_eigenvalues(m).is_none());
         assert!(symmetric_eigenvalues(DMatrix::zeros(0, 0)).is_none());
+    }
+
+    /// `gemm_product` equals nalgebra's `gemm` bit for bit: m, n from 3 to 40 (4- and 8-wide
+    /// blocks, exact and shifted), k from 3 to 600 (across matrixmultiply's blocks of 256), the
+    /// second factor column-major and as the transpose of a column-major matrix, the symmetric
+    /// form for `x x^T`; every build this CPU runs (AVX-512, AVX2 8 x 4 and 4 x 4), and the unfused
+    /// order against the sum written out. 2 draws per shape.
+    #[test]
+    fn gemm_product_equals_gemm_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let bits = |a: &DMatrix<f64>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let mut draw =
+            |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-6..=3)));
+        for m in [3, 6, 7, 8, 9, 31, 40] {
+            for n in [3, 6, 8, 13, 31] {
+                for k in [3, 6, 31, 256, 257, 600] {
+                    for _ in 0..2 {
+                        let a = draw(m, k);
+                        let b = draw(k, n);
+                        let bt = b.transpose();
+                        let mut expected = DMatrix::zeros(m, n);
+                        expected.gemm(1.0, &a, &b, 0.0);
+                        let factors = [
+                            Factor { data: b.as_slice(), row_stride: 1, col_stride: k },
+                            Factor { data: bt.as_slice(), row_stride: n, col_stride: 1 },
+                        ];
+                        for f in factors {
+                            let mut got = DMatrix::from_element(m, n, f64::NAN);
+                            gemm_product(&a, f, n, &mut got, false);
+                            assert_eq!(bits(&got), bits(&expected), "m = {m}, n = {n}, k = {k}");
+                            let builds = product_builds(&a, f, n, false);
+                            for (name, got) in builds {
+                                assert_eq!(bits(&got), bits(&expected), "{name}: m = {m}, n = {n}, k = {k}");
+                            }
+                            if m >= 4 && n >= 4 {
+                                let naive = DMatrix::from_fn(m, n, |i, j| {
+                                    let block = |k0: usize| (k0..(k0 + 256).min(k)).fold(0.0, |s, l| s + a[(i, l)] * b[(l, j)]);
+                                    (256..k).step_by(256).fold(block(0), |t, k0| t + block(k0))
+                                });
+                                product_body::<false, 4, 4>(a.as_slice(), (m, k), f, n, got.as_mut_slice(), false);
+                                assert_eq!(bits(&got), bits(&naive), "unfused: m = {m}, n = {n}, k = {k}");
+                            }
+                        }
+                        if m == n {
+                            // x x^T, symmetric.
+                            let mut expected = DMatrix::zeros(m, m);
+                            expected.gemm(1.0, &a, &a.transpose(), 0.0);
+                            let f = Factor { data: a.as_slice(), row_stride: m, col_stride: 1 };
+                            let mut got = DMatrix::from_element(m, m, f64::NAN);
+                            gemm_product(&a, f, m, &mut got, true);
+                            assert_eq!(bits(&got), bits(&expected), "symmetric: m = {m}, k = {k}");
+                            for (name, got) in product_builds(&a, f, m, true) {
+                                assert_eq!(bits(&got), bits(&expected), "symmetric {name}: m = {m}, k = {k}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The product by every compiled build this CPU can run and whose block fits (m >= 6 rows and
+    /// n >= 6 columns, as `gemm_product` requires).
+    fn product_builds(a: &DMatrix<f64>, b: Factor<'_>, n: usize, symmetric: bool) -> Vec<(&'static str, DMatrix<f64>)> {
+        let (m, k) = a.shape();
+        let mut out = Vec::new();
+        if m <= 5 || n <= 5 || k <= 5 {
+            return out;
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            let run = |f: &dyn Fn(&mut [f64])| {
+                let mut got = DMatrix::from_element(m, n, f64::NAN);
+                f(got.as_mut_slice());
+                got
+            };
+            let fma = std::arch::is_x86_feature_detected!("fma") && std::arch::is_x86_feature_detected!("avx2");
+            #[allow(unsafe_code)]
+            if fma {
+                // SAFETY: AVX2 and FMA were just detected.
+                out.push(("avx2", run(&|y| unsafe { product_fused_avx2(a.as_slice(), (m, k), b, n, y, symmetric) })));
+                if m >= 8 {
+                    // SAFETY: as above.
+                    out.push(("avx2 4 x 4", run(&|y| unsafe { product_body_avx2_4x4(a.as_slice(), (m, k), b, n, y, symmetric) })));
+                }
+            }
+            #[allow(unsafe_code)]
+            if std::arch::is_x86_feature_detected!("avx512f") && m >= 8 && n >= 8 {
+                // SAFETY: AVX-512F was just detected.
+                out.push(("avx512", run(&|y| unsafe { product_fused_avx512(a.as_slice(), (m, k), b, n, y, symmetric) })));
+            }
+        }
+        out
+    }
+
+    /// The 4 x 4 blocks of the AVX2 build, also for 8 rows or more.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn product_body_avx2_4x4(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, out: &mut [f64], symmetric: bool) {
+        product_body::<true, 4, 4>(a, mk, b, n, out, symmetric);
     }
 }

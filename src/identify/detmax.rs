@@ -513,7 +513,10 @@ impl<'a> State<'a> {
         // D_k for all k at once: the 3 x 3 diagonal blocks of J M^-1 J^T, each entry summed over
         // the parameters in order as nalgebra's small-matrix product sums it (the first product,
         // then each next one added), without a matrix allocated per block.
-        let jm = &pool.j * &minv;
+        // J M^-1 as `&pool.j * &minv` computes it, without matrixmultiply's packing buffers.
+        let mut jm = DMatrix::zeros(pool.j.nrows(), pool.m);
+        let minv_factor = crate::numeric::Factor { data: minv.as_slice(), row_stride: 1, col_stride: pool.m };
+        crate::numeric::gemm_product(&pool.j, minv_factor, pool.m, &mut jm, false);
         let d = (0..pool.len)
             .map(|k| {
                 let mut b = [0.0; 12];

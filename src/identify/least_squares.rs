@@ -241,108 +241,11 @@ fn accumulate(model: &RobotModel, set: &ParamSet, obs: &[Observation], ws: &mut 
 }
 
 /// `N = J^T J` from the transposed Jacobian `jt` (p x m): the same to the bit as
-/// `n.gemm(1.0, jt, &jt.transpose(), 0.0)`, without its transposed copy and matrixmultiply's packing
-/// buffers (a fresh allocation per call, so page faults on every iteration).
-///
-/// nalgebra hands products with more than five rows and columns to matrixmultiply, whose kernels
-/// sum each entry's products in order from zero over blocks of 256 (its `kc`) and add the blocks in
-/// turn; fused multiply-adds where its kernel uses them (AVX-512, AVX2 with FMA, aarch64), separate
-/// products and sums otherwise. That is done here for four entries of a row at a time, each entry
-/// (a, b) once for b >= a and mirrored (`fma(x, y, s) = fma(y, x, s)`). Smaller products go through
-/// `gemm` itself (nalgebra's own loops).
+/// `n.gemm(1.0, jt, &jt.transpose(), 0.0)` ([`crate::numeric::gemm_product`]).
 fn normal_matrix(jt: &DMatrix<f64>, n: &mut DMatrix<f64>) {
-    let (p, m) = jt.shape();
-    if p <= 5 || m <= 5 {
-        n.gemm(1.0, jt, &jt.transpose(), 0.0);
-        return;
-    }
-    let (x, out) = (jt.as_slice(), n.as_mut_slice());
-    #[cfg(target_arch = "x86_64")]
-    {
-        let avx512 = std::arch::is_x86_feature_detected!("avx512f");
-        if avx512 && p >= 8 {
-            // SAFETY: the CPU was just found to support AVX-512F, the only requirement of
-            // `normal_fused_avx512`.
-            #[allow(unsafe_code)]
-            unsafe {
-                normal_fused_avx512(p, m, x, out)
-            };
-        } else if avx512 || (std::arch::is_x86_feature_detected!("fma") && std::arch::is_x86_feature_detected!("avx2")) {
-            // SAFETY: the CPU was just found to support AVX2 and FMA (or AVX-512F, which
-            // implies both), the only requirements of `normal_fused_avx2`.
-            #[allow(unsafe_code)]
-            unsafe {
-                normal_fused_avx2(p, m, x, out)
-            };
-        } else {
-            normal_body::<false, 4, 4>(p, m, x, out);
-        }
-    }
-    #[cfg(target_arch = "aarch64")]
-    normal_body::<true, 4, 4>(p, m, x, out);
-    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
-    normal_body::<false, 4, 4>(p, m, x, out);
-}
-
-/// [`normal_body`] with fused multiply-adds, 8 x 8 blocks, compiled for AVX-512 (p >= 8).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn normal_fused_avx512(p: usize, m: usize, x: &[f64], out: &mut [f64]) {
-    normal_body::<true, 8, 8>(p, m, x, out);
-}
-
-/// [`normal_body`] with fused multiply-adds, 8 x 4 blocks, compiled for AVX2 and FMA (p >= 8 or
-/// the smaller blocks).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn normal_fused_avx2(p: usize, m: usize, x: &[f64], out: &mut [f64]) {
-    if p >= 8 {
-        normal_body::<true, 4, 8>(p, m, x, out);
-    } else {
-        normal_body::<true, 4, 4>(p, m, x, out);
-    }
-}
-
-/// The entries of `x x^T` (x: p x m column-major, p >= max(L, R)) into `out` (p x p
-/// column-major) in matrixmultiply's summation order (see [`normal_matrix`]). Blocks of R rows x L
-/// columns, each entry its own running sum (so R independent chains of L lanes): columns from
-/// multiples of L, rows from multiples of R up to the block's last column, a block that would pass
-/// `p` shifted back to end at it (overlapping blocks recompute the same values; entries below the
-/// diagonal are the mirrored ones).
-#[inline(always)]
-fn normal_body<const FUSED: bool, const L: usize, const R: usize>(p: usize, m: usize, x: &[f64], out: &mut [f64]) {
-    /// matrixmultiply's `kc` for f64 (its default; it is a build-time setting of that crate).
-    const KC: usize = 256;
-    for c0 in (0..p).step_by(L) {
-        let c = c0.min(p - L);
-        for r0 in (0..c + L).step_by(R) {
-            let r = r0.min(p - R);
-            let mut total = [[0.0_f64; L]; R];
-            for kb in (0..m).step_by(KC) {
-                let mut acc = [[0.0_f64; L]; R];
-                for col in x[kb * p..(kb + KC).min(m) * p].chunks_exact(p) {
-                    let xc: &[f64; L] = col[c..c + L].try_into().expect("L values");
-                    let xr: &[f64; R] = col[r..r + R].try_into().expect("R values");
-                    for (acc_row, &xi) in acc.iter_mut().zip(xr) {
-                        for (a, &xj) in acc_row.iter_mut().zip(xc) {
-                            *a = if FUSED { xi.mul_add(xj, *a) } else { *a + xi * xj };
-                        }
-                    }
-                }
-                for (t, a) in total.iter_mut().zip(&acc) {
-                    for (t, a) in t.iter_mut().zip(a) {
-                        *t = if kb == 0 { *a } else { *t + *a };
-                    }
-                }
-            }
-            for (i, t) in total.iter().enumerate() {
-                for (l, &v) in t.iter().enumerate() {
-                    out[(c + l) * p + r + i] = v;
-                    out[(r + i) * p + c + l] = v;
-                }
-            }
-        }
-    }
+    let p = jt.nrows();
+    let b = crate::numeric::Factor { data: jt.as_slice(), row_stride: p, col_stride: 1 };
+    crate::numeric::gemm_product(jt, b, p, n, true);
 }
 
 /// Eigen-decomposition of the scaled normal matrix: singular values (descending) and the rank test.
@@ -582,10 +485,8 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// The normal matrix equals nalgebra's `gemm` bit for bit: parameter counts below, at and
-    /// above the four-wide blocks (6, 7, 26, 31, 32, 33; 3 and 5 take `gemm` itself), stacked rows
-    /// below and above matrixmultiply's blocks of 256 (6 to 600), entries of mixed signs and
-    /// magnitudes (1e-6 to 1e3), 3 draws each.
+    /// The normal matrix equals nalgebra's `gemm` bit for bit (the kernels' own test is in
+    /// `numeric`): parameter counts 3 to 33, 6 to 600 stacked rows, 3 draws each.
     #[test]
     fn normal_matrix_equals_gemm_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
@@ -599,27 +500,6 @@ mod tests {
                     normal_matrix(&jt, &mut got);
                     let bits = |a: &DMatrix<f64>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                     assert_eq!(bits(&got), bits(&expected), "p = {p}, m = {m}");
-                    #[cfg(target_arch = "x86_64")]
-                    if p > 5 && std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                        // The AVX2 build is what a CPU without AVX-512 runs: same bits.
-                        got.fill(f64::NAN);
-                        // SAFETY: AVX2 and FMA were just detected.
-                        #[allow(unsafe_code)]
-                        unsafe {
-                            normal_fused_avx2(p, m, jt.as_slice(), got.as_mut_slice())
-                        };
-                        assert_eq!(bits(&got), bits(&expected), "AVX2, p = {p}, m = {m}");
-                    }
-                    if p >= 4 {
-                        // The unfused order (matrixmultiply's kernels without FMA; not the kernel of
-                        // a CPU with FMA, so checked against the sum written out instead).
-                        let naive = DMatrix::from_fn(p, p, |a, b| {
-                            let block = |k0: usize| (k0..(k0 + 256).min(m)).fold(0.0, |s, k| s + jt[(a, k)] * jt[(b, k)]);
-                            (256..m).step_by(256).fold(block(0), |t, k0| t + block(k0))
-                        });
-                        normal_body::<false, 4, 4>(p, m, jt.as_slice(), got.as_mut_slice());
-                        assert_eq!(bits(&got), bits(&naive), "unfused, p = {p}, m = {m}");
-                    }
                 }
             }
         }
