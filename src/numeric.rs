@@ -91,32 +91,65 @@ pub fn gemm_product(a: &DMatrix<f64>, b: Factor<'_>, n: usize, out: &mut DMatrix
                 }
             }
         } else {
-            product_body::<false, 4, 4>(x, (m, k), b, n, y, symmetric);
+            product_body(x, (m, k), b, n, y, symmetric, block_sums::<false, 4, 4>);
         }
     }
     #[cfg(target_arch = "aarch64")]
-    product_body::<true, 4, 4>(x, (m, k), b, n, y, symmetric);
+    product_body(x, (m, k), b, n, y, symmetric, block_sums::<true, 4, 4>);
     #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
-    product_body::<false, 4, 4>(x, (m, k), b, n, y, symmetric);
+    product_body(x, (m, k), b, n, y, symmetric, block_sums::<false, 4, 4>);
 }
 
 /// [`product_body`] with fused multiply-adds, blocks of 8 x 8, compiled for AVX-512 (m, n >= 8).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
 fn product_fused_avx512(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, out: &mut [f64], symmetric: bool) {
-    product_body::<true, 8, 8>(a, mk, b, n, out, symmetric);
+    product_body(a, mk, b, n, out, symmetric, block_sums::<true, 8, 8>);
 }
 
 /// [`product_body`] with fused multiply-adds, compiled for AVX2 and FMA: blocks of 8 x 4 (two
-/// vectors of rows, so eight independent sums), 4 x 4 for fewer than 8 rows.
+/// vectors of rows, so eight independent sums) with [`block_sums_avx2_8x4`], 4 x 4 for fewer than
+/// 8 rows.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn product_fused_avx2(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, out: &mut [f64], symmetric: bool) {
     if mk.0 >= 8 {
-        product_body::<true, 8, 4>(a, mk, b, n, out, symmetric);
+        product_body(a, mk, b, n, out, symmetric, |a, m, b, rc, ls| block_sums_avx2_8x4(a, m, b, rc, ls));
     } else {
-        product_body::<true, 4, 4>(a, mk, b, n, out, symmetric);
+        product_body(a, mk, b, n, out, symmetric, block_sums::<true, 4, 4>);
     }
+}
+
+/// [`block_sums`] of an 8 x 4 block with fused multiply-adds, written with AVX2 vectors: the
+/// compiler leaves the generic form's two vectors of rows as scalar products. Each lane is the
+/// same fused multiply-add in the same order, so the sums are the same to the bit.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn block_sums_avx2_8x4(a: &[f64], m: usize, b: Factor<'_>, (r, c): (usize, usize), ls: std::ops::Range<usize>) -> [[f64; 8]; 4] {
+    use std::arch::x86_64::{_mm256_fmadd_pd, _mm256_loadu_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd};
+    let mut lo = [_mm256_setzero_pd(); 4];
+    let mut hi = [_mm256_setzero_pd(); 4];
+    for l in ls {
+        let xa: &[f64; 8] = a[l * m + r..][..8].try_into().expect("8 values");
+        let xb: [f64; 4] = std::array::from_fn(|t| b.data[l * b.row_stride + (c + t) * b.col_stride]);
+        // SAFETY: `xa` holds 8 values, read as two vectors of 4 at offsets 0 and 4.
+        let (x0, x1) = unsafe { (_mm256_loadu_pd(xa.as_ptr()), _mm256_loadu_pd(xa.as_ptr().add(4))) };
+        for t in 0..4 {
+            let y = _mm256_set1_pd(xb[t]);
+            lo[t] = _mm256_fmadd_pd(x0, y, lo[t]);
+            hi[t] = _mm256_fmadd_pd(x1, y, hi[t]);
+        }
+    }
+    let mut sums = [[0.0; 8]; 4];
+    for ((col, lo), hi) in sums.iter_mut().zip(lo).zip(hi) {
+        // SAFETY: `col` holds 8 values, written as two vectors of 4 at offsets 0 and 4.
+        unsafe {
+            _mm256_storeu_pd(col.as_mut_ptr(), lo);
+            _mm256_storeu_pd(col.as_mut_ptr().add(4), hi);
+        }
+    }
+    sums
 }
 
 /// The entries of `a * b` into `out` in matrixmultiply's summation order (see [`gemm_product`]):
@@ -124,13 +157,14 @@ fn product_fused_avx2(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, ou
 /// its own running sum; a block that would pass the last row or column is shifted back to end at it
 /// (overlapping blocks recompute the same values). Needs m >= L and n >= R.
 #[inline(always)]
-fn product_body<const FUSED: bool, const L: usize, const R: usize>(
+fn product_body<const L: usize, const R: usize>(
     a: &[f64],
     (m, k): (usize, usize),
     b: Factor<'_>,
     n: usize,
     out: &mut [f64],
     symmetric: bool,
+    sums: impl Fn(&[f64], usize, Factor<'_>, (usize, usize), std::ops::Range<usize>) -> [[f64; L]; R],
 ) {
     /// matrixmultiply's `kc` for f64 (its default; it is a build-time setting of that crate).
     const KC: usize = 256;
@@ -141,16 +175,7 @@ fn product_body<const FUSED: bool, const L: usize, const R: usize>(
             let r = r0.min(m - L);
             let mut total = [[0.0_f64; L]; R];
             for kb in (0..k).step_by(KC) {
-                let mut acc = [[0.0_f64; L]; R];
-                for l in kb..(kb + KC).min(k) {
-                    let xa: &[f64; L] = a[l * m + r..][..L].try_into().expect("L values");
-                    for (t, acc_col) in acc.iter_mut().enumerate() {
-                        let xb = b.data[l * b.row_stride + (c + t) * b.col_stride];
-                        for (s, &xi) in acc_col.iter_mut().zip(xa) {
-                            *s = if FUSED { xi.mul_add(xb, *s) } else { *s + xi * xb };
-                        }
-                    }
-                }
+                let acc = sums(a, m, b, (r, c), kb..(kb + KC).min(k));
                 for (t, a) in total.iter_mut().zip(&acc) {
                     for (t, a) in t.iter_mut().zip(a) {
                         *t = if kb == 0 { *a } else { *t + *a };
@@ -167,6 +192,30 @@ fn product_body<const FUSED: bool, const L: usize, const R: usize>(
             }
         }
     }
+}
+
+/// The sums over `ls` (from zero) of the L x R block of `a * b` at row r and column c, each entry
+/// its own running sum in the order of l, fused (`FUSED`) or a product then a sum: the inner loop
+/// of [`product_body`].
+#[inline(always)]
+fn block_sums<const FUSED: bool, const L: usize, const R: usize>(
+    a: &[f64],
+    m: usize,
+    b: Factor<'_>,
+    (r, c): (usize, usize),
+    ls: std::ops::Range<usize>,
+) -> [[f64; L]; R] {
+    let mut acc = [[0.0_f64; L]; R];
+    for l in ls {
+        let xa: &[f64; L] = a[l * m + r..][..L].try_into().expect("L values");
+        for (t, acc_col) in acc.iter_mut().enumerate() {
+            let xb = b.data[l * b.row_stride + (c + t) * b.col_stride];
+            for (s, &xi) in acc_col.iter_mut().zip(xa) {
+                *s = if FUSED { xi.mul_add(xb, *s) } else { *s + xi * xb };
+            }
+        }
+    }
+    acc
 }
 
 /// Eigenvalues of a symmetric matrix (see [`symmetric_eigen`]), the same to the bit as the
@@ -351,7 +400,7 @@ mod tests {
                                     let block = |k0: usize| (k0..(k0 + 256).min(k)).fold(0.0, |s, l| s + a[(i, l)] * b[(l, j)]);
                                     (256..k).step_by(256).fold(block(0), |t, k0| t + block(k0))
                                 });
-                                product_body::<false, 4, 4>(a.as_slice(), (m, k), f, n, got.as_mut_slice(), false);
+                                product_body(a.as_slice(), (m, k), f, n, got.as_mut_slice(), false, block_sums::<false, 4, 4>);
                                 assert_eq!(bits(&got), bits(&naive), "unfused: m = {m}, n = {n}, k = {k}");
                             }
                         }
@@ -411,6 +460,6 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn product_body_avx2_4x4(a: &[f64], mk: (usize, usize), b: Factor<'_>, n: usize, out: &mut [f64], symmetric: bool) {
-        product_body::<true, 4, 4>(a, mk, b, n, out, symmetric);
+        product_body(a, mk, b, n, out, symmetric, block_sums::<true, 4, 4>);
     }
 }
