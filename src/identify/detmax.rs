@@ -517,17 +517,27 @@ impl<'a> State<'a> {
         let mut jm = DMatrix::zeros(pool.j.nrows(), pool.m);
         let minv_factor = crate::numeric::Factor { data: minv.as_slice(), row_stride: 1, col_stride: pool.m };
         crate::numeric::gemm_product(&pool.j, minv_factor, pool.m, &mut jm, false);
+        // The nine sums of a block advance together (each still in the order of j), so that they
+        // are independent chains rather than one after another.
+        let rows = jm.nrows();
         let d = (0..pool.len)
             .map(|k| {
+                let jc: [&[f64]; 3] = std::array::from_fn(|c| &pool.rows[(3 * k + c) * pool.stride..][..pool.m]);
+                let jm_j = |j: usize| -> &[f64; 3] { jm.as_slice()[j * rows + 3 * k..][..3].try_into().expect("3 rows") };
                 let mut b = [0.0; 12];
+                let first = jm_j(0);
                 for c in 0..3 {
-                    let jc = &pool.rows[(3 * k + c) * pool.stride..][..pool.m];
                     for i in 0..3 {
-                        let mut sum = jm[(3 * k + i, 0)] * jc[0];
-                        for (j, &x) in jc.iter().enumerate().skip(1) {
-                            sum += jm[(3 * k + i, j)] * x;
+                        b[4 * c + i] = first[i] * jc[c][0];
+                    }
+                }
+                for j in 1..pool.m {
+                    let m_j = jm_j(j);
+                    for c in 0..3 {
+                        let x = jc[c][j];
+                        for i in 0..3 {
+                            b[4 * c + i] += m_j[i] * x;
                         }
-                        b[4 * c + i] = sum;
                     }
                 }
                 Block(b)
