@@ -285,7 +285,7 @@ pub fn main() -> ExitCode {
                 .map(str::trim)
                 .filter(|l| !l.is_empty() && !l.starts_with("tip:"))
                 .collect();
-            eprintln!("{}", if said.is_empty() { "error: bad command line".to_string() } else { said.join(" ") });
+            eprintln!("{}", if said.is_empty() { "error: bad command line".to_string() } else { compact_numbers(&said.join(" ")) });
             return ExitCode::from(2);
         }
     };
@@ -304,10 +304,30 @@ pub fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(msg) => {
-            eprintln!("error: {msg}");
+            eprintln!("error: {}", compact_numbers(&msg));
             ExitCode::from(2)
         }
     }
+}
+
+/// The message with every number written out in more than 24 characters (Rust prints `1e300` as
+/// 301 digits and `1e-300` as 302 characters) in exponent form, so that an error about a huge or
+/// tiny value stays one readable line.
+fn compact_numbers(msg: &str) -> String {
+    let mut out = String::with_capacity(msg.len());
+    let mut rest = msg;
+    while let Some(start) = rest.find(|c: char| c.is_ascii_digit()) {
+        let len = rest[start..].find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(rest.len() - start);
+        let token = &rest[start..start + len];
+        out.push_str(&rest[..start]);
+        match token.parse::<f64>() {
+            Ok(x) if len > 24 => out.push_str(&format!("{x:e}")),
+            _ => out.push_str(token),
+        }
+        rest = &rest[start + len..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// The command-line overrides of the seed, the set sizes (the table size moves to the nearest
@@ -394,7 +414,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     debug_assert_eq!(text, scenario.text);
 
     println!("{}", report::terminal_table(&rows));
-    fit_health(results.tasks.iter().map(|t| &t.id))?;
+    fit_health(results.tasks.iter().map(|t| &t.id)).map_err(|e| format!("{}: [study] parameters: {e}", args.scenario.display()))?;
     println!(
         "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s){}, results \
              written in {:.3} s (recording {:.3} s) to {}",
@@ -570,7 +590,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         .map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     println!("{}", report::terminal_table(&rows));
-    fit_health(results.tasks.iter().map(|t| &t.id))?;
+    fit_health(results.tasks.iter().map(|t| &t.id)).map_err(|e| format!("{}: [study] parameters: {e}", args.scenario.display()))?;
     let t = &results.timings;
     println!(
         "timing: study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests \
@@ -666,6 +686,10 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
     let model = &converted.model;
     let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), args.urdf.display());
     let text = crate::robot::file::to_text(model, &source, &[], converted.capsules.as_ref(), converted.flange.as_ref());
+    // The robot file must be one calsim can load: a URDF value outside its ranges is the URDF's
+    // error, and nothing is written.
+    crate::robot::file::RobotFile::from_text(&args.out, &text)
+        .map_err(|e| format!("{}: the robot file it converts to cannot be used: {}: {}", args.urdf.display(), e.field, e.message))?;
     crate::io::out_dir::write_file_atomically(&args.out, &text).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let l = &model.data().links;
     println!(
@@ -935,4 +959,20 @@ fn demo(args: &DemoArgs) -> Result<(), String> {
     }
     println!("total {:.3} s", t0.elapsed().as_secs_f64());
     Ok(())
+}
+
+#[cfg(test)]
+mod compact_tests {
+    use super::compact_numbers;
+
+    #[test]
+    fn long_numbers_are_written_with_an_exponent() {
+        let huge = format!("[robot] payload_kg = {}: must be <= 1000", 1e300_f64);
+        assert_eq!(compact_numbers(&huge), "[robot] payload_kg = 1e300: must be <= 1000");
+        let tiny = format!("x = -{} mm", 1.5e-300_f64);
+        assert_eq!(compact_numbers(&tiny), "x = -1.5e-300 mm");
+        // Numbers of ordinary length, versions and whole numbers of u64 stay as written.
+        let plain = "m.toml: axis[0] (study.repetitions) = 18446744073709551615, 0.208 mm, calsim 0.1.0";
+        assert_eq!(compact_numbers(plain), plain);
+    }
 }

@@ -101,6 +101,31 @@ fn a_malformed_or_missing_urdf_is_one_line_and_exit_2() {
     }
 }
 
+/// A URDF that parses but gives a robot calsim cannot use (a link of 1e300 kg, a joint limit of
+/// 1e300 rad) is refused in one line naming the URDF and the field, and no robot file is written.
+#[test]
+fn a_urdf_with_absurd_values_is_refused_and_nothing_written() {
+    let urdf = std::fs::read_to_string(common::repo().join("robots/kr6r900sixx.urdf")).unwrap();
+    let first = |t: &str, from: &str, to: &str| {
+        let i = t.find(from).expect("the shipped URDF has it") + from.len();
+        let j = i + t[i..].find('"').unwrap();
+        format!("{}{to}{}", &t[..i], &t[j..])
+    };
+    for (name, text, field) in [
+        ("heavy.urdf", first(&urdf, "<mass value=\"", "1e300"), "mass_kg"),
+        ("limitless.urdf", first(&urdf, "upper=\"", "1e300"), "limits"),
+    ] {
+        let p = write(name, &text);
+        let out = p.with_extension("toml");
+        let o = common::calsim().args(["import-urdf", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(err.contains(name) && err.contains(field), "names the URDF and the field: {err}");
+        assert!(!out.exists(), "{name}: nothing written");
+    }
+}
+
 /// The shipped third arm: robots/kr6r900sixx.toml is the conversion of robots/kr6r900sixx.urdf
 /// (the ROS-Industrial KR 6 R900 sixx, first axis pointing down: {0} upside down, gravity along its
 /// +z), to 1e-9 mm at 1,000 configurations, and its gravity points down in the root frame.

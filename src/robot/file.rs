@@ -235,6 +235,11 @@ impl RobotFile {
         Self::parse(path, &text).map_err(|(field, message)| err(&field, message))
     }
 
+    /// Checks the text of a robot file as `load` checks a file (`path` is named in the error).
+    pub fn from_text(path: &Path, text: &str) -> Result<Self, RobotFileError> {
+        Self::parse(path, text).map_err(|(field, message)| RobotFileError { path: path.to_path_buf(), field, message })
+    }
+
     fn parse(path: &Path, text: &str) -> Result<Self, (String, String)> {
         let f: File = toml::from_str(text).map_err(|e| {
             let msg = e.message().to_string();
