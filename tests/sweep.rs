@@ -140,6 +140,49 @@ fn a_killed_shard_resumes_and_merges_to_the_same_bytes() {
     assert_eq!(tables(&part.join("r")), tables(&whole.join("r")));
 }
 
+/// A unit file cut short, edited to absurd numbers or holding another unit is refused by `merge` in
+/// one line naming the file and the field; the untouched shard merges (1 point x 2 realisations).
+#[test]
+fn an_edited_or_misplaced_unit_file_is_refused_by_merge() {
+    let dir = scratch("sweep-units");
+    let f = sweep_file(&dir, "u.toml", 2, "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010]\n");
+    let out = dir.join("out");
+    run(&["sweep", f.to_str().unwrap(), "--shard", "0/1"], &out);
+    let shard = out.join("u.shard-0-of-1");
+    let file = shard.join("units/u0000001.json");
+    let good = std::fs::read_to_string(&file).unwrap();
+    let unit: serde_json::Value = serde_json::from_str(&good).unwrap();
+    let edited = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut u = unit.clone();
+        edit(&mut u);
+        u.to_string()
+    };
+    let merged = dir.join("merged");
+    let m = |expect: &[&str]| bad(&["merge", shard.to_str().unwrap(), "--out", merged.to_str().unwrap()], expect);
+    for (text, expect) in [
+        (good[..good.len() / 2].to_string(), vec!["u0000001.json", "EOF"]),
+        (edited(&|u| u["rows"][0]["after_median_mm"] = (-0.1).into()), vec!["u0000001.json", "rows[0].after_median_mm = -0.1"]),
+        (edited(&|u| u["rows"][0]["after_p95_mm"] = 1e300.into()), vec!["rows[0].after_p95_mm = 1e300"]),
+        (edited(&|u| u["before_mm"][2] = (-3.0).into()), vec!["before_mm[2]"]),
+        (edited(&|u| u["rows"][1]["no_model"] = 9.into()), vec!["rows[1].no_model = 9 of 2"]),
+        (edited(&|u| u["rows"][0]["max_within"] = serde_json::json!([1])), vec!["rows[0].max_within", "2 thresholds"]),
+        (
+            edited(&|u| {
+                u["unit"] = 0.into();
+                u["realisation"] = 0.into();
+            }),
+            vec!["u0000001.json", "not the unit its name gives"],
+        ),
+        (edited(&|u| u["realisation"] = 5.into()), vec!["not a unit of this sweep"]),
+    ] {
+        std::fs::write(&file, text).unwrap();
+        m(&expect);
+        assert!(!merged.join("u").exists(), "nothing merged");
+    }
+    std::fs::write(&file, good).unwrap();
+    run(&["merge", shard.to_str().unwrap()], &merged);
+}
+
 /// `calsim` with `args` must exit 2 with one line containing every one of `expect`.
 fn bad(args: &[&str], expect: &[&str]) {
     let o = calsim().args(args).output().unwrap();

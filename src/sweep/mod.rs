@@ -123,6 +123,62 @@ pub struct Unit {
     pub prediction: Option<crate::study::prediction::Prediction>,
 }
 
+/// Largest error a unit may report, mm (1000 km: beyond any arm, however badly calibrated).
+const MOST_MM: f64 = 1e9;
+
+impl Unit {
+    /// Whether this unit, read from `file`, can be one of `sweep`'s: its indices within the sweep
+    /// and the file's name, its counts within its repetitions, one count per threshold, and every
+    /// error, time and O1 either absent (NaN) or a finite number >= 0 (errors up to `MOST_MM`, the
+    /// campaign's modelled time up to 1e15 s, above any the scenario limits allow). A unit
+    /// file is written by calsim; this refuses one that was cut short, edited or mixed up.
+    fn check(&self, sweep: &ShardInfo, file: &Path) -> Result<(), String> {
+        let (points, reals) = (sweep.points.len(), sweep.realisations as usize);
+        if self.point >= points || self.realisation as usize >= reals || self.unit != self.point * reals + self.realisation as usize {
+            return Err(format!(
+                "unit {} (point {}, realisation {}) is not a unit of this sweep ({points} points x {reals} realisations)",
+                self.unit, self.point, self.realisation
+            ));
+        }
+        if file.file_stem().and_then(|s| s.to_str()) != Some(unit_file_stem(self.unit).as_str()) {
+            return Err(format!("holds unit {}, not the unit its name gives", self.unit));
+        }
+        let size = |what: &str, x: f64, most: f64| {
+            if x.is_nan() || (0.0..=most).contains(&x) { Ok(()) } else { Err(format!("{what} = {x}: not within [0, {most:e}]")) }
+        };
+        for (i, x) in self.before_mm.iter().enumerate() {
+            size(&format!("before_mm[{i}]"), *x, MOST_MM)?;
+        }
+        size("campaign_s", self.campaign_s, 1e15)?;
+        for (i, r) in self.rows.iter().enumerate() {
+            let at = |k: &str| format!("rows[{i}].{k}");
+            for (k, x) in [
+                ("after_median_mm", r.after_median_mm),
+                ("after_p95_mm", r.after_p95_mm),
+                ("after_max_mm", r.after_max_mm),
+                ("after_mean_mm", r.after_mean_mm),
+            ] {
+                size(&at(k), x, MOST_MM)?;
+            }
+            size(&at("o1_median"), r.o1_median, f64::MAX)?;
+            if r.no_model > r.repetitions {
+                return Err(format!("{} = {} of {} repetitions", at("no_model"), r.no_model, r.repetitions));
+            }
+            for (k, counts) in [("max_within", &r.max_within), ("mean_within", &r.mean_within)] {
+                if counts.len() != sweep.thresholds_mm.len() || counts.iter().any(|&c| c > r.repetitions) {
+                    return Err(format!(
+                        "{} = {counts:?}: one count of at most {} repetitions per threshold ({} thresholds)",
+                        at(k),
+                        r.repetitions,
+                        sweep.thresholds_mm.len()
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Statistics over repetitions of one selection and set size.
 fn row(selection: &str, n: usize, table: bool, per_rep: &[Option<ErrorStats>], o1: &[f64], thresholds: &[f64]) -> UnitRow {
     let ok: Vec<&ErrorStats> = per_rep.iter().flatten().collect();
@@ -270,7 +326,11 @@ pub fn shard_dir(out: &Path, name: &str, k: usize, count: usize) -> PathBuf {
 }
 
 fn unit_file(dir: &Path, unit: usize) -> PathBuf {
-    dir.join("units").join(format!("u{unit:07}.json"))
+    dir.join("units").join(format!("{}.json", unit_file_stem(unit)))
+}
+
+fn unit_file_stem(unit: usize) -> String {
+    format!("u{unit:07}")
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename: a reader sees all or nothing.
@@ -382,6 +442,8 @@ pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeErro
             }
             let u: Unit = serde_json::from_slice(&fs::read(&p).map_err(|e| shard_err(&p, e.to_string()))?)
                 .map_err(|e| shard_err(&p, e.to_string()))?;
+            let sweep = &info.as_ref().expect("set above").0;
+            u.check(sweep, &p).map_err(|why| shard_err(&p, why))?;
             units.insert(u.unit, u);
         }
     }
