@@ -75,6 +75,19 @@ fn an_out_of_range_value_is_named_with_its_key() {
     assert!(err.contains("negative.toml") && err.contains("trical") && err.contains("epsilon_mm"), "{err}");
 }
 
+/// A published figure of `[expect]` is an error in mm of a robot's size: 1e300 or 1e-300 mm is
+/// refused before anything runs, naming the band.
+#[test]
+fn an_absurd_expected_figure_is_named_with_its_band() {
+    let dir = scratch("expect-range");
+    for (name, value) in [("huge.toml", "1e300"), ("tiny.toml", "1e-300")] {
+        let text = base_text().replace("after_median_mm = { value = 0.208", &format!("after_median_mm = {{ value = {value}"));
+        assert_ne!(text, base_text(), "the band is in the reduced scenario");
+        let err = bad_input(&scenario_file(&dir, name, &text));
+        assert!(err.contains(name) && err.contains("after_median_mm.value") && err.contains(value), "{err}");
+    }
+}
+
 #[test]
 fn a_wrong_type_and_a_missing_file_are_clear_errors() {
     let dir = scratch("type");

@@ -337,11 +337,12 @@ impl Checker<'_> {
         if (lo..=hi).contains(&v) { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})"))) }
     }
 
-    /// A band of `[expect]`: a finite published value and a tolerance in [0, 10].
+    /// A band of `[expect]` (every one is an error in mm): a published value of a robot's size,
+    /// 1 nm to 10 m, and a tolerance in [0, 10].
     fn band(&self, key: &str, b: &Option<Band>) -> Result<(), ScenarioError> {
         if let Some(b) = b {
-            if !(b.value.is_finite() && b.value > 0.0) {
-                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be the published value, finite and > 0"));
+            if !(b.value.is_finite() && (1e-6..=1e4).contains(&b.value)) {
+                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be the published value in mm, within [1e-6, 1e4]"));
             }
             if !(b.tolerance.is_finite() && (0.0..=10.0).contains(&b.tolerance)) {
                 return Err(self.fail(
