@@ -312,16 +312,18 @@ pub fn main() -> ExitCode {
 
 /// The message with every number written out in more than 24 characters (Rust prints `1e300` as
 /// 301 digits and `1e-300` as 302 characters) in exponent form, so that an error about a huge or
-/// tiny value stays one readable line.
+/// tiny value stays one readable line. Digits that are part of a word or a path stay as written.
 fn compact_numbers(msg: &str) -> String {
+    let word = |c: Option<char>| c.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/');
     let mut out = String::with_capacity(msg.len());
     let mut rest = msg;
     while let Some(start) = rest.find(|c: char| c.is_ascii_digit()) {
         let len = rest[start..].find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(rest.len() - start);
         let token = &rest[start..start + len];
+        let alone = !word(rest[..start].chars().last().or_else(|| out.chars().last())) && !word(rest[start + len..].chars().next());
         out.push_str(&rest[..start]);
         match token.parse::<f64>() {
-            Ok(x) if len > 24 => out.push_str(&format!("{x:e}")),
+            Ok(x) if len > 24 && alone => out.push_str(&format!("{x:e}")),
             _ => out.push_str(token),
         }
         rest = &rest[start + len..];
@@ -414,7 +416,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     debug_assert_eq!(text, scenario.text);
 
     println!("{}", report::terminal_table(&rows));
-    fit_health(results.tasks.iter().map(|t| &t.id)).map_err(|e| format!("{}: [study] parameters: {e}", args.scenario.display()))?;
+    fit_health(&args.scenario, results.tasks.iter().map(|t| &t.id))?;
     println!(
         "timing: study {:.3} s (campaign {:.3} s, of which pool {:.3} s; {} identifications {:.3} s){}, results \
              written in {:.3} s (recording {:.3} s) to {}",
@@ -473,8 +475,8 @@ fn trical_checks(
 
 /// One line at the terminal when identifications failed: how many gave no model (and which
 /// parameters they could not separate), how many stopped at the iteration cap. A study in which
-/// no identification gave a model is an error.
-fn fit_health<'a>(ids: impl Iterator<Item = &'a Identified>) -> Result<(), String> {
+/// no identification gave a model is an error of its scenario's parameter set.
+fn fit_health<'a>(scenario: &Path, ids: impl Iterator<Item = &'a Identified>) -> Result<(), String> {
     let (mut total, mut no_model, mut capped) = (0, 0, 0);
     let mut names: Vec<&str> = Vec::new();
     for id in ids {
@@ -492,7 +494,10 @@ fn fit_health<'a>(ids: impl Iterator<Item = &'a Identified>) -> Result<(), Strin
     }
     let hidden = if names.is_empty() { String::new() } else { format!(" (could not separate: {})", names.join(" ")) };
     if no_model == total && total > 0 {
-        return Err(format!("every one of the {total} identifications failed{hidden}: no set of the pool identifies this parameter set"));
+        return Err(format!(
+            "{}: [study] parameters: every one of the {total} identifications failed{hidden}: no set of the pool identifies this parameter set",
+            scenario.display()
+        ));
     }
     if no_model > 0 || capped > 0 {
         eprintln!("warning: {no_model} of {total} identifications gave no model{hidden}; {capped} stopped at the iteration cap");
@@ -590,7 +595,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
         .map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     println!("{}", report::terminal_table(&rows));
-    fit_health(results.tasks.iter().map(|t| &t.id)).map_err(|e| format!("{}: [study] parameters: {e}", args.scenario.display()))?;
+    fit_health(&args.scenario, results.tasks.iter().map(|t| &t.id))?;
     let t = &results.timings;
     println!(
         "timing: study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests \
@@ -974,5 +979,8 @@ mod compact_tests {
         // Numbers of ordinary length, versions and whole numbers of u64 stay as written.
         let plain = "m.toml: axis[0] (study.repetitions) = 18446744073709551615, 0.208 mm, calsim 0.1.0";
         assert_eq!(compact_numbers(plain), plain);
+        // Long digit runs inside a path or a word are not numbers.
+        let path = "/tmp/run12345678901234567890123456789/a.toml: x = 2";
+        assert_eq!(compact_numbers(path), path);
     }
 }

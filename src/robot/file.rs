@@ -230,9 +230,12 @@ pub fn to_text(
 impl RobotFile {
     /// Reads and checks `path`.
     pub fn load(path: &Path) -> Result<Self, RobotFileError> {
-        let err = |field: &str, message: String| RobotFileError { path: path.to_path_buf(), field: field.into(), message };
-        let text = std::fs::read_to_string(path).map_err(|e| err("(file)", e.to_string()))?;
-        Self::parse(path, &text).map_err(|(field, message)| err(&field, message))
+        let text = std::fs::read_to_string(path).map_err(|e| RobotFileError {
+            path: path.to_path_buf(),
+            field: "(file)".into(),
+            message: e.to_string(),
+        })?;
+        Self::from_text(path, &text)
     }
 
     /// Checks the text of a robot file as `load` checks a file (`path` is named in the error).

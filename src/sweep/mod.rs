@@ -442,8 +442,7 @@ pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeErro
             }
             let u: Unit = serde_json::from_slice(&fs::read(&p).map_err(|e| shard_err(&p, e.to_string()))?)
                 .map_err(|e| shard_err(&p, e.to_string()))?;
-            let sweep = &info.as_ref().expect("set above").0;
-            u.check(sweep, &p).map_err(|why| shard_err(&p, why))?;
+            u.check(&this, &p).map_err(|why| shard_err(&p, why))?;
             units.insert(u.unit, u);
         }
     }
