@@ -44,27 +44,52 @@ fn sincos_shifted((s0, c0): (f64, f64), delta: f64) -> (f64, f64) {
 }
 
 /// Forward kinematics with compliance: fills `st` and returns the TCP position in {W}, mm.
+///
+/// With AVX (detected at run time) the frames are computed lane-wise in 256-bit vectors
+/// (`kinematics_avx`), with the same operations in the same order: the same numbers to the bit.
 pub fn forward(model: &RobotModel, st: &mut KinState, q: &Joints) -> Vector3<f64> {
-    let links = &model.data().links;
-    for i in 0..JOINTS {
-        st.sincos0[i] = (q[i] + links[i].theta_offset).sin_cos();
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU was just found to support AVX, the only requirement of `kinematics_avx::forward`.
+        #[allow(unsafe_code)]
+        return unsafe { super::kinematics_avx::forward(model, st, q) };
     }
+    forward_portable(model, st, q)
+}
+
+/// `theta0 = q + theta_offs`, rad.
+#[inline(always)]
+pub(super) fn angles(model: &RobotModel, q: &Joints) -> Joints {
+    let links = &model.data().links;
+    std::array::from_fn(|i| q[i] + links[i].theta_offset)
+}
+
+/// Sines and cosines of the deflected angles `theta0 + c tau` (from those of `theta0` in
+/// `st.sincos0` and the torques in `st.tau`); stores the angles in `st.theta`.
+#[inline(always)]
+pub(super) fn deflected_sincos(model: &RobotModel, st: &mut KinState, q: &Joints) -> [(f64, f64); JOINTS] {
+    let links = &model.data().links;
+    let mut sc = [(0.0, 1.0); JOINTS];
+    for i in 0..JOINTS {
+        let delta = links[i].compliance * st.tau[i];
+        st.theta[i] = q[i] + links[i].theta_offset + delta;
+        sc[i] = sincos_shifted(st.sincos0[i], delta);
+    }
+    sc
+}
+
+/// [`forward`] without vector extensions.
+pub(crate) fn forward_portable(model: &RobotModel, st: &mut KinState, q: &Joints) -> Vector3<f64> {
+    st.sincos0 = angles(model, q).map(f64::sin_cos);
     let sc0 = st.sincos0;
     chain(model, &sc0, &mut st.rot0, &mut st.org0);
     gravity_pass(model, st);
     if model.rigid {
         st.rot = st.rot0;
         st.org = st.org0;
-        for i in 0..JOINTS {
-            st.theta[i] = q[i] + links[i].theta_offset;
-        }
+        st.theta = angles(model, q);
     } else {
-        let mut sc = [(0.0, 1.0); JOINTS];
-        for i in 0..JOINTS {
-            let delta = links[i].compliance * st.tau[i];
-            st.theta[i] = q[i] + links[i].theta_offset + delta;
-            sc[i] = sincos_shifted(sc0[i], delta);
-        }
+        let sc = deflected_sincos(model, st, q);
         chain(model, &sc, &mut st.rot, &mut st.org);
     }
     st.tcp_base = st.org[JOINTS] + st.rot[JOINTS] * model.data().flange_tcp_mm;
@@ -134,9 +159,30 @@ fn link_motion(
 ///
 /// Every column is analytic, including the change of the gravity torques with the kinematic
 /// parameters (the compliance term `c_k d tau_k / d rho`).
+///
+/// With AVX2 (detected at run time) the columns are computed lane-wise (`kinematics_avx`), with
+/// the same operations in the same order: the same numbers to the bit.
 pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &ParamSet, jac: &mut [Vector3<f64>]) -> Vector3<f64> {
     assert_eq!(jac.len(), set.len(), "one Jacobian column per parameter");
-    let pw = forward(model, st, q);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU was just found to support AVX2 (and so AVX), the only requirement of
+        // `kinematics_avx::tcp_jacobian`.
+        #[allow(unsafe_code)]
+        return unsafe { super::kinematics_avx::tcp_jacobian(model, st, q, set, jac) };
+    }
+    tcp_jacobian_portable(model, st, q, set, jac)
+}
+
+/// [`tcp_jacobian`] without vector extensions (its frames from [`forward_portable`]).
+pub(crate) fn tcp_jacobian_portable(
+    model: &RobotModel,
+    st: &mut KinState,
+    q: &Joints,
+    set: &ParamSet,
+    jac: &mut [Vector3<f64>],
+) -> Vector3<f64> {
+    let pw = forward_portable(model, st, q);
     let p = st.tcp_base;
     let links = &model.data().links;
     // Position sensitivity of each joint angle (deflected frames).
@@ -177,25 +223,25 @@ pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &Par
                 }
                 model.base_rot * dp
             }
-            ParamId::Base(b) => {
-                let rel = pw - model.base_pos;
-                let f = &model.data().world_from_base;
-                match b {
-                    BaseParam::X => Vector3::x(),
-                    BaseParam::Y => Vector3::y(),
-                    BaseParam::Z => Vector3::z(),
-                    BaseParam::Alpha => Vector3::z().cross(&rel),
-                    BaseParam::Beta => {
-                        let (s, c) = f.alpha.sin_cos();
-                        Vector3::new(-s, c, 0.0).cross(&rel)
-                    }
-                    BaseParam::Gamma => model.base_rot.column(0).cross(&rel),
-                }
-            }
+            ParamId::Base(b) => base_column(model, b, &pw),
             ParamId::Tool(k) => model.base_rot * st.rot[JOINTS].column(k),
         };
     }
     pw
+}
+
+/// The Jacobian column of base parameter `b` at the TCP `pw` (in {W}, mm).
+#[inline(always)]
+pub(super) fn base_column(model: &RobotModel, b: BaseParam, pw: &Vector3<f64>) -> Vector3<f64> {
+    let rel = pw - model.base_pos;
+    match b {
+        BaseParam::X => Vector3::x(),
+        BaseParam::Y => Vector3::y(),
+        BaseParam::Z => Vector3::z(),
+        BaseParam::Alpha => Vector3::z().cross(&rel),
+        BaseParam::Beta => model.base_beta_axis.cross(&rel),
+        BaseParam::Gamma => model.base_rot.column(0).cross(&rel),
+    }
 }
 
 /// Convenience form of [`tcp_jacobian`] returning a fresh 3 x p matrix.

@@ -4,6 +4,8 @@ pub mod builtin;
 pub mod file;
 pub mod ik;
 pub mod kinematics;
+#[cfg(target_arch = "x86_64")]
+mod kinematics_avx;
 pub mod model;
 pub mod params;
 pub mod state;

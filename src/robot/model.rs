@@ -170,6 +170,8 @@ pub struct RobotModel {
     pub(crate) joint: [JointConst; JOINTS],
     pub(crate) base_rot: Matrix3<f64>,
     pub(crate) base_pos: Vector3<f64>,
+    /// `(-sin alpha, cos alpha, 0)` of `world_from_base`: the axis of its beta rotation in {W}.
+    pub(crate) base_beta_axis: Vector3<f64>,
     /// Compliance is exactly zero on every joint: the gravity pass can be skipped.
     pub(crate) rigid: bool,
 }
@@ -185,7 +187,15 @@ impl RobotModel {
             JointConst { fixed: rx * ry, beta_axis: rx.column(1).into_owned() }
         });
         let rigid = data.links.iter().all(|l| l.compliance == 0.0);
-        Ok(Self { base_rot: data.world_from_base.rotation(), base_pos: data.world_from_base.translation(), joint, rigid, data })
+        let (s, c) = data.world_from_base.alpha.sin_cos();
+        Ok(Self {
+            base_rot: data.world_from_base.rotation(),
+            base_pos: data.world_from_base.translation(),
+            base_beta_axis: Vector3::new(-s, c, 0.0),
+            joint,
+            rigid,
+            data,
+        })
     }
 
     /// The data this model was built from.

@@ -23,6 +23,35 @@ pub struct KinState {
     pub(crate) mass: [f64; JOINTS + 1],
     pub(crate) tcp_base: Vector3<f64>,
     pub(crate) tcp_world: Vector3<f64>,
+    /// The same frames with every 3-vector in four lanes, for the vector kernels.
+    pub(crate) lanes: Lanes,
+}
+
+/// The frames of the last evaluation with every 3-vector (and matrix column) in the low three of
+/// four lanes, the fourth zero: written and read by the AVX kernels (`kinematics_avx`) only.
+#[derive(Clone, Debug)]
+#[repr(C, align(32))]
+pub(crate) struct Lanes {
+    pub(crate) rot0: [[[f64; 4]; 3]; JOINTS + 1],
+    pub(crate) org0: [[f64; 4]; JOINTS + 1],
+    pub(crate) rot: [[[f64; 4]; 3]; JOINTS + 1],
+    pub(crate) org: [[f64; 4]; JOINTS + 1],
+    pub(crate) moment: [[f64; 4]; JOINTS + 1],
+    pub(crate) tcp_base: [f64; 4],
+}
+
+impl Default for Lanes {
+    fn default() -> Self {
+        const IDENTITY: [[f64; 4]; 3] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+        Self {
+            rot0: [IDENTITY; JOINTS + 1],
+            org0: [[0.0; 4]; JOINTS + 1],
+            rot: [IDENTITY; JOINTS + 1],
+            org: [[0.0; 4]; JOINTS + 1],
+            moment: [[0.0; 4]; JOINTS + 1],
+            tcp_base: [0.0; 4],
+        }
+    }
 }
 
 impl Default for KinState {
@@ -39,6 +68,7 @@ impl Default for KinState {
             mass: [0.0; JOINTS + 1],
             tcp_base: Vector3::zeros(),
             tcp_world: Vector3::zeros(),
+            lanes: Lanes::default(),
         }
     }
 }

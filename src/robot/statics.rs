@@ -11,7 +11,7 @@
 //! The torques are evaluated at the commanded configuration `theta0 = q + theta_offs` (without the
 //! deflection itself), with the gravity vector fixed in the robot base frame {0}.
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use super::model::{JOINTS, Joints, RobotModel};
 use super::state::KinState;
@@ -30,10 +30,16 @@ pub(crate) fn gravity_pass(model: &RobotModel, st: &mut KinState) {
         st.moment[k] = s;
         st.mass[k] = m;
         let r = s - st.org0[k] * m;
-        let z = st.rot0[k].column(2);
-        // kg mm m/s^2 = N mm; holding torque is minus the gravity moment about z_k.
-        st.tau[k - 1] = -z.dot(&r.cross(&g)) * 1e-3;
+        st.tau[k - 1] = holding_torque(&st.rot0[k], &r, &g);
     }
+}
+
+/// The holding torque about `z_k` (column 2 of `rot_k`) of the weight of bodies whose mass moment
+/// about the origin of frame k is `r` (kg mm), N m.
+#[inline(always)]
+pub(crate) fn holding_torque(rot_k: &Matrix3<f64>, r: &Vector3<f64>, g: &Vector3<f64>) -> f64 {
+    // kg mm m/s^2 = N mm; holding torque is minus the gravity moment about z_k.
+    -rot_k.column(2).dot(&r.cross(g)) * 1e-3
 }
 
 /// Holding torques of the gravity load at `q`, N m (see the module docs for the sign).
