@@ -95,7 +95,8 @@ fn setup2_without_indicators_rejects_no_more_validation_poses() {
 
 #[test]
 fn bad_candidate_values_are_one_line_naming_the_key() {
-    let dir = scratch("candidate-keys");
+    let tmp = scratch("candidate-keys");
+    let dir = tmp.path();
     let base = common::scenario_text_anywhere("ci_quick.toml");
     for (name, from, to, key) in [
         ("count0.toml", "[robot.unmodelled]", "[robot.unmodelled]\ntransmission_high_count = 0", "transmission_high_count"),
@@ -109,7 +110,7 @@ fn bad_candidate_values_are_one_line_naming_the_key() {
         assert!(base.contains(from), "{from}");
         let f = dir.join(name);
         std::fs::write(&f, base.replacen(from, to, 1)).unwrap();
-        let out = calsim().arg("run").arg(&f).arg("--out").arg(&dir).output().unwrap();
+        let out = calsim().arg("run").arg(&f).arg("--out").arg(dir).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{name}: {err}");
         assert_eq!(err.trim_end().lines().count(), 1, "{name}: one line: {err}");

@@ -11,7 +11,8 @@ use common::{calsim, repo, scratch};
 
 #[test]
 fn an_exported_robot_file_is_the_identified_model() {
-    let dir = scratch("export");
+    let tmp = scratch("export");
+    let dir = tmp.path();
     let scenario = repo().join("scenarios/ci_quick.toml");
     let out = dir.join("out");
     let o = calsim().args(["run", scenario.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
@@ -102,7 +103,8 @@ fn an_exported_robot_file_is_the_identified_model() {
 
 #[test]
 fn bad_export_input_is_one_line_and_exit_2() {
-    let dir = scratch("export-bad");
+    let tmp = scratch("export-bad");
+    let dir = tmp.path();
     for (args, expect) in
         [(vec!["export", dir.to_str().unwrap()], "manifest.json"), (vec!["export", dir.to_str().unwrap(), "--task", "x"], "--task")]
     {
@@ -116,7 +118,8 @@ fn bad_export_input_is_one_line_and_exit_2() {
 
 #[test]
 fn bad_targets_are_one_line_naming_the_file_and_line() {
-    let dir = scratch("compensate-bad");
+    let tmp = scratch("compensate-bad");
+    let dir = tmp.path();
     let robot = repo().join("robots/irb120.toml");
     for (name, text, expect) in [
         ("nan.csv", "x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n300,0,400,0,180,0\n300,nan,400,0,180,0\n", "line 3"),
@@ -140,7 +143,8 @@ fn bad_targets_are_one_line_naming_the_file_and_line() {
 /// flange, so the exported file can run a TriCal study of its own.
 #[test]
 fn an_exported_kr6_keeps_its_capsules_and_flange() {
-    let dir = scratch("export-kr6");
+    let tmp = scratch("export-kr6");
+    let dir = tmp.path();
     let text = common::scenario_text_anywhere("kr6r900sixx_trical.toml")
         .replace("set_sizes = [20, 25, 30, 35, 40, 45, 50, 55, 60, 65, 70, 75, 80, 85, 90, 95, 100]", "set_sizes = [75]")
         .replace("repetitions = 30 ", "repetitions = 3 ");

@@ -156,14 +156,15 @@ fn set(t: &mut toml::Table, section: &str, key: &str, v: toml::Value) {
 
 fn fuzz(kind: &str, doc: toml::Value) {
     let cases = std::env::var("CALSIM_FUZZ_CASES").ok().and_then(|c| c.parse().ok()).unwrap_or(12);
-    let dir = common::scratch(&format!("fuzz-{kind}"));
+    let tmp = common::scratch(&format!("fuzz-{kind}"));
+    let dir = tmp.path();
     let mut paths = Vec::new();
     leaves(&doc, &mut Vec::new(), &mut paths);
     let config = Config { cases, failure_persistence: None, ..Config::default() };
     let mut runner = TestRunner::new_with_rng(config, TestRng::deterministic_rng(RngAlgorithm::ChaCha));
     let n = paths.len();
     let result =
-        runner.run(&(0..n, 0..MUTATIONS), |(leaf, m)| run_case(&mutate(&doc, &paths[leaf], m), &dir, &format!("{kind}_{leaf}_{m}.toml")));
+        runner.run(&(0..n, 0..MUTATIONS), |(leaf, m)| run_case(&mutate(&doc, &paths[leaf], m), dir, &format!("{kind}_{leaf}_{m}.toml")));
     if let Err(e) = result {
         panic!("{e}");
     }

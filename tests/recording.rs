@@ -1,5 +1,7 @@
 //! The Rerun recording of a study, read back with Rerun's own decoder.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::Command;
@@ -39,12 +41,12 @@ fn read(path: &std::path::Path) -> (BTreeMap<String, Entity>, bool) {
 
 #[test]
 fn the_recording_holds_the_cell_the_poses_the_centring_and_the_study() {
-    let dir = std::env::temp_dir().join(format!("calsim-test-recording-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = common::scratch("recording");
+    let dir = tmp.path();
     let out = Command::new(env!("CARGO_BIN_EXE_calsim"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(["run", "scenarios/ci_quick.toml", "--set-sizes", "20:75:55", "--repetitions", "3", "--no-plots", "--out"])
-        .arg(&dir)
+        .arg(dir)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -90,12 +92,12 @@ fn the_recording_holds_the_cell_the_poses_the_centring_and_the_study() {
 
 #[test]
 fn the_spms_recording_holds_the_heads_the_pool_the_test_and_the_study() {
-    let dir = std::env::temp_dir().join(format!("calsim-test-recording-spms-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = common::scratch("recording-spms");
+    let dir = tmp.path();
     let out = Command::new(env!("CARGO_BIN_EXE_calsim"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(["run", "scenarios/er20c10_spms.toml", "--set-sizes", "20:50:30", "--repetitions", "2", "--no-plots", "--out"])
-        .arg(&dir)
+        .arg(dir)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

@@ -24,10 +24,11 @@ fn complete(dir: &std::path::Path) -> bool {
 
 #[test]
 fn a_file_in_the_way_is_an_error_before_the_study_and_is_left_alone() {
-    let dir = scratch("out-file");
+    let tmp = scratch("out-file");
+    let dir = tmp.path();
     std::fs::write(dir.join("ci_quick"), b"keep me").unwrap();
     let t = Instant::now();
-    let out = quick(&dir).output().unwrap();
+    let out = quick(dir).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("ci_quick") && err.contains("not a directory"), "{err}");
@@ -46,22 +47,23 @@ fn a_file_in_the_way_is_an_error_before_the_study_and_is_left_alone() {
 
 #[test]
 fn kill_at_any_instant_leaves_old_or_new_results_and_the_next_run_cleans_up() {
-    let dir = scratch("out-kill");
-    assert!(quick(&dir).status().unwrap().success());
+    let tmp = scratch("out-kill");
+    let dir = tmp.path();
+    assert!(quick(dir).status().unwrap().success());
     let dest = dir.join("ci_quick");
     assert!(complete(&dest));
     // Kill runs at staggered instants: before, during and after the write.
     let first = Instant::now();
-    assert!(quick(&dir).status().unwrap().success());
+    assert!(quick(dir).status().unwrap().success());
     let full = first.elapsed();
     for k in 0..8u32 {
-        let mut child = quick(&dir).stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().unwrap();
+        let mut child = quick(dir).stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().unwrap();
         std::thread::sleep(full.mul_f64(0.5 + 0.08 * f64::from(k)));
         let _ = child.kill(); // SIGKILL
         let _ = child.wait();
         assert!(complete(&dest), "after a kill at {k}: {:?}", std::fs::read_dir(&dest).map(|d| d.count()));
     }
-    assert!(quick(&dir).status().unwrap().success());
-    let entries: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert!(quick(dir).status().unwrap().success());
+    let entries: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(entries, vec!["ci_quick".to_string()], "what killed runs left is removed: {entries:?}");
 }

@@ -32,9 +32,8 @@ fn the_shipped_er20c10_is_the_built_in_bit_for_bit() {
 /// The IRB 120 file with `edit` applied to its text.
 fn bad(name: &str, edit: impl Fn(&str) -> String) -> String {
     let text = std::fs::read_to_string(shipped("irb120.toml")).unwrap();
-    let dir = std::env::temp_dir().join(format!("calsim-robot-files-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
+    let tmp = common::scratch("robot-files");
+    let path = tmp.path().join(name);
     std::fs::write(&path, edit(&text)).unwrap();
     let e = RobotFile::load(&path).expect_err(name).to_string();
     assert!(e.contains(path.to_str().unwrap()), "{name}: the error names the file: {e}");
@@ -78,14 +77,15 @@ fn a_bad_robot_file_is_one_line_naming_the_file_and_the_field() {
 /// one line naming the scenario, `robot.file`, the robot file and `collision`.
 #[test]
 fn a_trical_scenario_needs_the_arms_capsules() {
-    let dir = common::scratch("robot-file-no-capsules");
+    let tmp = common::scratch("robot-file-no-capsules");
+    let dir = tmp.path();
     let robot = dir.join("bare.toml");
     let text = std::fs::read_to_string(shipped("irb120.toml")).unwrap();
     let cut = text.find("[[collision]]").unwrap();
     let end = text.find("\n[truth]").unwrap();
     std::fs::write(&robot, format!("{}{}", &text[..cut], &text[end..])).unwrap();
     assert!(RobotFile::load(&robot).expect("loads without capsules").capsules.is_none());
-    run_refused(&dir, &robot, &["s.toml", "robot.file", "bare.toml", "collision"]);
+    run_refused(dir, &robot, &["s.toml", "robot.file", "bare.toml", "collision"]);
 }
 
 /// `calsim run` of a scenario in `dir` naming `robot` exits 2 with one line holding every one of
@@ -106,11 +106,12 @@ fn run_refused(dir: &Path, robot: &Path, parts: &[&str]) {
 /// robot file and the field.
 #[test]
 fn a_scenario_with_a_bad_robot_file_exits_2_naming_it() {
-    let dir = common::scratch("robot-file-cli");
+    let tmp = common::scratch("robot-file-cli");
+    let dir = tmp.path();
     let robot = dir.join("arm.toml");
     let text = std::fs::read_to_string(shipped("irb120.toml")).unwrap();
     std::fs::write(&robot, text.replacen("limits_deg = [-110.0, 70.0]", "limits_deg = [70.0, -110.0]", 1)).unwrap();
-    run_refused(&dir, &robot, &["s.toml", "robot.file", "arm.toml", "joint[3].limits_deg"]);
+    run_refused(dir, &robot, &["s.toml", "robot.file", "arm.toml", "joint[3].limits_deg"]);
     // A missing robot file.
-    run_refused(&dir, Path::new("no-such-arm.toml"), &["s.toml", "robot.file", "no-such-arm.toml"]);
+    run_refused(dir, Path::new("no-such-arm.toml"), &["s.toml", "robot.file", "no-such-arm.toml"]);
 }

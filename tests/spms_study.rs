@@ -124,8 +124,9 @@ fn spms_results_are_identical_for_one_and_two_threads() {
 /// every result file.
 #[test]
 fn ci_check_of_the_spms_scenario_passes_and_writes_every_result() {
-    let dir = scratch("spms-check");
-    let out = calsim().args(["check", "scenarios/er20c10_spms.toml", "--out"]).arg(&dir).output().unwrap();
+    let tmp = scratch("spms-check");
+    let dir = tmp.path();
+    let out = calsim().args(["check", "scenarios/er20c10_spms.toml", "--out"]).arg(dir).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("8 of 8 figures within their bands"), "{stdout}");
@@ -154,7 +155,8 @@ fn ci_check_of_the_spms_scenario_passes_and_writes_every_result() {
 
 #[test]
 fn a_bad_spms_scenario_is_a_clear_error() {
-    let dir = scratch("spms-bad");
+    let tmp = scratch("spms-bad");
+    let dir = tmp.path();
     let text = common::scenario_text_anywhere("er20c10_spms.toml");
     for (name, edited, expect) in [
         ("unknown_key.toml", text.replace("cycles = 30", "cycles = 30\ncycle_count = 3"), "iso9283.cycle_count"),
@@ -164,7 +166,7 @@ fn a_bad_spms_scenario_is_a_clear_error() {
     ] {
         let p = dir.join(name);
         std::fs::write(&p, edited).unwrap();
-        let out = calsim().arg("run").arg(&p).arg("--out").arg(&dir).output().unwrap();
+        let out = calsim().arg("run").arg(&p).arg("--out").arg(dir).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{name}: {err}");
         assert!(err.contains(name) && err.contains(expect), "{name}: {err}");

@@ -59,18 +59,20 @@ fn bad_input(file: &Path) -> String {
 
 #[test]
 fn an_unknown_key_is_named_with_the_file() {
-    let dir = scratch("unknown");
+    let tmp = scratch("unknown");
+    let dir = tmp.path();
     let text = base_text().replace("ball_diameter_mm = 12.7", "ball_diameter_mm = 12.7\nball_diametre_mm = 12.7");
-    let f = scenario_file(&dir, "typo.toml", &text);
+    let f = scenario_file(dir, "typo.toml", &text);
     let err = bad_input(&f);
     assert!(err.contains("typo.toml") && err.contains("ball_diametre_mm"), "{err}");
 }
 
 #[test]
 fn an_out_of_range_value_is_named_with_its_key() {
-    let dir = scratch("range");
+    let tmp = scratch("range");
+    let dir = tmp.path();
     let text = base_text().replace("epsilon_mm = 0.010", "epsilon_mm = -0.010");
-    let f = scenario_file(&dir, "negative.toml", &text);
+    let f = scenario_file(dir, "negative.toml", &text);
     let err = bad_input(&f);
     assert!(err.contains("negative.toml") && err.contains("trical") && err.contains("epsilon_mm"), "{err}");
 }
@@ -79,20 +81,22 @@ fn an_out_of_range_value_is_named_with_its_key() {
 /// refused before anything runs, naming the band.
 #[test]
 fn an_absurd_expected_figure_is_named_with_its_band() {
-    let dir = scratch("expect-range");
+    let tmp = scratch("expect-range");
+    let dir = tmp.path();
     for (name, value) in [("huge.toml", "1e300"), ("tiny.toml", "1e-300")] {
         let text = base_text().replace("after_median_mm = { value = 0.208", &format!("after_median_mm = {{ value = {value}"));
         assert_ne!(text, base_text(), "the band is in the reduced scenario");
-        let err = bad_input(&scenario_file(&dir, name, &text));
+        let err = bad_input(&scenario_file(dir, name, &text));
         assert!(err.contains(name) && err.contains("after_median_mm.value") && err.contains(value), "{err}");
     }
 }
 
 #[test]
 fn a_wrong_type_and_a_missing_file_are_clear_errors() {
-    let dir = scratch("type");
+    let tmp = scratch("type");
+    let dir = tmp.path();
     let text = base_text().replace("repetitions = 10", "repetitions = \"ten\"");
-    let f = scenario_file(&dir, "string.toml", &text);
+    let f = scenario_file(dir, "string.toml", &text);
     let err = bad_input(&f);
     assert!(err.contains("string.toml") && err.contains("repetitions"), "{err}");
     let err = bad_input(&dir.join("absent.toml"));
@@ -115,12 +119,13 @@ fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
 /// leaves the complete result set and no temporary directory behind.
 #[test]
 fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
-    let dir = scratch("check");
-    let out = calsim().args(["check", "scenarios/ci_quick.toml", "--out"]).arg(&dir).output().unwrap();
+    let tmp = scratch("check");
+    let dir = tmp.path();
+    let out = calsim().args(["check", "scenarios/ci_quick.toml", "--out"]).arg(dir).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("figures within their bands"), "{stdout}");
-    let entries: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let entries: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(entries, vec!["ci_quick".to_string()], "no temporary directory left: {entries:?}");
     for f in ["tasks.parquet", "parameters.parquet", "validation_errors.parquet", "manifest.json", "summary.md"] {
         let len = std::fs::metadata(dir.join("ci_quick").join(f)).map(|m| m.len()).unwrap_or(0);
@@ -147,10 +152,11 @@ fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
 
 #[test]
 fn no_plots_skips_the_figures() {
-    let dir = scratch("noplots");
+    let tmp = scratch("noplots");
+    let dir = tmp.path();
     let out = calsim()
         .args(["run", "scenarios/ci_quick.toml", "--set-sizes", "20:30:10", "--repetitions", "2", "--no-plots", "--out"])
-        .arg(&dir)
+        .arg(dir)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -165,18 +171,19 @@ fn no_plots_skips_the_figures() {
 /// leaves, and an empty set.
 #[test]
 fn unidentifiable_parameter_sets_are_refused_at_load() {
-    let dir = scratch("unidentifiable");
+    let tmp = scratch("unidentifiable");
+    let dir = tmp.path();
     let base = base_text();
     let all31 = "\"alpha1\",\"alpha2\",\"alpha3\",\"alpha4\",\"alpha5\",\"a1\",\"a2\",\"a3\",\"a4\",\"a5\",\"d3\",\"d4\",\"d5\",\"d6\",\"theta_offs2\",\"theta_offs3\",\"theta_offs4\",\"theta_offs5\",\"theta_offs6\",\"c2\",\"c3\",\"c4\",\"c5\",\"c6\",\"beta2\",\"x0W\",\"y0W\",\"z0W\",\"alpha0W\",\"beta0W\",\"gamma0W\"";
     let redundant = base.replacen("[study]\n", &format!("[study]\nparameters = [\"theta_offs1\", {all31}]\n"), 1);
-    let err = bad_input(&scenario_file(&dir, "redundant.toml", &redundant));
+    let err = bad_input(&scenario_file(dir, "redundant.toml", &redundant));
     assert!(err.contains("[study] parameters = theta_offs1 alpha0W") && err.contains("fix all but one"), "{err}");
     let on_axis = base.replace("tcp_mm = [35.0, 0.0, 125.0]", "tcp_mm = [0.0, 0.0, 125.0]");
     assert_ne!(on_axis, base);
-    let err = bad_input(&scenario_file(&dir, "on_axis.toml", &on_axis));
+    let err = bad_input(&scenario_file(dir, "on_axis.toml", &on_axis));
     assert!(err.contains("[study] parameters = ") && err.contains("theta_offs5") && err.contains("robot.tcp_mm"), "{err}");
     let empty = base.replacen("[study]\n", "[study]\nparameters = []\n", 1);
-    let err = bad_input(&scenario_file(&dir, "empty.toml", &empty));
+    let err = bad_input(&scenario_file(dir, "empty.toml", &empty));
     assert!(err.contains("[study] parameters = []") && err.contains("at least one parameter"), "{err}");
 }
 

@@ -60,8 +60,9 @@ const AXIS: &str = "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010, 0.02
 
 #[test]
 fn sharded_and_threaded_runs_merge_to_the_same_bytes() {
-    let dir = scratch("sweep-shards");
-    let f = sweep_file(&dir, "s.toml", 3, AXIS);
+    let tmp = scratch("sweep-shards");
+    let dir = tmp.path();
+    let f = sweep_file(dir, "s.toml", 3, AXIS);
     let fs = f.to_str().unwrap();
     let one = dir.join("one");
     run(&["sweep", fs, "--threads", "1"], &one);
@@ -88,10 +89,11 @@ fn sharded_and_threaded_runs_merge_to_the_same_bytes() {
 #[test]
 fn a_point_equal_to_the_base_is_the_plain_run_at_realisation_0_and_worlds_are_shared() {
     use calsim::io::scenario::Loaded;
-    let dir = scratch("sweep-crn");
+    let tmp = scratch("sweep-crn");
+    let dir = tmp.path();
     // Two points that differ in the repetitions only: the same worlds, so the same errors before
     // calibration in each realisation; realisation 0 of point 0 is the plain run.
-    let f = sweep_file(&dir, "crn.toml", 2, "[[axis]]\nkey = \"study.repetitions\"\nvalues = [2, 3]\n");
+    let f = sweep_file(dir, "crn.toml", 2, "[[axis]]\nkey = \"study.repetitions\"\nvalues = [2, 3]\n");
     let sweep = calsim::sweep::spec::load(&f).unwrap();
     let units: Vec<_> = (0..4).map(|u| calsim::sweep::run_unit(&sweep, u)).collect();
     assert_eq!(units[0].before_mm, units[2].before_mm, "realisation 0 of both points: one world");
@@ -112,8 +114,9 @@ fn a_point_equal_to_the_base_is_the_plain_run_at_realisation_0_and_worlds_are_sh
 
 #[test]
 fn a_killed_shard_resumes_and_merges_to_the_same_bytes() {
-    let dir = scratch("sweep-resume");
-    let f = sweep_file(&dir, "r.toml", 4, AXIS);
+    let tmp = scratch("sweep-resume");
+    let dir = tmp.path();
+    let f = sweep_file(dir, "r.toml", 4, AXIS);
     let fs = f.to_str().unwrap();
     let whole = dir.join("whole");
     let t = std::time::Instant::now();
@@ -144,8 +147,9 @@ fn a_killed_shard_resumes_and_merges_to_the_same_bytes() {
 /// one line naming the file and the field; the untouched shard merges (1 point x 2 realisations).
 #[test]
 fn an_edited_or_misplaced_unit_file_is_refused_by_merge() {
-    let dir = scratch("sweep-units");
-    let f = sweep_file(&dir, "u.toml", 2, "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010]\n");
+    let tmp = scratch("sweep-units");
+    let dir = tmp.path();
+    let f = sweep_file(dir, "u.toml", 2, "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010]\n");
     let out = dir.join("out");
     run(&["sweep", f.to_str().unwrap(), "--shard", "0/1"], &out);
     let shard = out.join("u.shard-0-of-1");
@@ -197,7 +201,8 @@ fn bad(args: &[&str], expect: &[&str]) {
 
 #[test]
 fn bad_sweep_input_is_one_line_and_exit_2() {
-    let dir = scratch("sweep-bad");
+    let tmp = scratch("sweep-bad");
+    let dir = tmp.path();
     let out = dir.join("out");
     let o = out.to_str().unwrap();
     for (name, axes, expect) in [
@@ -231,15 +236,15 @@ fn bad_sweep_input_is_one_line_and_exit_2() {
             vec!["shape.toml", "layout.shape", "circle"],
         ),
     ] {
-        let f = sweep_file(&dir, name, 1, axes);
+        let f = sweep_file(dir, name, 1, axes);
         bad(&["sweep", f.to_str().unwrap(), "--out", o], &expect);
     }
-    let good = sweep_file(&dir, "good.toml", 1, AXIS);
+    let good = sweep_file(dir, "good.toml", 1, AXIS);
     let g = good.to_str().unwrap();
     bad(&["sweep", g, "--shard", "0/0", "--out", o], &["0/0", "K must be"]);
     bad(&["sweep", g, "--shard", "3/3", "--out", o], &["3/3", "k must be below K"]);
     // Shards of two different sweeps.
-    let other = sweep_file(&dir, "good2.toml", 1, "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.03]\n");
+    let other = sweep_file(dir, "good2.toml", 1, "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.03]\n");
     let s1 = dir.join("s1");
     let s2 = dir.join("s2");
     run(&["sweep", g, "--shard", "0/2"], &s1);

@@ -30,16 +30,18 @@ fn irb120_urdf(edit: impl Fn(&str) -> String) -> String {
     edit(&text)
 }
 
-fn write(name: &str, text: &str) -> std::path::PathBuf {
-    let dir = common::scratch(&format!("urdf-import-{name}"));
-    let p = dir.join(name);
+/// `text` written as `name` in a scratch directory of its own, removed when the guard is dropped.
+fn write(name: &str, text: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let tmp = common::scratch(&format!("urdf-import-{name}"));
+    let p = tmp.path().join(name);
     std::fs::write(&p, text).unwrap();
-    p
+    (tmp, p)
 }
 
 #[test]
 fn the_ros_industrial_irb120_is_the_table3_arm() {
-    let model = calsim::robot::urdf::load(&write("irb120.urdf", &irb120_urdf(str::to_string))).expect("the URDF converts");
+    let (_urdf_dir, urdf) = write("irb120.urdf", &irb120_urdf(str::to_string));
+    let model = calsim::robot::urdf::load(&urdf).expect("the URDF converts");
     let table3 = irb120();
     let mut rng = common::rng(120);
     // 1,000 configurations within the limits: the flange positions agree to 1e-6 mm.
@@ -51,9 +53,10 @@ fn the_ros_industrial_irb120_is_the_table3_arm() {
     assert!(l[2].alpha.abs() < 1e-12, "joints 2 and 3 are parallel");
 
     // Through the command line into a robot file, and back: the same flange positions.
-    let dir = common::scratch("urdf-import-cli");
+    let tmp = common::scratch("urdf-import-cli");
+    let dir = tmp.path();
     let out = dir.join("irb120_from_urdf.toml");
-    let urdf = write("irb120_cli.urdf", &irb120_urdf(str::to_string));
+    let (_cli_dir, urdf) = write("irb120_cli.urdf", &irb120_urdf(str::to_string));
     let o = common::calsim().args(["import-urdf", urdf.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let file = calsim::robot::file::RobotFile::load(&out).expect("the robot file loads");
@@ -77,7 +80,7 @@ fn a_urdf_calsim_cannot_take_is_one_error_naming_the_joint_or_link() {
         ),
         ("five.urdf", ("name=\"joint_6\" type=\"revolute\"", "name=\"joint_6\" type=\"fixed\""), "5 revolute joints"),
     ] {
-        let p = write(name, &irb120_urdf(|t| t.replacen(edit.0, edit.1, 1)));
+        let (_dir, p) = write(name, &irb120_urdf(|t| t.replacen(edit.0, edit.1, 1)));
         let e = calsim::robot::urdf::load(&p).expect_err(name).to_string();
         assert!(e.contains(name) && e.contains(expect), "{name}: {e}");
         assert_eq!(e.lines().count(), 1, "{name}: {e}");
@@ -90,7 +93,7 @@ fn a_urdf_calsim_cannot_take_is_one_error_naming_the_joint_or_link() {
 
 #[test]
 fn a_malformed_or_missing_urdf_is_one_line_and_exit_2() {
-    let broken = write("broken.urdf", &irb120_urdf(|t| t.replace("</robot>", "")));
+    let (_dir, broken) = write("broken.urdf", &irb120_urdf(|t| t.replace("</robot>", "")));
     let missing = broken.with_file_name("missing.urdf");
     for p in [broken, missing] {
         let o = common::calsim().args(["import-urdf", p.to_str().unwrap(), "--out", "/tmp/never-written.toml"]).output().unwrap();
@@ -115,7 +118,7 @@ fn a_urdf_with_absurd_values_is_refused_and_nothing_written() {
         ("heavy.urdf", first(&urdf, "<mass value=\"", "1e300"), "mass_kg"),
         ("limitless.urdf", first(&urdf, "upper=\"", "1e300"), "limits"),
     ] {
-        let p = write(name, &text);
+        let (_dir, p) = write(name, &text);
         let out = p.with_extension("toml");
         let o = common::calsim().args(["import-urdf", p.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
@@ -197,7 +200,7 @@ fn urdf_collision_cylinders_become_capsules_in_place() {
     assert!((ends[1].coords - nalgebra::Vector3::new(402.5, 0.0, 400.0)).norm() < 1e-9, "{}", ends[1]);
     assert_eq!(cap.radius, 70.0);
     let text = std::fs::read_to_string(common::repo().join("robots/kr6r900sixx.urdf")).unwrap();
-    let bad = write("negative-radius.urdf", &text.replacen("<cylinder radius=\"0.07\"", "<cylinder radius=\"-0.07\"", 1));
+    let (_dir, bad) = write("negative-radius.urdf", &text.replacen("<cylinder radius=\"0.07\"", "<cylinder radius=\"-0.07\"", 1));
     let e = calsim::robot::urdf::load_all(&bad).err().expect("refused").to_string();
     assert!(e.contains("negative-radius.urdf") && e.contains("link_2") && e.lines().count() == 1, "{e}");
 }

@@ -10,6 +10,29 @@ calsim=$(realpath "${1:?usage: $0 <calsim binary> [sweep file]}")
 here=$(cd "$(dirname "$0")" && pwd)
 repo=$(cd "$here/../.." && pwd)
 work=$(mktemp -d /tmp/calsim-slurm.XXXXXX)
+# The work directory goes at exit, after the daemons, unless something failed (then its logs stay).
+keep=0
+stop() {
+    local pidfile
+    for pidfile in "$work/slurmd.pid" "$work/slurmctld.pid"; do
+        [ -f "$pidfile" ] || continue
+        local pid
+        pid=$(cat "$pidfile")
+        kill "$pid" 2>/dev/null || true
+        for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    done
+}
+finish() {
+    local rc=$?
+    scancel --quiet --user="$(id -un)" 2>/dev/null || true
+    stop
+    if [ "$rc" = 0 ] && [ "$keep" = 0 ]; then
+        rm -rf "$work"
+    else
+        echo "slurm test: logs kept in $work" >&2
+    fi
+}
+trap finish EXIT
 skip() { echo "slurm test skipped: $*"; exit 0; }
 
 if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
@@ -17,7 +40,7 @@ if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
     command -v apt-get >/dev/null || skip "slurm-wlm and munge are not installed and there is no apt-get"
     echo "slurm test: installing slurm-wlm and munge"
     { apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y slurm-wlm munge; } >"$work/apt.log" 2>&1 \
-        || skip "apt-get install slurm-wlm munge failed (see $work/apt.log)"
+        || { keep=1; skip "apt-get install slurm-wlm munge failed (see $work/apt.log)"; }
 fi
 [ "$(id -u)" = 0 ] || skip "starting slurmctld and slurmd here needs root"
 
@@ -75,12 +98,6 @@ AccountingStorageType=accounting_storage/none
 NodeName=$host CPUs=$cpus RealMemory=$mem State=UNKNOWN
 PartitionName=calsim Nodes=$host Default=YES MaxTime=INFINITE State=UP
 CONF
-cleanup() {
-    scancel --quiet --user="$(id -un)" 2>/dev/null || true
-    [ -f "$work/slurmd.pid" ] && kill "$(cat "$work/slurmd.pid")" 2>/dev/null || true
-    [ -f "$work/slurmctld.pid" ] && kill "$(cat "$work/slurmctld.pid")" 2>/dev/null || true
-}
-trap cleanup EXIT
 slurmctld -i -f "$SLURM_CONF"
 slurmd -f "$SLURM_CONF"
 for _ in $(seq 60); do

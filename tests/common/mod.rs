@@ -41,12 +41,10 @@ pub fn calsim() -> Command {
     c
 }
 
-/// An empty scratch directory of this test process.
-pub fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("calsim-test-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// An empty scratch directory, removed with everything in it when the returned guard is dropped
+/// (at the end of the test, passed or failed).
+pub fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new().prefix(&format!("calsim-test-{name}-")).tempdir().unwrap()
 }
 
 /// The text of the repo's scenario `name` with its robot file named by absolute path, so that a
