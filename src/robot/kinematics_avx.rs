@@ -11,8 +11,8 @@
 //! compare the two paths over every field of the state and every Jacobian column.
 
 use std::arch::x86_64::{
-    __m256d, _mm_store_sd, _mm_storeu_pd, _mm256_add_pd, _mm256_castpd256_pd128, _mm256_extractf128_pd, _mm256_load_pd, _mm256_mul_pd,
-    _mm256_permute4x64_pd, _mm256_set_pd, _mm256_set1_pd, _mm256_store_pd, _mm256_storeu_pd, _mm256_sub_pd, _mm256_xor_pd,
+    __m256d, _mm_store_sd, _mm_storeu_pd, _mm256_add_pd, _mm256_castpd256_pd128, _mm256_extractf128_pd, _mm256_loadu_pd, _mm256_mul_pd,
+    _mm256_permute4x64_pd, _mm256_set_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd, _mm256_xor_pd,
 };
 
 use nalgebra::{Matrix3, Vector3};
@@ -46,21 +46,21 @@ fn columns(m: &Matrix3<f64>) -> [V; 3] {
 #[inline]
 #[target_feature(enable = "avx")]
 fn load(x: &[f64; 4]) -> V {
-    // SAFETY: `x` holds four f64 and `Lanes` (every array of which this reads) is 32-byte aligned,
-    // its rows 32 bytes each.
+    // SAFETY: `x` holds four f64; an unaligned load (the arrays of `Lanes` are 32-byte aligned, so
+    // theirs never cross a cache line).
     #[allow(unsafe_code)]
     unsafe {
-        _mm256_load_pd(x.as_ptr())
+        _mm256_loadu_pd(x.as_ptr())
     }
 }
 
 #[inline]
 #[target_feature(enable = "avx")]
 fn store(x: &mut [f64; 4], v: V) {
-    // SAFETY: as for `load`.
+    // SAFETY: `x` holds four f64; an unaligned store.
     #[allow(unsafe_code)]
     unsafe {
-        _mm256_store_pd(x.as_mut_ptr(), v)
+        _mm256_storeu_pd(x.as_mut_ptr(), v)
     }
 }
 
@@ -102,6 +102,7 @@ fn put_matrix(out: &mut Matrix3<f64>, c: &[V; 3]) {
     }
 }
 
+/// Four lanes on a 32-byte boundary: a spill slot that never crosses a cache line.
 #[repr(align(32))]
 struct Aligned([f64; 4]);
 
