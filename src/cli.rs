@@ -267,6 +267,43 @@ struct DemoArgs {
     solver: SolverArg,
 }
 
+/// Most worker threads a command takes (`--threads` and `RAYON_NUM_THREADS`).
+const MOST_THREADS: u32 = 1024;
+
+/// The worker pool of a command and its size: `--threads`, else `RAYON_NUM_THREADS` (rayon's own
+/// variable, read here because rayon ignores a value it cannot read; 0 means every core, as in
+/// rayon; set but empty counts as unset), else every core.
+fn thread_pool(threads: Option<u32>) -> Result<(rayon::ThreadPool, Threads), String> {
+    let threads = match threads {
+        Some(t) => t as usize,
+        None => match std::env::var_os("RAYON_NUM_THREADS").filter(|v| !v.is_empty()) {
+            None => rayon::current_num_threads(),
+            Some(v) => match v.to_str().and_then(|s| s.trim().parse::<u32>().ok()) {
+                Some(0) => std::thread::available_parallelism().map_or(1, usize::from),
+                Some(n) if n <= MOST_THREADS => n as usize,
+                _ => {
+                    return Err(format!(
+                        "environment: RAYON_NUM_THREADS = {:?} is not a number of threads (1 to {MOST_THREADS}, or 0 for every core)",
+                        v.to_string_lossy()
+                    ));
+                }
+            },
+        },
+    };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    Ok((pool, Threads(threads)))
+}
+
+/// A thread count, displayed as "1 thread" or "n threads".
+#[derive(Clone, Copy, Debug)]
+struct Threads(usize);
+
+impl std::fmt::Display for Threads {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.0 == 1 { write!(f, "1 thread") } else { write!(f, "{} threads", self.0) }
+    }
+}
+
 /// Entry point of the binary.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -365,10 +402,9 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     let text = scenario.text.clone();
     scenario::check_overrides(&scenario).map_err(|e| e.to_string())?;
     crate::io::out_dir::prepare(&args.out, &scenario.name).map_err(|e| e.to_string())?;
-    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    let (pool, threads) = thread_pool(args.threads)?;
 
-    eprintln!("calsim {}: {} (seed {}), {} threads", if check { "check" } else { "run" }, scenario.name, scenario.seed, threads);
+    eprintln!("calsim {}: {} (seed {}), {threads}", if check { "check" } else { "run" }, scenario.name, scenario.seed);
     let spec = &scenario.experiment;
     let experiment = spec.build(scenario.seed).map_err(|e| format!("{}: campaign: {e}", args.scenario.display()))?;
     let campaign_s = t0.elapsed().as_secs_f64();
@@ -410,7 +446,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     };
     let extras =
         crate::io::results::Extras { plots: plot_inputs.as_ref(), recording: if args.no_recording { None } else { Some(&record) } };
-    let report = crate::io::results::Report { figures: &figures, checks: &rows, threads, timings: &timings, extras };
+    let report = crate::io::results::Report { figures: &figures, checks: &rows, threads: threads.0, timings: &timings, extras };
     let dest = crate::io::results::write(&args.out, &scenario, &results, &report).map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     debug_assert_eq!(text, scenario.text);
@@ -565,9 +601,8 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
     apply_overrides(args, &mut sc.seed, &mut st.set_sizes, &mut st.table_set_size, &mut st.repetitions);
     scenario::check_spms(&sc.spec, &format!("{} (with command-line overrides)", args.scenario.display())).map_err(|e| e.to_string())?;
     crate::io::out_dir::prepare(&args.out, &sc.name).map_err(|e| e.to_string())?;
-    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
-    eprintln!("calsim {}: {} (SPMS, seed {}), {} threads", if check { "check" } else { "run" }, sc.name, sc.seed, threads);
+    let (pool, threads) = thread_pool(args.threads)?;
+    eprintln!("calsim {}: {} (SPMS, seed {}), {threads}", if check { "check" } else { "run" }, sc.name, sc.seed);
     let bar = ProgressBar::new(0);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} identifications, {elapsed} elapsed, ETA {eta}").expect("template"));
     let results = pool
@@ -591,7 +626,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
     };
     let extras =
         crate::io::spms_results::SpmsExtras { plots: !args.no_plots, recording: if args.no_recording { None } else { Some(&record) } };
-    let dest = crate::io::spms_results::write(&args.out, &sc, &results, &figures, &rows, threads, &extras)
+    let dest = crate::io::spms_results::write(&args.out, &sc, &results, &figures, &rows, threads.0, &extras)
         .map_err(|e| format!("{}: {e}", args.out.display()))?;
     let write_s = t_write.elapsed().as_secs_f64();
     println!("{}", report::terminal_table(&rows));
@@ -630,11 +665,10 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
     if args.shard.is_none() {
         crate::io::out_dir::prepare(&args.out, &sweep.name).map_err(|e| e.to_string())?;
     }
-    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    let (pool, threads) = thread_pool(args.threads)?;
     let units = sweep.points.len() * sweep.realisations as usize;
     eprintln!(
-        "calsim sweep: {} ({} grid points x {} realisations = {units} work units{}), {threads} threads",
+        "calsim sweep: {} ({} grid points x {} realisations = {units} work units{}), {threads}",
         sweep.name,
         sweep.points.len(),
         sweep.realisations,
@@ -769,10 +803,9 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
     crate::io::out_dir::prepare(&args.out, &sweep.name).map_err(|e| e.to_string())?;
     crate::io::out_dir::prepare(&args.out, &crate::sweep::shard_dir(Path::new(""), &sweep.name, 0, 1).display().to_string())
         .map_err(|e| e.to_string())?;
-    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
+    let (pool, threads) = thread_pool(args.threads)?;
     eprintln!(
-        "calsim budget: {} ({} sources, {} configurations x {} realisations), {threads} threads",
+        "calsim budget: {} ({} sources, {} configurations x {} realisations), {threads}",
         sweep.name,
         sources.len(),
         configs.len(),
@@ -844,9 +877,8 @@ fn table8(args: &Table8Args) -> Result<ExitCode, String> {
             return Err(format!("{}: kind: Table 8 is the TriCal paper's (a TriCal scenario)", args.scenario.display()));
         }
     };
-    let threads = args.threads.map(|t| t as usize).unwrap_or_else(rayon::current_num_threads);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
-    eprintln!("calsim table8: {} (seed {}), {} realisations, {threads} threads", s.name, s.seed, args.realisations);
+    let (pool, threads) = thread_pool(args.threads)?;
+    eprintln!("calsim table8: {} (seed {}), {} realisations, {threads}", s.name, s.seed, args.realisations);
     let bar = ProgressBar::new(u64::from(args.realisations));
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} realisations, {elapsed} elapsed, ETA {eta}").expect("template"));
     let mut worlds = Vec::new();

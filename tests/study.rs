@@ -103,6 +103,37 @@ fn a_wrong_type_and_a_missing_file_are_clear_errors() {
     assert!(err.contains("absent.toml"), "{err}");
 }
 
+/// `RAYON_NUM_THREADS` (rayon would ignore a value it cannot read) is checked like `--threads`:
+/// one line naming the variable, exit 2, nothing run; `--threads` wins over it; 0 is every core.
+#[test]
+fn a_bad_thread_count_in_the_environment_is_one_line_and_exit_2() {
+    let tmp = scratch("rayon-env");
+    let quick = |env: &str, threads: Option<&str>| {
+        let mut c = calsim();
+        c.args(["run", "scenarios/ci_quick.toml", "--set-sizes", "20:30:10", "--repetitions", "2", "--no-plots", "--no-recording"]);
+        c.arg("--out").arg(tmp.path()).env("RAYON_NUM_THREADS", env);
+        if let Some(t) = threads {
+            c.args(["--threads", t]);
+        }
+        c.output().unwrap()
+    };
+    for bad in ["abc", "-1", "1e3", "2000", "99999999999999999999", "NaN"] {
+        let out = quick(bad, None);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{bad}: one line: {err}");
+        assert!(err.contains("RAYON_NUM_THREADS") && err.contains(bad), "{bad}: names the variable and the value: {err}");
+        assert!(!tmp.path().join("ci_quick").exists(), "{bad}: nothing written");
+    }
+    let said = |out: std::process::Output| String::from_utf8_lossy(&out.stderr).lines().next().unwrap_or_default().to_string();
+    let one = quick("1", None);
+    assert!(one.status.success());
+    assert!(said(one).ends_with(", 1 thread"));
+    let flag = quick("abc", Some("2"));
+    assert!(flag.status.success(), "--threads wins over the environment");
+    assert!(said(flag).ends_with(", 2 threads"));
+}
+
 #[test]
 fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
     let read = |name: &str| -> toml::Table { std::fs::read_to_string(repo().join("scenarios").join(name)).unwrap().parse().unwrap() };
