@@ -23,6 +23,7 @@ pub const MAX_TARGETS: usize = 1_000_000;
 /// Reads the targets of `path`; an error names the file, the line and the column.
 pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, String> {
     let at = |line: u64, what: String| format!("{}: line {line}: {what}", path.display());
+    crate::io::check_input(path, None).map_err(|e| format!("{}: {e}", path.display()))?;
     let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let header: Vec<String> = r.headers().map_err(|e| at(1, e.to_string()))?.iter().map(str::to_string).collect();
     if header != TARGET_COLUMNS {

@@ -63,11 +63,10 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
         scenario_sha256: String,
         seed: u64,
     }
-    let manifest: Manifest = std::fs::read(dir.join("manifest.json"))
+    let manifest: Manifest = crate::io::read_bytes(&dir.join("manifest.json"))
         .map_err(|e| err(dir, format!("manifest.json: {e} (not a results directory of `calsim run`)")))
         .and_then(|b| serde_json::from_slice(&b).map_err(|e| err(dir, format!("manifest.json: {e}"))))?;
-    let text =
-        std::fs::read_to_string(&manifest.scenario_path).map_err(|e| err(dir, format!("{}: {e}", manifest.scenario_path.display())))?;
+    let text = crate::io::read_text(&manifest.scenario_path).map_err(|e| err(dir, format!("{}: {e}", manifest.scenario_path.display())))?;
     if format!("{:x}", sha2::Sha256::digest(text.as_bytes())) != manifest.scenario_sha256 {
         return Err(err(dir, format!("{} changed since these results were written: run it again", manifest.scenario_path.display())));
     }

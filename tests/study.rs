@@ -134,6 +134,27 @@ fn a_bad_thread_count_in_the_environment_is_one_line_and_exit_2() {
     assert!(said(flag).ends_with(", 2 threads"));
 }
 
+/// A pipe (which would block the read until something writes to it), a device and a file beyond
+/// the input size limit (17 MiB, sparse) are refused at once: one line naming the file, exit 2.
+#[test]
+fn a_pipe_a_device_or_an_oversized_file_is_refused_at_once() {
+    let tmp = scratch("special-files");
+    let pipe = tmp.path().join("pipe.toml");
+    let made = std::process::Command::new("mkfifo").arg(&pipe).status().is_ok_and(|s| s.success());
+    let big = tmp.path().join("big.toml");
+    std::fs::File::create(&big).unwrap().set_len(17 << 20).unwrap();
+    let mut cases = vec![(big, "larger than 16 MiB"), (PathBuf::from("/dev/null"), "not a regular file")];
+    if made {
+        cases.push((pipe, "not a regular file"));
+    } else {
+        eprintln!("no mkfifo here: the pipe case is not run");
+    }
+    for (file, expect) in cases {
+        let err = bad_input(&file);
+        assert!(err.contains(file.to_str().unwrap()) && err.contains(expect), "{}: {err}", file.display());
+    }
+}
+
 #[test]
 fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
     let read = |name: &str| -> toml::Table { std::fs::read_to_string(repo().join("scenarios").join(name)).unwrap().parse().unwrap() };

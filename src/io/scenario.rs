@@ -98,7 +98,7 @@ pub enum ScenarioError {
 /// Reads and checks a scenario file.
 pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     parse(&text, path)
 }
 
@@ -567,7 +567,7 @@ pub enum Loaded {
 /// Reads a scenario file once and loads it as the kind its top-level `kind` key names.
 pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     let table = table(&text, &shown)?;
     from_table(&text, table, path)
 }
@@ -576,7 +576,7 @@ pub fn load_any(path: &Path) -> Result<Loaded, ScenarioError> {
 /// before loading it with [`from_table`] (sweeps).
 pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     let mut t = table(&text, &shown)?;
     // A robot file is named relative to its scenario; the table may be loaded under another name
     // (a sweep point), so it carries the path from here on.
@@ -665,7 +665,7 @@ pub struct SpmsScenario {
 /// Reads and checks an SPMS scenario file.
 pub fn load_spms(path: &Path) -> Result<SpmsScenario, ScenarioError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read { path: shown, message: e.to_string() })?;
+    let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown, message: e.to_string() })?;
     parse_spms(&text, path)
 }
 

@@ -230,7 +230,7 @@ pub fn to_text(
 impl RobotFile {
     /// Reads and checks `path`.
     pub fn load(path: &Path) -> Result<Self, RobotFileError> {
-        let text = std::fs::read_to_string(path).map_err(|e| RobotFileError {
+        let text = crate::io::read_text(path).map_err(|e| RobotFileError {
             path: path.to_path_buf(),
             field: "(file)".into(),
             message: e.to_string(),

@@ -68,7 +68,8 @@ pub fn load(path: &Path) -> Result<RobotModel, UrdfError> {
 pub fn load_all(path: &Path) -> Result<Converted, UrdfError> {
     let shown = path.display().to_string();
     let fail = |message: String| UrdfError { path: shown.clone(), message };
-    let robot = urdf_rs::read_file(path).map_err(|e| fail(e.to_string()))?;
+    let text = crate::io::read_text(path).map_err(|e| fail(e.to_string()))?;
+    let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
     convert(&robot).map_err(fail)
 }
 

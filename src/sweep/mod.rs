@@ -425,7 +425,8 @@ pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeErro
     let mut info: Option<(ShardInfo, &Path)> = None;
     let mut units: BTreeMap<usize, Unit> = BTreeMap::new();
     for d in dirs {
-        let bytes = fs::read(d.join("sweep.json")).map_err(|e| shard_err(d, format!("not a shard directory (sweep.json: {e})")))?;
+        let bytes =
+            crate::io::read_bytes(&d.join("sweep.json")).map_err(|e| shard_err(d, format!("not a shard directory (sweep.json: {e})")))?;
         let this: ShardInfo = serde_json::from_slice(&bytes).map_err(|e| shard_err(d, format!("sweep.json: {e}")))?;
         match &info {
             Some((first, fp)) if first.identity != this.identity || first.name != this.name => {
@@ -440,7 +441,7 @@ pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeErro
             if p.extension().is_none_or(|x| x != "json") {
                 continue;
             }
-            let u: Unit = serde_json::from_slice(&fs::read(&p).map_err(|e| shard_err(&p, e.to_string()))?)
+            let u: Unit = serde_json::from_slice(&crate::io::read_bytes(&p).map_err(|e| shard_err(&p, e.to_string()))?)
                 .map_err(|e| shard_err(&p, e.to_string()))?;
             u.check(&this, &p).map_err(|why| shard_err(&p, why))?;
             units.insert(u.unit, u);

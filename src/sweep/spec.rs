@@ -270,7 +270,7 @@ pub fn grid(lengths: &[usize], combine: Combine) -> Result<Vec<Vec<usize>>, Stri
 /// Reads and checks a sweep file: every grid point is loaded and checked as a scenario.
 pub fn load(path: &Path) -> Result<Sweep, SweepError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
+    let text = crate::io::read_text(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
     let file: SweepFile = {
         let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, "(file)", e.message()))?;
         serde_path_to_error::deserialize(de).map_err(|e| {
