@@ -274,22 +274,19 @@ const MOST_THREADS: u32 = 1024;
 /// variable, read here because rayon ignores a value it cannot read; 0 means every core, as in
 /// rayon; set but empty counts as unset), else every core.
 fn thread_pool(threads: Option<u32>) -> Result<(rayon::ThreadPool, Threads), String> {
-    let threads = match threads {
-        Some(t) => t as usize,
+    let asked = match threads {
+        Some(t) => t,
         None => match std::env::var_os("RAYON_NUM_THREADS").filter(|v| !v.is_empty()) {
-            None => rayon::current_num_threads(),
-            Some(v) => match v.to_str().and_then(|s| s.trim().parse::<u32>().ok()) {
-                Some(0) => std::thread::available_parallelism().map_or(1, usize::from),
-                Some(n) if n <= MOST_THREADS => n as usize,
-                _ => {
-                    return Err(format!(
-                        "environment: RAYON_NUM_THREADS = {:?} is not a number of threads (1 to {MOST_THREADS}, or 0 for every core)",
-                        v.to_string_lossy()
-                    ));
-                }
-            },
+            None => 0,
+            Some(v) => v.to_str().and_then(|s| s.trim().parse::<u32>().ok()).filter(|n| *n <= MOST_THREADS).ok_or_else(|| {
+                format!(
+                    "environment: RAYON_NUM_THREADS = {:?} is not a number of threads (1 to {MOST_THREADS}, or 0 for every core)",
+                    v.to_string_lossy()
+                )
+            })?,
         },
     };
+    let threads = if asked == 0 { std::thread::available_parallelism().map_or(1, usize::from) } else { asked as usize };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?;
     Ok((pool, Threads(threads)))
 }
