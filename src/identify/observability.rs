@@ -43,12 +43,13 @@ pub struct PoolJacobian {
     pub stride: usize,
     /// Column scale factors `s_j` (internal units of the parameter per mm).
     pub scale: Vec<f64>,
+    /// The same rows laid out for DETMAX's kernels.
+    pub lanes: super::detmax::Lanes,
 }
 
 impl PoolJacobian {
     /// Evaluates and scales the Jacobians of `qs` at `model` for `set`.
     pub fn new(model: &RobotModel, set: &ParamSet, qs: &[Joints]) -> Self {
-        let m = set.len();
         let mut j = stacked_jacobian(model, set, qs);
         let n = qs.len().max(1) as f64;
         let scale: Vec<f64> = j.column_iter().map(|c| (c.norm_squared() / n).sqrt()).collect();
@@ -57,6 +58,13 @@ impl PoolJacobian {
                 j.column_mut(c).unscale_mut(*s);
             }
         }
+        Self::from_scaled(j, scale)
+    }
+
+    /// The pool of the scaled stacked Jacobian `j` (rows 3k..3k + 3: configuration k) and its
+    /// column scales.
+    pub(crate) fn from_scaled(j: DMatrix<f64>, scale: Vec<f64>) -> Self {
+        let m = j.ncols();
         let stride = m.div_ceil(4) * 4;
         let mut rows = vec![0.0; j.nrows() * stride];
         for (i, row) in rows.chunks_exact_mut(stride).enumerate() {
@@ -64,7 +72,8 @@ impl PoolJacobian {
                 row[c] = j[(i, c)];
             }
         }
-        Self { m, len: qs.len(), j, rows, stride, scale }
+        let lanes = super::detmax::Lanes::new(&j);
+        Self { m, len: j.nrows() / 3, j, rows, stride, scale, lanes }
     }
 
     /// Information matrix `sum_k J_k^T J_k` of the configurations `set`, m x m.
@@ -264,14 +273,7 @@ fn scaled_inverse(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate:
 pub(crate) fn random_pool(len: usize, m: usize, rng: &mut rand_chacha::ChaCha8Rng) -> PoolJacobian {
     use rand::RngExt;
     let j = DMatrix::from_fn(3 * len, m, |_, _| rng.random_range(-1.0..1.0));
-    let stride = m.div_ceil(4) * 4;
-    let mut rows = vec![0.0; 3 * len * stride];
-    for r in 0..3 * len {
-        for c in 0..m {
-            rows[r * stride + c] = j[(r, c)];
-        }
-    }
-    PoolJacobian { m, len, j, rows, stride, scale: vec![1.0; m] }
+    PoolJacobian::from_scaled(j, vec![1.0; m])
 }
 
 #[cfg(test)]
