@@ -74,6 +74,120 @@ impl Lanes {
     }
 }
 
+/// The blocks `D_k = J_k M^-1 J_k^T` of every configuration from the inverse Cholesky factor
+/// `linv = L^-1` of `M = L L^T`, in the lanes' column order (the varying columns, then the
+/// constant ones): `X_k = J_k L^-T` (`X_k[r][c]`: the products `J_k[r][i] linv[c][i]` for i from 0
+/// to c, the first a product, the others fused, in order) and `D_k = X_k X_k^T` (entry `(r, s)`:
+/// `X_k[r][c] X_k[s][c]` the same way over c). The AVX2 build (chosen at run time) gives the same
+/// numbers.
+pub fn start_blocks(lanes: &Lanes, linv: &DMatrix<f64>) -> Vec<Group> {
+    let m = lanes.varying.len() + lanes.constant.len();
+    assert_eq!(linv.shape(), (m, m));
+    // Row c of L^-1 up to its diagonal, rows one after another.
+    let rows: Vec<f64> = (0..m).flat_map(|c| (0..=c).map(move |i| (c, i))).map(|(c, i)| linv[(c, i)]).collect();
+    let mut d = vec![[[0.0; LANES]; 6]; lanes.groups];
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU was just found to support AVX2 and FMA, the only requirement of
+        // `start_blocks_avx2`.
+        #[allow(unsafe_code)]
+        unsafe {
+            start_blocks_avx2(lanes, m, &rows, &mut d)
+        };
+        return d;
+    }
+    start_blocks_portable(lanes, m, &rows, &mut d);
+    d
+}
+
+/// [`start_blocks`] one configuration at a time (`rows`: L^-1's rows up to the diagonal).
+fn start_blocks_portable(lanes: &Lanes, m: usize, rows: &[f64], d: &mut [Group]) {
+    let mut x = vec![[0.0; 3]; m];
+    for k in 0..lanes.len {
+        let (g, lane) = (k / LANES, k % LANES);
+        let mv = lanes.varying.len();
+        let jv = |r: usize, i: usize| if i < mv { lanes.j[((g * 3 + r) * mv + i) * LANES + lane] } else { lanes.constant[i - mv].1[r] };
+        for c in 0..m {
+            let lc = &rows[c * (c + 1) / 2..][..=c];
+            for (r, xr) in x[c].iter_mut().enumerate() {
+                *xr = (1..=c).fold(jv(r, 0) * lc[0], |acc, i| jv(r, i).mul_add(lc[i], acc));
+            }
+        }
+        for (e, &(r, s)) in ENTRIES.iter().enumerate() {
+            d[g][e][lane] = (1..m).fold(x[0][r] * x[0][s], |acc, c| x[c][r].mul_add(x[c][s], acc));
+        }
+    }
+}
+
+/// [`start_blocks`] with AVX2: a group's configurations in the lanes, columns of `X` four at a
+/// time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn start_blocks_avx2(lanes: &Lanes, m: usize, rows: &[f64], d: &mut [Group]) {
+    use std::arch::x86_64::{
+        __m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let mv = lanes.varying.len();
+    assert!(lanes.j.len() >= lanes.groups * 3 * mv * LANES && rows.len() >= m * (m + 1) / 2 && d.len() >= lanes.groups);
+    let mut x = vec![[_mm256_setzero_pd(); 3]; m];
+    for (g, dg) in d.iter_mut().enumerate().take(lanes.groups) {
+        let jg = lanes.group(g).as_ptr();
+        // Row r, column i of the group's J in the lanes' order.
+        let jv = |r: usize, i: usize| -> __m256d {
+            if i < mv {
+                // SAFETY: (r * mv + i) * LANES + LANES <= 3 * mv * LANES, the group's size.
+                #[allow(unsafe_code)]
+                unsafe {
+                    _mm256_loadu_pd(jg.add((r * mv + i) * LANES))
+                }
+            } else {
+                _mm256_set1_pd(lanes.constant[i - mv].1[r])
+            }
+        };
+        let mut c0 = 0;
+        while c0 < m {
+            let nc = (m - c0).min(4);
+            let mut acc = [[_mm256_setzero_pd(); 4]; 3];
+            // Terms 0..=c0 belong to every column of the block.
+            for i in 0..=c0 {
+                let xr = [jv(0, i), jv(1, i), jv(2, i)];
+                for cc in 0..nc {
+                    let l = _mm256_set1_pd(rows[(c0 + cc) * (c0 + cc + 1) / 2 + i]);
+                    for r in 0..3 {
+                        acc[r][cc] = if i == 0 { _mm256_mul_pd(xr[r], l) } else { _mm256_fmadd_pd(xr[r], l, acc[r][cc]) };
+                    }
+                }
+            }
+            // Then term c0 + t for the columns from c0 + t on.
+            for t in 1..nc {
+                let i = c0 + t;
+                let xr = [jv(0, i), jv(1, i), jv(2, i)];
+                for cc in t..nc {
+                    let l = _mm256_set1_pd(rows[(c0 + cc) * (c0 + cc + 1) / 2 + i]);
+                    for r in 0..3 {
+                        acc[r][cc] = _mm256_fmadd_pd(xr[r], l, acc[r][cc]);
+                    }
+                }
+            }
+            for cc in 0..nc {
+                x[c0 + cc] = [acc[0][cc], acc[1][cc], acc[2][cc]];
+            }
+            c0 += nc;
+        }
+        for (e, &(r, s)) in ENTRIES.iter().enumerate() {
+            let mut acc = _mm256_mul_pd(x[0][r], x[0][s]);
+            for xc in &x[1..] {
+                acc = _mm256_fmadd_pd(xc[r], xc[s], acc);
+            }
+            // SAFETY: dg[e] holds LANES = 4 values; unaligned store.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm256_storeu_pd(dg[e].as_mut_ptr(), acc)
+            };
+        }
+    }
+}
+
 /// One exchange step as every block takes it (see the module's text).
 #[derive(Clone, Debug)]
 pub struct Update {
@@ -515,6 +629,38 @@ mod tests {
                 assert_eq!(best_portable(&d, sign, |g| bits[g]), plain, "case {case}");
                 assert_eq!(best(&d, sign, |g| bits[g]), plain, "case {case}");
             }
+        }
+    }
+
+    /// The start blocks are `J_k M^-1 J_k^T` (nalgebra, to rounding) and the AVX2 build gives the
+    /// portable one's numbers bit for bit: 23 configurations, 31 and 6 columns (two constant).
+    #[test]
+    fn start_blocks_are_the_blocks_of_j_m_inverse_j_t() {
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        for m in [31, 6] {
+            let len = 23;
+            let j = random_j(len, m, &mut rng);
+            let lanes = Lanes::new(&j);
+            let order: Vec<usize> = lanes.varying.iter().copied().chain(lanes.constant.iter().map(|(c, _)| *c)).collect();
+            let jp = DMatrix::from_fn(3 * len, m, |i, c| j[(i, order[c])]);
+            let info = jp.tr_mul(&jp);
+            let linv = info.clone().cholesky().unwrap().l().try_inverse().unwrap();
+            let d = start_blocks(&lanes, &linv);
+            let minv = info.try_inverse().unwrap();
+            for k in 0..len {
+                let jk = jp.rows(3 * k, 3);
+                let expected = &jk * &minv * jk.transpose();
+                let got = block(&d, k);
+                assert!((got - &expected).abs().max() <= 1e-12 * (1.0 + expected.abs().max()), "m = {m}, k = {k}: {got} vs {expected}");
+            }
+            let rows: Vec<f64> = (0..m).flat_map(|c| (0..=c).map(move |i| (c, i))).map(|(c, i)| linv[(c, i)]).collect();
+            let mut slow = vec![[[0.0; LANES]; 6]; lanes.groups];
+            start_blocks_portable(&lanes, m, &rows, &mut slow);
+            // Every configuration's entries (the padded lanes of the last group hold no block).
+            let bits = |d: &[Group]| {
+                (0..len).flat_map(|k| (0..6).map(move |e| (k, e))).map(|(k, e)| d[k / LANES][e][k % LANES].to_bits()).collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&d[..]), bits(&slow), "m = {m}");
         }
     }
 

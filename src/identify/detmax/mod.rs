@@ -284,52 +284,44 @@ fn woodbury_u_avx2<const NB: usize>(minv: &[f64], mp: usize, m: usize, ja: &[f64
 
 impl<'a> State<'a> {
     fn new(pool: &'a PoolJacobian, set: &[usize]) -> Option<Self> {
-        let info = pool.information(set);
+        let (m, lanes) = (pool.m, &pool.lanes);
+        // M of the set in the lanes' column order (the varying columns, then the constant ones):
+        // the product of the stacked rows' transpose with themselves.
+        let order: Vec<usize> = lanes.varying.iter().copied().chain(lanes.constant.iter().map(|(c, _)| *c)).collect();
+        let mut at = DMatrix::zeros(m, 3 * set.len());
+        for (t, &k) in set.iter().enumerate() {
+            for r in 0..3 {
+                let row = &pool.rows[(3 * k + r) * pool.stride..][..m];
+                for (i, &c) in order.iter().enumerate() {
+                    at[(i, 3 * t + r)] = row[c];
+                }
+            }
+        }
+        let mut info = DMatrix::zeros(m, m);
+        crate::numeric::gemm_product(&at, crate::numeric::Factor { data: at.as_slice(), row_stride: m, col_stride: 1 }, m, &mut info, true);
         let chol = info.cholesky()?;
         let logdet = 2.0 * chol.l_dirty().diagonal().iter().map(|v| v.ln()).sum::<f64>();
         if !logdet.is_finite() {
             return None;
         }
-        let inverse = chol.inverse();
-        // Exactly symmetric (the Woodbury steps keep it so): the lower triangle mirrored.
-        let mp = pool.m.div_ceil(4) * 4;
-        let minv = DMatrix::from_fn(mp, pool.m, |i, j| {
-            if i >= pool.m {
-                0.0
-            } else if i >= j {
-                inverse[(i, j)]
-            } else {
-                inverse[(j, i)]
-            }
-        });
-        let mut member = vec![0u8; pool.lanes.groups];
+        let linv = chol.l().solve_lower_triangular(&DMatrix::identity(m, m))?;
+        // M^-1 = L^-T L^-1, exactly symmetric (the Woodbury steps keep it so), back in the pool's
+        // column order and padded with zero rows.
+        let mut inverse = DMatrix::zeros(m, m);
+        let linv_factor = crate::numeric::Factor { data: linv.as_slice(), row_stride: 1, col_stride: m };
+        crate::numeric::gemm_product(&linv.transpose(), linv_factor, m, &mut inverse, true);
+        let mut position = vec![0; m];
+        for (i, &c) in order.iter().enumerate() {
+            position[c] = i;
+        }
+        let mp = m.div_ceil(4) * 4;
+        let minv = DMatrix::from_fn(mp, m, |i, j| if i < m { inverse[(position[i], position[j])] } else { 0.0 });
+        let mut member = vec![0u8; lanes.groups];
         for &k in set {
             member[k / LANES] |= 1 << (k % LANES);
         }
-        // D_k for all k at once: the 3 x 3 diagonal blocks of J M^-1 J^T (the upper triangle of
-        // each), every entry summed over the parameters in order. J M^-1 as `&pool.j * &minv`
-        // computes it, without matrixmultiply's packing buffers.
-        let mut jm = DMatrix::zeros(pool.j.nrows(), pool.m);
-        let minv_factor = crate::numeric::Factor { data: minv.as_slice(), row_stride: 1, col_stride: mp };
-        crate::numeric::gemm_product(&pool.j, minv_factor, pool.m, &mut jm, false);
-        let rows = jm.nrows();
-        let mut d = vec![[[0.0; LANES]; 6]; pool.lanes.groups];
-        for k in 0..pool.len {
-            let jc: [&[f64]; 3] = std::array::from_fn(|c| &pool.rows[(3 * k + c) * pool.stride..][..pool.m]);
-            let jm_j = |j: usize| -> &[f64; 3] { jm.as_slice()[j * rows + 3 * k..][..3].try_into().expect("3 rows") };
-            // The six sums advance together over the parameters (independent chains).
-            let mut b = [0.0; 6];
-            for j in 0..pool.m {
-                let m_j = jm_j(j);
-                for (e, &(r, s)) in lanes::ENTRIES.iter().enumerate() {
-                    b[e] = if j == 0 { m_j[r] * jc[s][0] } else { b[e] + m_j[r] * jc[s][j] };
-                }
-            }
-            for e in 0..6 {
-                d[k / LANES][e][k % LANES] = b[e];
-            }
-        }
-        let applied = vec![0; pool.lanes.groups * LANES];
+        let d = lanes::start_blocks(lanes, &linv);
+        let applied = vec![0; lanes.groups * LANES];
         Some(Self { pool, minv, mp, logdet, d, applied, pending: Vec::new(), member, size: set.len() })
     }
 
