@@ -13,11 +13,10 @@
 //! **One result whichever kernel runs.** Entry `(r, c)` of `P_k` starts at `pc[r][c]` and takes
 //! `J_k[r][j] U'[j][c]` by fused multiply-adds over the varying columns in order; entry `(r, s)` of
 //! the block takes `D -= sign ((P_r0 P_s0 + P_r1 P_s1) + P_r2 P_s2)`, the first a product and the
-//! others fused. The dense kernel (a whole group of [`LANES`] configurations in the lanes of one
-//! vector), the sparse one (single configurations, a lane per column of `U'`, four in flight) and
-//! the portable one (`f64::mul_add`, exactly rounded everywhere) perform these same operations on
-//! the same operands, so they give the same bits (tests below); which one runs is a matter of speed
-//! only, and the designs do not depend on the CPU's vector extensions.
+//! others fused. The AVX2 kernel (a whole group of [`LANES`] configurations in the lanes of one
+//! vector) and the portable one (`f64::mul_add`, exactly rounded everywhere) perform these same
+//! operations on the same operands, so they give the same bits (tests below); which one runs is a
+//! matter of speed only.
 
 use nalgebra::DMatrix;
 
@@ -252,41 +251,25 @@ fn update_portable(lanes: &Lanes, d: &mut Group, k: usize, up: &Update) {
     }
 }
 
-/// How many of a group's configurations must take an update for the dense kernel to run it
-/// (below, single configurations are cheaper: measured with `examples/detmax_profile.rs`).
-const DENSE_MIN: u32 = 2;
-
 /// The lanes of group g that hold configurations of a pool of `len`, as bits.
 pub fn valid_lanes(len: usize, g: usize) -> u8 {
     let n = len.saturating_sub(g * LANES).min(LANES);
     ((1u16 << n) - 1) as u8
 }
 
-/// The lanes of a group whose configurations have not taken all `len` updates (`applied`: the
-/// group's counts), as bits.
-#[inline(always)]
-fn behind(applied: &[u32], len: u32) -> u8 {
-    (0..LANES).fold(0, |bits, l| bits | (((applied[l] < len) as u8) << l))
-}
-
-/// Brings the blocks of the configurations `want` selects (`want(g)`: the lanes of group g, as
-/// bits) up to date: the updates of `pending` from `applied[k]` on, in order. `applied` has a
-/// count per lane of every group; `sparse` is scratch.
-pub fn catch_up(
-    lanes: &Lanes,
-    pending: &[Update],
-    d: &mut [Group],
-    applied: &mut [u32],
-    want: impl Fn(usize) -> u8,
-    sparse: &mut Vec<(u32, u32)>,
-) {
+/// Brings the blocks of every group `want` selects up to date: the updates of `pending` from
+/// `applied[g]` on, in order. A group is brought up to date whole, all its configurations
+/// together, even when only some of them are to be read: the vector does the work of four in the
+/// time of one, and a configuration not read now takes the same updates later anyway once an
+/// excursion is kept.
+pub fn catch_up(lanes: &Lanes, pending: &[Update], d: &mut [Group], applied: &mut [u32], want: impl Fn(usize) -> bool) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU was just found to support AVX2 and FMA, the only requirement of
         // `catch_up_avx2`.
         #[allow(unsafe_code)]
         unsafe {
-            catch_up_avx2(lanes, pending, d, applied, want, sparse)
+            catch_up_avx2(lanes, pending, d, applied, want)
         };
         return;
     }
@@ -294,96 +277,56 @@ pub fn catch_up(
 }
 
 /// [`catch_up`] without vector extensions, one configuration and one update at a time.
-pub fn catch_up_portable(lanes: &Lanes, pending: &[Update], d: &mut [Group], applied: &mut [u32], want: impl Fn(usize) -> u8) {
+pub fn catch_up_portable(lanes: &Lanes, pending: &[Update], d: &mut [Group], applied: &mut [u32], want: impl Fn(usize) -> bool) {
     let len = pending.len() as u32;
-    for g in 0..lanes.groups {
-        let need = want(g) & behind(&applied[g * LANES..][..LANES], len);
-        for lane in (0..LANES).filter(|l| need >> l & 1 == 1) {
-            let k = g * LANES + lane;
-            for up in &pending[applied[k] as usize..] {
-                update_portable(lanes, &mut d[g], k, up);
-            }
-            applied[k] = len;
+    for (g, (dg, ag)) in d.iter_mut().zip(applied.iter_mut()).enumerate().take(lanes.groups) {
+        if *ag == len || !want(g) {
+            continue;
         }
+        for k in (g * LANES..(g + 1) * LANES).filter(|&k| k < lanes.len) {
+            for up in &pending[*ag as usize..] {
+                update_portable(lanes, dg, k, up);
+            }
+        }
+        *ag = len;
     }
 }
 
-/// [`catch_up`] with AVX2: a group whose configurations mostly need the same updates takes them
-/// with the dense kernel, the rest one configuration at a time (four in flight).
+/// [`catch_up`] with AVX2: a group's configurations in the lanes of one vector.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn catch_up_avx2(
-    lanes: &Lanes,
-    pending: &[Update],
-    d: &mut [Group],
-    applied: &mut [u32],
-    want: impl Fn(usize) -> u8,
-    sparse: &mut Vec<(u32, u32)>,
-) {
+fn catch_up_avx2(lanes: &Lanes, pending: &[Update], d: &mut [Group], applied: &mut [u32], want: impl Fn(usize) -> bool) {
     let len = pending.len() as u32;
     let mv = lanes.varying.len();
-    assert!(lanes.j.len() >= lanes.groups * 3 * mv * LANES && d.len() >= lanes.groups && applied.len() >= lanes.groups * LANES);
+    assert!(lanes.j.len() >= lanes.groups * 3 * mv * LANES);
     assert!(pending.iter().all(|up| up.urows.len() == mv));
-    sparse.clear();
-    for (g, (dg, ag)) in d.iter_mut().zip(applied.chunks_exact_mut(LANES)).enumerate().take(lanes.groups) {
-        let need = want(g) & behind(ag, len);
-        if need == 0 {
+    for (g, (dg, ag)) in d.iter_mut().zip(applied.iter_mut()).enumerate().take(lanes.groups) {
+        if *ag == len || !want(g) {
             continue;
         }
-        if need.count_ones() >= DENSE_MIN {
-            let from = (0..LANES).filter(|l| need >> l & 1 == 1).map(|l| ag[l]).min().unwrap_or(len);
-            avx2::dense(lanes.group(g), mv, &pending[from as usize..], from, ag, need, dg);
-        } else {
-            for lane in (0..LANES).filter(|l| need >> l & 1 == 1) {
-                sparse.extend((ag[lane]..len).map(|i| ((g * LANES + lane) as u32, i)));
-            }
-        }
-        for (l, a) in ag.iter_mut().enumerate() {
-            if need >> l & 1 == 1 {
-                *a = len;
-            }
-        }
-    }
-    for items in sparse.chunks(4) {
-        avx2::sparse(lanes, pending, d, items);
+        avx2::dense(lanes.group(g), mv, &pending[*ag as usize..], dg);
+        *ag = len;
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use std::arch::x86_64::{
-        __m256d, _mm256_blendv_pd, _mm256_castsi256_pd, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd,
-        _mm256_setr_epi64x, _mm256_setr_pd, _mm256_storeu_pd, _mm256_sub_pd,
-    };
+    use std::arch::x86_64::{__m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd};
 
-    use super::{ENTRIES, Group, LANES, Lanes, Update, apply};
+    use super::{ENTRIES, Group, LANES, Update};
 
-    /// The lanes of `x`.
-    #[inline]
-    #[target_feature(enable = "avx")]
-    fn lanes_of(x: __m256d) -> [f64; 4] {
-        let mut out = [0.0; 4];
-        // SAFETY: `out` holds four values; unaligned store.
-        #[allow(unsafe_code)]
-        unsafe {
-            _mm256_storeu_pd(out.as_mut_ptr(), x)
-        };
-        out
-    }
-
-    /// Group `d` after the updates `ups` (update `first + i` is `ups[i]`), each taken by the
-    /// lanes of `need` whose count `applied` is at most its index: every configuration of the
-    /// group in one vector (`jg`: the group's rows, `mv` varying columns). The blocks stay in
-    /// registers from the first update to the last.
+    /// Group `d` after the updates `ups`, in order: every configuration of the group in one
+    /// vector (`jg`: the group's rows, `mv` varying columns). The blocks stay in registers from
+    /// the first update to the last.
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    pub(super) fn dense(jg: &[f64], mv: usize, ups: &[Update], first: u32, applied: &[u32], need: u8, d: &mut Group) {
-        assert!(jg.len() >= 3 * mv * LANES && ups.iter().all(|up| up.urows.len() >= mv) && applied.len() >= LANES);
+    pub(super) fn dense(jg: &[f64], mv: usize, ups: &[Update], d: &mut Group) {
+        assert!(jg.len() >= 3 * mv * LANES && ups.iter().all(|up| up.urows.len() >= mv));
         let jp = jg.as_ptr();
         // SAFETY: d[e] holds LANES = 4 values; unaligned loads.
         #[allow(unsafe_code)]
         let mut dv: [__m256d; 6] = std::array::from_fn(|e| unsafe { _mm256_loadu_pd(d[e].as_ptr()) });
-        for (i, up) in (first..).zip(ups) {
+        for up in ups {
             let mut acc: [[__m256d; 3]; 3] = std::array::from_fn(|r| std::array::from_fn(|c| _mm256_set1_pd(up.pc[r][c])));
             for (j, u) in up.urows[..mv].iter().enumerate() {
                 // SAFETY: (r * mv + j) * LANES + LANES <= 3 * mv * LANES <= jg.len() (asserted).
@@ -397,13 +340,11 @@ mod avx2 {
                 }
             }
             let sign = _mm256_set1_pd(up.sign);
-            let on = |l: usize| -(((need >> l) & 1 == 1 && applied[l] <= i) as i64);
-            let keep = _mm256_castsi256_pd(_mm256_setr_epi64x(on(0), on(1), on(2), on(3)));
             for (e, &(r, s)) in ENTRIES.iter().enumerate() {
                 let t = _mm256_mul_pd(acc[r][0], acc[s][0]);
                 let t = _mm256_fmadd_pd(acc[r][1], acc[s][1], t);
                 let t = _mm256_fmadd_pd(acc[r][2], acc[s][2], t);
-                dv[e] = _mm256_blendv_pd(dv[e], _mm256_sub_pd(dv[e], _mm256_mul_pd(sign, t)), keep);
+                dv[e] = _mm256_sub_pd(dv[e], _mm256_mul_pd(sign, t));
             }
         }
         for e in 0..6 {
@@ -412,55 +353,6 @@ mod avx2 {
             unsafe {
                 _mm256_storeu_pd(d[e].as_mut_ptr(), dv[e])
             };
-        }
-    }
-
-    /// Single configurations after single updates: `items` (at most four `(k, update index)`,
-    /// each configuration's in order) with their products `P_k` in flight together, a lane per
-    /// column of `U'`, then applied in the order of `items`.
-    #[inline]
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) fn sparse(lanes: &Lanes, pending: &[Update], d: &mut [Group], items: &[(u32, u32)]) {
-        assert!((1..=4).contains(&items.len()));
-        let mv = lanes.varying.len();
-        let size = 3 * mv * LANES;
-        // Short batches repeat their last item (computed, not applied).
-        let item = |q: usize| items[q.min(items.len() - 1)];
-        let (k, up): ([usize; 4], [&Update; 4]) = {
-            let k = std::array::from_fn(|q| item(q).0 as usize);
-            (k, std::array::from_fn(|q| &pending[item(q).1 as usize]))
-        };
-        assert!(k.iter().all(|&k| k < lanes.len) && lanes.j.len() >= lanes.groups * size);
-        assert!(up.iter().all(|u| u.urows.len() >= mv));
-        // Configuration q's value of row r, column j: base[q] + (r * mv + j) * LANES.
-        let base: [*const f64; 4] = std::array::from_fn(|q| {
-            // SAFETY: k < len, so its group's rows lie within `lanes.j` (asserted).
-            #[allow(unsafe_code)]
-            unsafe {
-                lanes.j.as_ptr().add((k[q] / LANES) * size + k[q] % LANES)
-            }
-        });
-        let mut acc: [[__m256d; 3]; 4] =
-            std::array::from_fn(|q| std::array::from_fn(|r| _mm256_setr_pd(up[q].pc[r][0], up[q].pc[r][1], up[q].pc[r][2], 0.0)));
-        for j in 0..mv {
-            for q in 0..4 {
-                // SAFETY: j < mv <= urows.len() (asserted); (r * mv + j) * LANES + lane < size.
-                #[allow(unsafe_code)]
-                unsafe {
-                    let u = _mm256_loadu_pd(up[q].urows.get_unchecked(j).as_ptr());
-                    for r in 0..3 {
-                        acc[q][r] = _mm256_fmadd_pd(_mm256_set1_pd(*base[q].add((r * mv + j) * LANES)), u, acc[q][r]);
-                    }
-                }
-            }
-        }
-        for q in 0..items.len() {
-            let p = [lanes_of(acc[q][0]), lanes_of(acc[q][1]), lanes_of(acc[q][2])];
-            let (g, lane) = (k[q] / LANES, k[q] % LANES);
-            let new = apply(std::array::from_fn(|e| d[g][e][lane]), &p, up[q].sign);
-            for e in 0..6 {
-                d[g][e][lane] = new[e];
-            }
         }
     }
 }
@@ -705,9 +597,9 @@ mod tests {
         }
     }
 
-    /// The AVX2 catch-up (dense groups and single configurations) gives the portable one's numbers
-    /// bit for bit: 37 configurations, 31 columns (two constant), 6 updates of both signs taken in
-    /// three rounds by different subsets, so that groups mix pending counts and both kernels run.
+    /// The AVX2 catch-up gives the portable one's numbers bit for bit: 37 configurations, 31
+    /// columns (two constant), 6 updates of both signs taken in three rounds by different sets of
+    /// groups, so that groups take different numbers of updates at once.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_catch_up_equals_the_portable_one_bit_for_bit() {
@@ -721,20 +613,20 @@ mod tests {
         let start: Vec<Group> =
             (0..lanes.groups).map(|_| std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))).collect();
         let pending: Vec<Update> = (0..6).map(|i| random_update(&lanes, m, if i % 2 == 0 { 1.0 } else { -1.0 }, &mut rng)).collect();
-        let slots = lanes.groups * LANES;
-        let (mut fast, mut slow) = ((start.clone(), vec![0u32; slots]), (start, vec![0u32; slots]));
-        let mut sparse = Vec::new();
-        let rounds: [(usize, &dyn Fn(usize) -> bool); 3] = [(2, &|k| k % 3 == 0), (4, &|k| k % 5 < 2 || k > 30), (6, &|_| true)];
-        for (n, pick) in rounds {
-            let want = |g: usize| (0..LANES).fold(0u8, |b, l| b | ((pick(g * LANES + l) as u8) << l)) & valid_lanes(len, g);
+        let (mut fast, mut slow) = ((start.clone(), vec![0u32; lanes.groups]), (start, vec![0u32; lanes.groups]));
+        let rounds: [(usize, &dyn Fn(usize) -> bool); 3] = [(2, &|g| g % 3 == 0), (4, &|g| g % 5 < 2 || g > 7), (6, &|_| true)];
+        for (n, want) in rounds {
             #[allow(unsafe_code)]
             // SAFETY: the CPU supports AVX2 and FMA (checked above).
             unsafe {
-                catch_up_avx2(&lanes, &pending[..n], &mut fast.0, &mut fast.1, want, &mut sparse)
+                catch_up_avx2(&lanes, &pending[..n], &mut fast.0, &mut fast.1, want)
             };
             catch_up_portable(&lanes, &pending[..n], &mut slow.0, &mut slow.1, want);
             assert_eq!(fast.1, slow.1);
-            let bits = |d: &[Group]| d.iter().flat_map(|g| g.iter().flatten().map(|v| v.to_bits())).collect::<Vec<_>>();
+            // Every configuration's entries (the padded lanes of the last group hold no block).
+            let bits = |d: &[Group]| {
+                (0..len).flat_map(|k| (0..6).map(move |e| (k, e))).map(|(k, e)| d[k / LANES][e][k % LANES].to_bits()).collect::<Vec<_>>()
+            };
             assert_eq!(bits(&fast.0), bits(&slow.0), "after the round of {n} updates");
         }
     }

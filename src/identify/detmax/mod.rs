@@ -81,14 +81,14 @@ struct State<'a> {
     mp: usize,
     logdet: f64,
     /// `D_k = J_k M^-1 J_k^T` for every pool configuration, [`LANES`] to a group, after the first
-    /// `applied[k]` updates of `pending`.
+    /// `applied[g]` updates of `pending` (g the group).
     d: Vec<Group>,
-    /// How many of the pending updates each `D_k` has taken.
+    /// How many of the pending updates each group has taken.
     applied: Vec<u32>,
     /// Exchange steps made since every `D_k` was last current, in order. A pick reads only the
-    /// `D_k` it scores (additions the non-members, removals the members), so only those are brought
-    /// up to date; an excursion that is rejected never pays for the rest. Each `D_k` takes the same
-    /// updates in the same order as an eager update would, so the numbers are the same.
+    /// `D_k` it scores (additions the non-members, removals the members), so only their groups are
+    /// brought up to date; an excursion that is rejected never pays for the rest. Each `D_k` takes
+    /// the same updates in the same order as an eager update would, so the numbers are the same.
     pending: Vec<Update>,
     /// The members of every group, a bit per lane.
     member: Vec<u8>,
@@ -100,13 +100,11 @@ struct Scratch {
     /// The columns of `U = M^-1 J_a^T`, then of `U' = U L^-T`, m values each and zeros to a
     /// multiple of 4.
     u: [Vec<f64>; 3],
-    /// The single configurations of a catch-up.
-    sparse: Vec<(u32, u32)>,
 }
 
 impl Scratch {
     fn new(pool: &PoolJacobian) -> Self {
-        Self { u: std::array::from_fn(|_| vec![0.0; pool.m.div_ceil(4) * 4]), sparse: Vec::new() }
+        Self { u: std::array::from_fn(|_| vec![0.0; pool.m.div_ceil(4) * 4]) }
     }
 }
 
@@ -321,7 +319,7 @@ impl<'a> State<'a> {
             member[k / LANES] |= 1 << (k % LANES);
         }
         let d = lanes::start_blocks(lanes, &linv);
-        let applied = vec![0; lanes.groups * LANES];
+        let applied = vec![0; lanes.groups];
         Some(Self { pool, minv, mp, logdet, d, applied, pending: Vec::new(), member, size: set.len() })
     }
 
@@ -332,7 +330,7 @@ impl<'a> State<'a> {
 
     /// Adds (sign = 1) or removes (sign = -1) configuration a; its `D_a` must be current.
     fn update(&mut self, a: usize, sign: f64, sc: &mut Scratch) -> bool {
-        debug_assert_eq!(self.applied[a] as usize, self.pending.len());
+        debug_assert_eq!(self.applied[a / LANES] as usize, self.pending.len());
         let da = self.entries(a);
         let s: [f64; 6] = std::array::from_fn(|e| if e < 3 { 1.0 + sign * da[e] } else { sign * da[e] });
         let Some(l) = cholesky3(s) else {
@@ -358,9 +356,9 @@ impl<'a> State<'a> {
     }
 
     /// Brings the `D_k` of `rows` up to date; with `Rows::All` the pending list is emptied.
-    fn catch_up(&mut self, rows: Rows, sc: &mut Scratch) {
+    fn catch_up(&mut self, rows: Rows) {
         let (member, len) = (&self.member, self.pool.len);
-        lanes::catch_up(&self.pool.lanes, &self.pending, &mut self.d, &mut self.applied, |g| rows.lanes(member, len, g), &mut sc.sparse);
+        lanes::catch_up(&self.pool.lanes, &self.pending, &mut self.d, &mut self.applied, |g| rows.lanes(member, len, g) != 0);
         if rows == Rows::All {
             self.pending.clear();
             self.applied.fill(0);
@@ -370,9 +368,9 @@ impl<'a> State<'a> {
     /// The configuration whose addition (sign = 1, among the non-members) or removal (sign = -1,
     /// among the members) leaves the largest determinant: the last of equal ones (scores that are
     /// not positive count as minus infinity).
-    fn best(&mut self, sign: f64, sc: &mut Scratch) -> Option<usize> {
+    fn best(&mut self, sign: f64) -> Option<usize> {
         let rows = if sign < 0.0 { Rows::Members } else { Rows::NonMembers };
-        self.catch_up(rows, sc);
+        self.catch_up(rows);
         lanes::best(&self.d, sign, |g| rows.lanes(&self.member, self.pool.len, g))
     }
 
@@ -412,7 +410,7 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
             let mut first_moved = None;
             'excursion: for (half, phase) in [up_first, !up_first].into_iter().enumerate() {
                 for _ in 0..k {
-                    let pick = trial.best(if phase { 1.0 } else { -1.0 }, &mut scratch);
+                    let pick = trial.best(if phase { 1.0 } else { -1.0 });
                     // An exchange of length 1 that would undo its own first move returns to the
                     // start design: a failure known before its last update.
                     if k == 1 && half == 1 && pick == first_moved {
@@ -427,7 +425,7 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
                 }
             }
             if ok && trial.logdet > state.logdet + 1e-9 {
-                trial.catch_up(Rows::All, &mut scratch);
+                trial.catch_up(Rows::All);
                 state = trial;
                 improved = true;
                 break;
@@ -490,14 +488,14 @@ mod tests {
         for (i, (a, sign)) in [(20, 1.0), (3, -1.0), (25, 1.0), (30, 1.0), (0, -1.0), (7, -1.0)].into_iter().enumerate() {
             // Half the steps from a fully current state, half with only the picked block current.
             if i % 2 == 0 {
-                state.catch_up(Rows::All, &mut sc);
+                state.catch_up(Rows::All);
             } else {
                 let member = state.is_member(a);
-                state.catch_up(if member { Rows::Members } else { Rows::NonMembers }, &mut sc);
+                state.catch_up(if member { Rows::Members } else { Rows::NonMembers });
             }
             assert!(state.update(a, sign, &mut sc));
         }
-        state.catch_up(Rows::All, &mut sc);
+        state.catch_up(Rows::All);
         let fresh = State::new(&pool, &state.selection()).expect("non-singular end");
         for k in 0..pool.len {
             let (got, expected) = (lanes::block(&state.d, k), lanes::block(&fresh.d, k));
