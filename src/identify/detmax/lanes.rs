@@ -200,8 +200,15 @@ pub struct Update {
 
 impl Update {
     /// The update from `U'` (m values per column, in the pool's column order).
+    #[cfg(test)]
     pub fn new(lanes: &Lanes, u: [&[f64]; 3], sign: f64) -> Self {
-        let urows = lanes.varying.iter().map(|&c| [u[0][c], u[1][c], u[2][c], 0.0]).collect();
+        Self::new_in(Vec::new(), lanes, u, sign)
+    }
+
+    /// [`Update::new`] with its rows written into `urows` (whose allocation it keeps).
+    pub fn new_in(mut urows: Vec<[f64; 4]>, lanes: &Lanes, u: [&[f64]; 3], sign: f64) -> Self {
+        urows.clear();
+        urows.extend(lanes.varying.iter().map(|&c| [u[0][c], u[1][c], u[2][c], 0.0]));
         let mut pc = [[0.0; 3]; 3];
         for (r, pr) in pc.iter_mut().enumerate() {
             for (c, v) in pr.iter_mut().enumerate() {

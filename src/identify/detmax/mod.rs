@@ -90,6 +90,8 @@ struct State<'a> {
     /// brought up to date; an excursion that is rejected never pays for the rest. Each `D_k` takes
     /// the same updates in the same order as an eager update would, so the numbers are the same.
     pending: Vec<Update>,
+    /// Row buffers of updates no longer pending, for the next ones.
+    spare: Vec<Vec<[f64; 4]>>,
     /// The members of every group, a bit per lane.
     member: Vec<u8>,
     size: usize,
@@ -320,7 +322,23 @@ impl<'a> State<'a> {
         }
         let d = lanes::start_blocks(lanes, &linv);
         let applied = vec![0; lanes.groups];
-        Some(Self { pool, minv, mp, logdet, d, applied, pending: Vec::new(), member, size: set.len() })
+        Some(Self { pool, minv, mp, logdet, d, applied, pending: Vec::new(), spare: Vec::new(), member, size: set.len() })
+    }
+
+    /// Becomes a copy of `other` (a state of the same pool), keeping its own allocations.
+    fn copy_from(&mut self, other: &Self) {
+        self.minv.copy_from(&other.minv);
+        self.logdet = other.logdet;
+        self.d.clone_from(&other.d);
+        self.applied.clone_from(&other.applied);
+        self.spare.extend(self.pending.drain(..).map(|up| up.urows));
+        for up in &other.pending {
+            let mut rows = self.spare.pop().unwrap_or_default();
+            rows.clone_from(&up.urows);
+            self.pending.push(Update { urows: rows, ..*up });
+        }
+        self.member.clone_from(&other.member);
+        self.size = other.size;
     }
 
     /// The six entries of `D_k`.
@@ -343,7 +361,8 @@ impl<'a> State<'a> {
         let stride = self.pool.stride;
         let ja = &self.pool.rows[3 * a * stride..3 * (a + 1) * stride];
         woodbury(self.minv.as_mut_slice(), self.mp, self.pool.m, ja, &l, sign, &mut sc.u);
-        self.pending.push(Update::new(&self.pool.lanes, [&sc.u[0], &sc.u[1], &sc.u[2]], sign));
+        let rows = self.spare.pop().unwrap_or_default();
+        self.pending.push(Update::new_in(rows, &self.pool.lanes, [&sc.u[0], &sc.u[1], &sc.u[2]], sign));
         self.logdet += det.ln();
         self.member[a / LANES] ^= 1 << (a % LANES);
         self.size = (self.size as isize + sign as isize) as usize;
@@ -360,7 +379,7 @@ impl<'a> State<'a> {
         let (member, len) = (&self.member, self.pool.len);
         lanes::catch_up(&self.pool.lanes, &self.pending, &mut self.d, &mut self.applied, |g| rows.lanes(member, len, g) != 0);
         if rows == Rows::All {
-            self.pending.clear();
+            self.spare.extend(self.pending.drain(..).map(|up| up.urows));
             self.applied.fill(0);
         }
     }
@@ -399,13 +418,15 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
     }
     let mut state = state.ok_or(DetmaxError::Singular(opts.max_starts))?;
     let mut scratch = Scratch::new(pool);
+    // Each excursion runs on a copy of the design, kept in one buffer.
+    let mut trial = state.clone();
     let mut history = vec![state.o1()];
     let mut steps = 0;
     let mut k = 1;
     while k <= opts.max_excursion && history.len() <= opts.max_improvements {
         let mut improved = false;
         for up_first in [true, false] {
-            let mut trial = state.clone();
+            trial.copy_from(&state);
             let mut ok = true;
             let mut first_moved = None;
             'excursion: for (half, phase) in [up_first, !up_first].into_iter().enumerate() {
@@ -426,7 +447,7 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
             }
             if ok && trial.logdet > state.logdet + 1e-9 {
                 trial.catch_up(Rows::All);
-                state = trial;
+                std::mem::swap(&mut state, &mut trial);
                 improved = true;
                 break;
             }
