@@ -108,44 +108,63 @@ fn information_avx2(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
 }
 
 /// The information matrix of `set` into `out` (m x m, column-major), in the summation order of
-/// nalgebra's dot product. Entry (a, b) is summed once for b >= a and mirrored: the dot product of
-/// two columns sums the same products in the same order whichever comes first.
+/// nalgebra's dot product: entry (a, b) sums the products of rows 8q + t into partial sum t
+/// (separate products and sums, q in order), adds the partial sums as `((0 + (s0 + s4)) + (s1 +
+/// s5)) + ...` and then the products of the rows past the last full eight, in order. The entries
+/// are computed in tiles of 4 x 4 with b >= a, each summed once and mirrored (the dot product of two
+/// columns sums the same products in the same order whichever comes first); the set's rows are
+/// gathered first, so that a tile reads them contiguously.
 #[inline(always)]
 fn information_body(pool: &PoolJacobian, set: &[usize], out: &mut [f64]) {
     let (m, stride) = (pool.m, pool.stride);
-    // The stacked Jacobian's rows, each padded to `stride`.
-    let rows: Vec<&[f64]> = set.iter().flat_map(|&k| (0..3).map(move |r| &pool.rows[(3 * k + r) * stride..][..stride])).collect();
-    let (full, rest) = rows.split_at(rows.len() / 8 * 8);
-    for a in 0..m {
-        // Four entries (a, c..c + 4) at a time, from the aligned group of four holding a.
-        for c in (a / 4 * 4..stride).step_by(4) {
-            let mut acc = [[0.0; 4]; 8];
-            for block in full.chunks_exact(8) {
-                for (acc_t, x) in acc.iter_mut().zip(block) {
-                    let (xa, xc): (f64, &[f64; 4]) = (x[a], x[c..c + 4].try_into().expect("four values"));
+    let n = 3 * set.len();
+    let mut x = Vec::with_capacity(n * stride);
+    for &k in set {
+        x.extend_from_slice(&pool.rows[3 * k * stride..3 * (k + 1) * stride]);
+    }
+    let row = |i: usize| -> &[f64] { &x[i * stride..(i + 1) * stride] };
+    let full = n / 8 * 8;
+    for a0 in (0..m).step_by(4) {
+        for c in (a0..stride).step_by(4) {
+            // Entries (a0 + i, c + l).
+            let mut res = [[0.0; 4]; 4];
+            for t in 0..4 {
+                // Partial sums t and t + 4.
+                let (mut s, mut u) = ([[0.0; 4]; 4], [[0.0; 4]; 4]);
+                for q in (0..full).step_by(8) {
+                    let (x1, x2) = (row(q + t), row(q + t + 4));
+                    let (c1, c2): (&[f64; 4], &[f64; 4]) = (x1[c..c + 4].try_into().expect("four"), x2[c..c + 4].try_into().expect("four"));
+                    for i in 0..4 {
+                        let (a1, a2) = (x1[a0 + i], x2[a0 + i]);
+                        for l in 0..4 {
+                            s[i][l] += a1 * c1[l];
+                            u[i][l] += a2 * c2[l];
+                        }
+                    }
+                }
+                for i in 0..4 {
                     for l in 0..4 {
-                        acc_t[l] += xa * xc[l];
+                        res[i][l] += s[i][l] + u[i][l];
                     }
                 }
             }
-            let mut res = [0.0; 4];
-            for (t, u) in [(0, 4), (1, 5), (2, 6), (3, 7)] {
-                for l in 0..4 {
-                    res[l] += acc[t][l] + acc[u][l];
-                }
-            }
-            for x in rest {
-                let (xa, xc): (f64, &[f64; 4]) = (x[a], x[c..c + 4].try_into().expect("four values"));
-                for l in 0..4 {
-                    res[l] += xa * xc[l];
+            for q in full..n {
+                let xq = row(q);
+                for i in 0..4 {
+                    for l in 0..4 {
+                        res[i][l] += xq[a0 + i] * xq[c + l];
+                    }
                 }
             }
             // Entries (a, b) and (b, a) for b >= a (column-major storage).
-            for (l, &r) in res.iter().enumerate() {
-                let b = c + l;
-                if b >= a && b < m {
-                    out[b * m + a] = r;
-                    out[a * m + b] = r;
+            for (i, ri) in res.iter().enumerate() {
+                let a = a0 + i;
+                for (l, &r) in ri.iter().enumerate() {
+                    let b = c + l;
+                    if a < m && b >= a && b < m {
+                        out[b * m + a] = r;
+                        out[a * m + b] = r;
+                    }
                 }
             }
         }
