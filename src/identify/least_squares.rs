@@ -15,7 +15,7 @@
 use super::damping::Damping;
 use nalgebra::{DMatrix, DVector, SymmetricEigen, Vector3};
 
-use crate::robot::{Joints, KinState, ParamSet, RobotModel, forward, tcp_jacobian};
+use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
 
 /// One measured configuration: joint values commanded and the TCP measured in {W}.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -367,7 +367,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
         let accept = match opts.solver {
             Solver::GaussNewton => true,
             Solver::LevenbergMarquardt { .. } => {
-                let new_cost = cost(&trial, obs, &mut ws.st);
+                let new_cost = cost(&trial, obs);
                 let gain = 2.0 * step_scaled.dot(&ne.b) - step_scaled.dot(&(&ne.n * &step_scaled));
                 let rho = if gain > 0.0 { (ne.cost - new_cost) / gain } else { -1.0 };
                 damping.update(rho)
@@ -389,7 +389,7 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
         }
     }
 
-    let residual_rms_mm = (cost(&model, obs, &mut ws.st) / obs.len().max(1) as f64).sqrt();
+    let residual_rms_mm = (cost(&model, obs) / obs.len().max(1) as f64).sqrt();
     conclude(set, opts, Iterate { model, x, iterations, converged, residual_rms_mm, history }, last_normal)
 }
 
@@ -475,8 +475,8 @@ fn conclude(set: &ParamSet, opts: &FitOptions, it: Iterate, last_normal: Option<
 }
 
 /// Sum of squared position residuals of `model` over `obs`, mm^2.
-fn cost(model: &RobotModel, obs: &[Observation], st: &mut KinState) -> f64 {
-    obs.iter().map(|o| (o.tcp_world_mm - forward(model, st, &o.q)).norm_squared()).sum()
+fn cost(model: &RobotModel, obs: &[Observation]) -> f64 {
+    crate::robot::tcps_world(model, obs.iter().map(|o| &o.q)).iter().zip(obs).map(|(p, o)| (o.tcp_world_mm - p).norm_squared()).sum()
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@ pub mod ik;
 pub mod kinematics;
 #[cfg(target_arch = "x86_64")]
 mod kinematics_avx;
+mod kinematics_batch;
 pub mod model;
 pub mod params;
 pub mod state;
@@ -16,6 +17,7 @@ pub mod virtual_robot;
 
 pub use ik::{IkError, inverse};
 pub use kinematics::{forward, tcp_jacobian, tcp_jacobian_matrix, tcp_world, world_from_base, world_from_flange};
+pub use kinematics_batch::tcps_world;
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use state::KinState;

@@ -199,8 +199,9 @@ pub struct StudyResults {
 }
 
 /// Validation errors of `model` over the tracker poses, mm.
-pub fn validation_errors(model: &RobotModel, experiment: &Experiment, st: &mut KinState) -> Vec<f64> {
-    experiment.campaign.validation.iter().map(|v| (forward(model, st, &v.q) - v.measured_w).norm()).collect()
+pub fn validation_errors(model: &RobotModel, experiment: &Experiment) -> Vec<f64> {
+    let poses = &experiment.campaign.validation;
+    crate::robot::tcps_world(model, poses.iter().map(|v| &v.q)).iter().zip(poses).map(|(p, v)| (p - v.measured_w).norm()).collect()
 }
 
 /// Runs every task of `spec` on `experiment`, starting identifications from `before`, with
@@ -237,8 +238,7 @@ pub fn run_on_pool(
     let results = engine::run_tasks(&spec.tasks(), seed, crate::seeds::study::TRICAL, progress, |task, rng| cx.run(task, rng).0);
     let tasks_s = t1.elapsed().as_secs_f64();
 
-    let mut st = KinState::default();
-    let before_errors = validation_errors(before, experiment, &mut st);
+    let before_errors = validation_errors(before, experiment);
     let base_w = world_from_base(&experiment.robot.truth).transform_point(&Point3::origin()).coords;
     let ccz = experiment.cell.calibration_zone_centre();
     let distance_to_base_mm = experiment.campaign.validation.iter().map(|v| (v.measured_w - base_w).norm()).collect();
@@ -294,7 +294,7 @@ impl TaskContext<'_> {
             let obs: Vec<Observation> = chosen.iter().map(|&k| self.observations[k]).collect();
             identify(self.before, self.set, &obs, &self.opts)
         });
-        let errors = model.as_ref().map(|m| validation_errors(m, self.experiment, &mut KinState::default()));
+        let errors = model.as_ref().map(|m| validation_errors(m, self.experiment));
         let validation = errors.as_deref().map(ErrorStats::of).unwrap_or_default();
         let keep = task.set_size == self.table_n;
         let compensated = match (&model, &self.targets) {
