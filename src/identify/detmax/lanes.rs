@@ -318,7 +318,9 @@ fn catch_up_avx2(lanes: &Lanes, pending: &[Update], d: &mut [Group], applied: &m
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use std::arch::x86_64::{__m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd};
+    use std::arch::x86_64::{
+        __m256d, _mm256_add_pd, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd,
+    };
 
     use super::{ENTRIES, Group, LANES, Update};
 
@@ -346,12 +348,13 @@ mod avx2 {
                     }
                 }
             }
-            let sign = _mm256_set1_pd(up.sign);
+            // `D - sign t` with sign = +-1 is exactly `D - t` or `D + t`.
+            let add = up.sign < 0.0;
             for (e, &(r, s)) in ENTRIES.iter().enumerate() {
                 let t = _mm256_mul_pd(acc[r][0], acc[s][0]);
                 let t = _mm256_fmadd_pd(acc[r][1], acc[s][1], t);
                 let t = _mm256_fmadd_pd(acc[r][2], acc[s][2], t);
-                dv[e] = _mm256_sub_pd(dv[e], _mm256_mul_pd(sign, t));
+                dv[e] = if add { _mm256_add_pd(dv[e], t) } else { _mm256_sub_pd(dv[e], t) };
             }
         }
         for e in 0..6 {
