@@ -6,7 +6,8 @@ Usage: scripts/bench/compare_results.py OLD_DIR NEW_DIR   (needs python3 with po
 For every parquet table both directories hold: whether it is identical, and per numeric column
 the largest absolute difference, the largest relative difference (|a - b| / max(|a|, |b|)) and
 the rows that differ; non-numeric columns must be equal. Exit 0 when every table has the same
-shape and columns (the numbers may differ), 1 otherwise.
+shape and columns (the numbers may differ), 1 otherwise, 2 on bad input (one line naming it: a
+directory that is missing or holds no table, a table that cannot be read).
 """
 import sys
 from pathlib import Path
@@ -15,6 +16,13 @@ import polars as pl
 
 
 def main(old: Path, new: Path) -> int:
+    for d in (old, new):
+        if not d.is_dir():
+            print(f"compare_results: {d}: not a directory", file=sys.stderr)
+            return 2
+        if not any(d.glob("*.parquet")):
+            print(f"compare_results: {d}: holds no parquet table", file=sys.stderr)
+            return 2
     status = 0
     tables = sorted({p.name for p in old.glob("*.parquet")} & {p.name for p in new.glob("*.parquet")})
     only = sorted({p.name for p in old.glob("*.parquet")} ^ {p.name for p in new.glob("*.parquet")})
@@ -22,7 +30,11 @@ def main(old: Path, new: Path) -> int:
         print(f"{name}: in one directory only")
         status = 1
     for name in tables:
-        a, b = pl.read_parquet(old / name), pl.read_parquet(new / name)
+        try:
+            a, b = pl.read_parquet(old / name), pl.read_parquet(new / name)
+        except Exception as e:  # a cut or foreign file: one line, not a traceback
+            print(f"compare_results: {name}: cannot be read: {str(e).splitlines()[0] if str(e) else type(e).__name__}", file=sys.stderr)
+            return 2
         if a.shape != b.shape or a.columns != b.columns:
             print(f"{name}: shape {a.shape} vs {b.shape}, columns differ: {a.columns != b.columns}")
             status = 1
@@ -50,6 +62,6 @@ def main(old: Path, new: Path) -> int:
 
 if __name__ == "__main__":
     if len(sys.argv) != 3:
-        print(__doc__.strip().splitlines()[2], file=sys.stderr)
+        print("compare_results: usage: compare_results.py OLD_DIR NEW_DIR", file=sys.stderr)
         sys.exit(2)
     sys.exit(main(Path(sys.argv[1]), Path(sys.argv[2])))

@@ -353,9 +353,9 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    use crate::robot::builtin::{er20c10_table4, er20c10_table5, irb120, trical_2018_nominal, trical_2018_table7};
     use crate::robot::kinematics::{forward_portable, tcp_jacobian_portable};
-    use crate::robot::{Inertial, KinState, ParamId, ParamSet, RobotModel};
+    use crate::robot::test_models::models;
+    use crate::robot::{KinState, ParamId, ParamSet};
 
     /// Every number of the state, in field order.
     fn numbers(st: &KinState) -> Vec<f64> {
@@ -369,38 +369,6 @@ mod tests {
         st.moment.iter().for_each(|m| v.extend(m.iter()));
         v.extend(st.tcp_base.iter().chain(st.tcp_world.iter()));
         v
-    }
-
-    /// A model with every link, body and base number moved at random (`scale` of its size).
-    fn scrambled(m: &RobotModel, rng: &mut ChaCha8Rng) -> RobotModel {
-        m.edited(|d| {
-            let mut r = |x: f64, s: f64| x + rng.random_range(-1.0..1.0) * s;
-            for l in &mut d.links {
-                (l.alpha, l.a, l.beta) = (r(l.alpha, 0.5), r(l.a, 50.0), r(l.beta, 0.1));
-                (l.theta_offset, l.d, l.compliance) = (r(l.theta_offset, 0.5), r(l.d, 50.0), r(l.compliance, 1e-3));
-            }
-            for b in d.links_inertial.iter_mut().chain(std::iter::once(&mut d.payload)) {
-                *b = Inertial { mass_kg: r(b.mass_kg, 1.0).abs(), com_mm: b.com_mm.map(|c| r(c, 80.0)) };
-            }
-            let w = &mut d.world_from_base;
-            (w.x, w.alpha, w.beta, w.gamma) = (r(w.x, 500.0), r(w.alpha, 3.0), r(w.beta, 3.0), r(w.gamma, 3.0));
-            d.flange_tcp_mm = d.flange_tcp_mm.map(|c| r(c, 100.0));
-            d.gravity_base = Vector3::new(r(0.0, 2.0), r(0.0, 2.0), r(-9.81, 2.0));
-        })
-        .expect("finite model")
-    }
-
-    /// The models compared: 5 built-in robots, their rigid forms and 40 scrambled models.
-    fn models(rng: &mut ChaCha8Rng) -> Vec<RobotModel> {
-        let mut models = vec![irb120(), trical_2018_nominal(), trical_2018_table7(), er20c10_table4(), er20c10_table5(true)];
-        let rigid: Vec<_> = models.iter().map(|m| m.edited(|d| d.links.iter_mut().for_each(|l| l.compliance = 0.0)).unwrap()).collect();
-        assert!(rigid.iter().all(|m| m.rigid));
-        models.extend(rigid);
-        for i in 0..40 {
-            let m = scrambled(&models[i % 5], rng);
-            models.push(m);
-        }
-        models
     }
 
     /// A configuration: within +-3.2 rad, one in four within +-20 rad.

@@ -148,7 +148,8 @@ fn four(model: &RobotModel, q: &[Joints; LANES]) -> [Vector3<f64>; LANES] {
             let mut sd = mul(delta, sub(one, mul(div6, sub(one, div20))));
             let mut cd = sub(one, mul(div2, sub(one, div12)));
             for l in 0..LANES {
-                if !(delta[l].abs() < 1e-3) {
+                let small = delta[l].abs() < 1e-3;
+                if !small {
                     (sd[l], cd[l]) = delta[l].sin_cos();
                 }
             }
@@ -205,7 +206,6 @@ mod tests {
 
     use super::*;
     use crate::robot::KinState;
-    use crate::robot::builtin::{er20c10_table4, er20c10_table5, irb120, trical_2018_nominal, trical_2018_table7};
     use crate::robot::kinematics::{forward, forward_portable};
 
     /// The batched TCPs equal `forward`'s (and the portable path's) to the bit: the 5 built-in
@@ -215,30 +215,7 @@ mod tests {
     #[test]
     fn batched_tcps_equal_forward_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(17);
-        let mut models = vec![irb120(), trical_2018_nominal(), trical_2018_table7(), er20c10_table4(), er20c10_table5(true)];
-        let rigid: Vec<_> = models.iter().map(|m| m.edited(|d| d.links.iter_mut().for_each(|l| l.compliance = 0.0)).unwrap()).collect();
-        assert!(rigid.iter().all(|m| m.rigid));
-        models.extend(rigid);
-        for i in 0..40 {
-            let base = models[i % 5].clone();
-            let m = base
-                .edited(|d| {
-                    let mut r = |x: f64, s: f64| x + rng.random_range(-1.0..1.0) * s;
-                    for l in &mut d.links {
-                        (l.alpha, l.a, l.beta) = (r(l.alpha, 0.5), r(l.a, 50.0), r(l.beta, 0.1));
-                        (l.theta_offset, l.d, l.compliance) = (r(l.theta_offset, 0.5), r(l.d, 50.0), r(l.compliance, 1e-3));
-                    }
-                    for b in d.links_inertial.iter_mut().chain(std::iter::once(&mut d.payload)) {
-                        *b = crate::robot::Inertial { mass_kg: r(b.mass_kg, 1.0).abs(), com_mm: b.com_mm.map(|c| r(c, 80.0)) };
-                    }
-                    let w = &mut d.world_from_base;
-                    (w.x, w.alpha, w.beta, w.gamma) = (r(w.x, 500.0), r(w.alpha, 3.0), r(w.beta, 3.0), r(w.gamma, 3.0));
-                    d.flange_tcp_mm = d.flange_tcp_mm.map(|c| r(c, 100.0));
-                    d.gravity_base = Vector3::new(r(0.0, 2.0), r(0.0, 2.0), r(-9.81, 2.0));
-                })
-                .expect("finite model");
-            models.push(m);
-        }
+        let models = crate::robot::test_models::models(&mut rng);
         let mut large = 0;
         let mut st = KinState::default();
         for model in &models {

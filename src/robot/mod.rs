@@ -11,6 +11,8 @@ pub mod model;
 pub mod params;
 pub mod state;
 pub mod statics;
+#[cfg(test)]
+mod test_models;
 pub mod truth;
 pub mod urdf;
 pub mod virtual_robot;

@@ -551,7 +551,7 @@ mod tests {
             let minv = info.try_inverse().unwrap();
             for k in 0..len {
                 let jk = jp.rows(3 * k, 3);
-                let expected = &jk * &minv * jk.transpose();
+                let expected = jk * &minv * jk.transpose();
                 let got = block(&d, k);
                 assert!((got - &expected).abs().max() <= 1e-12 * (1.0 + expected.abs().max()), "m = {m}, k = {k}: {got} vs {expected}");
             }

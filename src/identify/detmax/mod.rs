@@ -134,20 +134,22 @@ impl Rows {
 /// The Cholesky factor `(l00, l10, l11, l20, l21, l22)` of the symmetric `s` (its six entries in
 /// the order of [`lanes::ENTRIES`]), or `None` when `s` is not positive definite.
 fn cholesky3(s: [f64; 6]) -> Option<[f64; 6]> {
+    // NaN is not positive either.
+    let positive = |x: f64| x > 0.0;
     let [s00, s11, s22, s01, s02, s12] = s;
-    if !(s00 > 0.0) {
+    if !positive(s00) {
         return None;
     }
     let l00 = s00.sqrt();
     let (l10, l20) = (s01 / l00, s02 / l00);
     let t11 = s11 - l10 * l10;
-    if !(t11 > 0.0) {
+    if !positive(t11) {
         return None;
     }
     let l11 = t11.sqrt();
     let l21 = (s12 - l20 * l10) / l11;
     let t22 = (s22 - l20 * l20) - l21 * l21;
-    if !(t22 > 0.0 && t22.is_finite()) {
+    if !(positive(t22) && t22.is_finite()) {
         return None;
     }
     Some([l00, l10, l11, l20, l21, t22.sqrt()])
@@ -355,7 +357,7 @@ impl<'a> State<'a> {
             return false;
         };
         let det = (l[0] * l[2] * l[5]).powi(2);
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return false;
         }
         let stride = self.pool.stride;
