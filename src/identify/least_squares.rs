@@ -15,7 +15,7 @@
 use super::damping::Damping;
 use nalgebra::{DMatrix, DVector, SymmetricEigen, Vector3};
 
-use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
+use crate::robot::{Joints, ParamSet, RobotModel, tcp_jacobians_transposed};
 
 /// One measured configuration: joint values commanded and the TCP measured in {W}.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -192,8 +192,10 @@ struct Normal {
 
 /// Scratch of one identification, allocated once.
 struct Workspace {
-    st: KinState,
-    cols: Vec<Vector3<f64>>,
+    /// The configurations of the observations.
+    qs: Vec<Joints>,
+    /// The predicted TCPs in {W}.
+    tcps: Vec<Vector3<f64>>,
     /// Transposed stacked Jacobian, p x 3n.
     jt: DMatrix<f64>,
     /// Stacked residuals, 3n.
@@ -203,10 +205,11 @@ struct Workspace {
 }
 
 impl Workspace {
-    fn new(p: usize, configurations: usize) -> Self {
+    fn new(p: usize, obs: &[Observation]) -> Self {
+        let configurations = obs.len();
         Self {
-            st: KinState::default(),
-            cols: vec![Vector3::zeros(); p],
+            qs: obs.iter().map(|o| o.q).collect(),
+            tcps: vec![Vector3::zeros(); configurations],
             jt: DMatrix::zeros(p, 3 * configurations),
             r: DVector::zeros(3 * configurations),
             n: DMatrix::zeros(p, p),
@@ -216,17 +219,11 @@ impl Workspace {
 
 fn accumulate(model: &RobotModel, set: &ParamSet, obs: &[Observation], ws: &mut Workspace) -> Normal {
     let p = set.len();
-    let (jt, r) = (ws.jt.as_mut_slice(), ws.r.as_mut_slice());
-    for ((o, jt3), r3) in obs.iter().zip(jt.chunks_exact_mut(3 * p)).zip(r.chunks_exact_mut(3)) {
-        let pw = tcp_jacobian(model, &mut ws.st, &o.q, set, &mut ws.cols);
+    // Rows 3i..3i + 3 of J are columns of jt (p x 3n, column-major).
+    tcp_jacobians_transposed(model, set, &ws.qs, ws.jt.as_mut_slice(), &mut ws.tcps);
+    for ((o, pw), r3) in obs.iter().zip(&ws.tcps).zip(ws.r.as_mut_slice().chunks_exact_mut(3)) {
         let res = o.tcp_world_mm - pw;
-        // Rows 3i..3i + 3 of J are columns of jt (p x 3n, column-major).
-        for (c, jt_col) in jt3.chunks_exact_mut(p).enumerate() {
-            r3[c] = res[c];
-            for (v, col) in jt_col.iter_mut().zip(&ws.cols) {
-                *v = col[c];
-            }
-        }
+        r3.copy_from_slice(res.as_slice());
     }
     normal_matrix(&ws.jt, &mut ws.n);
     // `mul_to` is what `&jt * &r` calls (nalgebra's gemm), here without a fresh vector.
@@ -320,7 +317,7 @@ fn cholesky_step(n: &DMatrix<f64>, b: &DVector<f64>, mu: f64, rank_rtol: f64) ->
 /// parameter outside the set).
 pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &FitOptions) -> Fit {
     let p = set.len();
-    let mut ws = Workspace::new(p, obs.len());
+    let mut ws = Workspace::new(p, obs);
     let mut x = set.pack(start);
     let mut model = start.clone();
     let scale_rms = 1.0 / ((3 * obs.len()).max(1) as f64).sqrt();

@@ -10,16 +10,17 @@
 
 use nalgebra::{DMatrix, Vector3};
 
-use crate::robot::{Joints, KinState, ParamSet, RobotModel, tcp_jacobian};
+use crate::robot::{Joints, ParamSet, RobotModel};
 
 /// The identification Jacobians of `qs` at `model` for `set`, stacked: rows 3k..3k+3 are
 /// configuration k (unscaled).
 pub fn stacked_jacobian(model: &RobotModel, set: &ParamSet, qs: &[Joints]) -> DMatrix<f64> {
-    let mut st = KinState::default();
-    let mut cols = vec![Vector3::zeros(); set.len()];
-    let mut j = DMatrix::zeros(3 * qs.len(), set.len());
-    for (k, q) in qs.iter().enumerate() {
-        tcp_jacobian(model, &mut st, q, set, &mut cols);
+    let p = set.len();
+    let mut cols = vec![Vector3::zeros(); p * qs.len()];
+    let mut tcps = vec![Vector3::zeros(); qs.len()];
+    crate::robot::tcp_jacobians(model, set, qs, &mut cols, &mut tcps);
+    let mut j = DMatrix::zeros(3 * qs.len(), p);
+    for (k, cols) in cols.chunks_exact(p.max(1)).enumerate().take(qs.len()) {
         for (c, col) in cols.iter().enumerate() {
             j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
         }

@@ -1,19 +1,25 @@
-//! The TCPs of many configurations of one model: forward kinematics with gravity torques and
-//! compliance for four configurations side by side, a configuration per lane.
+//! The TCPs and identification Jacobians of many configurations of one model: forward kinematics
+//! with gravity torques and compliance, and the Jacobian, for four configurations side by side, a
+//! configuration per lane.
 //!
 //! Each lane performs exactly the operations of [`super::kinematics::forward_portable`] on its
 //! configuration, in the same order: nalgebra's products of a 3 x 3 matrix and a vector
 //! (`(a_0 x_0 + a_1 x_1) + a_2 x_2`, column by column), its cross and dot products, separate
 //! multiplies and adds (no fused operations), `sincos` of each angle by the same library call, the
 //! same short series for small deflections. So every TCP is the same to the bit as [`forward`]'s
-//! (a test compares them over 50 models); the lanes only share the model's constants and the
-//! loop. The validation of every identified model takes its TCPs here: 506 poses, one model.
+//! (a test compares them over 50 models), and every Jacobian column the same as
+//! [`super::kinematics::tcp_jacobian`]'s (`tcp_jacobian_portable`'s operations: torque
+//! sensitivities, the suffix and prefix sums of the compliance term, each parameter's motion);
+//! the lanes only share the model's constants and the loop. The validation of every identified
+//! model takes its TCPs here (506 poses, one model), the identification its Jacobians (every
+//! configuration of the set, one model per iteration).
 //!
 //! [`forward`]: super::kinematics::forward
 
 use nalgebra::{Matrix3, Vector3};
 
 use super::model::{JOINTS, Joints, RobotModel};
+use super::params::{BaseParam, LinkParam, ParamId, ParamSet};
 
 /// Configurations side by side.
 const LANES: usize = 4;
@@ -54,6 +60,29 @@ fn vadd(a: &V, b: &V) -> V {
 #[inline(always)]
 fn vscale(v: &V, x: L) -> V {
     std::array::from_fn(|i| mul(v[i], x))
+}
+
+#[inline(always)]
+fn vsub(a: &V, b: &V) -> V {
+    std::array::from_fn(|i| sub(a[i], b[i]))
+}
+
+/// A constant vector in every lane.
+#[inline(always)]
+fn vsplat(v: &Vector3<f64>) -> V {
+    [splat(v.x), splat(v.y), splat(v.z)]
+}
+
+/// nalgebra's cross product: `(a_y b_z - a_z b_y, a_z b_x - a_x b_z, a_x b_y - a_y b_x)`.
+#[inline(always)]
+fn cross(a: &V, b: &V) -> V {
+    [sub(mul(a[1], b[2]), mul(a[2], b[1])), sub(mul(a[2], b[0]), mul(a[0], b[2])), sub(mul(a[0], b[1]), mul(a[1], b[0]))]
+}
+
+/// `m * x`, both of each lane: `(m_0 x_0 + m_1 x_1) + m_2 x_2`.
+#[inline(always)]
+fn mat_vec(m: &M, x: &V) -> V {
+    std::array::from_fn(|i| add(add(mul(m[0][i], x[0]), mul(m[1][i], x[1])), mul(m[2][i], x[2])))
 }
 
 /// `m * x` for a constant vector x: `(m_0 x_0 + m_1 x_1) + m_2 x_2`.
@@ -100,9 +129,27 @@ fn chain(model: &RobotModel, sc: &[(L, L); JOINTS], mut frames: Option<(&mut [M;
     (r, o)
 }
 
-/// The TCPs in {W} (mm) of four configurations.
+/// The forward pass of four configurations: what the TCP and the Jacobian read (the fields of
+/// `KinState` that `forward_portable` fills, in lanes).
+struct Frames {
+    rot0: [M; JOINTS + 1],
+    org0: [V; JOINTS + 1],
+    rot: [M; JOINTS + 1],
+    org: [V; JOINTS + 1],
+    /// Mass moment of links k..6 and the payload (kg mm), undeflected frames.
+    moment: [V; JOINTS + 1],
+    /// Their mass (kg), the same in every lane.
+    mass: [f64; JOINTS + 1],
+    /// Holding torques, N m.
+    tau: [L; JOINTS],
+    tcp_base: V,
+    tcp_world: V,
+}
+
+/// [`Frames`] of four configurations into `f` (`kinematics::forward_portable`, lane by lane).
+/// `all`: the deflected chain's frames too (the Jacobian reads them; the TCP only the last).
 #[inline(always)]
-fn four(model: &RobotModel, q: &[Joints; LANES]) -> [Vector3<f64>; LANES] {
+fn forward(model: &RobotModel, q: &[Joints; LANES], all: bool, f: &mut Frames) {
     let data = model.data();
     let links = &data.links;
     let mut sc0 = [(splat(0.0), splat(1.0)); JOINTS];
@@ -111,37 +158,36 @@ fn four(model: &RobotModel, q: &[Joints; LANES]) -> [Vector3<f64>; LANES] {
             (sci.0[l], sci.1[l]) = (q[l][i] + links[i].theta_offset).sin_cos();
         }
     }
-    let mut rot0 = [[[splat(0.0); 3]; 3]; JOINTS + 1];
-    let mut org0 = [[splat(0.0); 3]; JOINTS + 1];
-    let (r6, o6) = chain(model, &sc0, Some((&mut rot0, &mut org0)));
+    let (r6, o6) = chain(model, &sc0, Some((&mut f.rot0, &mut f.org0)));
+    // The gravity pass (`statics::gravity_pass`): holding torques at the undeflected frames.
+    let g = data.gravity_base;
+    let (gx, gy, gz) = (splat(g.x), splat(g.y), splat(g.z));
+    let payload = &data.payload;
+    let mut s = vscale(&vadd(&o6, &times(&r6, &payload.com_mm)), splat(payload.mass_kg));
+    let mut m = payload.mass_kg;
+    for k in (1..=JOINTS).rev() {
+        let body = &data.links_inertial[k - 1];
+        s = vadd(&s, &vscale(&vadd(&f.org0[k], &times(&f.rot0[k], &body.com_mm)), splat(body.mass_kg)));
+        m += body.mass_kg;
+        f.moment[k] = s;
+        f.mass[k] = m;
+        let r = vsub(&s, &vscale(&f.org0[k], splat(m)));
+        // -z . (r x g) * 1e-3, nalgebra's cross and dot.
+        let c = cross(&r, &[gx, gy, gz]);
+        let z = &f.rot0[k][2];
+        let dot = add(add(mul(z[0], c[0]), mul(z[1], c[1])), mul(z[2], c[2]));
+        f.tau[k - 1] = dot.map(|d| -d * 1e-3);
+    }
     let (rot, org) = if model.rigid {
+        f.rot = f.rot0;
+        f.org = f.org0;
         (r6, o6)
     } else {
-        // The gravity pass (`statics::gravity_pass`): holding torques at the undeflected frames.
-        let g = data.gravity_base;
-        let (gx, gy, gz) = (splat(g.x), splat(g.y), splat(g.z));
-        let payload = &data.payload;
-        let mut s = vscale(&vadd(&o6, &times(&r6, &payload.com_mm)), splat(payload.mass_kg));
-        let mut m = payload.mass_kg;
-        let mut tau = [splat(0.0); JOINTS];
-        for k in (1..=JOINTS).rev() {
-            let body = &data.links_inertial[k - 1];
-            s = vadd(&s, &vscale(&vadd(&org0[k], &times(&rot0[k], &body.com_mm)), splat(body.mass_kg)));
-            m += body.mass_kg;
-            let mv = splat(m);
-            let r = [sub(s[0], mul(org0[k][0], mv)), sub(s[1], mul(org0[k][1], mv)), sub(s[2], mul(org0[k][2], mv))];
-            // -z . (r x g) * 1e-3, nalgebra's cross and dot.
-            let cross = [sub(mul(r[1], gz), mul(r[2], gy)), sub(mul(r[2], gx), mul(r[0], gz)), sub(mul(r[0], gy), mul(r[1], gx))];
-            let z = &rot0[k][2];
-            let dot = add(add(mul(z[0], cross[0]), mul(z[1], cross[1])), mul(z[2], cross[2]));
-            tau[k - 1] = dot.map(|d| -d * 1e-3);
-        }
-        // The deflected angles' sines and cosines (`kinematics::deflected_sincos`).
         // The same operations as `kinematics::sincos_shifted`, its series in every lane and
         // `sin_cos` of the deflection where it is 1e-3 rad or more.
         let mut sc = sc0;
         for (i, sci) in sc.iter_mut().enumerate() {
-            let delta = mul(splat(links[i].compliance), tau[i]);
+            let delta = mul(splat(links[i].compliance), f.tau[i]);
             let d2 = mul(delta, delta);
             let one = splat(1.0);
             let (div6, div20, div2, div12) = (d2.map(|x| x / 6.0), d2.map(|x| x / 20.0), d2.map(|x| x / 2.0), d2.map(|x| x / 12.0));
@@ -156,16 +202,135 @@ fn four(model: &RobotModel, q: &[Joints; LANES]) -> [Vector3<f64>; LANES] {
             let (s0, c0) = sc0[i];
             *sci = (add(mul(s0, cd), mul(c0, sd)), sub(mul(c0, cd), mul(s0, sd)));
         }
-        chain(model, &sc, None)
+        chain(model, &sc, all.then_some((&mut f.rot, &mut f.org)))
     };
-    let tcp_base = vadd(&org, &times(&rot, &data.flange_tcp_mm));
-    let world =
-        vadd(&[splat(model.base_pos.x), splat(model.base_pos.y), splat(model.base_pos.z)], &const_times(&model.base_rot, &tcp_base));
-    let mut out = [Vector3::zeros(); LANES];
-    for (l, p) in out.iter_mut().enumerate() {
-        *p = Vector3::new(world[0][l], world[1][l], world[2][l]);
+    f.tcp_base = vadd(&org, &times(&rot, &data.flange_tcp_mm));
+    f.tcp_world = vadd(&vsplat(&model.base_pos), &const_times(&model.base_rot, &f.tcp_base));
+}
+
+impl Frames {
+    /// Frame 0 in both chains is the base: the identity at the origin (as in `KinState`); the rest
+    /// is written by [`forward`].
+    fn new() -> Self {
+        let mut identity = [[splat(0.0); 3]; 3];
+        for (j, col) in identity.iter_mut().enumerate() {
+            col[j] = splat(1.0);
+        }
+        Frames {
+            rot0: [identity; JOINTS + 1],
+            org0: [[splat(0.0); 3]; JOINTS + 1],
+            rot: [identity; JOINTS + 1],
+            org: [[splat(0.0); 3]; JOINTS + 1],
+            moment: [[splat(0.0); 3]; JOINTS + 1],
+            mass: [0.0; JOINTS + 1],
+            tau: [splat(0.0); JOINTS],
+            tcp_base: [splat(0.0); 3],
+            tcp_world: [splat(0.0); 3],
+        }
     }
-    out
+}
+
+/// A motion of frames i..6 caused by one parameter (`kinematics::Motion`), in lanes.
+enum Motion {
+    Rotation { axis: V, point: V },
+    Translation(V),
+}
+
+/// `kinematics::link_motion` in lanes.
+#[inline(always)]
+fn link_motion(model: &RobotModel, rot: &[M; JOINTS + 1], org: &[V; JOINTS + 1], i: usize, kind: LinkParam) -> Option<Motion> {
+    let prev_x = rot[i - 1][0];
+    Some(match kind {
+        LinkParam::Alpha => Motion::Rotation { axis: prev_x, point: org[i - 1] },
+        LinkParam::A => Motion::Translation(prev_x),
+        LinkParam::Beta => Motion::Rotation {
+            axis: times(&rot[i - 1], &model.joint[i - 1].beta_axis),
+            point: vadd(&org[i - 1], &vscale(&prev_x, splat(model.data().links[i - 1].a))),
+        },
+        LinkParam::ThetaOffset => Motion::Rotation { axis: rot[i][2], point: org[i] },
+        LinkParam::D => Motion::Translation(rot[i][2]),
+        LinkParam::Compliance => return None,
+    })
+}
+
+/// The Jacobian columns of `set` at four configurations (`kinematics::tcp_jacobian_portable`, lane
+/// by lane): `emit(column, value in lanes)`.
+#[inline(always)]
+fn jacobian(model: &RobotModel, f: &Frames, set: &ParamSet, mut emit: impl FnMut(usize, &V)) {
+    let p = &f.tcp_base;
+    let pw = &f.tcp_world;
+    let links = &model.data().links;
+    let mut jt = [[splat(0.0); 3]; JOINTS];
+    for (k, jk) in jt.iter_mut().enumerate() {
+        *jk = cross(&f.rot[k + 1][2], &vsub(p, &f.org[k + 1]));
+    }
+    let compliant = !model.rigid;
+    let zero: M = [[splat(0.0); 3]; 3];
+    let mut w_suffix = [zero; JOINTS + 2];
+    let mut u_prefix = [zero; JOINTS + 2];
+    if compliant {
+        // `torque_sensitivities`: w_k = -((z_k x r_k) x g) 1e-3, u_k = -(g x z_k) 1e-3.
+        let g = vsplat(&model.data().gravity_base);
+        let milli = splat(1e-3);
+        let neg = |v: V| v.map(|c| c.map(|x| -x));
+        let mut w = [[splat(0.0); 3]; JOINTS];
+        let mut u = [[splat(0.0); 3]; JOINTS];
+        for k in 1..=JOINTS {
+            let z = f.rot0[k][2];
+            let r = vsub(&f.moment[k], &vscale(&f.org0[k], splat(f.mass[k])));
+            w[k - 1] = vscale(&neg(cross(&cross(&z, &r), &g)), milli);
+            u[k - 1] = vscale(&neg(cross(&g, &z)), milli);
+        }
+        // The outer products `c_k jt_k w_k^T` (column j: `c_k jt_k` times `w_k[j]`), summed.
+        for k in (1..=JOINTS).rev() {
+            let cj = vscale(&jt[k - 1], splat(links[k - 1].compliance));
+            for j in 0..3 {
+                let next = w_suffix[k + 1][j];
+                w_suffix[k][j] = vadd(&next, &vscale(&cj, w[k - 1][j]));
+            }
+        }
+        for k in 1..=JOINTS {
+            let cj = vscale(&jt[k - 1], splat(links[k - 1].compliance));
+            for j in 0..3 {
+                let prev = u_prefix[k][j];
+                u_prefix[k + 1][j] = vadd(&prev, &vscale(&cj, u[k - 1][j]));
+            }
+        }
+    }
+    let rel = vsub(pw, &vsplat(&model.base_pos));
+    for (c, id) in set.ids().iter().enumerate() {
+        let col = match *id {
+            ParamId::Link { joint: i, kind } => {
+                let mut dp = match link_motion(model, &f.rot, &f.org, i, kind) {
+                    Some(Motion::Rotation { axis, point }) => cross(&axis, &vsub(p, &point)),
+                    Some(Motion::Translation(t)) => t,
+                    None => vscale(&jt[i - 1], f.tau[i - 1]),
+                };
+                if compliant && let Some(m0) = link_motion(model, &f.rot0, &f.org0, i, kind) {
+                    let extra = match m0 {
+                        Motion::Rotation { axis, point } => vadd(
+                            &mat_vec(&w_suffix[i], &axis),
+                            &mat_vec(&u_prefix[i], &cross(&axis, &vsub(&f.moment[i], &vscale(&point, splat(f.mass[i]))))),
+                        ),
+                        Motion::Translation(t) => mat_vec(&u_prefix[i], &vscale(&t, splat(f.mass[i]))),
+                    };
+                    dp = vadd(&dp, &extra);
+                }
+                const_times(&model.base_rot, &dp)
+            }
+            // `kinematics::base_column`.
+            ParamId::Base(b) => match b {
+                BaseParam::X => vsplat(&Vector3::x()),
+                BaseParam::Y => vsplat(&Vector3::y()),
+                BaseParam::Z => vsplat(&Vector3::z()),
+                BaseParam::Alpha => cross(&vsplat(&Vector3::z()), &rel),
+                BaseParam::Beta => cross(&vsplat(&model.base_beta_axis), &rel),
+                BaseParam::Gamma => cross(&vsplat(&model.base_rot.column(0).into_owned()), &rel),
+            },
+            ParamId::Tool(k) => const_times(&model.base_rot, &f.rot[JOINTS][k]),
+        };
+        emit(c, &col);
+    }
 }
 
 /// The TCP in {W} (mm) of every configuration of `qs` at `model`, in order: the same to the bit as
@@ -191,12 +356,94 @@ fn tcps_avx2(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
 #[inline(always)]
 fn tcps_body(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
     let mut out = Vec::with_capacity(qs.len());
+    let mut f = Frames::new();
     for chunk in qs.chunks(LANES) {
         // A short last chunk repeats its last configuration (computed, not returned).
         let q: [Joints; LANES] = std::array::from_fn(|l| *chunk[l.min(chunk.len() - 1)]);
-        out.extend_from_slice(&four(model, &q)[..chunk.len()]);
+        forward(model, &q, false, &mut f);
+        let w = &f.tcp_world;
+        out.extend((0..chunk.len()).map(|l| Vector3::new(w[0][l], w[1][l], w[2][l])));
     }
     out
+}
+
+/// The identification Jacobian `d p_W / d rho` of `set` at every configuration of `qs` (`model`):
+/// `jac` gets `set.len()` columns per configuration, one configuration after another, and `tcps`
+/// the TCP in {W} of each (mm); the same to the bit as [`super::kinematics::tcp_jacobian`] of each.
+pub fn tcp_jacobians(model: &RobotModel, set: &ParamSet, qs: &[Joints], jac: &mut [Vector3<f64>], tcps: &mut [Vector3<f64>]) {
+    let p = set.len();
+    assert_eq!(jac.len(), qs.len() * p, "set.len() columns per configuration");
+    assert_eq!(tcps.len(), qs.len(), "one TCP per configuration");
+    dispatch(model, set, qs, tcps, |n, c, col| jac[n * p + c] = col);
+}
+
+/// [`tcp_jacobians`] with the Jacobian's transpose written instead, as least squares reads it:
+/// `jt` is p x 3n, column-major (column 3k + i holds row i of configuration k's 3 x p Jacobian).
+pub fn tcp_jacobians_transposed(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
+    let p = set.len();
+    assert_eq!(jt.len(), 3 * qs.len() * p, "p x 3n");
+    assert_eq!(tcps.len(), qs.len(), "one TCP per configuration");
+    dispatch(model, set, qs, tcps, |n, c, col| {
+        for i in 0..3 {
+            jt[(3 * n + i) * p + c] = col[i];
+        }
+    });
+}
+
+/// [`each_jacobian`] compiled for AVX2 where the CPU has it.
+#[inline(always)]
+fn dispatch(model: &RobotModel, set: &ParamSet, qs: &[Joints], tcps: &mut [Vector3<f64>], sink: impl FnMut(usize, usize, Vector3<f64>)) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU was just found to support AVX2, the only requirement of
+        // `each_jacobian_avx2`.
+        #[allow(unsafe_code)]
+        unsafe {
+            each_jacobian_avx2(model, set, qs, tcps, sink)
+        };
+        return;
+    }
+    each_jacobian(model, set, qs, tcps, sink);
+}
+
+/// [`each_jacobian`] compiled for AVX2 (the lanes in one vector; the same operations).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn each_jacobian_avx2(
+    model: &RobotModel,
+    set: &ParamSet,
+    qs: &[Joints],
+    tcps: &mut [Vector3<f64>],
+    sink: impl FnMut(usize, usize, Vector3<f64>),
+) {
+    each_jacobian(model, set, qs, tcps, sink);
+}
+
+/// Every configuration's TCP into `tcps` and every Jacobian column to `sink(configuration,
+/// column, value)`, four configurations at a time.
+#[inline(always)]
+fn each_jacobian(
+    model: &RobotModel,
+    set: &ParamSet,
+    qs: &[Joints],
+    tcps: &mut [Vector3<f64>],
+    mut sink: impl FnMut(usize, usize, Vector3<f64>),
+) {
+    let mut f = Frames::new();
+    for (n, chunk) in qs.chunks(LANES).enumerate() {
+        // A short last chunk repeats its last configuration (computed, not returned).
+        let q: [Joints; LANES] = std::array::from_fn(|l| chunk[l.min(chunk.len() - 1)]);
+        forward(model, &q, true, &mut f);
+        let first = n * LANES;
+        for l in 0..chunk.len() {
+            tcps[first + l] = Vector3::new(f.tcp_world[0][l], f.tcp_world[1][l], f.tcp_world[2][l]);
+        }
+        jacobian(model, &f, set, |c, col| {
+            for l in 0..chunk.len() {
+                sink(first + l, c, Vector3::new(col[0][l], col[1][l], col[2][l]));
+            }
+        });
+    }
 }
 
 #[cfg(test)]
@@ -207,6 +454,7 @@ mod tests {
     use super::*;
     use crate::robot::KinState;
     use crate::robot::kinematics::{forward, forward_portable};
+    use crate::robot::params::ParamId;
 
     /// The batched TCPs equal `forward`'s (and the portable path's) to the bit: the 5 built-in
     /// arms, their rigid forms and 40 models with every link, body, base, tool and gravity number
@@ -236,5 +484,50 @@ mod tests {
             }
         }
         assert!(large > 100, "deflections of 1e-3 rad or more: {large}");
+    }
+
+    /// The batched Jacobians (both layouts) equal `tcp_jacobian`'s (and the portable path's) to
+    /// the bit, for every parameter calsim names (each link parameter of every joint, base and tool): 50 models (see
+    /// `test_models`), 101 configurations each (a short last chunk), one in four within +-20 rad.
+    #[test]
+    fn batched_jacobians_equal_tcp_jacobian_bit_for_bit() {
+        use crate::robot::kinematics::{tcp_jacobian, tcp_jacobian_portable};
+        let mut rng = ChaCha8Rng::seed_from_u64(23);
+        let models = crate::robot::test_models::models(&mut rng);
+        let set = ParamSet::new(ParamId::all()).unwrap();
+        assert_eq!(set.len(), 6 * 6 + 6 + 3, "every link, base and tool parameter");
+        let p = set.len();
+        let mut st = KinState::default();
+        let mut one = vec![Vector3::zeros(); p];
+        for model in &models {
+            let qs: Vec<Joints> = (0..101)
+                .map(|j| {
+                    let wide = if j % 4 == 0 { 20.0 } else { 3.2 };
+                    std::array::from_fn(|_| rng.random_range(-wide..wide))
+                })
+                .collect();
+            let (mut jac, mut tcps) = (vec![Vector3::zeros(); qs.len() * p], vec![Vector3::zeros(); qs.len()]);
+            tcp_jacobians(model, &set, &qs, &mut jac, &mut tcps);
+            let (mut jac_b, mut tcps_b) = (jac.clone(), tcps.clone());
+            each_jacobian(model, &set, &qs, &mut tcps_b, |n, c, col| jac_b[n * p + c] = col);
+            let mut jt = vec![0.0; 3 * qs.len() * p];
+            tcp_jacobians_transposed(model, &set, &qs, &mut jt, &mut tcps_b);
+            for (n, c, i) in (0..qs.len()).flat_map(|n| (0..p).flat_map(move |c| (0..3).map(move |i| (n, c, i)))) {
+                assert_eq!(jt[(3 * n + i) * p + c].to_bits(), jac[n * p + c][i].to_bits());
+            }
+            let bits = |v: &Vector3<f64>| v.map(f64::to_bits);
+            for (n, q) in qs.iter().enumerate() {
+                let pw = tcp_jacobian(model, &mut st, q, &set, &mut one);
+                assert_eq!(bits(&tcps[n]), bits(&pw), "{q:?}");
+                assert_eq!(bits(&tcps_b[n]), bits(&pw), "{q:?}");
+                let mut portable = vec![Vector3::zeros(); p];
+                tcp_jacobian_portable(model, &mut KinState::default(), q, &set, &mut portable);
+                for c in 0..p {
+                    let name = &set.names()[c];
+                    assert_eq!(bits(&jac[n * p + c]), bits(&one[c]), "{}: column {name} at {q:?}", model.name());
+                    assert_eq!(bits(&jac_b[n * p + c]), bits(&portable[c]), "{}: column {name} at {q:?}", model.name());
+                }
+            }
+        }
     }
 }
