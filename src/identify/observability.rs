@@ -8,7 +8,7 @@
 //! for its own numerics; for one set the two scalings differ by a diagonal matrix, so the fitted
 //! values are the same, but the singular values each reports are of its own scaling.
 
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::DMatrix;
 
 use crate::robot::{Joints, ParamSet, RobotModel};
 
@@ -16,16 +16,10 @@ use crate::robot::{Joints, ParamSet, RobotModel};
 /// configuration k (unscaled).
 pub fn stacked_jacobian(model: &RobotModel, set: &ParamSet, qs: &[Joints]) -> DMatrix<f64> {
     let p = set.len();
-    let mut cols = vec![Vector3::zeros(); p * qs.len()];
-    let mut tcps = vec![Vector3::zeros(); qs.len()];
-    crate::robot::tcp_jacobians(model, set, qs, &mut cols, &mut tcps);
-    let mut j = DMatrix::zeros(3 * qs.len(), p);
-    for (k, cols) in cols.chunks_exact(p.max(1)).enumerate().take(qs.len()) {
-        for (c, col) in cols.iter().enumerate() {
-            j.fixed_view_mut::<3, 1>(3 * k, c).copy_from(col);
-        }
-    }
-    j
+    let mut jt = DMatrix::zeros(p, 3 * qs.len());
+    let mut tcps = vec![nalgebra::Vector3::zeros(); qs.len()];
+    crate::robot::tcp_jacobians_transposed(model, set, qs, jt.as_mut_slice(), &mut tcps);
+    jt.transpose()
 }
 
 /// The pool's identification Jacobians, column-scaled, stacked: rows 3k..3k+3 are configuration k.

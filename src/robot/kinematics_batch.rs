@@ -367,68 +367,36 @@ fn tcps_body(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
     out
 }
 
-/// The identification Jacobian `d p_W / d rho` of `set` at every configuration of `qs` (`model`):
-/// `jac` gets `set.len()` columns per configuration, one configuration after another, and `tcps`
-/// the TCP in {W} of each (mm); the same to the bit as [`super::kinematics::tcp_jacobian`] of each.
-pub fn tcp_jacobians(model: &RobotModel, set: &ParamSet, qs: &[Joints], jac: &mut [Vector3<f64>], tcps: &mut [Vector3<f64>]) {
-    let p = set.len();
-    assert_eq!(jac.len(), qs.len() * p, "set.len() columns per configuration");
-    assert_eq!(tcps.len(), qs.len(), "one TCP per configuration");
-    dispatch(model, set, qs, tcps, |n, c, col| jac[n * p + c] = col);
-}
-
-/// [`tcp_jacobians`] with the Jacobian's transpose written instead, as least squares reads it:
-/// `jt` is p x 3n, column-major (column 3k + i holds row i of configuration k's 3 x p Jacobian).
+/// The identification Jacobians `d p_W / d rho` of `set` at every configuration of `qs` (`model`),
+/// transposed and stacked as least squares reads them: `jt` is p x 3n, column-major (column 3k + i
+/// holds row i of configuration k's 3 x p Jacobian); `tcps` gets the TCP in {W} of each (mm). The
+/// same to the bit as [`super::kinematics::tcp_jacobian`] of each.
 pub fn tcp_jacobians_transposed(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
-    let p = set.len();
-    assert_eq!(jt.len(), 3 * qs.len() * p, "p x 3n");
+    assert_eq!(jt.len(), 3 * qs.len() * set.len(), "p x 3n");
     assert_eq!(tcps.len(), qs.len(), "one TCP per configuration");
-    dispatch(model, set, qs, tcps, |n, c, col| {
-        for i in 0..3 {
-            jt[(3 * n + i) * p + c] = col[i];
-        }
-    });
-}
-
-/// [`each_jacobian`] compiled for AVX2 where the CPU has it.
-#[inline(always)]
-fn dispatch(model: &RobotModel, set: &ParamSet, qs: &[Joints], tcps: &mut [Vector3<f64>], sink: impl FnMut(usize, usize, Vector3<f64>)) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU was just found to support AVX2, the only requirement of
-        // `each_jacobian_avx2`.
+        // `jacobians_avx2`.
         #[allow(unsafe_code)]
         unsafe {
-            each_jacobian_avx2(model, set, qs, tcps, sink)
+            jacobians_avx2(model, set, qs, jt, tcps)
         };
         return;
     }
-    each_jacobian(model, set, qs, tcps, sink);
+    jacobians_body(model, set, qs, jt, tcps);
 }
 
-/// [`each_jacobian`] compiled for AVX2 (the lanes in one vector; the same operations).
+/// [`tcp_jacobians_transposed`] compiled for AVX2 (the lanes in one vector; the same operations).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn each_jacobian_avx2(
-    model: &RobotModel,
-    set: &ParamSet,
-    qs: &[Joints],
-    tcps: &mut [Vector3<f64>],
-    sink: impl FnMut(usize, usize, Vector3<f64>),
-) {
-    each_jacobian(model, set, qs, tcps, sink);
+fn jacobians_avx2(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
+    jacobians_body(model, set, qs, jt, tcps);
 }
 
-/// Every configuration's TCP into `tcps` and every Jacobian column to `sink(configuration,
-/// column, value)`, four configurations at a time.
 #[inline(always)]
-fn each_jacobian(
-    model: &RobotModel,
-    set: &ParamSet,
-    qs: &[Joints],
-    tcps: &mut [Vector3<f64>],
-    mut sink: impl FnMut(usize, usize, Vector3<f64>),
-) {
+fn jacobians_body(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
+    let p = set.len();
     let mut f = Frames::new();
     for (n, chunk) in qs.chunks(LANES).enumerate() {
         // A short last chunk repeats its last configuration (computed, not returned).
@@ -438,9 +406,13 @@ fn each_jacobian(
         for l in 0..chunk.len() {
             tcps[first + l] = Vector3::new(f.tcp_world[0][l], f.tcp_world[1][l], f.tcp_world[2][l]);
         }
+        // This chunk's 3 x len columns of jt, each p values.
+        let out = &mut jt[3 * first * p..3 * (first + chunk.len()) * p];
         jacobian(model, &f, set, |c, col| {
-            for l in 0..chunk.len() {
-                sink(first + l, c, Vector3::new(col[0][l], col[1][l], col[2][l]));
+            for (l, rows) in out.chunks_exact_mut(3 * p).enumerate() {
+                for (i, row) in rows.chunks_exact_mut(p).enumerate() {
+                    row[c] = col[i][l];
+                }
             }
         });
     }
@@ -486,8 +458,8 @@ mod tests {
         assert!(large > 100, "deflections of 1e-3 rad or more: {large}");
     }
 
-    /// The batched Jacobians (both layouts) equal `tcp_jacobian`'s (and the portable path's) to
-    /// the bit, for every parameter calsim names (each link parameter of every joint, base and tool): 50 models (see
+    /// The batched Jacobians equal `tcp_jacobian`'s (and the portable path's) to the bit, for every
+    /// parameter calsim names (each link parameter of every joint, base and tool): 50 models (see
     /// `test_models`), 101 configurations each (a short last chunk), one in four within +-20 rad.
     #[test]
     fn batched_jacobians_equal_tcp_jacobian_bit_for_bit() {
@@ -506,15 +478,12 @@ mod tests {
                     std::array::from_fn(|_| rng.random_range(-wide..wide))
                 })
                 .collect();
-            let (mut jac, mut tcps) = (vec![Vector3::zeros(); qs.len() * p], vec![Vector3::zeros(); qs.len()]);
-            tcp_jacobians(model, &set, &qs, &mut jac, &mut tcps);
-            let (mut jac_b, mut tcps_b) = (jac.clone(), tcps.clone());
-            each_jacobian(model, &set, &qs, &mut tcps_b, |n, c, col| jac_b[n * p + c] = col);
-            let mut jt = vec![0.0; 3 * qs.len() * p];
-            tcp_jacobians_transposed(model, &set, &qs, &mut jt, &mut tcps_b);
-            for (n, c, i) in (0..qs.len()).flat_map(|n| (0..p).flat_map(move |c| (0..3).map(move |i| (n, c, i)))) {
-                assert_eq!(jt[(3 * n + i) * p + c].to_bits(), jac[n * p + c][i].to_bits());
-            }
+            let (mut jt, mut tcps) = (vec![0.0; 3 * qs.len() * p], vec![Vector3::zeros(); qs.len()]);
+            tcp_jacobians_transposed(model, &set, &qs, &mut jt, &mut tcps);
+            let (mut jt_b, mut tcps_b) = (jt.clone(), tcps.clone());
+            jacobians_body(model, &set, &qs, &mut jt_b, &mut tcps_b);
+            // Column c of configuration n's Jacobian, from the transposed layout.
+            let column = |jt: &[f64], n: usize, c: usize| Vector3::from_fn(|i, _| jt[(3 * n + i) * p + c]);
             let bits = |v: &Vector3<f64>| v.map(f64::to_bits);
             for (n, q) in qs.iter().enumerate() {
                 let pw = tcp_jacobian(model, &mut st, q, &set, &mut one);
@@ -524,8 +493,8 @@ mod tests {
                 tcp_jacobian_portable(model, &mut KinState::default(), q, &set, &mut portable);
                 for c in 0..p {
                     let name = &set.names()[c];
-                    assert_eq!(bits(&jac[n * p + c]), bits(&one[c]), "{}: column {name} at {q:?}", model.name());
-                    assert_eq!(bits(&jac_b[n * p + c]), bits(&portable[c]), "{}: column {name} at {q:?}", model.name());
+                    assert_eq!(bits(&column(&jt, n, c)), bits(&one[c]), "{}: column {name} at {q:?}", model.name());
+                    assert_eq!(bits(&column(&jt_b, n, c)), bits(&portable[c]), "{}: column {name} at {q:?}", model.name());
                 }
             }
         }

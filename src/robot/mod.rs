@@ -19,7 +19,7 @@ pub mod virtual_robot;
 
 pub use ik::{IkError, inverse};
 pub use kinematics::{forward, tcp_jacobian, tcp_jacobian_matrix, tcp_world, world_from_base, world_from_flange};
-pub use kinematics_batch::{tcp_jacobians, tcp_jacobians_transposed, tcps_world};
+pub use kinematics_batch::{tcp_jacobians_transposed, tcps_world};
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use state::KinState;
