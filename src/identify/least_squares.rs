@@ -2,8 +2,8 @@
 //! (paper eqs. 11-15): Gauss-Newton with column scaling and a Moore-Penrose step, or
 //! Levenberg-Marquardt.
 //!
-//! Each iteration accumulates the normal matrix `N = J^T J` and `J^T r` configuration by
-//! configuration (never the 3n x p Jacobian), scales the columns to unit norm, and solves for the
+//! Each iteration forms the transposed Jacobian (p x 3n, four configurations at a time), the
+//! normal matrix `N = J^T J` and `J^T r`, scales the columns to unit norm, and solves for the
 //! step. While the scaled matrix is well conditioned, the step comes from its Cholesky factor, which
 //! equals the pseudo-inverse solution (eq. 14 = eq. 15 at full rank). When a Cholesky pivot signals
 //! near-dependence, the step comes from the eigendecomposition of the scaled normal matrix (the SVD
@@ -204,16 +204,31 @@ struct Workspace {
     n: DMatrix<f64>,
 }
 
+thread_local! {
+    /// The transposed Jacobian's storage, kept between the identifications one thread runs: every
+    /// entry is written before it is read, so a fit needs neither a fresh allocation nor zeroes.
+    static JT_STORAGE: std::cell::Cell<Vec<f64>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
 impl Workspace {
     fn new(p: usize, obs: &[Observation]) -> Self {
         let configurations = obs.len();
+        let mut storage = JT_STORAGE.take();
+        storage.resize(p * 3 * configurations, 0.0);
         Self {
             qs: obs.iter().map(|o| o.q).collect(),
             tcps: vec![Vector3::zeros(); configurations],
-            jt: DMatrix::zeros(p, 3 * configurations),
+            jt: DMatrix::from_vec(p, 3 * configurations, storage),
             r: DVector::zeros(3 * configurations),
             n: DMatrix::zeros(p, p),
         }
+    }
+}
+
+impl Drop for Workspace {
+    fn drop(&mut self) {
+        let jt = std::mem::replace(&mut self.jt, DMatrix::zeros(0, 0));
+        JT_STORAGE.set(jt.data.into());
     }
 }
 
@@ -226,9 +241,9 @@ fn accumulate(model: &RobotModel, set: &ParamSet, obs: &[Observation], ws: &mut 
         r3.copy_from_slice(res.as_slice());
     }
     normal_matrix(&ws.jt, &mut ws.n);
-    // `mul_to` is what `&jt * &r` calls (nalgebra's gemm), here without a fresh vector.
+    // `&jt * &r` (nalgebra's gemv), the same to the bit.
     let mut b = DVector::zeros(p);
-    ws.jt.mul_to(&ws.r, &mut b);
+    crate::numeric::matrix_vector(&ws.jt, ws.r.as_slice(), b.as_mut_slice());
     let cost = ws.r.norm_squared();
     let norms = DVector::from_fn(p, |j, _| ws.n[(j, j)].sqrt());
     let inv = norms.map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
@@ -331,7 +346,8 @@ pub fn identify(start: &RobotModel, set: &ParamSet, obs: &[Observation], opts: &
     while iterations < opts.max_iterations {
         iterations += 1;
         let ne = accumulate(&model, set, obs, &mut ws);
-        if !(ne.cost.is_finite() && ne.n.iter().all(|v| v.is_finite())) {
+        // Every entry looked at (no early exit), so that the test runs four at a time.
+        if !(ne.cost.is_finite() && ne.n.iter().fold(true, |all, v| all & v.is_finite())) {
             return Fit::not_finite(p, iterations, history);
         }
         if let Some(prev) = accepted_cost
