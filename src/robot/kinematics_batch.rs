@@ -253,10 +253,27 @@ fn link_motion(model: &RobotModel, rot: &[M; JOINTS + 1], org: &[V; JOINTS + 1],
     })
 }
 
+/// The sums of the compliance terms along the chain, in lanes: `w_suffix[i]` over joints k >= i,
+/// `u_prefix[i]` over k < i (see [`jacobian`]). For a compliant model, entries 1..=6 of `w_suffix`
+/// and 2..=7 of `u_prefix` are written for each four configurations before they are read (a rigid
+/// one reads none); `w_suffix[7]` and `u_prefix[1]` are the empty sums and stay zero. Made once per call and reused (zeroing them for every four
+/// configurations was a memset of 4.6 kB each time).
+struct ComplianceSums {
+    w_suffix: [M; JOINTS + 2],
+    u_prefix: [M; JOINTS + 2],
+}
+
+impl ComplianceSums {
+    fn new() -> Self {
+        let zero: M = [[splat(0.0); 3]; 3];
+        Self { w_suffix: [zero; JOINTS + 2], u_prefix: [zero; JOINTS + 2] }
+    }
+}
+
 /// The Jacobian columns of `set` at four configurations (`kinematics::tcp_jacobian_portable`, lane
 /// by lane): `emit(column, value in lanes)`.
 #[inline(always)]
-fn jacobian(model: &RobotModel, f: &Frames, set: &ParamSet, mut emit: impl FnMut(usize, &V)) {
+fn jacobian(model: &RobotModel, f: &Frames, set: &ParamSet, sums: &mut ComplianceSums, mut emit: impl FnMut(usize, &V)) {
     let p = &f.tcp_base;
     let pw = &f.tcp_world;
     let links = &model.data().links;
@@ -265,9 +282,7 @@ fn jacobian(model: &RobotModel, f: &Frames, set: &ParamSet, mut emit: impl FnMut
         *jk = cross(&f.rot[k + 1][2], &vsub(p, &f.org[k + 1]));
     }
     let compliant = !model.rigid;
-    let zero: M = [[splat(0.0); 3]; 3];
-    let mut w_suffix = [zero; JOINTS + 2];
-    let mut u_prefix = [zero; JOINTS + 2];
+    let ComplianceSums { w_suffix, u_prefix } = sums;
     if compliant {
         // `torque_sensitivities`: w_k = -((z_k x r_k) x g) 1e-3, u_k = -(g x z_k) 1e-3.
         let g = vsplat(&model.data().gravity_base);
@@ -398,6 +413,7 @@ fn jacobians_avx2(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f
 fn jacobians_body(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
     let p = set.len();
     let mut f = Frames::new();
+    let mut sums = ComplianceSums::new();
     for (n, chunk) in qs.chunks(LANES).enumerate() {
         // A short last chunk repeats its last configuration (computed, not returned).
         let q: [Joints; LANES] = std::array::from_fn(|l| chunk[l.min(chunk.len() - 1)]);
@@ -408,7 +424,7 @@ fn jacobians_body(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f
         }
         // This chunk's 3 x len columns of jt, each p values.
         let out = &mut jt[3 * first * p..3 * (first + chunk.len()) * p];
-        jacobian(model, &f, set, |c, col| {
+        jacobian(model, &f, set, &mut sums, |c, col| {
             for (l, rows) in out.chunks_exact_mut(3 * p).enumerate() {
                 for (i, row) in rows.chunks_exact_mut(p).enumerate() {
                     row[c] = col[i][l];
