@@ -477,6 +477,17 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    /// The Gram matrix `a^T a` of an (n + extra) x n draw over six decades; `repeated`: with the
+    /// last column of `a` a copy of the first (rank deficient).
+    fn gram(rng: &mut ChaCha8Rng, n: usize, extra: usize, repeated: bool) -> DMatrix<f64> {
+        let mut a = DMatrix::from_fn(n + extra, n, |_, _| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-3..=3)));
+        if repeated {
+            let c0 = a.column(0).into_owned();
+            a.set_column(n - 1, &c0);
+        }
+        a.tr_mul(&a)
+    }
+
     /// The eigenvalues-only sweeps give nalgebra's eigenvalues bit for bit: 40 draws per size
     /// (1, 2, 3, 7, 31, 40) of Gram matrices (full rank, and rank deficient through repeated
     /// columns), indefinite symmetric matrices, diagonal ones (already reduced), the zero matrix and
@@ -487,15 +498,8 @@ mod tests {
         let bits = |v: &DVector<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for n in [1, 2, 3, 7, 31, 40] {
             for draw in 0..40 {
-                let a = DMatrix::from_fn(n + 3, n, |_, _| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-3..=3)));
-                let mut gram = a.tr_mul(&a);
-                if draw % 4 == 1 && n > 1 {
-                    // Repeated column: one eigenvalue (numerically) zero.
-                    let mut b = a.clone();
-                    let c0 = b.column(0).into_owned();
-                    b.set_column(n - 1, &c0);
-                    gram = b.tr_mul(&b);
-                }
+                // Repeated column: one eigenvalue (numerically) zero.
+                let gram = gram(&mut rng, n, 3, draw % 4 == 1 && n > 1);
                 let indefinite = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 7 + i * j) % 13) as f64 - 6.0 + rng.random_range(-0.5..0.5));
                 let indefinite = &indefinite + indefinite.transpose();
                 let diagonal = DMatrix::from_diagonal(&DVector::from_fn(n, |_, _| rng.random_range(-5.0..5.0)));
@@ -526,14 +530,7 @@ mod tests {
         let bits = |v: &DVector<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for n in [1, 2, 3, 8, 9, 17, 31, 40] {
             for draw in 0..30 {
-                let a = DMatrix::from_fn(n + 2, n, |_, _| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-3..=3)));
-                let mut gram = a.tr_mul(&a);
-                if draw % 3 == 1 && n > 1 {
-                    let mut b = a.clone();
-                    let c0 = b.column(0).into_owned();
-                    b.set_column(n - 1, &c0);
-                    gram = b.tr_mul(&b);
-                }
+                let gram = gram(&mut rng, n, 2, draw % 3 == 1 && n > 1);
                 let indefinite = DMatrix::from_fn(n, n, |_, _| rng.random_range(-2.0..2.0));
                 let indefinite = &indefinite + indefinite.transpose();
                 let diagonal = DMatrix::from_diagonal(&DVector::from_fn(n, |_, _| rng.random_range(-5.0..5.0)));

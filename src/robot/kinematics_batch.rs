@@ -444,6 +444,17 @@ mod tests {
     use crate::robot::kinematics::{forward, forward_portable};
     use crate::robot::params::ParamId;
 
+    /// `count` configurations, one in four within +-20 rad (far outside any joint range), the
+    /// others within +-3.2 rad.
+    fn configurations(rng: &mut ChaCha8Rng, count: usize) -> Vec<Joints> {
+        (0..count)
+            .map(|j| {
+                let wide = if j % 4 == 0 { 20.0 } else { 3.2 };
+                std::array::from_fn(|_| rng.random_range(-wide..wide))
+            })
+            .collect()
+    }
+
     /// The batched TCPs equal `forward`'s (and the portable path's) to the bit: the 5 built-in
     /// arms, their rigid forms and 40 models with every link, body, base, tool and gravity number
     /// moved at random (large compliances among them, so that deflections take both branches of
@@ -455,12 +466,7 @@ mod tests {
         let mut large = 0;
         let mut st = KinState::default();
         for model in &models {
-            let qs: Vec<Joints> = (0..203)
-                .map(|j| {
-                    let wide = if j % 4 == 0 { 20.0 } else { 3.2 };
-                    std::array::from_fn(|_| rng.random_range(-wide..wide))
-                })
-                .collect();
+            let qs = configurations(&mut rng, 203);
             let batch = tcps_world(model, &qs);
             let body = tcps_body(model, &qs.iter().collect::<Vec<_>>());
             for (q, (b, p)) in qs.iter().zip(batch.iter().zip(&body)) {
@@ -488,12 +494,7 @@ mod tests {
         let mut st = KinState::default();
         let mut one = vec![Vector3::zeros(); p];
         for model in &models {
-            let qs: Vec<Joints> = (0..101)
-                .map(|j| {
-                    let wide = if j % 4 == 0 { 20.0 } else { 3.2 };
-                    std::array::from_fn(|_| rng.random_range(-wide..wide))
-                })
-                .collect();
+            let qs = configurations(&mut rng, 101);
             let (mut jt, mut tcps) = (vec![0.0; 3 * qs.len() * p], vec![Vector3::zeros(); qs.len()]);
             tcp_jacobians_transposed(model, &set, &qs, &mut jt, &mut tcps);
             let (mut jt_b, mut tcps_b) = (jt.clone(), tcps.clone());
