@@ -32,7 +32,7 @@ fn chain(model: &RobotModel, sc: &[(f64, f64); JOINTS], rot: &mut [Matrix3<f64>;
 
 /// sin and cos of `theta0 + delta` from those of `theta0`; a short series for the small deflections.
 #[inline(always)]
-pub(super) fn sincos_shifted((s0, c0): (f64, f64), delta: f64) -> (f64, f64) {
+fn sincos_shifted((s0, c0): (f64, f64), delta: f64) -> (f64, f64) {
     let (sd, cd) = if delta.abs() < 1e-3 {
         // Truncation below 2e-21 for |delta| < 1e-3.
         let d2 = delta * delta;

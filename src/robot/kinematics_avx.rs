@@ -350,11 +350,11 @@ pub(super) fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, se
 #[cfg(test)]
 mod tests {
     use nalgebra::Vector3;
-    use rand::{RngExt, SeedableRng};
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     use crate::robot::kinematics::{forward_portable, tcp_jacobian_portable};
-    use crate::robot::test_models::models;
+    use crate::robot::test_models::{configuration, models};
     use crate::robot::{KinState, ParamId, ParamSet};
 
     /// Every number of the state, in field order.
@@ -369,12 +369,6 @@ mod tests {
         st.moment.iter().for_each(|m| v.extend(m.iter()));
         v.extend(st.tcp_base.iter().chain(st.tcp_world.iter()));
         v
-    }
-
-    /// A configuration: within +-3.2 rad, one in four within +-20 rad.
-    fn configuration(rng: &mut ChaCha8Rng, j: usize) -> [f64; 6] {
-        let wide = if j.is_multiple_of(4) { 20.0 } else { 3.2 };
-        std::array::from_fn(|_| rng.random_range(-wide..wide))
     }
 
     /// The AVX forward pass gives the portable path's numbers to the bit: 50 models (see

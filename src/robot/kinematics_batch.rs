@@ -97,14 +97,17 @@ fn const_times(c: &Matrix3<f64>, x: &V) -> V {
     std::array::from_fn(|i| add(add(mul(splat(c[(i, 0)]), x[0]), mul(splat(c[(i, 1)]), x[1])), mul(splat(c[(i, 2)]), x[2])))
 }
 
+/// The identity in every lane.
+#[inline(always)]
+fn identity() -> M {
+    std::array::from_fn(|j| std::array::from_fn(|i| splat(if i == j { 1.0 } else { 0.0 })))
+}
+
 /// The frames of the chain from the sines and cosines of the joint angles (`kinematics::chain`):
 /// the last one, and every one into `frames` when given.
 #[inline(always)]
 fn chain(model: &RobotModel, sc: &[(L, L); JOINTS], mut frames: Option<(&mut [M; JOINTS + 1], &mut [V; JOINTS + 1])>) -> (M, V) {
-    let mut r: M = [[splat(0.0); 3]; 3];
-    for (j, col) in r.iter_mut().enumerate() {
-        col[j] = splat(1.0);
-    }
+    let mut r = identity();
     let mut o: V = [splat(0.0); 3];
     for i in 1..=JOINTS {
         let link = &model.data().links[i - 1];
@@ -212,14 +215,10 @@ impl Frames {
     /// Frame 0 in both chains is the base: the identity at the origin (as in `KinState`); the rest
     /// is written by [`forward`].
     fn new() -> Self {
-        let mut identity = [[splat(0.0); 3]; 3];
-        for (j, col) in identity.iter_mut().enumerate() {
-            col[j] = splat(1.0);
-        }
         Frames {
-            rot0: [identity; JOINTS + 1],
+            rot0: [identity(); JOINTS + 1],
             org0: [[splat(0.0); 3]; JOINTS + 1],
-            rot: [identity; JOINTS + 1],
+            rot: [identity(); JOINTS + 1],
             org: [[splat(0.0); 3]; JOINTS + 1],
             moment: [[splat(0.0); 3]; JOINTS + 1],
             mass: [0.0; JOINTS + 1],
@@ -256,8 +255,9 @@ fn link_motion(model: &RobotModel, rot: &[M; JOINTS + 1], org: &[V; JOINTS + 1],
 /// The sums of the compliance terms along the chain, in lanes: `w_suffix[i]` over joints k >= i,
 /// `u_prefix[i]` over k < i (see [`jacobian`]). For a compliant model, entries 1..=6 of `w_suffix`
 /// and 2..=7 of `u_prefix` are written for each four configurations before they are read (a rigid
-/// one reads none); `w_suffix[7]` and `u_prefix[1]` are the empty sums and stay zero. Made once per call and reused (zeroing them for every four
-/// configurations was a memset of 4.6 kB each time).
+/// one reads none); `w_suffix[7]` and `u_prefix[1]` are the empty sums and stay zero. Made once
+/// per call and reused (zeroing them for every four configurations was a memset of 4.6 kB each
+/// time).
 struct ComplianceSums {
     w_suffix: [M; JOINTS + 2],
     u_prefix: [M; JOINTS + 2],
@@ -348,6 +348,13 @@ fn jacobian(model: &RobotModel, f: &Frames, set: &ParamSet, sums: &mut Complianc
     }
 }
 
+/// The configurations of one chunk in lanes; a short last chunk repeats its last configuration
+/// (computed, not returned).
+#[inline(always)]
+fn padded<Q: std::borrow::Borrow<Joints>>(chunk: &[Q]) -> [Joints; LANES] {
+    std::array::from_fn(|l| *chunk[l.min(chunk.len() - 1)].borrow())
+}
+
 /// The TCP in {W} (mm) of every configuration of `qs` at `model`, in order: the same to the bit as
 /// [`super::kinematics::forward`] of each.
 pub fn tcps_world<'a>(model: &RobotModel, qs: impl IntoIterator<Item = &'a Joints>) -> Vec<Vector3<f64>> {
@@ -373,9 +380,7 @@ fn tcps_body(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
     let mut out = Vec::with_capacity(qs.len());
     let mut f = Frames::new();
     for chunk in qs.chunks(LANES) {
-        // A short last chunk repeats its last configuration (computed, not returned).
-        let q: [Joints; LANES] = std::array::from_fn(|l| *chunk[l.min(chunk.len() - 1)]);
-        forward(model, &q, false, &mut f);
+        forward(model, &padded(chunk), false, &mut f);
         let w = &f.tcp_world;
         out.extend((0..chunk.len()).map(|l| Vector3::new(w[0][l], w[1][l], w[2][l])));
     }
@@ -415,9 +420,7 @@ fn jacobians_body(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f
     let mut f = Frames::new();
     let mut sums = ComplianceSums::new();
     for (n, chunk) in qs.chunks(LANES).enumerate() {
-        // A short last chunk repeats its last configuration (computed, not returned).
-        let q: [Joints; LANES] = std::array::from_fn(|l| chunk[l.min(chunk.len() - 1)]);
-        forward(model, &q, true, &mut f);
+        forward(model, &padded(chunk), true, &mut f);
         let first = n * LANES;
         for l in 0..chunk.len() {
             tcps[first + l] = Vector3::new(f.tcp_world[0][l], f.tcp_world[1][l], f.tcp_world[2][l]);
@@ -436,24 +439,14 @@ fn jacobians_body(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f
 
 #[cfg(test)]
 mod tests {
-    use rand::{RngExt, SeedableRng};
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
     use crate::robot::KinState;
     use crate::robot::kinematics::{forward, forward_portable};
     use crate::robot::params::ParamId;
-
-    /// `count` configurations, one in four within +-20 rad (far outside any joint range), the
-    /// others within +-3.2 rad.
-    fn configurations(rng: &mut ChaCha8Rng, count: usize) -> Vec<Joints> {
-        (0..count)
-            .map(|j| {
-                let wide = if j % 4 == 0 { 20.0 } else { 3.2 };
-                std::array::from_fn(|_| rng.random_range(-wide..wide))
-            })
-            .collect()
-    }
+    use crate::robot::test_models::{configuration, models};
 
     /// The batched TCPs equal `forward`'s (and the portable path's) to the bit: the 5 built-in
     /// arms, their rigid forms and 40 models with every link, body, base, tool and gravity number
@@ -462,11 +455,11 @@ mod tests {
     #[test]
     fn batched_tcps_equal_forward_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(17);
-        let models = crate::robot::test_models::models(&mut rng);
+        let models = models(&mut rng);
         let mut large = 0;
         let mut st = KinState::default();
         for model in &models {
-            let qs = configurations(&mut rng, 203);
+            let qs: Vec<Joints> = (0..203).map(|j| configuration(&mut rng, j)).collect();
             let batch = tcps_world(model, &qs);
             let body = tcps_body(model, &qs.iter().collect::<Vec<_>>());
             for (q, (b, p)) in qs.iter().zip(batch.iter().zip(&body)) {
@@ -487,14 +480,14 @@ mod tests {
     fn batched_jacobians_equal_tcp_jacobian_bit_for_bit() {
         use crate::robot::kinematics::{tcp_jacobian, tcp_jacobian_portable};
         let mut rng = ChaCha8Rng::seed_from_u64(23);
-        let models = crate::robot::test_models::models(&mut rng);
+        let models = models(&mut rng);
         let set = ParamSet::new(ParamId::all()).unwrap();
         assert_eq!(set.len(), 6 * 6 + 6 + 3, "every link, base and tool parameter");
         let p = set.len();
         let mut st = KinState::default();
         let mut one = vec![Vector3::zeros(); p];
         for model in &models {
-            let qs = configurations(&mut rng, 101);
+            let qs: Vec<Joints> = (0..101).map(|j| configuration(&mut rng, j)).collect();
             let (mut jt, mut tcps) = (vec![0.0; 3 * qs.len() * p], vec![Vector3::zeros(); qs.len()]);
             tcp_jacobians_transposed(model, &set, &qs, &mut jt, &mut tcps);
             let (mut jt_b, mut tcps_b) = (jt.clone(), tcps.clone());

@@ -39,3 +39,10 @@ pub(crate) fn models(rng: &mut ChaCha8Rng) -> Vec<RobotModel> {
     }
     models
 }
+
+/// Configuration j of a test: within +-3.2 rad, one in four (j a multiple of 4) within +-20 rad
+/// (far outside any joint range).
+pub(crate) fn configuration(rng: &mut ChaCha8Rng, j: usize) -> [f64; 6] {
+    let wide = if j.is_multiple_of(4) { 20.0 } else { 3.2 };
+    std::array::from_fn(|_| rng.random_range(-wide..wide))
+}
