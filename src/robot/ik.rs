@@ -18,7 +18,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
 use super::kinematics::forward;
 use super::model::{JOINTS, Joints, RobotModel};
-use super::state::KinState;
+use super::kinematics::KinState;
 
 /// Why no configuration was returned.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

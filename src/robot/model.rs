@@ -30,7 +30,7 @@ pub struct Link {
     pub theta_offset: f64,
     /// Link offset d_i along z_i, mm.
     pub d: f64,
-    /// Joint compliance c_i, rad/(N m), multiplying the holding torque (see [`crate::robot::statics`]).
+    /// Joint compliance c_i, rad/(N m), multiplying the holding torque (see [`crate::robot::kinematics::statics`]).
     pub compliance: f64,
 }
 

@@ -18,7 +18,7 @@ pub struct DeviationSpec {
     /// Angles (alpha, beta, theta_offs, base angles), deg.
     pub angle_deg: f64,
     /// Joint compliances, mdeg/(N m). Drawn as `-|N(0, s)|`: a physical stiffness gives a
-    /// negative compliance in calsim's sign convention (see [`crate::robot::statics`]).
+    /// negative compliance in calsim's sign convention (see [`crate::robot::kinematics::statics`]).
     pub compliance_mdeg_per_nm: f64,
 }
 

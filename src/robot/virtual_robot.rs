@@ -13,7 +13,7 @@ use serde::Deserialize;
 
 use super::kinematics::forward;
 use super::model::{JOINTS, Joints, RobotModel};
-use super::state::KinState;
+use super::kinematics::KinState;
 
 /// Effects outside the identified model, as a scenario describes them. Every amplitude defaults
 /// to zero (off).

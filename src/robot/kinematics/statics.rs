@@ -13,8 +13,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::model::{JOINTS, Joints, RobotModel};
 use super::state::KinState;
+use crate::robot::model::{JOINTS, RobotModel};
 
 /// Fills `st.tau` (N m), `st.moment` and `st.mass` from the frames at `theta0` already in `st`.
 pub(crate) fn gravity_pass(model: &RobotModel, st: &mut KinState) {
@@ -40,13 +40,6 @@ pub(crate) fn gravity_pass(model: &RobotModel, st: &mut KinState) {
 pub(crate) fn holding_torque(rot_k: &Matrix3<f64>, r: &Vector3<f64>, g: &Vector3<f64>) -> f64 {
     // kg mm m/s^2 = N mm; holding torque is minus the gravity moment about z_k.
     -rot_k.column(2).dot(&r.cross(g)) * 1e-3
-}
-
-/// Holding torques of the gravity load at `q`, N m (see the module docs for the sign).
-pub fn gravity_torques(model: &RobotModel, q: &Joints) -> Joints {
-    let mut st = KinState::default();
-    super::kinematics::forward(model, &mut st, q);
-    st.tau
 }
 
 /// Direction of gravity's derivative helpers used by the Jacobian: for a rigid rotation `omega` of

@@ -2,24 +2,24 @@
 //! with gravity torques and compliance, and the Jacobian, for four configurations side by side, a
 //! configuration per lane.
 //!
-//! Each lane performs exactly the operations of [`super::kinematics::forward_portable`] on its
+//! Each lane performs exactly the operations of [`super::portable::forward_portable`] on its
 //! configuration, in the same order: nalgebra's products of a 3 x 3 matrix and a vector
 //! (`(a_0 x_0 + a_1 x_1) + a_2 x_2`, column by column), its cross and dot products, separate
 //! multiplies and adds (no fused operations), `sincos` of each angle by the same library call, the
 //! same short series for small deflections. So every TCP is the same to the bit as [`forward`]'s
 //! (a test compares them over 50 models), and every Jacobian column the same as
-//! [`super::kinematics::tcp_jacobian`]'s (`tcp_jacobian_portable`'s operations: torque
+//! [`super::tcp_jacobian`]'s (`tcp_jacobian_portable`'s operations: torque
 //! sensitivities, the suffix and prefix sums of the compliance term, each parameter's motion);
 //! the lanes only share the model's constants and the loop. The validation of every identified
 //! model takes its TCPs here (506 poses, one model), the identification its Jacobians (every
 //! configuration of the set, one model per iteration).
 //!
-//! [`forward`]: super::kinematics::forward
+//! [`forward`]: super::forward
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::model::{JOINTS, Joints, RobotModel};
-use super::params::{BaseParam, LinkParam, ParamId, ParamSet};
+use crate::robot::model::{JOINTS, Joints, RobotModel};
+use crate::robot::params::{BaseParam, LinkParam, ParamId, ParamSet};
 
 /// Configurations side by side.
 const LANES: usize = 4;
@@ -356,7 +356,7 @@ fn padded<Q: std::borrow::Borrow<Joints>>(chunk: &[Q]) -> [Joints; LANES] {
 }
 
 /// The TCP in {W} (mm) of every configuration of `qs` at `model`, in order: the same to the bit as
-/// [`super::kinematics::forward`] of each.
+/// [`super::forward`] of each.
 pub fn tcps_world<'a>(model: &RobotModel, qs: impl IntoIterator<Item = &'a Joints>) -> Vec<Vector3<f64>> {
     let qs: Vec<&Joints> = qs.into_iter().collect();
     #[cfg(target_arch = "x86_64")]
@@ -390,7 +390,7 @@ fn tcps_body(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
 /// The identification Jacobians `d p_W / d rho` of `set` at every configuration of `qs` (`model`),
 /// transposed and stacked as least squares reads them: `jt` is p x 3n, column-major (column 3k + i
 /// holds row i of configuration k's 3 x p Jacobian); `tcps` gets the TCP in {W} of each (mm). The
-/// same to the bit as [`super::kinematics::tcp_jacobian`] of each.
+/// same to the bit as [`super::tcp_jacobian`] of each.
 pub fn tcp_jacobians_transposed(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
     assert_eq!(jt.len(), 3 * qs.len() * set.len(), "p x 3n");
     assert_eq!(tcps.len(), qs.len(), "one TCP per configuration");

@@ -1,5 +1,5 @@
 //! Forward kinematics and the identification Jacobian with AVX vectors, chosen at run time by
-//! [`super::kinematics::forward`] and [`super::kinematics::tcp_jacobian`].
+//! [`super::forward`] and [`super::tcp_jacobian`].
 //!
 //! Every 3-vector and every matrix column lives in the low three lanes of a 256-bit vector (the
 //! fourth lane is zero and never read into the others), and every operation is lane-wise, with
@@ -17,9 +17,9 @@ use std::arch::x86_64::{
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::kinematics::{angles, base_column, deflected_sincos};
-use super::model::{JOINTS, Joints, RobotModel};
-use super::params::{LinkParam, ParamId, ParamSet};
+use super::portable::{angles, base_column, deflected_sincos};
+use crate::robot::model::{JOINTS, Joints, RobotModel};
+use crate::robot::params::{LinkParam, ParamId, ParamSet};
 use super::state::KinState;
 use super::statics::holding_torque;
 

@@ -1,9 +1,9 @@
 //! The per-thread scratch of a kinematic evaluation: every frame of the last forward pass and the
-//! gravity torques, filled by [`super::kinematics`] and [`super::statics`] and read by both.
+//! gravity torques, filled by [`super::portable`] (and the vector paths) and [`super::statics`] and read by both.
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
-use super::model::{JOINTS, Joints};
+use crate::robot::model::{JOINTS, Joints};
 
 /// Per-evaluation scratch: the frames of the last forward pass, in the base frame {0}.
 ///

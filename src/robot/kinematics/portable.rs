@@ -1,18 +1,14 @@
-//! Forward kinematics with gravity-induced joint compliance, and the analytic identification
-//! Jacobian of the TCP position in {W} with respect to any [`ParamSet`].
-//!
-//! Algorithms are free functions `f(&model, &mut state, q)`: the [`RobotModel`] is shared, the
-//! [`KinState`] is per-thread scratch that holds every frame of the last evaluation.
-//!
-//! The TCP position is `p = world_from_base * base_from_6(theta) * tcp`, with
-//! `theta = theta0 + c * tau(theta0)` and `theta0 = q + theta_offs` (paper eqs. 6-10, Table 5).
+//! The kinematics without vector extensions: the reference every vector path reproduces to the
+//! bit. Forward kinematics with gravity-induced joint compliance and the analytic identification
+//! Jacobian of the TCP position in {W}, operation for operation as [`super::avx`] and
+//! [`super::batch`] compute them.
 
-use nalgebra::{Isometry3, Matrix3, Matrix3xX, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
-use super::model::{JOINTS, Joints, RobotModel};
-use super::params::{BaseParam, LinkParam, ParamId, ParamSet};
-use super::state::{KinState, isometry};
+use super::state::KinState;
 use super::statics::{gravity_pass, torque_sensitivities};
+use crate::robot::model::{JOINTS, Joints, RobotModel};
+use crate::robot::params::{BaseParam, LinkParam, ParamId, ParamSet};
 
 /// Builds frames 1..=6 for MDH angles given by their sines and cosines.
 #[inline(always)]
@@ -41,20 +37,6 @@ fn sincos_shifted((s0, c0): (f64, f64), delta: f64) -> (f64, f64) {
         delta.sin_cos()
     };
     (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
-}
-
-/// Forward kinematics with compliance: fills `st` and returns the TCP position in {W}, mm.
-///
-/// With AVX (detected at run time) the frames are computed lane-wise in 256-bit vectors
-/// (`kinematics_avx`), with the same operations in the same order: the same numbers to the bit.
-pub fn forward(model: &RobotModel, st: &mut KinState, q: &Joints) -> Vector3<f64> {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the CPU was just found to support AVX, the only requirement of `kinematics_avx::forward`.
-        #[allow(unsafe_code)]
-        return unsafe { super::kinematics_avx::forward(model, st, q) };
-    }
-    forward_portable(model, st, q)
 }
 
 /// `theta0 = q + theta_offs`, rad.
@@ -97,24 +79,6 @@ pub(crate) fn forward_portable(model: &RobotModel, st: &mut KinState, q: &Joints
     st.tcp_world
 }
 
-/// TCP position in {W}, mm, with a scratch state of its own (convenience for non-hot code).
-pub fn tcp_world(model: &RobotModel, q: &Joints) -> Vector3<f64> {
-    forward(model, &mut KinState::default(), q)
-}
-
-/// `world_from_flange` at `q` (deflected configuration), mm.
-pub fn world_from_flange(model: &RobotModel, st: &mut KinState, q: &Joints) -> Isometry3<f64> {
-    forward(model, st, q);
-    let r = model.base_rot * st.rot[JOINTS];
-    let p = model.base_pos + model.base_rot * st.org[JOINTS];
-    isometry(&r, &p)
-}
-
-/// `world_from_base` of the model.
-pub fn world_from_base(model: &RobotModel) -> Isometry3<f64> {
-    isometry(&model.base_rot, &model.base_pos)
-}
-
 /// An infinitesimal motion of frames j..6 caused by one parameter, in {0}.
 #[derive(Clone, Copy)]
 enum Motion {
@@ -152,26 +116,6 @@ fn link_motion(
         LinkParam::D => Motion::Translation(rot[i].column(2).into_owned()),
         LinkParam::Compliance => return None,
     })
-}
-
-/// Identification Jacobian `d p_W / d rho` (3 x p, internal units) at `q` for the parameters in
-/// `set`, written column by column into `jac`; returns the TCP position in {W}, mm.
-///
-/// Every column is analytic, including the change of the gravity torques with the kinematic
-/// parameters (the compliance term `c_k d tau_k / d rho`).
-///
-/// With AVX2 (detected at run time) the columns are computed lane-wise (`kinematics_avx`), with
-/// the same operations in the same order: the same numbers to the bit.
-pub fn tcp_jacobian(model: &RobotModel, st: &mut KinState, q: &Joints, set: &ParamSet, jac: &mut [Vector3<f64>]) -> Vector3<f64> {
-    assert_eq!(jac.len(), set.len(), "one Jacobian column per parameter");
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU was just found to support AVX2 (and so AVX), the only requirement of
-        // `kinematics_avx::tcp_jacobian`.
-        #[allow(unsafe_code)]
-        return unsafe { super::kinematics_avx::tcp_jacobian(model, st, q, set, jac) };
-    }
-    tcp_jacobian_portable(model, st, q, set, jac)
 }
 
 /// [`tcp_jacobian`] without vector extensions (its frames from [`forward_portable`]).
@@ -244,9 +188,3 @@ pub(super) fn base_column(model: &RobotModel, b: BaseParam, pw: &Vector3<f64>) -
     }
 }
 
-/// Convenience form of [`tcp_jacobian`] returning a fresh 3 x p matrix.
-pub fn tcp_jacobian_matrix(model: &RobotModel, q: &Joints, set: &ParamSet) -> (Vector3<f64>, Matrix3xX<f64>) {
-    let mut cols = vec![Vector3::zeros(); set.len()];
-    let p = tcp_jacobian(model, &mut KinState::default(), q, set, &mut cols);
-    (p, Matrix3xX::from_columns(&cols))
-}
