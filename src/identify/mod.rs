@@ -7,5 +7,5 @@ pub use least_squares::{Fit, FitOptions, FitOutcome, Iteration, Observation, Sol
 pub mod detmax;
 pub mod observability;
 
-pub use detmax::{Design, DetmaxOptions, detmax};
-pub use observability::{Observability, PoolJacobian};
+pub use detmax::{Design, DetmaxOptions, PoolJacobian, detmax};
+pub use observability::Observability;

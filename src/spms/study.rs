@@ -11,7 +11,7 @@ use serde::Deserialize;
 
 use super::calibration::{ArmSpec, Cell, CellError, IsoResult, IsoSpec, StationSpec, default_parameters, identify_from, iso_test};
 use super::head::{BeamIdSpec, HeadError, HeadExperiment, HeadSpec};
-use crate::identify::observability::PoolJacobian;
+use crate::identify::PoolJacobian;
 use crate::robot::{ParamError, ParamSet};
 use crate::study::StudySpec;
 use crate::study::check::{Band, Bound, Check};

@@ -14,6 +14,7 @@
 //! step instead of an SVD per candidate.
 
 mod lanes;
+mod pool;
 
 use nalgebra::DMatrix;
 #[cfg(test)]
@@ -24,7 +25,7 @@ use rand::seq::index::sample;
 pub use lanes::Lanes;
 use lanes::{Group, LANES, Update};
 
-use super::observability::PoolJacobian;
+pub use pool::PoolJacobian;
 
 /// Settings of the exchange.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -481,7 +482,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-    use crate::identify::observability::random_pool;
+    use super::pool::random_pool;
 
     /// A random pool whose columns 0 and 4 are the same in every configuration (as the base
     /// translations are in the TriCal pool).
