@@ -469,7 +469,7 @@ fn study(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     );
     if args.realisations > 1 {
         let others = realisations(args.realisations, |r| {
-            let seed = crate::sweep::realisation_seed(scenario.seed, r);
+            let seed = crate::seeds::realisation_seed(scenario.seed, r);
             let e = spec.build(seed).map_err(|e| format!("campaign: {e}"))?;
             let b = spec.before_model(&e.campaign);
             let res = pool.install(|| crate::study::run(&e, &b, &scenario.study, seed, &|_, _| {})).map_err(|e| e.to_string())?;
@@ -644,7 +644,7 @@ fn spms_study(args: &RunArgs, mut sc: scenario::SpmsScenario, check: bool) -> Re
     if args.realisations > 1 {
         let table_n = sc.spec.study.table_set_size as usize;
         let others = realisations(args.realisations, |r| {
-            let seed = crate::sweep::realisation_seed(sc.seed, r);
+            let seed = crate::seeds::realisation_seed(sc.seed, r);
             let res = pool.install(|| crate::spms::study::run(&sc.spec, seed, &|_, _| {})).map_err(|e| e.to_string())?;
             Ok(crate::spms::study::checks(&crate::spms::study::SpmsFigures::of(&res, table_n), &sc.expect))
         });
@@ -880,7 +880,7 @@ fn table8(args: &Table8Args) -> Result<ExitCode, String> {
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} realisations, {elapsed} elapsed, ETA {eta}").expect("template"));
     let mut worlds = Vec::new();
     for r in 0..args.realisations {
-        match pool.install(|| table8_world(&s, crate::sweep::realisation_seed(s.seed, r), args.pool)) {
+        match pool.install(|| table8_world(&s, crate::seeds::realisation_seed(s.seed, r), args.pool)) {
             Ok(w) => worlds.push(w),
             Err(e) => eprintln!("warning: realisation {r} left out: {e}"),
         }

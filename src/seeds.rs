@@ -112,5 +112,11 @@ pub const STRUCTURAL_CHECK: u64 = 0x4f42_5345_5256;
 /// (realisation 0 is the scenario's own seed): the same world whatever a sweep varies.
 pub const REALISATION: u64 = 0x5245_414c_0000_0000;
 
+/// The seed of realisation `r` of a scenario seeded `seed`: the seed itself for realisation 0 (the
+/// plain run), an independent one for every other ([`REALISATION`]).
+pub fn realisation_seed(seed: u64, r: u32) -> u64 {
+    if r == 0 { seed } else { split_seed(seed, REALISATION + u64::from(r)) }
+}
+
 /// The draws of the linear prediction's validation errors, keyed per task (under the study's seed).
 pub const PREDICTION: u64 = 0x5052_4544_4943_5400;

@@ -3,7 +3,7 @@
 //!
 //! A **work unit** is one grid point in one realisation: the whole study of that point's scenario
 //! (campaign, set sizes x repetitions) in the physical world of that realisation. Realisation `r`
-//! of a scenario with seed `s` draws every random quantity from the seed [`realisation_seed`]`(s,
+//! of a scenario with seed `s` draws every random quantity from the seed [`crate::seeds::realisation_seed`]`(s,
 //! r)`, which depends on neither the grid point nor the shard: two designs are compared on the
 //! same worlds (common random numbers), and realisation 0 is the plain `calsim run` of the point.
 //!
@@ -25,12 +25,6 @@ use crate::io::scenario::Loaded;
 use crate::study::ErrorStats;
 use crate::study::stats::{finite_sorted, median, quantile};
 pub use spec::{Sweep, SweepError};
-
-/// The seed of realisation `r` of a scenario seeded `seed`: the seed itself for realisation 0 (the
-/// plain run), an independent one for every other.
-pub fn realisation_seed(seed: u64, r: u32) -> u64 {
-    if r == 0 { seed } else { crate::seeds::split_seed(seed, crate::seeds::REALISATION + u64::from(r)) }
-}
 
 /// JSON has no NaN: a number that is not finite (a median of nothing, a unit that could not run) is
 /// written as `null` and read back as NaN.
@@ -221,7 +215,7 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
         Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None };
     match &sweep.points[point].scenario {
         Loaded::Trical(s) => {
-            let seed = realisation_seed(s.seed, realisation);
+            let seed = crate::seeds::realisation_seed(s.seed, realisation);
             let experiment = match s.experiment.build(seed) {
                 Ok(e) => e,
                 Err(e) => {
@@ -254,7 +248,7 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
             }
         }
         Loaded::Spms(s) => {
-            let seed = realisation_seed(s.seed, realisation);
+            let seed = crate::seeds::realisation_seed(s.seed, realisation);
             let results = match crate::spms::study::run(&s.spec, seed, &quiet) {
                 Ok(r) => r,
                 Err(e) => {
