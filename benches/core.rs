@@ -4,8 +4,8 @@
 
 use std::hint::black_box;
 
-use calsim::campaign::uniform_configuration;
-use calsim::experiment::ExperimentSpec;
+use calsim::device::trical::campaign::uniform_configuration;
+use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::{DetmaxOptions, FitOptions, Observation, PoolJacobian, detmax, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use calsim::robot::{KinState, ParamSet, forward, tcp_jacobian};

@@ -4,7 +4,7 @@
 //!
 //! `cargo run --release --example centring_timing [scenario] [epsilon_um ...]`
 
-use calsim::io::scenario;
+use calsim::device::trical::spec as scenario;
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -25,7 +25,7 @@ fn main() {
     for e in eps {
         let mut spec = s.experiment.clone();
         spec.trical.epsilon_mm = e * 1e-3;
-        let ex = match spec.build(s.seed) {
+        let ex = match spec.build(s.header.seed) {
             Ok(x) => x,
             Err(err) => {
                 eprintln!("epsilon {e} um: {err}");

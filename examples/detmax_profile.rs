@@ -1,5 +1,5 @@
 //! Repeats DETMAX at n = 75 on the default pool, for profilers; prints steps and accepted excursions.
-use calsim::experiment::ExperimentSpec;
+use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::{DetmaxOptions, PoolJacobian, detmax};
 use calsim::robot::ParamSet;
 use rand::SeedableRng;

@@ -1,8 +1,9 @@
 //! The study's hot loop for instruction counts: the default campaign, then 10 tasks at n = 75
 //! (DETMAX, identification, validation) on one thread. `scripts/bench/instructions.sh` runs it
 //! under callgrind, whose counts repeat exactly from run to run on one machine.
-use calsim::experiment::ExperimentSpec;
-use calsim::study::{StudySpec, run};
+use calsim::device::trical::experiment::ExperimentSpec;
+use calsim::device::trical::study::run;
+use calsim::study::StudySpec;
 fn main() {
     let spec = ExperimentSpec::default();
     let e = spec.build(2018).expect("campaign");

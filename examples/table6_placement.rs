@@ -6,14 +6,14 @@
 //!
 //! `cargo run --release --example table6_placement [scenario]` (default scenarios/er20c10_spms.toml).
 
-use calsim::spms::calibration::{build, iso_test};
-use calsim::spms::head;
+use calsim::device::spms::calibration::{build, iso_test};
+use calsim::device::spms::head;
 
 const PUBLISHED: [f64; 5] = [0.336, 1.462, 0.997, 1.454, 1.030];
 
 fn main() {
     let path = std::env::args().nth(1).unwrap_or_else(|| "scenarios/er20c10_spms.toml".into());
-    let s = match calsim::io::scenario::load_spms(std::path::Path::new(&path)) {
+    let s = match calsim::device::spms::spec::load(std::path::Path::new(&path)) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("{e}");
@@ -21,11 +21,11 @@ fn main() {
         }
     };
     let spec = &s.spec;
-    let h = head::run(&spec.head, &spec.beams, s.seed).expect("head");
-    let cell = build(&spec.robot, &spec.station, &h.spms, h.identified(spec.beams.calibration_form), s.seed).expect("cell");
+    let h = head::run(&spec.head, &spec.beams, s.header.seed).expect("head");
+    let cell = build(&spec.robot, &spec.station, &h.spms, h.identified(spec.beams.calibration_form), s.header.seed).expect("cell");
     let score = |ap: &[f64; 5]| (ap.iter().zip(PUBLISHED).map(|(a, p)| (a - p).powi(2)).sum::<f64>() / 5.0).sqrt();
     let within = |ap: &[f64; 5]| ap.iter().zip(PUBLISHED).filter(|(a, p)| (*a / p - 1.0).abs() <= 0.25).count();
-    let default = iso_test(&cell, &cell.nominal, &spec.iso9283, s.seed).expect("the scenario's cube");
+    let default = iso_test(&cell, &cell.nominal, &spec.iso9283, s.header.seed).expect("the scenario's cube");
     println!(
         "scenario cube at {:?}: AP {:?} mm, RMS difference {:.3} mm, {} of 5 points within 25 %",
         spec.iso9283.cube_centre_base_mm,
@@ -41,7 +41,7 @@ fn main() {
                 let c = [500.0 + 100.0 * xi as f64, -600.0 + 100.0 * yi as f64, 200.0 + 100.0 * zi as f64];
                 let mut iso = spec.iso9283.clone();
                 iso.cube_centre_base_mm = c;
-                let Ok(r) = iso_test(&cell, &cell.nominal, &iso, s.seed) else { continue };
+                let Ok(r) = iso_test(&cell, &cell.nominal, &iso, s.header.seed) else { continue };
                 reachable += 1;
                 rows.push((score(&r.ap_mm), within(&r.ap_mm), c, r.ap_mm));
             }

@@ -471,6 +471,16 @@ fn delimit_subproblem(diag: &DVector<f64>, off_diag: &mut DVector<f64>, end: usi
     (new_start, n)
 }
 
+/// Quantile `p` of an ascending sample, linear interpolation between order statistics.
+pub fn quantile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let h = (sorted.len() - 1) as f64 * p.clamp(0.0, 1.0);
+    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,8 +4,12 @@
 
 mod common;
 
-use calsim::budget::{configs, sources};
-use calsim::io::scenario::{self, Loaded};
+use calsim::design::budget::configs;
+use calsim::device::scenario;
+
+fn sources(t: &toml::Table) -> Vec<calsim::design::budget::Source> {
+    calsim::design::budget::sources(calsim::device::device_of(t, std::path::Path::new("t.toml")).unwrap(), t)
+}
 
 fn table(path: &str) -> toml::Table {
     scenario::read_table(&common::repo().join(path)).unwrap().1
@@ -26,25 +30,22 @@ fn sources_are_the_scenarios_nonzero_error_terms() {
 }
 
 /// Loads the reduced CI scenario with `edit` applied to its table.
-fn quick(edit: impl Fn(&mut toml::Table)) -> calsim::io::scenario::Scenario {
+fn quick(edit: impl Fn(&mut toml::Table)) -> calsim::device::trical::TricalScenario {
     let mut t = table("scenarios/ci_quick.toml");
     edit(&mut t);
     let text = toml::to_string(&t).unwrap();
-    match scenario::from_table(&text, t, std::path::Path::new("quick.toml")).unwrap() {
-        Loaded::Trical(s) => *s,
-        Loaded::Spms(_) => unreachable!(),
-    }
+    calsim::device::trical::spec::parse_table(&text, t, std::path::Path::new("quick.toml")).unwrap()
 }
 
 fn set(t: &mut toml::Table, key: &str, v: f64) {
-    calsim::sweep::spec::set_dotted(t, key, toml::Value::Float(v)).unwrap();
+    calsim::design::sweep::spec::set_dotted(t, key, toml::Value::Float(v)).unwrap();
 }
 
 #[test]
 fn a_source_switched_off_leaves_the_other_sources_draws_unchanged() {
     let on = quick(|_| {});
     let off = quick(|t| set(t, "trical.indicator_accuracy_um", 0.0));
-    let (a, b) = (on.experiment.build(on.seed).unwrap(), off.experiment.build(off.seed).unwrap());
+    let (a, b) = (on.experiment.build(on.header.seed).unwrap(), off.experiment.build(off.header.seed).unwrap());
     // The device changed; the cell, the robot's unmodelled effects, the tracker and the validation
     // poses with their noise did not.
     assert_eq!(a.cell.spheres_w_measured, b.cell.spheres_w_measured);
@@ -68,11 +69,11 @@ fn with_every_source_off_the_error_falls_to_the_floor() {
                 set(t, k, 0.0);
             }
         }
-        calsim::sweep::spec::set_dotted(t, "study.set_sizes", toml::Value::Array(vec![toml::Value::Integer(75)])).unwrap();
+        calsim::design::sweep::spec::set_dotted(t, "study.set_sizes", toml::Value::Array(vec![toml::Value::Integer(75)])).unwrap();
     });
-    let e = off.experiment.build(off.seed).unwrap();
+    let e = off.experiment.build(off.header.seed).unwrap();
     let before = off.experiment.before_model(&e.campaign);
-    let r = calsim::study::run(&e, &before, &off.study, off.seed, &|_, _| {}).unwrap();
+    let r = calsim::device::trical::study::run(&e, &before, &off.study, off.header.seed, &|_, _| {}).unwrap();
     let p95 = calsim::study::stats::median(&r.tasks.iter().map(|t| t.validation.p95).collect::<Vec<_>>());
     // What remains is the centring tolerance (epsilon 10 um: every measured position is within it
     // of the ball), which the identification spreads over the workspace: a p95 of a few

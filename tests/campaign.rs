@@ -3,10 +3,10 @@
 
 mod common;
 
-use calsim::campaign::{collision_world, tcp_pose};
+use calsim::device::trical::campaign::{collision_world, tcp_pose};
 use calsim::cell::world_frame::{distance_matrix, sphere_centres};
 use calsim::cell::{Cell, CellSpec};
-use calsim::experiment::ExperimentSpec;
+use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::{FitOptions, FitOutcome, identify};
 use calsim::robot::builtin::trical_2018_table7;
 use calsim::robot::{KinState, ParamSet, forward, world_from_base};
@@ -143,11 +143,11 @@ fn the_tcp_pose_helper_points_the_flange_axis_where_asked() {
 /// workspace identifies the robot, and the validation error falls to nothing.
 #[test]
 fn an_exact_instrument_pool_recovers_the_robot() {
-    let s = calsim::io::scenario::load(&common::repo().join("scenarios/ci_quick.toml")).unwrap();
+    let s = calsim::device::trical::spec::load(&common::repo().join("scenarios/ci_quick.toml")).unwrap();
     let spec = s.experiment.noise_free(0.001);
-    let e = spec.build(s.seed).unwrap();
+    let e = spec.build(s.header.seed).unwrap();
     let before = spec.before_model(&e.campaign);
-    let pool = spec.instrument_pool(&e, s.seed, 150, &|p, _| Some(*p)).unwrap();
+    let pool = spec.instrument_pool(&e, s.header.seed, 150, &|p, _| Some(*p)).unwrap();
     assert_eq!(pool.len(), 150);
     let obs: Vec<calsim::identify::Observation> =
         pool.iter().map(|v| calsim::identify::Observation { q: v.q, tcp_world_mm: v.measured_w }).collect();
@@ -155,7 +155,7 @@ fn an_exact_instrument_pool_recovers_the_robot() {
     study.set_sizes = vec![75];
     study.table_set_size = 75;
     study.repetitions = 2;
-    let r = calsim::study::run_on_pool(&e, &before, &study, s.seed, &obs, &|_, _| {}).unwrap();
+    let r = calsim::device::trical::study::run_on_pool(&e, &before, &study, s.header.seed, &obs, &|_, _| {}).unwrap();
     for t in &r.tasks {
         assert!(t.id.outcome.is_converged(), "{:?}", t.id.outcome);
         assert!(t.validation.max < 1e-4, "max validation error {} mm", t.validation.max);

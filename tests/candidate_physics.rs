@@ -4,7 +4,7 @@
 
 mod common;
 
-use calsim::io::scenario;
+use calsim::device::trical::spec as scenario;
 use calsim::robot::{UnmodelledSpec, VirtualRobot};
 
 use common::{calsim, repo, scratch};
@@ -65,10 +65,10 @@ fn the_setup2_payload_changes_the_validation_robot_only() {
     let mut s = scenario::load(&repo().join("scenarios/ci_quick.toml")).unwrap();
     s.study.set_sizes = vec![35];
     s.experiment.robot.validation_payload_change_kg = None;
-    let e = s.experiment.build(s.seed).unwrap();
+    let e = s.experiment.build(s.header.seed).unwrap();
     assert_eq!(e.robot.truth.data(), e.robot_validation.truth.data());
     s.experiment.robot.validation_payload_change_kg = Some(-0.6);
-    let e2 = s.experiment.build(s.seed).unwrap();
+    let e2 = s.experiment.build(s.header.seed).unwrap();
     assert_eq!(e2.robot.truth.data(), e.robot.truth.data());
     assert!((e2.robot_validation.truth.data().payload.mass_kg - 0.4).abs() < 1e-12, "1.0 - 0.6 kg");
     assert_eq!(e2.campaign.pool, e.campaign.pool, "setup 1 is untouched");
@@ -79,10 +79,10 @@ fn the_setup2_payload_changes_the_validation_robot_only() {
 #[test]
 fn setup2_without_indicators_rejects_no_more_validation_poses() {
     let s = scenario::load(&repo().join("scenarios/ci_quick.toml")).unwrap();
-    let e = s.experiment.build(s.seed).unwrap();
+    let e = s.experiment.build(s.header.seed).unwrap();
     let mut spec = s.experiment.clone();
     spec.campaign.validation_indicators_removed = true;
-    let e2 = spec.build(s.seed).unwrap();
+    let e2 = spec.build(s.header.seed).unwrap();
     assert_eq!(e2.campaign.pool, e.campaign.pool);
     assert!(
         e2.campaign.validation_rejected <= e.campaign.validation_rejected,

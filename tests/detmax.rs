@@ -2,7 +2,7 @@
 
 mod common;
 
-use calsim::experiment::ExperimentSpec;
+use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::detmax::o1_of;
 use calsim::identify::{DetmaxOptions, Observability, PoolJacobian, detmax};
 use calsim::robot::ParamSet;

@@ -3,8 +3,7 @@
 
 mod common;
 
-use calsim::campaign::uniform_configuration;
-use calsim::io::scenario::{Loaded, load_any};
+use calsim::device::trical::campaign::uniform_configuration;
 use calsim::robot::file::RobotFile;
 use calsim::robot::{KinState, forward};
 use common::{calsim, repo, scratch};
@@ -26,10 +25,10 @@ fn an_exported_robot_file_is_the_identified_model() {
     assert!(std::fs::read_to_string(exported.join("calibration.yaml")).unwrap().contains("joint_6:"));
 
     // The identified model, redone from the scenario.
-    let Loaded::Trical(s) = load_any(&scenario).unwrap() else { panic!("a TriCal scenario") };
-    let e = s.experiment.build(s.seed).unwrap();
+    let s = calsim::device::trical::spec::load(&scenario).unwrap();
+    let e = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&e.campaign);
-    let r = calsim::study::recompute_task(&e, &before, &s.study, s.seed, task).unwrap().expect("the task exists");
+    let r = calsim::device::trical::study::recompute_task(&e, &before, &s.study, s.header.seed, task).unwrap().expect("the task exists");
     let model = r.model.expect("an identified model");
     assert_eq!(file.std.len(), r.set.len(), "a std per identified parameter");
     assert!(file.std.iter().all(|(_, v)| v.is_finite() && *v > 0.0));
@@ -167,10 +166,10 @@ fn an_exported_kr6_keeps_its_capsules_and_flange() {
     let (f, g) = (file.flange.expect("a flange"), arm.flange.unwrap());
     assert!((f - g).amax() < 1e-12, "the arm's flange");
 
-    let Loaded::Trical(s) = load_any(&scenario).unwrap() else { panic!("a TriCal scenario") };
-    let e = s.experiment.build(s.seed).unwrap();
+    let s = calsim::device::trical::spec::load(&scenario).unwrap();
+    let e = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&e.campaign);
-    let model = calsim::study::recompute_task(&e, &before, &s.study, s.seed, task).unwrap().expect("the task").model.expect("a model");
+    let model = calsim::device::trical::study::recompute_task(&e, &before, &s.study, s.header.seed, task).unwrap().expect("the task").model.expect("a model");
     let worst = common::largest_tcp_difference(&model, &file.nominal, &model, &mut common::rng(1001));
     assert!(worst < 1e-9, "largest TCP difference {worst:e} mm");
 }

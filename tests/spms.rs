@@ -3,8 +3,8 @@
 mod common;
 
 use calsim::instrument::spms::beams::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
-use calsim::spms::iso9283::{ap, rp, summary, test_points};
-use calsim::spms::{ReadingError, SensorSpec, Spms, fit_centre, frame_from_points, table2_beams};
+use calsim::device::spms::iso9283::{ap, rp, summary, test_points};
+use calsim::device::spms::{ReadingError, SensorSpec, Spms, fit_centre, frame_from_points, table2_beams};
 use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
@@ -115,7 +115,7 @@ fn beam_identification_recovers_the_table2_beams_from_noise_free_data() {
         let rough: Vec<_> = truth
             .iter()
             .map(|b| {
-                calsim::spms::Beam::new(
+                calsim::device::spms::Beam::new(
                     (b.p + Vector3::from_fn(|_, _| rng.random_range(-2.0..2.0))).into(),
                     (b.dir.into_inner() + Vector3::from_fn(|_, _| rng.random_range(-0.02..0.02))).into(),
                 )

@@ -5,12 +5,11 @@
 mod common;
 
 use calsim::identify::least_squares::{FitOptions, FitOutcome};
-use calsim::io::scenario;
 use calsim::robot::builtin::{ER20C10_TABLE5, ER20C10_ZERO_RAD, er20c10_table4, er20c10_table5};
 use calsim::robot::{ParamId, UnmodelledSpec};
-use calsim::spms::calibration::{ArmSpec, IsoSpec, StationSpec, build, default_parameters, identify_from, iso_test};
-use calsim::spms::head::{self, BeamIdSpec, HeadSpec};
-use calsim::spms::study::{self, SpmsSpec};
+use calsim::device::spms::calibration::{ArmSpec, IsoSpec, StationSpec, build, default_parameters, identify_from, iso_test};
+use calsim::device::spms::head::{self, BeamIdSpec, HeadSpec};
+use calsim::device::spms::study::{self, SpmsSpec};
 use calsim::study::engine::random_selection;
 
 use common::{calsim, repo, scratch};
@@ -93,7 +92,7 @@ fn a_noise_free_round_trip_recovers_the_true_robot() {
 }
 
 fn small_spec() -> SpmsSpec {
-    let mut s = scenario::load_spms(&repo().join("scenarios/er20c10_spms.toml")).unwrap().spec;
+    let mut s = calsim::device::spms::spec::load(&repo().join("scenarios/er20c10_spms.toml")).unwrap().spec;
     s.beams = quick_beams();
     s.station.pool = 90;
     s.study.set_sizes = vec![20, 30];

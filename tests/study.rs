@@ -5,8 +5,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use calsim::io::scenario;
-use calsim::study::{self, StudyResults};
+use calsim::device::trical::spec as scenario;
+use calsim::device::trical::study::{self, StudyResults};
 
 use common::{calsim, repo, scratch};
 
@@ -16,10 +16,10 @@ fn run_with_threads(threads: usize) -> StudyResults {
     s.study.set_sizes = vec![20, 35];
     s.study.repetitions = 3;
     s.study.table_set_size = 35;
-    let experiment = s.experiment.build(s.seed).unwrap();
+    let experiment = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&experiment.campaign);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-    pool.install(|| study::run(&experiment, &before, &s.study, s.seed, &|_, _| {}).unwrap())
+    pool.install(|| study::run(&experiment, &before, &s.study, s.header.seed, &|_, _| {}).unwrap())
 }
 
 #[test]
@@ -278,7 +278,7 @@ fn distribution_checks_need_the_median_in_the_band_and_the_published_value_in_p1
 fn compensated_targets_round_trip_on_the_exact_model() {
     let s = scenario::load(&repo().join("scenarios/ci_quick.toml")).unwrap();
     let quiet = s.experiment.noise_free(1e-4);
-    let e = quiet.build(s.seed).unwrap();
+    let e = quiet.build(s.header.seed).unwrap();
     let before = quiet.before_model(&e.campaign);
     let c = study::compensated_errors(&e.robot.truth, &study::compensation_targets(&before, &e), &e, &mut common::rng(3));
     assert!(c.failed <= 5, "{} targets unreachable", c.failed);
@@ -287,9 +287,9 @@ fn compensated_targets_round_trip_on_the_exact_model() {
     let mut s = s;
     s.study.set_sizes = vec![75];
     s.study.repetitions = 4;
-    let e = s.experiment.build(s.seed).unwrap();
+    let e = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&e.campaign);
-    let r = study::run(&e, &before, &s.study, s.seed, &|_, _| {}).unwrap();
+    let r = study::run(&e, &before, &s.study, s.header.seed, &|_, _| {}).unwrap();
     for t in &r.tasks {
         let c = t.compensated.as_ref().expect("kept at the table set size");
         let ratio = c.stats.median / t.validation.median;

@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use calsim::sweep::spec::{Combine, circle_layout, grid};
+use calsim::design::sweep::spec::{Combine, circle_layout, grid};
 use common::{calsim, repo, scratch};
 
 #[test]
@@ -88,22 +88,21 @@ fn sharded_and_threaded_runs_merge_to_the_same_bytes() {
 
 #[test]
 fn a_point_equal_to_the_base_is_the_plain_run_at_realisation_0_and_worlds_are_shared() {
-    use calsim::io::scenario::Loaded;
     let tmp = scratch("sweep-crn");
     let dir = tmp.path();
     // Two points that differ in the repetitions only: the same worlds, so the same errors before
     // calibration in each realisation; realisation 0 of point 0 is the plain run.
     let f = sweep_file(dir, "crn.toml", 2, "[[axis]]\nkey = \"study.repetitions\"\nvalues = [2, 3]\n");
-    let sweep = calsim::sweep::spec::load(&f).unwrap();
-    let units: Vec<_> = (0..4).map(|u| calsim::sweep::run_unit(&sweep, u)).collect();
+    let sweep = calsim::design::sweep::spec::load(&f).unwrap();
+    let units: Vec<_> = (0..4).map(|u| calsim::design::sweep::run_unit(&sweep, u)).collect();
     assert_eq!(units[0].before_mm, units[2].before_mm, "realisation 0 of both points: one world");
     assert_eq!(units[1].before_mm, units[3].before_mm, "realisation 1 of both points: one world");
     assert_ne!(units[0].before_mm, units[1].before_mm, "two realisations: two worlds");
 
-    let Loaded::Trical(s) = &sweep.points[0].scenario else { panic!("a TriCal sweep") };
-    let experiment = s.experiment.build(s.seed).unwrap();
+    let s = sweep.points[0].scenario.as_any().downcast_ref::<calsim::device::trical::TricalScenario>().expect("a TriCal sweep");
+    let experiment = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&experiment.campaign);
-    let plain = calsim::study::run(&experiment, &before, &s.study, s.seed, &|_, _| {}).unwrap();
+    let plain = calsim::device::trical::study::run(&experiment, &before, &s.study, s.header.seed, &|_, _| {}).unwrap();
     let b = calsim::study::ErrorStats::of(&plain.before_errors);
     assert_eq!(units[0].before_mm, [b.median, b.p95, b.max]);
     let at30: Vec<_> = plain.tasks.iter().filter(|t| t.task.set_size == 30).collect();

@@ -163,14 +163,14 @@ fn the_kr6_flange_faces_out_of_the_wrist() {
 /// below a third of the before-calibration mean.
 #[test]
 fn the_kr6_runs_the_trical_study() {
-    let mut s = calsim::io::scenario::load(&common::repo().join("scenarios/kr6r900sixx_trical.toml")).expect("scenario");
+    let mut s = calsim::device::trical::spec::load(&common::repo().join("scenarios/kr6r900sixx_trical.toml")).expect("scenario");
     s.study.set_sizes = vec![75];
     s.study.repetitions = 10;
-    let e = s.experiment.build(s.seed).expect("the KR 6 campaign");
+    let e = s.experiment.build(s.header.seed).expect("the KR 6 campaign");
     assert_eq!(e.campaign.pool.len(), 360);
     assert_eq!(e.campaign.validation.len(), 506);
     let before = s.experiment.before_model(&e.campaign);
-    let r = calsim::study::run(&e, &before, &s.study, s.seed, &|_, _| {}).expect("study");
+    let r = calsim::device::trical::study::run(&e, &before, &s.study, s.header.seed, &|_, _| {}).expect("study");
     let before_mean = r.before_errors.iter().sum::<f64>() / r.before_errors.len() as f64;
     let mut medians: Vec<f64> = r.tasks.iter().filter(|t| t.id.outcome.label() == "converged").map(|t| t.validation.median).collect();
     assert_eq!(medians.len(), 10, "every set identified");

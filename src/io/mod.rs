@@ -1,14 +1,14 @@
-//! Files: scenarios in, result tables, summaries and manifests out.
+//! The kit under everything that reads or writes files: bounded reading of inputs, the atomic
+//! results directory (`out_dir`), parquet tables and their hashes (`table`), the provenance of a
+//! manifest (`manifest`), the plot kit (`plot`) and the recording kit (`record`). It computes no
+//! figure and imports no device, study, sweep or budget: each producer computes its own figures
+//! and renders them through it.
 
-pub mod budget_results;
+pub mod manifest;
 pub mod out_dir;
-pub mod plots;
-pub mod recording;
-pub mod report;
-pub mod results;
-pub mod scenario;
-pub mod spms_results;
-pub mod sweep_results;
+pub mod plot;
+pub mod record;
+pub mod table;
 
 use std::io::Read;
 use std::path::Path;

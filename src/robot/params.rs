@@ -363,3 +363,9 @@ impl ParamSet {
         })?)
     }
 }
+
+/// The paper's name of a parameter given by any of its names, for tables (a name that is no
+/// parameter's is returned as it is).
+pub fn display_name(name: &str) -> String {
+    ParamId::parse(name).map(|id| id.name()).unwrap_or_else(|| name.to_string())
+}

@@ -1,5 +1,7 @@
 //! One band and one check row for every published figure of every study.
 
+use std::fmt::Write as _;
+
 use serde::Deserialize;
 
 /// A figure with its published value and the relative band the reproduction must fall in.
@@ -159,4 +161,50 @@ pub fn over_realisations(runs: &[Vec<Check>]) -> Vec<DistributionCheck> {
             DistributionCheck { row: row.clone(), median, p10, p90, count: sorted.len(), pass }
         })
         .collect()
+}
+
+/// The published-versus-reproduced table of a summary, under a heading.
+pub fn checks_markdown(heading: &str, checks: &[Check]) -> String {
+    let mut s = format!("## {heading}\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|\n");
+    for c in checks {
+        let v = if c.pass == Some(false) { "**miss**" } else { c.verdict() };
+        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
+    }
+    s
+}
+
+/// The comparison as a text table for the terminal.
+pub fn terminal_table(rows: &[Check]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "{:<58} {:>20} {:>12} {:>16}  result", "figure", "published", "calsim", "band");
+    for r in rows {
+        let verdict = if r.pass == Some(false) { "MISS" } else { r.verdict() };
+        let _ = writeln!(s, "{:<58} {:>20} {:>12} {:>16}  {verdict}", r.figure, r.published, r.reproduced, r.band);
+    }
+    s
+}
+
+/// The figures over realisations as a text table for the terminal.
+pub fn distribution_table(rows: &[DistributionCheck]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "{:<58} {:>14} {:>10} {:>10} {:>17} {:>16}  result", "figure", "published", "run 0", "median", "P10-P90", "band");
+    for d in rows {
+        let verdict = match d.pass {
+            Some(true) => "pass",
+            Some(false) => "MISS",
+            None => "-",
+        };
+        let published = d.row.published_value.map_or_else(|| d.row.published.clone(), |v| format!("{v:.3}"));
+        let _ = writeln!(
+            s,
+            "{:<58} {:>14} {:>10} {:>10.3} {:>17} {:>16}  {verdict}",
+            d.row.figure,
+            published.chars().take(14).collect::<String>(),
+            d.row.reproduced,
+            d.median,
+            format!("{:.3}-{:.3}", d.p10, d.p90),
+            d.row.band
+        );
+    }
+    s
 }

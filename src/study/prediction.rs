@@ -15,7 +15,6 @@ use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::StudyResults;
 use super::stats::{finite_sorted, median, quantile};
 use crate::identify::observability::parameter_covariance;
 use crate::robot::{Joints, ParamSet, RobotModel};
@@ -99,20 +98,6 @@ pub struct TaskView<'a> {
     pub residual_rms_mm: f64,
     /// The simulated figure of merit after calibration: median and p95, mm.
     pub simulated_mm: [f64; 2],
-}
-
-/// The prediction of every identification of a TriCal study at set size `n` that separated the
-/// parameters; `pool_qs` are the configurations the sets index, `validation_qs` the validation
-/// poses; `seed` keys the draws. `None` when no task qualifies.
-pub fn predict(results: &StudyResults, pool_qs: &[Joints], validation_qs: &[Joints], n: usize, seed: u64) -> Option<Prediction> {
-    let tasks = results.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()).map(|t| TaskView {
-        index: t.task.index,
-        chosen: &t.id.chosen,
-        values: &t.id.values,
-        residual_rms_mm: t.id.residual_rms_mm,
-        simulated_mm: [t.validation.median, t.validation.p95],
-    });
-    predict_tasks(&results.set, &results.truth, tasks, pool_qs, validation_qs, seed)
 }
 
 /// The prediction over `tasks` (identifications of `set` from `truth`'s configurations

@@ -39,15 +39,7 @@ impl ErrorStats {
     }
 }
 
-/// Quantile `p` of an ascending sample, linear interpolation between order statistics.
-pub fn quantile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let h = (sorted.len() - 1) as f64 * p.clamp(0.0, 1.0);
-    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
-    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
-}
+pub use crate::numeric::quantile;
 
 /// The finite values of a sample, ascending: the sample every order statistic below is taken of.
 /// A value that is NaN or infinite (a condition number of a rank-deficient fit, a figure of a run

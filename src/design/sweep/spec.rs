@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::io::scenario::{self, Loaded, ScenarioError};
+use crate::device::scenario::{self, ScenarioError};
+use crate::device::{self, Scenario};
 
 /// Most grid points of a sweep, and most realisations per point.
 pub const MAX_POINTS: usize = 10_000;
@@ -76,8 +77,9 @@ fn one() -> u32 {
 pub struct Point {
     /// The axis values, as written (`key = value`).
     pub values: Vec<(String, String)>,
-    /// The scenario of the point.
-    pub scenario: Loaded,
+    /// The scenario of the point (a unit's study, without the compensated validation: a unit's
+    /// tables hold the plain validation).
+    pub scenario: Box<dyn Scenario>,
 }
 
 /// A loaded, checked sweep.
@@ -316,7 +318,7 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
         let axis = shown_values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ");
         let point_path = PathBuf::from(format!("{stem}#{p}"));
         let text = toml::to_string(&t).unwrap_or_default();
-        let scenario = scenario::from_table(&text, t, &point_path).map_err(|e| SweepError::Point {
+        let scenario = unit_scenario(&text, t, &point_path).map_err(|e| SweepError::Point {
             path: shown.clone(),
             axis: if axis.is_empty() { "(base)".into() } else { axis.clone() },
             error: Box::new(e),
@@ -350,7 +352,7 @@ pub fn from_tables(
     for (p, (values, t)) in points.into_iter().enumerate() {
         let axis = values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ");
         let text = toml::to_string(&t).unwrap_or_default();
-        let scenario = scenario::from_table(&text, t, &PathBuf::from(format!("{name}#{p}"))).map_err(|e| SweepError::Point {
+        let scenario = unit_scenario(&text, t, &PathBuf::from(format!("{name}#{p}"))).map_err(|e| SweepError::Point {
             path: name.into(),
             axis: if axis.is_empty() { "(base)".into() } else { axis },
             error: Box::new(e),
@@ -365,4 +367,12 @@ pub fn get_dotted<'a>(t: &'a toml::Table, key: &str) -> Option<&'a toml::Value> 
     let mut parts = key.split('.');
     let first = parts.next()?;
     parts.try_fold(t.get(first)?, |v, p| v.as_table()?.get(p))
+}
+
+/// The scenario of a grid point as a unit runs it: loaded and checked from its table, without the
+/// compensated validation (a unit keeps the plain validation's statistics).
+fn unit_scenario(text: &str, t: toml::Table, path: &Path) -> Result<Box<dyn Scenario>, ScenarioError> {
+    let mut s = device::from_table(text, t, path)?;
+    s.study_mut().compensated_validation = false;
+    Ok(s)
 }

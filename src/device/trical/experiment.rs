@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
 
-use crate::campaign::{self, Campaign, CampaignError, CampaignSpec, Setup};
+use crate::device::trical::campaign::{self, Campaign, CampaignError, CampaignSpec, Setup};
 use crate::cell::world_frame::WorldFrameError;
 use crate::cell::{Cell, CellSpec};
 use crate::instrument::laser_tracker::{LaserTracker, LaserTrackerSpec};
@@ -229,8 +229,8 @@ impl ExperimentSpec {
         e: &Experiment,
         seed: u64,
         count: u32,
-        measure: crate::campaign::Measure<'_>,
-    ) -> Result<Vec<crate::campaign::ValidationPose>, CampaignError> {
+        measure: crate::device::trical::campaign::Measure<'_>,
+    ) -> Result<Vec<crate::device::trical::campaign::ValidationPose>, CampaignError> {
         let nominal = self.nominal();
         let setup = Setup {
             cell: &e.cell,

@@ -11,8 +11,9 @@ use std::path::{Path, PathBuf};
 use polars::prelude::*;
 use serde::Serialize;
 
-use crate::io::results::{err, parquet, table_hashes, write_atomically};
-use crate::sweep::{PointRow, ShardInfo, Unit};
+use super::{PointRow, ShardInfo, Unit, UnitRow};
+use crate::io::out_dir::write_atomically;
+use crate::io::table::{err, parquet, table_hashes};
 
 #[derive(Serialize)]
 struct Manifest<'a> {
@@ -65,11 +66,11 @@ fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow])
     let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
     // Long form: one row per unit and (selection, set size); a failed unit has one row with its error.
-    let rows: Vec<(&Unit, Option<&crate::sweep::UnitRow>)> = units
+    let rows: Vec<(&Unit, Option<&UnitRow>)> = units
         .iter()
         .flat_map(|x| if x.rows.is_empty() { vec![(x, None)] } else { x.rows.iter().map(|r| (x, Some(r))).collect() })
         .collect();
-    let opt = |g: &dyn Fn(&crate::sweep::UnitRow) -> f64| rows.iter().map(|(_, r)| r.map_or(f64::NAN, g)).collect::<Vec<_>>();
+    let opt = |g: &dyn Fn(&UnitRow) -> f64| rows.iter().map(|(_, r)| r.map_or(f64::NAN, g)).collect::<Vec<_>>();
     let mut cols = vec![
         u("unit", rows.iter().map(|(x, _)| x.unit as u32).collect()),
         u("point", rows.iter().map(|(x, _)| x.point as u32).collect()),
@@ -144,7 +145,7 @@ fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow])
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
     write_extremes(dir, info, points)?;
-    let drawn = crate::io::plots::write_sweep(dir, &plot_inputs(info, points)).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
+    let drawn = super::plots::write(dir, &plot_inputs(info, points)).map_err(std::io::Error::other)?;
     let mut text = summary(info, units, points);
     let _ = writeln!(text, "\n## Figures\n");
     for w in drawn {
@@ -155,7 +156,7 @@ fn write_into(dir: &Path, info: &ShardInfo, units: &[Unit], points: &[PointRow])
 }
 
 /// The figures' inputs: x is the axis value where the sweep has one numeric axis, else the point.
-fn plot_inputs(info: &ShardInfo, points: &[PointRow]) -> crate::io::plots::SweepPlotInputs {
+fn plot_inputs(info: &ShardInfo, points: &[PointRow]) -> super::plots::SweepPlotInputs {
     let numeric: Option<Vec<f64>> =
         if info.keys.len() == 1 { info.points.iter().map(|v| v[0].parse::<f64>().ok()).collect() } else { None };
     let x = |p: usize| numeric.as_ref().map_or(p as f64, |v| v[p]);
@@ -188,7 +189,7 @@ fn plot_inputs(info: &ShardInfo, points: &[PointRow]) -> crate::io::plots::Sweep
     } else {
         Vec::new()
     };
-    crate::io::plots::SweepPlotInputs {
+    super::plots::SweepPlotInputs {
         layouts,
         designs,
         xlabel: if numeric.is_some() { info.keys[0].clone() } else { "grid point (see the design table)".into() },

@@ -12,6 +12,8 @@
 //! units it finished. `merge` reads the units of every shard, in unit order, and writes the
 //! tables: any sharding and any thread count give the same bytes.
 
+pub mod plots;
+pub mod results;
 pub mod spec;
 
 use std::collections::BTreeMap;
@@ -21,7 +23,6 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::io::scenario::Loaded;
 use crate::study::ErrorStats;
 use crate::study::stats::{finite_sorted, median, quantile};
 pub use spec::{Sweep, SweepError};
@@ -206,82 +207,33 @@ fn grouped<T>(tasks: &[T], key: impl Fn(&T) -> (crate::study::Selection, usize))
     out
 }
 
-/// Runs one work unit.
+/// Runs one work unit: the point's study in the unit's world, kept as its statistics.
 pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
     let (point, realisation) = (unit / sweep.realisations as usize, (unit % sweep.realisations as usize) as u32);
     let th = &sweep.thresholds_mm;
-    let quiet = |_: usize, _: usize| {};
     let mut out =
         Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None };
-    match &sweep.points[point].scenario {
-        Loaded::Trical(s) => {
-            let seed = crate::seeds::realisation_seed(s.seed, realisation);
-            let experiment = match s.experiment.build(seed) {
-                Ok(e) => e,
-                Err(e) => {
-                    out.error = Some(format!("campaign: {e}"));
-                    return out;
-                }
-            };
-            let before = s.experiment.before_model(&experiment.campaign);
-            // A unit's tables hold the plain validation: the compensated one is not computed.
-            let study = crate::study::StudySpec { compensated_validation: false, ..s.study.clone() };
-            let results = match crate::study::run(&experiment, &before, &study, seed, &quiet) {
-                Ok(r) => r,
-                Err(e) => {
-                    out.error = Some(e.to_string());
-                    return out;
-                }
-            };
-            let b = ErrorStats::of(&results.before_errors);
-            out.before_mm = [b.median, b.p95, b.max];
-            out.campaign_s = experiment.campaign.pool.iter().map(|p| p.seconds).sum();
-            for ((sel, n), ts) in grouped(&results.tasks, |t| (t.task.selection, t.task.set_size)) {
-                let per: Vec<Option<ErrorStats>> = ts.iter().map(|t| (!t.id.outcome.is_rank_deficient()).then_some(t.validation)).collect();
-                let o1: Vec<f64> = ts.iter().map(|t| t.id.observability.o1).collect();
-                out.rows.push(row(sel.label(), n, n == s.study.table_set_size as usize, &per, &o1, th));
-            }
-            if sweep.predict {
-                let pool: Vec<_> = experiment.campaign.pool.iter().map(|p| p.q).collect();
-                let validation: Vec<_> = experiment.campaign.validation.iter().map(|v| v.q).collect();
-                out.prediction = crate::study::prediction::predict(&results, &pool, &validation, s.study.table_set_size as usize, seed);
-            }
+    let s = &sweep.points[point].scenario;
+    let seed = crate::seeds::realisation_seed(s.header().seed, realisation);
+    let outcome = match s.run(seed, &|_, _| {}) {
+        Ok(o) => o,
+        Err(e) => {
+            out.error = Some(e.to_string());
+            return out;
         }
-        Loaded::Spms(s) => {
-            let seed = crate::seeds::realisation_seed(s.seed, realisation);
-            let results = match crate::spms::study::run(&s.spec, seed, &quiet) {
-                Ok(r) => r,
-                Err(e) => {
-                    out.error = Some(e.to_string());
-                    return out;
-                }
-            };
-            let b = ErrorStats::of(&results.before.ap_mm);
-            out.before_mm = [b.median, b.p95, b.max];
-            for ((sel, n), ts) in grouped(&results.tasks, |t| (t.task.selection, t.task.set_size)) {
-                let per: Vec<Option<ErrorStats>> = ts.iter().map(|t| t.iso.as_ref().map(|i| ErrorStats::of(&i.ap_mm))).collect();
-                let o1: Vec<f64> = ts.iter().map(|t| t.id.observability.o1).collect();
-                out.rows.push(row(sel.label(), n, n == s.spec.study.table_set_size as usize, &per, &o1, th));
-            }
-            if sweep.predict {
-                use crate::study::prediction::{TaskView, predict_tasks};
-                let pool: Vec<_> = results.cell.pool.iter().map(|p| p.q).collect();
-                let n = s.spec.study.table_set_size as usize;
-                let tasks = results.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()).filter_map(|t| {
-                    let ap = ErrorStats::of(&t.iso.as_ref()?.ap_mm);
-                    Some(TaskView {
-                        index: t.task.index,
-                        chosen: &t.id.chosen,
-                        values: &t.id.values,
-                        residual_rms_mm: t.id.residual_rms_mm,
-                        simulated_mm: [ap.median, ap.p95],
-                    })
-                });
-                // The figure of merit (ISO 9283 AP after the controller's inverse kinematics, in the
-                // base frame) is not predicted: the parameters only.
-                out.prediction = predict_tasks(&results.set, &results.cell.robot.truth, tasks, &pool, &[], seed);
-            }
-        }
+    };
+    let world = outcome.world();
+    let b = world.before;
+    out.before_mm = [b.median, b.p95, b.max];
+    out.campaign_s = world.campaign_s;
+    let table_n = s.study().table_set_size as usize;
+    for ((sel, n), ts) in grouped(&world.tasks, |t| (t.selection, t.set_size)) {
+        let per: Vec<Option<ErrorStats>> = ts.iter().map(|t| t.after).collect();
+        let o1: Vec<f64> = ts.iter().map(|t| t.o1).collect();
+        out.rows.push(row(sel.label(), n, n == table_n, &per, &o1, th));
+    }
+    if sweep.predict {
+        out.prediction = outcome.prediction(seed);
     }
     out
 }
@@ -346,22 +298,8 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
         thresholds_mm: sweep.thresholds_mm.clone(),
         keys: sweep.keys.clone(),
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
-        layouts: sweep
-            .points
-            .iter()
-            .map(|p| match &p.scenario {
-                Loaded::Trical(s) => s.experiment.cell.spheres_w_mm.clone(),
-                Loaded::Spms(_) => Vec::new(),
-            })
-            .collect(),
-        scenarios: sweep
-            .points
-            .iter()
-            .map(|p| match &p.scenario {
-                Loaded::Trical(s) => s.text.clone(),
-                Loaded::Spms(s) => s.text.clone(),
-            })
-            .collect(),
+        layouts: sweep.points.iter().map(|p| p.scenario.layout_mm()).collect(),
+        scenarios: sweep.points.iter().map(|p| p.scenario.header().text.clone()).collect(),
         shard: k,
         count,
     };

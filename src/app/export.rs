@@ -11,7 +11,6 @@ use polars::prelude::*;
 use sha2::Digest;
 
 use crate::identify::observability::parameter_covariance;
-use crate::io::scenario::{Loaded, load_any};
 use crate::robot::{ParamId, RobotModel};
 use crate::study::prediction::noise_estimate;
 
@@ -62,23 +61,32 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
         scenario_path: PathBuf,
         scenario_sha256: String,
         seed: u64,
+        #[serde(default)]
+        overrides: Vec<(String, String)>,
     }
-    let manifest: Manifest = crate::io::read_bytes(&dir.join("manifest.json"))
-        .map_err(|e| err(dir, format!("manifest.json: {e} (not a results directory of `calsim run`)")))
-        .and_then(|b| serde_json::from_slice(&b).map_err(|e| err(dir, format!("manifest.json: {e}"))))?;
+    let bytes = crate::io::read_bytes(&dir.join("manifest.json"))
+        .map_err(|e| err(dir, format!("manifest.json: {e} (not a results directory of `calsim run`)")))?;
+    if serde_json::from_slice::<serde_json::Value>(&bytes).is_ok_and(|v| v.get("sweep").is_some()) {
+        return Err(err(
+            dir,
+            "the results of a sweep, not of a run: export takes a run's results; run one design with `calsim run <sweep results>/best_design.toml`, then export that",
+        ));
+    }
+    let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| err(dir, format!("manifest.json: {e}")))?;
     let text = crate::io::read_text(&manifest.scenario_path).map_err(|e| err(dir, format!("{}: {e}", manifest.scenario_path.display())))?;
     if format!("{:x}", sha2::Sha256::digest(text.as_bytes())) != manifest.scenario_sha256 {
         return Err(err(dir, format!("{} changed since these results were written: run it again", manifest.scenario_path.display())));
     }
-    let s = match load_any(&manifest.scenario_path).map_err(|e| e.to_string())? {
-        Loaded::Trical(s) => s,
-        Loaded::Spms(_) => return Err(err(dir, "export takes TriCal results (the SPMS robot calibration is not exported yet)")),
-    };
+    let overrides = crate::app::run::Overrides::from_pairs(&manifest.overrides)
+        .ok_or_else(|| err(dir, format!("manifest.json: overrides {:?}: not ones calsim writes", manifest.overrides)))?;
+    let mut s = crate::device::load(&manifest.scenario_path).map_err(|e| e.to_string())?;
+    overrides.apply(s.as_mut()).map_err(|e| e.to_string())?;
+    s.header_mut().seed = manifest.seed;
     let tasks = tasks_table(dir)?;
     let index = match pick {
         Pick::Task(t) => t,
         Pick::Median(n) | Pick::Best(n) | Pick::Worst(n) => {
-            let n = n.unwrap_or(s.study.table_set_size as usize);
+            let n = n.unwrap_or(s.study().table_set_size as usize);
             let mut at: Vec<(f64, usize)> = tasks.iter().filter(|t| t.1 == n && t.2.is_finite()).map(|t| (t.2, t.0)).collect();
             at.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             let k = match pick {
@@ -90,33 +98,29 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
         }
     };
     let row = tasks.iter().find(|t| t.0 == index).ok_or_else(|| err(dir, format!("--task {index}: no such task in tasks.parquet")))?;
-    let experiment = s.experiment.build(manifest.seed).map_err(|e| err(dir, format!("campaign: {e}")))?;
-    let before = s.experiment.before_model(&experiment.campaign);
-    let r = crate::study::recompute_task(&experiment, &before, &s.study, manifest.seed, index)
-        .map_err(|e| err(dir, e))?
-        .ok_or_else(|| err(dir, format!("task {index} is not in the scenario's study")))?;
+    let r = s.refit(index).map_err(|e| err(dir, e))?.ok_or_else(|| err(dir, format!("task {index} is not in the scenario's study")))?;
     let model = r.model.ok_or_else(|| err(dir, format!("task {index}: its set could not separate the parameters: no model")))?;
-    if r.result.validation.median.to_bits() != row.2.to_bits() {
+    if r.validation_median_mm.to_bits() != row.2.to_bits() {
         return Err(err(
             dir,
-            format!("task {index}: redone it gives a validation median of {} mm, the results say {} mm", r.result.validation.median, row.2),
+            format!("task {index}: redone it gives a validation median of {} mm, the results say {} mm", r.validation_median_mm, row.2),
         ));
     }
     let (n, m) = (r.observations.len(), r.set.len());
-    let sigma = noise_estimate(r.result.id.residual_rms_mm, n, m);
+    let sigma = noise_estimate(r.residual_rms_mm, n, m);
     let qs: Vec<_> = r.observations.iter().map(|o| o.q).collect();
     let cov = parameter_covariance(&model, &r.set, &qs, sigma);
     let std = r.set.ids().iter().enumerate().map(|(j, id)| (*id, cov.as_ref().map_or(f64::NAN, |c| c[(j, j)].max(0.0).sqrt()))).collect();
     Ok(Export {
-        scenario: s.name.clone(),
+        scenario: s.header().name.clone(),
         task: index,
-        set_size: r.result.task.set_size,
-        validation_median_mm: r.result.validation.median,
-        before,
+        set_size: r.set_size,
+        validation_median_mm: r.validation_median_mm,
+        before: r.before,
         model,
         std,
-        links: experiment.links.clone(),
-        flange: s.experiment.flange(),
+        links: r.links,
+        flange: r.flange,
     })
 }
 

@@ -9,10 +9,11 @@ use std::path::{Path, PathBuf};
 
 use polars::prelude::*;
 
-use crate::budget::{Config, Line, Source};
-use crate::io::results::{err, parquet, table_hashes, write_atomically};
+use super::{Config, Line, Source};
+use crate::design::sweep::PointRow;
+use crate::io::out_dir::write_atomically;
+use crate::io::table::{err, parquet, table_hashes};
 use crate::study::prediction::Prediction;
-use crate::sweep::PointRow;
 
 /// Everything a budget's files show.
 pub struct BudgetReport<'a> {
@@ -96,15 +97,15 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
         crate_version: env!("CARGO_PKG_VERSION"),
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
-    let tornado: Vec<crate::io::plots::TornadoLine> =
+    let tornado: Vec<super::plots::TornadoLine> =
         b.lines.iter().map(|l| (b.sources[l.source].label.to_string(), l.off_mm, l.scaled_mm.clone())).collect();
-    let mut drawn = crate::io::plots::write_tornado(dir, &tornado, b.all_mm).map_err(|e| std::io::Error::other(format!("plots: {e}")))?;
+    let mut drawn = super::plots::write_tornado(dir, &tornado, b.all_mm).map_err(std::io::Error::other)?;
     let spreads = |mode: &str| {
         b.configs.iter().zip(b.predictions).find(|(c, _)| c.mode == mode).and_then(|(_, p)| p.as_ref()).map(|p| p.parameter_spreads())
     };
     if let Some(all) = spreads("all") {
         let none = spreads("none").unwrap_or_default();
-        drawn.extend(crate::io::plots::write_prediction(dir, &all, &none).map_err(|e| std::io::Error::other(format!("plots: {e}")))?);
+        drawn.extend(super::plots::write_prediction(dir, &all, &none).map_err(std::io::Error::other)?);
     }
     let mut text = summary(b);
     for w in drawn {

@@ -5,19 +5,22 @@
 
 use std::fmt::Write as _;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use polars::prelude::*;
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 
-use crate::io::plots::{PlotInputs, Written};
-use crate::io::scenario::Scenario;
-use crate::robot::{ParamSet, RobotModel};
-use crate::study::check::Check;
-use crate::study::figures::Figures;
+use super::figures::Figures;
+use super::plots::PlotInputs;
+use super::spec::TricalScenario;
+use super::study::StudyResults;
+use crate::io::manifest::Provenance;
+use crate::io::plot::Written;
+use crate::io::record::Recorder;
+use crate::io::table::{err, parquet, table_hashes};
+use crate::study::check::{Check, checks_markdown};
 use crate::study::published::published;
-use crate::study::{Identified, StudyResults, Task};
+use crate::study::tables::{parameter_columns, task_columns};
 
 /// Wall times of a run, s.
 #[derive(Clone, Debug, Default, Serialize)]
@@ -34,47 +37,6 @@ pub struct Timings {
     pub study_s: f64,
 }
 
-/// Where a result came from: the head of every `manifest.json`.
-#[derive(Serialize)]
-pub(crate) struct Provenance<'a> {
-    scenario: &'a str,
-    scenario_path: String,
-    scenario_sha256: String,
-    seed: u64,
-    threads: usize,
-    crate_version: &'static str,
-    git_commit: String,
-}
-
-impl<'a> Provenance<'a> {
-    /// The provenance of a run of the scenario `name` read from `path` with `text`.
-    pub(crate) fn new(name: &'a str, path: &Path, text: &str, seed: u64, threads: usize) -> Self {
-        Self {
-            scenario: name,
-            scenario_path: path.display().to_string(),
-            scenario_sha256: format!("{:x}", Sha256::digest(text.as_bytes())),
-            seed,
-            threads,
-            crate_version: env!("CARGO_PKG_VERSION"),
-            git_commit: git_commit(),
-        }
-    }
-}
-
-/// The sha256 of every result table (`*.parquet`) in `dir`, by file name: two runs gave the same
-/// results when these agree (the tables carry no wall-clock value).
-pub(crate) fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<String, String>> {
-    let mut out = std::collections::BTreeMap::new();
-    for entry in fs::read_dir(dir)? {
-        let path = entry?.path();
-        if path.extension().is_some_and(|e| e == "parquet") {
-            let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-            out.insert(name, format!("{:x}", Sha256::digest(fs::read(&path)?)));
-        }
-    }
-    Ok(out)
-}
-
 #[derive(Serialize)]
 struct Manifest<'a> {
     #[serde(flatten)]
@@ -85,102 +47,6 @@ struct Manifest<'a> {
     repetitions: u32,
     timings: &'a Timings,
 }
-
-fn git_commit() -> String {
-    std::process::Command::new("git")
-        .args(["rev-parse", "HEAD"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-        .unwrap_or_else(|| "unknown".into())
-}
-
-pub(crate) fn err(e: impl std::fmt::Display) -> std::io::Error {
-    std::io::Error::other(e.to_string())
-}
-
-/// The columns every study's `tasks.parquet` starts with: where the task sits in the grid, the set
-/// chosen and how the fit ended.
-pub(crate) fn task_columns<'a>(rows: impl Iterator<Item = (&'a Task, &'a Identified)> + Clone) -> Vec<Column> {
-    let u32c = |name: &str, f: &dyn Fn(&Task, &Identified) -> u32| {
-        Column::new(name.into(), rows.clone().map(|(t, i)| f(t, i)).collect::<Vec<_>>())
-    };
-    let f64c = |name: &str, f: &dyn Fn(&Identified) -> f64| Column::new(name.into(), rows.clone().map(|(_, i)| f(i)).collect::<Vec<_>>());
-    let strc = |name: &str, f: &dyn Fn(&Task, &Identified) -> String| {
-        Column::new(name.into(), rows.clone().map(|(t, i)| f(t, i)).collect::<Vec<_>>())
-    };
-    vec![
-        u32c("task", &|t, _| t.index as u32),
-        strc("selection", &|t, _| t.selection.label().to_string()),
-        u32c("set_size", &|t, _| t.set_size as u32),
-        u32c("repetition", &|t, _| t.repetition as u32),
-        f64c("o1", &|i| i.observability.o1),
-        f64c("o2", &|i| i.observability.o2),
-        f64c("o3", &|i| i.observability.o3),
-        f64c("o4", &|i| i.observability.o4),
-        f64c("o5", &|i| i.observability.o5),
-        f64c("condition_number", &|i| i.condition_number),
-        strc("outcome", &|_, i| i.outcome.label().to_string()),
-        strc("unidentifiable", &|_, i| i.outcome.unidentifiable().join(" ")),
-        u32c("iterations", &|_, i| i.iterations as u32),
-        u32c("detmax_steps", &|_, i| i.detmax_steps as u32),
-        f64c("residual_rms_mm", &|i| i.residual_rms_mm),
-    ]
-}
-
-/// `parameters.parquet` of any study: one row per task and identified parameter, in the unit of the
-/// paper's tables, beside the truth and the nominal (start) value.
-pub(crate) fn parameter_columns<'a>(
-    set: &ParamSet,
-    rows: impl Iterator<Item = (&'a Task, &'a Identified)>,
-    truth: &RobotModel,
-    nominal: &RobotModel,
-) -> Vec<Column> {
-    let ids = set.ids();
-    let in_unit = |id: &crate::robot::ParamId, m: &RobotModel| id.unit().from_internal(id.get(m.data()));
-    let (truth_v, nominal_v): (Vec<f64>, Vec<f64>) = ids.iter().map(|id| (in_unit(id, truth), in_unit(id, nominal))).unzip();
-    let (mut task, mut param, mut unit, mut value, mut tv, mut nv) = (vec![], vec![], vec![], vec![], vec![], vec![]);
-    for (t, x) in rows {
-        for (j, id) in ids.iter().enumerate() {
-            task.push(t.index as u32);
-            param.push(id.name());
-            unit.push(id.unit().symbol().to_string());
-            value.push(x.values[j].map(|v| id.unit().from_internal(v)));
-            tv.push(truth_v[j]);
-            nv.push(nominal_v[j]);
-        }
-    }
-    vec![
-        Column::new("task".into(), task),
-        Column::new("parameter".into(), param),
-        Column::new("unit".into(), unit),
-        Column::new("identified".into(), value),
-        Column::new("truth".into(), tv),
-        Column::new("nominal".into(), nv),
-    ]
-}
-
-/// The published-versus-reproduced table of a summary, under a heading.
-pub(crate) fn checks_markdown(heading: &str, checks: &[Check]) -> String {
-    let mut s = format!("## {heading}\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|\n");
-    for c in checks {
-        let v = if c.pass == Some(false) { "**miss**" } else { c.verdict() };
-        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
-    }
-    s
-}
-
-pub(crate) fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
-    let mut df = DataFrame::new_infer_height(columns).map_err(err)?;
-    let file = fs::File::create(dir.join(name))?;
-    ParquetWriter::new(file).finish(&mut df).map_err(err)?;
-    Ok(())
-}
-
-/// Writes a recording to the path it is given.
-pub type Recorder<'a> = &'a dyn Fn(&Path) -> Result<(), String>;
 
 /// Optional outputs beside the tables.
 #[derive(Default)]
@@ -201,19 +67,15 @@ pub struct Report<'a> {
     pub threads: usize,
     /// Wall times.
     pub timings: &'a Timings,
+    /// Command-line overrides of the scenario (`key`, `value`).
+    pub overrides: &'a [(String, String)],
     /// The figures (PNG and SVG, embedded in `summary.md`) and the recording.
     pub extras: Extras<'a>,
 }
 
-/// Writes every result file of `results` into `out/<scenario name>`, replacing what was there.
-pub fn write(out: &Path, scenario: &Scenario, results: &StudyResults, report: &Report<'_>) -> std::io::Result<PathBuf> {
-    write_atomically(out, &scenario.name, |tmp| write_into(tmp, scenario, results, report))
-}
-
-pub(crate) use crate::io::out_dir::write_atomically;
-
-fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
-    let Report { figures: f, checks, threads, timings, ref extras } = *report;
+/// Writes every result file of `r` into `dir` (an empty directory).
+pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
+    let Report { figures: f, checks, threads, timings, overrides, ref extras } = *report;
     let t = &r.tasks;
     let f64c = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
     let mut cols = task_columns(t.iter().map(|x| (&x.task, &x.id)));
@@ -226,7 +88,7 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report
         f64c("validation_rms_mm", t.iter().map(|x| x.validation.rms).collect()),
     ]);
     parquet(dir, "tasks.parquet", cols)?;
-    let comp: Vec<(&crate::study::TaskResult, &crate::study::Compensated)> =
+    let comp: Vec<(&crate::device::trical::study::TaskResult, &crate::device::trical::study::Compensated)> =
         t.iter().filter_map(|x| x.compensated.as_ref().map(|c| (x, c))).collect();
     if !comp.is_empty() {
         let stat = |name: &str, g: fn(&crate::study::ErrorStats) -> f64| f64c(name, comp.iter().map(|(_, c)| g(&c.stats)).collect());
@@ -278,7 +140,7 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report
     )?;
 
     let manifest = Manifest {
-        provenance: Provenance::new(&scenario.name, &scenario.path, &scenario.text, scenario.seed, threads),
+        provenance: Provenance::new(&scenario.header.name, &scenario.header.path, &scenario.header.text, scenario.header.seed, overrides, threads),
         tables_sha256: table_hashes(dir)?,
         tasks: t.len(),
         set_sizes: scenario.study.set_sizes.clone(),
@@ -287,10 +149,10 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
     if let Some(record) = extras.recording {
-        record(&dir.join("study.rrd")).map_err(|e| std::io::Error::other(format!("recording: {e}")))?;
+        record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
     }
     let drawn = match extras.plots {
-        Some(p) => crate::io::plots::write_all(dir, r, p).map_err(|e| std::io::Error::other(format!("plots: {e}")))?,
+        Some(p) => super::plots::write_all(dir, r, p).map_err(std::io::Error::other)?,
         None => Vec::new(),
     };
     fs::write(dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
@@ -300,13 +162,13 @@ fn write_into(dir: &Path, scenario: &Scenario, r: &StudyResults, report: &Report
 /// The summary: the paper's Tables 7 and 8 and before/after figures next to calsim's.
 ///
 /// Long by design: the summary document top to bottom, one block per section.
-pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Check], drawn: &[Written]) -> String {
+pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks: &[Check], drawn: &[Written]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# {}: calsim against the published figures\n", scenario.name);
+    let _ = writeln!(s, "# {}: calsim against the published figures\n", scenario.header.name);
     let _ = writeln!(
         s,
         "Seed {}, {} identifications ({} set sizes x {} repetitions), DETMAX on O1 over a pool of {}, validation on {} poses.\n",
-        scenario.seed,
+        scenario.header.seed,
         r.tasks.len(),
         scenario.study.set_sizes.len(),
         scenario.study.repetitions,
@@ -332,7 +194,7 @@ pub fn summary(scenario: &Scenario, r: &StudyResults, f: &Figures, checks: &[Che
         "| after, n = {} (median over repetitions; paper Table 8: median {}, std {}, max {}) | {:.3} | {:.3} | {:.3} | - | {:.3} |",
         f.table_n, t8.median_mm, t8.std_mm, t8.max_mm, f.after_mean, f.after_median, f.after_std, f.after_max
     );
-    let comp: Vec<&crate::study::Compensated> = r.tasks.iter().filter_map(|x| x.compensated.as_ref()).collect();
+    let comp: Vec<&crate::device::trical::study::Compensated> = r.tasks.iter().filter_map(|x| x.compensated.as_ref()).collect();
     if !comp.is_empty() {
         let med =
             |g: fn(&crate::study::ErrorStats) -> f64| crate::study::stats::median(&comp.iter().map(|c| g(&c.stats)).collect::<Vec<_>>());

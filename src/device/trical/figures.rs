@@ -5,7 +5,7 @@
 use serde::Deserialize;
 
 use crate::robot::RobotModel;
-use crate::study::StudyResults;
+use crate::device::trical::study::StudyResults;
 use crate::study::check::{Band, Bound, Check};
 use crate::study::published::published;
 use crate::study::stats::{ErrorStats, iqr, median, pearson};
@@ -163,7 +163,7 @@ impl Figures {
     /// Computes the figures of a study; `truth` gives the injected values.
     pub fn of(results: &StudyResults, truth: &RobotModel, table_n: usize) -> Self {
         let at_n: Vec<_> = results.tasks.iter().filter(|t| t.task.set_size == table_n && !t.id.outcome.is_rank_deficient()).collect();
-        let med = |f: &dyn Fn(&crate::study::TaskResult) -> f64| median(&at_n.iter().map(|t| f(t)).collect::<Vec<_>>());
+        let med = |f: &dyn Fn(&crate::device::trical::study::TaskResult) -> f64| median(&at_n.iter().map(|t| f(t)).collect::<Vec<_>>());
         let table7 = results
             .set
             .ids()

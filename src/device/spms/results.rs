@@ -4,16 +4,21 @@
 
 use std::fmt::Write as _;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use polars::prelude::*;
 use serde::Serialize;
 
-use crate::io::plots::{SpmsPlotInputs, Written};
-use crate::io::report::display_name;
-use crate::io::results::{Provenance, Recorder, err, parameter_columns, parquet, table_hashes, task_columns, write_atomically};
-use crate::io::scenario::SpmsScenario;
-use crate::spms::study::{SpmsFigures, SpmsResults, SpmsTimings};
+use super::plots::SpmsPlotInputs;
+use super::spec::SpmsScenario;
+use super::study::{SpmsFigures, SpmsResults, SpmsTimings};
+use crate::io::manifest::Provenance;
+use crate::io::plot::Written;
+use crate::io::record::Recorder;
+use crate::io::table::{err, parquet, table_hashes};
+use crate::robot::params::display_name;
+use crate::study::check::checks_markdown;
+use crate::study::tables::{parameter_columns, task_columns};
 use crate::study::Selection;
 use crate::study::check::Check;
 use crate::study::published::published;
@@ -33,44 +38,27 @@ struct Manifest<'a> {
 }
 
 /// Optional outputs beside the tables.
-#[derive(Default)]
 pub struct SpmsExtras<'a> {
     /// Draw the figures.
     pub plots: bool,
     /// Writes the Rerun recording to the path it is given; `None` records nothing.
     pub recording: Option<Recorder<'a>>,
+    /// Worker threads (recorded in the manifest).
+    pub threads: usize,
+    /// Command-line overrides of the scenario (`key`, `value`).
+    pub overrides: &'a [(String, String)],
 }
 
-/// Writes every result file of `r` into `out/<scenario name>`, replacing what was there.
-pub fn write(
-    out: &Path,
-    s: &SpmsScenario,
-    r: &SpmsResults,
-    f: &SpmsFigures,
-    checks: &[Check],
-    threads: usize,
-    extras: &SpmsExtras<'_>,
-) -> std::io::Result<PathBuf> {
-    write_atomically(out, &s.name, |dir| write_into(dir, s, r, f, checks, threads, extras))
-}
-
+/// Writes every result file of `r` into `dir` (an empty directory).
 ///
 /// Long by design: one block per result table, in the order of the README's list of result files.
-fn write_into(
-    dir: &Path,
-    s: &SpmsScenario,
-    r: &SpmsResults,
-    f: &SpmsFigures,
-    checks: &[Check],
-    threads: usize,
-    extras: &SpmsExtras<'_>,
-) -> std::io::Result<()> {
+pub fn write(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], extras: &SpmsExtras<'_>) -> std::io::Result<()> {
     let h = &r.head;
     // Beams: truth and both identifications.
     let (mut which, mut beam, mut px, mut py, mut pz, mut dx, mut dy, mut dz, mut gain, mut perr, mut aerr) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
     let truth: Vec<_> = h.spms.sensors.iter().map(|s| s.beam).collect();
-    let mut push = |label: &str, beams: &[crate::spms::Beam], gains: &[f64], pe: &[f64], ae: &[f64]| {
+    let mut push = |label: &str, beams: &[crate::device::spms::Beam], gains: &[f64], pe: &[f64], ae: &[f64]| {
         for (k, b) in beams.iter().enumerate() {
             which.push(label.to_string());
             beam.push(k as u32 + 1);
@@ -161,7 +149,7 @@ fn write_into(
     )?;
 
     let manifest = Manifest {
-        provenance: Provenance::new(&s.name, &s.path, &s.text, s.seed, threads),
+        provenance: Provenance::new(&s.header.name, &s.header.path, &s.header.text, s.header.seed, extras.overrides, extras.threads),
         tables_sha256: table_hashes(dir)?,
         kind: "spms",
         tasks: t.len(),
@@ -201,7 +189,7 @@ fn write_into(
             ap_mean_by_size: f.after.iter().map(|a| (a.selection.label().to_string(), by_size(a.selection))).collect(),
             table_n: f.table_n,
         };
-        crate::io::plots::write_spms(dir, &inputs).map_err(|e| std::io::Error::other(format!("plots: {e}")))?
+        super::plots::write(dir, &inputs).map_err(std::io::Error::other)?
     } else {
         Vec::new()
     };
@@ -219,7 +207,7 @@ fn f3(x: f64) -> String {
 pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], drawn: &[Written]) -> String {
     let mut o = String::new();
     let h = &r.head;
-    let _ = writeln!(o, "# {}: SPMS and ER20-C10 (Gao et al. 2023), seed {}\n", s.name, s.seed);
+    let _ = writeln!(o, "# {}: SPMS and ER20-C10 (Gao et al. 2023), seed {}\n", s.header.name, s.header.seed);
     let _ = writeln!(
         o,
         "{} identifications ({} selections x {} set sizes x {} repetitions) from a pool of {} configurations \
@@ -233,9 +221,9 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         r.cell.stations.len(),
         r.cell.rejected
     );
-    o.push_str(&crate::io::results::checks_markdown("Published figures", checks));
+    o.push_str(&checks_markdown("Published figures", checks));
     let t6 = &published().spms_2023.iso9283;
-    let (own_before, own_after) = (crate::spms::iso9283::summary(&t6.ap_before_mm).2, crate::spms::iso9283::summary(&t6.ap_after_mm).2);
+    let (own_before, own_after) = (crate::device::spms::iso9283::summary(&t6.ap_before_mm).2, crate::device::spms::iso9283::summary(&t6.ap_after_mm).2);
     let _ = writeln!(
         o,
         "\nTable 6 prints an RMS ({:.3} before, {:.3} after) that is not the RMS of its own five AP values \
@@ -252,7 +240,7 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     );
     let _ = writeln!(o, "|---|---|---|---|---|---|---|---|---|---|---|");
     for id in [&h.paper, &h.paper_lm_only, &h.minimal] {
-        let (mx, mean, rms) = crate::spms::iso9283::summary(&id.measuring_error_mm);
+        let (mx, mean, rms) = crate::device::spms::iso9283::summary(&id.measuring_error_mm);
         let below = id.fit_residual_max_mm.iter().filter(|x| **x < 0.03).count();
         let _ = writeln!(
             o,

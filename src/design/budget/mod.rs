@@ -11,10 +11,14 @@
 //! beside it, the square of what removing it saves from the whole; the two disagree when sources
 //! interact.
 
+pub mod plots;
+pub mod results;
+
 use std::path::Path;
 
-use crate::io::scenario::{self, ScenarioError};
-use crate::sweep::spec::{Sweep, SweepError, from_tables, get_dotted, set_dotted};
+use crate::device::ErrorSource;
+use crate::device::scenario::{self, ScenarioError};
+use crate::design::sweep::spec::{Sweep, SweepError, from_tables, get_dotted, set_dotted};
 
 /// An error source: a label, the scenario keys it scales together, their unit.
 #[derive(Clone, Debug, PartialEq)]
@@ -29,9 +33,9 @@ pub struct Source {
     pub values: Vec<f64>,
 }
 
-type Candidate = (&'static str, &'static [&'static str], &'static str);
-
-const UNMODELLED: [Candidate; 6] = [
+/// The robot's unmodelled effects (and the payload change between the setups), sources of every
+/// device whose scenario sets them.
+const UNMODELLED: [ErrorSource; 6] = [
     ("transmission errors, high orders", &["robot.unmodelled.transmission_high_mdeg"], "mdeg"),
     ("encoder interpolation", &["robot.unmodelled.encoder_mdeg"], "mdeg"),
     ("payload change, setup 1 to setup 2", &["robot.validation_payload_change_kg"], "kg"),
@@ -40,43 +44,15 @@ const UNMODELLED: [Candidate; 6] = [
     ("thermal drift", &["robot.unmodelled.thermal_drift_ppm"], "ppm"),
 ];
 
-const TRICAL: [Candidate; 8] = [
-    ("indicator accuracy", &["trical.indicator_accuracy_um"], "um"),
-    ("indicator resolution", &["trical.indicator_resolution_um"], "um"),
-    ("indicator misalignment", &["trical.indicator_misalignment_deg"], "deg"),
-    ("ball diameter tolerance", &["cell.ball_diameter_tolerance_um"], "um"),
-    ("ballbar", &["cell.ballbar_sigma_um"], "um"),
-    ("CMM (TCP)", &["trical.cmm_sigma_um"], "um"),
-    ("robot repeatability", &["robot.repeatability_mm"], "mm"),
-    (
-        "laser tracker (validation)",
-        &["tracker.range_sigma_um", "tracker.range_sigma_um_per_m", "tracker.transverse_sigma_um", "tracker.transverse_sigma_um_per_m"],
-        "um",
-    ),
-];
-
-const SPMS: [Candidate; 10] = [
-    ("sensor linearity", &["head.sensor.linearity_pct_fs"], "% FS"),
-    ("sensor repeatability", &["head.sensor.repeatability_um"], "um"),
-    ("sensor temperature", &["head.sensor.temperature_delta_c"], "C"),
-    ("head assembly", &["head.assembly_error_mm", "head.assembly_error_deg"], "mm, deg"),
-    ("tracker, beam experiment", &["beams.tracker_sigma_um"], "um"),
-    ("tracker, station frames (A1-A3)", &["station.tracker_sigma_um"], "um"),
-    ("station placement", &["station.placement_error_mm", "station.placement_error_deg"], "mm, deg"),
-    ("sphere offset on the flange", &["robot.sphere_flange_error_mm"], "mm"),
-    ("robot repeatability", &["robot.repeatability_mm"], "mm"),
-    ("tracker, ISO 9283 test", &["iso9283.tracker_sigma_um"], "um"),
-];
-
 fn number(v: &toml::Value) -> Option<f64> {
     v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
 }
 
-/// The sources of a scenario table: the device's error keys the scenario sets non-zero.
-pub fn sources(t: &toml::Table) -> Vec<Source> {
-    let spms = matches!(t.get("kind"), Some(toml::Value::String(k)) if k == "spms");
-    let device: &[Candidate] = if spms { &SPMS } else { &TRICAL };
+/// The sources of a scenario table: its device's error keys, then the robot's unmodelled effects,
+/// that the scenario sets non-zero.
+pub fn sources(device: &dyn crate::device::Device, t: &toml::Table) -> Vec<Source> {
     device
+        .error_sources()
         .iter()
         .chain(UNMODELLED.iter())
         .filter_map(|&(label, keys, unit)| {
@@ -148,7 +124,7 @@ pub fn plan(
     repetitions: Option<u32>,
 ) -> Result<(Vec<Source>, Vec<Config>, Sweep), BudgetError> {
     let (text, base) = scenario::read_table(path)?;
-    let sources = sources(&base);
+    let sources = sources(crate::device::device_of(&base, path)?, &base);
     if sources.is_empty() {
         return Err(BudgetError::NoSource(path.display().to_string()));
     }

@@ -1,0 +1,275 @@
+//! `run` and `check`: a study of any device in the scenario's world, its results written, its
+//! published figures compared with their bands; with realisations, the figures judged over many
+//! worlds.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::{Error, Observer, thread_pool, threads_label};
+use crate::device::{Scenario, WriteOptions};
+use crate::identify::FitOutcome;
+use crate::study::check::{Check, DistributionCheck, over_realisations, tally};
+use crate::study::engine::Identified;
+
+/// Command-line changes to a scenario: the seed, the set sizes (the table size moves to the
+/// nearest given size) and the repetitions.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Overrides {
+    /// Seed, replacing the scenario's.
+    pub seed: Option<u64>,
+    /// Set sizes, replacing the scenario's.
+    pub set_sizes: Option<Vec<u32>>,
+    /// Repetitions per set size, replacing the scenario's.
+    pub repetitions: Option<u32>,
+}
+
+impl Overrides {
+    /// Applies the overrides to `s` and checks it again (`path` names it in errors).
+    pub fn apply(&self, s: &mut dyn Scenario) -> Result<(), Error> {
+        if self.is_empty() {
+            return Ok(());
+        }
+        if let Some(seed) = self.seed {
+            s.header_mut().seed = seed;
+        }
+        let st = s.study_mut();
+        if let Some(sizes) = &self.set_sizes {
+            st.set_sizes = sizes.clone();
+            if !sizes.contains(&st.table_set_size) {
+                st.table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(st.table_set_size)).expect("non-empty");
+            }
+        }
+        if let Some(r) = self.repetitions {
+            st.repetitions = r;
+        }
+        // Re-check what the overrides changed (sizes against the pool and the parameters).
+        s.recheck(&format!("{} (with command-line overrides)", s.header().path.display()))?;
+        Ok(())
+    }
+
+    /// Whether nothing is overridden.
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The overrides as `(key, TOML value)` pairs, as a manifest records them.
+    pub fn pairs(&self) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        if let Some(s) = self.seed {
+            out.push(("seed".into(), s.to_string()));
+        }
+        if let Some(v) = &self.set_sizes {
+            out.push(("study.set_sizes".into(), format!("{v:?}")));
+        }
+        if let Some(r) = self.repetitions {
+            out.push(("study.repetitions".into(), r.to_string()));
+        }
+        out
+    }
+
+    /// The overrides from the pairs of a manifest ([`Overrides::pairs`]); `None` for a pair calsim
+    /// does not write.
+    pub fn from_pairs(pairs: &[(String, String)]) -> Option<Self> {
+        let mut o = Self::default();
+        for (k, v) in pairs {
+            let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}")).ok()?.remove("v")?;
+            match k.as_str() {
+                "seed" => o.seed = Some(u64::try_from(value.as_integer()?).ok()?),
+                "study.set_sizes" => {
+                    o.set_sizes = Some(
+                        value.as_array()?.iter().map(|x| x.as_integer().and_then(|i| u32::try_from(i).ok())).collect::<Option<Vec<_>>>()?,
+                    )
+                }
+                "study.repetitions" => o.repetitions = Some(u32::try_from(value.as_integer()?).ok()?),
+                _ => return None,
+            }
+        }
+        Some(o)
+    }
+}
+
+/// What `run` and `check` are asked.
+#[derive(Clone, Debug)]
+pub struct RunSpec {
+    /// The scenario file.
+    pub scenario: PathBuf,
+    /// The directory the results go in (in a subdirectory named after the scenario).
+    pub out: PathBuf,
+    /// Worker threads (`None`: `RAYON_NUM_THREADS`, else every core).
+    pub threads: Option<u32>,
+    /// Changes to the scenario.
+    pub overrides: Overrides,
+    /// Draw the figures.
+    pub plots: bool,
+    /// Write the Rerun recording.
+    pub recording: bool,
+    /// Worlds the figures are judged over (1: the scenario's own world only).
+    pub realisations: u32,
+    /// Compare with the bands (`check`) rather than only report (`run`).
+    pub check: bool,
+}
+
+/// What `run` and `check` did.
+#[derive(Clone, Debug)]
+pub struct RunReport {
+    /// The scenario's name.
+    pub name: String,
+    /// Its device's kind.
+    pub kind: &'static str,
+    /// The seed of realisation 0.
+    pub seed: u64,
+    /// Worker threads.
+    pub threads: usize,
+    /// The published figures of realisation 0 beside calsim's.
+    pub checks: Vec<Check>,
+    /// The study's timing line.
+    pub timing: String,
+    /// Wall time of writing the results, and of the recording within it, s.
+    pub write_s: f64,
+    /// See `write_s`.
+    pub recording_s: f64,
+    /// Where the results are.
+    pub dest: PathBuf,
+    /// The figures over realisations, when more than one was asked.
+    pub distribution: Option<Vec<DistributionCheck>>,
+    /// Realisations that ran (realisation 0 included).
+    pub realisations_run: usize,
+}
+
+impl RunReport {
+    /// Figures checked and figures missed, by the rule the run used (over realisations when it ran
+    /// several).
+    pub fn tally(&self) -> (usize, usize) {
+        match &self.distribution {
+            Some(d) => (d.iter().filter(|d| d.pass.is_some()).count(), d.iter().filter(|d| d.pass == Some(false)).count()),
+            None => tally(&self.checks),
+        }
+    }
+}
+
+/// Loads a scenario of any device, with overrides applied; a sweep file given here is refused,
+/// saying what to run instead.
+pub fn load(path: &Path, overrides: &Overrides) -> Result<Box<dyn Scenario>, Error> {
+    let mut s = crate::device::load(path).map_err(|e| wrong_command(path, e))?;
+    overrides.apply(s.as_mut())?;
+    Ok(s)
+}
+
+/// A scenario error, or, when the file is a sweep file (it has `base` and `[[axis]]`), the command
+/// to run instead.
+fn wrong_command(path: &Path, e: crate::device::ScenarioError) -> Error {
+    let looks_like_sweep = crate::io::read_text(path)
+        .ok()
+        .and_then(|t| t.parse::<toml::Table>().ok())
+        .is_some_and(|t| t.contains_key("base") && (t.contains_key("axis") || t.contains_key("fixed")));
+    if looks_like_sweep {
+        return Error::input(path.display().to_string(), format!("a sweep file, not a scenario: run `calsim sweep {}`", path.display()));
+    }
+    e.into()
+}
+
+/// Runs the study of `spec.scenario`, writes its results, compares its figures (and, with
+/// realisations, judges them over that many worlds).
+pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> {
+    let scenario = load(&spec.scenario, &spec.overrides)?;
+    let h = scenario.header();
+    crate::io::out_dir::prepare(&spec.out, &h.name)?;
+    let (pool, threads) = thread_pool(spec.threads)?;
+    let kind = scenario.device().kind();
+    let shown_kind = if kind == crate::device::REGISTRY[0].kind() { String::new() } else { format!("{}, ", kind.to_uppercase()) };
+    observer.started(&format!(
+        "calsim {}: {} ({shown_kind}seed {}), {}",
+        if spec.check { "check" } else { "run" },
+        h.name,
+        h.seed,
+        threads_label(threads)
+    ));
+    let device_err = |source| Error::Device { path: spec.scenario.display().to_string(), source };
+    let outcome = pool
+        .install(|| scenario.run(h.seed, &|done, total| observer.progress(done, total, "identifications")))
+        .map_err(device_err)?;
+    observer.stage_done();
+    let checks = pool.install(|| outcome.checks()).map_err(device_err)?;
+    let t_write = Instant::now();
+    let options = WriteOptions { threads, plots: spec.plots, recording: spec.recording, overrides: spec.overrides.pairs() };
+    let mut written = Default::default();
+    let dest = crate::io::out_dir::write_atomically(&spec.out, &h.name, |dir| {
+        written = outcome.write(dir, &checks, &options).map_err(std::io::Error::other)?;
+        Ok(())
+    })
+    .map_err(Error::io(&spec.out))?;
+    let write_s = t_write.elapsed().as_secs_f64();
+    if let Some(w) = fit_health(&spec.scenario, outcome.fits())? {
+        observer.warning(&w);
+    }
+    let mut report = RunReport {
+        name: h.name.clone(),
+        kind,
+        seed: h.seed,
+        threads,
+        checks,
+        timing: outcome.timing(),
+        write_s,
+        recording_s: written.recording_s,
+        dest,
+        distribution: None,
+        realisations_run: 1,
+    };
+    if spec.realisations > 1 {
+        let others = realisations(spec.realisations, observer, |r| {
+            let seed = crate::seeds::realisation_seed(h.seed, r);
+            pool.install(|| scenario.run(seed, &|_, _| {}).and_then(|o| o.checks())).map_err(|e| e.to_string())
+        });
+        let mut runs = vec![report.checks.clone()];
+        runs.extend(others);
+        report.realisations_run = runs.len();
+        report.distribution = Some(over_realisations(&runs));
+    }
+    Ok(report)
+}
+
+/// One line when identifications failed: how many gave no model (and which parameters they could
+/// not separate), how many stopped at the iteration cap. A study in which no identification gave a
+/// model is an error of its scenario's parameter set.
+pub fn fit_health<'a>(scenario: &Path, ids: impl IntoIterator<Item = &'a Identified>) -> Result<Option<String>, Error> {
+    let (mut total, mut no_model, mut capped) = (0, 0, 0);
+    let mut names: Vec<&str> = Vec::new();
+    for id in ids {
+        total += 1;
+        match &id.outcome {
+            FitOutcome::RankDeficient { .. } | FitOutcome::NotFinite => no_model += 1,
+            FitOutcome::IterationCap { .. } => capped += 1,
+            _ => {}
+        }
+        for n in id.outcome.unidentifiable() {
+            if !names.contains(&n.as_str()) {
+                names.push(n);
+            }
+        }
+    }
+    let hidden = if names.is_empty() { String::new() } else { format!(" (could not separate: {})", names.join(" ")) };
+    if no_model == total && total > 0 {
+        return Err(Error::NoModel { scenario: scenario.display().to_string(), total, hidden });
+    }
+    Ok((no_model > 0 || capped > 0)
+        .then(|| format!("{no_model} of {total} identifications gave no model{hidden}; {capped} stopped at the iteration cap")))
+}
+
+/// The checks of realisations 1..count (realisation 0 is the plain run), with progress; a
+/// realisation whose study fails is left out with a warning.
+fn realisations(count: u32, observer: &dyn Observer, one: impl Fn(u32) -> Result<Vec<Check>, String>) -> Vec<Vec<Check>> {
+    let mut out = Vec::new();
+    let mut failed = Vec::new();
+    for r in 1..count {
+        match one(r) {
+            Ok(rows) => out.push(rows),
+            Err(e) => failed.push(format!("{r}: {e}")),
+        }
+        observer.progress(r as usize, count as usize - 1, "further realisations");
+    }
+    observer.stage_done();
+    if !failed.is_empty() {
+        observer.warning(&format!("{} realisations left out ({})", failed.len(), failed.join("; ")));
+    }
+    out
+}

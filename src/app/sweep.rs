@@ -1,0 +1,104 @@
+//! `sweep` and `merge`: a design sweep over realisations, whole or one shard of it, and the merge
+//! of its shard directories into the results.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::{Error, Observer, thread_pool, threads_label};
+use crate::design::sweep::{self, shard_dir};
+
+/// What `sweep` is asked.
+#[derive(Clone, Debug)]
+pub struct SweepSpec {
+    /// The sweep file.
+    pub file: PathBuf,
+    /// The directory of the shard directories and of the merged results.
+    pub out: PathBuf,
+    /// Only shard `k` of `K` (`None`: every unit, then merged).
+    pub shard: Option<(usize, usize)>,
+    /// Worker threads.
+    pub threads: Option<u32>,
+}
+
+/// What a sweep (or one shard of it) did.
+#[derive(Clone, Debug)]
+pub struct SweepReport {
+    /// The sweep's name.
+    pub name: String,
+    /// Units this run was responsible for, and its wall time, s.
+    pub units: usize,
+    /// See `units`.
+    pub run_s: f64,
+    /// The shard directory its units were written to (removed once merged).
+    pub shard_dir: PathBuf,
+    /// This shard and the number of shards.
+    pub shard: (usize, usize),
+    /// The merge, when the sweep ran whole.
+    pub merged: Option<MergeReport>,
+}
+
+/// What a merge did.
+#[derive(Clone, Debug)]
+pub struct MergeReport {
+    /// The merged results.
+    pub dest: PathBuf,
+    /// Work units merged, and of them failed (their campaign could not run in that world).
+    pub units: usize,
+    /// See `units`.
+    pub failed: usize,
+    /// The summary table (`summary.md`'s text).
+    pub summary: String,
+}
+
+/// Runs the sweep of `spec.file` (or one shard of it), then, unsharded, merges it.
+pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Error> {
+    let t0 = Instant::now();
+    let sweep = sweep::spec::load(&spec.file)?;
+    let (k, count) = spec.shard.unwrap_or((0, 1));
+    crate::io::out_dir::prepare(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string())?;
+    if spec.shard.is_none() {
+        crate::io::out_dir::prepare(&spec.out, &sweep.name)?;
+    }
+    let (pool, threads) = thread_pool(spec.threads)?;
+    let units = sweep.points.len() * sweep.realisations as usize;
+    observer.started(&format!(
+        "calsim sweep: {} ({} grid points x {} realisations = {units} work units{}), {}",
+        sweep.name,
+        sweep.points.len(),
+        sweep.realisations,
+        if count > 1 { format!(", shard {k} of {count}") } else { String::new() },
+        threads_label(threads)
+    ));
+    let dir = pool
+        .install(|| sweep::run_shard(&sweep, &spec.out, k, count, &|done, total| observer.progress(done, total, "work units")))
+        .map_err(Error::io(&spec.out))?;
+    observer.stage_done();
+    let mut report = SweepReport {
+        name: sweep.name.clone(),
+        units: units.div_ceil(count),
+        run_s: t0.elapsed().as_secs_f64(),
+        shard_dir: dir.clone(),
+        shard: (k, count),
+        merged: None,
+    };
+    if spec.shard.is_none() {
+        report.merged = Some(merge(std::slice::from_ref(&dir), &spec.out)?);
+        std::fs::remove_dir_all(&dir).map_err(Error::io(&dir))?;
+    }
+    Ok(report)
+}
+
+/// Merges the shard directories of one sweep into `out/<sweep>`; every unit failing is an error
+/// naming the sweep (its results are written first, with the reasons).
+pub fn merge(shards: &[PathBuf], out: &Path) -> Result<MergeReport, Error> {
+    let (info, units) = sweep::read_shards(shards)?;
+    crate::io::out_dir::prepare(out, &info.name)?;
+    let points = sweep::aggregate(&info, &units);
+    let dest = sweep::results::write(out, &info, &units, &points).map_err(Error::io(out))?;
+    let failed = units.iter().filter(|u| u.error.is_some()).count();
+    let summary = sweep::results::summary(&info, &units, &points);
+    if failed == units.len() {
+        return Err(Error::input(info.name.clone(), format!("every work unit failed (see {}/summary.md)", dest.display())));
+    }
+    Ok(MergeReport { dest, units: units.len(), failed, summary })
+}

@@ -1,0 +1,137 @@
+//! A budget's figures: the tornado of the sources and the linear prediction against the Monte
+//! Carlo.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, e2s, legend, range_of, register_font};
+
+/// One bar of the tornado: the source, the p95 without it, and the p95 at each what-if factor.
+pub type TornadoLine = (String, f64, Vec<(f64, f64)>);
+
+/// Writes the budget's tornado plot: per source (largest share first), the p95 after calibration
+/// without it and at each what-if factor, against the p95 with every source (`all_mm`).
+pub fn write_tornado(dir: &Path, lines: &[TornadoLine], all_mm: f64) -> Result<Vec<Written>, PlotError> {
+    register_font();
+    both!(dir, "budget_tornado", |root| tornado(root, lines, all_mm));
+    Ok(vec![Written {
+        stem: "budget_tornado".into(),
+        caption: format!(
+            "p95 after calibration with each source off or scaled (every other source as in the scenario); line: all sources, {all_mm:.3} mm"
+        ),
+    }])
+}
+
+fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLine], all_mm: f64) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let values = || lines.iter().flat_map(|l| std::iter::once(l.1).chain(l.2.iter().map(|x| x.1))).chain(std::iter::once(all_mm));
+    let xr = range_of(values(), 0.1);
+    let n = lines.len().max(1);
+    let mut chart = ChartBuilder::on(root)
+        .caption("Uncertainty budget: p95 after calibration per source", (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(220)
+        .build_cartesian_2d(xr.clone(), -0.5..(n as f64 - 0.5))
+        .map_err(e2s)?;
+    let labels: Vec<String> = lines.iter().map(|l| l.0.clone()).collect();
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(n)
+        .y_label_formatter(&|y| {
+            let k = y.round();
+            if (y - k).abs() < 1e-6 && k >= 0.0 { labels.get(n - 1 - k as usize).cloned().unwrap_or_default() } else { String::new() }
+        })
+        .x_desc("p95 of the validation error after calibration (mm)")
+        .label_style((FAMILY, 12))
+        .draw()
+        .map_err(e2s)?;
+    let y = |k: usize| (n - 1 - k) as f64;
+    let colours = [RGBColor(0, 140, 60), RGBColor(230, 120, 0), RGBColor(200, 30, 30)];
+    chart
+        .draw_series(
+            lines
+                .iter()
+                .enumerate()
+                .map(|(k, l)| Rectangle::new([(all_mm.min(l.1), y(k) - 0.3), (all_mm.max(l.1), y(k) + 0.3)], BLUE.mix(0.35).filled())),
+        )
+        .map_err(e2s)?
+        .label("source off")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], BLUE.mix(0.35).filled()));
+    let factors: Vec<f64> = lines.first().map(|l| l.2.iter().map(|x| x.0).collect()).unwrap_or_default();
+    for (j, f) in factors.iter().enumerate() {
+        let c = colours[j % colours.len()];
+        chart
+            .draw_series(lines.iter().enumerate().filter_map(|(k, l)| l.2.get(j).map(|v| Circle::new((v.1, y(k)), 5, c.filled()))))
+            .map_err(e2s)?
+            .label(format!("source x{f}"))
+            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+    }
+    chart
+        .draw_series(std::iter::once(PathElement::new(vec![(all_mm, -0.5), (all_mm, n as f64 - 0.5)], BLACK.stroke_width(2))))
+        .map_err(e2s)?
+        .label("all sources")
+        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
+    legend(&mut chart, SeriesLabelPosition::LowerRight, 12)?;
+    Ok(())
+}
+
+/// Writes the budget's predicted-versus-simulated plot: per parameter, the linear prediction's std
+/// against the simulated RMS error (internal units, log-log), with every source on and with none.
+pub fn write_prediction(dir: &Path, all: &[(f64, f64)], none: &[(f64, f64)]) -> Result<Vec<Written>, PlotError> {
+    register_font();
+    both!(dir, "budget_predicted_vs_simulated", |root| prediction(root, all, none));
+    Ok(vec![Written {
+        stem: "budget_predicted_vs_simulated".into(),
+        caption: "Per identified parameter: the linear prediction's std (sigma^2 (J^T J)^-1, sigma from the fit) against the \
+                  simulated RMS error over identifications and realisations; on the line the prediction is right"
+            .into(),
+    }])
+}
+
+fn prediction<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, all: &[(f64, f64)], none: &[(f64, f64)]) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let ok = |v: &&(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
+    let values: Vec<f64> = all.iter().chain(none).filter(ok).flat_map(|v| [v.0, v.1]).collect();
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = if lo.is_finite() && hi > lo { (lo / 2.0, hi * 2.0) } else { (1e-6, 1.0) };
+    let mut chart = ChartBuilder::on(root)
+        .caption("Parameter errors: linear prediction against Monte Carlo", (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((lo..hi).log_scale(), (lo..hi).log_scale())
+        .map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc("predicted std (internal units: mm, rad, rad/(N m))")
+        .y_desc("simulated RMS error")
+        .x_label_formatter(&|x| format!("{x:.0e}"))
+        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .label_style((FAMILY, 12))
+        .draw()
+        .map_err(e2s)?;
+    chart
+        .draw_series(std::iter::once(PathElement::new(vec![(lo, lo), (hi, hi)], BLACK.stroke_width(1))))
+        .map_err(e2s)?
+        .label("simulated = predicted")
+        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(1)));
+    let series = [(all, RGBColor(200, 30, 30), "every source on"), (none, RGBColor(0, 90, 200), "every source off (solver floor)")];
+    for (points, colour, label) in series {
+        if points.iter().filter(ok).count() == 0 {
+            continue;
+        }
+        chart
+            .draw_series(points.iter().filter(ok).map(|v| Circle::new((v.0, v.1), 4, colour.filled())))
+            .map_err(e2s)?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
+    }
+    legend(&mut chart, SeriesLabelPosition::UpperLeft, 12)?;
+    Ok(())
+}
+

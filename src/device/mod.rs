@@ -1,0 +1,239 @@
+//! Devices: each measuring device is one folder behind one interface, the way an argmin solver
+//! implements `Solver` and one executor runs any of them.
+//!
+//! A [`Device`] names its scenario `kind`, loads and checks its scenario files into a
+//! [`Scenario`], and lists its error sources for the budget. A [`Scenario`] runs its study in one
+//! physical world (a seed) and gives an [`Outcome`]: the published figures it checks, the summary a
+//! sweep keeps of a world, the linear prediction, and the results directory it writes. The
+//! application layer (`run`, `check`, realisations) and the design studies (sweeps, merges,
+//! budgets) are written once over these traits; [`REGISTRY`] is the one place that knows which
+//! devices exist.
+//!
+//! Adding a device: a folder here implementing the three traits, and one line in [`REGISTRY`].
+
+pub mod scenario;
+pub mod spms;
+pub mod trical;
+
+use std::any::Any;
+use std::path::Path;
+
+use crate::robot::RobotModel;
+use crate::study::check::Check;
+use crate::study::engine::{Identified, Selection};
+use crate::study::prediction::Prediction;
+use crate::study::{ErrorStats, StudySpec};
+pub use scenario::{Header, ScenarioError};
+
+/// Every device calsim knows, by the `kind` its scenario files give (the first is the default of
+/// a file without `kind`).
+pub static REGISTRY: &[&dyn Device] = &[&trical::TricalDevice, &spms::SpmsDevice];
+
+/// A measuring device: its scenario files and its error sources.
+pub trait Device: Sync {
+    /// The scenario's `kind` (`trical`, `spms`).
+    fn kind(&self) -> &'static str;
+
+    /// What the device is, in one line (for listings and errors).
+    fn describe(&self) -> &'static str;
+
+    /// Loads and checks a scenario of this device from its TOML table; `text` is what the
+    /// manifest hashes, `path` names it in errors and anchors the robot file.
+    fn load(&self, text: &str, table: toml::Table, path: &Path) -> Result<Box<dyn Scenario>, ScenarioError>;
+
+    /// The device's error sources for the budget, each a label, the dotted scenario keys it scales
+    /// together and their unit (the robot's unmodelled effects are the budget's own).
+    fn error_sources(&self) -> &'static [ErrorSource];
+}
+
+/// An error source of a budget: a label, the scenario keys it scales together, their unit.
+pub type ErrorSource = (&'static str, &'static [&'static str], &'static str);
+
+/// A loaded, checked scenario of some device.
+pub trait Scenario: Send + Sync + std::fmt::Debug {
+    /// Name, path, text and seed.
+    fn header(&self) -> &Header;
+
+    /// The same, to change the seed (a command-line override).
+    fn header_mut(&mut self) -> &mut Header;
+
+    /// The `[study]` table.
+    fn study(&self) -> &StudySpec;
+
+    /// The same, to change it (command-line overrides, a sweep's unit).
+    fn study_mut(&mut self) -> &mut StudySpec;
+
+    /// Checks the scenario again after its study or seed were changed; `path` names it in errors.
+    fn recheck(&self, path: &str) -> Result<(), ScenarioError>;
+
+    /// The device.
+    fn device(&self) -> &'static dyn Device;
+
+    /// A copy of this scenario.
+    fn clone_box(&self) -> Box<dyn Scenario>;
+
+    /// Runs the study in the physical world seeded `seed` (realisation 0 is the scenario's own
+    /// seed), calling `progress(done, total)` after each identification (from any thread).
+    fn run(&self, seed: u64, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<Box<dyn Outcome>, DeviceError>;
+
+    /// Points of the cell's layout in its world frame, mm (the TriCal datum spheres), for the
+    /// figures of a sweep that moves them; empty where the device has none.
+    fn layout_mm(&self) -> Vec<[f64; 3]>;
+
+    /// Redoes identification `index` of the study in realisation 0 for export; `Ok(None)` when the
+    /// study has no such task. A device without an exportable model says so.
+    fn refit(&self, index: usize) -> Result<Option<Refit>, DeviceError> {
+        let _ = index;
+        Err(DeviceError::new(format!("{}: export takes TriCal results (this device's calibration is not exported yet)", self.device().kind())))
+    }
+
+    /// The scenario as `Any`, for a command that belongs to one device (Table 8 of the TriCal
+    /// paper).
+    fn as_any(&self) -> &dyn Any;
+}
+
+impl Clone for Box<dyn Scenario> {
+    fn clone(&self) -> Self {
+        self.clone_box()
+    }
+}
+
+/// What a study in one world gave, for whatever the caller does next.
+pub trait Outcome: Send + Sync {
+    /// The published figures of this world compared with the scenario's bands (computing what the
+    /// checks need beyond the study, such as Table 8's external instruments, when asked).
+    fn checks(&self) -> Result<Vec<Check>, DeviceError>;
+
+    /// Every identification's record, in task order (for the fit-health line).
+    fn fits(&self) -> Vec<&Identified>;
+
+    /// What a sweep keeps of this world.
+    fn world(&self) -> WorldSummary;
+
+    /// The linear prediction beside the Monte Carlo at the table set size (`seed` keys its draws).
+    fn prediction(&self, seed: u64) -> Option<Prediction>;
+
+    /// Writes the results (tables, `manifest.json`, `summary.md`, figures, recording) into `dir`,
+    /// an empty directory; `checks` are this world's rows.
+    fn write(&self, dir: &Path, checks: &[Check], options: &WriteOptions) -> Result<WriteReport, DeviceError>;
+
+    /// The timing line of the study (what took how long), without the writing.
+    fn timing(&self) -> String;
+}
+
+/// What a results directory gets beside its tables.
+#[derive(Clone, Debug, Default)]
+pub struct WriteOptions {
+    /// Worker threads the run used (recorded in the manifest).
+    pub threads: usize,
+    /// Draw the figures.
+    pub plots: bool,
+    /// Write the Rerun recording.
+    pub recording: bool,
+    /// Command-line overrides applied to the scenario, as `key = value` (recorded in the manifest).
+    pub overrides: Vec<(String, String)>,
+}
+
+/// What writing the results took.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WriteReport {
+    /// Wall time of the recording, s.
+    pub recording_s: f64,
+}
+
+/// What a sweep keeps of a world: the error before calibration, the modelled campaign time, and
+/// per identification its place in the grid, its figure of merit after calibration and its O1.
+#[derive(Clone, Debug)]
+pub struct WorldSummary {
+    /// The error before calibration (TriCal: over the validation poses; SPMS: ISO 9283 AP), mm.
+    pub before: ErrorStats,
+    /// Modelled campaign time, s (0 where the device does not model it).
+    pub campaign_s: f64,
+    /// Per identification, in task order.
+    pub tasks: Vec<TaskFigure>,
+}
+
+/// One identification in a [`WorldSummary`].
+#[derive(Clone, Debug)]
+pub struct TaskFigure {
+    /// How its set was chosen.
+    pub selection: Selection,
+    /// Its set size.
+    pub set_size: usize,
+    /// The error after calibration (`None`: no model was identified), mm.
+    pub after: Option<ErrorStats>,
+    /// O1 of its set.
+    pub o1: f64,
+}
+
+/// One identification redone for export.
+pub struct Refit {
+    /// Task index.
+    pub task: usize,
+    /// Its set size.
+    pub set_size: usize,
+    /// Its validation median, mm.
+    pub validation_median_mm: f64,
+    /// The fit's residual RMS per configuration, mm.
+    pub residual_rms_mm: f64,
+    /// The model before calibration (the start of the fit).
+    pub before: RobotModel,
+    /// The identified model (`None`: the set could not separate the parameters).
+    pub model: Option<RobotModel>,
+    /// The identified parameter set.
+    pub set: crate::robot::ParamSet,
+    /// The chosen set's observations.
+    pub observations: Vec<crate::identify::Observation>,
+    /// The arm's link capsules.
+    pub links: crate::robot::file::LinkCapsules,
+    /// The arm's flange in MDH frame 6.
+    pub flange: Option<nalgebra::Matrix3<f64>>,
+}
+
+/// Why a device's study could not run, in its own words (the campaign, a parameter set, a file).
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct DeviceError(Box<dyn std::error::Error + Send + Sync>);
+
+impl DeviceError {
+    /// An error with this message.
+    pub fn new(message: impl Into<String>) -> Self {
+        Self(message.into().into())
+    }
+
+    /// Wraps a device's own error.
+    pub fn of(e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        Self(Box::new(e))
+    }
+}
+
+/// The device of a scenario table's `kind` (absent: the first of [`REGISTRY`]).
+pub fn device_of(table: &toml::Table, path: &Path) -> Result<&'static dyn Device, ScenarioError> {
+    let kind = match table.get("kind") {
+        None => return Ok(REGISTRY[0]),
+        Some(toml::Value::String(k)) => Some(k.as_str()),
+        Some(_) => None,
+    };
+    kind.and_then(|k| REGISTRY.iter().copied().find(|d| d.kind() == k)).ok_or_else(|| ScenarioError::Parse {
+        path: path.display().to_string(),
+        key: "kind".into(),
+        message: format!(
+            "{} is not a study kind ({})",
+            table["kind"],
+            REGISTRY.iter().map(|d| format!("\"{}\"", d.kind())).collect::<Vec<_>>().join(", ")
+        ),
+    })
+}
+
+/// Loads and checks a scenario of any device from its TOML table.
+pub fn from_table(text: &str, table: toml::Table, path: &Path) -> Result<Box<dyn Scenario>, ScenarioError> {
+    device_of(&table, path)?.load(text, table, path)
+}
+
+/// Reads a scenario file once and loads it as the device its `kind` names.
+pub fn load(path: &Path) -> Result<Box<dyn Scenario>, ScenarioError> {
+    let shown = path.display().to_string();
+    let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let table = scenario::table(&text, &shown)?;
+    from_table(&text, table, path)
+}

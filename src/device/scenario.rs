@@ -1,0 +1,343 @@
+//! What every scenario file shares, whatever its device: TOML with the unit in every key, unknown
+//! keys rejected, every number finite and range-checked, a robot file named relative to the
+//! scenario, the common `[study]`, `[robot.spread]` and `[robot.unmodelled]` tables. Errors name
+//! the file, the key and what is wrong, on one line ([`Checker`]). Each device parses and checks its
+//! own sections with these pieces (`device::<kind>::spec`).
+
+use std::path::{Path, PathBuf};
+
+use crate::study::StudySpec;
+use crate::study::check::Band;
+
+/// The parts of a loaded scenario every device has.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Header {
+    /// Name (the file stem).
+    pub name: String,
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// Its text (hashed into the manifest).
+    pub text: String,
+    /// Seed of every random stream.
+    pub seed: u64,
+}
+
+impl Header {
+    /// The header of a scenario read from `path` with `text` and `seed`.
+    pub fn new(path: &Path, text: &str, seed: u64) -> Self {
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
+        Self { name, path: path.to_path_buf(), text: text.to_string(), seed }
+    }
+}
+
+/// A scenario that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// The file cannot be read.
+    #[error("{path}: cannot read: {message}")]
+    Read {
+        /// File.
+        path: String,
+        /// OS error.
+        message: String,
+    },
+    /// The TOML is malformed or a key is unknown or of the wrong type.
+    #[error("{path}: {key}: {message}")]
+    Parse {
+        /// File.
+        path: String,
+        /// Dotted key path (or the position in the file).
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A value is out of its range.
+    #[error("{path}: [{section}] {key} = {value}: {why}")]
+    Range {
+        /// File.
+        path: String,
+        /// Table.
+        section: String,
+        /// Key.
+        key: String,
+        /// Value as written.
+        value: String,
+        /// The rule.
+        why: String,
+    },
+}
+
+/// Parses scenario text into its TOML table, naming the line of a syntax error.
+pub fn table(text: &str, shown: &str) -> Result<toml::Table, ScenarioError> {
+    toml::from_str(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
+        path: shown.into(),
+        key: position(text, e.span()),
+        message: e.message().to_string(),
+    })
+}
+
+/// Refuses a non-finite float anywhere under `v`, naming its dotted key (`cell.spheres_w_mm[3][0]`).
+fn finite(v: &toml::Value, path: &mut Vec<String>, shown: &str) -> Result<(), ScenarioError> {
+    match v {
+        toml::Value::Float(x) if !x.is_finite() => {
+            let (key, section) = path.split_last().map(|(k, s)| (k.clone(), s.join("."))).unwrap_or_default();
+            Err(ScenarioError::Range { path: shown.into(), section, key, value: x.to_string(), why: "must be a finite number".into() })
+        }
+        toml::Value::Table(t) => t.iter().try_for_each(|(k, v)| {
+            path.push(k.clone());
+            let r = finite(v, path, shown);
+            path.pop();
+            r
+        }),
+        toml::Value::Array(a) => a.iter().enumerate().try_for_each(|(i, v)| {
+            let last = path.pop().unwrap_or_default();
+            path.push(format!("{last}[{i}]"));
+            let r = finite(v, path, shown);
+            path.pop();
+            path.push(last);
+            r
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// Fills the keys of `section` that `t` leaves out from `defaults` (TOML text): how a device gives
+/// a common section its own defaults.
+pub fn with_defaults(mut t: toml::Table, section: &str, defaults: &str) -> toml::Table {
+    let defaults: toml::Table = toml::from_str(defaults).expect("device defaults are valid TOML");
+    let entry = t.entry(section.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let toml::Value::Table(given) = entry {
+        for (k, v) in defaults {
+            given.entry(k).or_insert(v);
+        }
+    }
+    t
+}
+
+/// Deserializes a scenario table, naming the offending key in the error. Every number in it must be
+/// finite first (TOML allows `nan` and `inf`, which no key of calsim takes).
+pub fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) -> Result<T, ScenarioError> {
+    for (k, v) in &t {
+        finite(v, &mut vec![k.clone()], shown)?;
+    }
+    serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
+        let key = e.path().to_string();
+        ScenarioError::Parse {
+            path: shown.into(),
+            key: if key == "." { "(file)".into() } else { key },
+            message: e.into_inner().message().to_string(),
+        }
+    })
+}
+
+fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    match span {
+        Some(s) => {
+            let line = text[..s.start.min(text.len())].lines().count().max(1);
+            format!("line {line}")
+        }
+        None => "(file)".into(),
+    }
+}
+
+/// Range checks that name the file, section, key, value and rule of what fails.
+pub struct Checker<'a> {
+    /// The file as shown in errors.
+    pub path: &'a str,
+}
+
+impl Checker<'_> {
+    /// The error for `section.key = value` breaking `why`.
+    pub fn fail(&self, section: &str, key: &str, value: impl ToString, why: &str) -> ScenarioError {
+        ScenarioError::Range { path: self.path.into(), section: section.into(), key: key.into(), value: value.to_string(), why: why.into() }
+    }
+
+    /// A finite number >= 0.
+    pub fn non_negative(&self, section: &str, key: &str, v: f64, what: &str) -> Result<(), ScenarioError> {
+        if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be >= 0 ({what})"))) }
+    }
+
+    /// The `[robot.spread]` table, the same in both kinds of scenario.
+    pub fn spread(&self, s: &crate::robot::SpreadSpec) -> Result<(), ScenarioError> {
+        self.within("robot.spread", "length_mm", s.length_mm, 0.0, 10.0, "one standard deviation of every length")?;
+        self.within("robot.spread", "angle_deg", s.angle_deg, 0.0, 5.0, "one standard deviation of every angle")?;
+        self.within(
+            "robot.spread",
+            "compliance_mdeg_per_nm",
+            s.compliance_mdeg_per_nm,
+            0.0,
+            100.0,
+            "one standard deviation of every compliance",
+        )
+    }
+
+    /// The `[robot.unmodelled]` table, the same in both kinds of scenario.
+    pub fn unmodelled(&self, u: &crate::robot::UnmodelledSpec) -> Result<(), ScenarioError> {
+        self.non_negative("robot.unmodelled", "transmission_low_mdeg", u.transmission_low_mdeg, "amplitude")?;
+        self.non_negative("robot.unmodelled", "transmission_high_mdeg", u.transmission_high_mdeg, "amplitude")?;
+        self.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
+        self.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
+        self.within("robot.unmodelled", "encoder_mdeg", u.encoder_mdeg, 0.0, 1000.0, "amplitude of the encoder error")?;
+        if let Some(n) = u.transmission_high_count
+            && !(1..=100).contains(&n)
+        {
+            return Err(self.fail("robot.unmodelled", "transmission_high_count", n, "must be 1 to 100 harmonics per joint"));
+        }
+        for (key, orders) in [("transmission_high_orders", u.transmission_high_orders), ("encoder_orders", u.encoder_orders)] {
+            if let Some([lo, hi]) = orders
+                && (lo == 0 || lo > hi || hi > 1_000_000)
+            {
+                return Err(self.fail(
+                    "robot.unmodelled",
+                    key,
+                    format!("[{lo}, {hi}]"),
+                    "must be [min, max] with 1 <= min <= max <= 1000000",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The `[study]` table, the same for every device: `pool` configurations to choose from and the
+    /// device's default parameter set.
+    pub fn study(&self, s: &StudySpec, pool: usize, default_set: fn() -> crate::robot::ParamSet) -> Result<(), ScenarioError> {
+        let set = s
+            .parameter_set(default_set)
+            .map_err(|e| self.fail("study", "parameters", format!("{:?}", s.parameters.clone().unwrap_or_default()), &e.to_string()))?;
+        let m = set.len();
+        if m == 0 {
+            return Err(self.fail("study", "parameters", "[]", "needs at least one parameter (absent: the device's default set)"));
+        }
+        if s.set_sizes.is_empty() {
+            return Err(self.fail("study", "set_sizes", "[]", "needs at least one set size"));
+        }
+        if s.set_sizes.len() > crate::study::MAX_SET_SIZES {
+            return Err(self.fail("study", "set_sizes", s.set_sizes.len(), &format!("at most {} set sizes", crate::study::MAX_SET_SIZES)));
+        }
+        for &n in &s.set_sizes {
+            if (n as usize) * 3 < m || n as usize >= pool {
+                return Err(self.fail(
+                    "study",
+                    "set_sizes",
+                    n,
+                    &format!("each size must give at least {m} equations (3 per configuration) and stay below the pool of {pool}"),
+                ));
+            }
+        }
+        self.count("study", "repetitions", s.repetitions.into(), 1, crate::study::MAX_REPETITIONS.into(), "identifications per set size")?;
+        if !s.set_sizes.contains(&s.table_set_size) {
+            return Err(self.fail("study", "table_set_size", s.table_set_size, "must be one of set_sizes"));
+        }
+        if s.selections.is_empty() || s.selections.len() > 2 {
+            return Err(self.fail("study", "selections", format!("{:?}", s.selections), "needs one or both of \"random\" and \"detmax\""));
+        }
+        let tasks = s.selections.len() as u64 * s.set_sizes.len() as u64 * u64::from(s.repetitions);
+        if tasks > crate::study::MAX_TASKS {
+            return Err(self.fail(
+                "study",
+                "repetitions",
+                s.repetitions,
+                &format!("{tasks} identifications in all: at most {}", crate::study::MAX_TASKS),
+            ));
+        }
+        self.within("study", "detmax_max_excursion", s.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
+        self.within("study", "rank_rtol", s.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
+        Ok(())
+    }
+
+    /// A count within `[lo, hi]`: the upper bound keeps every run within memory and time.
+    pub fn count(&self, section: &str, key: &str, v: u64, lo: u64, hi: u64, what: &str) -> Result<(), ScenarioError> {
+        if (lo..=hi).contains(&v) { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})"))) }
+    }
+
+    /// A band of `[expect]` (every one is an error in mm): a published value of a robot's size,
+    /// 1 nm to 10 m, and a tolerance in [0, 10].
+    pub fn band(&self, key: &str, b: &Option<Band>) -> Result<(), ScenarioError> {
+        if let Some(b) = b {
+            if !(b.value.is_finite() && (1e-6..=1e4).contains(&b.value)) {
+                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be the published value in mm, within [1e-6, 1e4]"));
+            }
+            if !(b.tolerance.is_finite() && (0.0..=10.0).contains(&b.tolerance)) {
+                return Err(self.fail(
+                    "expect",
+                    &format!("{key}.tolerance"),
+                    b.tolerance,
+                    "must be a relative tolerance within [0, 10] (0.2 = +-20 %)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// A bound of `[expect]` that is a plain number: finite and within `[lo, hi]`.
+    pub fn bound(&self, key: &str, v: Option<f64>, lo: f64, hi: f64) -> Result<(), ScenarioError> {
+        v.map_or(Ok(()), |v| self.within("expect", key, v, lo, hi, "bound of the check"))
+    }
+
+    /// Every parameter of the identified set must be separable on `model` by some set of
+    /// configurations: a parameter with a zero column (theta_offs6 with the TCP on the joint-6 axis)
+    /// or a redundancy (theta_offs1 with the base's alpha) is refused here, not found 510 times.
+    pub fn identifiable(&self, model: &crate::robot::RobotModel, set: &crate::robot::ParamSet, tool_key: &str) -> Result<(), ScenarioError> {
+        let hidden = crate::identify::observability::structurally_unidentifiable(model, set);
+        if hidden.is_empty() {
+            return Ok(());
+        }
+        let fix = if hidden.iter().any(|n| n == "theta_offs6") {
+            format!("theta_offs6 moves nothing while {tool_key} lies on the joint-6 axis: move the tool off the axis or fix theta_offs6")
+        } else {
+            format!(
+                "they move the tool alike in every configuration with this tool ({tool_key}): fix all but one of them, or move the tool"
+            )
+        };
+        Err(self.fail(
+            "study",
+            "parameters",
+            hidden.join(" "),
+            &format!("no set of configurations can separate these on this robot; {fix}"),
+        ))
+    }
+
+    /// A finite number within `[lo, hi]`.
+    pub fn within(&self, section: &str, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<(), ScenarioError> {
+        if v.is_finite() && v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})")))
+        }
+    }
+}
+
+/// Reads a scenario file into its TOML table, for callers that edit keys
+/// before loading it with [`from_table`] (sweeps).
+pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
+    let shown = path.display().to_string();
+    let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
+    let mut t = table(&text, &shown)?;
+    // A robot file is named relative to its scenario; the table may be loaded under another name
+    // (a sweep point), so it carries the path from here on.
+    if let Some(toml::Value::Table(robot)) = t.get_mut("robot")
+        && let Some(toml::Value::String(f)) = robot.get("file")
+    {
+        let resolved = relative_to(path, Path::new(f)).display().to_string();
+        robot.insert("file".into(), toml::Value::String(resolved));
+    }
+    Ok((text, t))
+}
+
+/// The robot file a scenario at `scenario` names (`None`: the built-in arm); an error names the
+/// scenario, `robot.file`, the robot file and its field.
+pub fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::robot::file::Arm>, ScenarioError> {
+    let Some(f) = file else { return Ok(None) };
+    let arm = crate::robot::file::RobotFile::load(&relative_to(scenario, f)).map_err(|e| ScenarioError::Parse {
+        path: scenario.display().to_string(),
+        key: "robot.file".into(),
+        message: e.to_string(),
+    })?;
+    Ok(Some(crate::robot::file::Arm(std::sync::Arc::new(arm))))
+}
+
+/// `file` as named in the scenario at `scenario`: relative paths from the scenario's directory.
+pub fn relative_to(scenario: &Path, file: &Path) -> PathBuf {
+    if file.is_absolute() { file.to_path_buf() } else { scenario.parent().unwrap_or(Path::new("")).join(file) }
+}
+

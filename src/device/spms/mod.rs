@@ -1,0 +1,207 @@
+//! The SPMS study of Gao et al. (Sensors 2023), on the one study engine: the head built and its
+//! beams identified (`head`), the ER20-C10 calibrated at SPMS stations and tested per ISO 9283
+//! (`calibration`, `iso9283`), random and DETMAX sets compared (`study`), its scenario file
+//! (`spec`) and results (`results`, `plots`, `recording`). The device itself (beams, readings,
+//! sphere fit, measurement frame, beam identification) is an instrument:
+//! [`crate::instrument::spms`], re-exported here.
+
+pub mod calibration;
+pub mod head;
+pub mod iso9283;
+pub mod plots;
+pub mod recording;
+pub mod results;
+pub mod spec;
+pub mod study;
+
+use std::any::Any;
+use std::cell::Cell;
+use std::path::Path;
+use std::time::Instant;
+
+pub use self::spec::SpmsScenario;
+use self::study::{SpmsFigures, SpmsResults};
+use super::{Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport};
+pub use crate::instrument::spms::*;
+use crate::study::check::Check;
+use crate::study::engine::Identified;
+use crate::study::prediction::Prediction;
+use crate::study::{ErrorStats, StudySpec};
+
+/// The SPMS device (`kind = "spms"`).
+pub struct SpmsDevice;
+
+/// The SPMS's error sources: the sensors, the head, the trackers, the stations, the tool and the
+/// robot's repeatability.
+const SOURCES: [ErrorSource; 10] = [
+    ("sensor linearity", &["head.sensor.linearity_pct_fs"], "% FS"),
+    ("sensor repeatability", &["head.sensor.repeatability_um"], "um"),
+    ("sensor temperature", &["head.sensor.temperature_delta_c"], "C"),
+    ("head assembly", &["head.assembly_error_mm", "head.assembly_error_deg"], "mm, deg"),
+    ("tracker, beam experiment", &["beams.tracker_sigma_um"], "um"),
+    ("tracker, station frames (A1-A3)", &["station.tracker_sigma_um"], "um"),
+    ("station placement", &["station.placement_error_mm", "station.placement_error_deg"], "mm, deg"),
+    ("sphere offset on the flange", &["robot.sphere_flange_error_mm"], "mm"),
+    ("robot repeatability", &["robot.repeatability_mm"], "mm"),
+    ("tracker, ISO 9283 test", &["iso9283.tracker_sigma_um"], "um"),
+];
+
+impl Device for SpmsDevice {
+    fn kind(&self) -> &'static str {
+        "spms"
+    }
+
+    fn describe(&self) -> &'static str {
+        "SPMS: five laser range sensors measuring a sphere on the flange (Gao et al. 2023)"
+    }
+
+    fn load(&self, text: &str, table: toml::Table, path: &Path) -> Result<Box<dyn Scenario>, ScenarioError> {
+        Ok(Box::new(spec::parse_table(text, table, path)?))
+    }
+
+    fn error_sources(&self) -> &'static [ErrorSource] {
+        &SOURCES
+    }
+}
+
+impl Scenario for SpmsScenario {
+    fn header(&self) -> &Header {
+        &self.header
+    }
+
+    fn header_mut(&mut self) -> &mut Header {
+        &mut self.header
+    }
+
+    fn study(&self) -> &StudySpec {
+        &self.spec.study
+    }
+
+    fn study_mut(&mut self) -> &mut StudySpec {
+        &mut self.spec.study
+    }
+
+    fn recheck(&self, path: &str) -> Result<(), ScenarioError> {
+        spec::check(&self.spec, path)
+    }
+
+    fn device(&self) -> &'static dyn Device {
+        &SpmsDevice
+    }
+
+    fn clone_box(&self) -> Box<dyn Scenario> {
+        Box::new(self.clone())
+    }
+
+    fn run(&self, seed: u64, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<Box<dyn Outcome>, DeviceError> {
+        let results = study::run(&self.spec, seed, progress).map_err(DeviceError::of)?;
+        let figures = SpmsFigures::of(&results, self.spec.study.table_set_size as usize);
+        Ok(Box::new(SpmsOutcome { scenario: self.clone(), results, figures }))
+    }
+
+    fn layout_mm(&self) -> Vec<[f64; 3]> {
+        Vec::new()
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// An SPMS study in one world.
+pub struct SpmsOutcome {
+    scenario: SpmsScenario,
+    results: SpmsResults,
+    figures: SpmsFigures,
+}
+
+impl SpmsOutcome {
+    /// The study's results.
+    pub fn results(&self) -> &SpmsResults {
+        &self.results
+    }
+
+    /// The paper's figures of this world.
+    pub fn figures(&self) -> &SpmsFigures {
+        &self.figures
+    }
+}
+
+impl Outcome for SpmsOutcome {
+    fn checks(&self) -> Result<Vec<Check>, DeviceError> {
+        Ok(study::checks(&self.figures, &self.scenario.expect))
+    }
+
+    fn fits(&self) -> Vec<&Identified> {
+        self.results.tasks.iter().map(|t| &t.id).collect()
+    }
+
+    fn world(&self) -> WorldSummary {
+        WorldSummary {
+            before: ErrorStats::of(&self.results.before.ap_mm),
+            campaign_s: 0.0,
+            tasks: self
+                .results
+                .tasks
+                .iter()
+                .map(|t| TaskFigure {
+                    selection: t.task.selection,
+                    set_size: t.task.set_size,
+                    after: t.iso.as_ref().map(|i| ErrorStats::of(&i.ap_mm)),
+                    o1: t.id.observability.o1,
+                })
+                .collect(),
+        }
+    }
+
+    fn prediction(&self, seed: u64) -> Option<Prediction> {
+        use crate::study::prediction::{TaskView, predict_tasks};
+        let r = &self.results;
+        let pool: Vec<_> = r.cell.pool.iter().map(|p| p.q).collect();
+        let n = self.scenario.spec.study.table_set_size as usize;
+        let tasks = r.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()).filter_map(|t| {
+            let ap = ErrorStats::of(&t.iso.as_ref()?.ap_mm);
+            Some(TaskView {
+                index: t.task.index,
+                chosen: &t.id.chosen,
+                values: &t.id.values,
+                residual_rms_mm: t.id.residual_rms_mm,
+                simulated_mm: [ap.median, ap.p95],
+            })
+        });
+        // The figure of merit (ISO 9283 AP after the controller's inverse kinematics, in the base
+        // frame) is not predicted: the parameters only.
+        predict_tasks(&r.set, &r.cell.robot.truth, tasks, &pool, &[], seed)
+    }
+
+    fn write(&self, dir: &Path, checks: &[Check], options: &WriteOptions) -> Result<WriteReport, DeviceError> {
+        let s = &self.scenario;
+        let recording_s = Cell::new(0.0);
+        let record = |path: &Path| {
+            let t = Instant::now();
+            let r = recording::write(path, &s.header.name, &s.spec, &self.results);
+            recording_s.set(t.elapsed().as_secs_f64());
+            r
+        };
+        let extras = results::SpmsExtras {
+            plots: options.plots,
+            recording: options.recording.then_some(&record as _),
+            threads: options.threads,
+            overrides: &options.overrides,
+        };
+        results::write(dir, s, &self.results, &self.figures, checks, &extras).map_err(DeviceError::of)?;
+        Ok(WriteReport { recording_s: recording_s.get() })
+    }
+
+    fn timing(&self) -> String {
+        let t = &self.results.timings;
+        format!(
+            "study {:.3} s (head {:.3} s, cell and pool {:.3} s, {} identifications with ISO 9283 tests {:.3} s)",
+            t.study_s,
+            t.head_s,
+            t.cell_s,
+            self.results.tasks.len(),
+            t.tasks_s
+        )
+    }
+}
