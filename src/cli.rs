@@ -455,7 +455,7 @@ fn export(args: &ExportArgs) -> Result<ExitCode, String> {
         (None, PickArg::Best) => Pick::Best(n),
         (None, PickArg::Worst) => Pick::Worst(n),
     };
-    let e = app::export::identification(&args.results, pick)?;
+    let e = app::export::identification(&args.results, pick).map_err(|e| e.to_string())?;
     let out = args.out.clone().unwrap_or_else(|| args.results.parent().map(Path::to_path_buf).unwrap_or_default());
     let name = format!("{}.task-{}", e.scenario, e.task);
     let dest = app::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;

@@ -14,13 +14,20 @@ fn an_exported_robot_file_is_the_identified_model() {
     let dir = tmp.path();
     let scenario = repo().join("scenarios/ci_quick.toml");
     let out = dir.join("out");
-    let o = calsim().args(["run", scenario.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let results = out.join("ci_quick");
-    let o = calsim().args(["export", results.to_str().unwrap(), "--out", dir.join("export").to_str().unwrap()]).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let exported = std::fs::read_dir(dir.join("export")).unwrap().map(|e| e.unwrap().path()).find(|p| p.is_dir()).expect("an export");
-    let task: usize = exported.to_str().unwrap().rsplit("task-").next().unwrap().parse().unwrap();
+    let spec = calsim::app::run::RunSpec {
+        scenario: scenario.clone(),
+        out: out.clone(),
+        threads: None,
+        overrides: Default::default(),
+        plots: false,
+        recording: false,
+        realisations: 1,
+        check: false,
+    };
+    let results = calsim::app::run::run(&spec, &calsim::app::Quiet).unwrap().dest;
+    let e = calsim::app::export::identification(&results, calsim::app::export::Pick::Median(None)).unwrap();
+    let exported = calsim::app::export::write(&dir.join("export"), "ci_quick.task", &e).unwrap();
+    let task = e.task;
     let file = RobotFile::load(&exported.join("robot.toml")).expect("the exported robot file loads");
     assert!(std::fs::read_to_string(exported.join("calibration.yaml")).unwrap().contains("joint_6:"));
 

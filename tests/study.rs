@@ -206,16 +206,24 @@ fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
 fn no_plots_skips_the_figures() {
     let tmp = scratch("noplots");
     let dir = tmp.path();
-    let out = calsim()
-        .args(["run", "scenarios/ci_quick.toml", "--set-sizes", "20:30:10", "--repetitions", "2", "--no-plots", "--out"])
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let spec = calsim::app::run::RunSpec {
+        scenario: repo().join("scenarios/ci_quick.toml"),
+        out: dir.to_path_buf(),
+        threads: Some(2),
+        overrides: calsim::app::run::Overrides { seed: None, set_sizes: Some(vec![20, 30]), repetitions: Some(2) },
+        plots: false,
+        recording: false,
+        realisations: 1,
+        check: false,
+    };
+    let report = calsim::app::run::run(&spec, &calsim::app::Quiet).unwrap();
+    assert_eq!(report.dest, dir.join("ci_quick"));
     let names: Vec<String> =
         std::fs::read_dir(dir.join("ci_quick")).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
-    assert!(names.iter().all(|n| !n.ends_with(".png") && !n.ends_with(".svg")), "{names:?}");
+    assert!(names.iter().all(|n| !n.ends_with(".png") && !n.ends_with(".svg") && !n.ends_with(".rrd")), "{names:?}");
     assert!(names.contains(&"summary.md".to_string()));
+    let manifest = std::fs::read_to_string(dir.join("ci_quick/manifest.json")).unwrap();
+    assert!(manifest.contains("study.set_sizes") && manifest.contains("[20, 30]"), "the overrides are recorded: {manifest}");
 }
 
 /// Parameter sets that no configurations can separate are refused at load, naming the parameters:

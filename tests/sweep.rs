@@ -58,32 +58,47 @@ fn tables(dir: &Path) -> Vec<Vec<u8>> {
 
 const AXIS: &str = "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010, 0.020]\n";
 
+/// Runs the sweep `file` (one shard of it with `shard`) through the library, `threads` workers.
+fn sweep_lib(file: &Path, out: &Path, shard: Option<(usize, usize)>, threads: u32) -> calsim::app::sweep::SweepReport {
+    let spec = calsim::app::sweep::SweepSpec { file: file.to_path_buf(), out: out.to_path_buf(), shard, threads: Some(threads) };
+    calsim::app::sweep::run(&spec, &calsim::app::Quiet).unwrap()
+}
+
 #[test]
 fn sharded_and_threaded_runs_merge_to_the_same_bytes() {
     let tmp = scratch("sweep-shards");
     let dir = tmp.path();
     let f = sweep_file(dir, "s.toml", 3, AXIS);
-    let fs = f.to_str().unwrap();
     let one = dir.join("one");
-    run(&["sweep", fs, "--threads", "1"], &one);
+    let merged = sweep_lib(&f, &one, None, 1).merged.expect("an unsharded sweep merges");
+    assert_eq!((merged.units, merged.failed), (6, 0), "2 points x 3 realisations, none failed");
     let two = dir.join("two");
-    run(&["sweep", fs, "--threads", "2"], &two);
+    sweep_lib(&f, &two, None, 2);
     let sharded = dir.join("sharded");
-    for k in 0..3 {
-        run(&["sweep", fs, "--shard", &format!("{k}/3")], &sharded);
-    }
-    let shards: Vec<String> = (0..3).map(|k| sharded.join(format!("s.shard-{k}-of-3")).display().to_string()).collect();
-    let mut args = vec!["merge"];
-    args.extend(shards.iter().map(String::as_str));
-    run(&args, &sharded);
+    let shards: Vec<PathBuf> = (0..3).map(|k| sweep_lib(&f, &sharded, Some((k, 3)), 2).shard_dir).collect();
+    calsim::app::sweep::merge(&shards, &sharded).unwrap();
     let reference = tables(&one.join("s"));
     assert!(reference[0].len() > 1000, "a sweep.parquet with rows");
     assert_eq!(tables(&two.join("s")), reference, "1 vs 2 threads");
     assert_eq!(tables(&sharded.join("s")), reference, "1 vs 3 shards");
-    // Every unit ran (6 = 2 points x 3 realisations); the unsharded run removes its shard directory.
     let manifest = std::fs::read_to_string(one.join("s/manifest.json")).unwrap();
     assert!(manifest.contains("\"units\": 6") && manifest.contains("\"failed_units\": 0"), "{manifest}");
-    assert!(!one.join("s.shard-0-of-1").exists());
+    assert!(!one.join("s.shard-0-of-1").exists(), "the unsharded run removes its shard directory");
+}
+
+/// The command line runs the same sweep: a shard, then `merge` of the shard directory.
+#[test]
+fn the_sweep_and_merge_commands_shard_and_merge() {
+    let tmp = scratch("sweep-cli");
+    let dir = tmp.path();
+    let f = sweep_file(dir, "c.toml", 1, AXIS);
+    let fs = f.to_str().unwrap();
+    let o = run(&["sweep", fs, "--shard", "0/1"], dir);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("merge the shards with: calsim merge"), "{}", String::from_utf8_lossy(&o.stdout));
+    let shard = dir.join("c.shard-0-of-1");
+    let o = run(&["merge", shard.to_str().unwrap()], dir);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("merged 2 work units (0 failed)"), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(dir.join("c/points.parquet").exists());
 }
 
 #[test]

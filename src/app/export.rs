@@ -11,6 +11,7 @@ use polars::prelude::*;
 use sha2::Digest;
 
 use crate::identify::observability::parameter_covariance;
+use super::Error;
 use crate::robot::{ParamId, RobotModel};
 use crate::study::prediction::noise_estimate;
 
@@ -50,12 +51,12 @@ pub struct Export {
     pub std: Vec<(ParamId, f64)>,
 }
 
-fn err(dir: &Path, what: impl std::fmt::Display) -> String {
-    format!("{}: {what}", dir.display())
+fn err(dir: &Path, what: impl std::fmt::Display) -> Error {
+    Error::input(dir.display().to_string(), what.to_string())
 }
 
 /// Redoes the identification `pick` of the TriCal results in `dir`.
-pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
+pub fn identification(dir: &Path, pick: Pick) -> Result<Export, Error> {
     #[derive(serde::Deserialize)]
     struct Manifest {
         scenario_path: PathBuf,
@@ -79,8 +80,8 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
     }
     let overrides = crate::app::run::Overrides::from_pairs(&manifest.overrides)
         .ok_or_else(|| err(dir, format!("manifest.json: overrides {:?}: not ones calsim writes", manifest.overrides)))?;
-    let mut s = crate::device::load(&manifest.scenario_path).map_err(|e| e.to_string())?;
-    overrides.apply(s.as_mut()).map_err(|e| e.to_string())?;
+    let mut s = crate::device::load(&manifest.scenario_path)?;
+    overrides.apply(s.as_mut())?;
     s.header_mut().seed = manifest.seed;
     let tasks = tasks_table(dir)?;
     let index = match pick {
@@ -125,7 +126,7 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, String> {
 }
 
 /// (task, set size, validation median) of every row of `dir/tasks.parquet`.
-fn tasks_table(dir: &Path) -> Result<Vec<(usize, usize, f64)>, String> {
+fn tasks_table(dir: &Path) -> Result<Vec<(usize, usize, f64)>, Error> {
     let path = dir.join("tasks.parquet");
     let file = std::fs::File::open(&path).map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
     let df = ParquetReader::new(file).finish().map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
@@ -215,7 +216,7 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
 /// corrections apart. The joint compliance, which URDF has no element for, is written as
 /// `<calsim_compliance joint="joint_i" rad_per_nm="..."/>` elements (ignored by URDF parsers).
 /// Metres and radians.
-pub fn urdf(e: &Export) -> Result<String, String> {
+pub fn urdf(e: &Export) -> Result<String, Error> {
     use nalgebra::{Isometry3, Vector3};
     use urdf_rs::{Axis, Calibration, Joint, JointLimit, JointType, Link, LinkName, Pose, Robot, Vec3};
     let (b, m) = (e.before.data(), e.model.data());
@@ -271,14 +272,14 @@ pub fn urdf(e: &Export) -> Result<String, String> {
     links.push(link("tcp", None));
     joints.push(fixed("tcp", "link_6", "tcp", Pose { xyz: Vec3([tcp.x, tcp.y, tcp.z]), rpy: Vec3([0.0; 3]) }));
     let robot = Robot { name: m.name.clone(), version: None, links, joints, materials: Vec::new() };
-    let text = urdf_rs::write_to_string(&robot).map_err(|err| format!("URDF: {err}"))?;
+    let text = urdf_rs::write_to_string(&robot).map_err(|err| Error::input("URDF", err.to_string()))?;
     let extension: String = m
         .links
         .iter()
         .enumerate()
         .map(|(i, l)| format!("  <calsim_compliance joint=\"joint_{}\" rad_per_nm=\"{:e}\"/>\n", i + 1, l.compliance))
         .collect();
-    let close = text.rfind("</robot>").ok_or("URDF: no closing </robot>")?;
+    let close = text.rfind("</robot>").ok_or_else(|| Error::input("URDF", "no closing </robot>"))?;
     Ok(format!(
         "{}  <!-- calsim: joint compliance (rad/(N m)), theta = q + offset + c tau; not part of URDF -->\n{extension}{}",
         &text[..close],

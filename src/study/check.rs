@@ -46,6 +46,16 @@ impl Bound {
     }
 }
 
+/// How a rule's bound reads in a table.
+pub fn describe(b: &Bound) -> String {
+    match b {
+        Bound::Band(b) => format!("{:.3} +-{:.0} %", b.value, b.tolerance * 100.0),
+        Bound::AtLeast(m) => format!(">= {m}"),
+        Bound::AtMost(m) => format!("<= {m}"),
+        Bound::Below(m) => format!("< {m}"),
+    }
+}
+
 /// One line of the published-versus-reproduced comparison.
 #[derive(Clone, Debug)]
 pub struct Check {

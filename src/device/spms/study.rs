@@ -252,7 +252,7 @@ pub fn checks(f: &SpmsFigures, e: &SpmsExpect) -> Vec<Check> {
             e.fit_residual_below_003_min.map(Bound::AtLeast),
             |b| match b {
                 Bound::AtLeast(v) => format!(">= {:.0} %", 100.0 * v),
-                other => crate::device::trical::figures::describe(other),
+                other => crate::study::check::describe(other),
             },
         ),
         Check::band("Table 6 before: max AP, mm", t6.max_before_mm, b.0, e.ap_before_max_mm),

@@ -6,7 +6,7 @@ use serde::Deserialize;
 
 use crate::robot::RobotModel;
 use crate::device::trical::study::StudyResults;
-use crate::study::check::{Band, Bound, Check};
+use crate::study::check::{Band, Bound, Check, describe};
 use crate::study::published::published;
 use crate::study::stats::{ErrorStats, iqr, median, pearson};
 
@@ -252,16 +252,6 @@ impl Figures {
             (Some(a), Some(b)) => a.iqr_of_means / b.iqr_of_means,
             _ => f64::NAN,
         }
-    }
-}
-
-/// How a rule's bound reads in a table.
-pub fn describe(b: &Bound) -> String {
-    match b {
-        Bound::Band(b) => format!("{:.3} +-{:.0} %", b.value, b.tolerance * 100.0),
-        Bound::AtLeast(m) => format!(">= {m}"),
-        Bound::AtMost(m) => format!("<= {m}"),
-        Bound::Below(m) => format!("< {m}"),
     }
 }
 

@@ -1,0 +1,105 @@
+//! The module graph of `src/` runs one way: every `crate::<module>` a file names is a module below
+//! its own in the layer order of ARCHITECTURE.md, a device names no other device (but the one it
+//! is built on), and the kernels (kinematics, identification) name no file, random-number,
+//! table or recording library. A new arrow upwards or sideways fails here, naming the file.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The top-level modules, lowest first: a module may name only modules before it.
+const LAYERS: [&str; 12] = ["numeric", "seeds", "io", "robot", "identify", "cell", "instrument", "study", "device", "design", "app", "cli"];
+
+/// Devices built on another device's world (tracker on the TriCal cell), by folder.
+const BUILT_ON: [(&str, &str); 1] = [("tracker", "trical")];
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// The code of a file without its unit tests (tests may reach anywhere).
+fn code(p: &Path) -> String {
+    let text = std::fs::read_to_string(p).unwrap();
+    match text.find("\n#[cfg(test)]") {
+        Some(i) => text[..i].to_string(),
+        None => text,
+    }
+}
+
+/// Every `crate::a` and `crate::a::b` the text names, as (a, b).
+fn named(text: &str) -> Vec<(String, Option<String>)> {
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find("crate::") {
+        rest = &rest[i + 7..];
+        let word = |s: &str| s.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect::<String>();
+        let a = word(rest);
+        let after = &rest[a.len()..];
+        let b = after.strip_prefix("::").map(word).filter(|w| !w.is_empty());
+        out.push((a, b));
+    }
+    out
+}
+
+#[test]
+fn every_module_names_only_modules_below_it_and_no_device_names_another() {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let layer: BTreeMap<&str, usize> = LAYERS.iter().enumerate().map(|(i, m)| (*m, i)).collect();
+    let mut wrong = Vec::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        let parts: Vec<String> = rel.iter().map(|s| s.to_string_lossy().trim_end_matches(".rs").to_string()).collect();
+        let top = parts[0].as_str();
+        if top == "lib" || top == "main" {
+            continue;
+        }
+        let own = *layer.get(top).unwrap_or_else(|| panic!("src/{}: a top-level module missing from LAYERS", rel.display()));
+        let device = (top == "device" && parts.len() > 2).then(|| parts[1].clone());
+        for (a, b) in named(&code(f)) {
+            if a == top {
+                // Inside a module: a device folder names no other device folder.
+                if let (Some(d), Some(b)) = (&device, &b) {
+                    let other_device = b != d && b != "scenario" && f.parent().unwrap().parent().unwrap().join(b).is_dir();
+                    if other_device && !BUILT_ON.contains(&(d.as_str(), b.as_str())) {
+                        wrong.push(format!("src/{}: names crate::device::{b} (a device names no other device)", rel.display()));
+                    }
+                }
+                continue;
+            }
+            match layer.get(a.as_str()) {
+                Some(&l) if l < own => {}
+                Some(_) => wrong.push(format!("src/{}: names crate::{a}, a module at or above {top}", rel.display())),
+                None => wrong.push(format!("src/{}: names crate::{a}, a module not in LAYERS", rel.display())),
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{} arrows against the layer order:\n{}", wrong.len(), wrong.join("\n"));
+}
+
+#[test]
+fn the_kernels_name_no_io_randomness_tables_or_recording() {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src.join("robot/kinematics"), &mut files);
+    rust_files(&src.join("identify"), &mut files);
+    let mut wrong = Vec::new();
+    for f in &files {
+        let text = code(f);
+        for forbidden in ["crate::io", "std::fs", "polars", "rerun", "plotters", "rand_chacha", "crate::seeds"] {
+            // The identification's load-time check draws its configurations from one fixed stream.
+            let allowed = forbidden == "crate::seeds" && f.ends_with("identify/observability.rs");
+            if text.contains(forbidden) && !allowed {
+                wrong.push(format!("{}: names {forbidden}", f.strip_prefix(&src).unwrap().display()));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "kernels reaching out:\n{}", wrong.join("\n"));
+}
