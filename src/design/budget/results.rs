@@ -143,6 +143,8 @@ fn prediction_rows(b: &BudgetReport<'_>) -> Option<Vec<PredictionRow>> {
 const MISSED_RATIO: f64 = 1.2;
 
 /// The section on the linear prediction against the Monte Carlo.
+///
+/// Long by design: the section top to bottom (what it compares, the table, then what it misses).
 fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
     let rows: Vec<(&Config, &Prediction)> = b
         .configs

@@ -74,6 +74,8 @@ pub struct Report<'a> {
 }
 
 /// Writes every result file of `r` into `dir` (an empty directory).
+///
+/// Long by design: one block per result file, in the order of the README's list of result files.
 pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
     let Report { figures: f, checks, threads, timings, overrides, ref extras } = *report;
     let t = &r.tasks;
