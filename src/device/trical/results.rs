@@ -73,11 +73,37 @@ pub struct Report<'a> {
     pub extras: Extras<'a>,
 }
 
-/// Writes every result file of `r` into `dir` (an empty directory).
-///
-/// Long by design: one block per result file, in the order of the README's list of result files.
+/// Writes every result file of `r` into `dir` (an empty directory): the tables, the manifest, the
+/// recording, the figures and the summary.
 pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
     let Report { figures: f, checks, threads, timings, overrides, ref extras } = *report;
+    write_tables(dir, r)?;
+    let manifest = Manifest {
+        provenance: Provenance::new(&scenario.header.name, &scenario.header.path, &scenario.header.text, scenario.header.seed, overrides, threads),
+        tables_sha256: table_hashes(dir)?,
+        tasks: r.tasks.len(),
+        set_sizes: scenario.study.set_sizes.clone(),
+        repetitions: scenario.study.repetitions,
+        timings,
+    };
+    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    if let Some(record) = extras.recording {
+        record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
+    }
+    let drawn = match extras.plots {
+        Some(p) => super::plots::write_all(dir, r, p).map_err(std::io::Error::other)?,
+        None => Vec::new(),
+    };
+    fs::write(dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
+    Ok(())
+}
+
+/// Writes the tables of a study validated on the tracker poses into `dir`: `tasks.parquet`,
+/// `compensated.parquet` (when the study ran the compensated validation), `parameters.parquet`
+/// and `validation_errors.parquet`.
+///
+/// Long by design: one block per table, in the order of the README's list of result files.
+pub fn write_tables(dir: &Path, r: &StudyResults) -> std::io::Result<()> {
     let t = &r.tasks;
     let f64c = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
     let mut cols = task_columns(t.iter().map(|x| (&x.task, &x.id)));
@@ -140,24 +166,6 @@ pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &R
             Column::new("distance_to_ccz_mm".into(), dccz),
         ],
     )?;
-
-    let manifest = Manifest {
-        provenance: Provenance::new(&scenario.header.name, &scenario.header.path, &scenario.header.text, scenario.header.seed, overrides, threads),
-        tables_sha256: table_hashes(dir)?,
-        tasks: t.len(),
-        set_sizes: scenario.study.set_sizes.clone(),
-        repetitions: scenario.study.repetitions,
-        timings,
-    };
-    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
-    if let Some(record) = extras.recording {
-        record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
-    }
-    let drawn = match extras.plots {
-        Some(p) => super::plots::write_all(dir, r, p).map_err(std::io::Error::other)?,
-        None => Vec::new(),
-    };
-    fs::write(dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
     Ok(())
 }
 
