@@ -13,6 +13,7 @@
 
 pub mod scenario;
 pub mod spms;
+pub mod tracker;
 pub mod trical;
 
 use std::any::Any;
@@ -27,7 +28,7 @@ pub use scenario::{Header, ScenarioError};
 
 /// Every device calsim knows, by the `kind` its scenario files give (the first is the default of
 /// a file without `kind`).
-pub static REGISTRY: &[&dyn Device] = &[&trical::TricalDevice, &spms::SpmsDevice];
+pub static REGISTRY: &[&dyn Device] = &[&trical::TricalDevice, &spms::SpmsDevice, &tracker::TrackerDevice];
 
 /// A measuring device: its scenario files and its error sources.
 pub trait Device: Sync {
