@@ -1,6 +1,7 @@
 //! The virtual robot: model data, named parameters, kinematics, statics and built-in robots.
 
 pub mod builtin;
+pub mod coupling;
 pub mod file;
 pub mod ik;
 pub mod kinematics;
