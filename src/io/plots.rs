@@ -14,8 +14,8 @@ use crate::study::stats::{ErrorStats, pearson, quantile, regression as least_squ
 
 /// The font every figure uses, embedded (see `assets/README.md`).
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
-const FAMILY: &str = "sans-serif";
-const SIZE: (u32, u32) = (900, 600);
+pub(crate) const FAMILY: &str = "sans-serif";
+pub(crate) const SIZE: (u32, u32) = (900, 600);
 
 /// What the figures show, gathered from a study and its experiment.
 pub struct PlotInputs {
@@ -37,13 +37,13 @@ pub struct Written {
     pub caption: String,
 }
 
-type DrawResult = Result<(), String>;
+pub(crate) type DrawResult = Result<(), String>;
 
 /// Values per set size: `(n, values)`.
 pub type BySize = Vec<(usize, Vec<f64>)>;
 
 /// Registers the embedded font once per process.
-fn register_font() {
+pub(crate) fn register_font() {
     static REGISTER: Once = Once::new();
     REGISTER.call_once(|| {
         // The font is a fixed asset: a failure here is a build defect, reported by the first text drawn.
@@ -52,7 +52,7 @@ fn register_font() {
 }
 
 /// The legend of a chart: a white box with a black border, labels in `size` points at `pos`.
-fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
     pos: SeriesLabelPosition,
     size: u32,
@@ -67,7 +67,7 @@ fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
         .map_err(e2s)
 }
 
-fn e2s<E: std::fmt::Debug>(e: E) -> String {
+pub(crate) fn e2s<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
 }
 
@@ -88,6 +88,7 @@ macro_rules! both {
         }
     }};
 }
+pub(crate) use both;
 
 /// Writes every figure into `dir`; returns what was written.
 ///
@@ -190,7 +191,7 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     Ok(out)
 }
 
-fn range_of(v: impl Iterator<Item = f64> + Clone, pad: f64) -> std::ops::Range<f64> {
+pub(crate) fn range_of(v: impl Iterator<Item = f64> + Clone, pad: f64) -> std::ops::Range<f64> {
     let lo = v.clone().fold(f64::INFINITY, f64::min);
     let hi = v.fold(f64::NEG_INFINITY, f64::max);
     let (lo, hi) = if lo.is_finite() && hi.is_finite() { (lo, hi) } else { (0.0, 1.0) };
@@ -336,7 +337,7 @@ pub fn heat_rgb(t: f64) -> [u8; 3] {
     [(255.0 * t) as u8, (80.0 * (1.0 - (2.0 * t - 1.0).abs())) as u8, (255.0 * (1.0 - t)) as u8]
 }
 
-fn heat(t: f64) -> RGBColor {
+pub(crate) fn heat(t: f64) -> RGBColor {
     let [r, g, b] = heat_rgb(t);
     RGBColor(r, g, b)
 }
