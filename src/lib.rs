@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod budget;
+pub mod calibrate;
 pub mod campaign;
 pub mod cell;
 pub mod cli;
