@@ -266,7 +266,40 @@ fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
     for t in &tools {
         frames_x.extend(t.iter());
     }
-    Ok(Setup { obs, frames, frames_x })
+    let s = Setup { obs, frames, frames_x };
+    check_start(robot, m, &s)?;
+    Ok(s)
+}
+
+/// Largest median error of the nominal robot registered on the points, mm: a robot's errors
+/// before calibration are millimetres (the IRB 120's 1-3 mm); tens of millimetres are data that
+/// do not describe this robot as the file says (units, joint order or convention, coupling, the
+/// wrong robot file).
+const MOST_START_MEDIAN_MM: f64 = 50.0;
+
+/// The nominal robot, registered, within [`MOST_START_MEDIAN_MM`] of the points (the median,
+/// so that outliers do not decide).
+fn check_start(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), CalibrateError> {
+    let layout = Layout { robot: ParamSet::new(vec![]).expect("no parameter"), sessions: m.sessions.len(), targets: m.targets.len() };
+    let problem = Problem { start: &robot.nominal, layout, obs: &s.obs };
+    let all: Vec<usize> = (0..s.obs.len()).collect();
+    let errors: Vec<f64> = problem.errors(&s.frames_x, &all).map_or_else(|| vec![f64::NAN], |e| e.iter().map(|v| v.norm()).collect());
+    let median = crate::study::stats::median(&errors);
+    if median <= MOST_START_MEDIAN_MM {
+        return Ok(());
+    }
+    Err(MeasurementError {
+        path: m.path.clone(),
+        line: None,
+        column: None,
+        message: format!(
+            "the nominal robot of {} registered on these points is {median:.1} mm off them (median; a robot before calibration is \
+             millimetres off): check the units in the column names, the joint order and convention (`# joints`, [[coupling]]) and \
+             the robot file",
+            robot.path.display()
+        ),
+    }
+    .into())
 }
 
 /// The models of `full` after the identifiability check on every point (duplicates left out).

@@ -95,7 +95,7 @@ fn per_joint<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
             .y_label_area_size(45)
             .build_cartesian_2d(xr, 0.0..ymax)
             .map_err(e2s)?;
-        chart.configure_mesh().x_desc("angle (deg)").y_desc("mm").label_style((FAMILY, 11)).draw().map_err(e2s)?;
+        chart.configure_mesh().x_labels(5).x_desc("angle (deg)").y_desc("mm").label_style((FAMILY, 11)).draw().map_err(e2s)?;
         chart.draw_series(keep.iter().map(|&i| Circle::new((angle(i), fit.errors_mm[i]), 2, BLUE.mix(0.6).filled()))).map_err(e2s)?;
     }
     Ok(())

@@ -278,7 +278,12 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     }
     let f = &c.chosen().fit;
     let lines: Vec<String> = (0..f.outlier.len()).filter(|&i| f.outlier[i]).map(|i| format!("line {}", m.points[i].line)).collect();
-    let _ = writeln!(s, "outliers: {}{}", lines.len(), if lines.is_empty() { String::new() } else { format!(" ({})", lines.join(", ")) });
+    let shown = match lines.len() {
+        0 => String::new(),
+        1..=10 => format!(" ({})", lines.join(", ")),
+        n => format!(" ({}, and {} more in summary.md)", lines[..10].join(", "), n - 10),
+    };
+    let _ = writeln!(s, "outliers: {}{shown}", lines.len());
     let _ = write!(s, "report, robot.toml, robot.urdf and calibration.yaml in {}", dir.display());
     s
 }
@@ -411,6 +416,13 @@ fn outliers_section(s: &mut String, c: &Calibration) {
         flagged.len(),
         f.outlier.len()
     );
+    if flagged.len() * 20 > f.outlier.len() {
+        let _ = writeln!(
+            s,
+            "**More than 5 % of the points are flagged**: more than measurement faults usually explain. The model may miss an \
+             effect (see the residuals per joint), or the file may mix robots, tools or joint conventions.\n"
+        );
+    }
     if flagged.is_empty() {
         return;
     }
@@ -479,8 +491,8 @@ fn parameters_section(s: &mut String, c: &Calibration) {
     }
     let _ = writeln!(
         s,
-        "\nCorrections within two standard deviations of zero (the data do not tell them from the nominal; fixing them with \
-         `--params` changes the held-out error little, the covariance of the others may shrink): {}.",
+        "\nCorrections within two standard deviations of zero (the data do not tell them from the nominal; fix them with \
+         `--params` and compare the held-out errors): {}.",
         if weak.is_empty() { "none".into() } else { weak.join(", ") }
     );
     frames_section(s, c);
