@@ -9,7 +9,7 @@ use calsim::calibrate::simulate::{SimulationSpec, to_csv};
 use calsim::calibrate::validation::Split;
 use calsim::calibrate::{Calibration, ModelKind, Options, ParamStatus, default_params, measurements, run};
 use calsim::robot::file::RobotFile;
-use calsim::robot::{ParamSet, RobotModel, UnmodelledSpec, XyzZyx};
+use calsim::robot::{ParamSet, RobotModel, UnmodelledSpec};
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 
 /// The IRB 120's robot file with a FANUC-style coupling of joint 3 (the controller reports
@@ -31,29 +31,20 @@ fn truth_on(robot: &RobotFile, set: &ParamSet) -> RobotModel {
     ParamSet::new(deviated.iter().map(|(id, _)| *id).collect()).unwrap().unpack(&robot.nominal, &values).unwrap()
 }
 
-fn frame(x: f64, y: f64, z: f64, a: f64, b: f64, g: f64) -> XyzZyx {
-    XyzZyx { x, y, z, alpha: a.to_radians(), beta: b.to_radians(), gamma: g.to_radians() }
-}
-
-/// 3 sessions (tracker frames moved between them) x 40 poses x 2 targets = 240 points.
+/// The shipped example's 3 sessions (tracker frames moved between them) x 40 poses x 2 targets =
+/// 240 points, with the robot `truth` inside the model (no unmodelled effect, no repeatability
+/// error), the coupling of `robot`, `noise_mm` per coordinate and the `outliers`.
 fn spec(truth: RobotModel, robot: &RobotFile, noise_mm: f64, outliers: Vec<(usize, Vector3<f64>)>) -> SimulationSpec {
     SimulationSpec {
         truth,
         unmodelled: UnmodelledSpec::default(),
         repeatability_mm: 0.0,
         coupling: robot.coupling.clone(),
-        sessions: vec![
-            ("A".into(), frame(1850.0, -300.0, -400.0, 170.0, 0.3, -0.2)),
-            ("B".into(), frame(1200.0, 1500.0, -350.0, -110.0, -0.4, 0.5)),
-            ("C".into(), frame(-900.0, -1700.0, -420.0, 60.0, 0.2, 0.1)),
-        ],
-        targets: vec![("SMR1".into(), Vector3::new(30.0, 0.0, 40.0)), ("SMR2".into(), Vector3::new(-25.0, 35.0, 45.0))],
-        poses_per_session: 40,
-        margin: 0.15,
         noise_mm,
         outliers,
         seed: 7,
         comments: vec!["joints = controller".into()],
+        ..calsim::calibrate::simulate::example_spec(robot).unwrap()
     }
 }
 
@@ -479,4 +470,45 @@ fn bad_calibrate_options_and_couplings_are_one_line_exit_2() {
         assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
         assert!(stderr.contains(expect), "{args:?}: expected `{expect}`, got {stderr}");
     }
+}
+
+/// Every value of one row of a small valid file (the coupled robot, 3 sessions x 8 poses x 1
+/// target, 24 points) replaced by each of 11 values (NaN, infinities, 1e300 either sign, empty,
+/// text, 1e-300, -0, 1e4, -720), 132 files: each is read and, where it reads, calibrated; none
+/// panics, every refusal is one line naming the file.
+#[test]
+fn mutated_measurement_values_are_refused_in_one_line_or_calibrated() {
+    let robot = robot_from(&coupled_irb120_text());
+    let mut s = spec(truth_on(&robot, &default_params()), &robot, 0.012, vec![]);
+    s.poses_per_session = 8;
+    s.targets.truncate(1);
+    let text = to_csv(&s);
+    let lines: Vec<&str> = text.lines().collect();
+    let row = lines.iter().position(|l| l.starts_with("p005")).unwrap();
+    let mutations = ["NaN", "inf", "-inf", "1e300", "-1e300", "", "abc", "1e-300", "-0", "1e4", "-720"];
+    let (mut refused, mut calibrated) = (0, 0);
+    for field in 0..12 {
+        for value in mutations {
+            let mut fields: Vec<&str> = lines[row].split(',').collect();
+            fields[field] = value;
+            let mutated = fields.join(",");
+            let mut all = lines.clone();
+            all[row] = &mutated;
+            let path = Path::new("mutated.csv");
+            let result = measurements::parse(path, &(all.join("\n") + "\n"), &robot)
+                .map_err(calsim::calibrate::CalibrateError::from)
+                .and_then(|m| run(&robot, &m, &Options { plots: false, prediction_draws: 20, ..Options::default() }));
+            match result {
+                Ok(_) => calibrated += 1,
+                Err(e) => {
+                    let msg = e.to_string();
+                    assert_eq!(msg.lines().count(), 1, "field {field} = {value:?}: {msg}");
+                    assert!(msg.starts_with("mutated.csv: "), "field {field} = {value:?}: {msg}");
+                    refused += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{refused} refused, {calibrated} calibrated");
+    assert_eq!(refused + calibrated, 132);
 }
