@@ -142,6 +142,9 @@ pub enum CalibrateError {
         /// How the fit ended.
         outcome: String,
     },
+    /// The report directory cannot be written where asked.
+    #[error(transparent)]
+    OutDir(#[from] crate::io::out_dir::OutDirError),
     /// Writing the report.
     #[error("{path}: {source}")]
     Io {
@@ -180,8 +183,7 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     let robot = RobotFile::load(&spec.robot_file)?;
     let m = measurements::read(&spec.measurements, &robot)?;
     let name = report::directory_name(&spec.measurements);
-    crate::io::out_dir::prepare(&spec.out, &name)
-        .map_err(|e| CalibrateError::Io { path: spec.out.clone(), source: std::io::Error::other(e) })?;
+    crate::io::out_dir::prepare(&spec.out, &name)?;
     let calibration = run(&robot, &m, &spec.options)?;
     let dir = report::write(&spec.out, &name, &calibration).map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
     Ok(CalibrationReport { calibration, dir })
