@@ -4,7 +4,7 @@
 
 use std::hint::black_box;
 
-use calsim::device::trical::campaign::uniform_configuration;
+use calsim::robot::uniform_configuration;
 use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::{DetmaxOptions, FitOptions, Observation, PoolJacobian, detmax, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};

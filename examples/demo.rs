@@ -12,7 +12,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use calsim::device::trical::campaign::uniform_configuration;
+use calsim::robot::uniform_configuration;
 use calsim::identify::{FitOptions, Observation, Solver, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use calsim::robot::{KinState, ParamSet, forward};

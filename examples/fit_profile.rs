@@ -1,5 +1,5 @@
 //! Repeats one 75-configuration identification, for profilers.
-use calsim::device::trical::campaign::uniform_configuration;
+use calsim::robot::uniform_configuration;
 use calsim::identify::{FitOptions, Observation, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
 use calsim::robot::{KinState, ParamSet, forward};

@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::app::{self, Observer};
+use crate::robot::ParamSet;
 use crate::study::check::{distribution_table, terminal_table};
 
 /// calsim: simulation and Monte Carlo studies of robot calibration with low-cost 3D measuring devices.
@@ -39,6 +40,40 @@ enum Command {
     Compensate(CompensateArgs),
     /// Convert a URDF arm (a serial chain of six revolute joints) into a calsim robot file.
     ImportUrdf(ImportUrdfArgs),
+    /// Calibrate a real robot from measured data (docs/calibrate.md): robot file, URDF, YAML and a report.
+    Calibrate(CalibrateArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct CalibrateArgs {
+    /// The robot file (nominal model, joint limits, optional [[coupling]]).
+    robot: PathBuf,
+    /// The measurement file (CSV, layout in docs/calibrate.md).
+    measurements: PathBuf,
+    /// Directory the report goes to (in `<measurements stem>.calibration`).
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// Cross-validation folds.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
+    folds: u32,
+    /// Fraction of each session's poses held out (default 0.2).
+    #[arg(long, conflicts_with = "hold_out_session")]
+    hold_out: Option<f64>,
+    /// Hold out every pose of this session instead.
+    #[arg(long)]
+    hold_out_session: Option<String>,
+    /// Seed of the split, the folds and the prediction's draws.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Robot parameters of the most complete model, comma-separated (default: the TriCal set less the base).
+    #[arg(long, value_delimiter = ',')]
+    params: Option<Vec<String>>,
+    /// Outlier threshold, robust standard deviations of a point's residual (default 4.5943).
+    #[arg(long)]
+    outlier_threshold: Option<f64>,
+    /// Skip the figures.
+    #[arg(long)]
+    no_plots: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -255,6 +290,7 @@ pub fn main() -> ExitCode {
         Command::Export(args) => export(args),
         Command::Compensate(args) => compensate(args),
         Command::ImportUrdf(args) => import_urdf(args),
+        Command::Calibrate(args) => calibrate(args),
     };
     match result {
         Ok(code) => code,
@@ -425,6 +461,33 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
     if !r.skipped.is_empty() {
         println!("collision shapes left out: {}", r.skipped.join(", "));
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
+    use crate::calibrate::{CalibrateSpec, Options, validation::Split};
+    let defaults = Options::default();
+    let params = match &args.params {
+        Some(names) => Some(ParamSet::from_names(names).map_err(|e| format!("--params: {e}"))?),
+        None => None,
+    };
+    let split = match (&args.hold_out_session, args.hold_out) {
+        (Some(session), _) => Split::Session(session.clone()),
+        (None, Some(fraction)) => Split::Poses { fraction },
+        (None, None) => defaults.split.clone(),
+    };
+    let options = Options {
+        params,
+        folds: args.folds as usize,
+        split,
+        seed: args.seed,
+        outlier_threshold: args.outlier_threshold.unwrap_or(defaults.outlier_threshold),
+        plots: !args.no_plots,
+        ..defaults
+    };
+    let spec = CalibrateSpec { robot_file: args.robot.clone(), measurements: args.measurements.clone(), out: args.out.clone(), options };
+    let report = crate::calibrate::calibrate(&spec).map_err(|e| e.to_string())?;
+    println!("{}", crate::calibrate::report::terminal(&report.calibration, &report.dir));
     Ok(ExitCode::SUCCESS)
 }
 

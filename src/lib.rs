@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod app;
+pub mod calibrate;
 pub mod cell;
 pub mod cli;
 pub mod design;

@@ -99,6 +99,19 @@ pub mod study {
     pub const COMPENSATED: u64 = 0x434f_4d50_454e_5341;
 }
 
+/// The streams of `calsim calibrate`, keyed under its `--seed` (measured data carry no scenario
+/// seed: the split, the folds and the prediction's draws are the only random quantities).
+pub mod calibrate {
+    /// Which poses are held out, and the fold of every other pose.
+    pub const SPLIT: u64 = 0x4341_4c49_0001;
+    /// The draws of the predicted held-out errors.
+    pub const PREDICTION: u64 = 0x4341_4c49_0002;
+    /// A simulated measurement file (`calibrate::simulate`): its poses.
+    pub const SIMULATED_POSES: u64 = 0x4341_4c49_0003;
+    /// A simulated measurement file: the robot's unmodelled effects, move and instrument noise.
+    pub const SIMULATED_NOISE: u64 = 0x4341_4c49_0004;
+}
+
 /// The stream of task `index` of a study whose tasks are salted with `salt` (see [`study`]).
 pub fn task_stream(seed: u64, salt: u64, index: usize) -> ChaCha8Rng {
     stream(split_seed(seed, salt), index as u64)

@@ -3,7 +3,7 @@
 
 mod common;
 
-use calsim::device::trical::campaign::uniform_configuration;
+use calsim::robot::uniform_configuration;
 use calsim::robot::file::RobotFile;
 use calsim::robot::{KinState, forward};
 use common::{calsim, repo, scratch};

@@ -103,18 +103,35 @@ pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::Param
         .collect();
     let (j, _) = scaled_stacked_jacobian(model, set, &qs);
     let names = set.names();
-    // The SVD of the scaled Jacobian itself (not of J^T J, which would square its condition).
-    let Some(svd) = crate::numeric::svd(j, false, true) else {
+    let Some(shares) = null_space_shares(j, 1e-9) else {
         return names;
     };
-    let Some(v_t) = svd.v_t else {
-        return names;
-    };
+    (0..names.len()).filter(|&j| shares[j] >= 0.01).map(|j| names[j].clone()).collect()
+}
+
+/// The share of each column's unit vector in the numerical null space of `j` (a Jacobian, columns
+/// scaled by the caller): the diagonal of the projector onto the right singular vectors whose
+/// singular values are below `rtol` times the largest, from the SVD of `j` itself (not of `J^T J`,
+/// which would square its condition). A share does not depend on which basis of a repeated null
+/// space the solver returns. `None` when the SVD does not converge.
+pub fn null_space_shares(j: DMatrix<f64>, rtol: f64) -> Option<Vec<f64>> {
+    let m = j.ncols();
+    let svd = crate::numeric::svd(j, false, true)?;
+    let v_t = svd.v_t?;
     let s = &svd.singular_values;
     let smax = s.iter().fold(0.0_f64, |m, &x| m.max(x));
-    let null: Vec<usize> = (0..s.len()).filter(|&k| !(smax > 0.0 && s[k] >= 1e-9 * smax)).collect();
-    // Diagonal of the projector onto the null space (rows of V^T are the right singular vectors).
-    (0..names.len()).filter(|&j| null.iter().map(|&k| v_t[(k, j)].powi(2)).sum::<f64>() >= 0.01).map(|j| names[j].clone()).collect()
+    let null: Vec<usize> = (0..s.len()).filter(|&k| !(smax > 0.0 && s[k] >= rtol * smax)).collect();
+    // Fewer rows than columns: the SVD is thin, and the columns beyond the rows are null too.
+    let thin = s.len() < m;
+    Some(
+        (0..m)
+            .map(|c| {
+                let captured: f64 = (0..s.len()).map(|k| v_t[(k, c)].powi(2)).sum();
+                let null_part: f64 = null.iter().map(|&k| v_t[(k, c)].powi(2)).sum();
+                if thin { null_part + (1.0 - captured).max(0.0) } else { null_part }
+            })
+            .collect(),
+    )
 }
 
 /// First-order standard deviations of the identified parameters (internal units) when every
@@ -142,7 +159,19 @@ pub fn parameter_covariance(
 /// `(J_s^T J_s)^-1` of the column-scaled identification Jacobian and the column scales (scaling
 /// keeps the inverse well conditioned across mm and rad columns).
 fn scaled_inverse(model: &RobotModel, set: &crate::robot::ParamSet, qs: &[crate::robot::Joints]) -> Option<(DMatrix<f64>, Vec<f64>)> {
-    let mut j = stacked_jacobian(model, set, qs);
+    scaled_inverse_of(stacked_jacobian(model, set, qs))
+}
+
+/// The first-order covariance `sigma^2 (J^T J)^-1` of the unknowns of any least-squares problem
+/// whose (weighted) Jacobian is `j`, in the units of its columns. `None` when `J^T J` is singular.
+pub fn covariance_of_jacobian(j: DMatrix<f64>, sigma: f64) -> Option<DMatrix<f64>> {
+    let (inv, scale) = scaled_inverse_of(j)?;
+    let s2 = sigma * sigma;
+    Some(DMatrix::from_fn(inv.nrows(), inv.ncols(), |i, k| s2 * inv[(i, k)] / (scale[i] * scale[k])))
+}
+
+/// `(J_s^T J_s)^-1` of `j` with its columns scaled to unit norm, and the scales.
+fn scaled_inverse_of(mut j: DMatrix<f64>) -> Option<(DMatrix<f64>, Vec<f64>)> {
     let scale: Vec<f64> = j.column_iter().map(|c| c.norm()).collect();
     if scale.iter().any(|s| *s == 0.0 || !s.is_finite()) {
         return None;

@@ -33,6 +33,10 @@
 //!
 //! [truth]              # the robot a study simulates: named values (absent: the nominal)
 //! a2 = 270.146
+//!
+//! [[coupling]]         # optional: a joint the controller reports coupled (see `coupling`)
+//! joint = 3
+//! controller = [0.0, -1.0, 1.0, 0.0, 0.0, 0.0]
 //! ```
 
 use std::collections::BTreeMap;
@@ -94,6 +98,9 @@ struct File {
     /// Standard deviation of identified parameters, in their units (an exported calibration).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     std: BTreeMap<String, f64>,
+    /// Joints the controller reports coupled (see [`super::coupling`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    coupling: Vec<super::coupling::CouplingRow>,
 }
 
 #[derive(Debug, Deserialize, Serialize)]
@@ -162,6 +169,8 @@ pub struct RobotFile {
     pub capsules: Option<LinkCapsules>,
     /// The flange frame in MDH frame 6 (`None`: frame 6 is the flange).
     pub flange: Option<Matrix3<f64>>,
+    /// The controller's joint coupling (`None`: the controller reports the model's joint angles).
+    pub coupling: Option<super::coupling::JointCoupling>,
 }
 
 /// A loaded robot file shared by the copies of a scenario (equal when read from the same path).
@@ -222,6 +231,7 @@ pub fn to_text(
             .collect(),
         truth: BTreeMap::new(),
         std: std.iter().map(|(id, v)| (id.name(), id.unit().from_internal(*v))).collect(),
+        coupling: Vec::new(),
     };
     let body = toml::to_string(&f).unwrap_or_default();
     format!("# A calsim robot file (format: src/robot/file.rs); units mm, deg, kg, mdeg/(N m).\n{body}")
@@ -414,7 +424,8 @@ impl RobotFile {
             }
             Some(caps)
         };
-        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std, capsules, flange };
+        let coupling = if f.coupling.is_empty() { None } else { Some(super::coupling::JointCoupling::from_rows(&f.coupling)?) };
+        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std, capsules, flange, coupling };
         file.truth_on(&file.nominal).map_err(|e| ("truth".to_string(), e))?;
         Ok(file)
     }

@@ -1,6 +1,8 @@
 //! The virtual robot: model data, named parameters, kinematics, statics and built-in robots.
 
 pub mod builtin;
+pub mod export;
+pub mod coupling;
 pub mod file;
 pub mod ik;
 pub mod kinematics;
@@ -17,7 +19,7 @@ pub use kinematics::{
     KinState, forward, gravity_torques, tcp_jacobian, tcp_jacobian_matrix, tcp_jacobians_transposed, tcp_world, tcps_world, world_from_base,
     world_from_flange,
 };
-pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx};
+pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx, uniform_configuration};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use truth::{DeviationSpec, SpreadSpec, deviate, perturb};
 pub use virtual_robot::{UnmodelledSpec, VirtualRobot};

@@ -286,3 +286,14 @@ impl XyzZyx {
         Self { x: p.x, y: p.y, z: p.z, alpha, beta, gamma }
     }
 }
+
+/// A configuration drawn uniformly inside the joint limits, leaving `margin` (a fraction of each
+/// range) free at both ends; joint 6 is drawn within +-180 deg, its full turn.
+pub fn uniform_configuration<R: rand::Rng + ?Sized>(model: &RobotModel, margin: f64, rng: &mut R) -> Joints {
+    std::array::from_fn::<f64, JOINTS, _>(|i| {
+        let l = model.limits()[i];
+        let (lo, hi) = if i == JOINTS - 1 { (l.min.max(-std::f64::consts::PI), l.max.min(std::f64::consts::PI)) } else { (l.min, l.max) };
+        let m = margin * (hi - lo);
+        rand::RngExt::random_range(rng, lo + m..hi - m)
+    })
+}

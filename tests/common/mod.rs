@@ -26,7 +26,7 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 
 /// `n` random configurations inside the joint limits (10 % margin each side; joint 6 within +-180 deg).
 pub fn random_configs(model: &RobotModel, n: usize, rng: &mut ChaCha8Rng) -> Vec<Joints> {
-    (0..n).map(|_| calsim::device::trical::campaign::uniform_configuration(model, 0.1, rng)).collect()
+    (0..n).map(|_| calsim::robot::uniform_configuration(model, 0.1, rng)).collect()
 }
 
 /// The repository root.
@@ -61,7 +61,7 @@ pub fn largest_tcp_difference(a: &RobotModel, b: &RobotModel, limits: &RobotMode
     let (mut sa, mut sb) = (calsim::robot::KinState::default(), calsim::robot::KinState::default());
     (0..1000)
         .map(|_| {
-            let q = calsim::device::trical::campaign::uniform_configuration(limits, 0.0, rng);
+            let q = calsim::robot::uniform_configuration(limits, 0.0, rng);
             (calsim::robot::forward(a, &mut sa, &q) - calsim::robot::forward(b, &mut sb, &q)).norm()
         })
         .fold(0.0, f64::max)

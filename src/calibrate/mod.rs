@@ -1,0 +1,402 @@
+//! Calibrating a real robot from measured data (`calsim calibrate`): the same model,
+//! identifiability check, least squares and export as the simulations, on a measurement file.
+//!
+//! ```text
+//! robot file ─┐
+//!             ├─► measurements::read ─► registration::register ─► registration::prune ─► validation::assign
+//! measurements┘   (checked, coupled     (each session's frame,     (per model: the robot      (held-out poses,
+//!                  joints)               each target's tool)        parameters the poses       folds)
+//!                                                                   separate; the rest named)
+//!  ─► robust::robust_fit (most complete model, every point: the outliers, once)
+//!  ─► per model: validation::cross_validate, a fit on the training poses and validation::held_out
+//!  ─► validation::select (by held-out error) ─► results::finish (the chosen model on every point)
+//!  ─► report::write (robot file, URDF, YAML, tables, figures, summary.md)
+//! ```
+//!
+//! The unknowns ([`problem`]) are the robot's parameters (a [`ParamSet`]: by default the TriCal
+//! paper's 31 less the base, which is per session here), a base per session (6 numbers, eq. 7)
+//! and a tool per target (3 numbers in MDH frame 6). Three models are compared: joint offsets
+//! only, the full geometric set, and geometric with joint compliance. The comparison with the
+//! plan that a scenario simulated is [`plan`]'s seam.
+
+pub mod measurements;
+pub mod plan;
+mod plots;
+pub mod problem;
+pub mod registration;
+pub mod report;
+pub mod results;
+pub mod robust;
+pub mod simulate;
+pub mod validation;
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Isometry3;
+
+use crate::robot::file::{RobotFile, RobotFileError};
+use crate::robot::{LinkParam, ParamId, ParamSet};
+use measurements::{MeasurementError, Measurements};
+use problem::{Layout, Obs, Problem, SolveOptions};
+use registration::{Raw, Unidentifiable, Unplaced};
+use robust::{RobustFit, fit_without, robust_fit};
+use validation::{HeldOutSpec, Split, SplitError, free_columns};
+
+pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ToolEstimate};
+use results::{Parts, finish, point_fit};
+
+/// The models compared, simplest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelKind {
+    /// Joint-zero offsets only (`theta_offs`).
+    Offsets,
+    /// Every kinematic parameter of the set (alpha, a, beta, theta_offs, d).
+    Geometric,
+    /// The kinematic parameters and the joint compliances.
+    Compliance,
+}
+
+impl ModelKind {
+    /// The three, simplest first.
+    pub const ALL: [ModelKind; 3] = [ModelKind::Offsets, ModelKind::Geometric, ModelKind::Compliance];
+
+    /// Short name for tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Offsets => "offsets",
+            ModelKind::Geometric => "geometric",
+            ModelKind::Compliance => "compliance",
+        }
+    }
+
+    /// The parameters of `full` this model frees.
+    fn subset(self, full: &ParamSet) -> ParamSet {
+        let keep = |id: &ParamId| match (self, id) {
+            (ModelKind::Offsets, ParamId::Link { kind, .. }) => *kind == LinkParam::ThetaOffset,
+            (ModelKind::Geometric, ParamId::Link { kind, .. }) => *kind != LinkParam::Compliance,
+            (ModelKind::Compliance, _) => true,
+            _ => false,
+        };
+        ParamSet::new(full.ids().iter().copied().filter(keep).collect()).expect("a subset of a set")
+    }
+}
+
+/// How to calibrate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// The robot parameters of the most complete model (`None`: the TriCal paper's 31 less the
+    /// base: alpha1..5, a1..5, d3..6, theta_offs2..6, c2..6, beta2).
+    pub params: Option<ParamSet>,
+    /// Cross-validation folds, 2..=20.
+    pub folds: usize,
+    /// The held-out split.
+    pub split: Split,
+    /// Seed of the split, the folds and the prediction's draws.
+    pub seed: u64,
+    /// Outlier threshold in robust standard deviations of a point's residual norm.
+    pub outlier_threshold: f64,
+    /// Parameter-error draws of the predicted held-out errors.
+    pub prediction_draws: usize,
+    /// Draw the figures.
+    pub plots: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            params: None,
+            folds: 5,
+            split: Split::Poses { fraction: 0.2 },
+            seed: 1,
+            outlier_threshold: robust::DEFAULT_THRESHOLD,
+            prediction_draws: 200,
+            plots: true,
+        }
+    }
+}
+
+/// Why a calibration cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrateError {
+    /// The robot file.
+    #[error(transparent)]
+    Robot(#[from] RobotFileError),
+    /// The measurement file (or what its data cannot fix).
+    #[error(transparent)]
+    Measurements(#[from] MeasurementError),
+    /// An option.
+    #[error("--{key}: {message}")]
+    Option {
+        /// The option, without dashes.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The final fit gave no model.
+    #[error("{path}: the {model} model could not be fitted ({outcome})")]
+    NoModel {
+        /// The measurement file.
+        path: PathBuf,
+        /// The model.
+        model: &'static str,
+        /// How the fit ended.
+        outcome: String,
+    },
+    /// The report directory cannot be written where asked.
+    #[error(transparent)]
+    OutDir(#[from] crate::io::out_dir::OutDirError),
+    /// Writing the report.
+    #[error("{path}: {source}")]
+    Io {
+        /// The directory.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+}
+
+/// What `calsim calibrate` returns: the calibration and where its report went.
+#[derive(Debug)]
+pub struct CalibrationReport {
+    /// The calibration.
+    pub calibration: Calibration,
+    /// The report directory.
+    pub dir: PathBuf,
+}
+
+/// Where `calsim calibrate` reads and writes.
+#[derive(Clone, Debug)]
+pub struct CalibrateSpec {
+    /// The robot file (nominal model, limits, coupling).
+    pub robot_file: PathBuf,
+    /// The measurement file.
+    pub measurements: PathBuf,
+    /// The directory the report goes in (`<out>/<measurements stem>.calibration`).
+    pub out: PathBuf,
+    /// How to calibrate.
+    pub options: Options,
+}
+
+/// `calsim calibrate`: reads the robot and measurement files, calibrates, writes the report.
+pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateError> {
+    check_options(&spec.options)?;
+    let robot = RobotFile::load(&spec.robot_file)?;
+    let m = measurements::read(&spec.measurements, &robot)?;
+    let name = report::directory_name(&spec.measurements);
+    crate::io::out_dir::prepare(&spec.out, &name)?;
+    let calibration = run(&robot, &m, &spec.options)?;
+    let dir = report::write(&spec.out, &name, &calibration).map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
+    Ok(CalibrationReport { calibration, dir })
+}
+
+fn check_options(o: &Options) -> Result<(), CalibrateError> {
+    let bad = |key: &str, message: String| Err(CalibrateError::Option { key: key.into(), message });
+    if !(2..=20).contains(&o.folds) {
+        return bad("folds", format!("{}: within 2 to 20", o.folds));
+    }
+    if let Split::Poses { fraction } = o.split
+        && !(fraction > 0.0 && fraction <= 0.5)
+    {
+        return bad("hold-out", format!("{fraction}: a fraction above 0 and at most 0.5"));
+    }
+    if !(o.outlier_threshold.is_finite() && (2.0..=100.0).contains(&o.outlier_threshold)) {
+        return bad("outlier-threshold", format!("{}: within 2 to 100 robust standard deviations", o.outlier_threshold));
+    }
+    if !(10..=100_000).contains(&o.prediction_draws) {
+        return bad("prediction-draws", format!("{}: within 10 to 100000", o.prediction_draws));
+    }
+    if let Some(p) = &o.params {
+        if let Some(id) = p.ids().iter().find(|id| matches!(id, ParamId::Base(_) | ParamId::Tool(_))) {
+            return bad("params", format!("{}: the bases and tools are fitted per session and target, not as robot parameters", id.name()));
+        }
+        if p.is_empty() {
+            return bad("params", "no parameter".into());
+        }
+    }
+    Ok(())
+}
+
+/// The default robot parameters: the TriCal paper's 31 less the base.
+pub fn default_params() -> ParamSet {
+    let set = ParamSet::trical_31();
+    ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).expect("a subset of a set")
+}
+
+/// The points in their sessions' registered frames and those frames.
+struct Setup {
+    obs: Vec<Obs>,
+    frames: Vec<Isometry3<f64>>,
+    /// Start values of the base and tool blocks.
+    frames_x: Vec<f64>,
+}
+
+fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
+    let raw: Vec<Raw> = m
+        .points
+        .iter()
+        .map(|p| {
+            let pose = &m.poses[p.pose];
+            Raw { q: pose.q, measured_mm: p.measured_mm, session: pose.session, target: p.target }
+        })
+        .collect();
+    let nominal = &robot.nominal;
+    let (frames, tools) =
+        registration::register(nominal, &raw, m.sessions.len(), m.targets.len(), nominal.data().flange_tcp_mm).map_err(|u| {
+            let (column, label, first) = match u {
+                Unplaced::Session(k) => ("session", &m.sessions[k], m.points.iter().find(|p| m.poses[p.pose].session == k)),
+                Unplaced::Target(t) => ("target", &m.targets[t], m.points.iter().find(|p| p.target == t)),
+            };
+            MeasurementError {
+                path: m.path.clone(),
+                line: first.map(|p| p.line),
+                column: Some(column.into()),
+                message: format!("{column} {label}: its points do not fix its frame (fewer than 3 distinct positions, or all on a line)"),
+            }
+        })?;
+    let obs = raw
+        .iter()
+        .zip(&m.points)
+        .map(|(r, p)| Obs {
+            q: r.q,
+            measured_mm: frames[r.session].inverse_transform_point(&r.measured_mm.into()).coords,
+            session: r.session,
+            target: r.target,
+            sigma: p.sigma_mm.unwrap_or(1.0),
+        })
+        .collect();
+    let mut frames_x = vec![0.0; 6 * m.sessions.len()];
+    for t in &tools {
+        frames_x.extend(t.iter());
+    }
+    let s = Setup { obs, frames, frames_x };
+    check_start(robot, m, &s)?;
+    Ok(s)
+}
+
+/// Largest median error of the nominal robot registered on the points, mm: a robot's errors
+/// before calibration are millimetres (the IRB 120's 1-3 mm); tens of millimetres are data that
+/// do not describe this robot as the file says (units, joint order or convention, coupling, the
+/// wrong robot file).
+const MOST_START_MEDIAN_MM: f64 = 50.0;
+
+/// The nominal robot, registered, within [`MOST_START_MEDIAN_MM`] of the points (the median,
+/// so that outliers do not decide).
+fn check_start(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), CalibrateError> {
+    let layout = Layout { robot: ParamSet::new(vec![]).expect("no parameter"), sessions: m.sessions.len(), targets: m.targets.len() };
+    let problem = Problem { start: &robot.nominal, layout, obs: &s.obs };
+    let all: Vec<usize> = (0..s.obs.len()).collect();
+    let errors: Vec<f64> = problem.errors(&s.frames_x, &all).map_or_else(|| vec![f64::NAN], |e| e.iter().map(|v| v.norm()).collect());
+    let median = crate::study::stats::median(&errors);
+    if median <= MOST_START_MEDIAN_MM {
+        return Ok(());
+    }
+    Err(MeasurementError {
+        path: m.path.clone(),
+        line: None,
+        column: None,
+        message: format!(
+            "the nominal robot of {} registered on these points is {median:.1} mm off them (median; a robot before calibration is \
+             millimetres off): check the units in the column names, the joint order and convention (`# joints`, [[coupling]]) and \
+             the robot file",
+            robot.path.display()
+        ),
+    }
+    .into())
+}
+
+/// The models of `full` after the identifiability check on every point (duplicates left out).
+fn candidates(
+    robot: &RobotFile,
+    m: &Measurements,
+    s: &Setup,
+    full: &ParamSet,
+) -> Result<Vec<(ModelKind, Layout, Vec<Unidentifiable>)>, CalibrateError> {
+    let all: Vec<usize> = (0..s.obs.len()).collect();
+    let mut out: Vec<(ModelKind, Layout, Vec<Unidentifiable>)> = Vec::new();
+    for kind in ModelKind::ALL {
+        let set = kind.subset(full);
+        if set.is_empty() || out.iter().any(|(k, _, _)| kind.subset(full) == k.subset(full)) {
+            continue;
+        }
+        let layout = Layout { robot: set, sessions: m.sessions.len(), targets: m.targets.len() };
+        let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
+        let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+        let (kept, fixed) = registration::prune(&problem, &x0, &all, (&m.sessions, &m.targets)).map_err(|e| MeasurementError {
+            path: m.path.clone(),
+            line: None,
+            column: None,
+            message: format!("the poses cannot fix {}: a session or target needs poses that turn the flange more", e.names.join(", ")),
+        })?;
+        out.push((kind, registration::with_robot(&layout, kept), fixed));
+    }
+    Ok(out)
+}
+
+/// Calibrates the arm of `robot` from `m`: every model cross-validated, the chosen one fitted on
+/// every point, nothing written.
+pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibration, CalibrateError> {
+    check_options(opts)?;
+    let full = opts.params.clone().unwrap_or_else(default_params);
+    let assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(|e| CalibrateError::Option {
+        key: "hold-out-session".into(),
+        message: match e {
+            SplitError::UnknownSession(l) => format!("{l}: no such session in {}", m.path.display()),
+            SplitError::OneSession => format!("{} has one session: none can be held out", m.path.display()),
+            SplitError::TargetOnlyThere(t) => format!("target {t} is measured in that session only"),
+        },
+    })?;
+    let s = setup(robot, m)?;
+    let cands = candidates(robot, m, &s, &full)?;
+    let sopts = SolveOptions::default();
+    // Outliers are a property of the data, decided once by the most complete model's robust fit
+    // on every point (a simpler model would take its own misfit for outliers); every fit and
+    // statistic below leaves out the same points.
+    let (outliers, outliers_by) = {
+        let (kind, layout, _) = cands.last().expect("at least one model");
+        let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+        let all: Vec<usize> = (0..s.obs.len()).collect();
+        let x0 = validation::start_values(layout, &robot.nominal, &s.frames_x);
+        (robust_fit(&problem, &x0, &free_columns(&problem, &all, true), &all, opts.outlier_threshold, &sopts).outlier, kind.name())
+    };
+    let point_fold: Vec<Option<usize>> = m.points.iter().map(|p| assignment.fold[p.pose]).collect();
+    let held: Vec<usize> = (0..m.points.len()).filter(|&i| assignment.held_out[m.points[i].pose]).collect();
+    let train: Vec<usize> = (0..m.points.len()).filter(|&i| !assignment.held_out[m.points[i].pose]).collect();
+    let register: Vec<usize> = match &opts.split {
+        Split::Session(l) => m.sessions.iter().position(|x| x == l).into_iter().collect(),
+        Split::Poses { .. } => Vec::new(),
+    };
+    let evaluate = |kind: Option<ModelKind>, layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
+        let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
+        let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+        let with_robot = !layout.robot.is_empty();
+        let cv = match kind {
+            Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts),
+            None => validation::CrossValidation::empty(s.obs.len()),
+        };
+        let free = free_columns(&problem, &train, with_robot);
+        let mask = |idx: &[usize]| idx.iter().map(|&i| outliers[i]).collect::<Vec<bool>>();
+        let fit = fit_without(&problem, &x0, &free, &train, &mask(&train), &sopts);
+        let spec =
+            HeldOutSpec { test: &held, register: &register, outliers: &outliers, draws: opts.prediction_draws, key, seed: opts.seed };
+        let held_out = fit.solved.outcome.is_converged().then(|| validation::held_out(&problem, &fit, &free, &spec, &sopts));
+        let all: Vec<usize> = (0..s.obs.len()).collect();
+        let all_fit = fit_without(&problem, &x0, &free_columns(&problem, &all, with_robot), &all, &outliers, &sopts);
+        let fit = point_fit(&problem, &all_fit);
+        (ModelResult { kind, layout, unidentifiable: fixed, cv, held_out, fit, against_chosen: (f64::NAN, f64::NAN, 0) }, all_fit)
+    };
+    let empty = ParamSet::new(vec![]).expect("no parameter");
+    let before = evaluate(None, registration::with_robot(&cands[0].1, empty), vec![], 0).0;
+    let (mut models, fits): (Vec<ModelResult>, Vec<RobustFit>) =
+        cands.into_iter().enumerate().map(|(k, (kind, layout, fixed))| evaluate(Some(kind), layout, fixed, k as u64 + 1)).unzip();
+    let chosen = validation::select(&models.iter().map(|r| Some(&r.cv)).collect::<Vec<_>>()).unwrap_or(models.len() - 1);
+    for k in 0..models.len() {
+        models[k].against_chosen = validation::paired_difference(&models[k].cv, &models[chosen].cv);
+    }
+    let fit = fits.into_iter().nth(chosen).expect("a fit per model");
+    finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by }, fit)
+}
+
+/// The directory `calsim calibrate` writes for the measurement file `path` under `out`.
+pub fn report_dir(out: &Path, path: &Path) -> PathBuf {
+    out.join(report::directory_name(path))
+}

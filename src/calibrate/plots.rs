@@ -1,0 +1,179 @@
+//! The calibration report's figures (PNG and SVG through the plot kit of `io::plots`): the error
+//! of every point before and after, the error against each joint's angle, the error map in the
+//! robot's base frame, and the held-out errors beside their prediction.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::Calibration;
+use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, e2s, heat, legend, range_of, register_font};
+
+/// Writes the figures of `c` into `dir`.
+pub fn write(dir: &Path, c: &Calibration) -> Result<Vec<Written>, PlotError> {
+    register_font();
+    let mut out = Vec::new();
+    both!(dir, "residuals_per_point", |root| per_point(root, c));
+    out.push(Written {
+        stem: "residuals_per_point".into(),
+        caption:
+            "Error of every point before (nominal robot, fitted bases and tools) and after calibration, in file order; outliers circled"
+                .into(),
+    });
+    both!(dir, "residuals_per_joint", |root| per_joint(root, c));
+    out.push(Written {
+        stem: "residuals_per_joint".into(),
+        caption: "Error after calibration against each joint's angle: a pattern along a joint is an error the model does not hold".into(),
+    });
+    both!(dir, "error_map", |root| error_map(root, c));
+    out.push(Written {
+        stem: "error_map".into(),
+        caption: "Error after calibration where each point was measured, in the robot's base frame".into(),
+    });
+    if c.chosen().held_out.is_some() {
+        both!(dir, "held_out", |root| held_out(root, c));
+        out.push(Written {
+            stem: "held_out".into(),
+            caption: "Held-out errors of every model (cumulative distributions), measured, with the chosen model's prediction".into(),
+        });
+    }
+    Ok(out)
+}
+
+fn per_point<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let (before, after) = (&c.before.fit, &c.chosen().fit);
+    let n = after.errors_mm.len();
+    let ymax = before.errors_mm.iter().chain(&after.errors_mm).copied().filter(|v| v.is_finite()).fold(1e-9, f64::max) * 1.05;
+    let title =
+        format!("Error per point: before {:.3} mm RMS, after ({}) {:.3} mm RMS", before.stats.rms, c.chosen().name(), after.stats.rms);
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(0.0..n as f64, 0.0..ymax)
+        .map_err(e2s)?;
+    chart.configure_mesh().x_desc("point (file order)").y_desc("position error (mm)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    for (fit, colour, label) in [(before, RED, "before"), (after, BLUE, "after")] {
+        chart
+            .draw_series(fit.errors_mm.iter().enumerate().map(|(i, e)| Circle::new((i as f64, *e), 2, colour.mix(0.6).filled())))
+            .map_err(e2s)?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x, y), 3, colour.filled()));
+    }
+    chart
+        .draw_series(
+            after
+                .errors_mm
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| after.outlier[*i])
+                .map(|(i, e)| Circle::new((i as f64, *e), 8, BLACK.stroke_width(2))),
+        )
+        .map_err(e2s)?
+        .label("outlier (after)")
+        .legend(|(x, y)| Circle::new((x, y), 6, BLACK.stroke_width(2)));
+    legend(&mut chart, SeriesLabelPosition::UpperRight, 13)
+}
+
+fn per_joint<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let root = root.titled(&format!("Error after calibration ({}) against each joint", c.chosen().name()), (FAMILY, 20)).map_err(e2s)?;
+    let fit = &c.chosen().fit;
+    let m = &c.measurements;
+    let keep: Vec<usize> = (0..fit.errors_mm.len()).filter(|&i| !fit.outlier[i] && fit.errors_mm[i].is_finite()).collect();
+    let ymax = keep.iter().map(|&i| fit.errors_mm[i]).fold(1e-9, f64::max) * 1.05;
+    for (j, area) in root.split_evenly((2, 3)).iter().enumerate() {
+        let angle = |i: usize| m.poses[m.points[i].pose].q[j].to_degrees();
+        let xr = range_of(keep.iter().map(|&i| angle(i)), 0.03);
+        let mut chart = ChartBuilder::on(area)
+            .caption(format!("joint {}", j + 1), (FAMILY, 14))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(xr, 0.0..ymax)
+            .map_err(e2s)?;
+        chart.configure_mesh().x_labels(5).x_desc("angle (deg)").y_desc("mm").label_style((FAMILY, 11)).draw().map_err(e2s)?;
+        chart.draw_series(keep.iter().map(|&i| Circle::new((angle(i), fit.errors_mm[i]), 2, BLUE.mix(0.6).filled()))).map_err(e2s)?;
+    }
+    Ok(())
+}
+
+fn error_map<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let fit = &c.chosen().fit;
+    let keep: Vec<usize> = (0..fit.errors_mm.len()).filter(|&i| !fit.outlier[i] && fit.errors_mm[i].is_finite()).collect();
+    let emax = keep.iter().map(|&i| fit.errors_mm[i]).fold(1e-9, f64::max);
+    let title = format!("Error after calibration ({}) in the base frame: blue 0 mm, red {emax:.3} mm", c.chosen().name());
+    let root = root.titled(&title, (FAMILY, 20)).map_err(e2s)?;
+    let p = &c.points_base_mm;
+    for (area, (name, a, b)) in root.split_evenly((1, 2)).iter().zip([("top view", 0, 1), ("side view", 0, 2)]) {
+        let axis = ["x", "y", "z"];
+        let mut chart = ChartBuilder::on(area)
+            .caption(name, (FAMILY, 16))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(range_of(keep.iter().map(|&i| p[i][a]), 0.05), range_of(keep.iter().map(|&i| p[i][b]), 0.05))
+            .map_err(e2s)?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("{} in {{0}} (mm)", axis[a]))
+            .y_desc(format!("{} in {{0}} (mm)", axis[b]))
+            .label_style((FAMILY, 12))
+            .draw()
+            .map_err(e2s)?;
+        chart.draw_series(keep.iter().map(|&i| Circle::new((p[i][a], p[i][b]), 3, heat(fit.errors_mm[i] / emax).filled()))).map_err(e2s)?;
+    }
+    Ok(())
+}
+
+fn held_out<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let curves: Vec<(String, Vec<f64>)> = std::iter::once(&c.before)
+        .chain(&c.models)
+        .filter_map(|r| {
+            let h = r.held_out.as_ref()?;
+            let mut v: Vec<f64> = h.errors_mm.iter().zip(&h.outlier).filter(|(e, o)| !**o && e.is_finite()).map(|(e, _)| *e).collect();
+            v.sort_by(f64::total_cmp);
+            Some((r.name().to_string(), v))
+        })
+        .collect();
+    let xmax = curves.iter().flat_map(|(_, v)| v.last()).copied().fold(1e-9, f64::max) * 1.05;
+    let mut chart = ChartBuilder::on(root)
+        .caption(format!("Held-out errors: {}", c.options.split.describe()), (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(0.0..xmax, 0.0..1.0)
+        .map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc("position error at held-out points (mm)")
+        .y_desc("fraction of points")
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
+    let colours = [RED, GREEN, MAGENTA, BLUE];
+    for (k, (name, v)) in curves.iter().enumerate() {
+        let colour = colours[k % colours.len()];
+        let n = v.len().max(1) as f64;
+        chart
+            .draw_series(LineSeries::new(v.iter().enumerate().map(|(i, e)| (*e, (i + 1) as f64 / n)), colour.stroke_width(2)))
+            .map_err(e2s)?
+            .label(format!("{name}, measured"))
+            .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], colour.stroke_width(2)));
+    }
+    if let Some(h) = &c.chosen().held_out {
+        let pr = &h.predicted;
+        let marks = [(pr.median, 0.5), (pr.p95, 0.95)];
+        chart
+            .draw_series(marks.iter().filter(|(x, _)| x.is_finite()).map(|&(x, y)| Cross::new((x, y), 8, BLACK.stroke_width(2))))
+            .map_err(e2s)?
+            .label(format!("{}: predicted median and p95", c.chosen().name()))
+            .legend(|(x, y)| Cross::new((x, y), 5, BLACK.stroke_width(2)));
+    }
+    legend(&mut chart, SeriesLabelPosition::LowerRight, 13)
+}

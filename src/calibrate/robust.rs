@@ -1,0 +1,120 @@
+//! Outliers: found, reported and left out of the fit, never dropped silently.
+//!
+//! The rule (iteratively reweighted least squares with 0/1 weights): fit the points not yet
+//! flagged; take the robust scale of the weighted residual norms, `s = median |r_i| / 1.5382` (the
+//! median of the chi distribution with 3 degrees of freedom, so that `s` estimates the noise per
+//! coordinate of Gaussian points whatever the outliers); flag every point whose norm exceeds
+//! `threshold * s`; repeat until the flags do not change (a flagged point comes back when a later
+//! fit explains it). The default threshold 4.5943 is the chi(3) quantile at 1 - 1e-4: a Gaussian
+//! point is flagged with probability 1e-4 (one in 10,000 points). Every flagged point stays in
+//! the report with its residual.
+
+use nalgebra::DMatrix;
+
+use super::problem::{Problem, SolveOptions, Solved, solve};
+
+/// Median of the chi distribution with 3 degrees of freedom (the square root of the median of
+/// chi-square(3), 2.365974).
+pub const CHI3_MEDIAN: f64 = 1.538_172;
+/// The default outlier threshold in robust standard deviations: P(chi(3) > 4.5943) = 1e-4
+/// (chi-square(3) quantile at 0.9999 = 21.1075 = 4.5943^2).
+pub const DEFAULT_THRESHOLD: f64 = 4.5943;
+/// The least robust scale (1 nm when the points carry no uncertainty): the rounding residuals of a
+/// noise-free fit are not outliers.
+const LEAST_SCALE: f64 = 1e-6;
+/// Rounds of fitting and flagging at most.
+const MOST_ROUNDS: usize = 10;
+
+/// A fit with its outliers.
+#[derive(Clone, Debug)]
+pub struct RobustFit {
+    /// The last fit (over the points not flagged).
+    pub solved: Solved,
+    /// The points considered (indices into the problem's points).
+    pub idx: Vec<usize>,
+    /// Per point of `idx`: flagged as an outlier.
+    pub outlier: Vec<bool>,
+    /// Per point of `idx`: its weighted residual norm over the robust scale.
+    pub normalized: Vec<f64>,
+    /// The robust scale of the weighted residual norms (per coordinate).
+    pub robust_scale: f64,
+    /// The a-posteriori noise per coordinate of unit weight, `sqrt(SSR / (3 n - m))` over the points
+    /// not flagged (mm when the points carry no uncertainty).
+    pub sigma_hat: f64,
+    /// Rounds of fitting and flagging.
+    pub rounds: usize,
+}
+
+impl RobustFit {
+    /// The points of `idx` not flagged.
+    pub fn inliers(&self) -> Vec<usize> {
+        self.idx.iter().zip(&self.outlier).filter(|(_, o)| !**o).map(|(i, _)| *i).collect()
+    }
+}
+
+/// Fits `free` over the points `idx` from `x0` with the outlier rule of this module.
+pub fn robust_fit(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usize], threshold: f64, opts: &SolveOptions) -> RobustFit {
+    let mut outlier = vec![false; idx.len()];
+    let mut x = x0.to_vec();
+    let mut rounds = 0;
+    loop {
+        rounds += 1;
+        let fit = fit_without(problem, &x, free, idx, &outlier, opts);
+        // NaN (no model) flags nothing: the fit's outcome says what happened.
+        let flags: Vec<bool> = fit.normalized.iter().map(|u| *u > threshold).collect();
+        if flags == outlier || rounds == MOST_ROUNDS || !fit.robust_scale.is_finite() {
+            return RobustFit { rounds, ..fit };
+        }
+        x.clone_from(&fit.solved.x);
+        outlier = flags;
+    }
+}
+
+/// Fits `free` over the points of `idx` not flagged in `outlier` (one flag per point of `idx`):
+/// the flags are given, not decided; the robust scale and normalized residuals are of every
+/// point of `idx`.
+pub fn fit_without(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usize], outlier: &[bool], opts: &SolveOptions) -> RobustFit {
+    let active: Vec<usize> = idx.iter().zip(outlier).filter(|(_, o)| !**o).map(|(i, _)| *i).collect();
+    let solved = solve(problem, x0, free, &active, opts);
+    let norms: Vec<f64> = match problem.errors(&solved.x, idx) {
+        Some(e) => e.iter().zip(idx).map(|(e, &i)| e.norm() / problem.obs[i].sigma).collect(),
+        None => vec![f64::NAN; idx.len()],
+    };
+    let scale = (crate::study::stats::median(&norms) / CHI3_MEDIAN).max(LEAST_SCALE);
+    let dof = (3 * active.len()).saturating_sub(free.len());
+    let sigma_hat = if dof == 0 { f64::NAN } else { (solved.cost / dof as f64).sqrt() };
+    let normalized = norms.iter().map(|u| u / scale).collect();
+    RobustFit { solved, idx: idx.to_vec(), outlier: outlier.to_vec(), normalized, robust_scale: scale, sigma_hat, rounds: 1 }
+}
+
+/// The first-order covariance `sigma_hat^2 (J^T J)^-1` of the free unknowns of `fit` (internal
+/// units, in the order of `free`), over its points not flagged. `None` when singular.
+pub fn covariance(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Option<DMatrix<f64>> {
+    let (_, j) = problem.linearise(&fit.solved.x, &fit.inliers())?;
+    crate::identify::observability::covariance_of_jacobian(j.select_columns(free), fit.sigma_hat)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The chi(3) constants against Simpson's rule on the chi(3) density `sqrt(2 / pi) t^2
+    /// exp(-t^2 / 2)` (smooth, 20,000 intervals): the median and the tail beyond the default
+    /// threshold, 1e-4.
+    #[test]
+    fn chi3_constants_match_the_chi_density() {
+        let density = |t: f64| (2.0 / std::f64::consts::PI).sqrt() * t * t * (-t * t / 2.0).exp();
+        let cdf = |to: f64| {
+            let n = 20_000;
+            let h = to / n as f64;
+            let mut s = density(0.0) + density(to);
+            for k in 1..n {
+                s += density(k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 };
+            }
+            s * h / 3.0
+        };
+        assert!((cdf(CHI3_MEDIAN) - 0.5).abs() < 1e-6, "median: {}", cdf(CHI3_MEDIAN));
+        let tail = 1.0 - cdf(DEFAULT_THRESHOLD);
+        assert!((tail - 1e-4).abs() < 1e-7, "tail beyond the threshold: {tail}");
+    }
+}

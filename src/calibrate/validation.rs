@@ -1,0 +1,344 @@
+//! Honest accuracy: which poses are held out, k-fold cross-validation on the rest, the errors at
+//! held-out points beside their first-order prediction, and the choice of model by held-out error.
+//!
+//! Held-out points are predicted by a model fitted without them. A held-out session has no base
+//! from the training fit: its base is registered on its own points (6 numbers, with the outlier
+//! rule), and its errors are what remains after that registration; the prediction then projects
+//! the predicted errors the same way.
+
+use nalgebra::{DMatrix, DVector};
+use rand::seq::SliceRandom;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::measurements::Measurements;
+use super::problem::{Layout, Problem, SolveOptions};
+use super::robust::{RobustFit, covariance, fit_without};
+use crate::study::stats::{ErrorStats, finite_sorted, quantile};
+
+/// Which points are held out of the fit whose errors the report gives.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Split {
+    /// A fraction of every session's poses, drawn at random (`--seed`).
+    Poses {
+        /// Fraction of the poses held out, (0, 0.5].
+        fraction: f64,
+    },
+    /// Every pose of one session (its base registered on its own points).
+    Session(String),
+}
+
+impl Split {
+    /// The split in words, for the report.
+    pub fn describe(&self) -> String {
+        match self {
+            Split::Poses { fraction } => format!("{:.0} % of each session's poses, drawn at random", fraction * 100.0),
+            Split::Session(s) => format!("every pose of session {s} (its base registered on its own points)"),
+        }
+    }
+}
+
+/// Why a split cannot be made.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SplitError {
+    /// No session of that label.
+    UnknownSession(String),
+    /// One session only: none can be held out.
+    OneSession,
+    /// A target measured in the held-out session only: its position is unknown to the training fit.
+    TargetOnlyThere(String),
+}
+
+/// The split and folds of the poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Assignment {
+    /// Per pose: held out.
+    pub held_out: Vec<bool>,
+    /// Per pose: its cross-validation fold (`None` for held-out poses).
+    pub fold: Vec<Option<usize>>,
+    /// Folds.
+    pub folds: usize,
+}
+
+/// Fewest training poses a session keeps when a fraction of its poses is held out.
+const KEEP_POSES: usize = 4;
+
+/// Assigns the poses of `m` to the held-out set and to `folds` folds, with the stream `seed`
+/// (poses are shuffled within each session; folds are balanced across sessions).
+pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Result<Assignment, SplitError> {
+    let mut rng = crate::seeds::stream(seed, crate::seeds::calibrate::SPLIT);
+    let mut held_out = vec![false; m.poses.len()];
+    match split {
+        Split::Poses { fraction } => {
+            for s in 0..m.sessions.len() {
+                let mut poses: Vec<usize> = (0..m.poses.len()).filter(|&p| m.poses[p].session == s).collect();
+                poses.shuffle(&mut rng);
+                let n = ((poses.len() as f64 * fraction).round() as usize).clamp(1, poses.len().saturating_sub(KEEP_POSES).max(1));
+                for &p in &poses[..n] {
+                    held_out[p] = true;
+                }
+            }
+        }
+        Split::Session(label) => {
+            let s = m.sessions.iter().position(|x| x == label).ok_or_else(|| SplitError::UnknownSession(label.clone()))?;
+            if m.sessions.len() < 2 {
+                return Err(SplitError::OneSession);
+            }
+            for (p, pose) in m.poses.iter().enumerate() {
+                held_out[p] = pose.session == s;
+            }
+            for (t, target) in m.targets.iter().enumerate() {
+                if !m.points.iter().any(|pt| pt.target == t && !held_out[pt.pose]) {
+                    return Err(SplitError::TargetOnlyThere(target.clone()));
+                }
+            }
+        }
+    }
+    let mut fold = vec![None; m.poses.len()];
+    let mut offset = 0;
+    for s in 0..m.sessions.len() {
+        let mut poses: Vec<usize> = (0..m.poses.len()).filter(|&p| m.poses[p].session == s && !held_out[p]).collect();
+        poses.shuffle(&mut rng);
+        for (k, &p) in poses.iter().enumerate() {
+            fold[p] = Some((offset + k) % folds);
+        }
+        offset += poses.len();
+    }
+    Ok(Assignment { held_out, fold, folds })
+}
+
+/// The columns free in a fit over the points `idx`: the robot's (unless `robot` is false), and the
+/// base and tool blocks of the sessions and targets those points have.
+pub fn free_columns(problem: &Problem<'_>, idx: &[usize], robot: bool) -> Vec<usize> {
+    let l = &problem.layout;
+    let mut free: Vec<usize> = if robot { (0..l.robot.len()).collect() } else { Vec::new() };
+    for s in 0..l.sessions {
+        if idx.iter().any(|&i| problem.obs[i].session == s) {
+            free.extend(l.base(s)..l.base(s) + 6);
+        }
+    }
+    for t in 0..l.targets {
+        if idx.iter().any(|&i| problem.obs[i].target == t) {
+            free.extend(l.tool(t)..l.tool(t) + 3);
+        }
+    }
+    free
+}
+
+/// Errors at held-out points: measured, and predicted to first order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeldOut {
+    /// Per held-out point: its error, mm (NaN when the model gave none).
+    pub errors_mm: Vec<f64>,
+    /// Per held-out point: an outlier of the data (left out of the statistics, counted).
+    pub outlier: Vec<bool>,
+    /// Statistics of the errors of the points not flagged, mm.
+    pub measured: ErrorStats,
+    /// The same statistics predicted from the training fit's covariance and noise estimate
+    /// (parameter errors drawn from `N(0, C)` plus the points' own noise); `max` is the median
+    /// over the draws of the largest error.
+    pub predicted: ErrorStats,
+    /// Points in the statistics.
+    pub points: usize,
+}
+
+/// What [`held_out`] needs besides the training fit.
+pub struct HeldOutSpec<'a> {
+    /// The held-out points.
+    pub test: &'a [usize],
+    /// Sessions whose bases are registered on the held-out points (a held-out session).
+    pub register: &'a [usize],
+    /// Per problem point: an outlier of the data (left out of every fit and statistic).
+    pub outliers: &'a [bool],
+    /// Parameter-error draws of the prediction.
+    pub draws: usize,
+    /// The stream key of the draws (under the calibration's seed).
+    pub key: u64,
+    /// The calibration's seed.
+    pub seed: u64,
+}
+
+/// The held-out errors of the model of `train` (fitted with the columns `free`).
+pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: &HeldOutSpec<'_>, opts: &SolveOptions) -> HeldOut {
+    let l = &problem.layout;
+    let mut x = train.solved.x.clone();
+    let reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base(s)..l.base(s) + 6).collect();
+    if !reg_cols.is_empty() {
+        let mask: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
+        x = fit_without(problem, &x, &reg_cols, spec.test, &mask, opts).solved.x;
+    }
+    let errors_mm: Vec<f64> =
+        problem.errors(&x, spec.test).map_or_else(|| vec![f64::NAN; spec.test.len()], |e| e.iter().map(|v| v.norm()).collect());
+    let outlier: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
+    let kept: Vec<usize> = (0..spec.test.len()).filter(|&k| !outlier[k]).collect();
+    let measured = ErrorStats::of(&kept.iter().map(|&k| errors_mm[k]).collect::<Vec<_>>());
+    let predicted = predict(problem, train, free, &x, spec, &reg_cols, &kept).unwrap_or(ErrorStats {
+        mean: f64::NAN,
+        median: f64::NAN,
+        std: f64::NAN,
+        p95: f64::NAN,
+        max: f64::NAN,
+        rms: f64::NAN,
+    });
+    HeldOut { errors_mm, outlier, measured, predicted, points: kept.len() }
+}
+
+/// The predicted error statistics at the held-out points `kept` (positions in `spec.test`).
+fn predict(
+    problem: &Problem<'_>,
+    train: &RobustFit,
+    free: &[usize],
+    x: &[f64],
+    spec: &HeldOutSpec<'_>,
+    reg_cols: &[usize],
+    kept: &[usize],
+) -> Option<ErrorStats> {
+    let c = covariance(problem, train, free)?;
+    let chol = c.cholesky()?;
+    let points: Vec<usize> = kept.iter().map(|&k| spec.test[k]).collect();
+    if points.is_empty() {
+        return None;
+    }
+    let (_, j) = problem.linearise(x, &points)?;
+    let sigmas: Vec<f64> = points.iter().map(|&i| problem.obs[i].sigma).collect();
+    // Unweighted rows (mm per unit of each unknown).
+    let unweight = |m: DMatrix<f64>| DMatrix::from_fn(m.nrows(), m.ncols(), |r, k| m[(r, k)] * sigmas[r / 3]);
+    let jf = unweight(j.select_columns(free));
+    // The registration of a held-out session removes what its base can absorb: the weighted
+    // projection I - B (B^T W B)^-1 B^T W.
+    let projection = if reg_cols.is_empty() {
+        None
+    } else {
+        let b = unweight(j.select_columns(reg_cols));
+        let w = DVector::from_fn(b.nrows(), |r, _| 1.0 / (sigmas[r / 3] * sigmas[r / 3]));
+        let bw = DMatrix::from_fn(b.ncols(), b.nrows(), |k, r| b[(r, k)] * w[r]);
+        let inv = (&bw * &b).try_inverse()?;
+        Some((b, inv * bw))
+    };
+    let mut rng = crate::seeds::stream(crate::seeds::split_seed(spec.seed, crate::seeds::calibrate::PREDICTION), spec.key);
+    let mut pooled = Vec::with_capacity(spec.draws * points.len());
+    let mut maxima = Vec::with_capacity(spec.draws);
+    for _ in 0..spec.draws {
+        let z = DVector::from_fn(free.len(), |_, _| StandardNormal.sample(&mut rng));
+        let mut v = &jf * (chol.l() * z);
+        for r in 0..v.len() {
+            let noise: f64 = StandardNormal.sample(&mut rng);
+            v[r] += noise * train.sigma_hat * sigmas[r / 3];
+        }
+        if let Some((b, solve)) = &projection {
+            v -= b * (solve * &v);
+        }
+        let norms: Vec<f64> = (0..points.len()).map(|k| v.fixed_rows::<3>(3 * k).norm()).collect();
+        maxima.push(norms.iter().copied().fold(0.0, f64::max));
+        pooled.extend(norms);
+    }
+    let mut stats = ErrorStats::of(&pooled);
+    stats.max = quantile(&finite_sorted(&maxima), 0.5);
+    Some(stats)
+}
+
+/// A model's k-fold cross-validation over the training points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CrossValidation {
+    /// Per problem point: its error when its fold was held out, mm (NaN outside the folds or when
+    /// the fold's fit gave no model).
+    pub errors_mm: Vec<f64>,
+    /// Per problem point: an outlier of the data (as given).
+    pub outlier: Vec<bool>,
+    /// Statistics over the held-out points not flagged, mm.
+    pub stats: ErrorStats,
+    /// Points in the statistics.
+    pub points: usize,
+    /// Folds whose fit did not converge, and how they ended.
+    pub failed: Vec<(usize, String)>,
+}
+
+impl CrossValidation {
+    /// No cross-validation over `n` points.
+    pub fn empty(n: usize) -> Self {
+        Self { errors_mm: vec![f64::NAN; n], outlier: vec![false; n], stats: ErrorStats::default(), points: 0, failed: Vec::new() }
+    }
+}
+
+/// Cross-validates the model of `problem` (its layout) from `x0`: for each fold, a fit on the
+/// other training points (the data's `outliers` left out) and the errors at the fold's.
+pub fn cross_validate(
+    problem: &Problem<'_>,
+    x0: &[f64],
+    point_fold: &[Option<usize>],
+    folds: usize,
+    outliers: &[bool],
+    opts: &SolveOptions,
+) -> CrossValidation {
+    let n = problem.obs.len();
+    let mut errors_mm = vec![f64::NAN; n];
+    let mut outlier = vec![false; n];
+    let mut failed = Vec::new();
+    for f in 0..folds {
+        let train: Vec<usize> = (0..n).filter(|&i| point_fold[i].is_some_and(|g| g != f)).collect();
+        let test: Vec<usize> = (0..n).filter(|&i| point_fold[i] == Some(f)).collect();
+        if test.is_empty() {
+            continue;
+        }
+        let free = free_columns(problem, &train, true);
+        let mask: Vec<bool> = train.iter().map(|&i| outliers[i]).collect();
+        let fit = fit_without(problem, x0, &free, &train, &mask, opts);
+        if !fit.solved.outcome.is_converged() {
+            failed.push((f, fit.solved.outcome.label().to_string()));
+            continue;
+        }
+        let Some(e) = problem.errors(&fit.solved.x, &test) else {
+            failed.push((f, "not_finite".into()));
+            continue;
+        };
+        for (i, e) in test.iter().zip(e) {
+            errors_mm[*i] = e.norm();
+            outlier[*i] = outliers[*i];
+        }
+    }
+    let kept: Vec<f64> = (0..n).filter(|&i| errors_mm[i].is_finite() && !outlier[i]).map(|i| errors_mm[i]).collect();
+    CrossValidation { points: kept.len(), stats: ErrorStats::of(&kept), errors_mm, outlier, failed }
+}
+
+/// The paired comparison of two models' cross-validated squared errors on the points both
+/// predicted and neither flagged: mean difference `a - b` (mm^2) and its standard error.
+pub fn paired_difference(a: &CrossValidation, b: &CrossValidation) -> (f64, f64, usize) {
+    let d: Vec<f64> = (0..a.errors_mm.len())
+        .filter(|&i| a.errors_mm[i].is_finite() && b.errors_mm[i].is_finite() && !a.outlier[i] && !b.outlier[i])
+        .map(|i| a.errors_mm[i].powi(2) - b.errors_mm[i].powi(2))
+        .collect();
+    let n = d.len();
+    if n < 2 {
+        return (f64::NAN, f64::NAN, n);
+    }
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    (mean, (var / n as f64).sqrt(), n)
+}
+
+/// The model chosen by held-out error: the one of least cross-validated mean squared error, unless
+/// a simpler one (earlier in `cvs`) is within one standard error of it on the paired difference
+/// (the one-standard-error rule: a difference the folds cannot tell from zero does not buy
+/// parameters). `None` when no model cross-validated.
+pub fn select(cvs: &[Option<&CrossValidation>]) -> Option<usize> {
+    let mse = |cv: &CrossValidation| cv.stats.rms.powi(2);
+    let best = (0..cvs.len()).filter(|&k| cvs[k].is_some_and(|c| c.points > 0)).min_by(|&a, &b| {
+        let (ca, cb) = (cvs[a].expect("filtered"), cvs[b].expect("filtered"));
+        mse(ca).total_cmp(&mse(cb))
+    })?;
+    let b = cvs[best].expect("filtered");
+    (0..best)
+        .find(|&k| {
+            cvs[k].is_some_and(|a| {
+                let (mean, se, _) = paired_difference(a, b);
+                mean.is_finite() && mean <= se
+            })
+        })
+        .or(Some(best))
+}
+
+/// The layouts' unknowns at their start: `layout`'s robot values from `start`, the frames `frames`.
+pub fn start_values(layout: &Layout, start: &crate::robot::RobotModel, frames: &[f64]) -> Vec<f64> {
+    let mut x: Vec<f64> = layout.robot.pack(start).iter().copied().collect();
+    x.extend_from_slice(frames);
+    x
+}

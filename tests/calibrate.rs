@@ -1,0 +1,514 @@
+//! `calsim calibrate`: round trips through the measurement layout (a simulated robot written as a
+//! measurement file, calibrated back), the shipped example, and bad measurement files.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use calsim::calibrate::simulate::{SimulationSpec, to_csv};
+use calsim::calibrate::validation::Split;
+use calsim::calibrate::{Calibration, ModelKind, Options, ParamStatus, default_params, measurements, run};
+use calsim::robot::file::RobotFile;
+use calsim::robot::{ParamSet, RobotModel, UnmodelledSpec};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+
+/// The IRB 120's robot file with a FANUC-style coupling of joint 3 (the controller reports
+/// J3 = theta2 + theta3, so theta3 = -q2 + q3).
+fn coupled_irb120_text() -> String {
+    let text = std::fs::read_to_string(common::repo().join("robots/irb120.toml")).unwrap();
+    format!("{text}\n[[coupling]]\njoint = 3\ncontroller = [0.0, -1.0, 1.0, 0.0, 0.0, 0.0]\n")
+}
+
+fn robot_from(text: &str) -> RobotFile {
+    RobotFile::from_text(Path::new("irb120_coupled.toml"), text).unwrap()
+}
+
+/// The robot measured: the nominal arm with Table 7's values of `set`'s parameters (the robot
+/// file's `[truth]`), nothing else deviated.
+fn truth_on(robot: &RobotFile, set: &ParamSet) -> RobotModel {
+    let deviated: Vec<(calsim::robot::ParamId, f64)> = robot.truth.iter().filter(|(id, _)| set.position(*id).is_some()).copied().collect();
+    let values: Vec<f64> = deviated.iter().map(|(_, v)| *v).collect();
+    ParamSet::new(deviated.iter().map(|(id, _)| *id).collect()).unwrap().unpack(&robot.nominal, &values).unwrap()
+}
+
+/// The shipped example's 3 sessions (tracker frames moved between them) x 40 poses x 2 targets =
+/// 240 points, with the robot `truth` inside the model (no unmodelled effect, no repeatability
+/// error), the coupling of `robot`, `noise_mm` per coordinate and the `outliers`.
+fn spec(truth: RobotModel, robot: &RobotFile, noise_mm: f64, outliers: Vec<(usize, Vector3<f64>)>) -> SimulationSpec {
+    SimulationSpec {
+        truth,
+        unmodelled: UnmodelledSpec::default(),
+        repeatability_mm: 0.0,
+        coupling: robot.coupling.clone(),
+        noise_mm,
+        outliers,
+        seed: 7,
+        comments: vec!["joints = controller".into()],
+        ..calsim::calibrate::simulate::example_spec(robot).unwrap()
+    }
+}
+
+/// The measurement file of `spec`, read back for `robot`.
+fn measured(spec: &SimulationSpec, robot: &RobotFile) -> measurements::Measurements {
+    measurements::parse(Path::new("simulated.csv"), &to_csv(spec), robot).unwrap()
+}
+
+/// A target's position in the calibrated frame 6 when d6 and theta_offs6 are kept nominal: the
+/// true position turned by the true theta_offs6 correction and moved by the true d6 correction
+/// (frame 6 is `Rz(theta) Dz(d)` after frame 5; both about and along the same z).
+fn equivalent_tool(truth: &RobotModel, nominal: &RobotModel, tool: Vector3<f64>) -> Vector3<f64> {
+    let (t, n) = (truth.links()[5], nominal.links()[5]);
+    nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), t.theta_offset - n.theta_offset) * tool + Vector3::new(0.0, 0.0, t.d - n.d)
+}
+
+/// The identified robot parameters' errors against `truth`, normalised by the calibration's own
+/// covariance: per parameter `(name, error / std)`, and the Mahalanobis distance `d^T C^-1 d`.
+fn normalised_errors(c: &Calibration, truth: &RobotModel) -> (Vec<(String, f64)>, f64) {
+    let ids: Vec<_> = c.estimates.iter().filter(|e| e.status == ParamStatus::Identified).collect();
+    let d = DVector::from_iterator(ids.len(), ids.iter().map(|e| e.value - e.id.get(truth.data())));
+    let std = DVector::from_iterator(ids.len(), ids.iter().map(|e| e.std));
+    let cov = DMatrix::from_fn(ids.len(), ids.len(), |a, b| c.correlation[(a, b)] * std[a] * std[b]);
+    let mahalanobis = d.dot(&(cov.try_inverse().unwrap() * &d));
+    (ids.iter().zip(d.iter().zip(std.iter())).map(|(e, (d, s))| (e.id.name(), d / s)).collect(), mahalanobis)
+}
+
+/// The acceptance round trip. A simulated IRB 120 (Table 7's values of the 25 default parameters)
+/// whose controller reports joint 3 coupled to joint 2, measured in 3 sessions with moved tracker
+/// frames at 2 targets, 40 poses per session (240 points), 12 um noise per coordinate, one point
+/// 1.1 mm off. The calibration reads the coupled joints, names d6 and theta_offs6 (the tools
+/// absorb them), chooses the compliance model, flags exactly the bad point and recovers the 23
+/// identified parameters within their predicted standard deviations: every |error| / std below 4
+/// (for 23 Gaussian errors, P(any beyond 4) = 0.15 %) and the Mahalanobis distance below 49.7
+/// (chi-square with 23 degrees of freedom at 0.999); the targets and bases within 4 standard
+/// deviations of their truth.
+#[test]
+fn calibrate_recovers_a_coupled_robot_in_moved_sessions_within_its_predicted_std_and_flags_the_outlier() {
+    let robot = robot_from(&coupled_irb120_text());
+    let truth = truth_on(&robot, &default_params());
+    let bad_row = 30;
+    let s = spec(truth.clone(), &robot, 0.012, vec![(bad_row, Vector3::new(1.0, 0.4, -0.2))]);
+    let m = measured(&s, &robot);
+    assert!(m.coupled);
+    assert_eq!((m.points.len(), m.poses.len(), m.sessions.len(), m.targets.len()), (240, 120, 3, 2));
+    let c = run(&robot, &m, &Options { plots: false, ..Options::default() }).unwrap();
+
+    assert_eq!(c.chosen().kind, Some(ModelKind::Compliance), "chosen by held-out error");
+    let mut unidentifiable: Vec<&str> = c.chosen().unidentifiable.iter().map(|u| u.name.as_str()).collect();
+    unidentifiable.sort_unstable();
+    assert_eq!(unidentifiable, ["d6", "theta_offs6"]);
+    let flagged: Vec<usize> = (0..m.points.len()).filter(|&i| c.chosen().fit.outlier[i]).collect();
+    assert_eq!(flagged, [bad_row], "the outlier and nothing else");
+    // The header takes 3 lines (simulated, format, joints) and the column names one: row 30 is line 35.
+    assert_eq!(m.points[bad_row].line, 35);
+
+    let (z, mahalanobis) = normalised_errors(&c, &truth);
+    let largest = z.iter().map(|(_, z)| z.abs()).fold(0.0, f64::max);
+    eprintln!("23 parameters: largest |error| / std {largest:.2}, Mahalanobis distance {mahalanobis:.1}");
+    assert_eq!(z.len(), 23);
+    for (name, z) in &z {
+        assert!(z.abs() < 4.0, "{name}: error {z:.2} standard deviations");
+    }
+    assert!(mahalanobis < 49.7, "Mahalanobis distance {mahalanobis:.1} over 23 parameters");
+
+    for (t, (label, tool)) in c.tools.iter().zip(&s.targets) {
+        assert_eq!(&t.target, label);
+        let expected = equivalent_tool(&truth, &robot.nominal, *tool);
+        for k in 0..3 {
+            assert!(
+                (t.flange_mm[k] - expected[k]).abs() < 4.0 * t.std_mm[k],
+                "{label} axis {k}: {} against {}",
+                t.flange_mm[k],
+                expected[k]
+            );
+        }
+    }
+    for (b, (label, true_frame)) in c.bases.iter().zip(&s.sessions) {
+        let delta: Isometry3<f64> = true_frame.isometry().inverse() * b.session_from_base.isometry();
+        for k in 0..3 {
+            assert!(delta.translation.vector[k].abs() < 4.0 * b.std[k], "base {label} axis {k}: {:.4} mm off", delta.translation.vector[k]);
+        }
+        let angle = delta.rotation.angle();
+        assert!(angle < 4.0 * b.std[3..].iter().copied().fold(0.0, f64::max), "base {label}: turned {angle:e} rad");
+    }
+}
+
+/// Without noise the round trip is exact: 240 points of the same coupled robot and sessions, every
+/// identified parameter within 1e-9 of its truth (internal units), every target within 1e-6 mm,
+/// the held-out errors below 1e-6 mm, and no point flagged. The truth deviates the 23 parameters
+/// the poses identify: a d6 or theta_offs6 deviation also moves link 6's centre of mass, whose
+/// gravity torque the tools cannot absorb (about 1e-5 mm here, below any instrument's noise but
+/// not zero).
+#[test]
+fn a_noise_free_round_trip_recovers_the_injected_robot_exactly() {
+    let robot = robot_from(&coupled_irb120_text());
+    let identifiable =
+        default_params().fixed(calsim::robot::ParamId::parse("d6").unwrap()).fixed(calsim::robot::ParamId::parse("theta_offs6").unwrap());
+    let truth = truth_on(&robot, &identifiable);
+    let s = spec(truth.clone(), &robot, 0.0, vec![]);
+    let c = run(&robot, &measured(&s, &robot), &Options { plots: false, ..Options::default() }).unwrap();
+    for e in c.estimates.iter().filter(|e| e.status == ParamStatus::Identified) {
+        let t = e.id.get(truth.data());
+        assert!((e.value - t).abs() < 1e-9, "{}: {} against {t}", e.id.name(), e.value);
+    }
+    for (t, (_, tool)) in c.tools.iter().zip(&s.targets) {
+        assert!((t.flange_mm - equivalent_tool(&truth, &robot.nominal, *tool)).norm() < 1e-6, "{}", t.target);
+    }
+    let h = c.chosen().held_out.as_ref().unwrap();
+    assert!(h.measured.max < 1e-6, "held-out max {:e} mm", h.measured.max);
+    assert!(c.chosen().fit.outlier.iter().all(|o| !o));
+}
+
+/// The held-out errors beside their prediction, for a robot inside the model (compliance model,
+/// 12 um noise, no outlier): the measured held-out RMS is within [0.75, 1.33] of the predicted one
+/// both when 20 % of the poses (24 poses, 48 points) and when a whole session (40 poses, 80
+/// points; its base registered on its own points) is held out. An RMS over 3n coordinates has a
+/// relative standard deviation of about sqrt(1 / (6n)): 6 % for 48 points, so the band is
+/// about four of them.
+#[test]
+fn held_out_errors_match_their_prediction_for_a_robot_inside_the_model() {
+    let robot = robot_from(&coupled_irb120_text());
+    let truth = truth_on(&robot, &default_params());
+    let m = measured(&spec(truth, &robot, 0.012, vec![]), &robot);
+    for split in [Split::Poses { fraction: 0.2 }, Split::Session("B".into())] {
+        let c = run(&robot, &m, &Options { plots: false, split: split.clone(), ..Options::default() }).unwrap();
+        let h = c.chosen().held_out.as_ref().unwrap();
+        let ratio = h.measured.rms / h.predicted.rms;
+        eprintln!("{split:?}: held-out RMS measured {:.4} mm, predicted {:.4} mm ({} points)", h.measured.rms, h.predicted.rms, h.points);
+        assert!((0.75..=1.33).contains(&ratio), "{split:?}: measured {:.4} mm, predicted {:.4} mm", h.measured.rms, h.predicted.rms);
+        let before = c.before.held_out.as_ref().unwrap();
+        assert!(before.measured.rms > 10.0 * h.measured.rms, "{split:?}: before {:.4} mm", before.measured.rms);
+    }
+}
+
+/// A robot whose errors are geometric only (Table 7's kinematic values, no compliance), 240
+/// points, 12 um noise: the compliance model fits better (it has 5 more parameters) but does not
+/// predict held-out poses better by more than a standard error, so the geometric one is chosen.
+#[test]
+fn the_model_is_chosen_by_held_out_error_not_by_fit() {
+    let robot = robot_from(&coupled_irb120_text());
+    let geometric = ParamSet::new(default_params().ids().iter().copied().filter(|id| !id.name().starts_with('c')).collect()).unwrap();
+    let truth = truth_on(&robot, &geometric);
+    let c = run(&robot, &measured(&spec(truth, &robot, 0.012, vec![]), &robot), &Options { plots: false, ..Options::default() }).unwrap();
+    let rms = |k: ModelKind| c.models.iter().find(|r| r.kind == Some(k)).unwrap().fit.stats.rms;
+    assert!(rms(ModelKind::Compliance) <= rms(ModelKind::Geometric), "more parameters never fit worse");
+    assert_eq!(c.chosen().kind, Some(ModelKind::Geometric));
+}
+
+/// The shipped example measurement file is what `cargo run --example calibrate_example` writes,
+/// and the shipped report (docs/calibrate/example_report) is what `calsim calibrate` writes from
+/// it: the summary and the tables, byte for byte.
+#[test]
+fn the_shipped_example_and_its_report_are_reproduced() {
+    let root = common::repo();
+    let robot = RobotFile::load(&root.join("robots/irb120.toml")).unwrap();
+    let spec = calsim::calibrate::simulate::example_spec(&robot).unwrap();
+    let shipped = std::fs::read_to_string(root.join("docs/calibrate/example_measurements.csv")).unwrap();
+    assert!(shipped.starts_with("# simulated = true\n"));
+    assert_eq!(to_csv(&spec), shipped);
+    let out = common::scratch("calibrate-example");
+    let status = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let fresh = out.path().join("example_measurements.calibration");
+    let report = root.join("docs/calibrate/example_report");
+    for file in ["summary.md", "models.parquet", "parameters.parquet", "points.parquet", "bases.parquet", "tools.parquet", "robot.toml"] {
+        let (a, b) = (std::fs::read(fresh.join(file)).unwrap(), std::fs::read(report.join(file)).unwrap());
+        if a != b {
+            // Text files show the difference; parquet tables are only named.
+            assert_eq!(String::from_utf8_lossy(&a), String::from_utf8_lossy(&b), "{file} differs from the shipped one");
+            panic!("{file} differs from the shipped one");
+        }
+    }
+}
+
+/// The calibrated robot file loads back as the calibrated model (its TCP to 1e-9 mm at 1,000
+/// configurations) and keeps the robot file's coupling.
+#[test]
+fn the_calibrated_robot_file_loads_back_with_its_coupling() {
+    let dir = common::scratch("calibrate-robot");
+    let robot_path = dir.path().join("irb120_coupled.toml");
+    std::fs::write(&robot_path, coupled_irb120_text()).unwrap();
+    let robot = RobotFile::load(&robot_path).unwrap();
+    let truth = truth_on(&robot, &default_params());
+    let csv = dir.path().join("run.csv");
+    std::fs::write(&csv, to_csv(&spec(truth, &robot, 0.012, vec![]))).unwrap();
+    let spec = calsim::calibrate::CalibrateSpec {
+        robot_file: robot_path,
+        measurements: csv,
+        out: dir.path().join("out"),
+        options: Options { plots: false, ..Options::default() },
+    };
+    let report = calsim::calibrate::calibrate(&spec).unwrap();
+    assert_eq!(report.dir, dir.path().join("out/run.calibration"));
+    let loaded = RobotFile::load(&report.dir.join("robot.toml")).unwrap();
+    assert_eq!(loaded.coupling, robot.coupling);
+    let mut rng = common::rng(3);
+    assert!(common::largest_tcp_difference(&loaded.nominal, &report.calibration.model, &robot.nominal, &mut rng) < 1e-9);
+    for file in ["robot.urdf", "calibration.yaml", "before.toml", "summary.md", "manifest.json", "correlation.parquet"] {
+        assert!(report.dir.join(file).is_file(), "{file}");
+    }
+}
+
+/// A measurement file from `header` and `rows` in a scratch directory.
+fn write_csv(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Five poses of two targets for sessions A and B: a valid file's rows (the IRB 120 at
+/// configurations inside its limits).
+fn valid_rows() -> Vec<String> {
+    let mut rows = Vec::new();
+    for s in ["A", "B"] {
+        for k in 0..5 {
+            for (t, dx) in [("SMR1", 0.0), ("SMR2", 30.0)] {
+                let q = [10.0 * k as f64, 5.0 + k as f64, -10.0 + 2.0 * k as f64, 20.0, 30.0 + k as f64, 40.0];
+                let qs: Vec<String> = q.iter().map(|v| format!("{v}")).collect();
+                rows.push(format!("p{k},{s},{t},{},{},{},{}", qs.join(","), 400.0 + dx + k as f64, 10.0 * k as f64, 500.0 - k as f64));
+            }
+        }
+    }
+    rows
+}
+
+/// A consistent simulated file (the coupled IRB 120, no noise) whose positions are written in
+/// metres under `_mm` column names.
+fn metres_as_mm() -> String {
+    let robot = robot_from(&coupled_irb120_text());
+    let text = to_csv(&spec(truth_on(&robot, &default_params()), &robot, 0.0, vec![]));
+    text.lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            match f.len() == 12 && !l.starts_with("pose") {
+                true => {
+                    let m: Vec<String> = f[9..].iter().map(|v| format!("{}", v.parse::<f64>().unwrap() / 1000.0)).collect();
+                    format!("{},{}\n", f[..9].join(","), m.join(","))
+                }
+                false => format!("{l}\n"),
+            }
+        })
+        .collect()
+}
+
+const HEADER: &str = "pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm";
+
+/// Bad measurement files, the class: a missing, unknown, duplicated or unit-less column, an unknown
+/// unit, NaN, infinite, absurd, empty and non-numeric values, a short row, a session with too few
+/// poses, a target with too few points, joints out of limits (a plain and a coupled one), a pose
+/// with two joint sets, a target measured twice at a pose, a quaternion half given or not of unit
+/// norm, a non-positive uncertainty, a label too long, bad and unknown header keys, a `# targets`
+/// naming an absent target, no rows, an empty file, bytes that are not UTF-8, every point in one
+/// place, positions in metres under `_mm` names. Each is one line naming the file, the line and
+/// the column or header key (where the fault has one: not a file's positions as a whole), exit
+/// code 2.
+#[test]
+fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
+    let dir = common::scratch("calibrate-bad");
+    let robot = write_csv(dir.path(), "coupled.toml", &coupled_irb120_text());
+    let rows = valid_rows();
+    let with = |header: &str, edit: &dyn Fn(&mut Vec<String>)| {
+        let mut r = rows.clone();
+        edit(&mut r);
+        format!("{header}\n{}\n", r.join("\n"))
+    };
+    let replace_field = |row: usize, field: usize, value: &'static str| {
+        move |r: &mut Vec<String>| {
+            let mut f: Vec<String> = r[row].split(',').map(str::to_string).collect();
+            f[field] = value.to_string();
+            r[row] = f.join(",");
+        }
+    };
+    let cases: Vec<(&str, String, &str, &str)> = vec![
+        (
+            "missing_z",
+            with(&HEADER.replace(",z_mm", ""), &|r| r.iter_mut().for_each(|x| *x = x.rsplit_once(',').unwrap().0.to_string())),
+            "line 1: z_mm: missing column",
+            "",
+        ),
+        ("unknown_unit", with(&HEADER.replace("x_mm", "x_in"), &|_| {}), "line 1: x_in: unknown unit `in`", ""),
+        ("no_unit", with(&HEADER.replace("q2_deg", "q2"), &|_| {}), "line 1: q2: a joint column needs its unit", ""),
+        ("unknown_column", with(&HEADER.replace("z_mm", "temperature_c"), &|_| {}), "line 1: temperature_c: unknown column", ""),
+        (
+            "duplicate_column",
+            with(&format!("{HEADER},q1_rad"), &|r| r.iter_mut().for_each(|x| x.push_str(",0.1"))),
+            "line 1: q1_rad: the same quantity as column `q1_deg`",
+            "",
+        ),
+        ("nan", with(HEADER, &replace_field(3, 9, "NaN")), "line 5: x_mm: NaN: not a finite number", ""),
+        ("infinite", with(HEADER, &replace_field(3, 10, "inf")), "line 5: y_mm: inf: not a finite number", ""),
+        ("absurd", with(HEADER, &replace_field(3, 11, "1e300")), "line 5: z_mm: 1e300: beyond", ""),
+        ("empty_value", with(HEADER, &replace_field(2, 4, "")), "line 4: q2_deg: empty", ""),
+        ("text", with(HEADER, &replace_field(2, 5, "abc")), "line 4: q3_deg: \"abc\" is not a number", ""),
+        (
+            "short_row",
+            with(HEADER, &|r| r[6] = r[6].rsplit_once(',').unwrap().0.to_string()),
+            "line 8: 11 fields where the column names give 12",
+            "",
+        ),
+        (
+            "few_poses",
+            with(HEADER, &|r| r.retain(|x| !(x.contains(",B,") && (x.starts_with("p3") || x.starts_with("p4"))))),
+            "line 12: session: session B has 3 poses",
+            "",
+        ),
+        (
+            "few_points",
+            with(HEADER, &|r| r.retain(|x| !(x.contains("SMR2") && (x.contains(",B,") || x.starts_with("p4"))))),
+            "line 3: target: target SMR2 has 4 points",
+            "",
+        ),
+        ("out_of_limits", with(HEADER, &replace_field(4, 8, "500")), "line 6: q6_deg: joint 6 at 500.0000 deg", ""),
+        (
+            "coupled_out_of_limits",
+            with(HEADER, &replace_field(4, 5, "100")),
+            "line 6: q2_deg, q3_deg: joint 3 at",
+            "(coupled: from q2_deg, q3_deg)",
+        ),
+        (
+            "two_joint_sets",
+            with(HEADER, &replace_field(1, 8, "41")),
+            "line 3: q6_deg: pose p0 of session A has other joint values on line 2",
+            "",
+        ),
+        (
+            "target_twice",
+            with(HEADER, &|r| r[1] = r[0].clone()),
+            "line 3: target: target SMR1 of pose p0 (session A) is measured on line 2 already",
+            "",
+        ),
+        (
+            "half_quaternion",
+            with(&format!("{HEADER},quat_w"), &|r| r.iter_mut().for_each(|x| x.push_str(",1"))),
+            "line 1: quat_x: missing column",
+            "",
+        ),
+        (
+            "quaternion_norm",
+            with(&format!("{HEADER},quat_w,quat_x,quat_y,quat_z"), &|r| {
+                r.iter_mut().enumerate().for_each(|(k, x)| x.push_str(if k == 7 { ",1,1,0,0" } else { ",1,0,0,0" }))
+            }),
+            "line 9: quat_w: the quaternion's norm is",
+            "",
+        ),
+        (
+            "sigma",
+            with(&format!("{HEADER},sigma_um"), &|r| {
+                r.iter_mut().enumerate().for_each(|(k, x)| x.push_str(if k == 2 { ",0" } else { ",10" }))
+            }),
+            "line 4: sigma_um: 0: an uncertainty must be above 0",
+            "",
+        ),
+        (
+            "long_label",
+            with(HEADER, &replace_field(0, 0, "a-label-of-more-than-sixty-four-characters-is-not-a-pose-label-of-this-file")),
+            "line 2: pose: a label of at most 64",
+            "",
+        ),
+        ("bad_key_value", with(&format!("# joints = motor\n{HEADER}"), &|_| {}), "line 1: joints: \"motor\"", ""),
+        ("unknown_key", with(&format!("# comment\n# joint = model\n{HEADER}"), &|_| {}), "line 2: joint: unknown header key", ""),
+        ("absent_target", with(&format!("# targets = SMR1, SMR9\n{HEADER}"), &|_| {}), "line 1: targets: target SMR9 has no row", ""),
+        ("no_rows", format!("{HEADER}\n"), "no measurements", ""),
+        (
+            "one_place",
+            with(HEADER, &|r| {
+                r.iter_mut().for_each(|x| *x = format!("{},{}", x.split(',').take(9).collect::<Vec<_>>().join(","), "400,0,500"))
+            }),
+            "line 2: session: session A: its points do not fix its frame",
+            "",
+        ),
+        ("metres_as_mm", metres_as_mm(), "", "mm off them (median; a robot before calibration is millimetres off)"),
+        ("empty", String::new(), "no column names", ""),
+    ];
+    let mut files: Vec<(PathBuf, &str, &str)> =
+        cases.iter().map(|(name, text, expect, also)| (write_csv(dir.path(), &format!("{name}.csv"), text), *expect, *also)).collect();
+    let mut latin1 = format!("{HEADER}\n").into_bytes();
+    latin1.extend_from_slice(b"p0,A,SMR\xe9,0,0,0,0,0,0,1,2,3\n");
+    let latin1_path = dir.path().join("latin1.csv");
+    std::fs::write(&latin1_path, latin1).unwrap();
+    files.push((latin1_path, "line 2", "UTF-8"));
+    for (path, expect, also) in files {
+        let out = common::calsim().args(["calibrate"]).arg(&robot).arg(&path).arg("--out").arg(dir.path().join("out")).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{}: {stderr}", path.display());
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{}: {stderr}", path.display());
+        assert!(stderr.contains(&format!("{}: ", path.display())), "{}: {stderr}", path.display());
+        assert!(stderr.contains(expect) && stderr.contains(also), "{}: expected `{expect}` and `{also}`, got {stderr}", path.display());
+    }
+}
+
+/// Bad options and robot files are one line, exit 2: folds out of range, a held-out fraction
+/// above 0.5, an unknown held-out session, a base parameter among the robot's, an outlier
+/// threshold that is not a number, a singular coupling in the robot file.
+#[test]
+fn bad_calibrate_options_and_couplings_are_one_line_exit_2() {
+    let dir = common::scratch("calibrate-options");
+    let robot = write_csv(dir.path(), "coupled.toml", &coupled_irb120_text());
+    let csv = write_csv(dir.path(), "ok.csv", &format!("{HEADER}\n{}\n", valid_rows().join("\n")));
+    let singular = write_csv(
+        dir.path(),
+        "singular.toml",
+        &coupled_irb120_text().replace("[0.0, -1.0, 1.0, 0.0, 0.0, 0.0]", "[0.0, 1.0, 0.0, 0.0, 0.0, 0.0]"),
+    );
+    let cases: Vec<(Vec<&str>, &Path, &str)> = vec![
+        (vec!["--folds", "1"], &robot, "--folds"),
+        (vec!["--hold-out", "0.9"], &robot, "--hold-out: 0.9"),
+        (vec!["--hold-out-session", "Z"], &robot, "--hold-out-session: Z: no such session"),
+        (vec!["--params", "a2,x0W"], &robot, "--params: x0W"),
+        (vec!["--params", "a2,zeta"], &robot, "--params: unknown parameter `zeta`"),
+        (vec!["--outlier-threshold", "nan"], &robot, "--outlier-threshold: NaN"),
+        (vec![], &singular, "coupling: the rows make a singular map"),
+    ];
+    for (args, robot, expect) in cases {
+        let out =
+            common::calsim().arg("calibrate").arg(robot).arg(&csv).arg("--out").arg(dir.path().join("out")).args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains(expect), "{args:?}: expected `{expect}`, got {stderr}");
+    }
+}
+
+/// Every value of one row of a small valid file (the coupled robot, 3 sessions x 8 poses x 1
+/// target, 24 points) replaced by each of 11 values (NaN, infinities, 1e300 either sign, empty,
+/// text, 1e-300, -0, 1e4, -720), 132 files: each is read and, where it reads, calibrated; none
+/// panics, every refusal is one line naming the file.
+#[test]
+fn mutated_measurement_values_are_refused_in_one_line_or_calibrated() {
+    let robot = robot_from(&coupled_irb120_text());
+    let mut s = spec(truth_on(&robot, &default_params()), &robot, 0.012, vec![]);
+    s.poses_per_session = 8;
+    s.targets.truncate(1);
+    let text = to_csv(&s);
+    let lines: Vec<&str> = text.lines().collect();
+    let row = lines.iter().position(|l| l.starts_with("p005")).unwrap();
+    let mutations = ["NaN", "inf", "-inf", "1e300", "-1e300", "", "abc", "1e-300", "-0", "1e4", "-720"];
+    let (mut refused, mut calibrated) = (0, 0);
+    for field in 0..12 {
+        for value in mutations {
+            let mut fields: Vec<&str> = lines[row].split(',').collect();
+            fields[field] = value;
+            let mutated = fields.join(",");
+            let mut all = lines.clone();
+            all[row] = &mutated;
+            let path = Path::new("mutated.csv");
+            let result = measurements::parse(path, &(all.join("\n") + "\n"), &robot)
+                .map_err(calsim::calibrate::CalibrateError::from)
+                .and_then(|m| run(&robot, &m, &Options { plots: false, prediction_draws: 20, ..Options::default() }));
+            match result {
+                Ok(_) => calibrated += 1,
+                Err(e) => {
+                    let msg = e.to_string();
+                    assert_eq!(msg.lines().count(), 1, "field {field} = {value:?}: {msg}");
+                    assert!(msg.starts_with("mutated.csv: "), "field {field} = {value:?}: {msg}");
+                    refused += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{refused} refused, {calibrated} calibrated");
+    assert_eq!(refused + calibrated, 132);
+}
