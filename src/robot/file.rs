@@ -193,10 +193,7 @@ pub fn to_text(
         gravity_m_s2: d.gravity_base.norm(),
         gravity_base_m_s2: (d.gravity_base.x != 0.0 || d.gravity_base.y != 0.0 || d.gravity_base.z > 0.0).then(|| d.gravity_base.into()),
         base_mm_deg: Some([b.x, b.y, b.z, b.alpha.to_degrees(), b.beta.to_degrees(), b.gamma.to_degrees()]),
-        flange_rpy_deg: flange.map(|r| {
-            let (x, y, z) = Rotation3::from_matrix_unchecked(*r).euler_angles();
-            [x.to_degrees(), y.to_degrees(), z.to_degrees()]
-        }),
+        flange_rpy_deg: flange.map(|r| super::rotation::rpy_deg(&Rotation3::from_matrix_unchecked(*r))),
         tool_mm: Some(to_flange(&d.flange_tcp_mm)),
         payload: Some(Payload { mass_kg: d.payload.mass_kg, com_mm: to_flange(&d.payload.com_mm) }),
         joint: (0..JOINTS)
@@ -349,8 +346,8 @@ impl RobotFile {
         for (k, v) in f.flange_rpy_deg.iter().flatten().enumerate() {
             within(format!("flange_rpy_deg[{k}]"), *v, -360.0, 360.0)?;
         }
-        let flange =
-            f.flange_rpy_deg.map(|[x, y, z]| *Rotation3::from_euler_angles(x.to_radians(), y.to_radians(), z.to_radians()).matrix());
+        // One rotation for every writing of it (see `robot::rotation`).
+        let flange = f.flange_rpy_deg.map(|rpy| super::rotation::from_rpy_deg(rpy).into_inner());
         let in_frame6 = |v: Vector3<f64>| flange.map_or(v, |r| r * v);
         let base = f.base_mm_deg.map_or_else(XyzZyx::default, XyzZyx::from_mm_deg);
         let data = RobotData {

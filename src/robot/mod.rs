@@ -9,6 +9,7 @@ mod kinematics_avx;
 mod kinematics_batch;
 pub mod model;
 pub mod params;
+pub mod rotation;
 pub mod state;
 pub mod statics;
 #[cfg(test)]
