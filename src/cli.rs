@@ -749,7 +749,7 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
 }
 
 fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
-    let load = |p: &Path| crate::robot::file::RobotFile::load(p).map(|f| f.nominal).map_err(|e| e.to_string());
+    let load = |p: &Path| crate::robot::file::RobotFile::load(p).map_err(|e| e.to_string());
     let model = load(&args.model)?;
     let nominal = args.nominal.as_deref().map(load).transpose()?;
     let targets = crate::compensate::read_targets(&args.targets)?;
