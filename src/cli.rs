@@ -56,6 +56,20 @@ enum Command {
     Compensate(CompensateArgs),
     /// Convert a URDF arm (a serial chain of six revolute joints) into a calsim robot file.
     ImportUrdf(ImportUrdfArgs),
+    /// The tool frame, gravity torques and joint deflections of a robot file's arm at each row of
+    /// a joints CSV (header q1_deg,...,q6_deg).
+    Fk(FkArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct FkArgs {
+    /// The arm: a robot file.
+    robot: PathBuf,
+    /// Joint values: CSV with the header q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg.
+    joints: PathBuf,
+    /// Output CSV (default: standard output).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -65,6 +79,12 @@ struct ImportUrdfArgs {
     /// The robot file to write.
     #[arg(long)]
     out: PathBuf,
+    /// The folder holding the packages that `package://NAME/...` mesh names point into.
+    #[arg(long)]
+    package_root: Option<PathBuf>,
+    /// Fit a link's capsule to its visual meshes where it has no collision geometry.
+    #[arg(long)]
+    visual_meshes: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -334,6 +354,7 @@ pub fn main() -> ExitCode {
         Command::Export(args) => export(args),
         Command::Compensate(args) => compensate(args),
         Command::ImportUrdf(args) => import_urdf(args),
+        Command::Fk(args) => fk(args),
     };
     match result {
         Ok(code) => code,
@@ -718,32 +739,21 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
 }
 
 fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
-    let converted = crate::robot::urdf::load_all(&args.urdf).map_err(|e| e.to_string())?;
-    let model = &converted.model;
-    let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), args.urdf.display());
-    let text = crate::robot::file::to_text(model, &source, &[], converted.capsules.as_ref(), converted.flange.as_ref());
-    // The robot file must be one calsim can load: a URDF value outside its ranges is the URDF's
-    // error, and nothing is written.
-    crate::robot::file::RobotFile::from_text(&args.out, &text)
-        .map_err(|e| format!("{}: the robot file it converts to cannot be used: {}: {}", args.urdf.display(), e.field, e.message))?;
-    crate::io::out_dir::write_file_atomically(&args.out, &text).map_err(|e| format!("{}: {e}", args.out.display()))?;
-    let l = &model.data().links;
-    println!(
-        "{}: {} as modified DH (a_i-1 mm: {}; d_i mm: {}) to {}",
-        args.urdf.display(),
-        model.data().name,
-        l.iter().map(|l| format!("{:.3}", l.a)).collect::<Vec<_>>().join(", "),
-        l.iter().map(|l| format!("{:.3}", l.d)).collect::<Vec<_>>().join(", "),
-        args.out.display()
-    );
-    match &converted.capsules {
-        Some(c) => println!("collision: {} capsules from the links' shapes", c.iter().map(Vec::len).sum::<usize>()),
-        None => {
-            println!("collision: none (the URDF has no cylinder, capsule, sphere or box): add [[collision]] capsules for a TriCal study")
-        }
+    let options = crate::robot::urdf::ImportOptions { package_root: args.package_root.clone(), visual_fallback: args.visual_meshes };
+    let report = crate::robot::urdf::import(&args.urdf, &args.out, &options).map_err(|e| e.to_string())?;
+    for line in report.lines(&args.urdf, &args.out) {
+        println!("{line}");
     }
-    if !converted.skipped.is_empty() {
-        println!("collision shapes left out: {}", converted.skipped.join(", "));
+    Ok(ExitCode::SUCCESS)
+}
+
+fn fk(args: &FkArgs) -> Result<ExitCode, String> {
+    let file = crate::robot::file::RobotFile::load(&args.robot).map_err(|e| e.to_string())?;
+    let joints = crate::robot::fk::read_joints(&args.joints).map_err(|e| e.to_string())?;
+    let text = crate::robot::fk::to_csv(&crate::robot::fk::fk_rows(&file, &joints));
+    match &args.out {
+        Some(out) => crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| format!("{}: {e}", out.display()))?,
+        None => print!("{text}"),
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -115,7 +115,7 @@ fn a_urdf_with_absurd_values_is_refused_and_nothing_written() {
         format!("{}{to}{}", &t[..i], &t[j..])
     };
     for (name, text, field) in [
-        ("heavy.urdf", first(&urdf, "<mass value=\"", "1e300"), "mass_kg"),
+        ("heavy.urdf", first(&urdf, "<mass value=\"", "1e300"), "link `link_1`: mass 1e300"),
         ("limitless.urdf", first(&urdf, "upper=\"", "1e300"), "limits"),
     ] {
         let (_dir, p) = write(name, &text);
@@ -187,7 +187,7 @@ fn the_kr6_runs_the_trical_study() {
 /// link.
 #[test]
 fn urdf_collision_cylinders_become_capsules_in_place() {
-    let c = calsim::robot::urdf::load_all(&common::repo().join("robots/kr6r900sixx.urdf")).expect("converts");
+    let c = calsim::robot::urdf::load_all(&common::repo().join("robots/kr6r900sixx.urdf"), &Default::default()).expect("converts");
     let caps = c.capsules.expect("the KR 6 URDF has collision cylinders");
     assert_eq!(caps.iter().map(Vec::len).sum::<usize>(), 7);
     let mut st = KinState::default();
@@ -201,6 +201,6 @@ fn urdf_collision_cylinders_become_capsules_in_place() {
     assert_eq!(cap.radius, 70.0);
     let text = std::fs::read_to_string(common::repo().join("robots/kr6r900sixx.urdf")).unwrap();
     let (_dir, bad) = write("negative-radius.urdf", &text.replacen("<cylinder radius=\"0.07\"", "<cylinder radius=\"-0.07\"", 1));
-    let e = calsim::robot::urdf::load_all(&bad).err().expect("refused").to_string();
+    let e = calsim::robot::urdf::load_all(&bad, &Default::default()).err().expect("refused").to_string();
     assert!(e.contains("negative-radius.urdf") && e.contains("link_2") && e.lines().count() == 1, "{e}");
 }

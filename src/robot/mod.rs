@@ -1,9 +1,12 @@
 //! The virtual robot: model data, named parameters, kinematics, statics and built-in robots.
 
 pub mod builtin;
+pub mod capsule_fit;
 pub mod file;
+pub mod fk;
 pub mod ik;
 pub mod kinematics;
+pub mod mesh;
 #[cfg(target_arch = "x86_64")]
 mod kinematics_avx;
 mod kinematics_batch;
