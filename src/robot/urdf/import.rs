@@ -34,7 +34,14 @@ pub fn import(urdf: &Path, out: &Path, options: &ImportOptions) -> Result<Import
     let converted = load_all(urdf, options)?;
     let urdf_text = crate::io::read_text(urdf).map_err(|e| fail(e.to_string()))?;
     let mut lines = preamble(&urdf_text);
-    lines.push(format!("converted by `calsim import-urdf {}`", urdf.display()));
+    let mut command = format!("calsim import-urdf {}", urdf.display());
+    if let Some(root) = &options.package_root {
+        command.push_str(&format!(" --package-root {}", root.display()));
+    }
+    if options.visual_fallback {
+        command.push_str(" --visual-meshes");
+    }
+    lines.push(format!("converted by `{command} --out {}`", out.display()));
     let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), urdf.display());
     let text = imported_text(&converted.model, &source, converted.capsules.as_ref(), converted.flange.as_ref(), &lines);
     // The robot file must be one calsim can load: a URDF value outside its ranges is the URDF's
