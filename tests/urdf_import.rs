@@ -290,3 +290,34 @@ fn a_massless_link_gets_no_centre_of_mass_and_fixed_links_fold_their_masses() {
     let along: f64 = (2.0 * 50.0 + 1.0 * 150.0) / 3.0;
     assert!((six.com_mm.z.abs() - along).abs() < 1e-3 && six.com_mm.xy().norm() < 1e-3, "{six:?}");
 }
+
+/// The shipped IRB 120 file (Table 3, robots/irb120.toml) against an independent kinematics: the
+/// `k` crate on the ROS-Industrial IRB 120 chain, 1,000 configurations within the limits. The
+/// flange positions agree to 1e-6 mm, and frame 6 is turned from the URDF's tool0 by one constant
+/// rotation (the same to 1e-9 rad at every configuration).
+#[test]
+fn the_shipped_irb120_file_equals_an_independent_kinematics_of_its_urdf() {
+    let (_dir, urdf) = write("irb120_k.urdf", &irb120_urdf(str::to_string));
+    let chain = k::Chain::<f64>::from_urdf_file(&urdf).expect("k reads the URDF");
+    let tool0 = chain.find_link("tool0").expect("tool0");
+    let file = calsim::robot::file::RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap();
+    let mut st = KinState::default();
+    let (mut dp, mut dr): (f64, f64) = (0.0, 0.0);
+    let mut offset: Option<nalgebra::UnitQuaternion<f64>> = None;
+    for q in common::random_configs(&file.nominal, 1000, &mut common::rng(120)) {
+        chain.set_joint_positions(&q).expect("within the limits");
+        chain.update_transforms();
+        let t = tool0.world_transform().expect("updated");
+        let (v, r) = (t.translation.vector, t.rotation.quaternion().coords);
+        let theirs = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(r[3], r[0], r[1], r[2]));
+        let f = calsim::robot::world_from_flange(&file.nominal, &mut st, &q);
+        dp = dp.max((nalgebra::Vector3::new(v[0], v[1], v[2]) * 1e3 - f.translation.vector).norm());
+        let rel = f.rotation.inverse() * theirs;
+        match offset {
+            None => offset = Some(rel),
+            Some(o) => dr = dr.max(o.angle_to(&rel)),
+        }
+    }
+    eprintln!("robots/irb120.toml against k on the ROS-Industrial IRB 120: {dp:.3e} mm, frame offset constant to {dr:.3e} rad");
+    assert!(dp < 1e-6 && dr < 1e-9, "{dp:e} mm, {dr:e} rad");
+}
