@@ -27,16 +27,17 @@ pub const MAX_TARGETS: usize = 1_000_000;
 /// Reads the targets of `path`; an error names the file, the line and the column.
 pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, String> {
     let at = |line: u64, what: String| format!("{}: line {line}: {what}", path.display());
-    crate::io::check_input(path, None).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    crate::io::check_input(path, Some(256 << 20)).map_err(|e| format!("{}: {e}", path.display()))?;
+    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(bytes.as_slice());
     let header: Vec<String> = r.headers().map_err(|e| at(1, e.to_string()))?.iter().map(str::to_string).collect();
     if header != TARGET_COLUMNS {
         return Err(at(1, format!("header {:?}: expected {}", header.join(","), TARGET_COLUMNS.join(","))));
     }
     let mut out = Vec::new();
     for rec in r.records() {
-        let rec = rec.map_err(|e| at(e.position().map_or(0, |p| p.line()), e.to_string()))?;
-        let line = rec.position().map_or(0, |p| p.line());
+        let rec = rec.map_err(|e| at(crate::robot::fk::line_at(&bytes, e.position()), e.to_string()))?;
+        let line = crate::robot::fk::line_at(&bytes, rec.position());
         if out.len() == MAX_TARGETS {
             return Err(at(line, format!("more than {MAX_TARGETS} targets")));
         }

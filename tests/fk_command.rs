@@ -83,7 +83,7 @@ fn fk_rows_are_compensate_targets_and_carry_the_statics() {
 }
 
 /// Through the command line: a joints CSV in, the rows out (the header and one row per
-/// configuration); bad CSVs (wrong header, a field that is not a number, NaN, infinite or beyond
+/// configuration); bad CSVs (wrong header, a field that is not a number (CRLF line ends too), NaN, infinite or beyond
 /// three turns, a short row, no rows, a missing file) are one line naming the file, the line and
 /// the column where there is one, exit 2.
 #[test]
@@ -107,6 +107,7 @@ fn the_fk_command_writes_rows_and_refuses_bad_csvs_in_one_line() {
     for (name, text, expect) in [
         ("header.csv", "q1,q2,q3,q4,q5,q6\n0,0,0,0,0,0\n".to_string(), "line 1: header"),
         ("word.csv", format!("{header}0,0,0,0,0,0\n0,x,0,0,0,0\n"), "line 3, column 2 (q2_deg): \"x\": not a number"),
+        ("crlf.csv", format!("{}\r\n0,0,0,0,0,0\r\n0,x,0,0,0,0\r\n", header.trim_end()), "line 3, column 2 (q2_deg)"),
         ("nan.csv", format!("{header}0,0,NaN,0,0,0\n"), "line 2, column 3 (q3_deg)"),
         ("inf.csv", format!("{header}0,0,0,inf,0,0\n"), "line 2, column 4 (q4_deg)"),
         ("huge.csv", format!("{header}0,0,0,0,1e300,0\n"), "line 2, column 5 (q5_deg)"),

@@ -80,24 +80,31 @@ pub enum JointsCsvError {
     },
 }
 
+/// Most bytes a joints file takes (a million rows of six values).
+const MOST_BYTES: u64 = 256 << 20;
+
+/// The 1-based line at which a record starting at byte `pos` of `bytes` lies (counted here:
+/// the csv crate's own line count misses the line break of a CRLF header).
+pub(crate) fn line_at(bytes: &[u8], pos: Option<&csv::Position>) -> u64 {
+    pos.map_or(0, |p| 1 + bytes[..(p.byte() as usize).min(bytes.len())].iter().filter(|b| **b == b'\n').count() as u64)
+}
+
 /// Reads the joint values (rad) of `path`.
 pub fn read_joints(path: &Path) -> Result<Vec<Joints>, JointsCsvError> {
     let p = || path.to_path_buf();
-    crate::io::check_input(path, None).map_err(|e| JointsCsvError::File { path: p(), reason: e.to_string() })?;
-    let mut r = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .flexible(true)
-        .from_path(path)
-        .map_err(|e| JointsCsvError::File { path: p(), reason: e.to_string() })?;
+    let file_error = |e: &dyn std::fmt::Display| JointsCsvError::File { path: p(), reason: e.to_string() };
+    crate::io::check_input(path, Some(MOST_BYTES)).map_err(|e| file_error(&e))?;
+    let bytes = std::fs::read(path).map_err(|e| file_error(&e))?;
+    let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).flexible(true).from_reader(bytes.as_slice());
     let header: Vec<String> =
-        r.headers().map_err(|e| JointsCsvError::File { path: p(), reason: e.to_string() })?.iter().map(str::to_string).collect();
+        r.headers().map_err(|e| file_error(&e))?.iter().map(str::to_string).collect();
     if header != JOINT_COLUMNS {
         return Err(JointsCsvError::Header { path: p(), found: header.join(",") });
     }
     let mut out = Vec::new();
     for rec in r.records() {
-        let rec = rec.map_err(|e| JointsCsvError::File { path: p(), reason: e.to_string() })?;
-        let line = rec.position().map_or(0, |pos| pos.line());
+        let rec = rec.map_err(|e| file_error(&e))?;
+        let line = line_at(&bytes, rec.position());
         if out.len() == MAX_ROWS {
             return Err(JointsCsvError::Rows { path: p(), reason: format!("more than {MAX_ROWS} rows") });
         }

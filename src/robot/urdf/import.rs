@@ -76,8 +76,8 @@ impl ImportReport {
             "{}: {} as modified DH (a_i-1 mm: {}; d_i mm: {}) to {}",
             urdf.display(),
             d.name,
-            d.links.iter().map(|l| format!("{:.3}", l.a + 0.0)).collect::<Vec<_>>().join(", "),
-            d.links.iter().map(|l| format!("{:.3}", l.d + 0.0)).collect::<Vec<_>>().join(", "),
+            d.links.iter().map(|l| format!("{:.3}", (l.a * 1e3).round() / 1e3 + 0.0)).collect::<Vec<_>>().join(", "),
+            d.links.iter().map(|l| format!("{:.3}", (l.d * 1e3).round() / 1e3 + 0.0)).collect::<Vec<_>>().join(", "),
             out.display()
         )];
         let mass: f64 = d.links_inertial.iter().map(|i| i.mass_kg).sum();
