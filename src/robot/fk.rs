@@ -86,7 +86,13 @@ const MOST_BYTES: u64 = 256 << 20;
 /// The 1-based line at which a record starting at byte `pos` of `bytes` lies (counted here:
 /// the csv crate's own line count misses the line break of a CRLF header).
 pub(crate) fn line_at(bytes: &[u8], pos: Option<&csv::Position>) -> u64 {
-    pos.map_or(0, |p| 1 + bytes[..(p.byte() as usize).min(bytes.len())].iter().filter(|b| **b == b'\n').count() as u64)
+    let Some(p) = pos else { return 0 };
+    // After a CRLF the record's offset can point at the line break before it: skip line breaks.
+    let mut start = (p.byte() as usize).min(bytes.len());
+    while start < bytes.len() && matches!(bytes[start], b'\r' | b'\n') {
+        start += 1;
+    }
+    1 + bytes[..start].iter().filter(|b| **b == b'\n').count() as u64
 }
 
 /// Reads the joint values (rad) of `path`.
