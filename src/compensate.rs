@@ -76,7 +76,10 @@ pub struct Compensated {
 fn frame6_at_tcp(world_from_tool: &Isometry3<f64>, frame6_from_flange: Option<&Matrix3<f64>>) -> Isometry3<f64> {
     match frame6_from_flange {
         None => *world_from_tool,
-        Some(r) => Isometry3::from_parts(world_from_tool.translation, world_from_tool.rotation * crate::robot::rotation::quaternion(&r.transpose())),
+        Some(r) => Isometry3::from_parts(
+            world_from_tool.translation,
+            world_from_tool.rotation * crate::robot::rotation::quaternion(&r.transpose()),
+        ),
     }
 }
 

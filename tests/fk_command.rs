@@ -43,7 +43,9 @@ fn against_k(robot: &str, urdf: &str, tip: &str) -> (f64, f64) {
 /// 200iC to 1e-9 mm and 1e-12 rad.
 #[test]
 fn fk_of_the_imported_arms_equals_an_independent_kinematics() {
-    for (robot, urdf) in [("robots/kr6r900sixx.toml", "robots/kr6r900sixx.urdf"), ("robots/lrmate200ic.toml", "robots/lrmate200ic/lrmate200ic.urdf")] {
+    for (robot, urdf) in
+        [("robots/kr6r900sixx.toml", "robots/kr6r900sixx.urdf"), ("robots/lrmate200ic.toml", "robots/lrmate200ic/lrmate200ic.urdf")]
+    {
         let (dp, dr) = against_k(robot, urdf, "tool0");
         assert!(dp < 1e-9 && dr < 1e-12, "{robot}: {dp:e} mm, {dr:e} rad");
     }
@@ -97,7 +99,11 @@ fn the_fk_command_writes_rows_and_refuses_bad_csvs_in_one_line() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(&out).unwrap();
     assert_eq!(text.lines().count(), 3);
-    assert!(text.starts_with("q1_deg,") && text.lines().next().unwrap().contains("tau2_nm") && text.lines().next().unwrap().contains("deflection6_mdeg"));
+    assert!(
+        text.starts_with("q1_deg,")
+            && text.lines().next().unwrap().contains("tau2_nm")
+            && text.lines().next().unwrap().contains("deflection6_mdeg")
+    );
     let row: Vec<f64> = text.lines().nth(2).unwrap().split(',').take(24).map(|x| x.parse().unwrap()).collect();
     let q = read_joints(&good).unwrap()[1];
     let ours = fk_rows(&RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap(), &[q])[0].clone();

@@ -31,7 +31,15 @@ fn flange_of(rpy: [f64; 3]) -> Matrix3<f64> {
 /// Other writings of the triple `[r, p, y]` (deg) of one rotation: the other pitch branch, whole
 /// turns added where the file's +-360 deg bound allows, zeros with their sign turned.
 fn writings([r, p, y]: [f64; 3], turns: [i32; 3]) -> Vec<[f64; 3]> {
-    let wrap = |a: f64| if a > 180.0 { a - 360.0 } else if a <= -180.0 { a + 360.0 } else { a };
+    let wrap = |a: f64| {
+        if a > 180.0 {
+            a - 360.0
+        } else if a <= -180.0 {
+            a + 360.0
+        } else {
+            a
+        }
+    };
     let other = [wrap(r + 180.0), if p >= 0.0 { 180.0 - p } else { -180.0 - p }, wrap(y + 180.0)];
     let shifted = |t: [f64; 3]| -> [f64; 3] {
         std::array::from_fn(|k| {
@@ -108,7 +116,8 @@ fn every_writing_of_an_axis_aligned_rotation_gives_the_same_bits() {
         for p in angles {
             for y in angles {
                 let m = flange_of([r, p, y]);
-                let exact = Rotation3::from_euler_angles(f64::to_radians(r), f64::to_radians(p), f64::to_radians(y)).into_inner().map(f64::round);
+                let exact =
+                    Rotation3::from_euler_angles(f64::to_radians(r), f64::to_radians(p), f64::to_radians(y)).into_inner().map(f64::round);
                 assert_eq!(m.map(f64::to_bits), (exact.map(|v| v + 0.0)).map(f64::to_bits), "[{r}, {p}, {y}]");
                 if !seen.iter().any(|(s, _)| *s == m) {
                     seen.push((m, [r, p, y]));
@@ -125,8 +134,11 @@ fn every_writing_of_an_axis_aligned_rotation_gives_the_same_bits() {
 #[test]
 fn every_writing_of_the_kr6_half_turn_flange_gives_the_same_campaign() {
     let scenario = std::fs::read_to_string(common::repo().join("scenarios/kr6r900sixx_trical.toml")).unwrap();
-    let mut reference: Option<(Vec<[u64; 6]>, Vec<[u64; 6]>)> = None;
-    for rpy in [[180.0, -0.0, -180.0], [180.0, 2.5444437451708134e-14, 180.0], [0.0, 180.0, 0.0], [-180.0, 0.0, 180.0], [0.0, -180.0, -0.0]] {
+    // The pool's and the validation's joint values, as bits.
+    type Campaign = (Vec<[u64; 6]>, Vec<[u64; 6]>);
+    let mut reference: Option<Campaign> = None;
+    for rpy in [[180.0, -0.0, -180.0], [180.0, 2.5444437451708134e-14, 180.0], [0.0, 180.0, 0.0], [-180.0, 0.0, 180.0], [0.0, -180.0, -0.0]]
+    {
         let tmp = common::scratch("orientation-writings");
         std::fs::create_dir_all(tmp.path().join("robots")).unwrap();
         std::fs::create_dir_all(tmp.path().join("scenarios")).unwrap();

@@ -21,7 +21,10 @@ fn lrmate() -> (PathBuf, PathBuf) {
 /// the chain from the root; a tree walk).
 fn link_frames(robot: &urdf_rs::Robot) -> Vec<(String, Isometry3<f64>)> {
     let iso = |p: &urdf_rs::Pose| {
-        Isometry3::from_parts(Translation3::new(p.xyz[0], p.xyz[1], p.xyz[2]), UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]))
+        Isometry3::from_parts(
+            Translation3::new(p.xyz[0], p.xyz[1], p.xyz[2]),
+            UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]),
+        )
     };
     let root = robot.links.iter().find(|l| !robot.joints.iter().any(|j| j.child.link == l.name)).unwrap();
     let mut out = vec![(root.name.clone(), Isometry3::identity())];
@@ -91,7 +94,14 @@ fn the_shipped_lrmate_is_one_import_of_its_urdf_and_its_capsules_hold_every_vert
     let tmp = common::scratch("lrmate-import");
     let out = tmp.path().join("lrmate200ic.toml");
     let o = common::calsim()
-        .args(["import-urdf", "robots/lrmate200ic/lrmate200ic.urdf", "--package-root", "robots/lrmate200ic", "--out", out.to_str().unwrap()])
+        .args([
+            "import-urdf",
+            "robots/lrmate200ic/lrmate200ic.urdf",
+            "--package-root",
+            "robots/lrmate200ic",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -130,10 +140,12 @@ fn urdf_with_meshes(visual_file: &str) -> String {
             r#"<joint name="joint_{i}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><parent link="{parent}"/><child link="link_{i}"/><axis xyz="{axis}"/><limit lower="-2" upper="2" effort="0" velocity="1"/></joint>"#
         )
     };
-    let link = |i: usize| match i {
+    let link = |i: usize| {
+        match i {
         2 => r#"<link name="link_2"><collision><origin xyz="0 0 0.1" rpy="0.3 0 0"/><geometry><mesh filename="package://pkg/meshes/upper.stl"/></geometry></collision></link>"#.to_string(),
         3 => format!(r#"<link name="link_3"><visual><origin xyz="0 0 0" rpy="0 0 0"/><geometry><mesh filename="{visual_file}" scale="0.001 0.001 0.001"/></geometry></visual></link>"#),
         _ => format!(r#"<link name="link_{i}"/>"#),
+    }
     };
     format!(
         r#"<robot name="meshy"><link name="base_link"/>{}{}{}{}{}{}{}</robot>"#,
@@ -168,7 +180,9 @@ fn capsules_fitted_to_meshes_hold_every_vertex_and_the_hull_gives_the_same() {
     let tris: Vec<[Vector3<f64>; 3]> = cloud.chunks(3).filter(|c| c.len() == 3).map(|c| [c[0], c[1], c[2]]).collect();
     std::fs::create_dir_all(dir.join("root/pkg/meshes")).unwrap();
     std::fs::write(dir.join("root/pkg/meshes/upper.stl"), stl(&tris)).unwrap();
-    let obj: String = (0..50).map(|k| format!("v {} {} {}\n", 10.0 * f64::from(k), 30.0 * (f64::from(k) * 0.3).sin(), 20.0)).collect::<String>() + "f 1 2 3\n";
+    let obj: String =
+        (0..50).map(|k| format!("v {} {} {}\n", 10.0 * f64::from(k), 30.0 * (f64::from(k) * 0.3).sin(), 20.0)).collect::<String>()
+            + "f 1 2 3\n";
     std::fs::write(dir.join("forearm.obj"), obj).unwrap();
     let urdf = dir.join("meshy.urdf");
     std::fs::write(&urdf, urdf_with_meshes("forearm.obj")).unwrap();
@@ -186,7 +200,8 @@ fn capsules_fitted_to_meshes_hold_every_vertex_and_the_hull_gives_the_same() {
     assert_eq!(every_vertex_inside(&urdf, &root, &file), tris.len() * 3);
 
     // The convex hull of the cloud: the same capsule.
-    let points: Vec<rapier3d_f64::parry::math::Vector3> = tris.iter().flatten().map(|v| rapier3d_f64::parry::math::Vector3::new(v.x, v.y, v.z)).collect();
+    let points: Vec<rapier3d_f64::parry::math::Vector3> =
+        tris.iter().flatten().map(|v| rapier3d_f64::parry::math::Vector3::new(v.x, v.y, v.z)).collect();
     let (hull, faces) = rapier3d_f64::parry::transformation::convex_hull(&points);
     let hull_tris: Vec<[Vector3<f64>; 3]> =
         faces.iter().map(|f| f.map(|i| Vector3::new(hull[i as usize].x, hull[i as usize].y, hull[i as usize].z))).collect();
@@ -194,7 +209,8 @@ fn capsules_fitted_to_meshes_hold_every_vertex_and_the_hull_gives_the_same() {
     std::fs::write(dir.join("root/pkg/meshes/upper.stl"), stl(&hull_tris)).unwrap();
     let (hulled, _) = import(&["--package-root", root.to_str().unwrap()], "b.toml");
     let (c, h) = (&caps[2][0], &hulled.capsules.as_ref().unwrap()[2][0]);
-    let d = [(Vector3::from(c.a) - Vector3::from(h.a)).norm(), (Vector3::from(c.b) - Vector3::from(h.b)).norm(), (c.radius - h.radius).abs()];
+    let d =
+        [(Vector3::from(c.a) - Vector3::from(h.a)).norm(), (Vector3::from(c.b) - Vector3::from(h.b)).norm(), (c.radius - h.radius).abs()];
     assert!(d.iter().all(|x| *x < 1e-9), "{c:?} vs {h:?}");
 
     // The visual OBJ on request: link 3 gets a capsule holding its vertices (mm in the file, scaled).

@@ -195,7 +195,13 @@ const HEADER: &str = "# A calsim robot file (format: src/robot/file.rs); units m
 /// (in its unit: mm, deg, kg) is written as that multiple, so rounding residues of the conversion
 /// (`25.000000000000004`, `2.5e-14`, `-0.0`) do not read as data; `preamble` (provenance, one
 /// comment line each) heads the file. A value moves by less than 1e-9 of its unit.
-pub fn imported_text(model: &RobotModel, source: &str, capsules: Option<&LinkCapsules>, flange: Option<&Matrix3<f64>>, preamble: &[String]) -> String {
+pub fn imported_text(
+    model: &RobotModel,
+    source: &str,
+    capsules: Option<&LinkCapsules>,
+    flange: Option<&Matrix3<f64>>,
+    preamble: &[String],
+) -> String {
     let mut f = file_of(model, source, &[], capsules, flange);
     tidy(&mut f);
     let body = toml::to_string(&f).unwrap_or_default();
@@ -220,7 +226,15 @@ fn tidy(f: &mut File) {
         p.com_mm.iter_mut().for_each(t);
     }
     for j in &mut f.joint {
-        for x in [&mut j.alpha_deg, &mut j.a_mm, &mut j.beta_deg, &mut j.theta_offset_deg, &mut j.d_mm, &mut j.compliance_mdeg_per_nm, &mut j.mass_kg] {
+        for x in [
+            &mut j.alpha_deg,
+            &mut j.a_mm,
+            &mut j.beta_deg,
+            &mut j.theta_offset_deg,
+            &mut j.d_mm,
+            &mut j.compliance_mdeg_per_nm,
+            &mut j.mass_kg,
+        ] {
             t(x);
         }
         j.limits_deg.iter_mut().chain(j.com_mm.iter_mut()).for_each(t);
@@ -232,7 +246,13 @@ fn tidy(f: &mut File) {
 }
 
 /// The file structure of [`to_text`].
-fn file_of(model: &RobotModel, source: &str, std: &[(ParamId, f64)], capsules: Option<&LinkCapsules>, flange: Option<&Matrix3<f64>>) -> File {
+fn file_of(
+    model: &RobotModel,
+    source: &str,
+    std: &[(ParamId, f64)],
+    capsules: Option<&LinkCapsules>,
+    flange: Option<&Matrix3<f64>>,
+) -> File {
     let d = model.data();
     let to_flange = |v: &Vector3<f64>| -> [f64; 3] { flange.map_or(*v, |r| r.transpose() * v).into() };
     let b = d.world_from_base;

@@ -102,8 +102,7 @@ pub fn read_joints(path: &Path) -> Result<Vec<Joints>, JointsCsvError> {
     crate::io::check_input(path, Some(MOST_BYTES)).map_err(|e| file_error(&e))?;
     let bytes = std::fs::read(path).map_err(|e| file_error(&e))?;
     let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).flexible(true).from_reader(bytes.as_slice());
-    let header: Vec<String> =
-        r.headers().map_err(|e| file_error(&e))?.iter().map(str::to_string).collect();
+    let header: Vec<String> = r.headers().map_err(|e| file_error(&e))?.iter().map(str::to_string).collect();
     if header != JOINT_COLUMNS {
         return Err(JointsCsvError::Header { path: p(), found: header.join(",") });
     }

@@ -6,10 +6,10 @@ pub mod file;
 pub mod fk;
 pub mod ik;
 pub mod kinematics;
-pub mod mesh;
 #[cfg(target_arch = "x86_64")]
 mod kinematics_avx;
 mod kinematics_batch;
+pub mod mesh;
 pub mod model;
 pub mod params;
 pub mod rotation;

@@ -105,14 +105,11 @@ mod tests {
     #[test]
     fn every_rotation_matrix_comes_back_from_its_quaternion() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(32);
-        let mut axis = |rng: &mut rand_chacha::ChaCha8Rng| {
-            nalgebra::Unit::new_normalize(Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)))
-        };
+        let axis = |rng: &mut rand_chacha::ChaCha8Rng| nalgebra::Unit::new_normalize(Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)));
         let mut cases: Vec<Matrix3<f64>> = Vec::new();
         for _ in 0..20_000 {
-            let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(nalgebra::Vector4::from_fn(|_, _| {
-                rng.random_range(-1.0..1.0)
-            })));
+            let q =
+                UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(nalgebra::Vector4::from_fn(|_, _| rng.random_range(-1.0..1.0))));
             cases.push(q.to_rotation_matrix().into_inner());
         }
         for _ in 0..2_000 {

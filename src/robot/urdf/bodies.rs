@@ -89,16 +89,22 @@ fn place<'a>(robot: &'a urdf_rs::Robot, chain: &Chain) -> Result<(Vec<Placed<'a>
             return Err("more than 10,000 links: not an arm".into());
         }
         for j in robot.joints.iter().filter(|j| j.parent.link == p.link.name) {
-            let child = robot.links.iter().find(|l| l.name == j.child.link).ok_or_else(|| format!("joint `{}`: no link `{}`", j.name, j.child.link))?;
+            let child = robot
+                .links
+                .iter()
+                .find(|l| l.name == j.child.link)
+                .ok_or_else(|| format!("joint `{}`: no link `{}`", j.name, j.child.link))?;
             let origin = iso(&j.origin);
             let axis = Unit::new_normalize(Vector3::new(j.axis.xyz[0], j.axis.xyz[1], j.axis.xyz[2]));
-            let turned = |angle: f64| origin * Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_axis_angle(&axis, angle));
+            let turned =
+                |angle: f64| origin * Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_axis_angle(&axis, angle));
             let next = if passive(j) {
                 let (master, k, off) = master_of(robot, j)?;
                 let &(lo, hi) = limits
                     .get(master.as_str())
                     .ok_or_else(|| format!("joint `{}` mimics `{master}`, which is not one of the arm's {JOINTS} joints", j.name))?;
-                if !(Vector3::new(j.axis.xyz[0], j.axis.xyz[1], j.axis.xyz[2]).norm() > 1e-9) {
+                let norm = Vector3::new(j.axis.xyz[0], j.axis.xyz[1], j.axis.xyz[2]).norm();
+                if norm.is_nan() || norm <= 1e-9 {
                     return Err(format!("joint `{}`: axis {:?} is not a direction", j.name, j.axis.xyz.0));
                 }
                 passives.push(PassiveJoint { name: j.name.clone(), master, multiplier: k, offset: off, body: p.body });
@@ -118,7 +124,13 @@ fn place<'a>(robot: &'a urdf_rs::Robot, chain: &Chain) -> Result<(Vec<Placed<'a>
                 Placed { link: child, body: p.body, zero: p.zero * turned(off), swept, sweeps }
             } else {
                 let body = if actuated(j) { (p.body + 1).min(JOINTS) } else { p.body };
-                Placed { link: child, body, zero: p.zero * origin, swept: p.swept.iter().map(|s| s * origin).collect(), sweeps: p.sweeps.clone() }
+                Placed {
+                    link: child,
+                    body,
+                    zero: p.zero * origin,
+                    swept: p.swept.iter().map(|s| s * origin).collect(),
+                    sweeps: p.sweeps.clone(),
+                }
             };
             stack.push(next);
         }
@@ -222,7 +234,8 @@ pub(super) fn bodies(
             };
             let cloud: Vec<Vector3<f64>> = p.swept.iter().flat_map(|pose| points.iter().map(move |v| in_body(pose, v))).collect();
             check_points(&p.link.name, &cloud)?;
-            margins[p.body] = margins[p.body].max(sagitta(&p.sweeps, &points.iter().map(|v| (p.zero * Point3::from(*v)).coords).collect::<Vec<_>>()) * 1e3);
+            margins[p.body] = margins[p.body]
+                .max(sagitta(&p.sweeps, &points.iter().map(|v| (p.zero * Point3::from(*v)).coords).collect::<Vec<_>>()) * 1e3);
             clouds[p.body].extend(cloud);
         }
     }

@@ -67,8 +67,7 @@ pub(super) fn walk(robot: &urdf_rs::Robot) -> Result<Chain, String> {
     let mut link: String = root.to_string();
     let mut axes: Vec<Axis> = Vec::new();
     loop {
-        let next: Vec<&urdf_rs::Joint> =
-            children(&link).into_iter().filter(|j| actuated(j) || drives(robot, &j.child.link, 0)).collect();
+        let next: Vec<&urdf_rs::Joint> = children(&link).into_iter().filter(|j| actuated(j) || drives(robot, &j.child.link, 0)).collect();
         let j = match (next.as_slice(), axes.len()) {
             ([j], _) => *j,
             ([], JOINTS) => {
@@ -119,7 +118,13 @@ pub(super) fn walk(robot: &urdf_rs::Robot) -> Result<Chain, String> {
                 if !(limits.0.is_finite() && limits.1.is_finite() && limits.0 < limits.1 && limits.0 >= -bound && limits.1 <= bound) {
                     return Err(format!("joint `{}`: limits [{}, {}] rad are not a range within +-6 pi", j.name, limits.0, limits.1));
                 }
-                axes.push(Axis { name: j.name.clone(), point: frame.translation.vector, dir: frame.rotation * a.normalize(), child: frame, limits });
+                axes.push(Axis {
+                    name: j.name.clone(),
+                    point: frame.translation.vector,
+                    dir: frame.rotation * a.normalize(),
+                    child: frame,
+                    limits,
+                });
             }
             ref other => return Err(format!("joint `{}` is {other:?}: calsim's arms have revolute joints only", j.name)),
         }

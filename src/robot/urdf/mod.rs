@@ -45,7 +45,6 @@ pub struct UrdfError {
     pub message: String,
 }
 
-
 /// A converted URDF: the arm, its links' collision capsules, and what the conversion did with
 /// the rest.
 pub struct Converted {
@@ -92,7 +91,15 @@ pub fn convert(robot: &urdf_rs::Robot, urdf_dir: &Path, options: &ImportOptions)
     // does too, and the flange (the tip) is turned from it.
     let r = (frames[JOINTS].rotation.inverse() * chain.tip.rotation).to_rotation_matrix().into_inner();
     let flange = ((r - nalgebra::Matrix3::identity()).amax() > 1e-12).then_some(r);
-    Ok(Converted { model, capsules: b.capsules, skipped: b.skipped, flange, meshes: b.meshes, passive: b.passive, from_visual: b.from_visual })
+    Ok(Converted {
+        model,
+        capsules: b.capsules,
+        skipped: b.skipped,
+        flange,
+        meshes: b.meshes,
+        passive: b.passive,
+        from_visual: b.from_visual,
+    })
 }
 
 /// The rigid transform of a URDF origin (`xyz` m, `rpy` rad about fixed x, y, z).
@@ -100,4 +107,3 @@ pub(super) fn iso(p: &urdf_rs::Pose) -> Isometry3<f64> {
     let (x, y, z) = (p.xyz[0], p.xyz[1], p.xyz[2]);
     Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]))
 }
-
