@@ -42,6 +42,9 @@ enum Command {
     ImportUrdf(ImportUrdfArgs),
     /// Calibrate a real robot from measured data (docs/calibrate.md): robot file, URDF, YAML and a report.
     Calibrate(CalibrateArgs),
+    /// The tool frame, gravity torques and joint deflections of a robot file's arm at each row of
+    /// a joints CSV (header q1_deg,...,q6_deg).
+    Fk(FkArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -77,12 +80,29 @@ struct CalibrateArgs {
 }
 
 #[derive(clap::Args, Debug)]
+struct FkArgs {
+    /// The arm: a robot file.
+    robot: PathBuf,
+    /// Joint values: CSV with the header q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg.
+    joints: PathBuf,
+    /// Output CSV (default: standard output).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
 struct ImportUrdfArgs {
     /// The URDF file.
     urdf: PathBuf,
     /// The robot file to write.
     #[arg(long)]
     out: PathBuf,
+    /// The folder holding the packages that `package://NAME/...` mesh names point into.
+    #[arg(long)]
+    package_root: Option<PathBuf>,
+    /// Fit a link's capsule to its visual meshes where it has no collision geometry.
+    #[arg(long)]
+    visual_meshes: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -291,6 +311,7 @@ pub fn main() -> ExitCode {
         Command::Compensate(args) => compensate(args),
         Command::ImportUrdf(args) => import_urdf(args),
         Command::Calibrate(args) => calibrate(args),
+        Command::Fk(args) => fk(args),
     };
     match result {
         Ok(code) => code,
@@ -442,24 +463,21 @@ fn merge(shards: &[PathBuf], out: &Path) -> Result<ExitCode, String> {
 }
 
 fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
-    let r = app::import_urdf::run(&args.urdf, &args.out).map_err(|e| e.to_string())?;
-    let join = |v: &[f64]| v.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>().join(", ");
-    println!(
-        "{}: {} as modified DH (a_i-1 mm: {}; d_i mm: {}) to {}",
-        args.urdf.display(),
-        r.name,
-        join(&r.a_mm),
-        join(&r.d_mm),
-        r.out.display()
-    );
-    match r.capsules {
-        Some(c) => println!("collision: {c} capsules from the links' shapes"),
-        None => {
-            println!("collision: none (the URDF has no cylinder, capsule, sphere or box): add [[collision]] capsules for a TriCal study")
-        }
+    let options = app::import_urdf::ImportOptions { package_root: args.package_root.clone(), visual_fallback: args.visual_meshes };
+    let r = app::import_urdf::run(&args.urdf, &args.out, &options).map_err(|e| e.to_string())?;
+    for line in &r.lines {
+        println!("{line}");
     }
-    if !r.skipped.is_empty() {
-        println!("collision shapes left out: {}", r.skipped.join(", "));
+    Ok(ExitCode::SUCCESS)
+}
+
+fn fk(args: &FkArgs) -> Result<ExitCode, String> {
+    let file = crate::robot::file::RobotFile::load(&args.robot).map_err(|e| e.to_string())?;
+    let joints = crate::robot::fk::read_joints(&args.joints).map_err(|e| e.to_string())?;
+    let text = crate::robot::fk::to_csv(&crate::robot::fk::fk_rows(&file, &joints));
+    match &args.out {
+        Some(out) => crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| format!("{}: {e}", out.display()))?,
+        None => print!("{text}"),
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -492,7 +510,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
 }
 
 fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
-    let load = |p: &Path| crate::robot::file::RobotFile::load(p).map(|f| f.nominal).map_err(|e| e.to_string());
+    let load = |p: &Path| crate::robot::file::RobotFile::load(p).map_err(|e| e.to_string());
     let model = load(&args.model)?;
     let nominal = args.nominal.as_deref().map(load).transpose()?;
     let targets = app::compensate::read_targets(&args.targets)?;

@@ -98,9 +98,9 @@ fn an_exported_robot_file_is_the_identified_model() {
         let q: [f64; 6] = std::array::from_fn(|i| v[i].to_radians());
         let p = forward(&file.nominal, &mut a, &q);
         let miss = ((p.x - t[0]).powi(2) + (p.y - t[1]).powi(2) + (p.z - t[2]).powi(2)).sqrt();
-        assert!(miss < 1e-6 && v[6] < 1e-6, "the model's TCP misses the target by {miss:e} mm");
+        assert!(miss < 1e-6 && v[6] < 1e-6 && v[7] < 1e-6, "the model's TCP misses the target by {miss:e} mm, {} deg", v[7]);
         let n = forward(&before, &mut b, &q);
-        let corrected = ((n.x - v[7]).powi(2) + (n.y - v[8]).powi(2) + (n.z - v[9]).powi(2)).sqrt();
+        let corrected = ((n.x - v[8]).powi(2) + (n.y - v[9]).powi(2) + (n.z - v[10]).powi(2)).sqrt();
         assert!(corrected < 1e-6, "the nominal target is the nominal TCP at q: {corrected:e} mm");
         rows += 1;
     }

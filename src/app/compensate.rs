@@ -3,15 +3,19 @@
 //! the full model), and, for a controller that only knows its nominal model, the Cartesian targets
 //! to command instead (the nominal model's TCP pose at those joint values).
 //!
-//! Targets: a CSV file with the header `x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg`, the TCP pose
-//! in {W} (eq. 7: translation, then rotations about z, y and x; the TCP frame carries the flange's
-//! orientation). Out: per target the joint values in degrees, the model's TCP error at them, and
-//! the corrected Cartesian target when a nominal model is given.
+//! Targets: a CSV file with the header `x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg`, the tool
+//! frame in {W} (eq. 7: translation, then rotations about z, y and x): the TCP position with the
+//! flange's orientation, the flange being the robot file's `flange_rpy_deg` frame in MDH frame 6
+//! (frame 6 itself where the file has none; a URDF's `tool0`). Out: per target the joint values in
+//! degrees, the model's position and orientation errors at them, and the corrected Cartesian
+//! target (in the same tool frame) when a nominal model is given.
 
 use std::path::Path;
 
-use nalgebra::{Isometry3, Translation3};
+use nalgebra::{Isometry3, Matrix3, Translation3};
 
+use crate::robot::file::RobotFile;
+use crate::robot::ik::pose_error;
 use crate::robot::{Joints, KinState, RobotModel, XyzZyx, inverse, world_from_flange};
 
 /// The columns of a targets file.
@@ -23,16 +27,17 @@ pub const MAX_TARGETS: usize = 1_000_000;
 /// Reads the targets of `path`; an error names the file, the line and the column.
 pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, String> {
     let at = |line: u64, what: String| format!("{}: line {line}: {what}", path.display());
-    crate::io::check_input(path, None).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    crate::io::check_input(path, Some(256 << 20)).map_err(|e| format!("{}: {e}", path.display()))?;
+    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(bytes.as_slice());
     let header: Vec<String> = r.headers().map_err(|e| at(1, e.to_string()))?.iter().map(str::to_string).collect();
     if header != TARGET_COLUMNS {
         return Err(at(1, format!("header {:?}: expected {}", header.join(","), TARGET_COLUMNS.join(","))));
     }
     let mut out = Vec::new();
     for rec in r.records() {
-        let rec = rec.map_err(|e| at(e.position().map_or(0, |p| p.line()), e.to_string()))?;
-        let line = rec.position().map_or(0, |p| p.line());
+        let rec = rec.map_err(|e| at(crate::robot::fk::line_at(&bytes, e.position()), e.to_string()))?;
+        let line = crate::robot::fk::line_at(&bytes, rec.position());
         if out.len() == MAX_TARGETS {
             return Err(at(line, format!("more than {MAX_TARGETS} targets")));
         }
@@ -60,37 +65,61 @@ pub struct Compensated {
     pub q: Option<Joints>,
     /// TCP position error of the model at `q`, mm.
     pub error_mm: f64,
-    /// The nominal model's TCP pose at `q` (what to command a controller that only knows it).
+    /// Angle between the model's tool frame at `q` and the target's, deg.
+    pub error_deg: f64,
+    /// The nominal model's tool frame at `q` (what to command a controller that only knows it).
     pub nominal_target: Option<XyzZyx>,
 }
 
-/// Compensates `targets` on `model`; each solution seeds the next.
-pub fn compensate(model: &RobotModel, nominal: Option<&RobotModel>, targets: &[Isometry3<f64>]) -> Vec<Compensated> {
+/// `world_from_frame6` with the frame-6 origin moved to the TCP, for a tool frame `world_from_tool`
+/// on an arm whose flange is `frame6_from_flange` in frame 6: the pose [`inverse`] takes.
+fn frame6_at_tcp(world_from_tool: &Isometry3<f64>, frame6_from_flange: Option<&Matrix3<f64>>) -> Isometry3<f64> {
+    match frame6_from_flange {
+        None => *world_from_tool,
+        Some(r) => Isometry3::from_parts(
+            world_from_tool.translation,
+            world_from_tool.rotation * crate::robot::rotation::quaternion(&r.transpose()),
+        ),
+    }
+}
+
+/// The tool frame (TCP position, flange orientation) of `model` at `q` in {W}.
+fn tool_frame(model: &RobotModel, frame6_from_flange: Option<&Matrix3<f64>>, st: &mut KinState, q: &Joints) -> Isometry3<f64> {
+    let f = world_from_flange(model, st, q);
+    let tcp = f * nalgebra::Point3::from(model.data().flange_tcp_mm);
+    let rotation = frame6_from_flange.map_or(f.rotation, |r| f.rotation * crate::robot::rotation::quaternion(r));
+    Isometry3::from_parts(Translation3::from(tcp.coords), rotation)
+}
+
+/// Compensates `targets` (tool frames in {W}) on the arm of `model` (its `nominal` is the
+/// calibrated model, its `flange` the tool frame's orientation); each solution seeds the next.
+/// With `nominal`, also the Cartesian targets to command a controller that only knows it.
+pub fn compensate(model: &RobotFile, nominal: Option<&RobotFile>, targets: &[Isometry3<f64>]) -> Vec<Compensated> {
     let mut seed: Joints = [0.0, 0.3, 0.3, 0.0, 1.0, 0.0];
     let mut st = KinState::default();
+    let flange = model.flange.as_ref();
     targets
         .iter()
         .map(|t| {
-            let Ok(q) = inverse(model, t, &seed) else {
-                return Compensated { q: None, error_mm: f64::NAN, nominal_target: None };
+            let goal = frame6_at_tcp(t, flange);
+            let Ok(q) = inverse(&model.nominal, &goal, &seed) else {
+                return Compensated { q: None, error_mm: f64::NAN, error_deg: f64::NAN, nominal_target: None };
             };
             seed = q;
-            let error_mm = (crate::robot::forward(model, &mut st, &q) - t.translation.vector).norm();
-            let nominal_target = nominal.map(|n| {
-                let f = world_from_flange(n, &mut st, &q);
-                let tcp = f * nalgebra::Point3::from(n.data().flange_tcp_mm);
-                XyzZyx::from_isometry(&Isometry3::from_parts(Translation3::from(tcp.coords), f.rotation))
-            });
-            Compensated { q: Some(q), error_mm, nominal_target }
+            let e = pose_error(&model.nominal, &q, &goal);
+            let nominal_target = nominal.map(|n| XyzZyx::from_isometry(&tool_frame(&n.nominal, n.flange.as_ref(), &mut st, &q)));
+            Compensated { q: Some(q), error_mm: e.position_mm, error_deg: e.orientation_rad.to_degrees(), nominal_target }
         })
         .collect()
 }
 
-/// The CSV text of `rows`: joint values in degrees, the model's TCP error, the nominal target.
+/// The CSV text of `rows`: joint values in degrees, the model's position and orientation errors,
+/// the nominal target.
 pub fn to_csv(rows: &[Compensated]) -> Result<String, String> {
     let mut w = csv::Writer::from_writer(Vec::new());
     let mut header: Vec<String> = (1..=6).map(|i| format!("q{i}_deg")).collect();
     header.push("model_error_mm".into());
+    header.push("model_error_deg".into());
     header.extend(TARGET_COLUMNS.iter().map(|c| format!("nominal_{c}")));
     w.write_record(&header).map_err(|e| e.to_string())?;
     for r in rows {
@@ -99,6 +128,7 @@ pub fn to_csv(rows: &[Compensated]) -> Result<String, String> {
             None => vec!["unreachable".into(); 6],
         };
         rec.push(format!("{:e}", r.error_mm));
+        rec.push(format!("{:e}", r.error_deg));
         match &r.nominal_target {
             Some(t) => {
                 rec.extend([t.x, t.y, t.z, t.alpha.to_degrees(), t.beta.to_degrees(), t.gamma.to_degrees()].iter().map(|v| format!("{v}")))

@@ -12,7 +12,7 @@
 //! `R` whose centre is at `c` from the TCP, which is `c . u_i` to first order.
 
 use crate::cell::collision::CapsuleSpec;
-use nalgebra::{Isometry3, Matrix3, Rotation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Unit, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
@@ -149,7 +149,9 @@ impl TriCal {
         match self.frame6_from_flange {
             None => world_from_tcp,
             Some(r) => {
-                let flange_from_frame6 = UnitQuaternion::from_matrix(&r.transpose());
+                // A half-turn flange is common (a last axis pointing into the wrist): the closed
+                // form, not nalgebra's iteration, which stalls there (see `robot::rotation`).
+                let flange_from_frame6 = crate::robot::rotation::quaternion(&r.transpose());
                 Isometry3::from_parts(world_from_tcp.translation, world_from_tcp.rotation * flange_from_frame6)
             }
         }

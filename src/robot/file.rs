@@ -193,19 +193,85 @@ pub fn to_text(
     capsules: Option<&LinkCapsules>,
     flange: Option<&Matrix3<f64>>,
 ) -> String {
+    let body = toml::to_string(&file_of(model, source, std, capsules, flange)).unwrap_or_default();
+    format!("{HEADER}{body}")
+}
+
+/// The first line of every robot file calsim writes.
+const HEADER: &str = "# A calsim robot file (format: src/robot/file.rs); units mm, deg, kg, mdeg/(N m).\n";
+
+/// [`to_text`] of an imported arm, written tidily: a number within 1e-9 of a multiple of 1e-6
+/// (in its unit: mm, deg, kg) is written as that multiple, so rounding residues of the conversion
+/// (`25.000000000000004`, `2.5e-14`, `-0.0`) do not read as data; `preamble` (provenance, one
+/// comment line each) heads the file. A value moves by less than 1e-9 of its unit.
+pub fn imported_text(
+    model: &RobotModel,
+    source: &str,
+    capsules: Option<&LinkCapsules>,
+    flange: Option<&Matrix3<f64>>,
+    preamble: &[String],
+) -> String {
+    let mut f = file_of(model, source, &[], capsules, flange);
+    tidy(&mut f);
+    let body = toml::to_string(&f).unwrap_or_default();
+    let lines: String = preamble.iter().map(|l| format!("# {}\n", l.trim_end())).collect();
+    format!("{HEADER}{lines}{body}")
+}
+
+/// Every number of `f` tidied as [`imported_text`] says.
+fn tidy(f: &mut File) {
+    fn t(x: &mut f64) {
+        let grid = (*x * 1e6).round() / 1e6;
+        if (*x - grid).abs() < 1e-9 {
+            *x = grid;
+        }
+        *x += 0.0;
+    }
+    t(&mut f.gravity_m_s2);
+    let arrays = f.gravity_base_m_s2.iter_mut().chain(&mut f.flange_rpy_deg).chain(&mut f.tool_mm);
+    arrays.flat_map(|a| a.iter_mut()).chain(f.base_mm_deg.iter_mut().flatten()).for_each(t);
+    if let Some(p) = &mut f.payload {
+        t(&mut p.mass_kg);
+        p.com_mm.iter_mut().for_each(t);
+    }
+    for j in &mut f.joint {
+        for x in [
+            &mut j.alpha_deg,
+            &mut j.a_mm,
+            &mut j.beta_deg,
+            &mut j.theta_offset_deg,
+            &mut j.d_mm,
+            &mut j.compliance_mdeg_per_nm,
+            &mut j.mass_kg,
+        ] {
+            t(x);
+        }
+        j.limits_deg.iter_mut().chain(j.com_mm.iter_mut()).for_each(t);
+    }
+    for c in &mut f.collision {
+        t(&mut c.radius_mm);
+        c.a_mm.iter_mut().chain(c.b_mm.iter_mut()).for_each(t);
+    }
+}
+
+/// The file structure of [`to_text`].
+fn file_of(
+    model: &RobotModel,
+    source: &str,
+    std: &[(ParamId, f64)],
+    capsules: Option<&LinkCapsules>,
+    flange: Option<&Matrix3<f64>>,
+) -> File {
     let d = model.data();
     let to_flange = |v: &Vector3<f64>| -> [f64; 3] { flange.map_or(*v, |r| r.transpose() * v).into() };
     let b = d.world_from_base;
-    let f = File {
+    File {
         name: d.name.clone(),
         source: Some(source.to_string()),
         gravity_m_s2: d.gravity_base.norm(),
         gravity_base_m_s2: (d.gravity_base.x != 0.0 || d.gravity_base.y != 0.0 || d.gravity_base.z > 0.0).then(|| d.gravity_base.into()),
         base_mm_deg: Some([b.x, b.y, b.z, b.alpha.to_degrees(), b.beta.to_degrees(), b.gamma.to_degrees()]),
-        flange_rpy_deg: flange.map(|r| {
-            let (x, y, z) = Rotation3::from_matrix_unchecked(*r).euler_angles();
-            [x.to_degrees(), y.to_degrees(), z.to_degrees()]
-        }),
+        flange_rpy_deg: flange.map(|r| super::rotation::rpy_deg(&Rotation3::from_matrix_unchecked(*r))),
         tool_mm: Some(to_flange(&d.flange_tcp_mm)),
         payload: Some(Payload { mass_kg: d.payload.mass_kg, com_mm: to_flange(&d.payload.com_mm) }),
         joint: (0..JOINTS)
@@ -232,9 +298,7 @@ pub fn to_text(
         truth: BTreeMap::new(),
         std: std.iter().map(|(id, v)| (id.name(), id.unit().from_internal(*v))).collect(),
         coupling: Vec::new(),
-    };
-    let body = toml::to_string(&f).unwrap_or_default();
-    format!("# A calsim robot file (format: src/robot/file.rs); units mm, deg, kg, mdeg/(N m).\n{body}")
+    }
 }
 
 impl RobotFile {
@@ -359,8 +423,8 @@ impl RobotFile {
         for (k, v) in f.flange_rpy_deg.iter().flatten().enumerate() {
             within(format!("flange_rpy_deg[{k}]"), *v, -360.0, 360.0)?;
         }
-        let flange =
-            f.flange_rpy_deg.map(|[x, y, z]| *Rotation3::from_euler_angles(x.to_radians(), y.to_radians(), z.to_radians()).matrix());
+        // One rotation for every writing of it (see `robot::rotation`).
+        let flange = f.flange_rpy_deg.map(|rpy| super::rotation::from_rpy_deg(rpy).into_inner());
         let in_frame6 = |v: Vector3<f64>| flange.map_or(v, |r| r * v);
         let base = f.base_mm_deg.map_or_else(XyzZyx::default, XyzZyx::from_mm_deg);
         let data = RobotData {

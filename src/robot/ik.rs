@@ -29,12 +29,41 @@ pub enum IkError {
     /// Every solution violates a joint limit.
     #[error("every solution violates a joint limit")]
     Limits,
-    /// Newton refinement on the full model did not converge.
-    #[error("refinement did not converge (residual {residual_mm:e} mm)")]
+    /// Newton refinement on the full model did not converge, or converged on a frame turned from
+    /// the target (the first-order orientation error vanishes at a half-turn as at agreement).
+    #[error("refinement did not converge (residual {position_mm:e} mm, {orientation_deg:e} deg)")]
     NoConvergence {
         /// Position residual at the last iterate, mm.
-        residual_mm: f64,
+        position_mm: f64,
+        /// Angle between the frame reached and the target frame at the last iterate, deg.
+        orientation_deg: f64,
     },
+}
+
+/// How far the TCP frame of a model at some joints is from a target frame: both errors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseError {
+    /// Distance between the TCP and the target position, mm.
+    pub position_mm: f64,
+    /// Angle of the rotation between the frame reached and the target frame, rad in [0, pi].
+    pub orientation_rad: f64,
+}
+
+/// Largest angle, rad, between the frame Newton's method reached and the target frame for
+/// [`refine_oriented`] to accept it: the method stops at 1e-13 of first-order error, which also
+/// holds a half-turn away, so any bound well below a half-turn tells the two apart.
+const ORIENTATION_TOLERANCE_RAD: f64 = 1e-6;
+
+/// The TCP position and frame-6 orientation errors of `model` at `q` against `world_from_tcp`
+/// (the pose [`inverse`] takes: the TCP position, frame 6's orientation).
+pub fn pose_error(model: &RobotModel, q: &Joints, world_from_tcp: &Isometry3<f64>) -> PoseError {
+    let mut st = KinState::default();
+    let p = forward(model, &mut st, q);
+    let r = model.base_rot * st.rot[JOINTS];
+    PoseError {
+        position_mm: (p - world_from_tcp.translation.vector).norm(),
+        orientation_rad: super::rotation::angle(&r, world_from_tcp.rotation.to_rotation_matrix().matrix()),
+    }
 }
 
 /// Closed-form solutions of the *nominal* geometry of `model` (its a2, a3, d1, d4, d6 and the
@@ -139,7 +168,7 @@ pub fn inverse(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joint
     candidates.sort_by(|a, b| distance(a, seed).total_cmp(&distance(b, seed)));
     let mut last = IkError::Limits;
     for q0 in candidates.iter().filter(|q| model.within_limits(q)) {
-        match refine(model, world_from_tcp, q0) {
+        match refine_oriented(model, world_from_tcp, q0) {
             Ok(q) if model.within_limits(&q) => return Ok(q),
             Ok(_) => {}
             Err(e) => last = e,
@@ -152,16 +181,19 @@ fn distance(a: &Joints, b: &Joints) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
 }
 
-/// Newton's method on the full model from `q0`: TCP position and flange orientation, with the
-/// geometric Jacobian of the deflected configuration (the compliance term dtau/dq is left out of
+/// Newton's method on the full model from `q0`: TCP position and flange orientation to first
+/// order, so a frame a half-turn from the target can come back ([`refine_oriented`] refuses it;
+/// the SPMS steps call this one: their sphere does not care, and their shipped tables were
+/// computed with it), with the geometric Jacobian of the deflected configuration (the compliance term dtau/dq is left out of
 /// the Jacobian, which only slows convergence by a factor of order c * dtau/dq ~ 1e-3).
 pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
     newton(model, &Goal::new(model, world_from_tcp), q0)
 }
 
-/// [`refine`] with the base orientation taken from the model as it is stored, not through the
-/// base's quaternion (whose iterative construction costs more than the Newton steps): the same
-/// solution to rounding, for callers that need many (the study's compensated validation).
+/// [`refine`] (orientation to first order) with the base orientation taken from the model as it
+/// is stored, not through the base's quaternion (whose iterative construction costs more than the
+/// Newton steps): the same solution to rounding, for callers that need many (the study's
+/// compensated validation).
 pub fn refine_direct(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
     let goal =
         Goal { rb: model.base_rot, p: world_from_tcp.translation.vector, r: world_from_tcp.rotation.to_rotation_matrix().into_inner() };
@@ -186,7 +218,26 @@ fn newton(model: &RobotModel, goal: &Goal, q0: &Joints) -> Result<Joints, IkErro
             q[k] += step[k];
         }
     }
-    Err(IkError::NoConvergence { residual_mm: residual })
+    let turned = super::rotation::angle(&(goal.rb * st.rot[JOINTS]), &goal.r);
+    Err(IkError::NoConvergence { position_mm: residual, orientation_deg: turned.to_degrees() })
+}
+
+/// `q` if the TCP frame of `model` there is the target's, else the error naming both residuals:
+/// Newton's method stops on a first-order orientation error, which vanishes a half-turn away as
+/// well as at the target (a seed with joint 6 turned by 180 deg and the TCP on its axis).
+fn oriented(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q: Joints) -> Result<Joints, IkError> {
+    let e = pose_error(model, &q, world_from_tcp);
+    if e.orientation_rad < ORIENTATION_TOLERANCE_RAD {
+        Ok(q)
+    } else {
+        Err(IkError::NoConvergence { position_mm: e.position_mm, orientation_deg: e.orientation_rad.to_degrees() })
+    }
+}
+
+/// [`refine`], then the orientation checked (see [`oriented`]): what [`inverse`] and [`numeric`]
+/// accept.
+pub fn refine_oriented(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
+    oriented(model, world_from_tcp, refine(model, world_from_tcp, q0)?)
 }
 
 /// `a x = b` by LU with partial pivoting, the same to the bit as nalgebra's `a.lu().solve(&b)`
@@ -274,7 +325,8 @@ impl Goal {
         let p = forward(model, st, q);
         let r = self.rb * st.rot[JOINTS];
         let dp = self.p - p;
-        // Orientation error as a rotation vector (first order), robust near the identity.
+        // Orientation error as a rotation vector (first order), robust near the identity; it
+        // vanishes a half-turn away too, which `oriented` catches.
         let dr = (0..3).map(|k| r.column(k).cross(&self.r.column(k))).fold(Vector3::zeros(), |a, v| a + v) * 0.5;
         let tcp = st.tcp_base;
         let mut jac = Matrix6::zeros();
@@ -323,7 +375,7 @@ pub fn numeric(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joint
     let mut last = IkError::Unreachable;
     for (n, start) in starts.iter().enumerate() {
         let Some(q) = damped(model, &goal, &mut st, start) else { continue };
-        match refine(model, world_from_tcp, &q) {
+        match refine_oriented(model, world_from_tcp, &q) {
             Ok(q) => {
                 let q = toward_seed(model, q, seed);
                 if !model.within_limits(&q) {
@@ -346,7 +398,9 @@ pub fn numeric(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joint
 }
 
 /// Damped least squares from `q0` alone, polished by [`refine`]: the solution of the branch `q0`
-/// is on (near a singularity, where Newton from `q0` diverges), within the limits.
+/// is on (near a singularity, where Newton from `q0` diverges), within the limits; orientation to
+/// first order as [`refine`] (the study's compensated validation, which checks positions only and
+/// whose shipped tables were computed this way).
 pub fn damped_from(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
     let goal = Goal::new(model, world_from_tcp);
     let q = damped(model, &goal, &mut KinState::default(), q0).ok_or(IkError::Unreachable)?;

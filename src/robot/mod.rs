@@ -1,13 +1,17 @@
 //! The virtual robot: model data, named parameters, kinematics, statics and built-in robots.
 
 pub mod builtin;
-pub mod export;
+pub mod capsule_fit;
 pub mod coupling;
+pub mod export;
 pub mod file;
+pub mod fk;
 pub mod ik;
 pub mod kinematics;
+pub mod mesh;
 pub mod model;
 pub mod params;
+pub mod rotation;
 #[cfg(test)]
 mod test_models;
 pub mod truth;

@@ -1,7 +1,7 @@
 //! The per-thread scratch of a kinematic evaluation: every frame of the last forward pass and the
 //! gravity torques, filled by [`super::portable`] (and the vector paths) and [`super::statics`] and read by both.
 
-use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 
 use crate::robot::model::{JOINTS, Joints};
 
@@ -96,6 +96,6 @@ impl KinState {
 }
 
 pub(crate) fn isometry(r: &Matrix3<f64>, p: &Vector3<f64>) -> Isometry3<f64> {
-    let rot = UnitQuaternion::from_matrix(r);
-    Isometry3::from_parts(Translation3::from(*p), rot)
+    // Not `UnitQuaternion::from_matrix` alone: it stalls at a half-turn (see `robot::rotation`).
+    Isometry3::from_parts(Translation3::from(*p), crate::robot::rotation::quaternion(r))
 }

@@ -1,80 +1,57 @@
-//! A URDF arm into calsim's modified-DH form: the serial chain of six revolute joints from the
-//! root link, its joint axes at the zero configuration turned into MDH frames (z along each axis,
-//! x along the common normal to the next axis, or their cross product where the axes meet; for
-//! parallel axes the normal through the previous frame's foot, so no beta is needed for a nominal
-//! geometry), the root-to-{0} transform as the base, the tip (the last link of fixed joints after
-//! joint 6) as the tool, and the links' masses and centres of mass in MDH frames. The result is
-//! checked against the URDF's own chain at random configurations before it is returned.
-//!
-//! Collision shapes: each link's `<collision>` cylinders, capsules and spheres become capsules of
-//! the same size in the MDH frame of the body the link belongs to (the number of revolute joints
-//! between it and the root), a box the capsule that encloses it (its longest edge as the segment,
-//! the half-diagonal of the other two as the radius); meshes are left out and named.
+//! The serial chain of a URDF: the six actuated revolute joints from the root link (fixed joints
+//! folded in, passive joints left to their branches), their axes at the zero configuration, and
+//! the MDH frames placed on them (see the module above).
 
 use std::collections::HashMap;
-use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
-use super::file::{CapsuleSpec, LinkCapsules};
-use super::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
+use super::iso;
+use crate::robot::model::{Inertial, JOINTS, JointLimit, Link, RobotData, RobotModel, XyzZyx};
 
-/// Why a URDF cannot be an arm of calsim: the file and what is wrong (joint or link named).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{path}: {message}")]
-pub struct UrdfError {
-    /// The file.
-    pub path: String,
-    /// What is wrong.
-    pub message: String,
-}
-
-/// One movable joint of the chain at the zero configuration, in the root frame (m).
-struct Axis {
-    name: String,
-    point: Vector3<f64>,
-    dir: Vector3<f64>,
+/// One actuated joint of the chain at the zero configuration, in the root frame (m).
+pub(super) struct Axis {
+    /// The joint's name.
+    pub name: String,
+    /// A point of the axis.
+    pub point: Vector3<f64>,
+    /// The axis direction (unit).
+    pub dir: Vector3<f64>,
     /// The child link's frame at q = 0 (root frame).
-    child: Isometry3<f64>,
-    limits: (f64, f64),
-    mass_kg: f64,
-    com_root: Vector3<f64>,
+    pub child: Isometry3<f64>,
+    /// Joint range, rad.
+    pub limits: (f64, f64),
 }
 
-fn iso(p: &urdf_rs::Pose) -> Isometry3<f64> {
-    let (x, y, z) = (p.xyz[0], p.xyz[1], p.xyz[2]);
-    Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]))
+/// The chain found in a URDF.
+pub(super) struct Chain {
+    /// The root link.
+    pub root: String,
+    /// The six actuated joints, joint 1 first.
+    pub axes: Vec<Axis>,
+    /// The tip link's frame (the flange: the last link of fixed joints after joint 6) at q = 0.
+    pub tip: Isometry3<f64>,
 }
 
-/// A converted URDF: the arm, its links' collision capsules (`None`: the URDF has no shape calsim
-/// converts) and the collision elements left out (meshes: `link name`).
-pub struct Converted {
-    /// The arm.
-    pub model: RobotModel,
-    /// Collision capsules per MDH frame.
-    pub capsules: Option<LinkCapsules>,
-    /// Collision elements not converted, by link.
-    pub skipped: Vec<String>,
-    /// The tip link's frame (the flange) in MDH frame 6 where it is not frame 6's orientation.
-    pub flange: Option<nalgebra::Matrix3<f64>>,
+/// Whether `j` moves without being driven: a joint that mimics another (a balancing cylinder, a
+/// parallelogram's second bar).
+pub(super) fn passive(j: &urdf_rs::Joint) -> bool {
+    j.mimic.is_some() && !matches!(j.joint_type, urdf_rs::JointType::Fixed)
 }
 
-/// Reads `path` and converts it (see the module).
-pub fn load(path: &Path) -> Result<RobotModel, UrdfError> {
-    load_all(path).map(|c| c.model)
+/// Whether `j` is driven: neither fixed nor passive.
+pub(super) fn actuated(j: &urdf_rs::Joint) -> bool {
+    !matches!(j.joint_type, urdf_rs::JointType::Fixed) && !passive(j)
 }
 
-/// Reads `path` and converts it with its collision shapes (see the module).
-pub fn load_all(path: &Path) -> Result<Converted, UrdfError> {
-    let shown = path.display().to_string();
-    let fail = |message: String| UrdfError { path: shown.clone(), message };
-    let text = crate::io::read_text(path).map_err(|e| fail(e.to_string()))?;
-    let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
-    convert(&robot).map_err(fail)
+/// Whether the subtree below `link` holds an actuated joint.
+fn drives(robot: &urdf_rs::Robot, link: &str, depth: usize) -> bool {
+    depth < 1000 && robot.joints.iter().filter(|j| j.parent.link == link).any(|j| actuated(j) || drives(robot, &j.child.link, depth + 1))
 }
 
-/// Converts a parsed URDF (see the module).
-pub fn convert(robot: &urdf_rs::Robot) -> Result<Converted, String> {
+/// The root link and the chain of actuated joints from it; a branch whose joints are all fixed
+/// or passive is not a second chain.
+pub(super) fn walk(robot: &urdf_rs::Robot) -> Result<Chain, String> {
     let mut by_child: HashMap<&str, &urdf_rs::Joint> = HashMap::new();
     for j in &robot.joints {
         if by_child.insert(j.child.link.as_str(), j).is_some() {
@@ -86,29 +63,18 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<Converted, String> {
         return Err(format!("{} root links ({}): not one tree", roots.len(), roots.join(", ")));
     };
     let children = |link: &str| robot.joints.iter().filter(move |j| j.parent.link == link).collect::<Vec<_>>();
-    let movable = |j: &urdf_rs::Joint| !matches!(j.joint_type, urdf_rs::JointType::Fixed);
-    // Whether the subtree below `link` holds a movable joint.
-    fn moves(robot: &urdf_rs::Robot, link: &str, depth: usize) -> bool {
-        depth < 1000
-            && robot
-                .joints
-                .iter()
-                .filter(|j| j.parent.link == link)
-                .any(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed) || moves(robot, &j.child.link, depth + 1))
-    }
-    let inertial = |name: &str| robot.links.iter().find(|l| l.name == name).map(|l| (l.inertial.mass.value, iso(&l.inertial.origin)));
     let mut frame = Isometry3::identity();
     let mut link: String = root.to_string();
     let mut axes: Vec<Axis> = Vec::new();
     loop {
-        let next: Vec<&urdf_rs::Joint> = children(&link).into_iter().filter(|j| moves(robot, &j.child.link, 0) || movable(j)).collect();
+        let next: Vec<&urdf_rs::Joint> = children(&link).into_iter().filter(|j| actuated(j) || drives(robot, &j.child.link, 0)).collect();
         let j = match (next.as_slice(), axes.len()) {
             ([j], _) => *j,
             ([], JOINTS) => {
                 // The tool: a unique chain of fixed joints after joint 6, if any.
-                let fixed = children(&link);
+                let fixed: Vec<_> = children(&link).into_iter().filter(|j| matches!(j.joint_type, urdf_rs::JointType::Fixed)).collect();
                 match fixed.as_slice() {
-                    [j] if !movable(j) => *j,
+                    [j] => *j,
                     _ => break,
                 }
             }
@@ -121,6 +87,13 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<Converted, String> {
                 ));
             }
         };
+        if passive(j) {
+            return Err(format!(
+                "joint `{}` mimics `{}` and carries the driven joints after it: calsim's arms have {JOINTS} independent joints in series",
+                j.name,
+                j.mimic.as_ref().map_or("", |m| m.joint.as_str())
+            ));
+        }
         let (xyz, rpy) = (j.origin.xyz.0, j.origin.rpy.0);
         if !(xyz.iter().all(|v| v.is_finite() && v.abs() <= 100.0) && rpy.iter().all(|v| v.is_finite() && v.abs() <= 100.0)) {
             return Err(format!("joint `{}`: origin xyz {xyz:?} m, rpy {rpy:?} rad: finite numbers within +-100", j.name));
@@ -145,15 +118,12 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<Converted, String> {
                 if !(limits.0.is_finite() && limits.1.is_finite() && limits.0 < limits.1 && limits.0 >= -bound && limits.1 <= bound) {
                     return Err(format!("joint `{}`: limits [{}, {}] rad are not a range within +-6 pi", j.name, limits.0, limits.1));
                 }
-                let (mass_kg, com) = inertial(&j.child.link).unwrap_or((0.0, Isometry3::identity()));
                 axes.push(Axis {
                     name: j.name.clone(),
                     point: frame.translation.vector,
                     dir: frame.rotation * a.normalize(),
                     child: frame,
                     limits,
-                    mass_kg,
-                    com_root: (frame * com).translation.vector,
                 });
             }
             ref other => return Err(format!("joint `{}` is {other:?}: calsim's arms have revolute joints only", j.name)),
@@ -163,79 +133,12 @@ pub fn convert(robot: &urdf_rs::Robot) -> Result<Converted, String> {
     if axes.len() != JOINTS {
         return Err(format!("{} revolute joints from `{root}`: calsim's arms have {JOINTS}", axes.len()));
     }
-    let tip = frame.translation.vector;
-    let (model, frames) = from_axes(&robot.name, &axes, &tip)?;
-    check(&model, &axes, &tip)?;
-    let (capsules, skipped) = capsules(robot, root, &frames)?;
-    // The tip's orientation in frame 6: where the URDF's last axis points into the arm, frame 6's z
-    // does too, and the flange (the tip) is turned from it.
-    let r = (frames[JOINTS].rotation.inverse() * frame.rotation).to_rotation_matrix().into_inner();
-    let flange = ((r - nalgebra::Matrix3::identity()).amax() > 1e-12).then_some(r);
-    Ok(Converted { model, capsules, skipped, flange })
-}
-
-/// The collision shapes of every link as capsules in its body's MDH frame (`frames`: {0}..{6} in
-/// the root frame at the zero configuration, m), and the elements left out.
-fn capsules(
-    robot: &urdf_rs::Robot,
-    root: &str,
-    frames: &[Isometry3<f64>; JOINTS + 1],
-) -> Result<(Option<LinkCapsules>, Vec<String>), String> {
-    let mut caps: LinkCapsules = Default::default();
-    let mut skipped = Vec::new();
-    let mut any = false;
-    // Links from the root at q = 0: (name, root_from_link, body).
-    let mut stack = vec![(root.to_string(), Isometry3::identity(), 0usize)];
-    let mut seen = 0;
-    while let Some((name, pose, body)) = stack.pop() {
-        seen += 1;
-        if seen > 10_000 {
-            return Err("more than 10,000 links: not an arm".into());
-        }
-        let Some(link) = robot.links.iter().find(|l| l.name == name) else { continue };
-        for c in &link.collision {
-            let at = pose * iso(&c.origin);
-            let seg = |half: f64, r: f64| (Vector3::new(0.0, 0.0, -half), Vector3::new(0.0, 0.0, half), r);
-            let (a, b, r) = match &c.geometry {
-                urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
-                    seg(length / 2.0, *radius)
-                }
-                urdf_rs::Geometry::Sphere { radius } => seg(0.0, *radius),
-                urdf_rs::Geometry::Box { size } => {
-                    let h = [size[0] / 2.0, size[1] / 2.0, size[2] / 2.0];
-                    let k = (0..3).max_by(|&i, &j| h[i].total_cmp(&h[j])).unwrap_or(2);
-                    let mut e = Vector3::zeros();
-                    e[k] = h[k];
-                    (-e, e, h[(k + 1) % 3].hypot(h[(k + 2) % 3]))
-                }
-                urdf_rs::Geometry::Mesh { .. } => {
-                    skipped.push(format!("{name} (mesh)"));
-                    continue;
-                }
-            };
-            let to_body = frames[body].inverse() * at;
-            let (pa, pb) = (to_body * Point3::from(a), to_body * Point3::from(b));
-            let ok = pa.iter().chain(pb.iter()).all(|v| v.is_finite() && v.abs() <= 100.0) && r.is_finite() && r > 0.0 && r <= 100.0;
-            if !ok {
-                return Err(format!(
-                    "link `{name}`: collision shape of radius {r} m at {:?} m: needs a radius above 0 and finite points, within 100 m",
-                    at.translation.vector
-                ));
-            }
-            caps[body].push(CapsuleSpec { a: (pa.coords * 1e3).into(), b: (pb.coords * 1e3).into(), radius: r * 1e3 });
-            any = true;
-        }
-        for j in robot.joints.iter().filter(|j| j.parent.link == name) {
-            let moving = !matches!(j.joint_type, urdf_rs::JointType::Fixed);
-            stack.push((j.child.link.clone(), pose * iso(&j.origin), (body + usize::from(moving)).min(JOINTS)));
-        }
-    }
-    Ok((any.then_some(caps), skipped))
+    Ok(Chain { root: root.to_string(), axes, tip: frame })
 }
 
 /// The MDH frames {1}..{6} (origin, x, z) of the axes, {0} and the model; with the frames {0}..{6}
 /// in the root frame at the zero configuration (m).
-fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<(RobotModel, [Isometry3<f64>; JOINTS + 1]), String> {
+pub(super) fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<(RobotModel, [Isometry3<f64>; JOINTS + 1]), String> {
     let z: Vec<Vector3<f64>> = axes.iter().map(|a| a.dir).collect();
     let mut origin = [Vector3::zeros(); JOINTS];
     let mut x = [Vector3::zeros(); JOINTS];
@@ -315,10 +218,8 @@ fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<(RobotMode
         world_from_base: base,
         flange_tcp_mm: tool,
         limits: std::array::from_fn(|i| JointLimit { min: axes[i].limits.0, max: axes[i].limits.1 }),
-        links_inertial: std::array::from_fn(|i| Inertial {
-            mass_kg: axes[i].mass_kg,
-            com_mm: mdh(i).inverse_transform_point(&Point3::from(axes[i].com_root)).coords * 1e3,
-        }),
+        // Filled from the links of each body (`bodies::inertials`) once the frames are known.
+        links_inertial: [Inertial::NONE; JOINTS],
         payload: Inertial::NONE,
         gravity_base: b.rotation.inverse() * Vector3::new(0.0, 0.0, -9.81),
     };
@@ -328,8 +229,8 @@ fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<(RobotMode
 
 /// The model's TCP against the URDF chain's tip (`tip`, root frame at q = 0, m) at 200
 /// configurations spread over the limits.
-fn check(model: &RobotModel, axes: &[Axis], tip: &Vector3<f64>) -> Result<(), String> {
-    let mut st = super::KinState::default();
+pub(super) fn check(model: &RobotModel, axes: &[Axis], tip: &Vector3<f64>) -> Result<(), String> {
+    let mut st = crate::robot::KinState::default();
     let tip_in_last = axes[JOINTS - 1].child.inverse_transform_point(&Point3::from(*tip)).coords;
     for k in 0..200 {
         let q: [f64; JOINTS] = std::array::from_fn(|i| {
@@ -348,7 +249,7 @@ fn check(model: &RobotModel, axes: &[Axis], tip: &Vector3<f64>) -> Result<(), St
             prev = a.child;
         }
         let urdf_tip = (t * Point3::from(tip_in_last)).coords * 1e3;
-        let ours = super::forward(model, &mut st, &q);
+        let ours = crate::robot::forward(model, &mut st, &q);
         if (urdf_tip - ours).norm() > 1e-6 {
             return Err(format!("the MDH form misses the URDF's tip by {:.3e} mm at q = {q:?}", (urdf_tip - ours).norm()));
         }
