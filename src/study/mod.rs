@@ -6,6 +6,7 @@
 
 pub mod check;
 pub mod engine;
+pub mod interval;
 pub mod prediction;
 pub mod published;
 pub mod stats;
