@@ -199,6 +199,9 @@ struct SweepArgs {
     /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
+    /// Realisations replacing the file's count (or the most of an adaptive sweep).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    realisations: Option<u32>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -429,7 +432,13 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
 }
 
 fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
-    let spec = app::sweep::SweepSpec { file: args.sweep.clone(), out: args.out.clone(), shard: args.shard, threads: args.threads };
+    let spec = app::sweep::SweepSpec {
+        file: args.sweep.clone(),
+        out: args.out.clone(),
+        shard: args.shard,
+        threads: args.threads,
+        realisations: args.realisations,
+    };
     let r = app::sweep::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
     let (k, count) = r.shard;
     println!(
@@ -440,11 +449,17 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
         r.shard_dir.display()
     );
     match &r.merged {
-        None => println!(
+        None if r.plan.complete => println!(
             "merge the shards with: calsim merge {}/{}.shard-*-of-{count} --out {}",
             args.out.display(),
             r.name,
             args.out.display()
+        ),
+        None => println!(
+            "adaptive sweep at stage {}: {} work units still to run in this stage (this shard's and others'); when every shard \
+             of this stage has run, run every shard again for the next stage, then merge",
+            r.plan.stage,
+            r.plan.missing.len()
         ),
         Some(m) => print_merge(m),
     }

@@ -60,7 +60,7 @@ const AXIS: &str = "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010, 0.02
 
 /// Runs the sweep `file` (one shard of it with `shard`) through the library, `threads` workers.
 fn sweep_lib(file: &Path, out: &Path, shard: Option<(usize, usize)>, threads: u32) -> calsim::app::sweep::SweepReport {
-    let spec = calsim::app::sweep::SweepSpec { file: file.to_path_buf(), out: out.to_path_buf(), shard, threads: Some(threads) };
+    let spec = calsim::app::sweep::SweepSpec { file: file.to_path_buf(), out: out.to_path_buf(), shard, threads: Some(threads), realisations: None };
     calsim::app::sweep::run(&spec, &calsim::app::Quiet).unwrap()
 }
 

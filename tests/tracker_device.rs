@@ -92,7 +92,7 @@ fn a_sweep_over_the_instrument_and_the_budget_sources_take_the_tracker_device() 
         ),
     )
     .unwrap();
-    let spec = calsim::app::sweep::SweepSpec { file, out: dir.to_path_buf(), shard: None, threads: Some(2) };
+    let spec = calsim::app::sweep::SweepSpec { file, out: dir.to_path_buf(), shard: None, threads: Some(2), realisations: None };
     let merged = calsim::app::sweep::run(&spec, &calsim::app::Quiet).unwrap().merged.unwrap();
     assert_eq!((merged.units, merged.failed), (4, 0));
     assert!(merged.summary.contains("optical_cmm") && merged.summary.contains("laser_tracker"), "{}", merged.summary);

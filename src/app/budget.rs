@@ -63,7 +63,8 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
     ));
     let dir = pool
         .install(|| sweep::run_shard(&plan, &spec.out, 0, 1, &|done, total| observer.progress(done, total, "work units")))
-        .map_err(Error::io(&spec.out))?;
+        .map_err(Error::io(&spec.out))?
+        .dir;
     observer.stage_done();
     let (info, units) = sweep::read_shards(std::slice::from_ref(&dir))?;
     let points = sweep::aggregate(&info, &units);

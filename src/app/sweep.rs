@@ -18,6 +18,8 @@ pub struct SweepSpec {
     pub shard: Option<(usize, usize)>,
     /// Worker threads.
     pub threads: Option<u32>,
+    /// Realisations replacing the file's count (or the most of an adaptive sweep).
+    pub realisations: Option<u32>,
 }
 
 /// What a sweep (or one shard of it) did.
@@ -33,6 +35,9 @@ pub struct SweepReport {
     pub shard_dir: PathBuf,
     /// This shard and the number of shards.
     pub shard: (usize, usize),
+    /// Where the sweep stands after this run: complete, or the stage whose units other shards
+    /// still owe (adaptive sweeps run stage by stage).
+    pub plan: sweep::race::Plan,
     /// The merge, when the sweep ran whole.
     pub merged: Option<MergeReport>,
 }
@@ -53,7 +58,7 @@ pub struct MergeReport {
 /// Runs the sweep of `spec.file` (or one shard of it), then, unsharded, merges it.
 pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Error> {
     let t0 = Instant::now();
-    let sweep = sweep::spec::load(&spec.file)?;
+    let sweep = sweep::spec::load_with(&spec.file, spec.realisations)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
     crate::io::out_dir::prepare(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string())?;
     if spec.shard.is_none() {
@@ -69,16 +74,18 @@ pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Err
         if count > 1 { format!(", shard {k} of {count}") } else { String::new() },
         threads_label(threads)
     ));
-    let dir = pool
+    let run = pool
         .install(|| sweep::run_shard(&sweep, &spec.out, k, count, &|done, total| observer.progress(done, total, "work units")))
         .map_err(Error::io(&spec.out))?;
     observer.stage_done();
+    let dir = run.dir.clone();
     let mut report = SweepReport {
         name: sweep.name.clone(),
-        units: units.div_ceil(count),
+        units: run.ran,
         run_s: t0.elapsed().as_secs_f64(),
         shard_dir: dir.clone(),
         shard: (k, count),
+        plan: run.plan,
         merged: None,
     };
     if spec.shard.is_none() {
@@ -92,11 +99,13 @@ pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Err
 /// naming the sweep (its results are written first, with the reasons).
 pub fn merge(shards: &[PathBuf], out: &Path) -> Result<MergeReport, Error> {
     let (info, units) = sweep::read_shards(shards)?;
+    let plan = sweep::complete(&info, &units)?;
     crate::io::out_dir::prepare(out, &info.name)?;
-    let points = sweep::aggregate(&info, &units);
-    let dest = sweep::results::write(out, &info, &units, &points).map_err(Error::io(out))?;
+    let merged = sweep::results::Merged::of(info, units, plan);
+    let dest = sweep::results::write(out, &merged).map_err(Error::io(out))?;
+    let (info, units) = (&merged.info, &merged.units);
     let failed = units.iter().filter(|u| u.error.is_some()).count();
-    let summary = sweep::results::summary(&info, &units, &points);
+    let summary = sweep::results::summary(&merged);
     if failed == units.len() {
         return Err(Error::input(info.name.clone(), format!("every work unit failed (see {}/summary.md)", dest.display())));
     }

@@ -318,7 +318,10 @@ pub fn read_table(path: &Path) -> Result<(String, toml::Table), ScenarioError> {
     if let Some(toml::Value::Table(robot)) = t.get_mut("robot")
         && let Some(toml::Value::String(f)) = robot.get("file")
     {
-        let resolved = relative_to(path, Path::new(f)).display().to_string();
+        // Absolute, so that a point's scenario written out (a sweep's best design) runs from any
+        // working directory.
+        let file = relative_to(path, Path::new(f));
+        let resolved = std::path::absolute(&file).unwrap_or(file).display().to_string();
         robot.insert("file".into(), toml::Value::String(resolved));
     }
     Ok((text, t))

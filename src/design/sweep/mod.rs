@@ -12,7 +12,10 @@
 //! units it finished. `merge` reads the units of every shard, in unit order, and writes the
 //! tables: any sharding and any thread count give the same bytes.
 
+pub mod designs;
+pub mod objective;
 pub mod plots;
+pub mod race;
 pub mod results;
 pub mod spec;
 
@@ -24,6 +27,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::study::ErrorStats;
+use crate::study::interval::{clopper_pearson, median_interval};
 use crate::study::stats::{finite_sorted, median, quantile};
 pub use spec::{Sweep, SweepError};
 
@@ -89,6 +93,12 @@ pub struct UnitRow {
     pub max_within: Vec<u32>,
     /// Per threshold: repetitions whose mean error is within it.
     pub mean_within: Vec<u32>,
+    /// Per threshold: repetitions whose p95 error is within it.
+    #[serde(default)]
+    pub p95_within: Vec<u32>,
+    /// Per threshold: repetitions whose median error is within it.
+    #[serde(default)]
+    pub median_within: Vec<u32>,
     /// Median O1 of the chosen sets.
     #[serde(with = "nan_as_null")]
     pub o1_median: f64,
@@ -159,7 +169,9 @@ impl Unit {
             if r.no_model > r.repetitions {
                 return Err(format!("{} = {} of {} repetitions", at("no_model"), r.no_model, r.repetitions));
             }
-            for (k, counts) in [("max_within", &r.max_within), ("mean_within", &r.mean_within)] {
+            for (k, counts) in
+                [("max_within", &r.max_within), ("mean_within", &r.mean_within), ("p95_within", &r.p95_within), ("median_within", &r.median_within)]
+            {
                 if counts.len() != sweep.thresholds_mm.len() || counts.iter().any(|&c| c > r.repetitions) {
                     return Err(format!(
                         "{} = {counts:?}: one count of at most {} repetitions per threshold ({} thresholds)",
@@ -190,6 +202,8 @@ fn row(selection: &str, n: usize, table: bool, per_rep: &[Option<ErrorStats>], o
         after_mean_mm: med(|s| s.mean),
         max_within: thresholds.iter().map(|t| ok.iter().filter(|s| s.max <= *t).count() as u32).collect(),
         mean_within: thresholds.iter().map(|t| ok.iter().filter(|s| s.mean <= *t).count() as u32).collect(),
+        p95_within: thresholds.iter().map(|t| ok.iter().filter(|s| s.p95 <= *t).count() as u32).collect(),
+        median_within: thresholds.iter().map(|t| ok.iter().filter(|s| s.median <= *t).count() as u32).collect(),
         o1_median: median(o1),
     }
 }
@@ -260,6 +274,12 @@ pub struct ShardInfo {
     /// included).
     #[serde(default)]
     pub scenarios: Vec<String>,
+    /// What the sweep decides (its default: minimise the p95 at the table set size).
+    #[serde(default)]
+    pub objective: objective::Objective,
+    /// Adaptive realisations, when the sweep races its designs.
+    #[serde(default)]
+    pub race: Option<race::Race>,
     /// This shard, `k` of `count`.
     pub shard: usize,
     /// Shards in all.
@@ -286,12 +306,21 @@ fn write_file_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     fs::rename(&tmp, path)
 }
 
-/// Runs the units of shard `k` of `count` not yet in its directory, in parallel, calling
-/// `progress(done, total)` after each; returns the shard directory.
-pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(dyn Fn(usize, usize) + Sync)) -> std::io::Result<PathBuf> {
-    let dir = shard_dir(out, &sweep.name, k, count);
-    fs::create_dir_all(dir.join("units"))?;
-    let info = ShardInfo {
+/// What one run of a shard did.
+#[derive(Clone, Debug)]
+pub struct ShardRun {
+    /// The shard directory.
+    pub dir: PathBuf,
+    /// Where the sweep stands after it (complete, or the stage and units it still needs: an
+    /// adaptive sweep's later stages need every shard's units of the stages before).
+    pub plan: race::Plan,
+    /// Units this run computed.
+    pub ran: usize,
+}
+
+/// The record of `sweep` that shard `k` of `count` writes as its `sweep.json`.
+pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
+    ShardInfo {
         name: sweep.name.clone(),
         identity: sweep.identity.clone(),
         realisations: sweep.realisations,
@@ -300,12 +329,24 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
         layouts: sweep.points.iter().map(|p| p.scenario.layout_mm()).collect(),
         scenarios: sweep.points.iter().map(|p| p.scenario.header().text.clone()).collect(),
+        objective: sweep.objective.clone(),
+        race: sweep.race.clone(),
         shard: k,
         count,
-    };
+    }
+}
+
+/// Runs the units shard `k` of `count` owes to the sweep's current stage (every unit of the shard,
+/// for a sweep of fixed realisations), in parallel, calling `progress(done, total)` after each;
+/// unsharded, stage after stage until the sweep is complete. Units already in the shard directory
+/// are kept (a killed run resumes).
+pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(dyn Fn(usize, usize) + Sync)) -> std::io::Result<ShardRun> {
+    let dir = shard_dir(out, &sweep.name, k, count);
+    fs::create_dir_all(dir.join("units"))?;
+    let info = shard_info(sweep, k, count);
     let info_path = dir.join("sweep.json");
     if let Ok(old) = fs::read(&info_path) {
-        let old: ShardInfo = serde_json::from_slice(&old).map_err(std::io::Error::other)?;
+        let old: ShardInfo = serde_json::from_slice(&old).map_err(|e| std::io::Error::other(format!("{}: {e}", info_path.display())))?;
         if old != info {
             return Err(std::io::Error::other(format!(
                 "{} holds units of another sweep or sharding: remove it or choose another --out",
@@ -321,18 +362,32 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
             let _ = fs::remove_file(&p);
         }
     }
-    let total = sweep.points.len() * sweep.realisations as usize;
-    let mine: Vec<usize> = (k..total).step_by(count).collect();
-    let pending: Vec<usize> = mine.iter().copied().filter(|&u| !unit_file(&dir, u).exists()).collect();
-    let done = std::sync::atomic::AtomicUsize::new(mine.len() - pending.len());
-    progress(done.load(std::sync::atomic::Ordering::Relaxed), mine.len());
-    pending.par_iter().try_for_each(|&u| -> std::io::Result<()> {
-        let unit = run_unit(sweep, u);
-        write_file_atomically(&unit_file(&dir, u), &serde_json::to_vec(&unit).map_err(std::io::Error::other)?)?;
-        progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, mine.len());
-        Ok(())
-    })?;
-    Ok(dir)
+    let mut ran = 0;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    loop {
+        let present = sibling_units(out, &info).map_err(|e| std::io::Error::other(e.to_string()))?;
+        let plan = race::plan(&info, &present);
+        let mine: Vec<usize> = plan.missing.iter().copied().filter(|u| u % count == k).collect();
+        if mine.is_empty() {
+            return Ok(ShardRun { dir, plan, ran });
+        }
+        let total = done.load(std::sync::atomic::Ordering::Relaxed) + mine.len();
+        progress(done.load(std::sync::atomic::Ordering::Relaxed), total);
+        mine.par_iter().try_for_each(|&u| -> std::io::Result<()> {
+            let unit = run_unit(sweep, u);
+            write_file_atomically(&unit_file(&dir, u), &serde_json::to_vec(&unit).map_err(std::io::Error::other)?)?;
+            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
+            Ok(())
+        })?;
+        ran += mine.len();
+    }
+}
+
+/// The units of every shard of `info`'s sharding under `out` that exists (a sibling's record must
+/// be the same sweep), by unit index.
+fn sibling_units(out: &Path, info: &ShardInfo) -> Result<BTreeMap<usize, Unit>, MergeError> {
+    let dirs: Vec<PathBuf> = (0..info.count).map(|j| shard_dir(out, &info.name, j, info.count)).filter(|d| d.join("sweep.json").exists()).collect();
+    Ok(read_shards(&dirs)?.1.into_iter().map(|u| (u.unit, u)).collect())
 }
 
 /// Why shards cannot be merged.
@@ -352,7 +407,8 @@ fn shard_err(p: &Path, why: impl Into<String>) -> MergeError {
     MergeError::Shard { path: p.display().to_string(), why: why.into() }
 }
 
-/// Reads the shards `dirs` of one sweep: their common record and every unit, in unit order.
+/// Reads the shards `dirs` of one sweep: their common record and every unit, in unit order
+/// (whether the sweep is complete is [`complete`]'s question).
 pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeError> {
     let mut info: Option<(ShardInfo, &Path)> = None;
     let mut units: BTreeMap<usize, Unit> = BTreeMap::new();
@@ -380,19 +436,34 @@ pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeErro
         }
     }
     let (info, _) = info.ok_or_else(|| shard_err(Path::new("merge"), "no shard directories given"))?;
-    let total = info.points.len() * info.realisations as usize;
-    let missing: Vec<usize> = (0..total).filter(|u| !units.contains_key(u)).collect();
-    if !missing.is_empty() {
-        return Err(shard_err(
-            Path::new(&info.name),
-            format!(
-                "{} of {total} work units missing (first: {}): run the missing shards or give every shard directory",
-                missing.len(),
-                missing[0]
-            ),
-        ));
-    }
     Ok((info, units.into_values().collect()))
+}
+
+/// The plan of a merged sweep, which must be complete: every unit of a sweep of fixed
+/// realisations, and an adaptive sweep's race decided.
+pub fn complete(info: &ShardInfo, units: &[Unit]) -> Result<race::Plan, MergeError> {
+    let present: BTreeMap<usize, Unit> = units.iter().map(|u| (u.unit, u.clone())).collect();
+    let plan = race::plan(info, &present);
+    if plan.complete {
+        return Ok(plan);
+    }
+    let why = match &info.race {
+        None => format!(
+            "{} of {} work units missing (first: {}): run the missing shards or give every shard directory",
+            plan.missing.len(),
+            info.points.len() * info.realisations as usize,
+            plan.missing[0]
+        ),
+        Some(_) => format!(
+            "the adaptive sweep is at stage {} and needs {} more work units (first: {}): run every shard again \
+             (`calsim sweep <file> --shard k/{}`), then merge",
+            plan.stage,
+            plan.missing.len(),
+            plan.missing[0],
+            info.count
+        ),
+    };
+    Err(shard_err(Path::new(&info.name), why))
 }
 
 /// Aggregates over realisations: one row per grid point, selection and set size.
@@ -410,10 +481,16 @@ pub struct PointRow {
     pub realisations: u32,
     /// Median, P10 and P90 over realisations of the after-calibration median, p95 and max, mm.
     pub after: [[f64; 3]; 3],
+    /// The interval of each median of `after` at the sweep's confidence (order statistics over
+    /// realisations).
+    pub after_ci: [[f64; 2]; 3],
     /// Median over realisations of the before-calibration median, p95, max, mm.
     pub before: [f64; 3],
     /// Per threshold: P(max <= t) and P(mean <= t) over realisations x repetitions.
     pub success: Vec<(f64, f64)>,
+    /// Per threshold: the Clopper-Pearson intervals of the two probabilities at the sweep's
+    /// confidence over the realisations (the unit of independence), `[max lo, max hi, mean lo, mean hi]`.
+    pub success_ci: Vec<[f64; 4]>,
     /// Identifications without a model.
     pub no_model: u32,
     /// Median O1.
@@ -442,14 +519,34 @@ pub fn aggregate(info: &ShardInfo, units: &[Unit]) -> Vec<PointRow> {
         }
         for (sel, n, table) in keys {
             let rows: Vec<&UnitRow> = us.iter().filter_map(|u| u.rows.iter().find(|r| r.selection == sel && r.set_size == n)).collect();
-            let reps: u32 = rows.iter().map(|r| r.repetitions).sum();
-            let success = (0..info.thresholds_mm.len())
+            // Sums in u64: unit files are checked against their own counts, not against overflow.
+            let reps: u64 = rows.iter().map(|r| u64::from(r.repetitions)).sum();
+            let success: Vec<(f64, f64)> = (0..info.thresholds_mm.len())
                 .map(|t| {
-                    let m: u32 = rows.iter().map(|r| r.max_within[t]).sum();
-                    let a: u32 = rows.iter().map(|r| r.mean_within[t]).sum();
-                    (f64::from(m) / f64::from(reps.max(1)), f64::from(a) / f64::from(reps.max(1)))
+                    let m: u64 = rows.iter().map(|r| u64::from(r.max_within[t])).sum();
+                    let a: u64 = rows.iter().map(|r| u64::from(r.mean_within[t])).sum();
+                    (m as f64 / reps.max(1) as f64, a as f64 / reps.max(1) as f64)
                 })
                 .collect();
+            let conf = info.objective.confidence;
+            let worlds = rows.len() as f64;
+            let success_ci = success
+                .iter()
+                .map(|(m, a): &(f64, f64)| {
+                    let (ml, mh) = clopper_pearson(m * worlds, worlds, conf);
+                    let (al, ah) = clopper_pearson(a * worlds, worlds, conf);
+                    [ml, mh, al, ah]
+                })
+                .collect();
+            let ci = |v: Vec<f64>| {
+                let (lo, hi) = median_interval(&v, conf);
+                [lo, hi]
+            };
+            let after_ci = [
+                ci(rows.iter().map(|r| r.after_median_mm).collect()),
+                ci(rows.iter().map(|r| r.after_p95_mm).collect()),
+                ci(rows.iter().map(|r| r.after_max_mm).collect()),
+            ];
             out.push(PointRow {
                 point: p,
                 selection: sel,
@@ -463,6 +560,8 @@ pub fn aggregate(info: &ShardInfo, units: &[Unit]) -> Vec<PointRow> {
                 ],
                 before: [0, 1, 2].map(|k| median(&us.iter().map(|u| u.before_mm[k]).collect::<Vec<_>>())),
                 success,
+                success_ci,
+                after_ci,
                 no_model: rows.iter().map(|r| r.no_model).sum(),
                 o1: median(&rows.iter().map(|r| r.o1_median).collect::<Vec<_>>()),
                 campaign_s: median(&us.iter().map(|u| u.campaign_s).collect::<Vec<_>>()),

@@ -55,8 +55,11 @@ pub struct Axis {
 #[serde(deny_unknown_fields)]
 struct SweepFile {
     base: PathBuf,
-    #[serde(default = "one")]
-    realisations: u32,
+    /// A count, or `{ max, confidence, batch, min }` for adaptive realisations.
+    #[serde(default)]
+    realisations: Option<toml::Value>,
+    #[serde(default)]
+    objective: Option<super::objective::ObjectiveFile>,
     #[serde(default)]
     combine: Combine,
     #[serde(default)]
@@ -66,10 +69,6 @@ struct SweepFile {
     fixed: toml::Table,
     #[serde(default, rename = "axis")]
     axes: Vec<Axis>,
-}
-
-fn one() -> u32 {
-    1
 }
 
 /// One grid point: its axis values and its checked scenario.
@@ -87,8 +86,12 @@ pub struct Point {
 pub struct Sweep {
     /// Name (the sweep file's stem).
     pub name: String,
-    /// Realisations per grid point.
+    /// Realisations per grid point (the most, for adaptive realisations).
     pub realisations: u32,
+    /// Adaptive realisations, when the sweep races its designs.
+    pub race: Option<super::race::Race>,
+    /// What the sweep decides.
+    pub objective: super::objective::Objective,
     /// Success thresholds on the after-calibration error, mm.
     pub thresholds_mm: Vec<f64>,
     /// The axes' keys.
@@ -269,8 +272,69 @@ pub fn grid(lengths: &[usize], combine: Combine) -> Result<Vec<Vec<usize>>, Stri
     }
 }
 
+/// The realisations of a sweep file: a count, or `{ max, confidence, batch, min }` (the
+/// confidence defaulting to the objective's); `override_count` (the command line's) replaces the
+/// count, or the most of an adaptive sweep.
+fn realisations(
+    path: &Path,
+    v: Option<&toml::Value>,
+    confidence: f64,
+    override_count: Option<u32>,
+) -> Result<(u32, Option<super::race::Race>), SweepError> {
+    let bad = |key: &str, m: String| Err(file_err(path, key, m));
+    let count = |key: &str, v: &toml::Value| -> Result<u32, SweepError> {
+        match v.as_integer() {
+            Some(n) if (1..=i64::from(MAX_REALISATIONS)).contains(&n) => Ok(n as u32),
+            _ => Err(file_err(path, key, format!("{v}: a whole number within [1, {MAX_REALISATIONS}]"))),
+        }
+    };
+    let (mut n, mut race) = match v {
+        None => (1, None),
+        Some(toml::Value::Table(t)) => {
+            if let Some(k) = t.keys().find(|k| !["max", "confidence", "batch", "min"].contains(&k.as_str())) {
+                return bad(&format!("realisations.{k}"), "unknown key (adaptive realisations take max, confidence, batch, min)".into());
+            }
+            let max = match t.get("max") {
+                Some(v) => count("realisations.max", v)?,
+                None => return bad("realisations.max", "adaptive realisations need their most: max = <count>".into()),
+            };
+            let batch = t.get("batch").map(|v| count("realisations.batch", v)).transpose()?.unwrap_or(10);
+            let min = t.get("min").map(|v| count("realisations.min", v)).transpose()?.unwrap_or(batch);
+            let c = match t.get("confidence") {
+                None => confidence,
+                Some(v) => match v.as_float() {
+                    Some(c) if (0.5..=0.999).contains(&c) => c,
+                    _ => return bad("realisations.confidence", format!("{v}: within [0.5, 0.999]")),
+                },
+            };
+            if min > max {
+                return bad("realisations.min", format!("{min}: above max = {max}"));
+            }
+            (max, Some(super::race::Race { min, batch, max, confidence: c }))
+        }
+        Some(v) => (count("realisations", v)?, None),
+    };
+    if let Some(o) = override_count {
+        if !(1..=MAX_REALISATIONS).contains(&o) {
+            return bad("--realisations", format!("{o}: within [1, {MAX_REALISATIONS}]"));
+        }
+        n = o;
+        if let Some(r) = &mut race {
+            r.max = o;
+            r.min = r.min.min(o);
+        }
+    }
+    Ok((n, race))
+}
+
 /// Reads and checks a sweep file: every grid point is loaded and checked as a scenario.
 pub fn load(path: &Path) -> Result<Sweep, SweepError> {
+    load_with(path, None)
+}
+
+/// [`load`] with the command line's realisations replacing the file's count (or the most of an
+/// adaptive sweep).
+pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Sweep, SweepError> {
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
     let file: SweepFile = {
@@ -280,11 +344,20 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
             file_err(path, &key, e.into_inner().message())
         })?
     };
-    if !(1..=MAX_REALISATIONS).contains(&file.realisations) {
-        return Err(file_err(path, "realisations", format!("{}: within [1, {MAX_REALISATIONS}]", file.realisations)));
+    let objective = match file.objective.clone() {
+        Some(o) => o.check().map_err(|(k, m)| file_err(path, &k, m))?,
+        None => super::objective::Objective::default(),
+    };
+    let (realisations_n, race) = realisations(path, file.realisations.as_ref(), objective.confidence, realisations_override)?;
+    let mut thresholds_mm = file.thresholds_mm.clone();
+    if let Some(t) = objective.threshold_mm
+        && !thresholds_mm.contains(&t)
+    {
+        thresholds_mm.push(t);
     }
-    if file.thresholds_mm.len() > 16 || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
-        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 thresholds, each within (0, 1000) mm", file.thresholds_mm)));
+    let duplicated = file.thresholds_mm.iter().enumerate().any(|(i, a)| file.thresholds_mm[..i].contains(a));
+    if thresholds_mm.len() > 16 || duplicated || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
+        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 different thresholds, each within (0, 1000) mm", file.thresholds_mm)));
     }
     let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
     let (base_text, mut base_table) =
@@ -297,7 +370,7 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
     let values: Vec<Vec<toml::Value>> = file.axes.iter().enumerate().map(|(i, a)| axis_values(path, i, a)).collect::<Result<_, _>>()?;
     let lengths: Vec<usize> = values.iter().map(Vec::len).collect();
     let tuples = grid(&lengths, file.combine).map_err(|m| file_err(path, "axis", m))?;
-    let units = tuples.len() as u64 * u64::from(file.realisations);
+    let units = tuples.len() as u64 * u64::from(realisations_n);
     if units > 1_000_000 {
         return Err(file_err(path, "realisations", format!("{units} work units (points x realisations): at most 1e6")));
     }
@@ -329,8 +402,10 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
     let identity = format!("{:x}", sha2::Sha256::digest(format!("{text}\u{0}{base_text}")));
     Ok(Sweep {
         name: stem,
-        realisations: file.realisations,
-        thresholds_mm: file.thresholds_mm,
+        realisations: realisations_n,
+        race,
+        objective,
+        thresholds_mm,
         keys: file.axes.iter().map(|a| a.key.clone()).collect(),
         points,
         identity,
@@ -359,7 +434,17 @@ pub fn from_tables(
         })?;
         out.push(Point { values, scenario });
     }
-    Ok(Sweep { name: name.into(), realisations, thresholds_mm, keys, points: out, identity, predict: false })
+    Ok(Sweep {
+        name: name.into(),
+        realisations,
+        race: None,
+        objective: super::objective::Objective::default(),
+        thresholds_mm,
+        keys,
+        points: out,
+        identity,
+        predict: false,
+    })
 }
 
 /// The value at dotted `key` of `t`, if there is one.
