@@ -298,3 +298,96 @@ fn a_robot_spread_draws_one_robot_per_world_and_none_without_it() {
     let std = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     assert!(mean.abs() < 0.03 && (std - 1.0).abs() < 0.03, "mean {mean}, std {std} over {n} draws");
 }
+
+/// An adaptive sweep with an objective: three designs (one set size per point) raced on common worlds.
+fn adaptive_file(dir: &Path, name: &str) -> PathBuf {
+    let base = repo().join("scenarios/ci_quick.toml");
+    let text = format!(
+        "base = {base:?}\nrealisations = {{ max = 8, min = 2, batch = 2, confidence = 0.8 }}\nthresholds_mm = [1.0]\n\n\
+         [objective]\nminimise = \"p95\"\nconfidence = 0.8\n\n[fixed]\n\"study.set_sizes\" = [30]\n\"study.table_set_size\" = 30\n\
+         \"study.repetitions\" = 2\n\n[[axis]]\nkey = \"robot.unmodelled.transmission_high_mdeg\"\nvalues = [0.0, 2.82, 20.0]\n",
+        base = base.display().to_string()
+    );
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn all_tables(dir: &Path) -> Vec<Vec<u8>> {
+    ["sweep.parquet", "points.parquet", "designs.parquet"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect()
+}
+
+/// An adaptive sweep gives the same bytes for 1 and 2 threads and for 3 shards run stage by stage
+/// (each shard once per stage, then merged): the race is a function of the units run.
+#[test]
+fn adaptive_sweeps_are_identical_for_any_threads_and_shards() {
+    let tmp = scratch("sweep-adaptive");
+    let dir = tmp.path();
+    let f = adaptive_file(dir, "a.toml");
+    let one = dir.join("one");
+    let report = sweep_lib(&f, &one, None, 1);
+    let merged = report.merged.expect("an unsharded sweep runs every stage and merges");
+    assert!(report.plan.stages_run >= 1);
+    let two = dir.join("two");
+    sweep_lib(&f, &two, None, 2);
+    let sharded = dir.join("sharded");
+    let mut rounds = 0;
+    let shards = loop {
+        rounds += 1;
+        assert!(rounds <= 10, "an adaptive sweep of at most 4 stages needs at most 4 rounds of its shards");
+        let runs: Vec<calsim::app::sweep::SweepReport> = (0..3).map(|k| sweep_lib(&f, &sharded, Some((k, 3)), 2)).collect();
+        // A shard that ran before the others finished the stage waits: run the round again.
+        let last = sweep_lib(&f, &sharded, Some((0, 3)), 2);
+        if last.plan.complete && runs.iter().all(|r| r.shard_dir.exists()) {
+            break runs.iter().map(|r| r.shard_dir.clone()).collect::<Vec<_>>();
+        }
+    };
+    calsim::app::sweep::merge(&shards, &sharded).unwrap();
+    let reference = all_tables(&one.join("a"));
+    assert_eq!(all_tables(&two.join("a")), reference, "1 vs 2 threads");
+    assert_eq!(all_tables(&sharded.join("a")), reference, "1 vs 3 shards");
+    assert!(merged.summary.contains("Designs ranked by the objective"), "{}", merged.summary);
+}
+
+/// The racing eliminates designs behind the leader before the most realisations, and runs fewer
+/// units than every point in every realisation.
+#[test]
+fn a_clearly_worse_design_leaves_the_race_early() {
+    let tmp = scratch("sweep-race");
+    let dir = tmp.path();
+    let f = adaptive_file(dir, "r.toml");
+    let m = sweep_lib(&f, dir, None, 2).merged.unwrap();
+    let section = m.summary.split("### Designs that left the race").nth(1).unwrap_or_else(|| panic!("no design left the race:\n{}", m.summary));
+    let row = section.lines().find(|l| l.contains("behind the leader")).unwrap_or_else(|| panic!("none behind:\n{}", m.summary));
+    let worlds: u32 = row.split('|').nth(2).unwrap().trim().parse().unwrap_or_else(|_| panic!("{row}\n{}", m.summary));
+    assert!(worlds < 8, "left with {worlds} of at most 8 realisations: {row}");
+    assert!(m.units < 3 * 8, "{} units: the race ran fewer than every point x every realisation", m.units);
+}
+
+/// Bad objectives and adaptive realisations are one line naming the file and the key.
+#[test]
+fn bad_objectives_and_adaptive_realisations_are_one_line_naming_the_key() {
+    let tmp = scratch("sweep-objective");
+    let dir = tmp.path();
+    let base = repo().join("scenarios/ci_quick.toml");
+    for (body, key) in [
+        ("[objective]\nmaximise = \"p95\"\n", "objective.maximise"),
+        ("[objective]\nminimise = \"joy\"\n", "objective.minimise"),
+        ("[objective]\nmaximise = \"success\"\n", "objective.threshold_mm"),
+        ("[objective]\nminimise = \"p95\"\nconfidence = 1.5\n", "objective.confidence"),
+        ("[objective]\nminimise = \"p95\"\nsuccess_at_least = 0.9\n", "objective.threshold_mm"),
+        ("[objective]\nminimise = \"p95\"\nmaximise = \"success\"\nthreshold_mm = 0.5\n", "objective.minimise"),
+        ("[objective]\nminimise = \"p95\"\nthreshold_mm = nan\n", "objective.threshold_mm"),
+        ("realisations = { max = 0 }\n", "realisations.max"),
+        ("realisations = { batch = 5 }\n", "realisations.max"),
+        ("realisations = { max = 10, min = 20 }\n", "realisations.min"),
+        ("realisations = { max = 10, speed = 2 }\n", "realisations.speed"),
+        ("realisations = -3\n", "realisations"),
+    ] {
+        let (head, tail) = if body.starts_with("realisations") { (body, "") } else { ("", body) };
+        let p = dir.join("bad.toml");
+        std::fs::write(&p, format!("base = {:?}\n{head}\n{tail}", base.display().to_string())).unwrap();
+        let e = calsim::design::sweep::spec::load(&p).unwrap_err().to_string();
+        assert!(e.contains(key) && !e.contains('\n'), "{body}: {e}");
+    }
+}

@@ -226,7 +226,8 @@ pub fn judge(info: &ShardInfo, units: &[Unit], eliminated: &[(Design, u32, Strin
             }
             let (a, b) = paired_values(&objective[i].2, &lv);
             let p = Paired::of(&a, &b, o.confidence);
-            r.tied = !p.separated(o.confidence);
+            // A design an adaptive sweep eliminated was separated at its stage: not tied.
+            r.tied = !p.separated(o.confidence) && r.eliminated.is_none();
             r.vs_leader = Some(p);
         }
     }

@@ -393,7 +393,15 @@ pub fn summary(m: &Merged) -> String {
             design_label(info, r),
             with_interval(r.estimate, r.interval),
             r.feasibility.label(),
-            if r.rank == 1 { "-" } else if r.tied { "**tied**" } else { "no" },
+            if r.rank == 1 {
+                "-"
+            } else if r.tied {
+                "**tied**"
+            } else if r.eliminated.is_some() {
+                "left the race"
+            } else {
+                "no"
+            },
             r.success.map_or("-".to_string(), |(p, ci)| with_interval(p, ci)),
             f3(r.campaign_h),
             r.worlds,
