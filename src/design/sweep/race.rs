@@ -9,7 +9,9 @@
 //! looks` (below), or when the
 //! sign test of its paired values against the leader's rejects equality at level
 //! `(1 - confidence) / looks` (Bonferroni over the stages planned, so that repeated looks do not
-//! inflate the error of an elimination) with the leader ahead. The race is a pure function of the
+//! inflate the error of an elimination) with the leader ahead. The race ends when the leader is
+//! alone and its constraints are confirmed or ruled out, or at the most realisations. It is a
+//! pure function of the
 //! units run: any thread count and any sharding give the same stages, eliminations and tables.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -116,7 +118,10 @@ pub fn plan(info: &ShardInfo, present: &BTreeMap<usize, Unit>) -> Plan {
             }
         }
         alive_points = alive_set.iter().map(|d| d.point).collect::<BTreeSet<_>>().into_iter().collect();
-        if alive_set.len() <= 1 {
+        // Decided: the leader alone, and its constraints confirmed or ruled out (an undecided
+        // leader gets more worlds while the stages last).
+        let leader_open = leader.feasibility == designs::Feasibility::Undecided;
+        if alive_set.len() <= 1 && !leader_open {
             return Plan { complete: true, stage: s, missing: Vec::new(), eliminated, stages_run: s + 1 };
         }
     }

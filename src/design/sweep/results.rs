@@ -378,12 +378,18 @@ pub fn summary(m: &Merged) -> String {
     let _ = writeln!(s, "## Designs ranked by the objective\n");
     let _ = writeln!(
         s,
-        "| rank | design | objective ({conf} % interval) | feasibility | vs leader: median difference (interval), p | pairing: r, variance saved | tied | P(success) | campaign, h | realisations |"
+        "| rank | design | objective ({conf} % interval) | feasibility | vs leader (paired on common worlds) | pairing: r, variance saved | tied | P(success) | campaign, h | realisations |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
     for r in &ranked {
         let vs = r.vs_leader.as_ref().map_or("leader".to_string(), |p| {
-            format!("{} ({}-{}), p = {:.3}", f3(p.median), f3(p.interval.0), f3(p.interval.1), p.test.p_value)
+            let (better, worse) = if o.maximises() { (p.test.positive, p.test.negative) } else { (p.test.negative, p.test.positive) };
+            if o.maximises() {
+                // Fractions of successes tie in most worlds: the mean difference and the counts say more.
+                format!("mean {:+.3}; better in {better}, worse in {worse} worlds, p = {:.3}", p.mean, p.test.p_value)
+            } else {
+                format!("{} ({}-{}); better in {better}, worse in {worse}, p = {:.3}", f3(p.median), f3(p.interval.0), f3(p.interval.1), p.test.p_value)
+            }
         });
         let pairing = r.vs_leader.as_ref().map_or("-".to_string(), |p| format!("{:.2}, {:.0} %", p.correlation, 100.0 * p.variance_saving));
         let _ = writeln!(
