@@ -19,13 +19,28 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-pyo3::create_exception!(calsim, CalsimError, PyException, "Every error calsim raises: `path` is the file, `key` the key (or line) and `value` the value at fault, where known.");
-pyo3::create_exception!(calsim, ScenarioError, CalsimError, "A scenario file is unusable: unreadable, malformed, an unknown key or a value out of its range.");
+pyo3::create_exception!(
+    calsim,
+    CalsimError,
+    PyException,
+    "Every error calsim raises: `path` is the file, `key` the key (or line) and `value` the value at fault, where known."
+);
+pyo3::create_exception!(
+    calsim,
+    ScenarioError,
+    CalsimError,
+    "A scenario file is unusable: unreadable, malformed, an unknown key or a value out of its range."
+);
 pyo3::create_exception!(calsim, SweepError, CalsimError, "A sweep file is unusable, or one of its grid points is not a valid scenario.");
 pyo3::create_exception!(calsim, MergeError, CalsimError, "Shard directories cannot be merged.");
 pyo3::create_exception!(calsim, BudgetError, CalsimError, "A budget cannot run (no error source of the scenario is set).");
 pyo3::create_exception!(calsim, RobotFileError, CalsimError, "A robot file or URDF is unusable.");
-pyo3::create_exception!(calsim, InputError, CalsimError, "A value given to the command (a keyword, an output directory, a results directory) is unusable.");
+pyo3::create_exception!(
+    calsim,
+    InputError,
+    CalsimError,
+    "A value given to the command (a keyword, an output directory, a results directory) is unusable."
+);
 pyo3::create_exception!(calsim, StudyError, CalsimError, "A study could not run: its campaign failed, or no identification gave a model.");
 pyo3::create_exception!(calsim, FileError, CalsimError, "A file could not be read or written.");
 
@@ -47,12 +62,20 @@ struct Fault {
 fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
     let message = e.to_string();
     let (err, fault) = match e {
-        app::Error::Scenario(s) | app::Error::Budget(CoreBudgetError::Scenario(s)) => (PyErr::new::<ScenarioError, _>(message), scenario_fault(&s)),
+        app::Error::Scenario(s) | app::Error::Budget(CoreBudgetError::Scenario(s)) => {
+            (PyErr::new::<ScenarioError, _>(message), scenario_fault(&s))
+        }
         app::Error::Sweep(s) | app::Error::Budget(CoreBudgetError::Sweep(s)) => (PyErr::new::<SweepError, _>(message), sweep_fault(&s)),
-        app::Error::Budget(CoreBudgetError::NoSource(path)) => (PyErr::new::<BudgetError, _>(message), Fault { path: Some(path), ..Fault::default() }),
-        app::Error::Merge(CoreMergeError::Shard { path, .. }) => (PyErr::new::<MergeError, _>(message), Fault { path: Some(path), ..Fault::default() }),
+        app::Error::Budget(CoreBudgetError::NoSource(path)) => {
+            (PyErr::new::<BudgetError, _>(message), Fault { path: Some(path), ..Fault::default() })
+        }
+        app::Error::Merge(CoreMergeError::Shard { path, .. }) => {
+            (PyErr::new::<MergeError, _>(message), Fault { path: Some(path), ..Fault::default() })
+        }
         app::Error::Urdf(_) | app::Error::RobotFile(_) => (PyErr::new::<RobotFileError, _>(message), Fault::default()),
-        app::Error::OutDir(OutDirError::InTheWay { path, .. }) => (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() }),
+        app::Error::OutDir(OutDirError::InTheWay { path, .. }) => {
+            (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() })
+        }
         app::Error::OutDir(OutDirError::Io { path, .. }) | app::Error::Io { path, .. } => {
             (PyErr::new::<FileError, _>(message), Fault { path: Some(path), ..Fault::default() })
         }
@@ -210,7 +233,9 @@ fn detached<T: Send>(
 
 fn check_threads(py: Python<'_>, threads: Option<u32>) -> PyResult<()> {
     match threads {
-        Some(t) if !(1..=MOST_THREADS).contains(&t) => Err(input(py, "threads", format!("{t}: a number of worker threads within [1, {MOST_THREADS}]"))),
+        Some(t) if !(1..=MOST_THREADS).contains(&t) => {
+            Err(input(py, "threads", format!("{t}: a number of worker threads within [1, {MOST_THREADS}]")))
+        }
         _ => Ok(()),
     }
 }
@@ -422,7 +447,9 @@ fn export<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     use app::export::Pick;
     let pick = match (task, pick) {
-        (Some(_), _) if set_size.is_some() => return Err(input(py, "task", "task and set_size exclude each other: a task has its set size")),
+        (Some(_), _) if set_size.is_some() => {
+            return Err(input(py, "task", "task and set_size exclude each other: a task has its set size"));
+        }
         (Some(t), _) => Pick::Task(t),
         (None, "median") => Pick::Median(set_size),
         (None, "best") => Pick::Best(set_size),
