@@ -273,3 +273,17 @@ def test_export_redoes_the_median_identification_and_writes_the_model(small_run,
     with pytest.raises(calsim.InputError) as err:
         calsim.export(small_run, task=10_000, out=tmp_path)
     assert err.value.path == str(small_run.dest)
+
+
+def test_the_readme_python_recipe_runs(tmp_path, monkeypatch):
+    import re
+
+    blocks = re.findall(r"```python\n(.*?)```", (REPO / "README.md").read_text(), flags=re.S)
+    assert blocks
+    for name in ("scenarios", "robots"):
+        (tmp_path / name).symlink_to(REPO / name)
+    monkeypatch.chdir(tmp_path)
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), {})
+    assert (tmp_path / "results" / "irb120_trical" / "tasks.parquet").is_file()
+    assert list((tmp_path / "results").glob("irb120_trical.task-*/robot.toml"))
