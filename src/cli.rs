@@ -45,6 +45,36 @@ enum Command {
     /// The tool frame, gravity torques and joint deflections of a robot file's arm at each row of
     /// a joints CSV (header q1_deg,...,q6_deg).
     Fk(FkArgs),
+    /// Every key of a scenario (trical, spms, tracker), sweep or robot file: unit, default, rules,
+    /// SOURCED / ASSUMED / FITTED note (docs/reference.md).
+    Keys(KeysArgs),
+    /// Write a commented starting scenario of a device, every key at its default.
+    Init(InitArgs),
+    /// Print the completion script of a shell (bash, zsh, fish, elvish, powershell).
+    Completions(CompletionsArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct KeysArgs {
+    /// trical, spms, tracker, sweep or robot (default: every one).
+    name: Option<String>,
+    /// The whole reference as Markdown (docs/reference.md).
+    #[arg(long, conflicts_with = "name")]
+    markdown: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct InitArgs {
+    /// The device: trical, spms or tracker.
+    kind: String,
+    /// The scenario file to write (default: standard output); an existing file is not replaced.
+    file: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+struct CompletionsArgs {
+    /// The shell.
+    shell: clap_complete::Shell,
 }
 
 #[derive(clap::Args, Debug)]
@@ -315,6 +345,13 @@ pub fn main() -> ExitCode {
         Command::ImportUrdf(args) => import_urdf(args),
         Command::Calibrate(args) => calibrate(args),
         Command::Fk(args) => fk(args),
+        Command::Keys(args) => keys(args),
+        Command::Init(args) => init(args),
+        Command::Completions(args) => {
+            use clap::CommandFactory;
+            clap_complete::generate(args.shell, &mut Cli::command(), "calsim", &mut std::io::stdout());
+            Ok(ExitCode::SUCCESS)
+        }
     };
     match result {
         Ok(code) => code,
@@ -346,7 +383,6 @@ fn compact_numbers(msg: &str) -> String {
     out.push_str(rest);
     out
 }
-
 
 /// The terminal's observer: the start line and warnings on standard error, a progress bar per stage.
 struct Terminal {
@@ -406,13 +442,7 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     };
     let r = app::run::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
     println!("{}", terminal_table(&r.checks));
-    println!(
-        "timing: {}, results written in {:.3} s (recording {:.3} s) to {}",
-        r.timing,
-        r.write_s,
-        r.recording_s,
-        r.dest.display()
-    );
+    println!("timing: {}, results written in {:.3} s (recording {:.3} s) to {}", r.timing, r.write_s, r.recording_s, r.dest.display());
     if let Some(d) = &r.distribution {
         println!(
             "\nover {} realisations (realisation 0 is the run above; pass: the median within the band, the published value within P10-P90):",
@@ -493,6 +523,33 @@ fn fk(args: &FkArgs) -> Result<ExitCode, String> {
     match &args.out {
         Some(out) => crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| format!("{}: {e}", out.display()))?,
         None => print!("{text}"),
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn keys(args: &KeysArgs) -> Result<ExitCode, String> {
+    if args.markdown {
+        print!("{}", app::keys::markdown().map_err(|e| e.to_string())?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let names = match &args.name {
+        Some(n) => vec![n.as_str()],
+        None => app::keys::names(),
+    };
+    let texts: Vec<String> = names.iter().map(|n| app::keys::text(n)).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
+    print!("{}", texts.join("\n"));
+    Ok(ExitCode::SUCCESS)
+}
+
+fn init(args: &InitArgs) -> Result<ExitCode, String> {
+    let text = app::keys::init(&args.kind).map_err(|e| e.to_string())?;
+    match &args.file {
+        None => print!("{text}"),
+        Some(f) if f.exists() => return Err(format!("{}: exists; calsim init does not replace a file", f.display())),
+        Some(f) => {
+            crate::io::out_dir::write_file_atomically(f, &text).map_err(|e| format!("{}: {e}", f.display()))?;
+            eprintln!("calsim init: wrote {} (check it with `calsim check {}`)", f.display(), f.display());
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -581,7 +638,12 @@ fn budget(args: &BudgetArgs) -> Result<ExitCode, String> {
 }
 
 fn table8(args: &Table8Args) -> Result<ExitCode, String> {
-    let spec = app::table8::Table8Spec { scenario: args.scenario.clone(), realisations: args.realisations, pool: args.pool, threads: args.threads };
+    let spec = app::table8::Table8Spec {
+        scenario: args.scenario.clone(),
+        realisations: args.realisations,
+        pool: args.pool,
+        threads: args.threads,
+    };
     let r = app::table8::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
     println!(
         "{:<16} {:>26} {:>44}",

@@ -2,7 +2,7 @@
 """Candidate error models of the fidelity study, side by side, and the knob fits.
 
 Each candidate is the default TriCal scenario with some keys changed (a physical reading each,
-see README "Candidate physics"). For each, `calsim check --realisations N` judges every figure
+see docs/findings.md, "Candidate physics"). For each, `calsim check --realisations N` judges every figure
 over N worlds; this prints one markdown row per candidate with the medians over the worlds.
 
     python3 scripts/fidelity/candidates.py [--realisations 20] [--only NAME ...]
@@ -28,7 +28,7 @@ CALSIM = os.environ.get("CALSIM", os.path.join(TARGET_DIR, "release", "calsim"))
 
 H = "robot.unmodelled.transmission_high_mdeg"
 OFF = {H: 0.0}
-# name: (keys, knob, bracket). The knob's value in `keys` is the fitted one (README, "Candidate
+# name: (keys, knob, bracket). The knob's value in `keys` is the fitted one (docs/findings.md, "Candidate
 # physics"; `--fit-all` refits every knob from its bracket).
 P = "robot.validation_payload_change_kg"
 SAME = {P: 0.0}  # setup 2 with setup 1's payload: no change between the setups

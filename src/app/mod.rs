@@ -8,6 +8,7 @@ pub mod budget;
 pub mod compensate;
 pub mod export;
 pub mod import_urdf;
+pub mod keys;
 pub mod run;
 pub mod sweep;
 pub mod table8;

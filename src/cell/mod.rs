@@ -11,7 +11,7 @@ use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
 
 /// The cell as a scenario describes it (units in the names).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct CellSpec {
     /// Datum-sphere centres in {W}, mm: the first at the origin, the second on +x, the third in the

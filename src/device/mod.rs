@@ -11,6 +11,7 @@
 //!
 //! Adding a device: a folder here implementing the three traits, and one line in [`REGISTRY`].
 
+pub mod keys;
 pub mod scenario;
 pub mod spms;
 pub mod tracker;
@@ -45,7 +46,18 @@ pub trait Device: Sync {
     /// The device's error sources for the budget, each a label, the dotted scenario keys it scales
     /// together and their unit (the robot's unmodelled effects are the budget's own).
     fn error_sources(&self) -> &'static [ErrorSource];
+
+    /// Its scenario file with every key at the default the loader fills in (the file
+    /// [`keys::minimal`] read and written back as TOML; optional keys without a default absent).
+    fn defaults(&self) -> toml::Table;
+
+    /// The notes (SOURCED, ASSUMED, FITTED) of its keys: TOML tables of `"dotted.key" = "note"`,
+    /// kept beside its specs ([`keys`]).
+    fn notes(&self) -> &'static [&'static str];
 }
+
+/// The notes of the sections every device shares (`[study]`, `[robot.spread]`, `[robot.unmodelled]`).
+pub const SHARED_NOTES: &str = include_str!("keys.toml");
 
 /// An error source of a budget: a label, the scenario keys it scales together, their unit.
 pub type ErrorSource = (&'static str, &'static [&'static str], &'static str);
@@ -85,7 +97,10 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     /// study has no such task. A device without an exportable model says so.
     fn refit(&self, index: usize) -> Result<Option<Refit>, DeviceError> {
         let _ = index;
-        Err(DeviceError::new(format!("{}: export takes TriCal results (this device's calibration is not exported yet)", self.device().kind())))
+        Err(DeviceError::new(format!(
+            "{}: export takes TriCal results (this device's calibration is not exported yet)",
+            self.device().kind()
+        )))
     }
 
     /// The scenario as `Any`, for a command that belongs to one device (Table 8 of the TriCal

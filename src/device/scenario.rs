@@ -4,6 +4,7 @@
 //! the file, the key and what is wrong, on one line ([`Checker`]). Each device parses and checks its
 //! own sections with these pieces (`device::<kind>::spec`).
 
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
 use crate::study::StudySpec;
@@ -140,10 +141,36 @@ fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
     }
 }
 
-/// Range checks that name the file, section, key, value and rule of what fails.
+/// Range checks that name the file, section, key, value and rule of what fails. Every rule a
+/// checker applies is also noted where [`rules_applied`] asks for them: the key reference
+/// (`calsim keys`) shows the rules the loader itself checks.
 pub struct Checker<'a> {
     /// The file as shown in errors.
     pub path: &'a str,
+}
+
+/// A rule a [`Checker`] applied to a key (`key` with its indices: `tcp_mm[0]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rule {
+    /// Table.
+    pub section: String,
+    /// Key.
+    pub key: String,
+    /// The rule, as an error states it (`within [0, 1] (ISO 9283 RP)`).
+    pub rule: String,
+}
+
+thread_local! {
+    static RULES: RefCell<Option<Vec<Rule>>> = const { RefCell::new(None) };
+}
+
+/// Runs `f` and returns, with its value, every rule the checkers applied on this thread meanwhile
+/// (in the order they were applied; a check that failed stops the rest).
+pub fn rules_applied<T>(f: impl FnOnce() -> T) -> (T, Vec<Rule>) {
+    let outer = RULES.with(|r| r.replace(Some(Vec::new())));
+    let value = f();
+    let rules = RULES.with(|r| r.replace(outer)).unwrap_or_default();
+    (value, rules)
 }
 
 impl Checker<'_> {
@@ -152,9 +179,30 @@ impl Checker<'_> {
         ScenarioError::Range { path: self.path.into(), section: section.into(), key: key.into(), value: value.to_string(), why: why.into() }
     }
 
+    /// Notes that `rule` applies to `section.key` (only while [`rules_applied`] listens): for a
+    /// check written out beside the checker's own.
+    pub fn rule(&self, section: &str, key: &str, rule: &str) {
+        self.note(section, key, || rule.to_string());
+    }
+
+    fn note(&self, section: &str, key: &str, rule: impl FnOnce() -> String) {
+        RULES.with(|r| {
+            if let Some(rules) = r.borrow_mut().as_mut() {
+                rules.push(Rule { section: section.into(), key: key.into(), rule: rule() });
+            }
+        });
+    }
+
+    /// The rule `why` on `section.key`: the error for `value` when `holds` is false.
+    pub fn require(&self, section: &str, key: &str, holds: bool, value: impl ToString, why: &str) -> Result<(), ScenarioError> {
+        self.note(section, key, || why.to_string());
+        if holds { Ok(()) } else { Err(self.fail(section, key, value, why)) }
+    }
+
     /// A finite number >= 0.
     pub fn non_negative(&self, section: &str, key: &str, v: f64, what: &str) -> Result<(), ScenarioError> {
-        if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be >= 0 ({what})"))) }
+        let why = format!("must be >= 0 ({what})");
+        self.require(section, key, v.is_finite() && v >= 0.0, v, &why)
     }
 
     /// The `[robot.spread]` table, the same in both kinds of scenario.
@@ -178,22 +226,13 @@ impl Checker<'_> {
         self.non_negative("robot.unmodelled", "backlash_mdeg", u.backlash_mdeg, "backlash width")?;
         self.within("robot.unmodelled", "thermal_drift_ppm", u.thermal_drift_ppm, -1000.0, 1000.0, "link growth")?;
         self.within("robot.unmodelled", "encoder_mdeg", u.encoder_mdeg, 0.0, 1000.0, "amplitude of the encoder error")?;
-        if let Some(n) = u.transmission_high_count
-            && !(1..=100).contains(&n)
-        {
-            return Err(self.fail("robot.unmodelled", "transmission_high_count", n, "must be 1 to 100 harmonics per joint"));
-        }
+        let n = u.transmission_high_count;
+        let count_ok = n.is_none_or(|n| (1..=100).contains(&n));
+        self.require("robot.unmodelled", "transmission_high_count", count_ok, n.unwrap_or(0), "must be 1 to 100 harmonics per joint")?;
         for (key, orders) in [("transmission_high_orders", u.transmission_high_orders), ("encoder_orders", u.encoder_orders)] {
-            if let Some([lo, hi]) = orders
-                && (lo == 0 || lo > hi || hi > 1_000_000)
-            {
-                return Err(self.fail(
-                    "robot.unmodelled",
-                    key,
-                    format!("[{lo}, {hi}]"),
-                    "must be [min, max] with 1 <= min <= max <= 1000000",
-                ));
-            }
+            let ok = orders.is_none_or(|[lo, hi]| lo >= 1 && lo <= hi && hi <= 1_000_000);
+            let shown = orders.map_or_else(String::new, |[lo, hi]| format!("[{lo}, {hi}]"));
+            self.require("robot.unmodelled", key, ok, shown, "must be [min, max] with 1 <= min <= max <= 1000000")?;
         }
         Ok(())
     }
@@ -201,45 +240,40 @@ impl Checker<'_> {
     /// The `[study]` table, the same for every device: `pool` configurations to choose from and the
     /// device's default parameter set.
     pub fn study(&self, s: &StudySpec, pool: usize, default_set: fn() -> crate::robot::ParamSet) -> Result<(), ScenarioError> {
-        let set = s
-            .parameter_set(default_set)
-            .map_err(|e| self.fail("study", "parameters", format!("{:?}", s.parameters.clone().unwrap_or_default()), &e.to_string()))?;
-        let m = set.len();
-        if m == 0 {
-            return Err(self.fail("study", "parameters", "[]", "needs at least one parameter (absent: the device's default set)"));
-        }
-        if s.set_sizes.is_empty() {
-            return Err(self.fail("study", "set_sizes", "[]", "needs at least one set size"));
-        }
-        if s.set_sizes.len() > crate::study::MAX_SET_SIZES {
-            return Err(self.fail("study", "set_sizes", s.set_sizes.len(), &format!("at most {} set sizes", crate::study::MAX_SET_SIZES)));
-        }
-        for &n in &s.set_sizes {
-            if (n as usize) * 3 < m || n as usize >= pool {
-                return Err(self.fail(
-                    "study",
-                    "set_sizes",
-                    n,
-                    &format!("each size must give at least {m} equations (3 per configuration) and stay below the pool of {pool}"),
-                ));
-            }
-        }
+        let set = s.parameter_set(default_set);
+        let shown = || format!("{:?}", s.parameters.clone().unwrap_or_default());
+        let why = set
+            .as_ref()
+            .err()
+            .map_or_else(|| "names of parameters the device can identify (absent: its default set)".into(), |e| e.to_string());
+        self.require("study", "parameters", set.is_ok(), shown(), &why)?;
+        let m = set.map(|set| set.len()).unwrap_or_default();
+        self.require("study", "parameters", m > 0, "[]", "needs at least one parameter (absent: the device's default set)")?;
+        self.require("study", "set_sizes", !s.set_sizes.is_empty(), "[]", "needs at least one set size")?;
+        let most = crate::study::MAX_SET_SIZES;
+        self.require("study", "set_sizes", s.set_sizes.len() <= most, s.set_sizes.len(), &format!("at most {most} set sizes"))?;
+        let why = format!("each size must give at least {m} equations (3 per configuration) and stay below the pool of {pool}");
+        let bad = s.set_sizes.iter().find(|&&n| (n as usize) * 3 < m || n as usize >= pool);
+        self.require("study", "set_sizes", bad.is_none(), bad.copied().unwrap_or_default(), &why)?;
         self.count("study", "repetitions", s.repetitions.into(), 1, crate::study::MAX_REPETITIONS.into(), "identifications per set size")?;
-        if !s.set_sizes.contains(&s.table_set_size) {
-            return Err(self.fail("study", "table_set_size", s.table_set_size, "must be one of set_sizes"));
-        }
-        if s.selections.is_empty() || s.selections.len() > 2 {
-            return Err(self.fail("study", "selections", format!("{:?}", s.selections), "needs one or both of \"random\" and \"detmax\""));
-        }
+        self.require("study", "table_set_size", s.set_sizes.contains(&s.table_set_size), s.table_set_size, "must be one of set_sizes")?;
+        let selections_ok = !s.selections.is_empty() && s.selections.len() <= 2;
+        self.require(
+            "study",
+            "selections",
+            selections_ok,
+            format!("{:?}", s.selections),
+            "needs one or both of \"random\" and \"detmax\"",
+        )?;
         let tasks = s.selections.len() as u64 * s.set_sizes.len() as u64 * u64::from(s.repetitions);
-        if tasks > crate::study::MAX_TASKS {
-            return Err(self.fail(
-                "study",
-                "repetitions",
-                s.repetitions,
-                &format!("{tasks} identifications in all: at most {}", crate::study::MAX_TASKS),
-            ));
-        }
+        let most = crate::study::MAX_TASKS;
+        self.require(
+            "study",
+            "repetitions",
+            tasks <= most,
+            s.repetitions,
+            &format!("at most {most} identifications in all (selections x set sizes x repetitions)"),
+        )?;
         self.within("study", "detmax_max_excursion", s.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
         self.within("study", "rank_rtol", s.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
         Ok(())
@@ -247,37 +281,34 @@ impl Checker<'_> {
 
     /// A count within `[lo, hi]`: the upper bound keeps every run within memory and time.
     pub fn count(&self, section: &str, key: &str, v: u64, lo: u64, hi: u64, what: &str) -> Result<(), ScenarioError> {
-        if (lo..=hi).contains(&v) { Ok(()) } else { Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})"))) }
+        self.require(section, key, (lo..=hi).contains(&v), v, &format!("must be within [{lo}, {hi}] ({what})"))
     }
 
     /// A band of `[expect]` (every one is an error in mm): a published value of a robot's size,
     /// 1 nm to 10 m, and a tolerance in [0, 10].
     pub fn band(&self, key: &str, b: &Option<Band>) -> Result<(), ScenarioError> {
-        if let Some(b) = b {
-            if !(b.value.is_finite() && (1e-6..=1e4).contains(&b.value)) {
-                return Err(self.fail("expect", &format!("{key}.value"), b.value, "must be the published value in mm, within [1e-6, 1e4]"));
-            }
-            if !(b.tolerance.is_finite() && (0.0..=10.0).contains(&b.tolerance)) {
-                return Err(self.fail(
-                    "expect",
-                    &format!("{key}.tolerance"),
-                    b.tolerance,
-                    "must be a relative tolerance within [0, 10] (0.2 = +-20 %)",
-                ));
-            }
-        }
-        Ok(())
+        let (value, tolerance) = b.map_or((1.0, 0.0), |b| (b.value, b.tolerance));
+        let why = "must be the published value in mm, within [1e-6, 1e4]";
+        self.require("expect", &format!("{key}.value"), value.is_finite() && (1e-6..=1e4).contains(&value), value, why)?;
+        let why = "must be a relative tolerance within [0, 10] (0.2 = +-20 %)";
+        self.require("expect", &format!("{key}.tolerance"), tolerance.is_finite() && (0.0..=10.0).contains(&tolerance), tolerance, why)
     }
 
     /// A bound of `[expect]` that is a plain number: finite and within `[lo, hi]`.
     pub fn bound(&self, key: &str, v: Option<f64>, lo: f64, hi: f64) -> Result<(), ScenarioError> {
-        v.map_or(Ok(()), |v| self.within("expect", key, v, lo, hi, "bound of the check"))
+        self.within_optional("expect", key, v, lo, hi, "bound of the check")
     }
 
     /// Every parameter of the identified set must be separable on `model` by some set of
     /// configurations: a parameter with a zero column (theta_offs6 with the TCP on the joint-6 axis)
     /// or a redundancy (theta_offs1 with the base's alpha) is refused here, not found 510 times.
-    pub fn identifiable(&self, model: &crate::robot::RobotModel, set: &crate::robot::ParamSet, tool_key: &str) -> Result<(), ScenarioError> {
+    pub fn identifiable(
+        &self,
+        model: &crate::robot::RobotModel,
+        set: &crate::robot::ParamSet,
+        tool_key: &str,
+    ) -> Result<(), ScenarioError> {
+        self.note("study", "parameters", || "every parameter separable by some set of configurations on this robot and tool".into());
         let hidden = crate::identify::observability::structurally_unidentifiable(model, set);
         if hidden.is_empty() {
             return Ok(());
@@ -299,10 +330,17 @@ impl Checker<'_> {
 
     /// A finite number within `[lo, hi]`.
     pub fn within(&self, section: &str, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<(), ScenarioError> {
-        if v.is_finite() && v >= lo && v <= hi {
-            Ok(())
-        } else {
-            Err(self.fail(section, key, v, &format!("must be within [{lo}, {hi}] ({what})")))
+        self.require(section, key, v.is_finite() && v >= lo && v <= hi, v, &format!("must be within [{lo}, {hi}] ({what})"))
+    }
+
+    /// An optional number: finite and within `[lo, hi]` when given.
+    pub fn within_optional(&self, section: &str, key: &str, v: Option<f64>, lo: f64, hi: f64, what: &str) -> Result<(), ScenarioError> {
+        match v {
+            Some(v) => self.within(section, key, v, lo, hi, what),
+            None => {
+                self.note(section, key, || format!("must be within [{lo}, {hi}] ({what})"));
+                Ok(())
+            }
         }
     }
 }
@@ -343,4 +381,3 @@ pub fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::ro
 pub fn relative_to(scenario: &Path, file: &Path) -> PathBuf {
     if file.is_absolute() { file.to_path_buf() } else { scenario.parent().unwrap_or(Path::new("")).join(file) }
 }
-

@@ -14,7 +14,7 @@ use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
 
 /// The tracker as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct LaserTrackerSpec {
     /// Horizontal distance from sphere 3, away from the robot base, mm.

@@ -14,7 +14,7 @@ use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
 
 /// The optical CMM as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct OpticalCmmSpec {
     /// Volumetric accuracy (2 sigma of the 3D error) inside the calibrated volume, mm. ASSUMED.

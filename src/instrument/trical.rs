@@ -18,7 +18,7 @@ use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
 
 /// The device as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct TriCalSpec {
     /// Accuracy of each indicator, um (Table 1: 3 um, Mitutoyo ID-C112XB); a reading's error is

@@ -55,7 +55,7 @@ fn moved<R: Rng + ?Sized>(model: &RobotModel, set: &ParamSet, rng: &mut R, delta
 /// The spread of a robot's parameters around the scenario's truth, one standard deviation per
 /// parameter type (`[robot.spread]`): each world (realisation) of a study draws its own robot.
 /// Zero everywhere (the default) keeps the scenario's truth.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SpreadSpec {
     /// Lengths (a, d, base x y z, tool), mm.

@@ -11,13 +11,13 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
 
+use super::kinematics::KinState;
 use super::kinematics::forward;
 use super::model::{JOINTS, Joints, RobotModel};
-use super::kinematics::KinState;
 
 /// Effects outside the identified model, as a scenario describes them. Every amplitude defaults
 /// to zero (off).
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct UnmodelledSpec {
     /// Amplitude of the low-order transmission harmonics (orders 1 and 2: eccentricity), per joint

@@ -17,7 +17,7 @@ use serde::Deserialize;
 use crate::identify::{DetmaxOptions, Fit, FitOutcome, Observability, PoolJacobian, detmax};
 
 /// How an identification set is chosen from the pool.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Selection {
     /// Drawn uniformly from the pool (the SPMS paper).

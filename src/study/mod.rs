@@ -20,7 +20,7 @@ pub use engine::{Identified, Selection, Task};
 pub use stats::ErrorStats;
 
 /// The name of an identification solver, as a scenario gives it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SolverName {
     /// Gauss-Newton with the pseudo-inverse step (the TriCal paper, eqs. 14-15).
@@ -30,7 +30,7 @@ pub enum SolverName {
 }
 
 /// The `[study]` table of a scenario, the same for every device: which sets are identified and how.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct StudySpec {
     /// Identification set sizes (the TriCal paper: 20 to 100).
@@ -108,4 +108,3 @@ pub const MAX_REPETITIONS: u32 = 10_000;
 pub const MAX_SET_SIZES: usize = 1_000;
 /// Most identifications a study takes in all (selections x set sizes x repetitions).
 pub const MAX_TASKS: u64 = 1_000_000;
-

@@ -24,7 +24,7 @@ use crate::robot::{Joints, KinState, ParamSet, RobotModel, UnmodelledSpec, Virtu
 use crate::seeds::{spms_cell as streams, stream};
 
 /// The robot, as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ArmSpec {
     /// The true geometry.
@@ -65,7 +65,7 @@ impl Default for ArmSpec {
 }
 
 /// Which published table the true ER20-C10 geometry is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TruthTable {
     /// Table 5 (the robot file's truth) with delta theta_2 left out.
@@ -105,7 +105,7 @@ impl ArmSpec {
 }
 
 /// Where the head stands and how the robot presents the sphere, as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct StationSpec {
     /// The points where the beams converge, one per placement of the head (station), robot base
@@ -146,7 +146,7 @@ impl Default for StationSpec {
 }
 
 /// The ISO 9283 test, as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct IsoSpec {
     /// Cube centre, robot base frame, mm.

@@ -19,7 +19,7 @@ use crate::instrument::spms::beams::{BeamData, Form, PsoOptions, levenberg_marqu
 use crate::seeds::{spms_head as streams, stream};
 
 /// The head and its reference sphere, as a scenario describes them.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct HeadSpec {
     /// Reference sphere diameter, mm (the paper: 50.8143).
@@ -40,7 +40,7 @@ impl Default for HeadSpec {
 }
 
 /// The beam identification and accuracy experiment, as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct BeamIdSpec {
     /// Poses of the head around the fixed sphere (the paper: 55).

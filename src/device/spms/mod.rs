@@ -21,7 +21,9 @@ use std::time::Instant;
 
 pub use self::spec::SpmsScenario;
 use self::study::{SpmsFigures, SpmsResults};
-use super::{Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport};
+use super::{
+    Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
+};
 pub use crate::instrument::spms::*;
 use crate::study::check::Check;
 use crate::study::engine::Identified;
@@ -61,6 +63,14 @@ impl Device for SpmsDevice {
 
     fn error_sources(&self) -> &'static [ErrorSource] {
         &SOURCES
+    }
+
+    fn defaults(&self) -> toml::Table {
+        spec::defaults()
+    }
+
+    fn notes(&self) -> &'static [&'static str] {
+        &[crate::device::SHARED_NOTES, spec::NOTES]
     }
 }
 

@@ -9,7 +9,7 @@ use crate::device::scenario::{Checker, Header, ScenarioError, deserialize, load_
 use crate::study::StudySpec;
 
 /// An SPMS scenario file as written.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 struct SpmsFile {
     #[allow(dead_code)]
@@ -29,6 +29,17 @@ struct SpmsFile {
     study: StudySpec,
     #[serde(default)]
     expect: super::study::SpmsExpect,
+}
+
+/// The notes of the keys of an SPMS scenario (SOURCED / ASSUMED / FITTED), for `calsim keys`.
+pub const NOTES: &str = include_str!("keys.toml");
+
+/// An SPMS scenario with every key at its default (the SPMS `[study]` defaults included), as TOML.
+pub fn defaults() -> toml::Table {
+    let t = table(&crate::device::keys::minimal("spms"), "defaults").expect("TOML");
+    let file: SpmsFile =
+        deserialize(with_defaults(t, "study", super::study::STUDY_DEFAULTS), "defaults").expect("the defaults deserialize");
+    toml::Table::try_from(&file).expect("a scenario serializes")
 }
 
 /// A loaded, checked SPMS scenario.
@@ -103,14 +114,13 @@ pub fn check(f: &super::study::SpmsSpec, path: &str) -> Result<(), ScenarioError
     c.count("beams", "pso_population", b.pso_population as u64, 2, 100_000, "particles")?;
     c.count("beams", "pso_iterations", b.pso_iterations as u64, 1, 10_000, "iterations")?;
     let evaluations = b.pso_population as u64 * b.pso_iterations as u64;
-    if evaluations > 100_000_000 {
-        return Err(c.fail(
-            "beams",
-            "pso_iterations",
-            b.pso_iterations,
-            &format!("{evaluations} swarm evaluations: at most 1e8 (population x iterations)"),
-        ));
-    }
+    c.require(
+        "beams",
+        "pso_iterations",
+        evaluations <= 100_000_000,
+        b.pso_iterations,
+        "at most 1e8 swarm evaluations (pso_population x pso_iterations)",
+    )?;
     c.within("beams", "pso_half_width_mm", b.pso_half_width_mm, 1e-6, 100.0, "search box")?;
     c.within("beams", "pso_half_width_dir", b.pso_half_width_dir, 1e-9, 1.0, "search box")?;
     c.within("beams", "pso_half_width_centre_mm", b.pso_half_width_centre_mm, 1e-6, 100.0, "search box")?;
@@ -131,21 +141,14 @@ pub fn check(f: &super::study::SpmsSpec, path: &str) -> Result<(), ScenarioError
     c.spread(&r.spread)?;
 
     let st = &f.station;
-    if !(1..=20).contains(&st.sphere_points_base_mm.len()) {
-        return Err(c.fail("station", "sphere_points_base_mm", st.sphere_points_base_mm.len(), "one to twenty stations"));
-    }
+    let n = st.sphere_points_base_mm.len();
+    c.require("station", "sphere_points_base_mm", (1..=20).contains(&n), n, "one to twenty stations")?;
     for (i, p) in st.sphere_points_base_mm.iter().enumerate() {
         for (k, v) in p.iter().enumerate() {
             c.within("station", &format!("sphere_points_base_mm[{i}][{k}]"), *v, -3000.0, 3000.0, "within the ER20-C10's reach")?;
         }
-        if p[0].hypot(p[1]) < 300.0 {
-            return Err(c.fail(
-                "station",
-                "sphere_points_base_mm",
-                format!("{p:?}"),
-                "a station must stand at least 300 mm from the base axis",
-            ));
-        }
+        let why = "a station must stand at least 300 mm from the base axis";
+        c.require("station", "sphere_points_base_mm", p[0].hypot(p[1]) >= 300.0, format!("{p:?}"), why)?;
     }
     for (k, v) in st.sphere_centre_head_mm.iter().enumerate() {
         c.within("station", &format!("sphere_centre_head_mm[{k}]"), *v, -1000.0, 1000.0, "sphere centre in the head frame")?;
@@ -193,4 +196,3 @@ fn expect(c: &Checker<'_>, e: &super::study::SpmsExpect) -> Result<(), ScenarioE
     }
     c.bound("fit_residual_below_003_min", e.fit_residual_below_003_min, 0.0, 1.0)
 }
-

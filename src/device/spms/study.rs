@@ -28,7 +28,7 @@ selections = ["random", "detmax"]
 "#;
 
 /// The `[expect]` table of an SPMS scenario: published figures with their bands.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SpmsExpect {
     /// Table 3: largest measuring error, mm.

@@ -22,7 +22,9 @@ use super::trical::experiment::Experiment;
 use super::trical::figures::Figures;
 use super::trical::study::StudyResults;
 use super::trical::{plots, results, table8};
-use super::{Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport};
+use super::{
+    Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
+};
 use crate::identify::Observation;
 use crate::io::manifest::Provenance;
 use crate::io::record::{RecordError, Rr, heat, p3};
@@ -63,6 +65,14 @@ impl Device for TrackerDevice {
 
     fn error_sources(&self) -> &'static [ErrorSource] {
         &SOURCES
+    }
+
+    fn defaults(&self) -> toml::Table {
+        spec::defaults()
+    }
+
+    fn notes(&self) -> &'static [&'static str] {
+        &[crate::device::SHARED_NOTES, crate::device::trical::spec::NOTES, spec::NOTES]
     }
 }
 

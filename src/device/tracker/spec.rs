@@ -16,7 +16,7 @@ use crate::instrument::optical_cmm::OpticalCmmSpec;
 use crate::study::check::Band;
 
 /// Which instrument measures the identification pool.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
 #[serde(rename_all = "snake_case")]
 pub enum InstrumentKind {
     /// The cell's laser tracker (Table 8, laser tracker row).
@@ -27,7 +27,7 @@ pub enum InstrumentKind {
 }
 
 /// The `[instrument]` table.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct InstrumentSpec {
     /// The instrument.
@@ -45,7 +45,7 @@ impl Default for InstrumentSpec {
 
 /// The `[expect]` table: Table 8's row of the instrument, each figure the median over the
 /// repetitions at the table set size of the validation error's statistic, mm.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackerExpect {
     /// Median error after calibration.
@@ -57,7 +57,7 @@ pub struct TrackerExpect {
 }
 
 /// The sections of a tracker scenario that the TriCal cell does not have.
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 struct Own {
     #[serde(default)]
@@ -66,6 +66,20 @@ struct Own {
     optical_cmm: OpticalCmmSpec,
     #[serde(default)]
     expect: TrackerExpect,
+}
+
+/// The notes of the tracker's own keys (SOURCED / ASSUMED / FITTED), for `calsim keys`; the
+/// cell's keys are the TriCal scenario's.
+pub const NOTES: &str = include_str!("keys.toml");
+
+/// A tracker scenario with every key at its default, as TOML: the TriCal cell's keys (the
+/// tracker's `[expect]` in place of the TriCal's) and its own sections.
+pub fn defaults() -> toml::Table {
+    let mut t = crate::device::trical::spec::defaults();
+    let own = toml::Table::try_from(Own::default()).expect("the tracker's sections serialize");
+    t.extend(own);
+    t.insert("kind".into(), toml::Value::String("tracker".into()));
+    t
 }
 
 /// A loaded, checked tracker scenario.
@@ -112,15 +126,16 @@ pub fn parse_table(text: &str, mut t: toml::Table, path: &Path) -> Result<Tracke
 pub fn check(s: &TrackerScenario, path: &str) -> Result<(), ScenarioError> {
     let c = Checker { path };
     c.count("instrument", "pool", s.instrument.pool.into(), 50, 100_000, "configurations of the identification pool")?;
-    if let Some(&n) = s.cell.study.set_sizes.iter().find(|&&n| n >= s.instrument.pool) {
-        return Err(c.fail("study", "set_sizes", n, &format!("each size must stay below the instrument's pool of {}", s.instrument.pool)));
-    }
+    let too_big = s.cell.study.set_sizes.iter().find(|&&n| n >= s.instrument.pool);
+    let why = format!("each size must stay below the instrument's pool of {}", s.instrument.pool);
+    c.require("study", "set_sizes", too_big.is_none(), too_big.copied().unwrap_or_default(), &why)?;
     let o = &s.optical_cmm;
     c.within("optical_cmm", "volumetric_accuracy_mm", o.volumetric_accuracy_mm, 0.0, 10.0, "2 sigma of the 3D error")?;
     c.within("optical_cmm", "calibrated_range_mm", o.calibrated_range_mm, 1.0, 1e5, "range of the calibrated volume")?;
     c.within("optical_cmm", "accuracy_growth_mm_per_m", o.accuracy_growth_mm_per_m, 0.0, 10.0, "growth beyond it")?;
     c.within("optical_cmm", "max_range_mm", o.max_range_mm, o.calibrated_range_mm, 1e5, "farthest target seen")?;
-    for (k, b) in [("after_median_mm", &s.expect.after_median_mm), ("after_std_mm", &s.expect.after_std_mm), ("after_max_mm", &s.expect.after_max_mm)]
+    for (k, b) in
+        [("after_median_mm", &s.expect.after_median_mm), ("after_std_mm", &s.expect.after_std_mm), ("after_max_mm", &s.expect.after_max_mm)]
     {
         c.band(k, b)?;
     }

@@ -4,9 +4,9 @@
 use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
 
-use crate::device::trical::campaign::{self, Campaign, CampaignError, CampaignSpec, Setup};
 use crate::cell::world_frame::WorldFrameError;
 use crate::cell::{Cell, CellSpec};
+use crate::device::trical::campaign::{self, Campaign, CampaignError, CampaignSpec, Setup};
 use crate::instrument::laser_tracker::{LaserTracker, LaserTrackerSpec};
 use crate::instrument::trical::{TriCal, TriCalSpec};
 use crate::robot::builtin::{TRICAL_PAYLOAD, TRICAL_TCP_MM, irb120, trical_2018_table7};
@@ -15,7 +15,7 @@ use crate::robot::{Inertial, RobotModel, UnmodelledSpec, VirtualRobot, world_fro
 use crate::seeds::{self, split_seed, stream};
 
 /// The physical robot as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct RobotSpec {
     /// ISO 9283 position repeatability RP, mm (the paper: 0.010 mm).

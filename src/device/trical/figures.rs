@@ -4,14 +4,14 @@
 
 use serde::Deserialize;
 
-use crate::robot::RobotModel;
 use crate::device::trical::study::StudyResults;
+use crate::robot::RobotModel;
 use crate::study::check::{Band, Bound, Check, describe};
 use crate::study::published::published;
 use crate::study::stats::{ErrorStats, iqr, median, pearson};
 
 /// The `[expect]` table of a TriCal scenario: the bands the published figures are checked with.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExpectSpec {
     /// Mean error over the validation poses before calibration, mm.

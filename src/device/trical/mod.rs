@@ -15,8 +15,8 @@ pub mod table8;
 
 use std::any::Any;
 use std::cell::Cell;
-use std::sync::OnceLock;
 use std::path::Path;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use self::experiment::Experiment;
@@ -24,7 +24,9 @@ use self::figures::Figures;
 use self::results::Timings;
 pub use self::spec::TricalScenario;
 use self::study::StudyResults;
-use super::{Device, DeviceError, ErrorSource, Header, Outcome, Refit, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport};
+use super::{
+    Device, DeviceError, ErrorSource, Header, Outcome, Refit, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
+};
 use crate::robot::RobotModel;
 use crate::study::check::Check;
 use crate::study::engine::Identified;
@@ -66,6 +68,14 @@ impl Device for TricalDevice {
 
     fn error_sources(&self) -> &'static [ErrorSource] {
         &SOURCES
+    }
+
+    fn defaults(&self) -> toml::Table {
+        spec::defaults()
+    }
+
+    fn notes(&self) -> &'static [&'static str] {
+        &[crate::device::SHARED_NOTES, spec::NOTES]
     }
 }
 
@@ -153,8 +163,8 @@ impl TricalOutcome {
         let experiment = spec.build(seed).map_err(|e| DeviceError::new(format!("campaign: {e}")))?;
         let campaign_s = t0.elapsed().as_secs_f64();
         let before = spec.before_model(&experiment.campaign);
-        let results = study::run(&experiment, &before, &s.study, seed, progress)
-            .map_err(|e| DeviceError::new(format!("[study] parameters: {e}")))?;
+        let results =
+            study::run(&experiment, &before, &s.study, seed, progress).map_err(|e| DeviceError::new(format!("[study] parameters: {e}")))?;
         let timings = Timings {
             campaign_s,
             pool_s: experiment.campaign.pool_wall_s,

@@ -15,7 +15,7 @@ use crate::instrument::trical::TriCalSpec;
 use crate::study::StudySpec;
 
 /// A scenario file as written.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 struct ScenarioFile {
     /// `"trical"` or absent (checked by [`crate::device::device_of`]).
@@ -37,6 +37,16 @@ struct ScenarioFile {
     campaign: CampaignSpec,
     #[serde(default)]
     expect: ExpectSpec,
+}
+
+/// The notes of the keys of a TriCal scenario (SOURCED / ASSUMED / FITTED), for `calsim keys`.
+pub const NOTES: &str = include_str!("keys.toml");
+
+/// A TriCal scenario with every key at its default, as TOML.
+pub fn defaults() -> toml::Table {
+    let text = crate::device::keys::minimal("trical");
+    let file: ScenarioFile = deserialize(table(&text, "defaults").expect("TOML"), "defaults").expect("the defaults deserialize");
+    toml::Table::try_from(&file).expect("a scenario serializes")
 }
 
 /// A loaded, checked TriCal scenario.
@@ -129,16 +139,14 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     let r = &f.robot;
     c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
     c.within("robot", "payload_kg", r.payload_kg, 0.0, 3.0, "device mass; the IRB 120 carries 3 kg")?;
-    if let Some(dm) = r.validation_payload_change_kg {
-        c.within(
-            "robot",
-            "validation_payload_change_kg",
-            dm,
-            -r.payload_kg,
-            3.0 - r.payload_kg,
-            "setup 2's mass on the flange within 0-3 kg",
-        )?;
-    }
+    c.within_optional(
+        "robot",
+        "validation_payload_change_kg",
+        r.validation_payload_change_kg,
+        -r.payload_kg,
+        3.0 - r.payload_kg,
+        "setup 2's mass on the flange within 0-3 kg",
+    )?;
     for (k, v) in r.tcp_mm.iter().enumerate() {
         c.within("robot", &format!("tcp_mm[{k}]"), *v, -500.0, 500.0, "TCP in the flange frame")?;
     }
@@ -148,34 +156,33 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     for (k, v) in r.repeatability_reference_q_deg.iter().enumerate() {
         c.within("robot", &format!("repeatability_reference_q_deg[{k}]"), *v, -400.0, 400.0, "joint angle")?;
     }
-    if let Some(base) = r.nominal_base_mm_deg {
-        for (k, v) in base.iter().enumerate() {
-            let (lo, hi) = if k < 3 { (-5000.0, 5000.0) } else { (-360.0, 360.0) };
-            c.within("robot", &format!("nominal_base_mm_deg[{k}]"), *v, lo, hi, "x, y, z in mm then alpha, beta, gamma in deg")?;
-        }
+    for k in 0..6 {
+        let (lo, hi) = if k < 3 { (-5000.0, 5000.0) } else { (-360.0, 360.0) };
+        let v = r.nominal_base_mm_deg.map(|base| base[k]);
+        c.within_optional("robot", &format!("nominal_base_mm_deg[{k}]"), v, lo, hi, "x, y, z in mm then alpha, beta, gamma in deg")?;
     }
     c.unmodelled(&r.unmodelled)?;
     c.spread(&r.spread)?;
 
     let cell = &f.cell;
-    if !(3..=12).contains(&cell.spheres_w_mm.len()) {
-        return Err(c.fail("cell", "spheres_w_mm", cell.spheres_w_mm.len(), "three to twelve datum spheres (the first three define {W})"));
-    }
+    let n = cell.spheres_w_mm.len();
+    c.require("cell", "spheres_w_mm", (3..=12).contains(&n), n, "three to twelve datum spheres (the first three define {W})")?;
     let p = &cell.spheres_w_mm;
-    if p[0] != [0.0, 0.0, 0.0] || p[1][1] != 0.0 || p[1][2] != 0.0 || p[1][0] <= 0.0 || p[2][2] != 0.0 || p[2][1] <= 0.0 {
-        return Err(c.fail(
-            "cell",
-            "spheres_w_mm",
-            format!("{:?}", &p[..3]),
-            "the first three define {W} (eqs. 1-5): [0,0,0], then [d12,0,0] with d12 > 0, then [x,y,0] with y > 0",
-        ));
-    }
+    let frame_ok = p[0] == [0.0, 0.0, 0.0] && p[1][1] == 0.0 && p[1][2] == 0.0 && p[1][0] > 0.0 && p[2][2] == 0.0 && p[2][1] > 0.0;
+    c.require(
+        "cell",
+        "spheres_w_mm",
+        frame_ok,
+        format!("{:?}", &p[..3]),
+        "the first three define {W} (eqs. 1-5): [0,0,0], then [d12,0,0] with d12 > 0, then [x,y,0] with y > 0",
+    )?;
     c.within("cell", "ball_diameter_mm", cell.ball_diameter_mm, 1.0, 100.0, "datum ball")?;
     for (i, a) in p.iter().enumerate() {
         for (k, v) in a.iter().enumerate() {
             c.within("cell", &format!("spheres_w_mm[{i}][{k}]"), *v, -2000.0, 2000.0, "sphere centre in {W}, within the robot's reach")?;
         }
         for (j, b) in p.iter().enumerate().take(i) {
+            c.rule("cell", "spheres_w_mm", "datum spheres on their risers at least two ball diameters plus a riser apart");
             let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
             if d < 2.0 * cell.ball_diameter_mm + 2.0 * cell.riser_radius_mm {
                 return Err(c.fail(
@@ -282,4 +289,3 @@ fn expect(c: &Checker<'_>, e: &ExpectSpec) -> Result<(), ScenarioError> {
     c.bound("fig9_spread_ratio_min", e.fig9_spread_ratio_min, 0.0, 1000.0)?;
     c.bound("fig12_abs_r_max", e.fig12_abs_r_max, 0.0, 1.0)
 }
-

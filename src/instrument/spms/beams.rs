@@ -19,7 +19,7 @@ use rand::RngExt;
 use super::Beam;
 
 /// The parametrisation of the beams.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Form {
     /// The paper's `P_k`, `gamma_k` (6 per beam), sphere centre.

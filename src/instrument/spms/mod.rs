@@ -62,7 +62,7 @@ pub fn table2_beams() -> Vec<Beam> {
 }
 
 /// The laser range sensor (paper Table 1).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SensorSpec {
     /// Lower end of the measuring range, mm.

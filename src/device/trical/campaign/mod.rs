@@ -24,7 +24,7 @@ pub use centring::{Approach, CentringError, CentringResult, centre};
 pub use crate::robot::uniform_configuration;
 
 /// The campaign as a scenario describes it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct CampaignSpec {
     /// Identification configurations per datum sphere (the paper: 120, 360 in all).

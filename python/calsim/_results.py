@@ -1,0 +1,171 @@
+"""What the commands return: a results directory with its tables as polars DataFrames (read from
+the parquet files calsim wrote), its figures and summary, and what the command reported."""
+
+from __future__ import annotations
+
+import json
+from functools import cached_property
+from pathlib import Path
+
+import polars as pl
+
+
+class Results:
+    """A results directory: ``tables`` (every ``*.parquet`` by its stem, as DataFrames, read once),
+    ``figures`` (the PNG files), ``summary`` (``summary.md``) and ``manifest`` (``manifest.json``)."""
+
+    def __init__(self, dest: str | Path | None) -> None:
+        self.dest = None if dest is None else Path(dest)
+
+    @cached_property
+    def tables(self) -> dict[str, pl.DataFrame]:
+        """Every table of the directory by name (``tasks``, ``parameters``, ``points``, ...)."""
+        if self.dest is None:
+            return {}
+        return {p.stem: pl.read_parquet(p) for p in sorted(self.dest.glob("*.parquet"))}
+
+    def table(self, name: str) -> pl.DataFrame:
+        """One table by name; a KeyError lists the tables there are."""
+        try:
+            return self.tables[name]
+        except KeyError:
+            raise KeyError(f"{name!r}: no such table in {self.dest} (there are: {', '.join(self.tables)})") from None
+
+    @property
+    def figures(self) -> list[Path]:
+        """The figures written (PNG; an SVG of each lies beside it)."""
+        return [] if self.dest is None else sorted(self.dest.glob("*.png"))
+
+    @property
+    def summary(self) -> str:
+        """``summary.md``, the tables and figures in Markdown ("" when there is none)."""
+        path = None if self.dest is None else self.dest / "summary.md"
+        return path.read_text() if path is not None and path.is_file() else ""
+
+    @property
+    def manifest(self) -> dict:
+        """``manifest.json``: scenario and its hash, seed, version, overrides, table hashes, timings."""
+        path = None if self.dest is None else self.dest / "manifest.json"
+        return json.loads(path.read_text()) if path is not None and path.is_file() else {}
+
+    def __repr__(self) -> str:
+        names = ", ".join(self.tables) if self.dest is not None else "none"
+        return f"{type(self).__name__}(dest={str(self.dest)!r}, tables=[{names}], figures={len(self.figures)})"
+
+
+_CHECK_SCHEMA = {
+    "figure": pl.String,
+    "published": pl.String,
+    "published_value": pl.Float64,
+    "calsim": pl.String,
+    "value": pl.Float64,
+    "band": pl.String,
+    "result": pl.String,
+}
+
+_DISTRIBUTION_SCHEMA = {
+    "figure": pl.String,
+    "published": pl.String,
+    "published_value": pl.Float64,
+    "run0": pl.Float64,
+    "median": pl.Float64,
+    "p10": pl.Float64,
+    "p90": pl.Float64,
+    "count": pl.Int64,
+    "band": pl.String,
+    "result": pl.String,
+}
+
+
+class RunResult(Results):
+    """What ``run`` and ``check`` did: the results directory, and ``checks`` (the published
+    figures beside calsim's, with band and verdict ``pass``, ``miss`` or ``-``), ``distribution``
+    (the same over realisations, or None), ``passed`` / ``missed``, ``timing``, ``warnings``."""
+
+    def __init__(self, report: dict) -> None:
+        super().__init__(report["dest"])
+        self.name: str = report["name"]
+        self.kind: str = report["kind"]
+        self.seed: int = report["seed"]
+        self.threads: int = report["threads"]
+        self.timing: str = report["timing"]
+        self.realisations: int = report["realisations"]
+        self.checked: int = report["checked"]
+        self.missed: int = report["missed"]
+        self.warnings: list[str] = list(report["warnings"])
+        self.checks = pl.DataFrame(report["checks"], schema=_CHECK_SCHEMA)
+        dist = report["distribution"]
+        self.distribution = None if dist is None else pl.DataFrame(dist, schema=_DISTRIBUTION_SCHEMA)
+
+    @property
+    def passed(self) -> bool:
+        """Every banded figure within its band (over the realisations when several ran)."""
+        return self.missed == 0
+
+    def __repr__(self) -> str:
+        return (
+            f"RunResult({self.name!r}, kind={self.kind!r}, seed={self.seed}, "
+            f"{self.checked - self.missed} of {self.checked} figures within their bands, dest={str(self.dest)!r})"
+        )
+
+
+class SweepResult(Results):
+    """What a sweep or a merge did: the merged results (``tables['points']``, ``tables['sweep']``,
+    the figures), the work units and how many failed; for one shard, ``shard_dir`` and no tables."""
+
+    def __init__(self, report: dict) -> None:
+        merged = report.get("merged")
+        super().__init__(None if merged is None else merged["dest"])
+        self.name: str = report["name"]
+        self.units: int = merged["units"] if merged else report["units"]
+        self.failed: int = merged["failed"] if merged else 0
+        self.run_s: float | None = report.get("run_s")
+        self.shard: tuple[int, int] | None = tuple(report["shard"]) if "shard" in report else None
+        self.shard_dir = Path(report["shard_dir"]) if "shard_dir" in report else None
+        self.warnings: list[str] = list(report.get("warnings", []))
+        self._summary = merged["summary"] if merged else ""
+
+    @property
+    def summary(self) -> str:
+        return self._summary
+
+
+class BudgetResult(Results):
+    """What a budget did: ``tables['budget']`` (per source and configuration),
+    ``tables['prediction']`` (the linear prediction beside the Monte Carlo), the figures and the
+    budget table as text (``summary``)."""
+
+    def __init__(self, report: dict) -> None:
+        super().__init__(report["dest"])
+        self.units: int = report["units"]
+        self.run_s: float = report["run_s"]
+        self.warnings: list[str] = list(report["warnings"])
+        self._summary: str = report["summary"]
+
+    @property
+    def summary(self) -> str:
+        return self._summary
+
+
+class ExportResult:
+    """An exported identification: ``dest`` holds ``robot.toml`` (the identified model with each
+    parameter's standard deviation), ``before.toml``, ``robot.urdf`` and ``calibration.yaml``."""
+
+    def __init__(self, report: dict) -> None:
+        self.dest = Path(report["dest"])
+        self.scenario: str = report["scenario"]
+        self.task: int = report["task"]
+        self.set_size: int = report["set_size"]
+        self.validation_median_mm: float = report["validation_median_mm"]
+        self.files = [self.dest / f for f in report["files"]]
+
+    @property
+    def robot_file(self) -> Path:
+        """The calibrated model as a robot file (``calsim compensate`` takes it)."""
+        return self.dest / "robot.toml"
+
+    def __repr__(self) -> str:
+        return (
+            f"ExportResult(task={self.task}, set_size={self.set_size}, "
+            f"validation_median_mm={self.validation_median_mm:.4f}, dest={str(self.dest)!r})"
+        )

@@ -1,0 +1,501 @@
+//! `calsim._calsim`, the native half of the Python package: calsim's application layer
+//! (`calsim::app`) called from Python, as the CLI calls it. Each command takes a scenario or sweep
+//! path and keyword overrides, runs with the interpreter released (other Python threads go on, a
+//! notebook stays responsive), reports progress to a Python callback from the worker threads, and
+//! returns a dict the pure-Python half (`calsim/__init__.py`) turns into result objects whose
+//! tables are polars DataFrames. Every `calsim::app::Error` becomes a Python exception of the
+//! matching class carrying the file (`path`), the key (`key`) and the value where there is one.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use calsim::app::{self, Observer};
+use calsim::design::budget::BudgetError as CoreBudgetError;
+use calsim::design::sweep::{MergeError as CoreMergeError, SweepError as CoreSweepError};
+use calsim::device::ScenarioError as CoreScenarioError;
+use calsim::io::out_dir::OutDirError;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+pyo3::create_exception!(
+    calsim,
+    CalsimError,
+    PyException,
+    "Every error calsim raises: `path` is the file, `key` the key (or line) and `value` the value at fault, where known."
+);
+pyo3::create_exception!(
+    calsim,
+    ScenarioError,
+    CalsimError,
+    "A scenario file is unusable: unreadable, malformed, an unknown key or a value out of its range."
+);
+pyo3::create_exception!(calsim, SweepError, CalsimError, "A sweep file is unusable, or one of its grid points is not a valid scenario.");
+pyo3::create_exception!(calsim, MergeError, CalsimError, "Shard directories cannot be merged.");
+pyo3::create_exception!(calsim, BudgetError, CalsimError, "A budget cannot run (no error source of the scenario is set).");
+pyo3::create_exception!(calsim, RobotFileError, CalsimError, "A robot file or URDF is unusable.");
+pyo3::create_exception!(
+    calsim,
+    InputError,
+    CalsimError,
+    "A value given to the command (a keyword, an output directory, a results directory) is unusable."
+);
+pyo3::create_exception!(calsim, StudyError, CalsimError, "A study could not run: its campaign failed, or no identification gave a model.");
+pyo3::create_exception!(calsim, FileError, CalsimError, "A file could not be read or written.");
+
+/// Most worker threads, realisations and shards a command takes (the CLI's bounds).
+const MOST_THREADS: u32 = app::MOST_THREADS;
+const MOST_REALISATIONS: u32 = 10_000;
+const MOST_SHARDS: usize = 100_000;
+
+/// What a Python exception carries beside its message.
+#[derive(Default)]
+struct Fault {
+    path: Option<String>,
+    key: Option<String>,
+    value: Option<String>,
+}
+
+/// The exception of an application error: its class, its one-line message, and the file, key and
+/// value it names.
+fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
+    let message = e.to_string();
+    let (err, fault) = match e {
+        app::Error::Scenario(s) | app::Error::Budget(CoreBudgetError::Scenario(s)) => {
+            (PyErr::new::<ScenarioError, _>(message), scenario_fault(&s))
+        }
+        app::Error::Sweep(s) | app::Error::Budget(CoreBudgetError::Sweep(s)) => (PyErr::new::<SweepError, _>(message), sweep_fault(&s)),
+        app::Error::Budget(CoreBudgetError::NoSource(path)) => {
+            (PyErr::new::<BudgetError, _>(message), Fault { path: Some(path), ..Fault::default() })
+        }
+        app::Error::Merge(CoreMergeError::Shard { path, .. }) => {
+            (PyErr::new::<MergeError, _>(message), Fault { path: Some(path), ..Fault::default() })
+        }
+        app::Error::Urdf(_) | app::Error::RobotFile(_) => (PyErr::new::<RobotFileError, _>(message), Fault::default()),
+        app::Error::OutDir(OutDirError::InTheWay { path, .. }) => {
+            (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() })
+        }
+        app::Error::OutDir(OutDirError::Io { path, .. }) | app::Error::Io { path, .. } => {
+            (PyErr::new::<FileError, _>(message), Fault { path: Some(path), ..Fault::default() })
+        }
+        app::Error::Device { path, .. } => (PyErr::new::<StudyError, _>(message), Fault { path: Some(path), ..Fault::default() }),
+        app::Error::NoModel { scenario, .. } => {
+            (PyErr::new::<StudyError, _>(message), Fault { path: Some(scenario), key: Some("study.parameters".into()), ..Fault::default() })
+        }
+        app::Error::Input { what, .. } => (PyErr::new::<InputError, _>(message), Fault { path: Some(what), ..Fault::default() }),
+    };
+    let value = err.value(py);
+    for (name, v) in [("path", fault.path.map(|p| file_of(&p))), ("key", fault.key), ("value", fault.value)] {
+        // Setting an attribute on a fresh exception instance cannot fail but for memory.
+        let _ = value.setattr(name, v);
+    }
+    err
+}
+
+/// The file a path of an error names, without a note the message adds to it (" (with
+/// command-line overrides)").
+fn file_of(shown: &str) -> String {
+    match shown.rsplit_once(" (") {
+        Some((file, note)) if note.ends_with(')') && std::path::Path::new(file).exists() => file.to_string(),
+        _ => shown.to_string(),
+    }
+}
+
+/// The file, dotted key and value of a scenario error.
+fn scenario_fault(e: &CoreScenarioError) -> Fault {
+    match e {
+        CoreScenarioError::Read { path, .. } => Fault { path: Some(path.clone()), ..Fault::default() },
+        CoreScenarioError::Parse { path, key, .. } => Fault { path: Some(path.clone()), key: Some(key.clone()), value: None },
+        CoreScenarioError::Range { path, section, key, value, .. } => Fault {
+            path: Some(path.clone()),
+            key: Some(if section.is_empty() { key.clone() } else { format!("{section}.{key}") }),
+            value: Some(value.clone()),
+        },
+    }
+}
+
+/// The file and key of a sweep error (a grid point's: the scenario key at fault).
+fn sweep_fault(e: &CoreSweepError) -> Fault {
+    match e {
+        CoreSweepError::File { path, key, .. } => Fault { path: Some(path.clone()), key: Some(key.clone()), value: None },
+        CoreSweepError::Point { path, error, .. } => Fault { path: Some(path.clone()), ..scenario_fault(error) },
+    }
+}
+
+/// An input error naming the keyword (its `key`).
+fn input(py: Python<'_>, keyword: &str, why: impl Into<String>) -> PyErr {
+    let err = PyErr::new::<InputError, _>(format!("{keyword}: {}", why.into()));
+    let value = err.value(py);
+    for (name, v) in [("path", None), ("key", Some(keyword)), ("value", None)] {
+        let _ = value.setattr(name, v);
+    }
+    err
+}
+
+/// Shortest time between two progress calls into Python of one stage: the bar moves smoothly and
+/// the workers rarely wait for the interpreter.
+const PROGRESS_EVERY: Duration = Duration::from_millis(100);
+
+/// An observer that calls a Python callable `callback(event, text, done, total)` with `event` one
+/// of `started`, `progress`, `stage_done`, `warning`; progress is thinned to one call per
+/// [`PROGRESS_EVERY`] (and the last of a stage). It keeps the warnings for the result, and the
+/// first exception the callback raised (the callback is not called again after it).
+struct PyObserver {
+    callback: Option<Py<PyAny>>,
+    throttle: Mutex<Throttle>,
+    warnings: Mutex<Vec<String>>,
+    error: Mutex<Option<PyErr>>,
+}
+
+#[derive(Default)]
+struct Throttle {
+    last: Option<Instant>,
+    what: String,
+    done: usize,
+}
+
+impl PyObserver {
+    fn new(callback: Option<Py<PyAny>>) -> Self {
+        Self { callback, throttle: Mutex::default(), warnings: Mutex::default(), error: Mutex::default() }
+    }
+
+    fn call(&self, event: &str, text: &str, done: usize, total: usize) {
+        let Some(callback) = &self.callback else { return };
+        if lock(&self.error).is_some() {
+            return;
+        }
+        Python::attach(|py| {
+            if let Err(e) = callback.call1(py, (event, text, done, total)) {
+                lock(&self.error).get_or_insert(e);
+            }
+        });
+    }
+
+    /// The warnings, and the callback's exception if it raised one.
+    fn finish(self) -> (Vec<String>, Option<PyErr>) {
+        let warnings = self.warnings.into_inner().unwrap_or_else(|e| e.into_inner());
+        (warnings, self.error.into_inner().unwrap_or_else(|e| e.into_inner()))
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl Observer for PyObserver {
+    fn started(&self, line: &str) {
+        self.call("started", line, 0, 0);
+    }
+
+    fn progress(&self, done: usize, total: usize, what: &str) {
+        {
+            let now = Instant::now();
+            let mut t = lock(&self.throttle);
+            let new_stage = t.what != what;
+            // Workers finish out of order: a smaller count than one already shown is skipped.
+            let due = new_stage || (done > t.done && (done == total || t.last.is_none_or(|l| now - l >= PROGRESS_EVERY)));
+            if !due {
+                return;
+            }
+            *t = Throttle { last: Some(now), what: what.to_string(), done };
+        }
+        self.call("progress", what, done, total);
+    }
+
+    fn stage_done(&self) {
+        *lock(&self.throttle) = Throttle::default();
+        self.call("stage_done", "", 0, 0);
+    }
+
+    fn warning(&self, line: &str) {
+        lock(&self.warnings).push(line.to_string());
+        self.call("warning", line, 0, 0);
+    }
+}
+
+/// Runs `f` with the interpreter released and `progress` as its observer; the application error
+/// becomes its exception, an exception of the callback is raised after the command.
+fn detached<T: Send>(
+    py: Python<'_>,
+    progress: Option<Py<PyAny>>,
+    f: impl FnOnce(&dyn Observer) -> Result<T, app::Error> + Send,
+) -> PyResult<(T, Vec<String>)> {
+    let observer = PyObserver::new(progress);
+    let result = py.detach(|| f(&observer));
+    let (warnings, callback_error) = observer.finish();
+    let value = result.map_err(|e| to_py(py, e))?;
+    match callback_error {
+        Some(e) => Err(e),
+        None => Ok((value, warnings)),
+    }
+}
+
+fn check_threads(py: Python<'_>, threads: Option<u32>) -> PyResult<()> {
+    match threads {
+        Some(t) if !(1..=MOST_THREADS).contains(&t) => {
+            Err(input(py, "threads", format!("{t}: a number of worker threads within [1, {MOST_THREADS}]")))
+        }
+        _ => Ok(()),
+    }
+}
+
+fn check_realisations(py: Python<'_>, r: u32) -> PyResult<()> {
+    if (1..=MOST_REALISATIONS).contains(&r) {
+        Ok(())
+    } else {
+        Err(input(py, "realisations", format!("{r}: within [1, {MOST_REALISATIONS}]")))
+    }
+}
+
+/// Runs (or checks) the study of a scenario of any device: `calsim run` / `calsim check`.
+#[pyfunction]
+#[pyo3(signature = (scenario, *, out, check, seed=None, set_sizes=None, repetitions=None, threads=None, realisations=1, plots=true, recording=true, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn run<'py>(
+    py: Python<'py>,
+    scenario: PathBuf,
+    out: PathBuf,
+    check: bool,
+    seed: Option<u64>,
+    set_sizes: Option<Vec<u32>>,
+    repetitions: Option<u32>,
+    threads: Option<u32>,
+    realisations: u32,
+    plots: bool,
+    recording: bool,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_threads(py, threads)?;
+    check_realisations(py, realisations)?;
+    if let Some(sizes) = &set_sizes
+        && sizes.is_empty()
+    {
+        return Err(input(py, "set_sizes", "[]: needs at least one set size"));
+    }
+    let spec = app::run::RunSpec {
+        scenario,
+        out,
+        threads,
+        overrides: app::run::Overrides { seed, set_sizes, repetitions },
+        plots,
+        recording,
+        realisations,
+        check,
+    };
+    let (r, warnings) = detached(py, progress, |o| app::run::run(&spec, o))?;
+    let d = PyDict::new(py);
+    d.set_item("name", &r.name)?;
+    d.set_item("kind", r.kind)?;
+    d.set_item("seed", r.seed)?;
+    d.set_item("threads", r.threads)?;
+    d.set_item("dest", &r.dest)?;
+    d.set_item("timing", &r.timing)?;
+    d.set_item("write_s", r.write_s)?;
+    d.set_item("recording_s", r.recording_s)?;
+    d.set_item("realisations", r.realisations_run)?;
+    let (checked, missed) = r.tally();
+    d.set_item("checked", checked)?;
+    d.set_item("missed", missed)?;
+    let rows = PyList::empty(py);
+    for c in &r.checks {
+        let row = PyDict::new(py);
+        row.set_item("figure", &c.figure)?;
+        row.set_item("published", &c.published)?;
+        row.set_item("published_value", c.published_value)?;
+        row.set_item("calsim", &c.reproduced)?;
+        row.set_item("value", c.value)?;
+        row.set_item("band", &c.band)?;
+        row.set_item("result", verdict(c.pass))?;
+        rows.append(row)?;
+    }
+    d.set_item("checks", rows)?;
+    match &r.distribution {
+        None => d.set_item("distribution", py.None())?,
+        Some(dist) => {
+            let rows = PyList::empty(py);
+            for c in dist {
+                let row = PyDict::new(py);
+                row.set_item("figure", &c.row.figure)?;
+                row.set_item("published", &c.row.published)?;
+                row.set_item("published_value", c.row.published_value)?;
+                row.set_item("run0", c.row.value)?;
+                row.set_item("median", c.median)?;
+                row.set_item("p10", c.p10)?;
+                row.set_item("p90", c.p90)?;
+                row.set_item("count", c.count)?;
+                row.set_item("band", &c.row.band)?;
+                row.set_item("result", verdict(c.pass))?;
+                rows.append(row)?;
+            }
+            d.set_item("distribution", rows)?;
+        }
+    }
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
+/// A check's verdict as the terminal prints it: `pass`, `miss` or `-` (no band).
+fn verdict(pass: Option<bool>) -> &'static str {
+    match pass {
+        Some(true) => "pass",
+        Some(false) => "miss",
+        None => "-",
+    }
+}
+
+/// The merge report as a dict.
+fn merge_dict<'py>(py: Python<'py>, m: &app::sweep::MergeReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("dest", &m.dest)?;
+    d.set_item("units", m.units)?;
+    d.set_item("failed", m.failed)?;
+    d.set_item("summary", &m.summary)?;
+    Ok(d)
+}
+
+/// Runs a design sweep, whole (then merged) or one shard of it: `calsim sweep`.
+#[pyfunction]
+#[pyo3(signature = (file, *, out, shard=None, threads=None, progress=None))]
+fn sweep<'py>(
+    py: Python<'py>,
+    file: PathBuf,
+    out: PathBuf,
+    shard: Option<(usize, usize)>,
+    threads: Option<u32>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_threads(py, threads)?;
+    if let Some((k, n)) = shard
+        && (n == 0 || n > MOST_SHARDS || k >= n)
+    {
+        return Err(input(py, "shard", format!("({k}, {n}): (k, K) with 1 <= K <= {MOST_SHARDS} and 0 <= k < K")));
+    }
+    let spec = app::sweep::SweepSpec { file, out, shard, threads };
+    let (r, warnings) = detached(py, progress, |o| app::sweep::run(&spec, o))?;
+    let d = PyDict::new(py);
+    d.set_item("name", &r.name)?;
+    d.set_item("units", r.units)?;
+    d.set_item("run_s", r.run_s)?;
+    d.set_item("shard_dir", &r.shard_dir)?;
+    d.set_item("shard", r.shard)?;
+    match &r.merged {
+        Some(m) => d.set_item("merged", merge_dict(py, m)?)?,
+        None => d.set_item("merged", py.None())?,
+    }
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
+/// Merges the shard directories of one sweep: `calsim merge`.
+#[pyfunction]
+#[pyo3(signature = (shards, *, out))]
+fn merge<'py>(py: Python<'py>, shards: Vec<PathBuf>, out: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    if shards.is_empty() {
+        return Err(input(py, "shards", "[]: at least one shard directory"));
+    }
+    let (m, _) = detached(py, None, |_| app::sweep::merge(&shards, &out))?;
+    merge_dict(py, &m)
+}
+
+/// Runs the uncertainty budget of a scenario: `calsim budget`.
+#[pyfunction]
+#[pyo3(signature = (scenario, *, out, realisations=20, factors=vec![0.5, 2.0], repetitions=None, threads=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn budget<'py>(
+    py: Python<'py>,
+    scenario: PathBuf,
+    out: PathBuf,
+    realisations: u32,
+    factors: Vec<f64>,
+    repetitions: Option<u32>,
+    threads: Option<u32>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_threads(py, threads)?;
+    check_realisations(py, realisations)?;
+    if let Some(f) = factors.iter().find(|f| !(f.is_finite() && (0.0..=100.0).contains(*f))) {
+        return Err(input(py, "factors", format!("{f}: a factor within [0, 100]")));
+    }
+    if let Some(r) = repetitions
+        && !(1..=calsim::study::MAX_REPETITIONS).contains(&r)
+    {
+        return Err(input(py, "repetitions", format!("{r}: within [1, {}]", calsim::study::MAX_REPETITIONS)));
+    }
+    let spec = app::budget::BudgetSpec { scenario, out, realisations, factors, repetitions, threads };
+    let (r, warnings) = detached(py, progress, |o| app::budget::run(&spec, o))?;
+    let d = PyDict::new(py);
+    d.set_item("dest", &r.dest)?;
+    d.set_item("units", r.units)?;
+    d.set_item("run_s", r.run_s)?;
+    d.set_item("summary", &r.summary)?;
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
+/// Exports one identification of a TriCal results directory as a robot file, a URDF and a YAML
+/// overlay: `calsim export`.
+#[pyfunction]
+#[pyo3(signature = (results, *, task=None, set_size=None, pick="median", out=None))]
+fn export<'py>(
+    py: Python<'py>,
+    results: PathBuf,
+    task: Option<usize>,
+    set_size: Option<usize>,
+    pick: &str,
+    out: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use app::export::Pick;
+    let pick = match (task, pick) {
+        (Some(_), _) if set_size.is_some() => {
+            return Err(input(py, "task", "task and set_size exclude each other: a task has its set size"));
+        }
+        (Some(t), _) => Pick::Task(t),
+        (None, "median") => Pick::Median(set_size),
+        (None, "best") => Pick::Best(set_size),
+        (None, "worst") => Pick::Worst(set_size),
+        (None, other) => return Err(input(py, "pick", format!("{other:?}: one of \"median\", \"best\", \"worst\""))),
+    };
+    let out = out.unwrap_or_else(|| results.parent().map(PathBuf::from).unwrap_or_default());
+    let ((e, dest), _) = detached(py, None, |_| {
+        let e = app::export::identification(&results, pick)?;
+        let name = format!("{}.task-{}", e.scenario, e.task);
+        let dest = app::export::write(&out, &name, &e).map_err(app::Error::io(&out))?;
+        Ok((e, dest))
+    })?;
+    let d = PyDict::new(py);
+    d.set_item("dest", &dest)?;
+    d.set_item("scenario", &e.scenario)?;
+    d.set_item("task", e.task)?;
+    d.set_item("set_size", e.set_size)?;
+    d.set_item("validation_median_mm", e.validation_median_mm)?;
+    d.set_item("files", ["robot.toml", "before.toml", "robot.urdf", "calibration.yaml"])?;
+    Ok(d)
+}
+
+/// The native module.
+#[pymodule]
+fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("__version__", calsim_version())?;
+    m.add("CalsimError", py.get_type::<CalsimError>())?;
+    m.add("ScenarioError", py.get_type::<ScenarioError>())?;
+    m.add("SweepError", py.get_type::<SweepError>())?;
+    m.add("MergeError", py.get_type::<MergeError>())?;
+    m.add("BudgetError", py.get_type::<BudgetError>())?;
+    m.add("RobotFileError", py.get_type::<RobotFileError>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("StudyError", py.get_type::<StudyError>())?;
+    m.add("FileError", py.get_type::<FileError>())?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add_function(wrap_pyfunction!(budget, m)?)?;
+    m.add_function(wrap_pyfunction!(export, m)?)?;
+    Ok(())
+}
+
+/// The version of the calsim crate this module was built from.
+fn calsim_version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
