@@ -329,7 +329,7 @@ pub fn main() -> ExitCode {
                 .map(str::trim)
                 .filter(|l| !l.is_empty() && !l.starts_with("tip:"))
                 .collect();
-            eprintln!("{}", if said.is_empty() { "error: bad command line".to_string() } else { compact_numbers(&said.join(" ")) });
+            eprintln!("{}", if said.is_empty() { "error: bad command line".to_string() } else { one_line(&said.join(" ")) });
             return ExitCode::from(2);
         }
     };
@@ -356,10 +356,45 @@ pub fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(msg) => {
-            eprintln!("error: {}", compact_numbers(&msg));
+            eprintln!("error: {}", one_line(&msg));
             ExitCode::from(2)
         }
     }
+}
+
+/// The last step of every line calsim prints to standard error: whatever a path or value holds,
+/// the line stays one readable line: control characters and line breaks escaped
+/// ([`crate::io::names::escape_controls`]), long numbers in exponent form ([`compact_numbers`]),
+/// then a run of more than 200 characters without a space (a 100,000-part key, a file name of a
+/// megabyte) shortened in its middle.
+fn one_line(msg: &str) -> String {
+    shorten_long_words(&compact_numbers(&crate::io::names::escape_controls(msg)))
+}
+
+/// Most characters of a run without a space that a message shows whole.
+const MOST_WORD_CHARS: usize = 200;
+
+/// `msg` with every run of more than [`MOST_WORD_CHARS`] characters without a space shown as its
+/// first 120 and last 40 characters around `...[N characters]...`.
+fn shorten_long_words(msg: &str) -> String {
+    if msg.len() <= MOST_WORD_CHARS {
+        return msg.to_string();
+    }
+    let mut out = String::with_capacity(msg.len().min(4096));
+    for (i, word) in msg.split(' ').enumerate() {
+        if i > 0 {
+            out.push(' ');
+        }
+        let n = word.chars().count();
+        if n > MOST_WORD_CHARS {
+            let head: String = word.chars().take(120).collect();
+            let tail: String = word.chars().skip(n - 40).collect();
+            out.push_str(&format!("{head}...[{} characters]...{tail}", n - 160));
+        } else {
+            out.push_str(word);
+        }
+    }
+    out
 }
 
 /// The message with every number written out in more than 24 characters (Rust prints `1e300` as
@@ -397,7 +432,7 @@ impl Terminal {
 
 impl Observer for Terminal {
     fn started(&self, line: &str) {
-        eprintln!("{line}");
+        eprintln!("{}", one_line(line));
     }
 
     fn progress(&self, done: usize, total: usize, what: &str) {
@@ -420,7 +455,7 @@ impl Observer for Terminal {
 
     fn warning(&self, line: &str) {
         self.stage_done();
-        eprintln!("warning: {line}");
+        eprintln!("warning: {}", one_line(line));
     }
 }
 
@@ -517,6 +552,9 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
 }
 
 fn fk(args: &FkArgs) -> Result<ExitCode, String> {
+    if let Some(out) = &args.out {
+        crate::io::out_dir::vet_file(out, &[&args.robot, &args.joints]).map_err(|e| e.to_string())?;
+    }
     let file = crate::robot::file::RobotFile::load(&args.robot).map_err(|e| e.to_string())?;
     let joints = crate::robot::fk::read_joints(&args.joints).map_err(|e| e.to_string())?;
     let text = crate::robot::fk::to_csv(&crate::robot::fk::fk_rows(&file, &joints));
@@ -581,22 +619,26 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// `compensate`: exit 0 when every target is reached, 1 when some cannot be (their rows say
+/// `unreachable`, a line on standard error counts them), 2 when none can (nothing written).
 fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
-    let load = |p: &Path| crate::robot::file::RobotFile::load(p).map_err(|e| e.to_string());
-    let model = load(&args.model)?;
-    let nominal = args.nominal.as_deref().map(load).transpose()?;
-    let targets = app::compensate::read_targets(&args.targets)?;
-    let rows = app::compensate::compensate(&model, nominal.as_ref(), &targets);
-    let text = app::compensate::to_csv(&rows)?;
-    match &args.out {
-        Some(out) => crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| format!("{}: {e}", out.display()))?,
-        None => print!("{text}"),
+    let spec = app::compensate::CompensateSpec {
+        model: args.model.clone(),
+        targets: args.targets.clone(),
+        nominal: args.nominal.clone(),
+        out: args.out.clone(),
+    };
+    let r = app::compensate::run(&spec).map_err(|e| e.to_string())?;
+    if args.out.is_none() {
+        print!("{}", r.csv);
     }
-    let unreachable = rows.iter().filter(|r| r.q.is_none()).count();
-    if unreachable > 0 {
-        eprintln!("calsim compensate: {unreachable} of {} targets cannot be reached by the model", rows.len());
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(match r.unreachable_line() {
+        Some(line) => {
+            eprintln!("calsim compensate: {}", one_line(&line));
+            ExitCode::from(1)
+        }
+        None => ExitCode::SUCCESS,
+    })
 }
 
 fn export(args: &ExportArgs) -> Result<ExitCode, String> {
@@ -608,8 +650,9 @@ fn export(args: &ExportArgs) -> Result<ExitCode, String> {
         (None, PickArg::Best) => Pick::Best(n),
         (None, PickArg::Worst) => Pick::Worst(n),
     };
-    let e = app::export::identification(&args.results, pick).map_err(|e| e.to_string())?;
     let out = args.out.clone().unwrap_or_else(|| args.results.parent().map(Path::to_path_buf).unwrap_or_default());
+    crate::io::out_dir::vet_dir(&out).map_err(|e| e.to_string())?;
+    let e = app::export::identification(&args.results, pick).map_err(|e| e.to_string())?;
     let name = format!("{}.task-{}", e.scenario, e.task);
     let dest = app::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;
     println!(
@@ -664,7 +707,17 @@ fn table8(args: &Table8Args) -> Result<ExitCode, String> {
 
 #[cfg(test)]
 mod compact_tests {
-    use super::compact_numbers;
+    use super::{compact_numbers, one_line};
+
+    #[test]
+    fn an_error_line_stays_one_line_whatever_its_paths_and_values_hold() {
+        let msg = format!("a\nb.toml: axis[0] ({}): value {}: x\r\u{2028}y", "a.".repeat(100_000), 1e300_f64);
+        let line = one_line(&msg);
+        assert_eq!(line.lines().count(), 1, "{line}");
+        assert!(line.starts_with("a\\nb.toml: axis[0] (a.a.a."), "{line}");
+        assert!(line.contains("characters]...") && line.len() < 1000, "{line}");
+        assert!(line.ends_with("value 1e300: x\\r\\u{2028}y"), "{line}");
+    }
 
     #[test]
     fn long_numbers_are_written_with_an_exponent() {

@@ -48,6 +48,8 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
     if spec.factors.len() > MOST_FACTORS {
         return Err(Error::input("--factors", format!("{} factors, at most {MOST_FACTORS}", spec.factors.len())));
     }
+    // The budget's name is the scenario file's stem: one path component, checked before anything runs.
+    crate::io::names::of_file(&spec.scenario)?;
     let (sources, configs, mut plan) = budget::plan(&spec.scenario, spec.realisations, &spec.factors, spec.repetitions)?;
     plan.predict = true;
     crate::io::out_dir::prepare(&spec.out, &plan.name)?;

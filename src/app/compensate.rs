@@ -9,8 +9,15 @@
 //! (frame 6 itself where the file has none; a URDF's `tool0`). Out: per target the joint values in
 //! degrees, the model's position and orientation errors at them, and the corrected Cartesian
 //! target (in the same tool frame) when a nominal model is given.
+//!
+//! [`run`] is the command: outputs vetted, both robot files loaded, the nominal checked to be the
+//! same arm as the model, the targets compensated and written. A target the model cannot reach
+//! gets a row of `unreachable`; the report counts them and the command's exit code says so (1 when
+//! some are unreachable, an error when none can be reached: nothing is written then).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use super::Error;
 
 use nalgebra::{Isometry3, Matrix3, Translation3};
 
@@ -25,10 +32,9 @@ pub const TARGET_COLUMNS: [&str; 6] = ["x_mm", "y_mm", "z_mm", "alpha_deg", "bet
 pub const MAX_TARGETS: usize = 1_000_000;
 
 /// Reads the targets of `path`; an error names the file, the line and the column.
-pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, String> {
-    let at = |line: u64, what: String| format!("{}: line {line}: {what}", path.display());
-    crate::io::check_input(path, Some(256 << 20)).map_err(|e| format!("{}: {e}", path.display()))?;
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, Error> {
+    let at = |line: u64, what: String| Error::input(format!("{}: line {line}", path.display()), what);
+    let bytes = crate::io::read_bytes_at_most(path, 256 << 20).map_err(Error::io(path))?;
     let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(bytes.as_slice());
     let header: Vec<String> = r.headers().map_err(|e| at(1, e.to_string()))?.iter().map(str::to_string).collect();
     if header != TARGET_COLUMNS {
@@ -53,9 +59,135 @@ pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, String> {
         out.push(XyzZyx::from_mm_deg(v).isometry());
     }
     if out.is_empty() {
-        return Err(format!("{}: no targets", path.display()));
+        return Err(Error::input(path.display().to_string(), "no targets"));
     }
     Ok(out)
+}
+
+/// What `compensate` is asked.
+#[derive(Clone, Debug)]
+pub struct CompensateSpec {
+    /// The calibrated model: a robot file.
+    pub model: PathBuf,
+    /// The TCP targets (CSV).
+    pub targets: PathBuf,
+    /// The controller's nominal model, for the corrected Cartesian targets.
+    pub nominal: Option<PathBuf>,
+    /// The output CSV (`None`: the report carries the text).
+    pub out: Option<PathBuf>,
+}
+
+/// What `compensate` did.
+#[derive(Clone, Debug)]
+pub struct CompensateReport {
+    /// The CSV text (written to `out` when one was given).
+    pub csv: String,
+    /// Targets read.
+    pub targets: usize,
+    /// Targets the model cannot reach, 1-based in file order.
+    pub unreachable: Vec<usize>,
+}
+
+impl CompensateReport {
+    /// The line that says how many targets cannot be reached (`None`: every one can).
+    pub fn unreachable_line(&self) -> Option<String> {
+        if self.unreachable.is_empty() {
+            return None;
+        }
+        let mut shown: Vec<String> = self.unreachable.iter().take(10).map(usize::to_string).collect();
+        if self.unreachable.len() > 10 {
+            shown.push(format!("and {} more", self.unreachable.len() - 10));
+        }
+        Some(format!(
+            "{} of {} targets cannot be reached by the model (targets {}; their rows say `unreachable`)",
+            self.unreachable.len(),
+            self.targets,
+            shown.join(", ")
+        ))
+    }
+}
+
+/// Largest difference of a length (mm) and of an angle (deg) between a calibrated model and its
+/// nominal: a calibration moves a length by well under a millimetre and an angle by a fraction of
+/// a degree; ten and five times the largest of those is another arm (ASSUMED).
+const SAME_ARM_MM: f64 = 10.0;
+/// See [`SAME_ARM_MM`].
+const SAME_ARM_DEG: f64 = 5.0;
+
+/// Refuses a `nominal` that is not the nominal model of the arm of `model`: every modified-DH
+/// value of each joint within [`SAME_ARM_MM`] or [`SAME_ARM_DEG`] of the model's. The error names
+/// both files and the key.
+pub fn same_arm(model: &RobotFile, nominal: &RobotFile) -> Result<(), Error> {
+    let (m, n) = (model.nominal.data(), nominal.nominal.data());
+    for (i, (a, b)) in m.links.iter().zip(&n.links).enumerate() {
+        let values = [
+            ("alpha_deg", a.alpha.to_degrees(), b.alpha.to_degrees(), SAME_ARM_DEG),
+            ("a_mm", a.a, b.a, SAME_ARM_MM),
+            ("beta_deg", a.beta.to_degrees(), b.beta.to_degrees(), SAME_ARM_DEG),
+            ("theta_offset_deg", a.theta_offset.to_degrees(), b.theta_offset.to_degrees(), SAME_ARM_DEG),
+            ("d_mm", a.d, b.d, SAME_ARM_MM),
+        ];
+        for (key, x, y, most) in values {
+            if (x - y).abs() > most {
+                return Err(Error::input(
+                    format!("--nominal {}", nominal.path.display()),
+                    format!(
+                        "joint[{}].{key} = {y} against {x} in {}: not the nominal model of this arm (a calibration moves a \
+                         length by less than {SAME_ARM_MM} mm and an angle by less than {SAME_ARM_DEG} deg)",
+                        i + 1,
+                        model.path.display()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The length of the arm of `model`: the sum of its link lengths and offsets and its tool, mm
+/// (no point of the arm is farther than this from its base).
+fn arm_length_mm(model: &RobotModel) -> f64 {
+    let d = model.data();
+    d.links.iter().map(|l| l.a.abs() + l.d.abs()).sum::<f64>() + d.flange_tcp_mm.norm()
+}
+
+/// `compensate`: the joint targets (and, with a nominal model, the corrected Cartesian targets)
+/// for the targets of `spec`, written to `spec.out`. The output is vetted before anything is read
+/// ([`crate::io::out_dir::vet_file`]); when no target can be reached, nothing is written and the
+/// error says how far the nearest target is.
+pub fn run(spec: &CompensateSpec) -> Result<CompensateReport, Error> {
+    let mut inputs: Vec<&Path> = vec![&spec.model, &spec.targets];
+    inputs.extend(spec.nominal.as_deref());
+    if let Some(out) = &spec.out {
+        crate::io::out_dir::vet_file(out, &inputs)?;
+    }
+    let model = RobotFile::load(&spec.model)?;
+    let nominal = spec.nominal.as_deref().map(RobotFile::load).transpose()?;
+    if let Some(n) = &nominal {
+        same_arm(&model, n)?;
+    }
+    let targets = read_targets(&spec.targets)?;
+    let rows = compensate(&model, nominal.as_ref(), &targets);
+    let unreachable: Vec<usize> = rows.iter().enumerate().filter(|(_, r)| r.q.is_none()).map(|(k, _)| k + 1).collect();
+    if unreachable.len() == rows.len() {
+        let base = crate::robot::world_from_base(&model.nominal).translation.vector;
+        let nearest = targets.iter().map(|t| (t.translation.vector - base).norm()).fold(f64::INFINITY, f64::min);
+        return Err(Error::input(
+            spec.targets.display().to_string(),
+            format!(
+                "none of the {} targets can be reached by the arm of {} (the nearest is {nearest:.1} mm from its base; its links \
+                 add up to {:.1} mm): nothing written",
+                rows.len(),
+                spec.model.display(),
+                arm_length_mm(&model.nominal)
+            ),
+        ));
+    }
+    let csv = to_csv(&rows).map_err(|e| Error::input("compensate", e))?;
+    if let Some(out) = &spec.out {
+        crate::io::out_dir::write_file_atomically(out, &csv).map_err(Error::io(out))?;
+    }
+    Ok(CompensateReport { csv, targets: rows.len(), unreachable })
 }
 
 /// One compensated target.

@@ -127,8 +127,8 @@ pub fn identification(dir: &Path, pick: Pick) -> Result<Export, Error> {
 /// (task, set size, validation median) of every row of `dir/tasks.parquet`.
 fn tasks_table(dir: &Path) -> Result<Vec<(usize, usize, f64)>, Error> {
     let path = dir.join("tasks.parquet");
-    let file = std::fs::File::open(&path).map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
-    let df = ParquetReader::new(file).finish().map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
+    let bytes = crate::io::read_bytes_at_most(&path, crate::io::MOST_TABLE_BYTES).map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
+    let df = ParquetReader::new(std::io::Cursor::new(bytes)).finish().map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
     let col = |name: &str| df.column(name).map_err(|e| err(dir, format!("tasks.parquet: {e}")));
     let task = col("task")?.cast(&DataType::UInt64).map_err(|e| err(dir, e))?;
     let size = col("set_size")?.cast(&DataType::UInt64).map_err(|e| err(dir, e))?;
@@ -170,10 +170,10 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
         e.flange.as_ref(),
     );
     crate::io::out_dir::write_atomically(out, name, |dir| {
-        std::fs::write(dir.join("robot.toml"), &robot)?;
-        std::fs::write(dir.join("before.toml"), &before)?;
-        std::fs::write(dir.join("robot.urdf"), &urdf)?;
-        std::fs::write(dir.join("calibration.yaml"), &yaml)
+        crate::io::out_dir::write_file(&dir.join("robot.toml"), &robot)?;
+        crate::io::out_dir::write_file(&dir.join("before.toml"), &before)?;
+        crate::io::out_dir::write_file(&dir.join("robot.urdf"), &urdf)?;
+        crate::io::out_dir::write_file(&dir.join("calibration.yaml"), &yaml)
     })
 }
 

@@ -17,8 +17,10 @@ pub struct Imported {
 }
 
 /// Converts `urdf` into the robot file `out`; nothing is written unless calsim can load the
-/// result and it reproduces the converted arm.
+/// result and it reproduces the converted arm. `out` is vetted first: never the URDF, a device or
+/// a pipe, nor a file inside other results.
 pub fn run(urdf: &Path, out: &Path, options: &ImportOptions) -> Result<Imported, Error> {
+    crate::io::out_dir::vet_file(out, &[urdf])?;
     let report = crate::robot::urdf::import(urdf, out, options)?;
     let lines = report.lines(urdf, out);
     Ok(Imported { report, lines, out: out.to_path_buf() })

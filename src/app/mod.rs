@@ -62,6 +62,9 @@ pub enum Error {
     /// The results cannot go where they were asked to.
     #[error(transparent)]
     OutDir(#[from] OutDirError),
+    /// A file's name cannot name its results.
+    #[error(transparent)]
+    Name(#[from] crate::io::names::NameError),
     /// A study could not run (its campaign, its parameter set).
     #[error("{path}: {source}")]
     Device {

@@ -58,6 +58,8 @@ pub struct MergeReport {
 /// Runs the sweep of `spec.file` (or one shard of it), then, unsharded, merges it.
 pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Error> {
     let t0 = Instant::now();
+    // The sweep's name is its file's stem: one path component, checked before anything runs.
+    crate::io::names::of_file(&spec.file)?;
     let sweep = sweep::spec::load_with(&spec.file, spec.realisations)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
     crate::io::out_dir::prepare(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string())?;

@@ -145,6 +145,9 @@ pub enum CalibrateError {
     /// The report directory cannot be written where asked.
     #[error(transparent)]
     OutDir(#[from] crate::io::out_dir::OutDirError),
+    /// The measurement file's name cannot name the report directory.
+    #[error(transparent)]
+    Name(#[from] crate::io::names::NameError),
     /// Writing the report.
     #[error("{path}: {source}")]
     Io {
@@ -180,6 +183,9 @@ pub struct CalibrateSpec {
 /// `calsim calibrate`: reads the robot and measurement files, calibrates, writes the report.
 pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateError> {
     check_options(&spec.options)?;
+    // Before any work: the report's name and directory.
+    crate::io::names::of_file(&spec.measurements)?;
+    crate::io::out_dir::vet_dir(&spec.out)?;
     let robot = RobotFile::load(&spec.robot_file)?;
     let m = measurements::read(&spec.measurements, &robot)?;
     let name = report::directory_name(&spec.measurements);

@@ -24,7 +24,7 @@ pub fn write(out: &Path, name: &str, c: &Calibration) -> std::io::Result<PathBuf
         write_robot(dir, c)?;
         tables(dir, c)?;
         let drawn = if c.options.plots { super::plots::write(dir, c).map_err(std::io::Error::other)? } else { Vec::new() };
-        std::fs::write(dir.join("summary.md"), summary(c, &drawn))?;
+        crate::io::out_dir::write_file(&dir.join("summary.md"), summary(c, &drawn))?;
         manifest(dir, c)
     })
 }
@@ -49,11 +49,11 @@ fn write_robot(dir: &Path, c: &Calibration) -> std::io::Result<()> {
     let robot = crate::robot::file::to_text(&c.model, &source, &std, capsules, flange) + &coupling;
     let before_source = format!("the robot file {} before calibration", c.robot.path.display());
     let before = crate::robot::file::to_text(before_model, &before_source, &[], capsules, flange) + &coupling;
-    std::fs::write(dir.join("robot.toml"), robot)?;
-    std::fs::write(dir.join("before.toml"), before)?;
-    std::fs::write(dir.join("robot.urdf"), crate::robot::export::urdf(before_model, &c.model).map_err(std::io::Error::other)?)?;
+    crate::io::out_dir::write_file(&dir.join("robot.toml"), robot)?;
+    crate::io::out_dir::write_file(&dir.join("before.toml"), before)?;
+    crate::io::out_dir::write_file(&dir.join("robot.urdf"), crate::robot::export::urdf(before_model, &c.model).map_err(std::io::Error::other)?)?;
     let provenance = format!("calibrate of {}, {} poses", c.measurements.path.display(), c.measurements.poses.len());
-    std::fs::write(dir.join("calibration.yaml"), crate::robot::export::yaml_overlay(before_model, &c.model, &provenance))
+    crate::io::out_dir::write_file(&dir.join("calibration.yaml"), crate::robot::export::yaml_overlay(before_model, &c.model, &provenance))
 }
 
 fn tables(dir: &Path, c: &Calibration) -> std::io::Result<()> {
@@ -211,7 +211,7 @@ fn model_columns(c: &Calibration) -> Vec<Column> {
 }
 
 fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
-    let sha = |p: &Path| std::fs::read(p).map(|b| format!("{:x}", sha2::Sha256::digest(&b))).unwrap_or_default();
+    let sha = |p: &Path| crate::io::read_bytes(p).map(|b| format!("{:x}", sha2::Sha256::digest(&b))).unwrap_or_default();
     let o = &c.options;
     let value = serde_json::json!({
         "measurements_path": c.measurements.path.display().to_string(),
@@ -229,7 +229,7 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
         },
         "tables_sha256": crate::io::table::table_hashes(dir)?,
     });
-    std::fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&value).map_err(std::io::Error::other)?)
+    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&value).map_err(std::io::Error::other)?)
 }
 
 /// What `calsim calibrate` prints: the models' held-out errors, the choice, the outliers, where the

@@ -121,6 +121,7 @@ pub fn refusal(e: ScenarioError) -> (String, String) {
         ScenarioError::Parse { key, message, .. } => (key, message),
         ScenarioError::Range { section, key, why, .. } => (format!("{section}.{key}"), why),
         ScenarioError::Read { path, message } => (path, message),
+        ScenarioError::Name(e) => (String::new(), e.to_string()),
     }
 }
 

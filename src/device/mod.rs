@@ -248,6 +248,7 @@ pub fn from_table(text: &str, table: toml::Table, path: &Path) -> Result<Box<dyn
 
 /// Reads a scenario file once and loads it as the device its `kind` names.
 pub fn load(path: &Path) -> Result<Box<dyn Scenario>, ScenarioError> {
+    crate::io::names::of_file(path)?;
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     let table = scenario::table(&text, &shown)?;

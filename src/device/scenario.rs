@@ -24,7 +24,8 @@ pub struct Header {
 }
 
 impl Header {
-    /// The header of a scenario read from `path` with `text` and `seed`.
+    /// The header of a scenario read from `path` with `text` and `seed` (its name the file's stem,
+    /// checked by [`crate::io::names::of_file`] when the file was read).
     pub fn new(path: &Path, text: &str, seed: u64) -> Self {
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scenario".into());
         Self { name, path: path.to_path_buf(), text: text.to_string(), seed }
@@ -52,6 +53,9 @@ pub enum ScenarioError {
         /// What is wrong.
         message: String,
     },
+    /// The file's name cannot name its results (`..toml`, a line break in it).
+    #[error(transparent)]
+    Name(#[from] crate::io::names::NameError),
     /// A value is out of its range.
     #[error("{path}: [{section}] {key} = {value}: {why}")]
     Range {

@@ -1,14 +1,19 @@
-//! The kit under everything that reads or writes files: bounded reading of inputs, the atomic
-//! results directory (`out_dir`), parquet tables and their hashes (`table`), the provenance of a
-//! manifest (`manifest`), the plot kit (`plot`) and the recording kit (`record`). It computes no
-//! figure and imports no device, study, sweep or budget: each producer computes its own figures
-//! and renders them through it.
+//! The kit under everything that reads or writes files: bounded reading of inputs (here; every
+//! input calsim reads goes through [`read_text`], [`read_bytes`] or [`read_bytes_at_most`], a test
+//! keeps it so), the shape of an XML input checked before it is parsed (`xml`), the names calsim
+//! makes directories from (`names`), the atomic results directory and the vetting of output paths
+//! (`out_dir`), parquet tables and their hashes (`table`), the provenance of a manifest
+//! (`manifest`), the plot kit (`plot`) and the recording kit (`record`). It computes no figure and
+//! imports no device, study, sweep or budget: each producer computes its own figures and renders
+//! them through it.
 
 pub mod manifest;
+pub mod names;
 pub mod out_dir;
 pub mod plot;
 pub mod record;
 pub mod table;
+pub mod xml;
 
 use std::io::Read;
 use std::path::Path;
@@ -45,11 +50,21 @@ pub fn read_text(path: &Path) -> std::io::Result<String> {
 
 /// The bytes of an input file, checked as for [`read_text`].
 pub fn read_bytes(path: &Path) -> std::io::Result<Vec<u8>> {
-    check_input(path, Some(MOST_INPUT_BYTES))?;
+    read_bytes_at_most(path, MOST_INPUT_BYTES)
+}
+
+/// Most bytes of a result table read back (a `tasks.parquet` of the most identifications a study
+/// may have is far smaller).
+pub const MOST_TABLE_BYTES: u64 = 1 << 30;
+
+/// The bytes of an input file of at most `most` bytes (a CSV of a million rows, a mesh, a result
+/// table), checked by [`check_input`] and read no further than that.
+pub fn read_bytes_at_most(path: &Path, most: u64) -> std::io::Result<Vec<u8>> {
+    check_input(path, Some(most))?;
     let mut bytes = Vec::new();
-    std::fs::File::open(path)?.take(MOST_INPUT_BYTES + 1).read_to_end(&mut bytes)?;
-    if bytes.len() as u64 > MOST_INPUT_BYTES {
-        return Err(too_large(MOST_INPUT_BYTES));
+    std::fs::File::open(path)?.take(most + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > most {
+        return Err(too_large(most));
     }
     Ok(bytes)
 }

@@ -66,7 +66,12 @@ pub fn e2s<E: std::fmt::Debug>(e: E) -> PlotError {
     PlotError(format!("{e:?}"))
 }
 
-/// Draws `draw` into `dir/<stem>.png` and `dir/<stem>.svg`.
+/// A plotters error writing the file `path` as a [`PlotError`] naming the file.
+pub fn written<E: std::fmt::Display>(path: &std::path::Path) -> impl FnOnce(E) -> PlotError + '_ {
+    move |e| PlotError(format!("{}: {e}", path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned())))
+}
+
+/// Draws `draw` into `dir/<stem>.png` and `dir/<stem>.svg`; a write error names the file.
 macro_rules! both {
     ($dir:expr, $stem:expr, $draw:expr) => {{
         let png = $dir.join(format!("{}.png", $stem));
@@ -74,12 +79,12 @@ macro_rules! both {
         {
             let root = plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::BitMapBackend::new(&png, $crate::io::plot::SIZE));
             $draw(&root)?;
-            root.present().map_err($crate::io::plot::e2s)?;
+            root.present().map_err($crate::io::plot::written(&png))?;
         }
         {
             let root = plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::SVGBackend::new(&svg, $crate::io::plot::SIZE));
             $draw(&root)?;
-            root.present().map_err($crate::io::plot::e2s)?;
+            root.present().map_err($crate::io::plot::written(&svg))?;
         }
     }};
 }

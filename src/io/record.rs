@@ -31,6 +31,11 @@ impl From<rerun::RecordingStreamError> for RecordError {
 /// Saves a recording named `name` to `path`: `log` logs its entities, then the blueprint opens on
 /// the 3D cell (`cell_contents`) beside the time series (`first_series`: title and origin, on the
 /// `pool_configuration` timeline; the study's per-task series under `study_title`).
+///
+/// The recording is encoded in memory and written in one go: Rerun's own file writer runs on a
+/// thread of its own, which on a full disk dies and leaves the flush waiting (or says only "File-
+/// writer thread shut down prematurely"); written here, the error is the file system's, naming the
+/// file (`study.rrd: No space left on device`).
 pub fn save(
     path: &Path,
     name: &str,
@@ -39,13 +44,14 @@ pub fn save(
     first_series: (&str, &str),
     study_title: &str,
 ) -> Result<(), RecordError> {
-    let rec = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).save(path).map_err(|e| RecordError(e.to_string()))?;
+    let (rec, storage) = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).memory().map_err(|e| RecordError(e.to_string()))?;
     log(&rec)?;
     blueprint(cell_contents, first_series, study_title)
         .send(&rec, BlueprintActivation { make_active: true, make_default: true })
         .map_err(|e| RecordError(e.to_string()))?;
     rec.flush_blocking().map_err(|e| RecordError(e.to_string()))?;
-    Ok(())
+    let bytes = storage.drain_as_bytes().map_err(|e| RecordError(e.to_string()))?;
+    crate::io::out_dir::write_file(path, bytes).map_err(|e| RecordError(e.to_string()))
 }
 
 /// A point in f32, as Rerun takes it.
@@ -111,4 +117,14 @@ pub fn log_axes(rec: &RecordingStream, path: &str, frame: &Isometry3<f64>, len: 
             Color::from_rgb(40, 80, 230),
         ]),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_recording_that_cannot_be_written_says_which_file_and_why() {
+        let log = |rec: &rerun::RecordingStream| rec.log("cell/point", &rerun::Points3D::new([[0.0f32, 0.0, 0.0]]));
+        let e = super::save(std::path::Path::new("/dev/full"), "test", log, &["cell"], ("series", "series"), "study").unwrap_err();
+        assert!(e.to_string().contains("full: No space left on device"), "{e}");
+    }
 }

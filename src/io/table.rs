@@ -12,12 +12,20 @@ pub fn err(e: impl std::fmt::Display) -> std::io::Error {
     std::io::Error::other(e.to_string())
 }
 
-/// Writes `columns` as the parquet table `dir/name`.
+/// Writes `columns` as the parquet table `dir/name`; an error names the table (and the column,
+/// for two columns of one name).
 pub fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
-    let mut df = DataFrame::new_infer_height(columns).map_err(err)?;
-    let file = fs::File::create(dir.join(name))?;
-    ParquetWriter::new(file).finish(&mut df).map_err(err)?;
-    Ok(())
+    let in_table = |e: &dyn std::fmt::Display| std::io::Error::other(format!("{name}: {e}"));
+    let mut seen = std::collections::HashSet::new();
+    if let Some(twice) = columns.iter().map(|c| c.name().as_str()).find(|n| !seen.insert(*n)) {
+        return Err(in_table(&format!("two columns named `{twice}`")));
+    }
+    let mut df = DataFrame::new_infer_height(columns).map_err(|e| in_table(&e))?;
+    // Encoded in memory and written in one go, so that a write error is the file system's own
+    // (`No space left on device`), naming the table.
+    let mut bytes = Vec::new();
+    ParquetWriter::new(&mut bytes).finish(&mut df).map_err(|e| in_table(&e))?;
+    crate::io::out_dir::write_file(&dir.join(name), bytes)
 }
 
 /// The sha256 of every result table (`*.parquet`) in `dir`, by file name: two runs gave the same
@@ -28,7 +36,8 @@ pub fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<St
         let path = entry?.path();
         if path.extension().is_some_and(|e| e == "parquet") {
             let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-            out.insert(name, format!("{:x}", Sha256::digest(fs::read(&path)?)));
+            let bytes = crate::io::read_bytes_at_most(&path, crate::io::MOST_TABLE_BYTES).map_err(crate::io::out_dir::named(&path))?;
+            out.insert(name, format!("{:x}", Sha256::digest(bytes)));
         }
     }
     Ok(out)

@@ -491,6 +491,8 @@ impl RobotFile {
         let coupling = if f.coupling.is_empty() { None } else { Some(super::coupling::JointCoupling::from_rows(&f.coupling)?) };
         let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std, capsules, flange, coupling };
         file.truth_on(&file.nominal).map_err(|e| ("truth".to_string(), e))?;
+        // Values each within range that together describe no arm.
+        super::plausible::check(&file)?;
         Ok(file)
     }
 

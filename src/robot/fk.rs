@@ -99,8 +99,7 @@ pub(crate) fn line_at(bytes: &[u8], pos: Option<&csv::Position>) -> u64 {
 pub fn read_joints(path: &Path) -> Result<Vec<Joints>, JointsCsvError> {
     let p = || path.to_path_buf();
     let file_error = |e: &dyn std::fmt::Display| JointsCsvError::File { path: p(), reason: e.to_string() };
-    crate::io::check_input(path, Some(MOST_BYTES)).map_err(|e| file_error(&e))?;
-    let bytes = std::fs::read(path).map_err(|e| file_error(&e))?;
+    let bytes = crate::io::read_bytes_at_most(path, MOST_BYTES).map_err(|e| file_error(&e))?;
     let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).flexible(true).from_reader(bytes.as_slice());
     let header: Vec<String> = r.headers().map_err(|e| file_error(&e))?.iter().map(str::to_string).collect();
     if header != JOINT_COLUMNS {

@@ -69,8 +69,11 @@ pub fn vertices(path: &Path, filename: &str, scale: [f64; 3]) -> Result<Vec<Vect
         return Err(MeshError::BadScale { filename: filename.into(), scale });
     }
     let unreadable = |reason: String| MeshError::Unreadable { path: path.to_path_buf(), reason };
-    crate::io::check_input(path, Some(MOST_MESH_BYTES)).map_err(|e| unreadable(e.to_string()))?;
-    let bytes = std::fs::read(path).map_err(|e| unreadable(e.to_string()))?;
+    let bytes = crate::io::read_bytes_at_most(path, MOST_MESH_BYTES).map_err(|e| unreadable(e.to_string()))?;
+    // A COLLADA file is XML, read by a parser that recurses once per nested element.
+    if crate::io::xml::looks_like_xml(&bytes) {
+        crate::io::xml::check_shape_bytes(&bytes).map_err(|e| unreadable(e.to_string()))?;
+    }
     // The reader reads nothing else (a COLLADA or OBJ file that names others gets an error).
     let loader = mesh_loader::Loader::default().custom_reader(|p| Err(std::io::Error::other(format!("{} not read", p.display()))));
     let scene = loader.load_from_slice(&bytes, path).map_err(|e| unreadable(e.to_string()))?;

@@ -11,6 +11,7 @@ pub mod kinematics;
 pub mod mesh;
 pub mod model;
 pub mod params;
+pub mod plausible;
 pub mod rotation;
 #[cfg(test)]
 mod test_models;

@@ -345,8 +345,12 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
     fs::create_dir_all(dir.join("units"))?;
     let info = shard_info(sweep, k, count);
     let info_path = dir.join("sweep.json");
-    if let Ok(old) = fs::read(&info_path) {
-        let old: ShardInfo = serde_json::from_slice(&old).map_err(|e| std::io::Error::other(format!("{}: {e}", info_path.display())))?;
+    if info_path.exists() {
+        let old = crate::io::read_bytes(&info_path)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", crate::io::names::shown(&info_path))))?;
+        let old: ShardInfo = serde_json::from_slice(&old).map_err(|e| {
+            std::io::Error::other(format!("{}: {e} (a sweep.json calsim did not write: remove the directory)", crate::io::names::shown(&info_path)))
+        })?;
         if old != info {
             return Err(std::io::Error::other(format!(
                 "{} holds units of another sweep or sharding: remove it or choose another --out",

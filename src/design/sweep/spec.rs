@@ -133,9 +133,16 @@ fn file_err(path: &Path, key: &str, message: impl Into<String>) -> SweepError {
     SweepError::File { path: path.display().to_string(), key: key.into(), message: message.into() }
 }
 
+/// Most parts of a dotted key: a scenario nests its keys three deep; a deeper key would build
+/// tables whose dropping and printing recurse once per part (100,000 parts overflow the stack).
+pub const MOST_KEY_PARTS: usize = 16;
+
 /// Sets `key` (dotted) of `t` to `v`, making the tables on the way; a key under a value that is not
-/// a table is an error.
+/// a table, or of more than [`MOST_KEY_PARTS`] parts, is an error.
 pub fn set_dotted(t: &mut toml::Table, key: &str, v: toml::Value) -> Result<(), String> {
+    if key.split('.').nth(MOST_KEY_PARTS).is_some() {
+        return Err(format!("a key of more than {MOST_KEY_PARTS} dotted parts: no scenario key is that deep"));
+    }
     let parts: Vec<&str> = key.split('.').collect();
     if parts.iter().any(|p| p.is_empty()) {
         return Err(format!("{key:?} is not a dotted key"));
@@ -358,6 +365,13 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
     let duplicated = file.thresholds_mm.iter().enumerate().any(|(i, a)| file.thresholds_mm[..i].contains(a));
     if thresholds_mm.len() > 16 || duplicated || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
         return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 different thresholds, each within (0, 1000) mm", file.thresholds_mm)));
+    }
+    // Each threshold and each axis names columns of the tables: two alike would fail after the run.
+    if let Some(t) = file.thresholds_mm.iter().enumerate().find(|(i, t)| file.thresholds_mm[..*i].contains(t)).map(|(_, t)| t) {
+        return Err(file_err(path, "thresholds_mm", format!("{t} given twice: each threshold once")));
+    }
+    if let Some((i, a)) = file.axes.iter().enumerate().find(|(i, a)| file.axes[..*i].iter().any(|b| b.key == a.key)) {
+        return Err(file_err(path, &format!("axis[{i}] ({})", a.key), "the key of an earlier axis: each key once (combine its values in one axis)"));
     }
     let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
     let (base_text, mut base_table) =

@@ -3,7 +3,6 @@
 //! figures and, when asked, the recording. Written into a temporary directory renamed into place.
 
 use std::fmt::Write as _;
-use std::fs;
 use std::path::Path;
 
 use polars::prelude::*;
@@ -158,9 +157,9 @@ pub fn write(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, che
         selections: s.spec.study.selections.iter().map(|s| s.label().to_string()).collect(),
         timings: &r.timings,
     };
-    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
     if let Some(record) = extras.recording {
-        record(&dir.join("study.rrd")).map_err(|e| std::io::Error::other(format!("recording: {e}")))?;
+        record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
     }
     let drawn = if extras.plots {
         let mut sizes: Vec<usize> = t.iter().map(|x| x.task.set_size).collect();
@@ -193,7 +192,7 @@ pub fn write(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, che
     } else {
         Vec::new()
     };
-    fs::write(dir.join("summary.md"), summary(s, r, f, checks, &drawn))?;
+    crate::io::out_dir::write_file(&dir.join("summary.md"), summary(s, r, f, checks, &drawn))?;
     Ok(())
 }
 

@@ -55,6 +55,7 @@ pub struct SpmsScenario {
 
 /// Reads and checks an SPMS scenario file.
 pub fn load(path: &Path) -> Result<SpmsScenario, ScenarioError> {
+    crate::io::names::of_file(path)?;
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown, message: e.to_string() })?;
     parse(&text, path)

@@ -227,7 +227,7 @@ impl Outcome for TrackerOutcome {
             tasks: self.results.tasks.len(),
             timings_s: self.timings,
         };
-        std::fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err).map_err(io)?).map_err(io)?;
+        crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err).map_err(io)?).map_err(io)?;
         let drawn = if options.plots {
             let e = &self.experiment;
             let inputs = plots::PlotInputs {
@@ -247,7 +247,7 @@ impl Outcome for TrackerOutcome {
                 text.push_str(&format!("![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n\n", w.caption, w.stem, w.caption, w.stem));
             }
         }
-        std::fs::write(dir.join("summary.md"), text).map_err(io)?;
+        crate::io::out_dir::write_file(&dir.join("summary.md"), text).map_err(io)?;
         let t = Instant::now();
         if options.recording {
             self.record(&dir.join("study.rrd")).map_err(DeviceError::of)?;

@@ -4,7 +4,6 @@
 //! interrupted run leaves no half-written result.
 
 use std::fmt::Write as _;
-use std::fs;
 use std::path::Path;
 
 use polars::prelude::*;
@@ -86,7 +85,7 @@ pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &R
         repetitions: scenario.study.repetitions,
         timings,
     };
-    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
     if let Some(record) = extras.recording {
         record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
     }
@@ -94,7 +93,7 @@ pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &R
         Some(p) => super::plots::write_all(dir, r, p).map_err(std::io::Error::other)?,
         None => Vec::new(),
     };
-    fs::write(dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
+    crate::io::out_dir::write_file(&dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
     Ok(())
 }
 

@@ -64,6 +64,7 @@ pub struct TricalScenario {
 
 /// Reads and checks a TriCal scenario file (a file of another kind is refused, naming `kind`).
 pub fn load(path: &Path) -> Result<TricalScenario, ScenarioError> {
+    crate::io::names::of_file(path)?;
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     parse(&text, path)
@@ -262,12 +263,57 @@ fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     c.within("campaign", "jog_error_mm", cp.jog_error_mm, 0.0, 5.0, "jog distance: the indicators must touch the ball")?;
     c.count("campaign", "max_tries_per_configuration", cp.max_tries_per_configuration.into(), 1, 100_000, "tries per kept configuration")?;
 
+    centring_plausible(&c, t, cp)?;
+
     let pool = cp.pool_per_sphere as usize * cell.spheres_w_mm.len();
     c.study(&f.study, pool, crate::robot::ParamSet::trical_31)?;
     let set = f.study.parameter_set(crate::robot::ParamSet::trical_31).expect("checked by study()");
     let spec = ExperimentSpec { robot: r.clone(), cell: cell.clone(), trical: t.clone(), tracker: tr.clone(), campaign: cp.clone() };
     c.identifiable(&spec.nominal(), &set, "robot.tcp_mm")?;
     expect(&c, &f.expect)
+}
+
+/// The keys of the centring that only make sense together: epsilon against what the indicators
+/// can show (their resolution) and hold (half their stroke: they are zeroed at mid-stroke), and the
+/// first contact's error against that half stroke. Each error names both keys.
+fn centring_plausible(c: &Checker<'_>, t: &TriCalSpec, cp: &CampaignSpec) -> Result<(), ScenarioError> {
+    let half_stroke = t.indicator_range_mm / 2.0;
+    if t.epsilon_mm * 1e3 < t.indicator_resolution_um {
+        return Err(c.fail(
+            "trical",
+            "epsilon_mm",
+            t.epsilon_mm,
+            &format!(
+                "below [trical] indicator_resolution_um = {} (the indicators show steps of {} mm): the tolerance must be one \
+                 they can see",
+                t.indicator_resolution_um,
+                t.indicator_resolution_um * 1e-3
+            ),
+        ));
+    }
+    if t.epsilon_mm >= half_stroke {
+        return Err(c.fail(
+            "trical",
+            "epsilon_mm",
+            t.epsilon_mm,
+            &format!(
+                "not below half of [trical] indicator_range_mm = {} (zeroed at mid-stroke, an indicator reads at most {half_stroke} mm)",
+                t.indicator_range_mm
+            ),
+        ));
+    }
+    if cp.jog_error_mm >= half_stroke {
+        return Err(c.fail(
+            "campaign",
+            "jog_error_mm",
+            cp.jog_error_mm,
+            &format!(
+                "not below half of [trical] indicator_range_mm = {} (the first contact must lie within the indicators' {half_stroke} mm)",
+                t.indicator_range_mm
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The `[expect]` table of a TriCal scenario.

@@ -2,8 +2,6 @@
 //! folded in, passive joints left to their branches), their axes at the zero configuration, and
 //! the MDH frames placed on them (see the module above).
 
-use std::collections::HashMap;
-
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use super::iso;
@@ -44,30 +42,16 @@ pub(super) fn actuated(j: &urdf_rs::Joint) -> bool {
     !matches!(j.joint_type, urdf_rs::JointType::Fixed) && !passive(j)
 }
 
-/// Whether the subtree below `link` holds an actuated joint.
-fn drives(robot: &urdf_rs::Robot, link: &str, depth: usize) -> bool {
-    depth < 1000 && robot.joints.iter().filter(|j| j.parent.link == link).any(|j| actuated(j) || drives(robot, &j.child.link, depth + 1))
-}
-
-/// The root link and the chain of actuated joints from it; a branch whose joints are all fixed
-/// or passive is not a second chain.
-pub(super) fn walk(robot: &urdf_rs::Robot) -> Result<Chain, String> {
-    let mut by_child: HashMap<&str, &urdf_rs::Joint> = HashMap::new();
-    for j in &robot.joints {
-        if by_child.insert(j.child.link.as_str(), j).is_some() {
-            return Err(format!("link `{}` is the child of two joints: not a serial chain", j.child.link));
-        }
-    }
-    let roots: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).filter(|l| !by_child.contains_key(l)).collect();
-    let [root] = roots.as_slice() else {
-        return Err(format!("{} root links ({}): not one tree", roots.len(), roots.join(", ")));
-    };
-    let children = |link: &str| robot.joints.iter().filter(move |j| j.parent.link == link).collect::<Vec<_>>();
+/// The root link and the chain of actuated joints from it, read from the checked `tree`; a branch
+/// whose joints are all fixed or passive is not a second chain.
+pub(super) fn walk(tree: &super::graph::Tree<'_>) -> Result<Chain, String> {
+    let root = tree.root;
+    let children = |link: &str| tree.children(link).to_vec();
     let mut frame = Isometry3::identity();
     let mut link: String = root.to_string();
     let mut axes: Vec<Axis> = Vec::new();
     loop {
-        let next: Vec<&urdf_rs::Joint> = children(&link).into_iter().filter(|j| actuated(j) || drives(robot, &j.child.link, 0)).collect();
+        let next: Vec<&urdf_rs::Joint> = children(&link).into_iter().filter(|j| actuated(j) || tree.drives(&j.child.link)).collect();
         let j = match (next.as_slice(), axes.len()) {
             ([j], _) => *j,
             ([], JOINTS) => {

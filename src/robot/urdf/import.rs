@@ -22,7 +22,7 @@ pub struct ImportReport {
 fn preamble(text: &str) -> Vec<String> {
     let head = text.split("<robot").next().unwrap_or("");
     match (head.find("<!--"), head.find("-->")) {
-        (Some(a), Some(b)) if a < b => head[a + 4..b].lines().map(str::trim).filter(|l| !l.is_empty()).map(str::to_string).collect(),
+        (Some(a), Some(b)) if a < b => head[a + 4..b].lines().map(str::trim).filter(|l| !l.is_empty()).map(crate::io::names::escape_controls).collect(),
         _ => Vec::new(),
     }
 }
@@ -41,7 +41,8 @@ pub fn import(urdf: &Path, out: &Path, options: &ImportOptions) -> Result<Import
     if options.visual_fallback {
         command.push_str(" --visual-meshes");
     }
-    lines.push(format!("converted by `{command} --out {}`", out.display()));
+    // Comment lines of the robot file: a path's line break would end the comment.
+    lines.push(crate::io::names::escape_controls(&format!("converted by `{command} --out {}`", out.display())));
     let source = format!("converted by calsim {} from {}", env!("CARGO_PKG_VERSION"), urdf.display());
     let text = imported_text(&converted.model, &source, converted.capsules.as_ref(), converted.flange.as_ref(), &lines);
     // The robot file must be one calsim can load: a URDF value outside its ranges is the URDF's
@@ -62,6 +63,10 @@ pub fn import(urdf: &Path, out: &Path, options: &ImportOptions) -> Result<Import
     if worst > 1e-6 {
         return Err(fail(format!("the robot file written misses the converted arm by {worst:e} mm")));
     }
+    // The output is none of the files read (the URDF, its meshes) and no device or pipe.
+    let meshes: Vec<std::path::PathBuf> = converted.meshes.iter().map(|(m, _)| m.into()).collect();
+    let inputs: Vec<&Path> = std::iter::once(urdf).chain(meshes.iter().map(|m| m.as_path())).collect();
+    crate::io::out_dir::vet_file(out, &inputs).map_err(|e| fail(e.to_string()))?;
     crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| fail(format!("{}: {e}", out.display())))?;
     Ok(ImportReport { converted, text, file_difference_mm: worst })
 }

@@ -6,6 +6,9 @@
 //! joints after joint 6) as the tool and the flange. The result is checked against the URDF's own
 //! chain at 200 configurations before it is returned.
 //!
+//! The links and joints are checked as one tree before anything else (`graph`: names given once,
+//! links defined, one root, no detached cycle).
+//!
 //! The links' masses, collision geometry and passive joints (`bodies`): every link belongs to the
 //! body of the last actuated joint before it; each body gets the sum of its links' masses at their
 //! common centre of mass, primitive shapes as capsules of the same size, and one capsule around
@@ -21,7 +24,10 @@ use super::model::{JOINTS, RobotModel};
 
 mod bodies;
 mod chain;
+mod graph;
 mod import;
+
+pub use graph::MOST_LINKS;
 
 pub use bodies::PassiveJoint;
 pub use import::{ImportReport, import};
@@ -74,14 +80,18 @@ pub fn load_all(path: &Path, options: &ImportOptions) -> Result<Converted, UrdfE
     let shown = path.display().to_string();
     let fail = |message: String| UrdfError { path: shown.clone(), message };
     let text = crate::io::read_text(path).map_err(|e| fail(e.to_string()))?;
-    let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
+    // The XML parser recurses once per nested element: the shape is checked before it runs.
+    crate::io::xml::check_shape(&text).map_err(|e| fail(e.to_string()))?;
+    let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(crate::io::names::escape_controls(&e.to_string())))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     convert(&robot, dir, options).map_err(fail)
 }
 
-/// Converts a parsed URDF (see the module), its mesh files named relative to `urdf_dir`.
+/// Converts a parsed URDF (see the module), its mesh files named relative to `urdf_dir`: its links
+/// and joints are checked as one tree first (`graph`).
 pub fn convert(robot: &urdf_rs::Robot, urdf_dir: &Path, options: &ImportOptions) -> Result<Converted, String> {
-    let chain = chain::walk(robot)?;
+    let tree = graph::tree(robot)?;
+    let chain = chain::walk(&tree)?;
     let tip = chain.tip.translation.vector;
     let (model, frames) = chain::from_axes(&robot.name, &chain.axes, &tip)?;
     chain::check(&model, &chain.axes, &tip)?;
