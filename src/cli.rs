@@ -282,11 +282,19 @@ struct RunArgs {
     /// Skip the Rerun recording (study.rrd).
     #[arg(long)]
     no_recording: bool,
-    /// Judge every figure over this many realisations (worlds) of the scenario: a figure passes
-    /// when its median over them is within the band and the published value within their P10-P90.
-    /// Realisation 0 is the run whose results are written.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
-    realisations: u32,
+    /// Judge every figure over this many realisations (worlds) of the scenario, as a test: a figure
+    /// misses when the interval of its median over them lies wholly outside its band. Realisation 0
+    /// is the run whose results are written [default: 1 for run, the scenario's
+    /// study.check_realisations for check].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_CHECK_REALISATIONS as i64))]
+    realisations: Option<u32>,
+    /// The check's false-alarm rate over realisations: the probability that a model whose medians
+    /// meet every band fails [default: the scenario's study.check_false_alarm, 0.01].
+    #[arg(long)]
+    false_alarm: Option<f64>,
+    /// Also write the check's verdict as JUnit XML to this file (check.json is always written).
+    #[arg(long)]
+    junit: Option<PathBuf>,
 }
 
 /// Set sizes given on the command line.
@@ -473,6 +481,8 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         plots: !args.no_plots,
         recording: !args.no_recording,
         realisations: args.realisations,
+        false_alarm: args.false_alarm,
+        junit: args.junit.clone(),
         check,
     };
     let r = app::run::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
@@ -480,8 +490,9 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     println!("timing: {}, results written in {:.3} s (recording {:.3} s) to {}", r.timing, r.write_s, r.recording_s, r.dest.display());
     if let Some(d) = &r.distribution {
         println!(
-            "\nover {} realisations (realisation 0 is the run above; pass: the median within the band, the published value within P10-P90):",
-            r.realisations_run
+            "\nover {} realisations (realisation 0 is the run above): a figure misses when the interval of its median lies wholly \
+             outside its band, open when it straddles an edge; false-alarm rate {} over the figures checked",
+            r.realisations_run, r.false_alarm
         );
         println!("{}", distribution_table(d));
     }
@@ -490,7 +501,13 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     }
     let (checked, missed) = r.tally();
     match r.distribution {
-        Some(_) => println!("check: {} of {checked} figures within their bands over {} realisations", checked - missed, r.realisations_run),
+        Some(_) => println!(
+            "check: {} of {checked} figures not missed over {} realisations (false-alarm rate {}); verdict in {}",
+            checked - missed,
+            r.realisations_run,
+            r.false_alarm,
+            r.dest.join("check.json").display()
+        ),
         None => println!("check: {} of {checked} figures within their bands", checked - missed),
     }
     Ok(if missed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS })

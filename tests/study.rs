@@ -167,16 +167,34 @@ fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
     assert_eq!(full, quick);
 }
 
-/// The check CI relies on: the reduced study meets the bands of its [expect] table, and a run
-/// leaves the complete result set and no temporary directory behind.
+/// The reduced study's own world (seed 2018, one realisation) meets the bands of its [expect]
+/// table, and a check leaves the complete result set with its machine-readable verdict
+/// (check.json, and JUnit XML on request) and no temporary directory behind. The check over the
+/// scenario's 20 worlds runs in CI with the release binary (.ci/run).
 #[test]
 fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
     let tmp = scratch("check");
     let dir = tmp.path();
-    let out = calsim().args(["check", "scenarios/ci_quick.toml", "--out"]).arg(dir).output().unwrap();
+    let junit = tmp.path().with_extension("junit.xml");
+    let out = calsim()
+        .args(["check", "scenarios/ci_quick.toml", "--realisations", "1", "--junit"])
+        .arg(&junit)
+        .arg("--out")
+        .arg(dir)
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("figures within their bands"), "{stdout}");
+    let verdict: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("ci_quick/check.json")).unwrap()).unwrap();
+    assert_eq!(verdict["pass"], true);
+    assert_eq!(verdict["realisations"], 1);
+    let figures = verdict["figures"].as_array().unwrap();
+    assert_eq!(figures.iter().filter(|f| f["verdict"] == "pass").count(), 6, "{figures:?}");
+    let xml = std::fs::read_to_string(&junit).unwrap();
+    let _ = std::fs::remove_file(&junit);
+    assert!(xml.contains("<testsuite name=\"calsim check ci_quick\"") && xml.contains("failures=\"0\""), "{xml}");
+    assert_eq!(xml.matches("<testcase ").count(), figures.len());
     let entries: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(entries, vec!["ci_quick".to_string()], "no temporary directory left: {entries:?}");
     for f in ["tasks.parquet", "parameters.parquet", "validation_errors.parquet", "manifest.json", "summary.md"] {
@@ -303,4 +321,29 @@ fn compensated_targets_round_trip_on_the_exact_model() {
         let ratio = c.stats.median / t.validation.median;
         assert!((0.75..1.25).contains(&ratio), "task {}: compensated {} vs plain {} mm", t.task.index, c.stats.median, t.validation.median);
     }
+}
+
+/// Over several worlds the check judges each figure's median by its interval: with three worlds
+/// no interval at the scenario's confidence is bounded, so every banded figure is open (no
+/// evidence either way) and the check passes; check.json carries the realisations, the
+/// false-alarm rate and a verdict per figure.
+#[test]
+fn a_check_over_too_few_worlds_for_an_interval_reports_every_figure_open_and_passes() {
+    let tmp = scratch("check-worlds");
+    let dir = tmp.path();
+    let out = calsim()
+        .args(["check", "scenarios/ci_quick.toml", "--realisations", "3", "--set-sizes", "50:75:25", "--repetitions", "2"])
+        .args(["--no-plots", "--no-recording", "--out"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let verdict: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("ci_quick/check.json")).unwrap()).unwrap();
+    assert_eq!(verdict["realisations"], 3);
+    assert_eq!(verdict["false_alarm"], 0.01);
+    let figures = verdict["figures"].as_array().unwrap();
+    let banded: Vec<_> = figures.iter().filter(|f| f["verdict"] != "report").collect();
+    assert_eq!(banded.len(), 6);
+    assert!(banded.iter().all(|f| f["verdict"] == "open" && f["interval"].is_null()), "{banded:?}");
 }

@@ -128,7 +128,7 @@ def run(
     ``progress``: True (a tqdm bar when tqdm is installed, else a line per stage), False, or a
     callable ``f(event, text, done, total)``.
     """
-    return _run(scenario, False, out, seed, set_sizes, repetitions, threads, realisations, plots, recording, progress)
+    return _run(scenario, False, out, seed, set_sizes, repetitions, threads, realisations, None, plots, recording, progress)
 
 
 def check(
@@ -139,20 +139,24 @@ def check(
     set_sizes: Iterable[int] | None = None,
     repetitions: int | None = None,
     threads: int | None = None,
-    realisations: int = 1,
+    realisations: int | None = None,
+    false_alarm: float | None = None,
     plots: bool = True,
     recording: bool = True,
     progress: Progress = True,
 ) -> RunResult:
-    """Runs the study and compares it with the scenario's ``[expect]`` bands (``calsim check``).
+    """Runs the study and judges its figures against the scenario's ``[expect]`` bands (``calsim check``).
 
-    The same as :func:`run`; ``result.passed`` says whether every banded figure is within its band
-    (the CLI's exit code 0), ``result.missed`` how many are not.
+    The same as :func:`run`; over ``realisations`` worlds (default: the scenario's
+    ``study.check_realisations``) a figure misses when the interval of its median lies wholly
+    outside its band, at the false-alarm rate ``false_alarm`` (default: the scenario's
+    ``study.check_false_alarm``). ``result.passed`` says whether no figure missed (the CLI's exit
+    code 0), ``result.missed`` how many did; the verdict is also in ``check.json`` of the results.
     """
-    return _run(scenario, True, out, seed, set_sizes, repetitions, threads, realisations, plots, recording, progress)
+    return _run(scenario, True, out, seed, set_sizes, repetitions, threads, realisations, false_alarm, plots, recording, progress)
 
 
-def _run(scenario, check_, out, seed, set_sizes, repetitions, threads, realisations, plots, recording, progress) -> RunResult:
+def _run(scenario, check_, out, seed, set_sizes, repetitions, threads, realisations, false_alarm, plots, recording, progress) -> RunResult:
     with observer(progress) as callback:
         report = _calsim.run(
             Path(scenario),
@@ -162,7 +166,8 @@ def _run(scenario, check_, out, seed, set_sizes, repetitions, threads, realisati
             set_sizes=_sizes(set_sizes),
             repetitions=_optional("repetitions", repetitions, _U32),
             threads=_optional("threads", threads, _U32),
-            realisations=_whole("realisations", realisations, 0, _U32),
+            realisations=_optional("realisations", realisations, _U32),
+            false_alarm=None if false_alarm is None else float(false_alarm),
             plots=plots,
             recording=recording,
             progress=callback,

@@ -250,7 +250,7 @@ fn check_realisations(py: Python<'_>, r: u32) -> PyResult<()> {
 
 /// Runs (or checks) the study of a scenario of any device: `calsim run` / `calsim check`.
 #[pyfunction]
-#[pyo3(signature = (scenario, *, out, check, seed=None, set_sizes=None, repetitions=None, threads=None, realisations=1, plots=true, recording=true, progress=None))]
+#[pyo3(signature = (scenario, *, out, check, seed=None, set_sizes=None, repetitions=None, threads=None, realisations=None, false_alarm=None, plots=true, recording=true, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn run<'py>(
     py: Python<'py>,
@@ -261,13 +261,16 @@ fn run<'py>(
     set_sizes: Option<Vec<u32>>,
     repetitions: Option<u32>,
     threads: Option<u32>,
-    realisations: u32,
+    realisations: Option<u32>,
+    false_alarm: Option<f64>,
     plots: bool,
     recording: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_threads(py, threads)?;
-    check_realisations(py, realisations)?;
+    if let Some(r) = realisations {
+        check_realisations(py, r)?;
+    }
     if let Some(sizes) = &set_sizes
         && sizes.is_empty()
     {
@@ -281,6 +284,8 @@ fn run<'py>(
         plots,
         recording,
         realisations,
+        false_alarm,
+        junit: None,
         check,
     };
     let (r, warnings) = detached(py, progress, |o| app::run::run(&spec, o))?;
@@ -294,6 +299,7 @@ fn run<'py>(
     d.set_item("write_s", r.write_s)?;
     d.set_item("recording_s", r.recording_s)?;
     d.set_item("realisations", r.realisations_run)?;
+    d.set_item("false_alarm", r.false_alarm)?;
     let (checked, missed) = r.tally();
     d.set_item("checked", checked)?;
     d.set_item("missed", missed)?;

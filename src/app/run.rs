@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::{Error, Observer, thread_pool, threads_label};
 use crate::device::{Scenario, WriteOptions};
 use crate::identify::FitOutcome;
-use crate::study::check::{Check, DistributionCheck, over_realisations, tally};
+use crate::study::check::{Check, CheckReport, DistributionCheck, over_realisations, tally};
 use crate::study::engine::Identified;
 
 /// Command-line changes to a scenario: the seed, the set sizes (the table size moves to the
@@ -103,8 +103,14 @@ pub struct RunSpec {
     pub plots: bool,
     /// Write the Rerun recording.
     pub recording: bool,
-    /// Worlds the figures are judged over (1: the scenario's own world only).
-    pub realisations: u32,
+    /// Worlds the figures are judged over (1: the scenario's own world only; `None`: one for
+    /// `run`, the scenario's `study.check_realisations` for `check`).
+    pub realisations: Option<u32>,
+    /// The check's false-alarm rate over realisations (`None`: the scenario's
+    /// `study.check_false_alarm`).
+    pub false_alarm: Option<f64>,
+    /// Also write the check's verdict as JUnit XML to this file.
+    pub junit: Option<PathBuf>,
     /// Compare with the bands (`check`) rather than only report (`run`).
     pub check: bool,
 }
@@ -134,6 +140,10 @@ pub struct RunReport {
     pub distribution: Option<Vec<DistributionCheck>>,
     /// Realisations that ran (realisation 0 included).
     pub realisations_run: usize,
+    /// The false-alarm rate the figures were judged at over realisations.
+    pub false_alarm: f64,
+    /// The verdict as written to `check.json` (a check only).
+    pub check_report: Option<CheckReport>,
 }
 
 impl RunReport {
@@ -173,6 +183,15 @@ fn wrong_command(path: &Path, e: crate::device::ScenarioError) -> Error {
 pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> {
     let scenario = load(&spec.scenario, &spec.overrides)?;
     let h = scenario.header();
+    let study = scenario.study();
+    let count = spec.realisations.unwrap_or(if spec.check { study.check_realisations } else { 1 });
+    let false_alarm = spec.false_alarm.unwrap_or(study.check_false_alarm);
+    if !(1e-6..=0.5).contains(&false_alarm) {
+        return Err(Error::input("--false-alarm", format!("{false_alarm}: within [1e-6, 0.5]")));
+    }
+    if let Some(j) = &spec.junit {
+        crate::io::out_dir::vet_file(j, &[&spec.scenario])?;
+    }
     crate::io::out_dir::prepare(&spec.out, &h.name)?;
     let (pool, threads) = thread_pool(spec.threads)?;
     let kind = scenario.device().kind();
@@ -190,19 +209,42 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         .map_err(device_err)?;
     observer.stage_done();
     let checks = pool.install(|| outcome.checks()).map_err(device_err)?;
+    let mut distribution = None;
+    let mut realisations_run = 1;
+    if count > 1 {
+        let others = realisations(count, observer, |r| {
+            let seed = crate::seeds::realisation_seed(h.seed, r);
+            pool.install(|| scenario.run(seed, &|_, _| {}).and_then(|o| o.checks())).map_err(|e| e.to_string())
+        });
+        let mut runs = vec![checks.clone()];
+        runs.extend(others);
+        realisations_run = runs.len();
+        distribution = Some(over_realisations(&runs, false_alarm));
+    }
+    let check_report = spec.check.then(|| match &distribution {
+        Some(d) => CheckReport::over(&h.name, h.seed, realisations_run, false_alarm, d),
+        None => CheckReport::single(&h.name, h.seed, &checks),
+    });
     let t_write = Instant::now();
     let options = WriteOptions { threads, plots: spec.plots, recording: spec.recording, overrides: spec.overrides.pairs() };
     let mut written = Default::default();
     let dest = crate::io::out_dir::write_atomically(&spec.out, &h.name, |dir| {
         written = outcome.write(dir, &checks, &options).map_err(std::io::Error::other)?;
+        if let Some(c) = &check_report {
+            let json = serde_json::to_string_pretty(c).map_err(std::io::Error::other)?;
+            crate::io::out_dir::write_file(&dir.join("check.json"), json + "\n")?;
+        }
         Ok(())
     })
     .map_err(Error::io(&spec.out))?;
+    if let (Some(j), Some(c)) = (&spec.junit, &check_report) {
+        crate::io::out_dir::write_file_atomically(j, &c.junit()).map_err(Error::io(j))?;
+    }
     let write_s = t_write.elapsed().as_secs_f64();
     if let Some(w) = fit_health(&spec.scenario, outcome.fits())? {
         observer.warning(&w);
     }
-    let mut report = RunReport {
+    Ok(RunReport {
         name: h.name.clone(),
         kind,
         seed: h.seed,
@@ -212,20 +254,11 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         write_s,
         recording_s: written.recording_s,
         dest,
-        distribution: None,
-        realisations_run: 1,
-    };
-    if spec.realisations > 1 {
-        let others = realisations(spec.realisations, observer, |r| {
-            let seed = crate::seeds::realisation_seed(h.seed, r);
-            pool.install(|| scenario.run(seed, &|_, _| {}).and_then(|o| o.checks())).map_err(|e| e.to_string())
-        });
-        let mut runs = vec![report.checks.clone()];
-        runs.extend(others);
-        report.realisations_run = runs.len();
-        report.distribution = Some(over_realisations(&runs));
-    }
-    Ok(report)
+        distribution,
+        realisations_run,
+        false_alarm,
+        check_report,
+    })
 }
 
 /// One line when identifications failed: how many gave no model (and which parameters they could

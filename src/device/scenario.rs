@@ -280,6 +280,9 @@ impl Checker<'_> {
         )?;
         self.within("study", "detmax_max_excursion", s.detmax_max_excursion as f64, 1.0, 10.0, "excursion length")?;
         self.within("study", "rank_rtol", s.rank_rtol, 1e-7, 0.1, "relative singular-value threshold")?;
+        let most = crate::study::MAX_CHECK_REALISATIONS;
+        self.count("study", "check_realisations", s.check_realisations.into(), 1, most.into(), "worlds a check judges over")?;
+        self.within("study", "check_false_alarm", s.check_false_alarm, 1e-6, 0.5, "false-alarm rate of a check")?;
         Ok(())
     }
 

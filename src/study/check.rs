@@ -131,6 +131,30 @@ pub fn tally(rows: &[Check]) -> (usize, usize) {
     (rows.iter().filter(|r| r.pass.is_some()).count(), rows.iter().filter(|r| r.pass == Some(false)).count())
 }
 
+/// The verdict on one figure over realisations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The interval of the median lies within the bound.
+    Pass,
+    /// The interval straddles the bound's edge: no evidence either way at these realisations
+    /// (the gate passes it: it fails only on evidence).
+    Open,
+    /// The interval lies wholly outside the bound: evidence that the model's median misses it.
+    Miss,
+}
+
+impl Verdict {
+    /// The verdict as a word.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Pass => "pass",
+            Verdict::Open => "open",
+            Verdict::Miss => "MISS",
+        }
+    }
+}
+
 /// One figure over realisations: the rule of a distribution check.
 #[derive(Clone, Debug)]
 pub struct DistributionCheck {
@@ -142,17 +166,55 @@ pub struct DistributionCheck {
     pub p10: f64,
     /// See `median`.
     pub p90: f64,
+    /// The distribution-free interval of the median at `confidence` (order statistics).
+    pub interval: (f64, f64),
+    /// The confidence of `interval`: `1 - 2 false_alarm / figures checked` (see [`over_realisations`]).
+    pub confidence: f64,
     /// Realisations with a finite value.
     pub count: usize,
-    /// Passed: the median within the bound, and the published value (where the paper prints one
-    /// and the row has a band) within P10-P90; `None` without a bound.
+    /// The published value (where the paper prints one) within P10-P90 of the realisations:
+    /// reported, not part of the verdict.
+    pub covers_published: Option<bool>,
+    /// The verdict, `None` without a bound.
+    pub verdict: Option<Verdict>,
+    /// Passed the gate (not [`Verdict::Miss`]), `None` without a bound.
     pub pass: Option<bool>,
 }
 
+/// Where the interval `(lo, hi)` lies against `b`.
+fn judge(b: &Bound, (lo, hi): (f64, f64)) -> Verdict {
+    let (inside, outside) = match *b {
+        Bound::Band(band) => {
+            let (a, z) = (band.value - band.tolerance * band.value.abs(), band.value + band.tolerance * band.value.abs());
+            (lo >= a && hi <= z, hi < a || lo > z)
+        }
+        Bound::AtLeast(m) => (lo >= m, hi < m),
+        Bound::AtMost(m) => (hi <= m, lo > m),
+        Bound::Below(m) => (hi < m, lo >= m),
+    };
+    if outside {
+        Verdict::Miss
+    } else if inside {
+        Verdict::Pass
+    } else {
+        Verdict::Open
+    }
+}
+
 /// The distribution checks of the same rows computed in several realisations (`runs[r][i]` is row
-/// i of realisation r; every realisation has the rows of the first).
-pub fn over_realisations(runs: &[Vec<Check>]) -> Vec<DistributionCheck> {
+/// i of realisation r; every realisation has the rows of the first), judged as a test whose
+/// false-alarm rate is at most `false_alarm`.
+///
+/// Each bounded figure's median over the realisations gets its distribution-free interval at
+/// confidence `1 - 2 a / k` (k figures with a bound, `a = false_alarm`); a figure misses only when
+/// that interval lies wholly outside its bound. When the model's true median of a figure satisfies
+/// the bound, the interval misses it on the far side with probability at most `a / k`, so the
+/// probability that any of the k figures misses is at most `a` (Bonferroni), for any seed and any
+/// number of realisations. Too few realisations give an unbounded interval: every figure is open.
+pub fn over_realisations(runs: &[Vec<Check>], false_alarm: f64) -> Vec<DistributionCheck> {
     let Some(first) = runs.first() else { return Vec::new() };
+    let k = first.iter().filter(|r| r.bound.is_some()).count().max(1);
+    let confidence = 1.0 - 2.0 * false_alarm / k as f64;
     first
         .iter()
         .enumerate()
@@ -161,14 +223,14 @@ pub fn over_realisations(runs: &[Vec<Check>]) -> Vec<DistributionCheck> {
             let sorted = crate::study::stats::finite_sorted(&values);
             let q = |p: f64| crate::study::stats::quantile(&sorted, p);
             let (median, p10, p90) = (q(0.5), q(0.1), q(0.9));
-            let pass = row.bound.map(|b| {
-                let covered = match (b, row.published_value) {
-                    (Bound::Band(_), Some(p)) => p10 <= p && p <= p90,
-                    _ => true,
-                };
-                b.holds(median) && covered
-            });
-            DistributionCheck { row: row.clone(), median, p10, p90, count: sorted.len(), pass }
+            let interval = crate::study::interval::median_interval(&sorted, confidence);
+            let covers_published = match (row.bound, row.published_value) {
+                (Some(Bound::Band(_)), Some(p)) => Some(p10 <= p && p <= p90),
+                _ => None,
+            };
+            let verdict = row.bound.map(|b| judge(&b, interval));
+            let pass = verdict.map(|v| v != Verdict::Miss);
+            DistributionCheck { row: row.clone(), median, p10, p90, interval, confidence, count: sorted.len(), covers_published, verdict, pass }
         })
         .collect()
 }
@@ -197,24 +259,170 @@ pub fn terminal_table(rows: &[Check]) -> String {
 /// The figures over realisations as a text table for the terminal.
 pub fn distribution_table(rows: &[DistributionCheck]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "{:<58} {:>14} {:>10} {:>10} {:>17} {:>16}  result", "figure", "published", "run 0", "median", "P10-P90", "band");
+    let conf = rows.first().map_or(0.0, |d| d.confidence);
+    let _ = writeln!(
+        s,
+        "{:<58} {:>14} {:>10} {:>10} {:>19} {:>17} {:>16}  result",
+        "figure",
+        "published",
+        "run 0",
+        "median",
+        format!("{:.2} % interval", 100.0 * conf),
+        "P10-P90",
+        "band"
+    );
     for d in rows {
-        let verdict = match d.pass {
-            Some(true) => "pass",
-            Some(false) => "MISS",
-            None => "-",
-        };
+        let verdict = d.verdict.map_or("-", Verdict::word);
         let published = d.row.published_value.map_or_else(|| d.row.published.clone(), |v| format!("{v:.3}"));
+        let interval = if d.interval.0.is_finite() && d.interval.1.is_finite() {
+            format!("{:.3}-{:.3}", d.interval.0, d.interval.1)
+        } else {
+            "unbounded".to_string()
+        };
         let _ = writeln!(
             s,
-            "{:<58} {:>14} {:>10} {:>10.3} {:>17} {:>16}  {verdict}",
+            "{:<58} {:>14} {:>10} {:>10.3} {:>19} {:>17} {:>16}  {verdict}",
             d.row.figure,
             published.chars().take(14).collect::<String>(),
             d.row.reproduced,
             d.median,
+            interval,
             format!("{:.3}-{:.3}", d.p10, d.p90),
             d.row.band
         );
     }
     s
+}
+
+/// The machine-readable verdict of a check (`check.json`): every figure with its published value,
+/// calsim's value, its interval over realisations, its bound and verdict.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckReport {
+    /// Scenario name.
+    pub scenario: String,
+    /// Seed of realisation 0.
+    pub seed: u64,
+    /// Realisations the figures were judged over (1: the plain run's values, judged as they are).
+    pub realisations: usize,
+    /// The test's false-alarm rate (over realisations), the probability of a miss when the model's
+    /// medians satisfy every bound.
+    pub false_alarm: Option<f64>,
+    /// Every figure passed the gate.
+    pub pass: bool,
+    /// Figures with a bound, and of them missed.
+    pub checked: usize,
+    /// See `checked`.
+    pub missed: usize,
+    /// One row per figure.
+    pub figures: Vec<CheckRow>,
+}
+
+/// One figure of [`CheckReport`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckRow {
+    /// Figure.
+    pub figure: String,
+    /// Published value as a number, where the paper prints one.
+    pub published_value: Option<f64>,
+    /// Published value or rule as the paper gives it.
+    pub published: String,
+    /// calsim's value: the median over realisations (or the plain run's value).
+    pub value: f64,
+    /// The interval of the median over realisations (absent for one realisation or too few).
+    pub interval: Option<[f64; 2]>,
+    /// Confidence of `interval`.
+    pub confidence: Option<f64>,
+    /// P10 and P90 over realisations.
+    pub p10_p90: Option<[f64; 2]>,
+    /// The published value within P10-P90 (reported, not judged).
+    pub covers_published: Option<bool>,
+    /// The bound as written (`-` for a figure reported without one).
+    pub band: String,
+    /// `pass`, `open` (over realisations: no evidence either way), `miss` or `report` (no bound).
+    pub verdict: String,
+}
+
+impl CheckReport {
+    /// The report of the plain run's `checks` (one realisation).
+    pub fn single(scenario: &str, seed: u64, checks: &[Check]) -> Self {
+        let figures = checks
+            .iter()
+            .map(|c| CheckRow {
+                figure: c.figure.clone(),
+                published_value: c.published_value,
+                published: c.published.clone(),
+                value: c.value,
+                interval: None,
+                confidence: None,
+                p10_p90: None,
+                covers_published: None,
+                band: c.band.clone(),
+                verdict: c.pass.map_or("report", |p| if p { "pass" } else { "miss" }).to_string(),
+            })
+            .collect();
+        let (checked, missed) = tally(checks);
+        Self { scenario: scenario.into(), seed, realisations: 1, false_alarm: None, pass: missed == 0, checked, missed, figures }
+    }
+
+    /// The report of figures judged over realisations.
+    pub fn over(scenario: &str, seed: u64, realisations: usize, false_alarm: f64, rows: &[DistributionCheck]) -> Self {
+        let finite = |(a, b): (f64, f64)| (a.is_finite() && b.is_finite()).then_some([a, b]);
+        let figures = rows
+            .iter()
+            .map(|d| CheckRow {
+                figure: d.row.figure.clone(),
+                published_value: d.row.published_value,
+                published: d.row.published.clone(),
+                value: d.median,
+                interval: finite(d.interval),
+                confidence: Some(d.confidence),
+                p10_p90: finite((d.p10, d.p90)),
+                covers_published: d.covers_published,
+                band: d.row.band.clone(),
+                verdict: d.verdict.map_or("report", |v| match v {
+                    Verdict::Pass => "pass",
+                    Verdict::Open => "open",
+                    Verdict::Miss => "miss",
+                })
+                .to_string(),
+            })
+            .collect();
+        let checked = rows.iter().filter(|d| d.pass.is_some()).count();
+        let missed = rows.iter().filter(|d| d.pass == Some(false)).count();
+        Self { scenario: scenario.into(), seed, realisations, false_alarm: Some(false_alarm), pass: missed == 0, checked, missed, figures }
+    }
+
+    /// The report as JUnit XML (one test suite, one test case per figure with a bound; a miss is a
+    /// failure, a figure without a bound is skipped), for CI systems.
+    pub fn junit(&self) -> String {
+        let esc = |t: &str| t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;");
+        let skipped = self.figures.iter().filter(|f| f.verdict == "report").count();
+        let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
+        let _ = writeln!(
+            s,
+            "<testsuites><testsuite name=\"calsim check {}\" tests=\"{}\" failures=\"{}\" skipped=\"{skipped}\">",
+            esc(&self.scenario),
+            self.figures.len(),
+            self.missed
+        );
+        for f in &self.figures {
+            let interval = f.interval.map_or(String::new(), |[a, b]| format!(", interval {a:.4}-{b:.4}"));
+            let what = format!("calsim {:.4}{interval}, published {}, band {}", f.value, f.published, f.band);
+            let _ = write!(s, "  <testcase classname=\"{}\" name=\"{}\">", esc(&self.scenario), esc(&f.figure));
+            match f.verdict.as_str() {
+                "miss" => {
+                    let _ = write!(s, "<failure message=\"{}\"/>", esc(&what));
+                }
+                "report" => {
+                    let _ = write!(s, "<skipped message=\"reported without a bound: {}\"/>", esc(&what));
+                }
+                _ => {
+                    let _ = write!(s, "<system-out>{} ({})</system-out>", esc(&what), f.verdict);
+                }
+            }
+            s.push_str("</testcase>\n");
+        }
+        s.push_str("</testsuite></testsuites>\n");
+        s
+    }
 }

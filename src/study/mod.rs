@@ -54,6 +54,11 @@ pub struct StudySpec {
     /// Validate the identifications at the table set size with compensated targets too
     /// ([`compensated_errors`]).
     pub compensated_validation: bool,
+    /// Worlds `calsim check` judges the figures over (1: the scenario's own world, as it is).
+    pub check_realisations: u32,
+    /// The false-alarm rate of `calsim check` over realisations: the probability of a miss when
+    /// the model's medians satisfy every bound.
+    pub check_false_alarm: f64,
 }
 
 impl Default for StudySpec {
@@ -69,6 +74,8 @@ impl Default for StudySpec {
             rank_rtol: FitOptions::default().rank_rtol,
             truncate: false,
             compensated_validation: true,
+            check_realisations: 1,
+            check_false_alarm: 0.01,
         }
     }
 }
@@ -106,5 +113,7 @@ impl StudySpec {
 pub const MAX_REPETITIONS: u32 = 10_000;
 /// Most set sizes a study takes.
 pub const MAX_SET_SIZES: usize = 1_000;
+/// Most realisations `calsim check` judges over.
+pub const MAX_CHECK_REALISATIONS: u32 = 10_000;
 /// Most identifications a study takes in all (selections x set sizes x repetitions).
 pub const MAX_TASKS: u64 = 1_000_000;

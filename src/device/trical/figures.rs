@@ -28,6 +28,11 @@ pub struct ExpectSpec {
     pub table7_std_within_factor3_min: Option<u32>,
     /// Least number of Table 7 parameters whose mean is within 3 published std of the truth.
     pub table7_mean_within_3std_min: Option<u32>,
+    /// Least number of Table 7's compliances identified with the published sign.
+    pub table7_compliance_signs_min: Option<u32>,
+    /// Least number of Table 7's joint offsets identified within 3 published std of the published
+    /// mean.
+    pub table7_offsets_near_published_min: Option<u32>,
     /// Largest rise allowed between consecutive set sizes of the median of the mean error
     /// (Fig. 8: the median does not rise with n), relative.
     pub fig8_max_rise: Option<f64>,
@@ -238,6 +243,23 @@ impl Figures {
         (listed, std_ok, mean_ok)
     }
 
+    /// Table 7's compliances (`c2`..`c6`) with a published mean, and how many of them were
+    /// identified (their mean over the sets) with the published sign.
+    pub fn table7_compliance_signs(&self) -> (u32, u32) {
+        let c: Vec<&ParamStats> = self.table7.iter().filter(|p| p.name.starts_with('c') && p.published.is_some()).collect();
+        let same = c.iter().filter(|p| p.published.is_some_and(|(m, _)| p.mean * m > 0.0)).count() as u32;
+        (c.len() as u32, same)
+    }
+
+    /// Table 7's joint offsets (`theta_offs*`) with a published mean, and how many of them were
+    /// identified (their mean over the sets) within 3 published std of the published mean (not of
+    /// the scenario's truth: an offset moved in the truth or the model shows here).
+    pub fn table7_offsets_near_published(&self) -> (u32, u32) {
+        let o: Vec<&ParamStats> = self.table7.iter().filter(|p| p.name.starts_with("theta_offs") && p.published.is_some()).collect();
+        let near = o.iter().filter(|p| p.published.is_some_and(|(m, sd)| (p.mean - m).abs() <= 3.0 * sd.max(0.0005))).count() as u32;
+        (o.len() as u32, near)
+    }
+
     /// Largest relative rise of the median of mean errors between consecutive set sizes.
     pub fn fig8_max_rise(&self) -> f64 {
         self.sizes
@@ -258,6 +280,8 @@ impl Figures {
 /// The comparison rows for a scenario's `[expect]` table (rows without a band are reported only).
 pub fn checks(f: &Figures, expect: &ExpectSpec) -> Vec<Check> {
     let (listed, std_ok, mean_ok) = f.table7_counts();
+    let (c_listed, c_same) = f.table7_compliance_signs();
+    let (o_listed, o_near) = f.table7_offsets_near_published();
     let rise = f.fig8_max_rise();
     let ratio = f.fig9_spread_ratio();
     let p = &published().trical_2018;
@@ -287,6 +311,22 @@ pub fn checks(f: &Figures, expect: &ExpectSpec) -> Vec<Check> {
             f64::from(mean_ok),
             format!("{mean_ok} of {listed}"),
             expect.table7_mean_within_3std_min.map(|m| Bound::AtLeast(f64::from(m))),
+            describe,
+        ),
+        Check::rule(
+            "Table 7: compliances identified with the published sign",
+            &format!("{c_listed} compliances"),
+            f64::from(c_same),
+            format!("{c_same} of {c_listed}"),
+            expect.table7_compliance_signs_min.map(|m| Bound::AtLeast(f64::from(m))),
+            describe,
+        ),
+        Check::rule(
+            "Table 7: joint offsets within 3 published std of the published mean",
+            &format!("{o_listed} offsets"),
+            f64::from(o_near),
+            format!("{o_near} of {o_listed}"),
+            expect.table7_offsets_near_published_min.map(|m| Bound::AtLeast(f64::from(m))),
             describe,
         ),
         Check::rule(

@@ -331,6 +331,8 @@ fn expect(c: &Checker<'_>, e: &ExpectSpec) -> Result<(), ScenarioError> {
     }
     c.bound("table7_std_within_factor3_min", e.table7_std_within_factor3_min.map(f64::from), 0.0, 31.0)?;
     c.bound("table7_mean_within_3std_min", e.table7_mean_within_3std_min.map(f64::from), 0.0, 31.0)?;
+    c.bound("table7_compliance_signs_min", e.table7_compliance_signs_min.map(f64::from), 0.0, 5.0)?;
+    c.bound("table7_offsets_near_published_min", e.table7_offsets_near_published_min.map(f64::from), 0.0, 5.0)?;
     c.bound("fig8_max_rise", e.fig8_max_rise, -1.0, 10.0)?;
     c.bound("fig9_spread_ratio_min", e.fig9_spread_ratio_min, 0.0, 1000.0)?;
     c.bound("fig12_abs_r_max", e.fig12_abs_r_max, 0.0, 1.0)
