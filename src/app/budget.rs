@@ -73,6 +73,26 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
     let rows: Vec<Option<&sweep::PointRow>> = (0..configs.len()).map(|i| points.iter().find(|p| p.point == i && p.table)).collect();
     let p95: Vec<f64> = rows.iter().map(|r| r.map_or(f64::NAN, |r| r.after[1][0])).collect();
     let (all_mm, none_mm, lines) = budget::lines(&sources, &configs, &p95);
+    // Per configuration and world, the p95 at the table set size (NaN where the world could not run it).
+    let per_world: Vec<Vec<f64>> = (0..configs.len())
+        .map(|i| {
+            (0..info.realisations)
+                .map(|r| {
+                    units
+                        .iter()
+                        .find(|u| u.point == i && u.realisation == r)
+                        .and_then(|u| u.rows.iter().find(|row| row.table))
+                        .map_or(f64::NAN, |row| row.after_p95_mm)
+                })
+                .collect()
+        })
+        .collect();
+    let shares = budget::shares(&sources, &configs, &per_world);
+    let against = budget::against_all_on(&configs, &per_world);
+    let warnings = budget::warnings(&sources, &shares, spec.realisations);
+    for w in &warnings {
+        observer.warning(w);
+    }
     // The linear prediction per configuration, merged over realisations in unit order.
     let predictions: Vec<Option<Prediction>> = (0..configs.len())
         .map(|i| {
@@ -93,6 +113,9 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
         none_mm,
         lines: &lines,
         predictions: &predictions,
+        shares: &shares,
+        against: &against,
+        warnings: &warnings,
     };
     let dest = budget::results::write(&spec.out, &report).map_err(Error::io(&spec.out))?;
     std::fs::remove_dir_all(&dir).map_err(Error::io(&dir))?;

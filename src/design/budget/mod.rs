@@ -199,3 +199,109 @@ pub fn lines(sources: &[Source], configs: &[Config], p95: &[f64]) -> (f64, f64, 
     out.sort_by(|a, b| b.share_alone.total_cmp(&a.share_alone).then(a.source.cmp(&b.source)));
     (all, none, out)
 }
+
+/// Confidence of the budget's intervals and tests.
+pub const CONFIDENCE: f64 = 0.95;
+
+/// Bootstrap resamples of a share's interval.
+const RESAMPLES: usize = 2000;
+
+/// A source's share over the worlds, with its interval, and what the worlds resolve.
+#[derive(Clone, Debug)]
+pub struct Share {
+    /// Index of the source.
+    pub source: usize,
+    /// The share of the source alone: the mean over worlds of the square it adds to the floor's
+    /// p95, over the mean of the sum of those squares (a ratio of means: worlds are the unit of
+    /// independence, and the squares add where medians do not).
+    pub share: f64,
+    /// Its bootstrap-t interval at [`CONFIDENCE`] over worlds.
+    pub interval: (f64, f64),
+    /// The p95 with the source alone against the floor's, paired per world, mm.
+    pub effect: Paired,
+    /// The effect is resolved: the sign test over worlds rejects "no effect" at [`CONFIDENCE`].
+    pub resolved: bool,
+    /// The per-world added squares of this source against the next in the order (paired), and
+    /// whether the worlds tell the two apart; `None` for the last source.
+    pub above_next: Option<(Paired, bool)>,
+}
+
+use crate::study::interval::{Paired, bootstrap_t, ratio_of_means};
+
+/// The per-world p95 of every configuration (`per_world[config][world]`, NaN where the world could
+/// not run it) turned into the sources' shares with intervals, largest share first.
+pub fn shares(sources: &[Source], configs: &[Config], per_world: &[Vec<f64>]) -> Vec<Share> {
+    let find = |mode: &str, s: Option<usize>| configs.iter().position(|c| c.mode == mode && c.source == s);
+    let (Some(none), n) = (find("none", None), sources.len()) else { return Vec::new() };
+    let alone: Vec<Option<usize>> = (0..n).map(|s| find("alone", Some(s))).collect();
+    let worlds = per_world.first().map_or(0, Vec::len);
+    // Per world, the square each source adds alone over the floor; worlds where any is missing left out.
+    let added: Vec<Vec<f64>> = (0..worlds)
+        .filter_map(|r| {
+            let floor = per_world[none][r];
+            let row: Vec<f64> = alone.iter().map(|a| a.map_or(f64::NAN, |a| (per_world[a][r].powi(2) - floor.powi(2)).max(0.0))).collect();
+            (floor.is_finite() && row.iter().all(|x| x.is_finite())).then_some(row)
+        })
+        .collect();
+    let all: Vec<usize> = (0..added.len()).collect();
+    let mut out: Vec<Share> = (0..n)
+        .map(|s| {
+            use rand::SeedableRng;
+            // A fixed stream per source: the interval is a function of the results alone.
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xB0D6_E7 + s as u64);
+            let share = if added.len() > 1 { ratio_of_means(&added, s, &all).0 } else { f64::NAN };
+            let interval = bootstrap_t(added.len(), |idx| ratio_of_means(&added, s, idx), RESAMPLES, CONFIDENCE, &mut rng);
+            let clamp = |x: f64| x.clamp(0.0, 1.0);
+            let effect = alone[s].map_or_else(|| Paired::of(&[], &[], CONFIDENCE), |a| Paired::of(&per_world[a], &per_world[none], CONFIDENCE));
+            let resolved = effect.separated(CONFIDENCE) && effect.median > 0.0;
+            Share { source: s, share, interval: (clamp(interval.0), clamp(interval.1)), effect, resolved, above_next: None }
+        })
+        .collect();
+    out.sort_by(|a, b| b.share.total_cmp(&a.share).then(a.source.cmp(&b.source)));
+    for i in 0..out.len().saturating_sub(1) {
+        let (a, b) = (out[i].source, out[i + 1].source);
+        let x: Vec<f64> = added.iter().map(|w| w[a]).collect();
+        let y: Vec<f64> = added.iter().map(|w| w[b]).collect();
+        let p = Paired::of(&x, &y, CONFIDENCE);
+        out[i].above_next = Some((p, p.separated(CONFIDENCE) && p.median > 0.0));
+    }
+    out
+}
+
+/// Every configuration against every source on, paired per world (p95, mm): what a what-if
+/// changes, with its interval; `None` for every source on itself.
+pub fn against_all_on(configs: &[Config], per_world: &[Vec<f64>]) -> Vec<Option<Paired>> {
+    let all = configs.iter().position(|c| c.mode == "all");
+    configs
+        .iter()
+        .enumerate()
+        .map(|(i, _)| match all {
+            Some(a) if a != i => Some(Paired::of(&per_world[i], &per_world[a], CONFIDENCE)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Warnings on what the worlds cannot tell: the leading sources not ranked, effects within the
+/// noise.
+pub fn warnings(sources: &[Source], shares: &[Share], realisations: u32) -> Vec<String> {
+    let mut w = Vec::new();
+    if let Some(first) = shares.first()
+        && let Some((p, false)) = first.above_next
+        && let Some(second) = shares.get(1)
+    {
+        w.push(format!(
+            "the {realisations} realisations cannot rank the leading sources: {} and {} (their added squares differ in {} of {} worlds, sign test p = {:.3}); run with more --realisations",
+            sources[first.source].label,
+            sources[second.source].label,
+            p.test.positive.max(p.test.negative),
+            p.n,
+            p.test.p_value
+        ));
+    }
+    let noise: Vec<&str> = shares.iter().filter(|s| !s.resolved).map(|s| sources[s.source].label).collect();
+    if !noise.is_empty() {
+        w.push(format!("within the noise of {realisations} realisations (alone, no effect on the p95 resolved): {}", noise.join(", ")));
+    }
+    w
+}

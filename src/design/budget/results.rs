@@ -13,6 +13,7 @@ use super::{Config, Line, Source};
 use crate::design::sweep::PointRow;
 use crate::io::out_dir::write_atomically;
 use crate::io::table::{err, parquet, table_hashes};
+use crate::study::interval::Paired;
 use crate::study::prediction::Prediction;
 
 /// Everything a budget's files show.
@@ -36,6 +37,12 @@ pub struct BudgetReport<'a> {
     /// Per configuration, the linear prediction beside the Monte Carlo (TriCal; `None` where there
     /// is none).
     pub predictions: &'a [Option<Prediction>],
+    /// The sources' shares over worlds with their intervals, largest first.
+    pub shares: &'a [super::Share],
+    /// Per configuration, its p95 against every source on, paired per world.
+    pub against: &'a [Option<Paired>],
+    /// What the worlds cannot tell.
+    pub warnings: &'a [String],
 }
 
 /// Writes the budget into `out/<name>`, replacing what was there.
@@ -65,6 +72,31 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
             f("after_p95_mm_median", (0..n).map(|i| q(i, 1, 0)).collect()),
             f("after_p95_mm_p10", (0..n).map(|i| q(i, 1, 1)).collect()),
             f("after_p95_mm_p90", (0..n).map(|i| q(i, 1, 2)).collect()),
+            // Against every source on, paired per world: median difference of the p95 with its
+            // interval at the budget's confidence, the sign test's p-value (NaN for all on itself).
+            f("vs_all_on_p95_mm", b.against.iter().map(|p| p.map_or(f64::NAN, |p| p.median)).collect()),
+            f("vs_all_on_p95_mm_lo", b.against.iter().map(|p| p.map_or(f64::NAN, |p| p.interval.0)).collect()),
+            f("vs_all_on_p95_mm_hi", b.against.iter().map(|p| p.map_or(f64::NAN, |p| p.interval.1)).collect()),
+            f("vs_all_on_p_value", b.against.iter().map(|p| p.map_or(f64::NAN, |p| p.test.p_value)).collect()),
+        ],
+    )?;
+    parquet(
+        dir,
+        "shares.parquet",
+        vec![
+            Column::new("source".into(), b.shares.iter().map(|x| b.sources[x.source].label.to_string()).collect::<Vec<_>>()),
+            f("share", b.shares.iter().map(|x| x.share).collect()),
+            f("share_lo", b.shares.iter().map(|x| x.interval.0).collect()),
+            f("share_hi", b.shares.iter().map(|x| x.interval.1).collect()),
+            f("effect_p95_mm", b.shares.iter().map(|x| x.effect.median).collect()),
+            f("effect_p95_mm_lo", b.shares.iter().map(|x| x.effect.interval.0).collect()),
+            f("effect_p95_mm_hi", b.shares.iter().map(|x| x.effect.interval.1).collect()),
+            Column::new("effect_resolved".into(), b.shares.iter().map(|x| x.resolved).collect::<Vec<_>>()),
+            Column::new(
+                "ranked_above_next".into(),
+                b.shares.iter().map(|x| x.above_next.map(|(_, r)| r)).collect::<Vec<Option<bool>>>(),
+            ),
+            f("pairing_correlation", b.shares.iter().map(|x| x.effect.correlation).collect()),
         ],
     )?;
     if let Some(rows) = prediction_rows(b) {
@@ -248,30 +280,59 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
         f3(b.all_mm),
         f3(b.none_mm)
     );
+    let conf = 100.0 * super::CONFIDENCE;
+    let _ = writeln!(
+        s,
+        "Over worlds (the unit of independence: every configuration runs in the same worlds): share = the mean over worlds of \
+         the square a source adds alone to the floor's p95, over the mean of the sum of those squares, with its {conf:.0} % \
+         bootstrap-t interval; effect = the p95 alone minus the floor's, median of the per-world differences with its {conf:.0} % \
+         interval; resolved: the sign test over worlds tells the effect from none; ranked: tells this source's added square from \
+         the next one's. (Before the intervals, the share was the medians' squares over their sum: it moved with a few worlds.)\n"
+    );
+    for w in b.warnings {
+        let _ = writeln!(s, "**Warning:** {w}.\n");
+    }
     let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
-    let _ = write!(s, "| source | value | share (alone) | share (removed) | p95 alone, mm | p95 without it, mm |");
+    let _ = write!(s, "| source | value | share ({conf:.0} % interval) | effect alone, mm | resolved | ranked above next | share (removed, medians) | p95 alone, mm | p95 without it, mm |");
     for f in &factors {
-        let _ = write!(s, " p95 at x{f}, mm |");
+        let _ = write!(s, " p95 at x{f}, mm (vs all on) |");
     }
     let _ = writeln!(s, " interaction |");
-    let _ = writeln!(s, "|{}", "---|".repeat(7 + factors.len()));
-    for l in b.lines {
+    let _ = writeln!(s, "|{}", "---|".repeat(10 + factors.len()));
+    for sh in b.shares {
+        let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
         let src = &b.sources[l.source];
         let value = src.values.iter().map(|v| format!("{v}")).collect::<Vec<_>>().join(", ");
+        let e = &sh.effect;
         let _ = write!(
             s,
-            "| {} | {value} {} | {:.2} | {:.2} | {} | {} |",
+            "| {} | {value} {} | {:.2} ({:.2}-{:.2}) | {} ({}-{}) | {} | {} | {:.2} | {} | {} |",
             src.label,
             src.unit,
-            l.share_alone,
+            sh.share,
+            sh.interval.0,
+            sh.interval.1,
+            f3(e.median),
+            f3(e.interval.0),
+            f3(e.interval.1),
+            if sh.resolved { "yes" } else { "no: within the noise" },
+            sh.above_next.map_or("-", |(_, r)| if r { "yes" } else { "no" }),
             l.share_removed,
             f3(l.alone_mm),
             f3(l.off_mm)
         );
-        for (_, v) in &l.scaled_mm {
-            let _ = write!(s, " {} |", f3(*v));
+        for (factor, v) in &l.scaled_mm {
+            let vs = b
+                .configs
+                .iter()
+                .position(|c| c.mode == "scaled" && c.source == Some(l.source) && c.factor == *factor)
+                .and_then(|i| b.against[i]);
+            let vs = vs.map_or(String::new(), |p| {
+                format!(" ({:+.3}, {:+.3} to {:+.3}{})", p.median, p.interval.0, p.interval.1, if p.separated(super::CONFIDENCE) { "" } else { ", noise" })
+            });
+            let _ = write!(s, " {}{vs} |", f3(*v));
         }
-        let interacts = (l.share_alone - l.share_removed).abs() > 0.15;
+        let interacts = (sh.share - l.share_removed).abs() > 0.15;
         let _ = writeln!(s, " {} |", if interacts { "yes" } else { "" });
     }
     prediction_section(b, &mut s);
