@@ -304,3 +304,24 @@ impl RobotInCell {
         Self { base_w_mm: xyz(base), base_up_w: xyz(up), shoulder_w_mm: xyz(shoulder), reach_mm: reach, horizontal_reach_mm: horizontal }
     }
 }
+
+#[cfg(test)]
+mod robot_in_cell_tests {
+    use super::RobotInCell;
+
+    /// The IRB 120 without a tool: its wrist-centre reach from the shoulder is 270 + sqrt(302^2 +
+    /// 70^2) = 580.006 mm (ABB: 0.58 m), so the reach of frame 6 lies between that and that plus
+    /// the 72 mm flange; a base moved 100 mm down in {W} moves the shoulder with it and leaves
+    /// the reach as it was.
+    #[test]
+    fn the_irb120_reaches_as_far_as_its_geometry_and_moves_with_its_base() {
+        let arm = crate::robot::builtin::irb120();
+        let r = RobotInCell::of(&arm);
+        assert!(r.reach_mm > 580.0 && r.reach_mm <= 580.01 + 72.0 + 1e-6, "reach {}", r.reach_mm);
+        let lowered = arm.edited(|d| d.world_from_base.z -= 100.0).expect("a base");
+        let l = RobotInCell::of(&lowered);
+        assert!((l.base_w_mm[2] - r.base_w_mm[2] + 100.0).abs() < 1e-9);
+        assert!((l.shoulder_w_mm[2] - r.shoulder_w_mm[2] + 100.0).abs() < 1e-9);
+        assert!((l.reach_mm - r.reach_mm).abs() < 1e-9);
+    }
+}

@@ -173,11 +173,13 @@ pub fn write(dir: &Path, info: &ShardInfo, points: &[PointRow], designs: &[Desig
                 }
             })
             .collect();
-        let side_view = panels.iter().any(|p| p.robot.as_ref().is_some_and(|r| r.base_up_w[2] < 1.0 - 1e-9))
-            || panels.windows(2).any(|w| match (&w[0].robot, &w[1].robot) {
-                (Some(a), Some(b)) => (a.base_w_mm[2] - b.base_w_mm[2]).abs() > 1e-6,
-                _ => false,
-            });
+        // From the side too when the designs raise, lower or tilt the robot relative to the spheres.
+        let side_view = panels.windows(2).any(|w| match (&w[0].robot, &w[1].robot) {
+            (Some(a), Some(b)) => {
+                (a.base_w_mm[2] - b.base_w_mm[2]).abs() > 1e-6 || (0..3).any(|k| (a.base_up_w[k] - b.base_up_w[k]).abs() > 1e-9)
+            }
+            _ => false,
+        });
         let cols = (panels.len() as f64).sqrt().ceil().max(1.0) as usize;
         let rows = panels.len().div_ceil(cols);
         let size = ((cols as u32 * if side_view { 520 } else { 300 }).max(900), (rows as u32 * 300 + 60).max(600));
