@@ -300,8 +300,17 @@ impl RobotInCell {
                 }
             }
         }
-        let xyz = |v: nalgebra::Vector3<f64>| [v.x, v.y, v.z];
-        Self { base_w_mm: xyz(base), base_up_w: xyz(up), shoulder_w_mm: xyz(shoulder), reach_mm: reach, horizontal_reach_mm: horizontal }
+        // Rounded (1e-6 mm, 1e-12 for the unit vector) so that a shard's record reads back from
+        // JSON to the same bits (few digits parse exactly) and a resumed shard recognises its sweep.
+        let round = |x: f64, q: f64| (x * q).round() / q;
+        let xyz = |v: nalgebra::Vector3<f64>, q: f64| [round(v.x, q), round(v.y, q), round(v.z, q)];
+        Self {
+            base_w_mm: xyz(base, 1e6),
+            base_up_w: xyz(up, 1e12),
+            shoulder_w_mm: xyz(shoulder, 1e6),
+            reach_mm: round(reach, 1e6),
+            horizontal_reach_mm: round(horizontal, 1e6),
+        }
     }
 }
 
