@@ -93,6 +93,12 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     /// figures of a sweep that moves them; empty where the device has none.
     fn layout_mm(&self) -> Vec<[f64; 3]>;
 
+    /// Where the robot stands in the cell's world frame, for the same figures; `None` where the
+    /// device draws no cell.
+    fn robot_in_cell(&self) -> Option<RobotInCell> {
+        None
+    }
+
     /// Redoes identification `index` of the study in realisation 0 for export; `Ok(None)` when the
     /// study has no such task. A device without an exportable model says so.
     fn refit(&self, index: usize) -> Result<Option<Refit>, DeviceError> {
@@ -253,4 +259,78 @@ pub fn load(path: &Path) -> Result<Box<dyn Scenario>, ScenarioError> {
     let text = crate::io::read_text(path).map_err(|e| ScenarioError::Read { path: shown.clone(), message: e.to_string() })?;
     let table = scenario::table(&text, &shown)?;
     from_table(&text, table, path)
+}
+
+/// Where a cell's robot stands in the cell's world frame {W}, for figures drawn to scale.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RobotInCell {
+    /// Origin of the true robot's base frame in {W}, mm.
+    pub base_w_mm: [f64; 3],
+    /// The base frame's z axis (up) in {W}, a unit vector.
+    pub base_up_w: [f64; 3],
+    /// The shoulder in {W}: the point of the base's z axis at the height of joint 2's axis, mm.
+    pub shoulder_w_mm: [f64; 3],
+    /// The farthest the TCP gets from the shoulder, mm (over a grid of joints 2, 3 and 5 within
+    /// their limits, the others at zero).
+    pub reach_mm: f64,
+    /// The farthest the TCP gets from the base's z axis, mm (the same grid).
+    pub horizontal_reach_mm: f64,
+}
+
+impl RobotInCell {
+    /// The robot `arm` where its `world_from_base` puts it, and its reach.
+    pub fn of(arm: &RobotModel) -> Self {
+        let world_from_base = crate::robot::world_from_base(arm);
+        let up = world_from_base.rotation * nalgebra::Vector3::z();
+        let base = world_from_base.translation.vector;
+        let mut state = crate::robot::KinState::default();
+        crate::robot::forward(arm, &mut state, &[0.0; 6]);
+        let shoulder = base + up * state.base_from_frame(2).translation.vector.z;
+        let lim = arm.limits();
+        let grid = |j: usize, k: usize, n: usize| lim[j].min + (lim[j].max - lim[j].min) * k as f64 / (n - 1) as f64;
+        let (mut reach, mut horizontal): (f64, f64) = (0.0, 0.0);
+        for a in 0..41 {
+            for b in 0..41 {
+                for c in 0..5 {
+                    let q = [0.0, grid(1, a, 41), grid(2, b, 41), 0.0, grid(4, c, 5), 0.0];
+                    let tcp = crate::robot::tcp_world(arm, &q);
+                    reach = reach.max((tcp - shoulder).norm());
+                    let d = tcp - base;
+                    horizontal = horizontal.max((d - up * d.dot(&up)).norm());
+                }
+            }
+        }
+        // Rounded (1e-6 mm, 1e-12 for the unit vector) so that a shard's record reads back from
+        // JSON to the same bits (few digits parse exactly) and a resumed shard recognises its sweep.
+        let round = |x: f64, q: f64| (x * q).round() / q;
+        let xyz = |v: nalgebra::Vector3<f64>, q: f64| [round(v.x, q), round(v.y, q), round(v.z, q)];
+        Self {
+            base_w_mm: xyz(base, 1e6),
+            base_up_w: xyz(up, 1e12),
+            shoulder_w_mm: xyz(shoulder, 1e6),
+            reach_mm: round(reach, 1e6),
+            horizontal_reach_mm: round(horizontal, 1e6),
+        }
+    }
+}
+
+#[cfg(test)]
+mod robot_in_cell_tests {
+    use super::RobotInCell;
+
+    /// The IRB 120 without a tool: its wrist-centre reach from the shoulder is 270 + sqrt(302^2 +
+    /// 70^2) = 580.006 mm (ABB: 0.58 m), so the reach of frame 6 lies between that and that plus
+    /// the 72 mm flange; a base moved 100 mm down in {W} moves the shoulder with it and leaves
+    /// the reach as it was.
+    #[test]
+    fn the_irb120_reaches_as_far_as_its_geometry_and_moves_with_its_base() {
+        let arm = crate::robot::builtin::irb120();
+        let r = RobotInCell::of(&arm);
+        assert!(r.reach_mm > 580.0 && r.reach_mm <= 580.01 + 72.0 + 1e-6, "reach {}", r.reach_mm);
+        let lowered = arm.edited(|d| d.world_from_base.z -= 100.0).expect("a base");
+        let l = RobotInCell::of(&lowered);
+        assert!((l.base_w_mm[2] - r.base_w_mm[2] + 100.0).abs() < 1e-9);
+        assert!((l.shoulder_w_mm[2] - r.shoulder_w_mm[2] + 100.0).abs() < 1e-9);
+        assert!((l.reach_mm - r.reach_mm).abs() < 1e-9);
+    }
 }

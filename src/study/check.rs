@@ -245,51 +245,102 @@ pub fn checks_markdown(heading: &str, checks: &[Check]) -> String {
     s
 }
 
-/// The comparison as a text table for the terminal.
+/// The comparison as a text table for the terminal (columns as wide as their widest cell).
 pub fn terminal_table(rows: &[Check]) -> String {
+    let width = |head: &str, f: &dyn Fn(&Check) -> usize| rows.iter().map(f).max().unwrap_or(0).max(head.len());
+    let wf = width("figure", &|r| r.figure.chars().count());
+    let wp = width("published", &|r| r.published.chars().count());
+    let wc = width("calsim", &|r| r.reproduced.chars().count()).max(10);
+    let wb = width("band", &|r| r.band.chars().count());
     let mut s = String::new();
-    let _ = writeln!(s, "{:<58} {:>20} {:>12} {:>16}  result", "figure", "published", "calsim", "band");
+    let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  result", "figure", "published", "calsim", "band");
     for r in rows {
         let verdict = if r.pass == Some(false) { "MISS" } else { r.verdict() };
-        let _ = writeln!(s, "{:<58} {:>20} {:>12} {:>16}  {verdict}", r.figure, r.published, r.reproduced, r.band);
+        let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  {verdict}", r.figure, r.published, r.reproduced, r.band);
     }
     s
 }
 
-/// The figures over realisations as a text table for the terminal.
+/// `v` written in the form of `like`, a row's reproduced value: `+54.1 %` (a fraction shown in
+/// percent, sign kept), `29 of 31` (a count: whole, or one decimal for a quantile between counts),
+/// `6.54` (as many decimals); a value with no such form as `0.123`.
+pub fn in_the_form_of(like: &str, v: f64) -> String {
+    if !v.is_finite() {
+        return "-".into();
+    }
+    let t = like.trim();
+    let number_end = t.find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '+' || c == '-')).unwrap_or(t.len());
+    let (number, suffix) = t.split_at(number_end);
+    if number.parse::<f64>().is_err() {
+        return format!("{v:.3}");
+    }
+    let decimals = number.split_once('.').map_or(0, |(_, d)| d.len());
+    let signed = number.starts_with('+');
+    let (x, decimals) = if suffix.trim_start().starts_with('%') {
+        (100.0 * v, decimals)
+    } else if suffix.trim_start().starts_with("of ") && decimals == 0 && (v - v.round()).abs() > 1e-9 {
+        (v, 1)
+    } else {
+        (v, decimals)
+    };
+    let n = if signed { format!("{x:+.decimals$}") } else { format!("{x:.decimals$}") };
+    format!("{n}{suffix}")
+}
+
+/// The figures over realisations as a text table for the terminal: the median and P10-P90 in the
+/// form of the run-0 value (percent, counts, decimals), columns as wide as their widest cell.
 pub fn distribution_table(rows: &[DistributionCheck]) -> String {
-    let mut s = String::new();
-    let conf = rows.first().map_or(0.0, |d| d.confidence);
-    let _ = writeln!(
-        s,
-        "{:<58} {:>14} {:>10} {:>10} {:>19} {:>17} {:>16}  result",
-        "figure",
-        "published",
-        "run 0",
-        "median",
-        format!("{:.2} % interval", 100.0 * conf),
-        "P10-P90",
-        "band"
-    );
-    for d in rows {
-        let verdict = d.verdict.map_or("-", Verdict::word);
-        let published = d.row.published_value.map_or_else(|| d.row.published.clone(), |v| format!("{v:.3}"));
-        let interval = if d.interval.0.is_finite() && d.interval.1.is_finite() {
-            format!("{:.3}-{:.3}", d.interval.0, d.interval.1)
-        } else {
-            "unbounded".to_string()
-        };
-        let _ = writeln!(
-            s,
-            "{:<58} {:>14} {:>10} {:>10.3} {:>19} {:>17} {:>16}  {verdict}",
-            d.row.figure,
-            published.chars().take(14).collect::<String>(),
-            d.row.reproduced,
-            d.median,
-            interval,
-            format!("{:.3}-{:.3}", d.p10, d.p90),
-            d.row.band
-        );
+    let cells: Vec<[String; 7]> = rows
+        .iter()
+        .map(|d| {
+            let like = &d.row.reproduced;
+            // One suffix for a range: `29-30 of 31`, `+21.8 to +48.9 %`.
+            let range = |a: f64, b: f64| {
+                if !(a.is_finite() && b.is_finite()) {
+                    return "unbounded".to_string();
+                }
+                let (lo, hi) = (in_the_form_of(like, a), in_the_form_of(like, b));
+                let suffix = |s: &str| s.find(' ').map_or(String::new(), |i| s[i..].to_string());
+                let number = |s: &str| s.split(' ').next().unwrap_or("").to_string();
+                let sep = if number(&lo).starts_with('+') || number(&hi).starts_with('-') { " to " } else { "-" };
+                format!("{}{sep}{}{}", number(&lo), number(&hi), suffix(&hi))
+            };
+            [
+                d.row.figure.clone(),
+                d.row.published_value.map_or_else(|| d.row.published.clone(), |v| format!("{v:.3}")),
+                like.clone(),
+                in_the_form_of(like, d.median),
+                range(d.interval.0, d.interval.1),
+                range(d.p10, d.p90),
+                d.row.band.clone(),
+            ]
+        })
+        .collect();
+    let conf = format!("{:.2} % interval", 100.0 * rows.first().map_or(0.0, |d| d.confidence));
+    let head = ["figure", "published", "run 0", "median", conf.as_str(), "P10-P90", "band"];
+    let w: Vec<usize> = (0..7).map(|k| cells.iter().map(|c| c[k].chars().count()).max().unwrap_or(0).max(head[k].len())).collect();
+    let line = |c: [&str; 7], verdict: &str| {
+        format!(
+            "{:<a$}  {:>b$}  {:>c$}  {:>d$}  {:>e$}  {:>f$}  {:>g$}  {verdict}\n",
+            c[0],
+            c[1],
+            c[2],
+            c[3],
+            c[4],
+            c[5],
+            c[6],
+            a = w[0],
+            b = w[1],
+            c = w[2],
+            d = w[3],
+            e = w[4],
+            f = w[5],
+            g = w[6]
+        )
+    };
+    let mut s = line(head, "result");
+    for (d, c) in rows.iter().zip(&cells) {
+        s.push_str(&line([&c[0], &c[1], &c[2], &c[3], &c[4], &c[5], &c[6]], d.verdict.map_or("-", Verdict::word)));
     }
     s
 }
@@ -424,5 +475,21 @@ impl CheckReport {
         }
         s.push_str("</testsuite></testsuites>\n");
         s
+    }
+}
+
+#[cfg(test)]
+mod form_tests {
+    use super::in_the_form_of;
+
+    #[test]
+    fn values_over_realisations_are_written_in_the_form_of_run_0() {
+        assert_eq!(in_the_form_of("+54.1 %", 0.281), "+28.1 %");
+        assert_eq!(in_the_form_of("100 %", 0.99), "99 %");
+        assert_eq!(in_the_form_of("29 of 31", 30.0), "30 of 31");
+        assert_eq!(in_the_form_of("29 of 31", 29.2), "29.2 of 31");
+        assert_eq!(in_the_form_of("6.54", 4.0931), "4.09");
+        assert_eq!(in_the_form_of("0.646", 0.5481), "0.548");
+        assert_eq!(in_the_form_of("fails", 0.5), "0.500");
     }
 }

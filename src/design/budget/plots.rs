@@ -6,10 +6,21 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, e2s, legend, range_of, register_font};
+use crate::io::plot::{
+    DrawResult, FAMILY, Mark, PlotError, Side, Written, both, e2s, interval_bar_h, keyed, pale, range_of, register_font,
+};
 
-/// One bar of the tornado: the source, the p95 without it, and the p95 at each what-if factor.
-pub type TornadoLine = (String, f64, Vec<(f64, f64)>);
+/// One bar of the tornado: a source and the p95 after calibration without it and scaled.
+pub struct TornadoLine {
+    /// The source's label.
+    pub source: String,
+    /// p95 after calibration with the source off, mm.
+    pub off_mm: f64,
+    /// The interval of `off_mm` (drawn as an error bar at the bar's end when given), mm.
+    pub off_interval_mm: Option<(f64, f64)>,
+    /// Per what-if factor: the factor and the p95 after calibration with the source scaled by it, mm.
+    pub scaled_mm: Vec<(f64, f64)>,
+}
 
 /// Writes the budget's tornado plot: per source (largest share first), the p95 after calibration
 /// without it and at each what-if factor, against the p95 with every source (`all_mm`).
@@ -26,7 +37,23 @@ pub fn write_tornado(dir: &Path, lines: &[TornadoLine], all_mm: f64) -> Result<V
 
 fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLine], all_mm: f64) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
-    let values = || lines.iter().flat_map(|l| std::iter::once(l.1).chain(l.2.iter().map(|x| x.1))).chain(std::iter::once(all_mm));
+    let colours = [RGBColor(0, 140, 60), RGBColor(230, 120, 0), RGBColor(200, 30, 30)];
+    let factors: Vec<f64> = lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
+    let mut key = vec![("source off".to_string(), Mark::Bar(pale(BLUE, 0.35)))];
+    if lines.iter().any(|l| l.off_interval_mm.is_some()) {
+        key.push(("its interval".to_string(), Mark::Interval(BLACK)));
+    }
+    key.extend(factors.iter().enumerate().map(|(j, f)| (format!("source x{f}"), Mark::Dot(colours[j % colours.len()]))));
+    key.push((format!("all sources, {all_mm:.3} mm"), Mark::Line(BLACK)));
+    let root = &keyed(root, &key, Side::Bottom)?;
+    let ends = |l: &TornadoLine| l.off_interval_mm.map_or(vec![], |(a, b)| vec![a, b]);
+    let values = || {
+        lines
+            .iter()
+            .flat_map(|l| std::iter::once(l.off_mm).chain(l.scaled_mm.iter().map(|x| x.1)).chain(ends(l)))
+            .filter(|v| v.is_finite())
+            .chain(std::iter::once(all_mm))
+    };
     let xr = range_of(values(), 0.1);
     let n = lines.len().max(1);
     let mut chart = ChartBuilder::on(root)
@@ -36,7 +63,7 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
         .y_label_area_size(220)
         .build_cartesian_2d(xr.clone(), -0.5..(n as f64 - 0.5))
         .map_err(e2s)?;
-    let labels: Vec<String> = lines.iter().map(|l| l.0.clone()).collect();
+    let labels: Vec<String> = lines.iter().map(|l| l.source.clone()).collect();
     chart
         .configure_mesh()
         .disable_y_mesh()
@@ -50,32 +77,26 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
         .draw()
         .map_err(e2s)?;
     let y = |k: usize| (n - 1 - k) as f64;
-    let colours = [RGBColor(0, 140, 60), RGBColor(230, 120, 0), RGBColor(200, 30, 30)];
     chart
-        .draw_series(
-            lines
-                .iter()
-                .enumerate()
-                .map(|(k, l)| Rectangle::new([(all_mm.min(l.1), y(k) - 0.3), (all_mm.max(l.1), y(k) + 0.3)], BLUE.mix(0.35).filled())),
-        )
-        .map_err(e2s)?
-        .label("source off")
-        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], BLUE.mix(0.35).filled()));
-    let factors: Vec<f64> = lines.first().map(|l| l.2.iter().map(|x| x.0).collect()).unwrap_or_default();
-    for (j, f) in factors.iter().enumerate() {
+        .draw_series(lines.iter().enumerate().map(|(k, l)| {
+            Rectangle::new([(all_mm.min(l.off_mm), y(k) - 0.3), (all_mm.max(l.off_mm), y(k) + 0.3)], BLUE.mix(0.35).filled())
+        }))
+        .map_err(e2s)?;
+    // The interval of the p95 without the source, at the bar's end.
+    for (k, l) in lines.iter().enumerate() {
+        if let Some(ci) = l.off_interval_mm {
+            chart.draw_series(interval_bar_h(y(k), ci, 0.15, BLACK.stroke_width(2))).map_err(e2s)?;
+        }
+    }
+    for j in 0..factors.len() {
         let c = colours[j % colours.len()];
         chart
-            .draw_series(lines.iter().enumerate().filter_map(|(k, l)| l.2.get(j).map(|v| Circle::new((v.1, y(k)), 5, c.filled()))))
-            .map_err(e2s)?
-            .label(format!("source x{f}"))
-            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+            .draw_series(lines.iter().enumerate().filter_map(|(k, l)| l.scaled_mm.get(j).map(|v| Circle::new((v.1, y(k)), 5, c.filled()))))
+            .map_err(e2s)?;
     }
     chart
         .draw_series(std::iter::once(PathElement::new(vec![(all_mm, -0.5), (all_mm, n as f64 - 0.5)], BLACK.stroke_width(2))))
-        .map_err(e2s)?
-        .label("all sources")
-        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(2)));
-    legend(&mut chart, SeriesLabelPosition::LowerRight, 12)?;
+        .map_err(e2s)?;
     Ok(())
 }
 
@@ -94,6 +115,10 @@ pub fn write_prediction(dir: &Path, all: &[(f64, f64)], none: &[(f64, f64)]) -> 
 
 fn prediction<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, all: &[(f64, f64)], none: &[(f64, f64)]) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
+    let series = [(all, RGBColor(200, 30, 30), "every source on"), (none, RGBColor(0, 90, 200), "every source off (solver floor)")];
+    let mut key = vec![("simulated = predicted".to_string(), Mark::Line(BLACK))];
+    key.extend(series.iter().filter(|s| !s.0.is_empty()).map(|s| (format!("{} (one dot per parameter)", s.2), Mark::Dot(s.1))));
+    let root = &keyed(root, &key, Side::Bottom)?;
     let ok = |v: &&(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
     let values: Vec<f64> = all.iter().chain(none).filter(ok).flat_map(|v| [v.0, v.1]).collect();
     let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
@@ -115,23 +140,9 @@ fn prediction<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, all: &[(f64, f6
         .label_style((FAMILY, 12))
         .draw()
         .map_err(e2s)?;
-    chart
-        .draw_series(std::iter::once(PathElement::new(vec![(lo, lo), (hi, hi)], BLACK.stroke_width(1))))
-        .map_err(e2s)?
-        .label("simulated = predicted")
-        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLACK.stroke_width(1)));
-    let series = [(all, RGBColor(200, 30, 30), "every source on"), (none, RGBColor(0, 90, 200), "every source off (solver floor)")];
-    for (points, colour, label) in series {
-        if points.iter().filter(ok).count() == 0 {
-            continue;
-        }
-        chart
-            .draw_series(points.iter().filter(ok).map(|v| Circle::new((v.0, v.1), 4, colour.filled())))
-            .map_err(e2s)?
-            .label(label)
-            .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
+    chart.draw_series(std::iter::once(PathElement::new(vec![(lo, lo), (hi, hi)], BLACK.stroke_width(1)))).map_err(e2s)?;
+    for (points, colour, _) in series {
+        chart.draw_series(points.iter().filter(ok).map(|v| Circle::new((v.0, v.1), 4, colour.filled()))).map_err(e2s)?;
     }
-    legend(&mut chart, SeriesLabelPosition::UpperLeft, 12)?;
     Ok(())
 }
-

@@ -129,8 +129,16 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
         crate_version: env!("CARGO_PKG_VERSION"),
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
-    let tornado: Vec<super::plots::TornadoLine> =
-        b.lines.iter().map(|l| (b.sources[l.source].label.to_string(), l.off_mm, l.scaled_mm.clone())).collect();
+    let tornado: Vec<super::plots::TornadoLine> = b
+        .lines
+        .iter()
+        .map(|l| super::plots::TornadoLine {
+            source: b.sources[l.source].label.to_string(),
+            off_mm: l.off_mm,
+            off_interval_mm: None,
+            scaled_mm: l.scaled_mm.clone(),
+        })
+        .collect();
     let mut drawn = super::plots::write_tornado(dir, &tornado, b.all_mm).map_err(std::io::Error::other)?;
     let spreads = |mode: &str| {
         b.configs.iter().zip(b.predictions).find(|(c, _)| c.mode == mode).and_then(|(_, p)| p.as_ref()).map(|p| p.parameter_spreads())
@@ -274,9 +282,9 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
     let _ = writeln!(
         s,
         "p95 of the validation error after calibration at the table set size, median over realisations: {} mm with every \
-         source, {} mm with none (the solver's floor). Share (alone): the square of what a source adds alone over the floor, \
-         over the sum of those; share (removed): the square of what removing it saves from the whole, over the sum. \
-         Where the two differ by more than 0.15 the sources interact.\n",
+         source, {} mm with none (the solver's floor). Share (removed, medians): the square of what removing a source saves \
+         from the whole (medians over realisations), over the sum; where it differs from the share by more than 0.15 the \
+         sources interact.\n",
         f3(b.all_mm),
         f3(b.none_mm)
     );
@@ -302,13 +310,16 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
     for sh in b.shares {
         let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
         let src = &b.sources[l.source];
-        let value = src.values.iter().map(|v| format!("{v}")).collect::<Vec<_>>().join(", ");
+        // Each term with its own unit, read from its key (`_um_per_m` is um/m), the source's otherwise.
+        const UNITS: [(&str, &str); 7] =
+            [("_um_per_m", "um/m"), ("_um", "um"), ("_mm", "mm"), ("_deg", "deg"), ("_pct_fs", "% FS"), ("_c", "C"), ("_kg", "kg")];
+        let unit = |key: &str| UNITS.iter().find(|(suffix, _)| key.ends_with(suffix)).map_or(src.unit, |u| u.1);
+        let value = src.keys.iter().zip(&src.values).map(|(k, v)| format!("{v} {}", unit(k))).collect::<Vec<_>>().join(", ");
         let e = &sh.effect;
         let _ = write!(
             s,
-            "| {} | {value} {} | {:.2} ({:.2}-{:.2}) | {} ({}-{}) | {} | {} | {:.2} | {} | {} |",
+            "| {} | {value} | {:.2} ({:.2}-{:.2}) | {} ({}-{}) | {} | {} | {:.2} | {} | {} |",
             src.label,
-            src.unit,
             sh.share,
             sh.interval.0,
             sh.interval.1,

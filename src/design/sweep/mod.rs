@@ -270,6 +270,9 @@ pub struct ShardInfo {
     /// Per grid point, the datum spheres in {W}, mm (TriCal; empty for other devices).
     #[serde(default)]
     pub layouts: Vec<Vec<[f64; 3]>>,
+    /// Per grid point, where the robot stands in {W} (TriCal; empty for other devices).
+    #[serde(default)]
+    pub robots: Vec<Option<crate::device::RobotInCell>>,
     /// Per grid point, its whole scenario as TOML (what `calsim run` takes to redo it, recording
     /// included).
     #[serde(default)]
@@ -328,6 +331,7 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
         keys: sweep.keys.clone(),
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
         layouts: sweep.points.iter().map(|p| p.scenario.layout_mm()).collect(),
+        robots: sweep.points.iter().map(|p| p.scenario.robot_in_cell()).collect(),
         scenarios: sweep.points.iter().map(|p| p.scenario.header().text.clone()).collect(),
         objective: sweep.objective.clone(),
         race: sweep.race.clone(),

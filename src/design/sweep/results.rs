@@ -218,7 +218,7 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
     };
     fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
     write_extremes(dir, m)?;
-    let drawn = super::plots::write(dir, &plot_inputs(info, points)).map_err(std::io::Error::other)?;
+    let drawn = super::plots::write(dir, info, points, &m.designs).map_err(std::io::Error::other)?;
     let mut text = summary(m);
     let _ = writeln!(text, "\n## Figures\n");
     for w in drawn {
@@ -227,50 +227,6 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
     fs::write(dir.join("summary.md"), text)?;
     Ok(())
 }
-
-/// The figures' inputs: x is the axis value where the sweep has one numeric axis, else the point.
-fn plot_inputs(info: &ShardInfo, points: &[PointRow]) -> super::plots::SweepPlotInputs {
-    let numeric: Option<Vec<f64>> =
-        if info.keys.len() == 1 { info.points.iter().map(|v| v[0].parse::<f64>().ok()).collect() } else { None };
-    let x = |p: usize| numeric.as_ref().map_or(p as f64, |v| v[p]);
-    let label = |p: &PointRow| format!("{} {}", p.point, p.selection);
-    let designs = points.iter().filter(|p| p.table).map(|p| (label(p), x(p.point), p.after[1], p.campaign_s)).collect();
-    let mut success: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    if !info.thresholds_mm.is_empty() {
-        for p in points {
-            let l = label(p);
-            let v = (f64::from(p.set_size), p.success[0].0);
-            match success.iter_mut().find(|s| s.0 == l) {
-                Some(s) => s.1.push(v),
-                None => success.push((l, vec![v])),
-            }
-        }
-    }
-    // The cell from above, one panel per design, when the sweep moves the spheres.
-    let moves_spheres = info.keys.iter().any(|k| k == "cell.layout" || k == "cell.spheres_w_mm");
-    let layouts = if moves_spheres && info.layouts.len() == info.points.len() {
-        (0..info.points.len())
-            .map(|p| {
-                let at = points.iter().find(|r| r.point == p && r.table);
-                let title = match at {
-                    Some(r) => format!("{p}: p95 {:.3} mm", r.after[1][0]),
-                    None => format!("{p}: campaign failed"),
-                };
-                (title, info.layouts[p].clone(), at.is_some())
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
-    super::plots::SweepPlotInputs {
-        layouts,
-        designs,
-        xlabel: if numeric.is_some() { info.keys[0].clone() } else { "grid point (see the design table)".into() },
-        success,
-        threshold_mm: info.thresholds_mm.first().copied().unwrap_or(f64::NAN),
-    }
-}
-
 
 /// `designs.parquet`: one row per design judged by the objective.
 fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {

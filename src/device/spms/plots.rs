@@ -5,7 +5,7 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::io::plot::{BySize, DrawResult, FAMILY, PlotError, Written, both, boxplots, e2s, legend, register_font};
+use crate::io::plot::{BySize, DrawResult, FAMILY, Mark, PlotError, Side, Written, both, boxplots, e2s, keyed, register_font, whole};
 
 /// What the SPMS figures show.
 pub struct SpmsPlotInputs<'a> {
@@ -88,6 +88,12 @@ fn per_sample<DB: DrawingBackend>(
     line: Option<(f64, &str)>,
 ) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
+    let forms = [("PSO + LM, paper's 6K+3 form", BLUE), ("LM, minimal 5K+3 form", RGBColor(230, 120, 0))];
+    let mut key: Vec<(String, Mark)> = forms.iter().map(|(l, c)| (l.to_string(), Mark::Dot(*c))).collect();
+    if let Some((_, label)) = line {
+        key.push((label.to_string(), Mark::Line(BLACK)));
+    }
+    let root = &keyed(root, &key, Side::Bottom)?;
     let n = v[0].len().max(v[1].len()).max(1);
     let top = v.iter().flat_map(|s| s.iter().copied()).chain(line.map(|l| l.0)).fold(0.0, f64::max) * 1.15;
     let mut chart = ChartBuilder::on(root)
@@ -97,22 +103,21 @@ fn per_sample<DB: DrawingBackend>(
         .y_label_area_size(65)
         .build_cartesian_2d(0.0..(n as f64 + 1.0), 0.0..top.max(1e-6))
         .map_err(e2s)?;
-    chart.configure_mesh().x_desc("measurement").y_desc(ylabel).light_line_style(WHITE).label_style((FAMILY, 13)).draw().map_err(e2s)?;
-    for (s, (label, colour)) in v.iter().zip([("PSO + LM, paper's 6K+3 form", BLUE), ("LM, minimal 5K+3 form", RGBColor(230, 120, 0))]) {
-        chart
-            .draw_series(s.iter().enumerate().map(|(i, y)| Circle::new((i as f64 + 1.0, *y), 4, colour.filled())))
-            .map_err(e2s)?
-            .label(label)
-            .legend(move |(x, y)| Circle::new((x + 7, y), 4, colour.filled()));
+    chart
+        .configure_mesh()
+        .x_desc("measurement")
+        .y_desc(ylabel)
+        .x_label_formatter(&whole)
+        .light_line_style(WHITE)
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
+    for (s, (_, colour)) in v.iter().zip(forms) {
+        chart.draw_series(s.iter().enumerate().map(|(i, y)| Circle::new((i as f64 + 1.0, *y), 4, colour.filled()))).map_err(e2s)?;
     }
-    if let Some((y, label)) = line {
-        chart
-            .draw_series(std::iter::once(PathElement::new(vec![(0.0, y), (n as f64 + 1.0, y)], BLACK.stroke_width(1))))
-            .map_err(e2s)?
-            .label(label)
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(1)));
+    if let Some((y, _)) = line {
+        chart.draw_series(std::iter::once(PathElement::new(vec![(0.0, y), (n as f64 + 1.0, y)], BLACK.stroke_width(1)))).map_err(e2s)?;
     }
-    legend(&mut chart, SeriesLabelPosition::MiddleRight, 14)?;
     Ok(())
 }
 
@@ -127,7 +132,9 @@ fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs
     for (i, (l, v)) in p.ap_after.iter().enumerate() {
         bars.push((format!("calsim, after ({l})"), colours[i % 2], *v));
     }
-    let top = bars.iter().flat_map(|b| b.2).filter(|x| x.is_finite()).fold(0.0, f64::max) * 1.15;
+    let key: Vec<(String, Mark)> = bars.iter().map(|b| (b.0.clone(), Mark::Bar(b.1))).collect();
+    let root = &keyed(root, &key, Side::Bottom)?;
+    let top = bars.iter().flat_map(|b| b.2).filter(|x| x.is_finite()).fold(0.0, f64::max) * 1.1;
     let mut chart = ChartBuilder::on(root)
         .caption("Table 6: ISO 9283 AP per test point", (FAMILY, 22))
         .margin(15)
@@ -146,18 +153,14 @@ fn ap_bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &SpmsPlotInputs
         .draw()
         .map_err(e2s)?;
     let w = 0.8 / bars.len() as f64;
-    for (i, (label, colour, v)) in bars.iter().enumerate() {
+    for (i, (_, colour, v)) in bars.iter().enumerate() {
         let c = *colour;
         chart
             .draw_series(v.iter().enumerate().filter(|(_, y)| y.is_finite()).map(|(k, y)| {
                 let x0 = k as f64 + 1.0 - 0.4 + i as f64 * w;
                 Rectangle::new([(x0, 0.0), (x0 + w * 0.9, *y)], c.filled())
             }))
-            .map_err(e2s)?
-            .label(label.as_str())
-            .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
+            .map_err(e2s)?;
     }
-    legend(&mut chart, SeriesLabelPosition::UpperRight, 14)?;
     Ok(())
 }
-

@@ -114,6 +114,10 @@ impl Scenario for TrackerScenario {
         self.cell.layout_mm()
     }
 
+    fn robot_in_cell(&self) -> Option<crate::device::RobotInCell> {
+        self.cell.robot_in_cell()
+    }
+
     fn as_any(&self) -> &dyn Any {
         self
     }

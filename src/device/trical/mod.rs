@@ -116,6 +116,10 @@ impl Scenario for TricalScenario {
         self.experiment.cell.spheres_w_mm.clone()
     }
 
+    fn robot_in_cell(&self) -> Option<super::RobotInCell> {
+        Some(super::RobotInCell::of(&self.experiment.truth()))
+    }
+
     fn refit(&self, index: usize) -> Result<Option<Refit>, DeviceError> {
         let e = self.experiment.build(self.header.seed).map_err(|e| DeviceError::new(format!("campaign: {e}")))?;
         let before = self.experiment.before_model(&e.campaign);

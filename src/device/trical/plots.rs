@@ -9,8 +9,10 @@ use plotters::prelude::*;
 use nalgebra::Vector3;
 
 use super::study::StudyResults;
+use crate::io::plot::{
+    DrawResult, FAMILY, Mark, PlotError, Side, Written, both, boxplot, colour_bar, e2s, heat, keyed, range_of, register_font, whole,
+};
 use crate::study::stats::{ErrorStats, pearson, regression as least_squares_line};
-use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, boxplot, e2s, heat, legend, range_of, register_font};
 
 /// What the figures show, gathered from a study and its experiment.
 pub struct PlotInputs {
@@ -128,6 +130,12 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
 fn fig07<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
     let root = root.titled("Fig. 7: validation poses (TCP in {W}) and datum spheres", (FAMILY, 22)).map_err(e2s)?;
+    let key = [
+        ("validation pose".to_string(), Mark::Dot(BLUE)),
+        ("datum sphere".to_string(), Mark::Dot(RED)),
+        ("robot base (origin of its frame)".to_string(), Mark::Triangle(BLACK)),
+    ];
+    let root = keyed(&root, &key, Side::Bottom)?;
     let panels = root.split_evenly((1, 2));
     let views: [(&str, usize, usize); 2] = [("top view", 0, 1), ("side view", 0, 2)];
     for (area, (name, a, b)) in panels.iter().zip(views) {
@@ -149,37 +157,26 @@ fn fig07<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs) -> D
             .label_style((FAMILY, 12))
             .draw()
             .map_err(e2s)?;
-        chart
-            .draw_series(p.validation_w.iter().map(|v| Circle::new((v[a], v[b]), 2, BLUE.mix(0.5).filled())))
-            .map_err(e2s)?
-            .label("validation pose")
-            .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
-        chart
-            .draw_series(p.spheres_w.iter().map(|v| Circle::new((v[a], v[b]), 6, RED.filled())))
-            .map_err(e2s)?
-            .label("datum sphere")
-            .legend(|(x, y)| Circle::new((x, y), 4, RED.filled()));
-        chart
-            .draw_series(std::iter::once(TriangleMarker::new((p.base_w[a], p.base_w[b]), 8, BLACK.filled())))
-            .map_err(e2s)?
-            .label("robot base")
-            .legend(|(x, y)| TriangleMarker::new((x, y), 5, BLACK.filled()));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font((FAMILY, 12))
-            .draw()
-            .map_err(e2s)?;
+        chart.draw_series(p.validation_w.iter().map(|v| Circle::new((v[a], v[b]), 2, BLUE.mix(0.5).filled()))).map_err(e2s)?;
+        chart.draw_series(p.spheres_w.iter().map(|v| Circle::new((v[a], v[b]), 6, RED.filled()))).map_err(e2s)?;
+        chart.draw_series(std::iter::once(TriangleMarker::new((p.base_w[a], p.base_w[b]), 8, BLACK.filled()))).map_err(e2s)?;
     }
     Ok(())
 }
 
 fn fig10<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs, after: &[f64], n: usize, task: usize) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
+    let emax = after.iter().copied().fold(0.0, f64::max).max(1e-9);
+    let key = [
+        ("validation pose, coloured by its error".to_string(), Mark::Dot(heat(0.5))),
+        ("the 10 largest errors".to_string(), Mark::Ring(BLACK)),
+        ("datum sphere".to_string(), Mark::Triangle(GREEN)),
+    ];
+    let root = keyed(root, &key, Side::Bottom)?;
+    let root = colour_bar(&root, emax, "error after calibration (mm)")?;
+    let root = &root;
     let xr = range_of(p.validation_w.iter().map(|v| v.x), 0.05);
     let yr = range_of(p.validation_w.iter().map(|v| v.y), 0.05);
-    let emax = after.iter().copied().fold(0.0, f64::max).max(1e-9);
     let title = format!("Fig. 10: error after calibration (n = {n}, task {task}), top view; max {emax:.3} mm");
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FAMILY, 20))
@@ -194,20 +191,8 @@ fn fig10<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &PlotInputs, afte
     order.sort_by(|&a, &b| after[b].total_cmp(&after[a]));
     chart
         .draw_series(order.iter().take(10).map(|&k| Circle::new((p.validation_w[k].x, p.validation_w[k].y), 10, BLACK.stroke_width(2))))
-        .map_err(e2s)?
-        .label("10 largest errors")
-        .legend(|(x, y)| Circle::new((x, y), 6, BLACK.stroke_width(2)));
-    chart
-        .draw_series(p.spheres_w.iter().map(|v| TriangleMarker::new((v.x, v.y), 7, GREEN.filled())))
-        .map_err(e2s)?
-        .label("datum spheres")
-        .legend(|(x, y)| TriangleMarker::new((x, y), 5, GREEN.filled()));
-    chart
-        .draw_series(std::iter::once(Circle::new((0.0, 0.0), 0, WHITE)))
-        .map_err(e2s)?
-        .label(format!("colour: 0 mm (blue) to {emax:.3} mm (red)"))
-        .legend(|(x, y)| Rectangle::new([(x - 6, y - 4), (x + 6, y + 4)], heat(1.0).filled()));
-    legend(&mut chart, SeriesLabelPosition::MiddleRight, 12)?;
+        .map_err(e2s)?;
+    chart.draw_series(p.spheres_w.iter().map(|v| TriangleMarker::new((v.x, v.y), 7, GREEN.filled()))).map_err(e2s)?;
     Ok(())
 }
 
@@ -219,6 +204,11 @@ fn regression<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, d: &[f64], e: &
     let yr = 0f64.min(yr.start)..yr.end;
     let r = pearson(d, e);
     let (intercept, slope) = least_squares_line(d, e);
+    let key = [
+        ("validation pose".to_string(), Mark::Dot(BLUE)),
+        (format!("least squares: {slope:.2e} mm/mm, r = {r:.3}, r^2 = {:.3}", r * r), Mark::Line(RED)),
+    ];
+    let root = &keyed(root, &key, Side::Bottom)?;
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FAMILY, 20))
         .margin(15)
@@ -227,18 +217,9 @@ fn regression<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, d: &[f64], e: &
         .build_cartesian_2d(xr.clone(), yr)
         .map_err(e2s)?;
     chart.configure_mesh().x_desc(xlabel).y_desc("error after calibration (mm)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
-    chart
-        .draw_series(d.iter().zip(e).map(|(&x, &y)| Circle::new((x, y), 2, BLUE.mix(0.6).filled())))
-        .map_err(e2s)?
-        .label("validation pose")
-        .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
+    chart.draw_series(d.iter().zip(e).map(|(&x, &y)| Circle::new((x, y), 2, BLUE.mix(0.6).filled()))).map_err(e2s)?;
     let line = [xr.start, xr.end].map(|x| (x, intercept + slope * x));
-    chart
-        .draw_series(LineSeries::new(line, RED.stroke_width(2)))
-        .map_err(e2s)?
-        .label(format!("least squares: {:.2e} mm/mm, r = {r:.3}, r^2 = {:.3}", slope, r * r))
-        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
-    legend(&mut chart, SeriesLabelPosition::UpperLeft, 13)?;
+    chart.draw_series(LineSeries::new(line, RED.stroke_width(2))).map_err(e2s)?;
     Ok(())
 }
 
@@ -265,7 +246,14 @@ fn fig13<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, before: &[f64], afte
             .y_label_area_size(50)
             .build_cartesian_2d(0.0..hi, 0.0..cmax * 1.45)
             .map_err(e2s)?;
-        chart.configure_mesh().x_desc("position error (mm)").y_desc("validation poses").label_style((FAMILY, 12)).draw().map_err(e2s)?;
+        chart
+            .configure_mesh()
+            .x_desc("position error (mm)")
+            .y_desc("validation poses")
+            .y_label_formatter(&whole)
+            .label_style((FAMILY, 12))
+            .draw()
+            .map_err(e2s)?;
         chart
             .draw_series(
                 counts
@@ -290,4 +278,3 @@ fn fig13<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, before: &[f64], afte
     }
     Ok(())
 }
-
