@@ -21,7 +21,9 @@ fn an_exported_robot_file_is_the_identified_model() {
         overrides: Default::default(),
         plots: false,
         recording: false,
-        realisations: 1,
+        realisations: Some(1),
+        false_alarm: None,
+        junit: None,
         check: false,
     };
     let results = calsim::app::run::run(&spec, &calsim::app::Quiet).unwrap().dest;

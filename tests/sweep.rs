@@ -99,6 +99,17 @@ fn the_sweep_and_merge_commands_shard_and_merge() {
     let o = run(&["merge", shard.to_str().unwrap()], dir);
     assert!(String::from_utf8_lossy(&o.stdout).contains("merged 2 work units (0 failed)"), "{}", String::from_utf8_lossy(&o.stdout));
     assert!(dir.join("c/points.parquet").exists());
+    // The best design file runs from any working directory: here from a directory that holds
+    // neither the sweep, its base scenario nor the robot file.
+    let elsewhere = scratch("sweep-cli-elsewhere");
+    let best = dir.join("c/best_design.toml");
+    let o = calsim()
+        .current_dir(elsewhere.path())
+        .args(["run", best.to_str().unwrap(), "--set-sizes", "20:30:10", "--repetitions", "1", "--no-plots", "--no-recording", "--out"])
+        .arg(elsewhere.path().join("out"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "best_design.toml from another directory: {}", String::from_utf8_lossy(&o.stderr));
 }
 
 #[test]

@@ -317,6 +317,11 @@ impl RobotFile {
         Self::parse(path, text).map_err(|(field, message)| RobotFileError { path: path.to_path_buf(), field, message })
     }
 
+    /// Parses and checks a robot file's text: the field and message of the first refusal.
+    ///
+    /// Long by design: one pass over the file's tables in the order a reader meets them (joints,
+    /// flange, collision, truth), each key checked where it is read and named in its error;
+    /// pieces would hand the half-built model and the key context back and forth.
     fn parse(path: &Path, text: &str) -> Result<Self, (String, String)> {
         let f: File = toml::from_str(text).map_err(|e| {
             let msg = e.message().to_string();

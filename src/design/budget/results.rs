@@ -50,6 +50,8 @@ pub fn write(out: &Path, b: &BudgetReport<'_>) -> std::io::Result<PathBuf> {
     write_atomically(out, b.name, |dir| write_into(dir, b))
 }
 
+/// The budget's files in `dir`. Long by design: the tables' columns listed one after the other
+/// (each a line naming its column), then the manifest, figures and summary.
 fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
     let q = |i: usize, m: usize, k: usize| b.rows[i].map_or(f64::NAN, |r| r.after[m][k]);
     let n = b.configs.len();
@@ -276,6 +278,9 @@ fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
 const VALIDATION_MISSED: f64 = 1.25;
 
 /// The budget table, sorted by share, and every configuration.
+///
+/// Long by design: the summary top to bottom (the definitions, the warnings, the budget table with
+/// its intervals, the prediction section, every configuration).
 pub fn summary(b: &BudgetReport<'_>) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# {}: uncertainty budget over {} realisations\n", b.name, b.realisations);

@@ -105,6 +105,9 @@ impl<'a> Names<'a> {
 }
 
 /// Writes the sweep's figures into `dir`.
+///
+/// Long by design: the list of the sweep's figures, each a short block (its data, its file, its
+/// caption) drawn in the order summary.md shows them.
 pub fn write(dir: &Path, info: &ShardInfo, points: &[PointRow], designs: &[DesignRow]) -> Result<Vec<Written>, PlotError> {
     register_font();
     let names = Names::new(info, points);

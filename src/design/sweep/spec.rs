@@ -299,7 +299,8 @@ fn realisations(
         None => (1, None),
         Some(toml::Value::Table(t)) => {
             if let Some(k) = t.keys().find(|k| !["max", "confidence", "batch", "min"].contains(&k.as_str())) {
-                return bad(&format!("realisations.{k}"), "unknown key (adaptive realisations take max, confidence, batch, min)".into());
+                // In serde's words, so that `calsim keys sweep` finds the table's fields by probing.
+                return bad("realisations", format!("unknown field `{k}`, expected one of `max`, `min`, `batch`, `confidence` (adaptive realisations)"));
             }
             let max = match t.get("max") {
                 Some(v) => count("realisations.max", v)?,
@@ -341,6 +342,10 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
 
 /// [`load`] with the command line's realisations replacing the file's count (or the most of an
 /// adaptive sweep).
+///
+/// Long by design: the file's keys checked in the order they are written (base, realisations,
+/// objective, thresholds, fixed keys, axes), then every grid point built and checked, each error
+/// naming its key.
 pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Sweep, SweepError> {
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;

@@ -122,6 +122,9 @@ pub(super) fn walk(tree: &super::graph::Tree<'_>) -> Result<Chain, String> {
 
 /// The MDH frames {1}..{6} (origin, x, z) of the axes, {0} and the model; with the frames {0}..{6}
 /// in the root frame at the zero configuration (m).
+///
+/// Long by design: the construction of the MDH frames is one sequence (common normals, then the
+/// frames, then the parameters read off consecutive frames), each step using the previous.
 pub(super) fn from_axes(name: &str, axes: &[Axis], tip: &Vector3<f64>) -> Result<(RobotModel, [Isometry3<f64>; JOINTS + 1]), String> {
     let z: Vec<Vector3<f64>> = axes.iter().map(|a| a.dir).collect();
     let mut origin = [Vector3::zeros(); JOINTS];
