@@ -362,9 +362,8 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
     {
         thresholds_mm.push(t);
     }
-    let duplicated = file.thresholds_mm.iter().enumerate().any(|(i, a)| file.thresholds_mm[..i].contains(a));
-    if thresholds_mm.len() > 16 || duplicated || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
-        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 different thresholds, each within (0, 1000) mm", file.thresholds_mm)));
+    if thresholds_mm.len() > 16 || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
+        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 thresholds, each within (0, 1000) mm", file.thresholds_mm)));
     }
     // Each threshold and each axis names columns of the tables: two alike would fail after the run.
     if let Some(t) = file.thresholds_mm.iter().enumerate().find(|(i, t)| file.thresholds_mm[..*i].contains(t)).map(|(_, t)| t) {
