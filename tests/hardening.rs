@@ -561,6 +561,7 @@ fn a_sweep_of_9001_points_keeps_a_record_that_merge_reads() {
         std::fs::write(shard.join(format!("units/u{p:07}.json")), serde_json::to_vec(&unit).unwrap()).unwrap();
     }
     let m = calsim::app::sweep::merge(&[shard], &out).unwrap();
+
     assert_eq!((m.units, m.failed), (9001, 0));
     assert!(m.summary.contains("9001 grid points"), "{}", &m.summary[..200]);
 }

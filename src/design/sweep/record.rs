@@ -18,6 +18,7 @@
 
 use std::path::Path;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::objective::{Goal, Objective};
@@ -209,21 +210,25 @@ pub fn check(info: &ShardInfo, file: &Path) -> Result<Vec<PointStudy>, MergeErro
     }
     let base: toml::Table =
         toml::from_str(&info.scenario).map_err(|e: toml::de::Error| fail("scenario", format!("not TOML: {}", e.message())))?;
-    let mut studies = Vec::with_capacity(points);
-    for (p, ch) in info.changes.iter().enumerate() {
-        let table = apply(&base, ch).map_err(|(i, why)| fail(&format!("changes[{p}][{i}]"), why))?;
-        let text = toml::to_string(&table).map_err(|e| fail(&format!("changes[{p}]"), e.to_string()))?;
-        let s = crate::device::from_table(&text, table, Path::new(&format!("{}#{p}", info.name)))
-            .map_err(|e| fail(&format!("scenario of grid point {p}"), e.to_string()))?;
-        let layout = s.layout_mm();
-        let same = layout.len() == info.layouts[p].len()
-            && layout.iter().zip(&info.layouts[p]).all(|(a, b)| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-6));
-        if !same {
-            return Err(fail(&format!("layouts[{p}]"), "not the datum spheres of the point's scenario".into()));
-        }
-        studies.push(PointStudy::of(s.as_ref()));
-    }
-    Ok(studies)
+    // Loading a scenario checks it whole (the identifiability of its parameters among it): the
+    // points load in parallel, and the first failing point in grid order is the one named.
+    let studies: Vec<Result<PointStudy, MergeError>> = (0..points)
+        .into_par_iter()
+        .map(|p| {
+            let table = apply(&base, &info.changes[p]).map_err(|(i, why)| fail(&format!("changes[{p}][{i}]"), why))?;
+            let text = toml::to_string(&table).map_err(|e| fail(&format!("changes[{p}]"), e.to_string()))?;
+            let s = crate::device::from_table(&text, table, Path::new(&format!("{}#{p}", info.name)))
+                .map_err(|e| fail(&format!("scenario of grid point {p}"), e.to_string()))?;
+            let layout = s.layout_mm();
+            let same = layout.len() == info.layouts[p].len()
+                && layout.iter().zip(&info.layouts[p]).all(|(a, b)| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-6));
+            if !same {
+                return Err(fail(&format!("layouts[{p}]"), "not the datum spheres of the point's scenario".into()));
+            }
+            Ok(PointStudy::of(s.as_ref()))
+        })
+        .collect();
+    studies.into_iter().collect()
 }
 
 /// The thresholds as the sweep loader allows them: at most 16, each within (0, 1000) mm, once.
