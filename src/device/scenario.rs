@@ -135,7 +135,8 @@ pub fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) 
     })
 }
 
-fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+/// `line N` of the byte range a TOML error points at (`(file)` without one).
+pub fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
     match span {
         Some(s) => {
             let line = text[..s.start.min(text.len())].lines().count().max(1);

@@ -528,7 +528,7 @@ fn read_shards_of(dirs: &[PathBuf], known: Option<(&ShardInfo, &[record::PointSt
     for d in dirs {
         let file = d.join("sweep.json");
         let bytes = crate::io::read_bytes(&file).map_err(|e| shard_err(d, format!("not a shard directory (sweep.json: {e})")))?;
-        let this: ShardInfo = serde_json::from_slice(&bytes).map_err(|e| shard_err(&file, e.to_string()))?;
+        let this: ShardInfo = from_json(&bytes, &file)?;
         match &first {
             None => {
                 let studies = record::check(&this, &file)?;
@@ -562,13 +562,27 @@ fn read_shards_of(dirs: &[PathBuf], known: Option<(&ShardInfo, &[record::PointSt
             if p.extension().is_none_or(|x| x != "json") {
                 continue;
             }
-            let u: Unit = serde_json::from_slice(&crate::io::read_bytes(&p).map_err(|e| shard_err(&p, e.to_string()))?)
-                .map_err(|e| shard_err(&p, e.to_string()))?;
+            let u: Unit = from_json(&crate::io::read_bytes(&p).map_err(|e| shard_err(&p, e.to_string()))?, &p)?;
             u.check(&info, &studies, shard, &p).map_err(|why| shard_err(&p, why))?;
             units.insert(u.unit, u);
         }
     }
     Ok((info, units.into_values().collect()))
+}
+
+/// `bytes` of `file` as a `T`; an error names the key it is at (`thresholds_mm[0]`: a record is
+/// one line, its column alone would not say where).
+fn from_json<T: serde::de::DeserializeOwned>(bytes: &[u8], file: &Path) -> Result<T, MergeError> {
+    let fail = |key: String, why: String| MergeError::Record {
+        path: crate::io::names::shown(file),
+        key: if key == "." { "(file)".into() } else { key },
+        why: crate::io::names::escape_controls(&why),
+    };
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value = serde_path_to_error::deserialize(&mut de).map_err(|e| fail(e.path().to_string(), e.into_inner().to_string()))?;
+    // Anything after the document is not calsim's: a record or unit written twice, or edited.
+    de.end().map_err(|e| fail(".".into(), e.to_string()))?;
+    Ok(value)
 }
 
 /// The first key in which record `b` differs from record `a` (but for the shard index).
