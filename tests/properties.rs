@@ -260,62 +260,67 @@ fn debris(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// One case: `args` run in `dir`; its end checked (see the module doc) and counted. `names`: what
-/// the error line must hold one of (the file, or the files it may name); `result`: what a
-/// refusal must not leave.
-fn case(
-    dir: &Path,
-    args: &[&str],
-    names: &[&str],
-    result: &Path,
+/// The cases of one surface: its name, counts and log.
+struct Surface {
+    name: &'static str,
+    counts: Counts,
+    log: Option<std::fs::File>,
+    /// Whether exit 1 is an answer (`compensate`: some targets out of reach).
     allow_one: bool,
-    counts: &mut Counts,
-    log: &mut Option<std::fs::File>,
-    surface: &str,
-) {
-    let (code, err) = run_in(dir, args);
-    counts.cases += 1;
-    let keep = || {
-        let kept = std::env::temp_dir().join(format!("calsim-property-{surface}-{}", counts.cases));
-        let _ = std::fs::remove_dir_all(&kept);
-        let _ = std::process::Command::new("cp").arg("-r").arg(dir).arg(&kept).status();
-        kept.display().to_string()
-    };
-    let error_lines: Vec<&str> = err.lines().filter(|l| !l.starts_with("calsim ")).collect();
-    if let Some(log) = log {
-        // One write per line: the surfaces run in parallel into one log.
-        let line = format!("{surface}\t{}\t{}\n", code.map_or("signal".into(), |c| c.to_string()), error_lines.join(" | "));
-        let _ = log.write_all(line.as_bytes());
+}
+
+impl Surface {
+    fn new(name: &'static str, allow_one: bool) -> Self {
+        let log = std::env::var_os("CALSIM_PROPERTY_LOG").map(|p| std::fs::OpenOptions::new().create(true).append(true).open(p).unwrap());
+        Self { name, counts: Counts::default(), log, allow_one }
     }
-    match code {
-        Some(0) => counts.ok += 1,
-        Some(1) if allow_one => counts.one += 1,
-        Some(2) => {
-            counts.refused += 1;
-            assert!(
-                error_lines.len() == 1 && error_lines[0].starts_with("error: "),
-                "{surface}: {args:?}: one error line, not {err:?} (kept in {})",
-                keep()
-            );
-            assert!(
-                names.iter().any(|n| error_lines[0].contains(n)),
-                "{surface}: {args:?}: none of {names:?} in {err:?} (kept in {})",
-                keep()
-            );
-            assert!(!result.exists(), "{surface}: {args:?}: refused, yet {} was written (kept in {})", result.display(), keep());
+
+    /// One case: `args` run in `dir`; its end checked (see the module doc) and counted. `names`: what
+    /// the error line must hold one of (the file, or the files it may name); `result`: what a
+    /// refusal must not leave.
+    fn case(&mut self, dir: &Path, args: &[&str], names: &[&str], result: &Path) {
+        let (code, err) = run_in(dir, args);
+        self.counts.cases += 1;
+        let (surface, n) = (self.name, self.counts.cases);
+        let keep = || {
+            let kept = std::env::temp_dir().join(format!("calsim-property-{surface}-{n}"));
+            let _ = std::fs::remove_dir_all(&kept);
+            let _ = std::process::Command::new("cp").arg("-r").arg(dir).arg(&kept).status();
+            kept.display().to_string()
+        };
+        let error_lines: Vec<&str> = err.lines().filter(|l| !l.starts_with("calsim ")).collect();
+        if let Some(log) = &mut self.log {
+            // One write per line: the surfaces run in parallel into one log.
+            let line = format!("{surface}\t{}\t{}\n", code.map_or("signal".into(), |c| c.to_string()), error_lines.join(" | "));
+            let _ = log.write_all(line.as_bytes());
         }
-        _ => panic!("{surface}: {args:?}: exit {code:?}: {err} (kept in {})", keep()),
+        match code {
+            Some(0) => self.counts.ok += 1,
+            Some(1) if self.allow_one => self.counts.one += 1,
+            Some(2) => {
+                self.counts.refused += 1;
+                assert!(
+                    error_lines.len() == 1 && error_lines[0].starts_with("error: "),
+                    "{surface}: {args:?}: one error line, not {err:?} (kept in {})",
+                    keep()
+                );
+                assert!(
+                    names.iter().any(|n| error_lines[0].contains(n)),
+                    "{surface}: {args:?}: none of {names:?} in {err:?} (kept in {})",
+                    keep()
+                );
+                assert!(!result.exists(), "{surface}: {args:?}: refused, yet {} was written (kept in {})", result.display(), keep());
+            }
+            _ => panic!("{surface}: {args:?}: exit {code:?}: {err} (kept in {})", keep()),
+        }
+        let left = debris(dir);
+        assert!(left.is_empty(), "{surface}: {args:?}: temporary files left: {left:?}");
     }
-    let left = debris(dir);
-    assert!(left.is_empty(), "{surface}: {args:?}: temporary files left: {left:?}");
-}
 
-fn log_file() -> Option<std::fs::File> {
-    std::env::var_os("CALSIM_PROPERTY_LOG").map(|p| std::fs::OpenOptions::new().create(true).append(true).open(p).unwrap())
-}
-
-fn report(surface: &str, c: &Counts) {
-    eprintln!("property {surface}: {} cases: {} exit 0, {} exit 1, {} exit 2, 0 otherwise", c.cases, c.ok, c.one, c.refused);
+    fn report(&self, what: &str) {
+        let c = &self.counts;
+        eprintln!("property {what}: {} cases: {} exit 0, {} exit 1, {} exit 2, 0 otherwise", c.cases, c.ok, c.one, c.refused);
+    }
 }
 
 /// The reduced CI scenario (one set size, one repetition) with its robot file named absolutely.
@@ -331,7 +336,7 @@ const SWEEP: &str = "base = \"base.toml\"\nrealisations = 2\nthresholds_mm = [0.
 #[test]
 fn sweep_files_mutated_at_random_run_or_are_refused_in_one_line() {
     let mut rng = rng(1);
-    let (mut counts, mut log) = (Counts::default(), log_file());
+    let mut surface = Surface::new("sweep", false);
     for _ in 0..cases() {
         let tmp = scratch("prop-sweep");
         let dir = tmp.path();
@@ -339,18 +344,9 @@ fn sweep_files_mutated_at_random_run_or_are_refused_in_one_line() {
         let text = (0..rng.random_range(1..3)).fold(SWEEP.to_string(), |t, _| mutate_text(&t, &mut rng));
         std::fs::write(dir.join("s.toml"), text).unwrap();
         // One shard of many: a sweep grown to its limits runs a few units, not all of them.
-        case(
-            dir,
-            &["sweep", "s.toml", "--out", "out", "--shard", "0/1000"],
-            &["s.toml"],
-            &dir.join("out/s.shard-0-of-1000/units"),
-            false,
-            &mut counts,
-            &mut log,
-            "sweep",
-        );
+        surface.case(dir, &["sweep", "s.toml", "--out", "out", "--shard", "0/1000"], &["s.toml"], &dir.join("out/s.shard-0-of-1000/units"));
     }
-    report("sweep files", &counts);
+    surface.report("sweep files");
 }
 
 #[test]
@@ -366,27 +362,23 @@ fn shard_records_and_units_mutated_at_random_merge_or_are_refused_in_one_line() 
     let units: Vec<(PathBuf, String)> =
         (0..4).map(|u| shard.join(format!("units/u{u:07}.json"))).map(|p| (p.clone(), std::fs::read_to_string(&p).unwrap())).collect();
     let mut rng = rng(2);
-    let (mut counts, mut log) = (Counts::default(), log_file());
+    let mut surface = Surface::new("shard", false);
     for _ in 0..cases() {
         // Three in four cases change the record, the others a unit.
         let (file, good) =
             if rng.random_range(0..4) > 0 { (shard.join("sweep.json"), record.clone()) } else { units[rng.random_range(0..4)].clone() };
         let text = (0..rng.random_range(1..3)).fold(good.clone(), |t, _| mutate_json(&t, &mut rng));
         std::fs::write(&file, text).unwrap();
-        case(
+        surface.case(
             dir,
             &["merge", "out/m.shard-0-of-1", "--out", "merged"],
             &["sweep.json", "/units/u", "work units", "m.shard-0-of-1"],
             &dir.join("merged/m"),
-            false,
-            &mut counts,
-            &mut log,
-            "shard",
         );
         std::fs::write(&file, good).unwrap();
         let _ = std::fs::remove_dir_all(dir.join("merged"));
     }
-    report("shard records", &counts);
+    surface.report("shard records");
 }
 
 #[test]
@@ -396,23 +388,14 @@ fn robot_files_mutated_at_random_load_or_are_refused_in_one_line() {
     let dir = tmp.path();
     std::fs::write(dir.join("joints.csv"), "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n0,0,0,0,0,0\n10,-20,30,-40,50,-60\n").unwrap();
     let mut rng = rng(3);
-    let (mut counts, mut log) = (Counts::default(), log_file());
+    let mut surface = Surface::new("robot", false);
     for _ in 0..cases() {
         let text = (0..rng.random_range(1..3)).fold(arm.clone(), |t, _| mutate_text(&t, &mut rng));
         std::fs::write(dir.join("arm.toml"), text).unwrap();
-        case(
-            dir,
-            &["fk", "arm.toml", "joints.csv", "--out", "fk.csv"],
-            &["arm.toml"],
-            &dir.join("fk.csv"),
-            false,
-            &mut counts,
-            &mut log,
-            "robot",
-        );
+        surface.case(dir, &["fk", "arm.toml", "joints.csv", "--out", "fk.csv"], &["arm.toml"], &dir.join("fk.csv"));
         let _ = std::fs::remove_file(dir.join("fk.csv"));
     }
-    report("robot files", &counts);
+    surface.report("robot files");
 }
 
 #[test]
@@ -421,23 +404,14 @@ fn urdfs_mutated_at_random_import_or_are_refused_in_one_line() {
     let tmp = scratch("prop-urdf");
     let dir = tmp.path();
     let mut rng = rng(4);
-    let (mut counts, mut log) = (Counts::default(), log_file());
+    let mut surface = Surface::new("urdf", false);
     for _ in 0..cases() {
         let text = (0..rng.random_range(1..3)).fold(urdf.clone(), |t, _| mutate_text(&t, &mut rng));
         std::fs::write(dir.join("arm.urdf"), text).unwrap();
-        case(
-            dir,
-            &["import-urdf", "arm.urdf", "--out", "arm.toml"],
-            &["arm.urdf"],
-            &dir.join("arm.toml"),
-            false,
-            &mut counts,
-            &mut log,
-            "urdf",
-        );
+        surface.case(dir, &["import-urdf", "arm.urdf", "--out", "arm.toml"], &["arm.urdf"], &dir.join("arm.toml"));
         let _ = std::fs::remove_file(dir.join("arm.toml"));
     }
-    report("URDFs", &counts);
+    surface.report("URDFs");
 }
 
 #[test]
@@ -447,23 +421,14 @@ fn target_csvs_mutated_at_random_compensate_or_are_refused_in_one_line() {
     let tmp = scratch("prop-targets");
     let dir = tmp.path();
     let mut rng = rng(5);
-    let (mut counts, mut log) = (Counts::default(), log_file());
+    let mut surface = Surface::new("targets", true);
     for _ in 0..cases() {
         let text = (0..rng.random_range(1..3)).fold(targets.clone(), |t, _| mutate_text(&t, &mut rng));
         std::fs::write(dir.join("t.csv"), text).unwrap();
-        case(
-            dir,
-            &["compensate", irb120.to_str().unwrap(), "t.csv", "--out", "c.csv"],
-            &["t.csv"],
-            &dir.join("c.csv"),
-            true,
-            &mut counts,
-            &mut log,
-            "targets",
-        );
+        surface.case(dir, &["compensate", irb120.to_str().unwrap(), "t.csv", "--out", "c.csv"], &["t.csv"], &dir.join("c.csv"));
         let _ = std::fs::remove_file(dir.join("c.csv"));
     }
-    report("target CSVs", &counts);
+    surface.report("target CSVs");
 }
 
 #[test]
@@ -473,22 +438,13 @@ fn measurement_csvs_mutated_at_random_calibrate_or_are_refused_in_one_line() {
     let tmp = scratch("prop-measurements");
     let dir = tmp.path();
     let mut rng = rng(6);
-    let (mut counts, mut log) = (Counts::default(), log_file());
+    let mut surface = Surface::new("measurements", false);
     for _ in 0..cases() {
         let text = (0..rng.random_range(1..3)).fold(measurements.clone(), |t, _| mutate_text(&t, &mut rng));
         std::fs::write(dir.join("m.csv"), text).unwrap();
         let result = dir.join("out/m.calibration");
-        case(
-            dir,
-            &["calibrate", irb120.to_str().unwrap(), "m.csv", "--out", "out", "--no-plots"],
-            &["m.csv"],
-            &result,
-            false,
-            &mut counts,
-            &mut log,
-            "measurements",
-        );
+        surface.case(dir, &["calibrate", irb120.to_str().unwrap(), "m.csv", "--out", "out", "--no-plots"], &["m.csv"], &result);
         let _ = std::fs::remove_dir_all(dir.join("out"));
     }
-    report("measurement CSVs", &counts);
+    surface.report("measurement CSVs");
 }
