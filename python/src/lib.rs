@@ -69,7 +69,7 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         app::Error::Budget(CoreBudgetError::NoSource(path)) => {
             (PyErr::new::<BudgetError, _>(message), Fault { path: Some(path), ..Fault::default() })
         }
-        app::Error::Merge(CoreMergeError::Shard { path, .. }) => {
+        app::Error::Merge(CoreMergeError::Shard { path, .. } | CoreMergeError::Record { path, .. }) => {
             (PyErr::new::<MergeError, _>(message), Fault { path: Some(path), ..Fault::default() })
         }
         app::Error::Urdf(_) | app::Error::RobotFile(_) => (PyErr::new::<RobotFileError, _>(message), Fault::default()),

@@ -135,7 +135,8 @@ pub fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) 
     })
 }
 
-fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+/// `line N` of the byte range a TOML error points at (`(file)` without one).
+pub fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
     match span {
         Some(s) => {
             let line = text[..s.start.min(text.len())].lines().count().max(1);
@@ -316,7 +317,7 @@ impl Checker<'_> {
         tool_key: &str,
     ) -> Result<(), ScenarioError> {
         self.note("study", "parameters", || "every parameter separable by some set of configurations on this robot and tool".into());
-        let hidden = crate::identify::observability::structurally_unidentifiable(model, set);
+        let hidden = unidentifiable_memo(model, set);
         if hidden.is_empty() {
             return Ok(());
         }
@@ -387,4 +388,28 @@ pub fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::ro
 /// `file` as named in the scenario at `scenario`: relative paths from the scenario's directory.
 pub fn relative_to(scenario: &Path, file: &Path) -> PathBuf {
     if file.is_absolute() { file.to_path_buf() } else { scenario.parent().unwrap_or(Path::new("")).join(file) }
+}
+
+/// [`crate::identify::observability::structurally_unidentifiable`], remembered by its inputs: the
+/// points of a sweep (and a merge re-loading them) share their robot and parameter set, and each
+/// answer costs the SVD of 200 configurations (a 9,001-point sweep spent over a minute loading the
+/// same answer 9,001 times). The inputs are keyed by their exact `Debug` text (floats print as
+/// the shortest text that reads back to the same value); at most 256 answers are kept.
+fn unidentifiable_memo(model: &crate::robot::RobotModel, set: &crate::robot::ParamSet) -> Vec<String> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static MEMO: OnceLock<Mutex<HashMap<String, Vec<String>>>> = OnceLock::new();
+    let key = format!("{model:?}\u{0}{set:?}");
+    let memo = MEMO.get_or_init(Default::default);
+    if let Some(hidden) = memo.lock().ok().and_then(|m| m.get(&key).cloned()) {
+        return hidden;
+    }
+    let hidden = crate::identify::observability::structurally_unidentifiable(model, set);
+    if let Ok(mut m) = memo.lock() {
+        if m.len() >= 256 {
+            m.clear();
+        }
+        m.insert(key, hidden.clone());
+    }
+    hidden
 }

@@ -292,10 +292,15 @@ pub fn boxplots<DB: DrawingBackend>(
         series.iter().filter(|s| !s.0.is_empty()).map(|s| (s.0.to_string(), Mark::Bar(pale(s.1, 0.4)))).collect();
     let root = &keyed(root, &entries, Side::Bottom)?;
     let sizes: Vec<usize> = series.first().map(|s| s.2.iter().map(|(n, _)| *n).collect()).unwrap_or_default();
-    let xr = range_of(sizes.iter().map(|n| *n as f64), 0.06);
+    let step = if sizes.len() > 1 { sizes.windows(2).map(|w| (w[1] - w[0]) as f64).fold(f64::INFINITY, f64::min) } else { 10.0 };
+    // One set size: the axis spans a step either side, so that its box has a width to be drawn in
+    // (a range of the one size alone is 1e-9 wide, and the box's edges overflow the pixel grid).
+    let xr = match sizes.as_slice() {
+        [n] => (*n as f64 - step)..(*n as f64 + step),
+        _ => range_of(sizes.iter().map(|n| *n as f64), 0.06),
+    };
     let yr = range_of(series.iter().flat_map(|s| s.2.iter().flat_map(|(_, v)| v.iter().copied())), 0.08);
     let yr = 0f64.min(yr.start)..yr.end;
-    let step = if sizes.len() > 1 { sizes.windows(2).map(|w| (w[1] - w[0]) as f64).fold(f64::INFINITY, f64::min) } else { 10.0 };
     let k = series.len().max(1) as f64;
     let half = 0.3 * step / k;
     let mut chart = ChartBuilder::on(root)

@@ -23,6 +23,28 @@ pub enum ShapeError {
         /// Its column (in bytes), 1-based.
         column: usize,
     },
+    /// A closing tag that closes no open element, or another than the innermost.
+    #[error("line {line}, column {column}: </{name}> {closes}")]
+    Mismatched {
+        /// Where the closing tag starts.
+        line: usize,
+        /// See `line`.
+        column: usize,
+        /// Its element name.
+        name: String,
+        /// What it closes instead (`closes <link> opened on line 12`, `closes no open element`).
+        closes: String,
+    },
+    /// An element still open at the end of the file.
+    #[error("line {line}, column {column}: <{name}> is never closed")]
+    Unclosed {
+        /// Where its opening tag starts.
+        line: usize,
+        /// See `line`.
+        column: usize,
+        /// Its element name.
+        name: String,
+    },
     /// More elements than [`MOST_ELEMENTS`].
     #[error("line {line}, column {column}: more than {MOST_ELEMENTS} elements: not a file calsim reads")]
     TooMany {
@@ -84,6 +106,17 @@ pub fn looks_like_xml(bytes: &[u8]) -> bool {
 /// breaks as ASCII: UTF-8, Latin-1).
 pub fn check_shape_bytes(b: &[u8]) -> Result<(), ShapeError> {
     let (mut i, mut depth, mut elements) = (0, 0usize, 0usize);
+    // The open elements, innermost last (name and where its tag starts): at most MOST_DEPTH.
+    let mut open: Vec<(&[u8], usize)> = Vec::new();
+    let name_at = |from: usize| {
+        let rest = b.get(from..).unwrap_or_default();
+        let n = rest.iter().position(|c| c.is_ascii_whitespace() || matches!(c, b'/' | b'>')).unwrap_or(rest.len());
+        &rest[..n]
+    };
+    let shown = |n: &[u8]| {
+        let text = String::from_utf8_lossy(&n[..n.len().min(60)]).into_owned();
+        crate::io::names::escape_controls(&text)
+    };
     while let Some(lt) = b.get(i..).and_then(|r| r.iter().position(|&c| c == b'<')).map(|k| i + k) {
         let rest = &b[lt..];
         i = if rest.starts_with(b"<!--") {
@@ -96,6 +129,18 @@ pub fn check_shape_bytes(b: &[u8]) -> Result<(), ShapeError> {
             tag_end(b, lt + 2).0
         } else if rest.starts_with(b"</") {
             depth = depth.saturating_sub(1);
+            let name = name_at(lt + 2);
+            match open.pop() {
+                Some((n, _)) if n == name => {}
+                other => {
+                    let (line, column) = position(b, lt);
+                    let closes = match other {
+                        Some((n, at)) => format!("closes <{}> opened on line {}", shown(n), position(b, at).0),
+                        None => "closes no open element".into(),
+                    };
+                    return Err(ShapeError::Mismatched { line, column, name: shown(name), closes });
+                }
+            }
             tag_end(b, lt + 2).0
         } else {
             let (end, closed) = tag_end(b, lt + 1);
@@ -110,11 +155,18 @@ pub fn check_shape_bytes(b: &[u8]) -> Result<(), ShapeError> {
                     let (line, column) = position(b, lt);
                     return Err(ShapeError::TooDeep { line, column });
                 }
+                open.push((name_at(lt + 1), lt));
             }
             end
         };
     }
-    Ok(())
+    match open.last() {
+        Some(&(n, at)) => {
+            let (line, column) = position(b, at);
+            Err(ShapeError::Unclosed { line, column, name: shown(n) })
+        }
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]
@@ -141,6 +193,17 @@ mod tests {
         assert_eq!(check_shape(&flat), Ok(()));
         let wide = format!("<robot>{}</robot>", "<x/>".repeat(MOST_ELEMENTS));
         assert!(matches!(check_shape(&wide), Err(ShapeError::TooMany { line: 1, .. })));
+    }
+
+    #[test]
+    fn a_closing_tag_of_another_element_or_an_element_never_closed_is_named_with_its_line() {
+        let e = check_shape("<robot>\n  <link name=\"a\">\n  </joint>\n</robot>").unwrap_err();
+        assert_eq!(e.to_string(), "line 3, column 3: </joint> closes <link> opened on line 2");
+        let e = check_shape("<robot/>\n</robot>").unwrap_err();
+        assert_eq!(e.to_string(), "line 2, column 1: </robot> closes no open element");
+        let e = check_shape("<robot>\n<link>").unwrap_err();
+        assert_eq!(e.to_string(), "line 2, column 1: <link> is never closed");
+        assert_eq!(check_shape("<a><b x=\"</c>\"/><c></c ></a>"), Ok(()));
     }
 
     #[test]

@@ -104,7 +104,8 @@ fn deflection(model: &RobotModel, key: &str) -> Result<(), (String, String)> {
         let tau = super::gravity_torques(model, &q);
         for i in 0..JOINTS {
             let bend = (d.links[i].compliance * tau[i]).abs().to_degrees();
-            if !(bend <= worst.0) {
+            // A NaN bend (a compliance times an infinite torque) is the worst of all.
+            if bend.is_nan() || bend > worst.0 {
                 worst = (bend, i, q);
             }
         }

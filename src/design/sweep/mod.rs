@@ -16,6 +16,7 @@ pub mod designs;
 pub mod objective;
 pub mod plots;
 pub mod race;
+pub mod record;
 pub mod results;
 pub mod spec;
 
@@ -132,12 +133,15 @@ pub struct Unit {
 const MOST_MM: f64 = 1e9;
 
 impl Unit {
-    /// Whether this unit, read from `file`, can be one of `sweep`'s: its indices within the sweep
-    /// and the file's name, its counts within its repetitions, one count per threshold, and every
-    /// error, time and O1 either absent (NaN) or a finite number >= 0 (errors up to `MOST_MM`, the
-    /// campaign's modelled time up to 1e15 s, above any the scenario limits allow). A unit
-    /// file is written by calsim; this refuses one that was cut short, edited or mixed up.
-    fn check(&self, sweep: &ShardInfo, file: &Path) -> Result<(), String> {
+    /// Whether this unit, read from `file` in the directory of shard `shard`, can be one of
+    /// `sweep`'s: its indices within the sweep, the file's name and the shard's units, exactly the
+    /// rows its point's study promises (`studies`: each selection and set size once, over the
+    /// study's repetitions; none when the unit could not run), its counts within its repetitions,
+    /// one count per threshold, and every error, time and O1 either absent (NaN) or a finite
+    /// number >= 0 (errors up to `MOST_MM`, the campaign's modelled time up to 1e15 s, above any
+    /// the scenario limits allow). A unit file is written by calsim; this refuses one that was cut
+    /// short, edited or mixed up.
+    fn check(&self, sweep: &ShardInfo, studies: &[record::PointStudy], shard: usize, file: &Path) -> Result<(), String> {
         let (points, reals) = (sweep.points.len(), sweep.realisations as usize);
         if self.point >= points || self.realisation as usize >= reals || self.unit != self.point * reals + self.realisation as usize {
             return Err(format!(
@@ -148,6 +152,15 @@ impl Unit {
         if file.file_stem().and_then(|s| s.to_str()) != Some(unit_file_stem(self.unit).as_str()) {
             return Err(format!("holds unit {}, not the unit its name gives", self.unit));
         }
+        if self.unit % sweep.count != shard {
+            return Err(format!(
+                "holds unit {}, a unit of shard {} of {}, not of this shard {shard}",
+                self.unit,
+                self.unit % sweep.count,
+                sweep.count
+            ));
+        }
+        self.check_rows(&studies[self.point])?;
         let size = |what: &str, x: f64, most: f64| {
             if x.is_nan() || (0.0..=most).contains(&x) { Ok(()) } else { Err(format!("{what} = {x}: not within [0, {most:e}]")) }
         };
@@ -169,15 +182,61 @@ impl Unit {
             if r.no_model > r.repetitions {
                 return Err(format!("{} = {} of {} repetitions", at("no_model"), r.no_model, r.repetitions));
             }
-            for (k, counts) in
-                [("max_within", &r.max_within), ("mean_within", &r.mean_within), ("p95_within", &r.p95_within), ("median_within", &r.median_within)]
-            {
+            for (k, counts) in [
+                ("max_within", &r.max_within),
+                ("mean_within", &r.mean_within),
+                ("p95_within", &r.p95_within),
+                ("median_within", &r.median_within),
+            ] {
                 if counts.len() != sweep.thresholds_mm.len() || counts.iter().any(|&c| c > r.repetitions) {
                     return Err(format!(
                         "{} = {counts:?}: one count of at most {} repetitions per threshold ({} thresholds)",
                         at(k),
                         r.repetitions,
                         sweep.thresholds_mm.len()
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Unit {
+    /// Whether the rows are exactly those `study` promises (see [`Unit::check`]).
+    fn check_rows(&self, study: &record::PointStudy) -> Result<(), String> {
+        if self.error.is_some() {
+            return if self.rows.is_empty() { Ok(()) } else { Err("rows: a unit that could not run has none".into()) };
+        }
+        for (i, r) in self.rows.iter().enumerate() {
+            let at = |k: &str| format!("rows[{i}].{k}");
+            if !study.selections.contains(&r.selection.as_str()) {
+                return Err(format!(
+                    "{} = {:?}: not a selection of the point's study {:?}",
+                    at("selection"),
+                    r.selection,
+                    study.selections
+                ));
+            }
+            if !study.set_sizes.contains(&r.set_size) {
+                return Err(format!("{} = {}: not a set size of the point's study {:?}", at("set_size"), r.set_size, study.set_sizes));
+            }
+            if self.rows[..i].iter().any(|o| o.selection == r.selection && o.set_size == r.set_size) {
+                return Err(format!("rows[{i}]: {} sets of {} a second time", r.selection, r.set_size));
+            }
+            if r.repetitions != study.repetitions {
+                return Err(format!("{} = {}: the point's study has {} repetitions", at("repetitions"), r.repetitions, study.repetitions));
+            }
+            if r.table != (r.set_size == study.table_set_size) {
+                return Err(format!("{} = {}: the point's table set size is {}", at("table"), r.table, study.table_set_size));
+            }
+        }
+        for sel in &study.selections {
+            for n in &study.set_sizes {
+                if !self.rows.iter().any(|r| r.selection == *sel && r.set_size == *n) {
+                    return Err(format!(
+                        "rows: no row of {sel} sets of {n} (the point's study has {:?} x set sizes {:?})",
+                        study.selections, study.set_sizes
                     ));
                 }
             }
@@ -252,8 +311,10 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
     out
 }
 
-/// What a shard directory records of its sweep, so that `merge` needs only the shards.
+/// What a shard directory records of its sweep (`sweep.json`), so that `merge` needs only the
+/// shards (and the robot files their scenarios name); stored and checked as [`record`] says.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ShardInfo {
     /// The sweep's name.
     pub name: String,
@@ -268,17 +329,16 @@ pub struct ShardInfo {
     /// Per grid point, its axis values as written.
     pub points: Vec<Vec<String>>,
     /// Per grid point, the datum spheres in {W}, mm (TriCal; empty for other devices).
-    #[serde(default)]
     pub layouts: Vec<Vec<[f64; 3]>>,
     /// Per grid point, where the robot stands in {W} (TriCal; empty for other devices).
     #[serde(default)]
     pub robots: Vec<Option<crate::device::RobotInCell>>,
-    /// Per grid point, its whole scenario as TOML (what `calsim run` takes to redo it, recording
+    /// The whole scenario of grid point 0 as TOML (what `calsim run` takes to redo it, recording
     /// included).
-    #[serde(default)]
-    pub scenarios: Vec<String>,
+    pub scenario: String,
+    /// Per grid point, the changes of its scenario from grid point 0's ([`ShardInfo::point_table`]).
+    pub changes: Vec<Vec<record::Change>>,
     /// What the sweep decides (its default: minimise the p95 at the table set size).
-    #[serde(default)]
     pub objective: objective::Objective,
     /// Adaptive realisations, when the sweep races its designs.
     #[serde(default)]
@@ -287,6 +347,16 @@ pub struct ShardInfo {
     pub shard: usize,
     /// Shards in all.
     pub count: usize,
+}
+
+impl ShardInfo {
+    /// The whole scenario of grid point `p` as a table (a record read from disk is checked by
+    /// [`record::check`] first).
+    pub fn point_table(&self, p: usize) -> Result<toml::Table, String> {
+        let base: toml::Table = toml::from_str(&self.scenario).map_err(|e: toml::de::Error| format!("scenario: {}", e.message()))?;
+        let changes = self.changes.get(p).ok_or_else(|| format!("no grid point {p}"))?;
+        record::apply(&base, changes).map_err(|(i, why)| format!("changes[{p}][{i}]: {why}"))
+    }
 }
 
 /// The shard directory of shard `k` of `count` of `sweep` under `out`.
@@ -323,6 +393,9 @@ pub struct ShardRun {
 
 /// The record of `sweep` that shard `k` of `count` writes as its `sweep.json`.
 pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
+    // Every point's text is calsim's own TOML of a table it loaded (`spec::load`, `from_tables`).
+    let tables: Vec<toml::Table> = sweep.points.iter().map(|p| toml::from_str(&p.scenario.header().text).unwrap_or_default()).collect();
+    let base = tables.first().cloned().unwrap_or_default();
     ShardInfo {
         name: sweep.name.clone(),
         identity: sweep.identity.clone(),
@@ -332,7 +405,8 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
         layouts: sweep.points.iter().map(|p| p.scenario.layout_mm()).collect(),
         robots: sweep.points.iter().map(|p| p.scenario.robot_in_cell()).collect(),
-        scenarios: sweep.points.iter().map(|p| p.scenario.header().text.clone()).collect(),
+        scenario: sweep.points.first().map(|p| p.scenario.header().text.clone()).unwrap_or_default(),
+        changes: tables.iter().map(|t| record::changes(&base, t)).collect(),
         objective: sweep.objective.clone(),
         race: sweep.race.clone(),
         shard: k,
@@ -346,14 +420,29 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
 /// are kept (a killed run resumes).
 pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(dyn Fn(usize, usize) + Sync)) -> std::io::Result<ShardRun> {
     let dir = shard_dir(out, &sweep.name, k, count);
-    fs::create_dir_all(dir.join("units"))?;
     let info = shard_info(sweep, k, count);
+    let bytes = serde_json::to_vec(&info).map_err(std::io::Error::other)?;
+    // Never write a record that merge cannot read back: refused before anything runs.
+    if bytes.len() as u64 > crate::io::MOST_INPUT_BYTES {
+        return Err(std::io::Error::other(format!(
+            "sweep {}: its record (sweep.json) would take {:.1} MiB, more than the {} MiB calsim reads of an input: fewer grid points or \
+             smaller axis values",
+            sweep.name,
+            bytes.len() as f64 / f64::from(1 << 20),
+            crate::io::MOST_INPUT_BYTES >> 20
+        )));
+    }
+    let studies: Vec<record::PointStudy> = sweep.points.iter().map(|p| record::PointStudy::of(p.scenario.as_ref())).collect();
+    fs::create_dir_all(dir.join("units"))?;
     let info_path = dir.join("sweep.json");
     if info_path.exists() {
         let old = crate::io::read_bytes(&info_path)
             .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", crate::io::names::shown(&info_path))))?;
         let old: ShardInfo = serde_json::from_slice(&old).map_err(|e| {
-            std::io::Error::other(format!("{}: {e} (a sweep.json calsim did not write: remove the directory)", crate::io::names::shown(&info_path)))
+            std::io::Error::other(format!(
+                "{}: {e} (a sweep.json calsim did not write: remove the directory)",
+                crate::io::names::shown(&info_path)
+            ))
         })?;
         if old != info {
             return Err(std::io::Error::other(format!(
@@ -362,7 +451,7 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
             )));
         }
     }
-    write_file_atomically(&info_path, &serde_json::to_vec_pretty(&info).map_err(std::io::Error::other)?)?;
+    write_file_atomically(&info_path, &bytes)?;
     // Temporary files of killed runs are not units: remove them.
     for e in fs::read_dir(dir.join("units"))? {
         let p = e?.path();
@@ -373,7 +462,7 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
     let mut ran = 0;
     let done = std::sync::atomic::AtomicUsize::new(0);
     loop {
-        let present = sibling_units(out, &info).map_err(|e| std::io::Error::other(e.to_string()))?;
+        let present = sibling_units(out, &info, &studies).map_err(|e| std::io::Error::other(e.to_string()))?;
         let plan = race::plan(&info, &present);
         let mine: Vec<usize> = plan.missing.iter().copied().filter(|u| u % count == k).collect();
         if mine.is_empty() {
@@ -392,10 +481,11 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
 }
 
 /// The units of every shard of `info`'s sharding under `out` that exists (a sibling's record must
-/// be the same sweep), by unit index.
-fn sibling_units(out: &Path, info: &ShardInfo) -> Result<BTreeMap<usize, Unit>, MergeError> {
-    let dirs: Vec<PathBuf> = (0..info.count).map(|j| shard_dir(out, &info.name, j, info.count)).filter(|d| d.join("sweep.json").exists()).collect();
-    Ok(read_shards(&dirs)?.1.into_iter().map(|u| (u.unit, u)).collect())
+/// be the same sweep), by unit index; `studies` are the promises of `info`'s points.
+fn sibling_units(out: &Path, info: &ShardInfo, studies: &[record::PointStudy]) -> Result<BTreeMap<usize, Unit>, MergeError> {
+    let dirs: Vec<PathBuf> =
+        (0..info.count).map(|j| shard_dir(out, &info.name, j, info.count)).filter(|d| d.join("sweep.json").exists()).collect();
+    Ok(read_shards_of(&dirs, Some((info, studies)))?.1.into_iter().map(|u| (u.unit, u)).collect())
 }
 
 /// Why shards cannot be merged.
@@ -409,42 +499,102 @@ pub enum MergeError {
         /// What is wrong.
         why: String,
     },
+    /// A shard's record (`sweep.json`) is not one calsim could have written.
+    #[error("{path}: {key}: {why}")]
+    Record {
+        /// The record's file.
+        path: String,
+        /// Its key.
+        key: String,
+        /// What is wrong.
+        why: String,
+    },
 }
 
 fn shard_err(p: &Path, why: impl Into<String>) -> MergeError {
     MergeError::Shard { path: p.display().to_string(), why: why.into() }
 }
 
-/// Reads the shards `dirs` of one sweep: their common record and every unit, in unit order
-/// (whether the sweep is complete is [`complete`]'s question).
+/// Reads the shards `dirs` of one sweep: their common record, checked whole ([`record::check`]),
+/// and every unit, checked against it, in unit order (whether the sweep is complete is
+/// [`complete`]'s question).
 pub fn read_shards(dirs: &[PathBuf]) -> Result<(ShardInfo, Vec<Unit>), MergeError> {
-    let mut info: Option<(ShardInfo, &Path)> = None;
-    let mut units: BTreeMap<usize, Unit> = BTreeMap::new();
+    read_shards_of(dirs, None)
+}
+
+/// [`read_shards`]; with `known`, the record and the promises of the sweep that runs (every shard's
+/// record must be it, and it need not be checked again).
+fn read_shards_of(dirs: &[PathBuf], known: Option<(&ShardInfo, &[record::PointStudy])>) -> Result<(ShardInfo, Vec<Unit>), MergeError> {
+    // The records first, all of them: nothing of a unit is read before every record is trusted.
+    let mut first: Option<(ShardInfo, PathBuf, Vec<record::PointStudy>)> =
+        known.map(|(i, s)| (i.clone(), PathBuf::from("the sweep file"), s.to_vec()));
+    let mut shards: Vec<(&Path, usize)> = Vec::with_capacity(dirs.len());
     for d in dirs {
-        let bytes =
-            crate::io::read_bytes(&d.join("sweep.json")).map_err(|e| shard_err(d, format!("not a shard directory (sweep.json: {e})")))?;
-        let this: ShardInfo = serde_json::from_slice(&bytes).map_err(|e| shard_err(d, format!("sweep.json: {e}")))?;
-        match &info {
-            Some((first, fp)) if first.identity != this.identity || first.name != this.name => {
-                return Err(shard_err(d, format!("a shard of another sweep than {} ({} against {})", fp.display(), this.name, first.name)));
+        let file = d.join("sweep.json");
+        let bytes = crate::io::read_bytes(&file).map_err(|e| shard_err(d, format!("not a shard directory (sweep.json: {e})")))?;
+        let this: ShardInfo = from_json(&bytes, &file)?;
+        match &first {
+            None => {
+                let studies = record::check(&this, &file)?;
+                first = Some((this.clone(), file.clone(), studies));
             }
-            Some(_) => {}
-            None => info = Some((this.clone(), d)),
+            Some((f, fp, _)) => {
+                if f.identity != this.identity || f.name != this.name {
+                    return Err(shard_err(d, format!("a shard of another sweep than {} ({} against {})", fp.display(), this.name, f.name)));
+                }
+                if this.shard >= f.count || (ShardInfo { shard: f.shard, ..this.clone() }) != *f {
+                    let key = differing_key(f, &this);
+                    return Err(MergeError::Record {
+                        path: crate::io::names::shown(&file),
+                        key,
+                        why: format!("not the record of {} (the same sweep holds one record in every shard)", fp.display()),
+                    });
+                }
+            }
         }
+        if let Some((other, _)) = shards.iter().find(|(_, k)| *k == this.shard) {
+            return Err(shard_err(d, format!("shard {} of {} a second time (also {})", this.shard, this.count, other.display())));
+        }
+        shards.push((d.as_path(), this.shard));
+    }
+    let (info, _, studies) = first.ok_or_else(|| shard_err(Path::new("merge"), "no shard directories given"))?;
+    let mut units: BTreeMap<usize, Unit> = BTreeMap::new();
+    for (d, shard) in shards {
         let entries = fs::read_dir(d.join("units")).map_err(|e| shard_err(d, format!("units: {e}")))?;
         for e in entries {
             let p = e.map_err(|e| shard_err(d, e.to_string()))?.path();
             if p.extension().is_none_or(|x| x != "json") {
                 continue;
             }
-            let u: Unit = serde_json::from_slice(&crate::io::read_bytes(&p).map_err(|e| shard_err(&p, e.to_string()))?)
-                .map_err(|e| shard_err(&p, e.to_string()))?;
-            u.check(&this, &p).map_err(|why| shard_err(&p, why))?;
+            let u: Unit = from_json(&crate::io::read_bytes(&p).map_err(|e| shard_err(&p, e.to_string()))?, &p)?;
+            u.check(&info, &studies, shard, &p).map_err(|why| shard_err(&p, why))?;
             units.insert(u.unit, u);
         }
     }
-    let (info, _) = info.ok_or_else(|| shard_err(Path::new("merge"), "no shard directories given"))?;
     Ok((info, units.into_values().collect()))
+}
+
+/// `bytes` of `file` as a `T`; an error names the key it is at (`thresholds_mm[0]`: a record is
+/// one line, its column alone would not say where).
+fn from_json<T: serde::de::DeserializeOwned>(bytes: &[u8], file: &Path) -> Result<T, MergeError> {
+    let fail = |key: String, why: String| MergeError::Record {
+        path: crate::io::names::shown(file),
+        key: if key == "." { "(file)".into() } else { key },
+        why: crate::io::names::escape_controls(&why),
+    };
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value = serde_path_to_error::deserialize(&mut de).map_err(|e| fail(e.path().to_string(), e.into_inner().to_string()))?;
+    // Anything after the document is not calsim's: a record or unit written twice, or edited.
+    de.end().map_err(|e| fail(".".into(), e.to_string()))?;
+    Ok(value)
+}
+
+/// The first key in which record `b` differs from record `a` (but for the shard index).
+fn differing_key(a: &ShardInfo, b: &ShardInfo) -> String {
+    let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) = (serde_json::to_value(a), serde_json::to_value(b)) else {
+        return "(record)".into();
+    };
+    a.iter().find(|(k, v)| k.as_str() != "shard" && b.get(k.as_str()) != Some(v)).map_or_else(|| "shard".into(), |(k, _)| k.clone())
 }
 
 /// The plan of a merged sweep, which must be complete: every unit of a sweep of fixed
@@ -570,7 +720,8 @@ pub fn aggregate(info: &ShardInfo, units: &[Unit]) -> Vec<PointRow> {
                 success,
                 success_ci,
                 after_ci,
-                no_model: rows.iter().map(|r| r.no_model).sum(),
+                // At most MAX_REPETITIONS x MAX_REALISATIONS (1e8): units are checked against their study.
+                no_model: u32::try_from(rows.iter().map(|r| u64::from(r.no_model)).sum::<u64>()).unwrap_or(u32::MAX),
                 o1: median(&rows.iter().map(|r| r.o1_median).collect::<Vec<_>>()),
                 campaign_s: median(&us.iter().map(|u| u.campaign_s).collect::<Vec<_>>()),
             });

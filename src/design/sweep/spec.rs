@@ -350,7 +350,7 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
     let file: SweepFile = {
-        let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, "(file)", e.message()))?;
+        let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, &scenario::position(&text, e.span()), e.message()))?;
         serde_path_to_error::deserialize(de).map_err(|e| {
             let key = e.path().to_string();
             file_err(path, &key, e.into_inner().message())
@@ -367,9 +367,8 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
     {
         thresholds_mm.push(t);
     }
-    let duplicated = file.thresholds_mm.iter().enumerate().any(|(i, a)| file.thresholds_mm[..i].contains(a));
-    if thresholds_mm.len() > 16 || duplicated || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
-        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 different thresholds, each within (0, 1000) mm", file.thresholds_mm)));
+    if thresholds_mm.len() > 16 || file.thresholds_mm.iter().any(|t| !(t.is_finite() && *t > 0.0 && *t < 1000.0)) {
+        return Err(file_err(path, "thresholds_mm", format!("{:?}: at most 16 thresholds, each within (0, 1000) mm", file.thresholds_mm)));
     }
     // Each threshold and each axis names columns of the tables: two alike would fail after the run.
     if let Some(t) = file.thresholds_mm.iter().enumerate().find(|(i, t)| file.thresholds_mm[..*i].contains(t)).map(|(_, t)| t) {

@@ -82,9 +82,21 @@ pub fn load_all(path: &Path, options: &ImportOptions) -> Result<Converted, UrdfE
     let text = crate::io::read_text(path).map_err(|e| fail(e.to_string()))?;
     // The XML parser recurses once per nested element: the shape is checked before it runs.
     crate::io::xml::check_shape(&text).map_err(|e| fail(e.to_string()))?;
-    let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(crate::io::names::escape_controls(&e.to_string())))?;
+    let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(parser_words(&e.to_string())))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     convert(&robot, dir, options).map_err(fail)
+}
+
+/// The URDF parser's error in calsim's words: on one line, without the deserializer's `custom: `
+/// prefix, a repeated element named as such (`duplicate field `axis``: an element given twice
+/// where the URDF takes one).
+fn parser_words(message: &str) -> String {
+    let m = message.trim().strip_prefix("custom: ").unwrap_or(message.trim());
+    let m = match m.strip_prefix("duplicate field ") {
+        Some(name) => format!("<{}> given twice in one element, where the URDF takes one", name.trim_matches('`')),
+        None => m.to_string(),
+    };
+    crate::io::names::escape_controls(&m)
 }
 
 /// Converts a parsed URDF (see the module), its mesh files named relative to `urdf_dir`: its links
