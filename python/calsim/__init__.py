@@ -192,16 +192,19 @@ def sweep(
     out: PathLike = "results",
     shard: tuple[int, int] | None = None,
     threads: int | None = None,
+    realisations: int | None = None,
     progress: Progress = True,
 ) -> SweepResult:
     """Runs a design sweep (``calsim sweep``): every work unit, then merged into ``out/<sweep>``;
-    with ``shard=(k, K)`` only every K-th unit from k, left for :func:`merge`."""
+    with ``shard=(k, K)`` only every K-th unit from k, left for :func:`merge`; ``realisations``
+    replaces the file's count (the most, for an adaptive sweep)."""
     with observer(progress) as callback:
         report = _calsim.sweep(
             Path(file),
             out=Path(out),
             shard=None if shard is None else tuple(_whole("shard", k, 0, 2**63) for k in shard),
             threads=_optional("threads", threads, _U32),
+            realisations=_optional("realisations", realisations, _U32),
             progress=callback,
         )
     _warn(report)

@@ -84,6 +84,7 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
             (PyErr::new::<StudyError, _>(message), Fault { path: Some(scenario), key: Some("study.parameters".into()), ..Fault::default() })
         }
         app::Error::Input { what, .. } => (PyErr::new::<InputError, _>(message), Fault { path: Some(what), ..Fault::default() }),
+        app::Error::Name(n) => (PyErr::new::<InputError, _>(message), Fault { path: Some(n.file), ..Fault::default() }),
     };
     let value = err.value(py);
     for (name, v) in [("path", fault.path.map(|p| file_of(&p))), ("key", fault.key), ("value", fault.value)] {
@@ -112,6 +113,7 @@ fn scenario_fault(e: &CoreScenarioError) -> Fault {
             key: Some(if section.is_empty() { key.clone() } else { format!("{section}.{key}") }),
             value: Some(value.clone()),
         },
+        CoreScenarioError::Name(n) => Fault { path: Some(n.file.clone()), ..Fault::default() },
     }
 }
 
@@ -362,22 +364,26 @@ fn merge_dict<'py>(py: Python<'py>, m: &app::sweep::MergeReport) -> PyResult<Bou
 
 /// Runs a design sweep, whole (then merged) or one shard of it: `calsim sweep`.
 #[pyfunction]
-#[pyo3(signature = (file, *, out, shard=None, threads=None, progress=None))]
+#[pyo3(signature = (file, *, out, shard=None, threads=None, realisations=None, progress=None))]
 fn sweep<'py>(
     py: Python<'py>,
     file: PathBuf,
     out: PathBuf,
     shard: Option<(usize, usize)>,
     threads: Option<u32>,
+    realisations: Option<u32>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_threads(py, threads)?;
+    if let Some(r) = realisations {
+        check_realisations(py, r)?;
+    }
     if let Some((k, n)) = shard
         && (n == 0 || n > MOST_SHARDS || k >= n)
     {
         return Err(input(py, "shard", format!("({k}, {n}): (k, K) with 1 <= K <= {MOST_SHARDS} and 0 <= k < K")));
     }
-    let spec = app::sweep::SweepSpec { file, out, shard, threads };
+    let spec = app::sweep::SweepSpec { file, out, shard, threads, realisations };
     let (r, warnings) = detached(py, progress, |o| app::sweep::run(&spec, o))?;
     let d = PyDict::new(py);
     d.set_item("name", &r.name)?;
