@@ -125,13 +125,16 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     report.finish_s = t1.elapsed().as_secs_f64();
     let outcome = results::Outcome::of(verdict);
     // Where a world's time goes: the winner's realisation 0 run again, its timing line.
-    if let Some((i, _)) = &outcome.winner {
+    let mut world: Option<Box<dyn crate::device::Outcome>> = None;
+    if let Some((i, r)) = &outcome.winner {
         let c = &outcome.verdict.verified[*i];
-        let text = toml::to_string(&c.table).unwrap_or_default();
-        if let Ok(s) = crate::device::from_table(&text, c.table.clone(), &spec.file)
+        let table = results::design_table(c, r);
+        let text = toml::to_string(&table).unwrap_or_default();
+        if let Ok(s) = crate::device::from_table(&text, table, &spec.file)
             && let Ok(o) = pool.install(|| s.run(s.header().seed, &|_, _| {}))
         {
             report.cost = Some(o.timing());
+            world = Some(o);
         }
     }
     let plots = spec.plots.then(|| plot_inputs(&space, &outcome));
@@ -145,7 +148,15 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         "winner_timing": report.cost,
         "crate_version": env!("CARGO_PKG_VERSION"),
     });
-    let dest = results::write(&spec.out, &space, &outcome, plots.as_ref(), &manifest).map_err(Error::io(&spec.out))?;
+    let options = crate::device::WriteOptions { threads, plots: spec.plots, recording: spec.plots, overrides: Vec::new() };
+    let write_world = |dir: &std::path::Path| -> std::io::Result<()> {
+        match &world {
+            Some(o) => o.write(dir, &[], &options).map(|_| ()).map_err(std::io::Error::other),
+            None => Ok(()),
+        }
+    };
+    let winner_world: Option<&dyn Fn(&std::path::Path) -> std::io::Result<()>> = if world.is_some() { Some(&write_world) } else { None };
+    let dest = results::write(&spec.out, &space, &outcome, plots.as_ref(), &manifest, winner_world).map_err(Error::io(&spec.out))?;
     report.summary = Some(results::summary(&space, &outcome));
     report.dest = Some(dest);
     Ok(report)
@@ -161,7 +172,7 @@ fn plot_inputs(space: &DesignSpace, o: &results::Outcome) -> OptimisePlotInputs 
             (format!("{} points, restart {}", restarts[r].0, restarts[r].1), scores)
         })
         .collect();
-    let ours = v.verified.iter().take_while(|c| c.count > 0).count();
+    let ours = v.verified.iter().filter(|c| !c.compared).count();
     let mut front = Vec::new();
     for (p, c) in v.verified.iter().enumerate() {
         let best = v.held_out_rows.iter().filter(|r| r.design.point == p).min_by_key(|r| r.rank);

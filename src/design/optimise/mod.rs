@@ -24,6 +24,7 @@
 //! deterministic, any thread count and any sharding give the same files and tables.
 
 pub mod plots;
+pub mod reach;
 pub mod results;
 pub mod search;
 pub mod spec;
@@ -119,6 +120,9 @@ pub struct Evaluated {
     pub failed: u32,
     /// See `worlds`.
     pub first_error: Option<String>,
+    /// Where some world failed: per point, how far it is from what the arm reaches with the
+    /// device in its approach cone, mm ([`reach`]; empty otherwise).
+    pub reach_mm: Vec<f64>,
     /// Per set size.
     pub sizes: Vec<SizeScore>,
     /// The design's score: its best set size's, or the violation's.
@@ -230,6 +234,7 @@ impl Context<'_> {
             worlds: 0,
             failed: 0,
             first_error: None,
+            reach_mm: Vec::new(),
             sizes: Vec::new(),
             score: f64::INFINITY,
         };
@@ -251,12 +256,16 @@ impl Context<'_> {
         e.worlds = units.len() as u32;
         e.failed = units.iter().filter(|u| u.error.is_some()).count() as u32;
         e.first_error = units.iter().find_map(|u| u.error.clone());
+        if e.failed > 0 {
+            e.reach_mm = reach::sphere_margins_mm(point.scenario.as_ref()).unwrap_or_default();
+        }
         let info = self.info(&self.sweep_of(vec![point], self.space.search.worlds));
         e.sizes = designs::judge(&info, &units, &[]).into_iter().map(|row| SizeScore { score: score_of(self.space, &row), row }).collect();
         e.score = match e.best() {
             Some(b) => b.score,
-            // Every world failed: a violation measured by the worlds (all of them).
-            None => 2.0 * PENALTY,
+            // Every world failed: a violation measured by the worlds (all of them) and by how far
+            // the farthest point is from the arm's reach.
+            None => 2.0 * PENALTY + e.reach_mm.iter().copied().fold(0.0, f64::max) / 100.0,
         };
         Ok(e)
     }
@@ -291,8 +300,15 @@ pub fn work_dir(out: &Path, name: &str) -> PathBuf {
     out.join(format!("{name}.evaluations"))
 }
 
-fn restart_file(dir: &Path, r: usize) -> PathBuf {
-    dir.join(format!("restart-{r:03}.json"))
+/// The record of restart `r` of `space`: named by the design file's identity and the search's
+/// settings, so that a changed file or method runs its searches again (the per-world files,
+/// named by their scenarios, are reused).
+fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
+    use sha2::Digest;
+    let s = &space.search;
+    let settings = format!("{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}", space.identity, s.method.label(), s.evaluations, s.restarts, s.worlds, s.seed);
+    let key = format!("{:x}", sha2::Sha256::digest(settings.as_bytes()));
+    dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
 }
 
 /// Runs restart `r` (or reads its record when a finished run left one): the search's designs
@@ -300,7 +316,7 @@ fn restart_file(dir: &Path, r: usize) -> PathBuf {
 pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync)) -> Result<Vec<Evaluated>, OptimiseError> {
     let space = ctx.space;
     let (count, rep) = restarts(space)[r];
-    let file = restart_file(&ctx.cache, r);
+    let file = restart_file(&ctx.cache, space, r);
     if let Some(asked) = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()) {
         return asked.into_iter().map(|a| ctx.evaluate(a)).collect();
     }
@@ -347,7 +363,7 @@ pub fn read_restarts(ctx: &Context<'_>) -> Result<Vec<Vec<Asked>>, OptimiseError
     let n = restarts(ctx.space).len();
     let mut out = Vec::with_capacity(n);
     for r in 0..n {
-        let file = restart_file(&ctx.cache, r);
+        let file = restart_file(&ctx.cache, ctx.space, r);
         let asked = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()).ok_or_else(|| {
             OptimiseError::Incomplete {
                 dir: ctx.cache.display().to_string(),
@@ -374,6 +390,8 @@ pub struct Candidate {
     pub points_mm: Vec<[f64; 3]>,
     /// Its search score (compared designs: none).
     pub search_score: Option<f64>,
+    /// Whether it is a compared design (of a sweep file), not the optimiser's.
+    pub compared: bool,
 }
 
 /// The race of the finalists on search worlds, then the held-out verification.
@@ -414,6 +432,7 @@ pub fn finish(ctx: &Context<'_>, trace: Vec<Evaluated>, compare: Vec<Candidate>,
                 key: e.key.clone(),
                 points_mm: e.points_mm.clone(),
                 search_score: Some(e.score),
+                compared: false,
             });
             taken += 1;
         }
@@ -486,7 +505,7 @@ pub fn compared(path: &Path) -> Result<Vec<Candidate>, crate::design::sweep::Swe
         .map(|(p, point)| {
             let table: toml::Table = point.scenario.header().text.parse().unwrap_or_default();
             let label = format!("{stem} #{p}: {}", point.values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", "));
-            Candidate { key: design_key(&table), label, count: 0, table, points_mm: point.scenario.layout_mm(), search_score: None }
+            Candidate { key: design_key(&table), label, count: 0, table, points_mm: point.scenario.layout_mm(), search_score: None, compared: true }
         })
         .collect())
 }

@@ -23,7 +23,7 @@ pub struct Outcome {
 impl Outcome {
     /// The winner: the best held-out row of the optimiser's own designs.
     pub fn of(verdict: Verdict) -> Self {
-        let ours = verdict.verified.iter().take_while(|c| c.count > 0).count();
+        let ours = verdict.verified.iter().filter(|c| !c.compared).count();
         let winner = verdict.held_out_rows.iter().filter(|r| r.design.point < ours).min_by_key(|r| r.rank).map(|r| (r.design.point, r.clone()));
         Self { verdict, winner }
     }
@@ -36,13 +36,19 @@ fn f3(x: f64) -> String {
 /// The scenario table of a verified design with its set size as the study's table (and only
 /// selection), for `best_design.toml`.
 pub fn design_file(c: &Candidate, r: &DesignRow, head: &str) -> String {
+    format!("{head}{}", toml::to_string(&design_table(c, r)).unwrap_or_default())
+}
+
+/// The scenario table of a verified design with its set size as the study's table and its
+/// selection the only one.
+pub fn design_table(c: &Candidate, r: &DesignRow) -> toml::Table {
     let mut table = c.table.clone();
     let study = table.entry("study").or_insert_with(|| toml::Value::Table(toml::Table::new()));
     if let Some(s) = study.as_table_mut() {
         s.insert("table_set_size".into(), toml::Value::Integer(i64::from(r.design.set_size)));
         s.insert("selections".into(), toml::Value::Array(vec![toml::Value::String(r.design.selection.clone())]));
     }
-    format!("{head}{}", toml::to_string(&table).unwrap_or_default())
+    table
 }
 
 /// A held-out or race row in words: `P = 0.95 (0.90-0.98), 100 worlds, campaign 2.10 h`.
@@ -126,11 +132,32 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
         v.finalists.len(),
         v.race_worlds
     );
+    let failing: Vec<&super::Evaluated> = v.trace.iter().filter(|e| e.failed > 0).collect();
+    if !failing.is_empty() {
+        let all = failing.iter().filter(|e| e.failed == e.worlds).count();
+        let margins: Vec<f64> = failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
+        s += &format!(
+            "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by how far their farthest \
+             point is from the arm's reach with the device in its approach cone: {} mm at most, {} mm at least; `trace.parquet` \
+             columns failed_worlds, first_error, reach_margin_mm).\n",
+            failing.len(),
+            all,
+            f3(margins.iter().copied().fold(f64::NAN, f64::max)),
+            f3(margins.iter().copied().fold(f64::NAN, f64::min)),
+        );
+    }
     s
 }
 
 /// Writes the results into `out/<name>` atomically; `plots` are the figures' inputs.
-pub fn write(out: &Path, space: &DesignSpace, o: &Outcome, plots: Option<&super::plots::OptimisePlotInputs>, manifest: &serde_json::Value) -> std::io::Result<PathBuf> {
+pub fn write(
+    out: &Path,
+    space: &DesignSpace,
+    o: &Outcome,
+    plots: Option<&super::plots::OptimisePlotInputs>,
+    manifest: &serde_json::Value,
+    winner_world: Option<&dyn Fn(&Path) -> std::io::Result<()>>,
+) -> std::io::Result<PathBuf> {
     crate::io::out_dir::write_atomically(out, &space.name, |dir| {
         let v = &o.verdict;
         let f = |n: &str, x: Vec<f64>| Column::new(n.into(), x);
@@ -153,6 +180,7 @@ pub fn write(out: &Path, space: &DesignSpace, o: &Outcome, plots: Option<&super:
                 u("worlds", v.trace.iter().map(|e| e.worlds).collect()),
                 u("failed_worlds", v.trace.iter().map(|e| e.failed).collect()),
                 s("first_error", v.trace.iter().map(|e| e.first_error.clone().unwrap_or_default()).collect()),
+                f("reach_margin_mm", v.trace.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).collect()),
                 u("set_size", best.iter().map(|b| b.map_or(0, |b| b.row.design.set_size)).collect()),
                 f("estimate", bf(&|r| r.estimate)),
                 f("lower", bf(&|r| r.interval.0)),
@@ -197,6 +225,12 @@ pub fn write(out: &Path, space: &DesignSpace, o: &Outcome, plots: Option<&super:
             crate::io::out_dir::write_file(&dir.join("best_design.toml"), design_file(&v.verified[*i], r, &head))?;
         }
         let mut text = summary(space, o);
+        if let Some(w) = winner_world {
+            let d = dir.join("winner");
+            std::fs::create_dir(&d)?;
+            w(&d)?;
+            text += "\n`winner/`: the winner's realisation 0 as `calsim run` writes it (tables, figures, the Rerun recording `study.rrd`).\n";
+        }
         if let Some(p) = plots {
             let written = super::plots::write(dir, p).map_err(std::io::Error::other)?;
             text += "\n## Figures\n\n";
