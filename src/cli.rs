@@ -281,7 +281,10 @@ fn optimise(args: &OptimiseArgs) -> Result<ExitCode, String> {
         plots: !args.no_plots,
     };
     let r = app::optimise::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
-    println!("timing: {} restarts, {} designs evaluated in {:.1} s; race and verification {:.1} s", r.restarts, r.evaluations, r.search_s, r.finish_s);
+    println!(
+        "timing: {} restarts, {} designs evaluated in {:.1} s; race and verification {:.1} s",
+        r.restarts, r.evaluations, r.search_s, r.finish_s
+    );
     if let Some(c) = &r.cost {
         println!("one world of the winner: {c}");
     }
@@ -290,7 +293,11 @@ fn optimise(args: &OptimiseArgs) -> Result<ExitCode, String> {
             println!("{s}");
             println!("results in {}", d.display());
         }
-        _ => println!("merge the restarts when every shard has run: calsim optimise {} --merge --out {}", args.design.display(), args.out.display()),
+        _ => println!(
+            "merge the restarts when every shard has run: calsim optimise {} --merge --out {}",
+            args.design.display(),
+            args.out.display()
+        ),
     }
     Ok(ExitCode::SUCCESS)
 }

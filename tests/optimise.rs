@@ -35,7 +35,11 @@ fn bad_design_files_are_one_line_naming_the_file_and_the_key() {
     let tmp = scratch("optimise-bad");
     let dir = tmp.path();
     let cases: [(&str, String, &str); 7] = [
-        ("unknown.toml", format!("[[variable]]\nkey = \"trical.no_such_key\"\nrange = [1.0, 2.0]\n{OBJECTIVE}"), "variable[0] (trical.no_such_key).key"),
+        (
+            "unknown.toml",
+            format!("[[variable]]\nkey = \"trical.no_such_key\"\nrange = [1.0, 2.0]\n{OBJECTIVE}"),
+            "variable[0] (trical.no_such_key).key",
+        ),
         ("reversed.toml", format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.02, 0.01]\n{OBJECTIVE}"), "range"),
         ("empty.toml", format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.02, 0.02]\n{OBJECTIVE}"), "range"),
         ("nan.toml", format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [nan, 0.02]\n{OBJECTIVE}"), "range"),
@@ -123,8 +127,8 @@ fn the_search_reaches_the_optimum_of_a_two_variable_plate_that_a_dense_grid_find
     }
 }
 
-/// The hand-found design (5 spheres 150 mm apart, plate +100 mm, tilted 20 deg) is the start of
-/// the shipped design file: decoding it gives the spheres and plate of cell_sizing.toml's point.
+/// The hand-found layout (5 spheres 150 mm apart, plate +100 mm, tilted 20 deg) is the start of
+/// the shipped design file: decoding it gives the spheres and plate of cell_sizing.toml's point 3.
 #[test]
 fn the_shipped_design_file_starts_from_the_hand_found_design() {
     let space = spec::load(&repo().join("scenarios/designs/irb120_spheres.toml")).unwrap();
@@ -143,7 +147,8 @@ fn the_shipped_design_file_starts_from_the_hand_found_design() {
     for (a, b) in offset.iter().zip([0.0, 0.0, 100.0, 0.0, 0.0, 20.0]) {
         assert!((a - b).abs() < 1e-3, "{offset:?}");
     }
-    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(120));
+    // The pool starts at the file's own start (110 per sphere), not the hand-found 120.
+    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(110));
 }
 
 const SMALL: &str = "[fixed]\n\"study.set_sizes\" = [20, 30]\n\"study.table_set_size\" = 30\n\"study.repetitions\" = 2\n\"campaign.validation_poses\" = 60\n\

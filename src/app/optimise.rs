@@ -71,14 +71,8 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     if merge {
         crate::io::out_dir::prepare(&spec.out, &space.name)?;
     }
-    let compare: Vec<optimise::Candidate> = space
-        .compare
-        .iter()
-        .map(|p| optimise::compared(p))
-        .collect::<Result<Vec<_>, _>>()?
-        .into_iter()
-        .flatten()
-        .collect();
+    let compare: Vec<optimise::Candidate> =
+        space.compare.iter().map(|p| optimise::compared(p)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect();
     let ctx = Context { space: &space, cache: optimise::work_dir(&spec.out, &space.name) };
     let (k, count) = spec.shard.unwrap_or((0, 1));
     let all = optimise::restarts(&space);
@@ -110,7 +104,16 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         observer.stage_done();
     }
     let search_s = t0.elapsed().as_secs_f64();
-    let mut report = OptimiseReport { name: space.name.clone(), restarts: mine, evaluations, search_s, finish_s: 0.0, dest: None, summary: None, cost: None };
+    let mut report = OptimiseReport {
+        name: space.name.clone(),
+        restarts: mine,
+        evaluations,
+        search_s,
+        finish_s: 0.0,
+        dest: None,
+        summary: None,
+        cost: None,
+    };
     if !merge {
         return Ok(report);
     }

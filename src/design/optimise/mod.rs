@@ -186,7 +186,8 @@ impl Context<'_> {
     /// The scenario of a table as a unit runs it (checked; without the compensated validation).
     fn point(&self, label: String, table: &toml::Table) -> Result<Point, String> {
         let text = toml::to_string(table).unwrap_or_default();
-        let mut s = crate::device::from_table(&text, table.clone(), Path::new(&format!("{}#{label}", self.space.name))).map_err(|e| e.to_string())?;
+        let mut s = crate::device::from_table(&text, table.clone(), Path::new(&format!("{}#{label}", self.space.name)))
+            .map_err(|e| e.to_string())?;
         s.study_mut().compensated_validation = false;
         Ok(Point { values: vec![("design".into(), label)], scenario: s })
     }
@@ -195,7 +196,8 @@ impl Context<'_> {
     /// run (in parallel) and written; unit `p * stride + k` for the `k`-th world of point `p`.
     fn units(&self, points: &[(String, Point)], worlds: &[u32], stride: u32) -> Result<Vec<Unit>, OptimiseError> {
         let sweep = self.sweep_of(points.iter().map(|(_, p)| p.clone()).collect(), 1);
-        let jobs: Vec<(usize, usize, u32)> = (0..points.len()).flat_map(|p| worlds.iter().enumerate().map(move |(k, &r)| (p, k, r))).collect();
+        let jobs: Vec<(usize, usize, u32)> =
+            (0..points.len()).flat_map(|p| worlds.iter().enumerate().map(move |(k, &r)| (p, k, r))).collect();
         let mut units: Vec<Unit> = jobs
             .par_iter()
             .map(|&(p, k, r)| -> Result<Unit, OptimiseError> {
@@ -206,7 +208,8 @@ impl Context<'_> {
                     _ => {
                         let u = run_world(&sweep, p, r);
                         fs::create_dir_all(&dir).map_err(io_err(&dir))?;
-                        let bytes = serde_json::to_vec(&Unit { point: 0, unit: r as usize, ..u.clone() }).map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
+                        let bytes = serde_json::to_vec(&Unit { point: 0, unit: r as usize, ..u.clone() })
+                            .map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
                         write_atomically(&file, &bytes).map_err(io_err(&file))?;
                         u
                     }
@@ -306,7 +309,8 @@ pub fn work_dir(out: &Path, name: &str) -> PathBuf {
 fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
     use sha2::Digest;
     let s = &space.search;
-    let settings = format!("{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}", space.identity, s.method.label(), s.evaluations, s.restarts, s.worlds, s.seed);
+    let settings =
+        format!("{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}", space.identity, s.method.label(), s.evaluations, s.restarts, s.worlds, s.seed);
     let key = format!("{:x}", sha2::Sha256::digest(settings.as_bytes()));
     dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
 }
@@ -348,7 +352,8 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
             }
         }
     };
-    search::minimise(space.search.method, &start, space.search.evaluations, seed, &mut f).map_err(|e| OptimiseError::Search(e.to_string()))?;
+    search::minimise(space.search.method, &start, space.search.evaluations, seed, &mut f)
+        .map_err(|e| OptimiseError::Search(e.to_string()))?;
     if let Some(e) = failure {
         return Err(e);
     }
@@ -413,7 +418,12 @@ pub struct Verdict {
 
 /// Races the best designs of the search on more search worlds, then verifies the best of each
 /// count and the compared designs on the held-out worlds; `progress(done, total, stage)`.
-pub fn finish(ctx: &Context<'_>, trace: Vec<Evaluated>, compare: Vec<Candidate>, progress: &(dyn Fn(usize, usize, &str) + Sync)) -> Result<Verdict, OptimiseError> {
+pub fn finish(
+    ctx: &Context<'_>,
+    trace: Vec<Evaluated>,
+    compare: Vec<Candidate>,
+    progress: &(dyn Fn(usize, usize, &str) + Sync),
+) -> Result<Verdict, OptimiseError> {
     let space = ctx.space;
     // Finalists: per count, the best distinct designs by search score that ran.
     let mut finalists: Vec<Candidate> = Vec::new();
@@ -439,8 +449,11 @@ pub fn finish(ctx: &Context<'_>, trace: Vec<Evaluated>, compare: Vec<Candidate>,
     }
     // The race: the sweeps' racing over the finalists' points, search worlds only.
     let race = space.search.race.clone();
-    let points: Vec<(String, Point)> =
-        finalists.iter().map(|c| ctx.point(c.key.clone(), &c.table).map(|p| (c.key.clone(), p))).collect::<Result<_, _>>().map_err(OptimiseError::Search)?;
+    let points: Vec<(String, Point)> = finalists
+        .iter()
+        .map(|c| ctx.point(c.key.clone(), &c.table).map(|p| (c.key.clone(), p)))
+        .collect::<Result<_, _>>()
+        .map_err(OptimiseError::Search)?;
     let mut sweep = ctx.sweep_of(points.iter().map(|p| p.1.clone()).collect(), race.max);
     sweep.race = Some(race.clone());
     let info = ctx.info(&sweep);
@@ -484,8 +497,11 @@ pub fn finish(ctx: &Context<'_>, trace: Vec<Evaluated>, compare: Vec<Candidate>,
     }
     verified.extend(compare);
     let held: Vec<u32> = (0..space.held_out).map(|k| HELD_OUT_BASE + k).collect();
-    let vpoints: Vec<(String, Point)> =
-        verified.iter().map(|c| ctx.point(c.key.clone(), &c.table).map(|p| (c.key.clone(), p))).collect::<Result<_, _>>().map_err(OptimiseError::Search)?;
+    let vpoints: Vec<(String, Point)> = verified
+        .iter()
+        .map(|c| ctx.point(c.key.clone(), &c.table).map(|p| (c.key.clone(), p)))
+        .collect::<Result<_, _>>()
+        .map_err(OptimiseError::Search)?;
     progress(0, vpoints.len() * held.len(), "held-out worlds");
     let vunits = ctx.units(&vpoints, &held, space.held_out)?;
     let vinfo = ctx.info(&ctx.sweep_of(vpoints.iter().map(|p| p.1.clone()).collect(), space.held_out));
@@ -505,7 +521,15 @@ pub fn compared(path: &Path) -> Result<Vec<Candidate>, crate::design::sweep::Swe
         .map(|(p, point)| {
             let table: toml::Table = point.scenario.header().text.parse().unwrap_or_default();
             let label = format!("{stem} #{p}: {}", point.values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", "));
-            Candidate { key: design_key(&table), label, count: 0, table, points_mm: point.scenario.layout_mm(), search_score: None, compared: true }
+            Candidate {
+                key: design_key(&table),
+                label,
+                count: 0,
+                table,
+                points_mm: point.scenario.layout_mm(),
+                search_score: None,
+                compared: true,
+            }
         })
         .collect())
 }

@@ -61,10 +61,17 @@ fn convergence<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePl
         .iter()
         .map(|(l, s)| {
             let mut m = f64::INFINITY;
-            (l.clone(), s.iter().enumerate().map(|(i, v)| {
-                m = m.min(*v);
-                ((i + 1) as f64, m)
-            }).filter(|x| x.1.is_finite() && x.1 < 50.0).collect())
+            (
+                l.clone(),
+                s.iter()
+                    .enumerate()
+                    .map(|(i, v)| {
+                        m = m.min(*v);
+                        ((i + 1) as f64, m)
+                    })
+                    .filter(|x| x.1.is_finite() && x.1 < 50.0)
+                    .collect(),
+            )
         })
         .collect();
     let xr = range_of(best.iter().flat_map(|b| b.1.iter().map(|v| v.0)), 0.03);
@@ -76,7 +83,13 @@ fn convergence<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePl
         .y_label_area_size(65)
         .build_cartesian_2d(xr, yr)
         .map_err(e2s)?;
-    chart.configure_mesh().x_desc("designs evaluated").y_desc("best score (lower is better)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc("designs evaluated")
+        .y_desc("best score (lower is better)")
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
     for (i, (label, pts)) in best.iter().enumerate() {
         let c = Palette99::pick(i).to_rgba();
         chart
@@ -101,12 +114,16 @@ fn front<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInpu
         .y_label_area_size(65)
         .build_cartesian_2d(xr, yr)
         .map_err(e2s)?;
-    chart.configure_mesh().x_desc("campaign time, h (median over worlds)").y_desc(p.objective.as_str()).label_style((FAMILY, 13)).draw().map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .x_desc("campaign time, h (median over worlds)")
+        .y_desc(p.objective.as_str())
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
     for (ours, colour, label) in [(true, RED, "optimiser (best of each count)"), (false, BLUE, "compared designs")] {
         let of: Vec<&&(String, f64, [f64; 3], bool)> = pts.iter().filter(|d| d.3 == ours).collect();
-        chart
-            .draw_series(of.iter().map(|d| PathElement::new(vec![(d.1, d.2[1]), (d.1, d.2[2])], colour.stroke_width(2))))
-            .map_err(e2s)?;
+        chart.draw_series(of.iter().map(|d| PathElement::new(vec![(d.1, d.2[1]), (d.1, d.2[2])], colour.stroke_width(2)))).map_err(e2s)?;
         chart
             .draw_series(of.iter().map(|d| Circle::new((d.1, d.2[0]), 4, colour.filled())))
             .map_err(e2s)?
@@ -142,7 +159,10 @@ fn cell<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInput
         chart.configure_mesh().label_style((FAMILY, 11)).draw().map_err(e2s)?;
         chart.draw_series(reach.iter().map(|q| Circle::new((q[a], q[b]), 1, RGBColor(200, 200, 200).filled()))).map_err(e2s)?;
         chart
-            .draw_series(std::iter::once(Rectangle::new([(base[a] - 20.0, base[b] - 20.0), (base[a] + 20.0, base[b] + 20.0)], BLACK.filled())))
+            .draw_series(std::iter::once(Rectangle::new(
+                [(base[a] - 20.0, base[b] - 20.0), (base[a] + 20.0, base[b] + 20.0)],
+                BLACK.filled(),
+            )))
             .map_err(e2s)?;
         chart.draw_series(points.iter().map(|q| Circle::new((q[a], q[b]), 5, RED.filled()))).map_err(e2s)?;
         chart

@@ -24,7 +24,8 @@ impl Outcome {
     /// The winner: the best held-out row of the optimiser's own designs.
     pub fn of(verdict: Verdict) -> Self {
         let ours = verdict.verified.iter().filter(|c| !c.compared).count();
-        let winner = verdict.held_out_rows.iter().filter(|r| r.design.point < ours).min_by_key(|r| r.rank).map(|r| (r.design.point, r.clone()));
+        let winner =
+            verdict.held_out_rows.iter().filter(|r| r.design.point < ours).min_by_key(|r| r.rank).map(|r| (r.design.point, r.clone()));
         Self { verdict, winner }
     }
 }
@@ -85,8 +86,16 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
     );
     if let Some((i, r)) = &o.winner {
         let c = &v.verified[*i];
-        let race = v.race_rows.iter().filter(|x| v.finalists[x.design.point].key == c.key && x.design.set_size == r.design.set_size).min_by_key(|x| x.rank);
-        let search = v.trace.iter().filter(|e| e.key == c.key).find_map(|e| e.sizes.iter().find(|z| z.row.design.set_size == r.design.set_size).map(|z| z.row.clone()));
+        let race = v
+            .race_rows
+            .iter()
+            .filter(|x| v.finalists[x.design.point].key == c.key && x.design.set_size == r.design.set_size)
+            .min_by_key(|x| x.rank);
+        let search = v
+            .trace
+            .iter()
+            .filter(|e| e.key == c.key)
+            .find_map(|e| e.sizes.iter().find(|z| z.row.design.set_size == r.design.set_size).map(|z| z.row.clone()));
         s += &format!("## The answer\n\n{} ({} sets of {}).\n\n", c.label, r.design.selection, r.design.set_size);
         s += "| stage | estimate (interval) |\n|---|---|\n";
         if let Some(x) = search {
@@ -100,12 +109,17 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
     }
-    s += "## Held-out worlds: every verified design\n\n| rank | design | selection | n | estimate | interval | P(success) | campaign, h | worlds | failed | feasibility | vs leader (better/worse worlds) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    s += "## Held-out worlds: every verified design\n\n| rank | design | selection | n | estimate | interval | P(success) | campaign, h | worlds | failed | feasibility | worlds the leader did better / worse |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     let mut rows: Vec<&DesignRow> = v.held_out_rows.iter().collect();
     rows.sort_by_key(|r| r.rank);
     for r in rows {
         let c = &v.verified[r.design.point];
-        let vs = r.vs_leader.as_ref().map_or("leader".to_string(), |p| format!("{} / {}", p.test.negative, p.test.positive));
+        // Worlds in which the leader did better / worse than this design (paired on common worlds).
+        let vs = r.vs_leader.as_ref().map_or("leader".to_string(), |p| {
+            let (better, worse) =
+                if space.objective.maximises() { (p.test.negative, p.test.positive) } else { (p.test.positive, p.test.negative) };
+            format!("{better} / {worse}")
+        });
         s += &format!(
             "| {} | {} | {} | {} | {} | {}-{} | {} | {} | {} | {} | {} | {} |\n",
             r.rank,
@@ -135,7 +149,8 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
     let failing: Vec<&super::Evaluated> = v.trace.iter().filter(|e| e.failed > 0).collect();
     if !failing.is_empty() {
         let all = failing.iter().filter(|e| e.failed == e.worlds).count();
-        let margins: Vec<f64> = failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
+        let margins: Vec<f64> =
+            failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
         s += &format!(
             "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by how far their farthest \
              point is from the arm's reach with the device in its approach cone: {} mm at most, {} mm at least; `trace.parquet` \
@@ -173,7 +188,10 @@ pub fn write(
                 u("evaluation", v.trace.iter().map(|e| e.asked.index).collect()),
                 u("count", v.trace.iter().map(|e| e.asked.count as u32).collect()),
                 s("design", v.trace.iter().map(|e| e.key.clone()).collect()),
-                s("values", v.trace.iter().map(|e| e.values.iter().map(|(k, x)| format!("{k} = {x}")).collect::<Vec<_>>().join("; ")).collect()),
+                s(
+                    "values",
+                    v.trace.iter().map(|e| e.values.iter().map(|(k, x)| format!("{k} = {x}")).collect::<Vec<_>>().join("; ")).collect(),
+                ),
                 s("x", v.trace.iter().map(|e| format!("{:?}", e.asked.x)).collect()),
                 s("violation", v.trace.iter().map(|e| e.violation.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect()),
                 f("violation_margin", v.trace.iter().map(|e| e.violation.as_ref().map_or(0.0, |x| x.1)).collect()),
@@ -229,7 +247,8 @@ pub fn write(
             let d = dir.join("winner");
             std::fs::create_dir(&d)?;
             w(&d)?;
-            text += "\n`winner/`: the winner's realisation 0 as `calsim run` writes it (tables, figures, the Rerun recording `study.rrd`).\n";
+            text +=
+                "\n`winner/`: the winner's realisation 0 as `calsim run` writes it (tables, figures, the Rerun recording `study.rrd`).\n";
         }
         if let Some(p) = plots {
             let written = super::plots::write(dir, p).map_err(std::io::Error::other)?;

@@ -145,7 +145,9 @@ impl Variable {
     fn unit_of(&self, v: &toml::Value) -> Option<f64> {
         let num = v.as_float().or(v.as_integer().map(|i| i as f64));
         match &self.domain {
-            Domain::Range(lo, hi) => num.filter(|x| x.is_finite() && *x >= *lo && *x <= *hi).map(|x| if hi > lo { (x - lo) / (hi - lo) } else { 0.5 }),
+            Domain::Range(lo, hi) => {
+                num.filter(|x| x.is_finite() && *x >= *lo && *x <= *hi).map(|x| if hi > lo { (x - lo) / (hi - lo) } else { 0.5 })
+            }
             Domain::Integer(lo, hi) => {
                 v.as_integer().filter(|i| i >= lo && i <= hi).map(|i| ((i - lo) as f64 + 0.5) / ((hi - lo + 1) as f64))
             }
@@ -351,12 +353,16 @@ impl DesignSpace {
                     Translation3::new(0.0, 0.0, h),
                     UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt.to_radians()),
                 );
-                let pts = (0..count).map(|k| lift * nalgebra::Point3::new(at(rest[2 + 2 * k], *x_mm), at(rest[3 + 2 * k], *y_mm), 0.0)).map(|q| q.coords).collect();
+                let pts = (0..count)
+                    .map(|k| lift * nalgebra::Point3::new(at(rest[2 + 2 * k], *x_mm), at(rest[3 + 2 * k], *y_mm), 0.0))
+                    .map(|q| q.coords)
+                    .collect();
                 (pts, Some((h, tilt)))
             }
-            Region::Box { x_mm, y_mm, z_mm } => {
-                ((0..count).map(|k| Vector3::new(at(rest[3 * k], *x_mm), at(rest[3 * k + 1], *y_mm), at(rest[3 * k + 2], *z_mm))).collect(), None)
-            }
+            Region::Box { x_mm, y_mm, z_mm } => (
+                (0..count).map(|k| Vector3::new(at(rest[3 * k], *x_mm), at(rest[3 * k + 1], *y_mm), at(rest[3 * k + 2], *z_mm))).collect(),
+                None,
+            ),
         };
         let round = |v: f64| (v * 1e3).round() / 1e3;
         out.points_mm = points.iter().map(|q| [round(q.x), round(q.y), round(q.z)]).collect();
@@ -378,7 +384,13 @@ impl DesignSpace {
         }
         if closest.0 < p.min_spacing_mm {
             out.violation = Some((
-                format!("points {} and {} are {:.1} mm apart, under min_spacing_mm = {}", closest.1 + 1, closest.2 + 1, closest.0, p.min_spacing_mm),
+                format!(
+                    "points {} and {} are {:.1} mm apart, under min_spacing_mm = {}",
+                    closest.1 + 1,
+                    closest.2 + 1,
+                    closest.0,
+                    p.min_spacing_mm
+                ),
                 p.min_spacing_mm - closest.0,
             ));
             return out;
@@ -423,7 +435,8 @@ impl DesignSpace {
                 })
                 .collect();
             let pose = crate::robot::XyzZyx::from_isometry(&w0_from_w);
-            let offset = [pose.x, pose.y, pose.z, pose.alpha.to_degrees(), pose.beta.to_degrees(), pose.gamma.to_degrees()].map(|v| (v * 1e6).round() / 1e6);
+            let offset = [pose.x, pose.y, pose.z, pose.alpha.to_degrees(), pose.beta.to_degrees(), pose.gamma.to_degrees()]
+                .map(|v| (v * 1e6).round() / 1e6);
             set_dotted(&mut out.table, "cell.spheres_w_mm", toml::Value::Array(in_w)).expect("a table");
             set_dotted(&mut out.table, "cell.plate_offset_mm_deg", floats(&offset)).expect("a table");
         } else {
@@ -475,7 +488,11 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
                     return Err(err(path, at("range"), format!("[{lo}, {hi}]: finite bounds")));
                 }
                 if lo >= hi {
-                    return Err(err(path, at("range"), format!("[{lo}, {hi}]: empty or reversed (the lower bound first, below the upper)")));
+                    return Err(err(
+                        path,
+                        at("range"),
+                        format!("[{lo}, {hi}]: empty or reversed (the lower bound first, below the upper)"),
+                    ));
                 }
                 Domain::Range(*lo, *hi)
             }
@@ -581,7 +598,8 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
     if !(spacing.is_finite() && spacing > 0.0) {
         return Err(err(path, "points.start_spacing_mm", format!("{spacing}: a distance > 0 mm")));
     }
-    let finite = |k: &str, v: f64| if v.is_finite() { Ok(v) } else { Err(err(path, format!("points.{k}"), format!("{v}: a finite number"))) };
+    let finite =
+        |k: &str, v: f64| if v.is_finite() { Ok(v) } else { Err(err(path, format!("points.{k}"), format!("{v}: a finite number"))) };
     let offset = p.start_offset_mm.unwrap_or([0.0; 3]);
     for v in offset {
         finite("start_offset_mm", v)?;
@@ -592,7 +610,10 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
         region,
         min_spacing_mm: p.min_spacing_mm,
         start_spacing_mm: spacing,
-        start_plate: (finite("start_height_mm", p.start_height_mm.unwrap_or(0.0))?, finite("start_tilt_deg", p.start_tilt_deg.unwrap_or(0.0))?),
+        start_plate: (
+            finite("start_height_mm", p.start_height_mm.unwrap_or(0.0))?,
+            finite("start_tilt_deg", p.start_tilt_deg.unwrap_or(0.0))?,
+        ),
         start_offset_mm: offset,
     })
 }
@@ -615,7 +636,11 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
         None => Race { min: worlds, batch: worlds, max: 4 * worlds, confidence: 0.9 },
         Some(r) => {
             if r.max < worlds || r.batch == 0 || r.max > 10_000 {
-                return Err(err(path, "search.race", format!("max = {}, batch = {}: max within [worlds = {worlds}, 10000], batch >= 1", r.max, r.batch)));
+                return Err(err(
+                    path,
+                    "search.race",
+                    format!("max = {}, batch = {}: max within [worlds = {worlds}, 10000], batch >= 1", r.max, r.batch),
+                ));
             }
             Race { min: worlds, batch: r.batch, max: r.max, confidence: 0.9 }
         }
