@@ -105,18 +105,20 @@ mod tests {
         (best.0, best.1, trace.len())
     }
 
+    /// The simplex stops when its costs spread by less than 1e-4 (a search score moves in steps
+    /// of 0.01 of P(success)): the bowl's minimum is then within 0.015 of each coordinate.
     #[test]
     fn nelder_mead_finds_the_minimum_of_a_bowl_within_its_budget() {
         let (x, v, n) = best_of(Method::NelderMead, 300);
         assert!(n <= 300, "{n} evaluations for a budget of 300");
-        assert!(v < 1e-6, "best {v} at {x:?}");
+        assert!(x.iter().zip([0.3, 0.7, 0.55]).all(|(a, b)| (a - b).abs() < 0.015), "best {v} at {x:?}");
     }
 
     #[test]
     fn the_swarm_finds_the_minimum_of_a_bowl_within_its_budget() {
         let (x, v, n) = best_of(Method::ParticleSwarm, 700);
         assert!(n <= 700, "{n} evaluations for a budget of 700");
-        assert!(v < 1e-3, "best {v} at {x:?}");
+        assert!(x.iter().zip([0.3, 0.7, 0.55]).all(|(a, b)| (a - b).abs() < 0.015), "best {v} at {x:?}");
     }
 
     #[test]
