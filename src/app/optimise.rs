@@ -158,7 +158,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
             None => Ok(()),
         }
     };
-    let winner_world: Option<&dyn Fn(&std::path::Path) -> std::io::Result<()>> = if world.is_some() { Some(&write_world) } else { None };
+    let winner_world: Option<results::WorldWriter<'_>> = if world.is_some() { Some(&write_world) } else { None };
     let dest = results::write(&spec.out, &space, &outcome, plots.as_ref(), &manifest, winner_world).map_err(Error::io(&spec.out))?;
     report.summary = Some(results::summary(&space, &outcome));
     report.dest = Some(dest);

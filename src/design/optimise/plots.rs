@@ -8,6 +8,10 @@ use plotters::prelude::*;
 
 use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, e2s, legend, range_of, register_font};
 
+/// The winning cell: its points in the region's frame, sampled reachable tool points in the same
+/// frame, and the base's origin, mm.
+pub type CellDrawing = (Vec<[f64; 3]>, Vec<[f64; 3]>, [f64; 3]);
+
 /// What the figures draw.
 pub struct OptimisePlotInputs {
     /// Per restart: its label and its scores in ask order.
@@ -19,7 +23,7 @@ pub struct OptimisePlotInputs {
     pub objective: String,
     /// The winning cell: its points in the region's frame, mm, and sampled reachable tool points
     /// of the arm in the same frame (empty where the device has none), the base's origin.
-    pub cell: Option<(Vec<[f64; 3]>, Vec<[f64; 3]>, [f64; 3])>,
+    pub cell: Option<CellDrawing>,
 }
 
 /// Writes the figures into `dir`.

@@ -11,6 +11,9 @@ use super::{Candidate, DesignSpace, Verdict};
 use crate::design::sweep::designs::DesignRow;
 use crate::io::table::parquet;
 
+/// Writes one world of the winner into a directory (as `calsim run` writes its results).
+pub type WorldWriter<'a> = &'a dyn Fn(&Path) -> std::io::Result<()>;
+
 /// The optimiser's outcome as the report shows it.
 #[derive(Clone, Debug)]
 pub struct Outcome {
@@ -171,7 +174,7 @@ pub fn write(
     o: &Outcome,
     plots: Option<&super::plots::OptimisePlotInputs>,
     manifest: &serde_json::Value,
-    winner_world: Option<&dyn Fn(&Path) -> std::io::Result<()>>,
+    winner_world: Option<WorldWriter<'_>>,
 ) -> std::io::Result<PathBuf> {
     crate::io::out_dir::write_atomically(out, &space.name, |dir| {
         let v = &o.verdict;

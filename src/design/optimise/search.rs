@@ -29,9 +29,12 @@ pub fn fold(x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// An objective over the unit cube.
+type Objective<'a> = &'a mut dyn FnMut(&[f64]) -> f64;
+
 /// The objective as argmin sees it: folds the point, counts the budget.
 struct Budgeted<'a> {
-    f: RefCell<&'a mut dyn FnMut(&[f64]) -> f64>,
+    f: RefCell<Objective<'a>>,
     left: RefCell<u32>,
 }
 
