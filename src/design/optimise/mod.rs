@@ -27,6 +27,7 @@ pub mod plots;
 pub mod reach;
 pub mod results;
 pub mod search;
+pub mod space;
 pub mod spec;
 
 use std::collections::BTreeMap;
