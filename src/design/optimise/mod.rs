@@ -209,10 +209,12 @@ impl Context<'_> {
                     _ => {
                         let u = run_world(&sweep, p, r);
                         fs::create_dir_all(&dir).map_err(io_err(&dir))?;
-                        let bytes = serde_json::to_vec(&Unit { point: 0, unit: r as usize, ..u.clone() })
+                        let bytes = serde_json::to_vec(&Unit { point: 0, unit: r as usize, ..u })
                             .map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
                         write_atomically(&file, &bytes).map_err(io_err(&file))?;
-                        u
+                        // The unit as the file gives it back (JSON's decimal numbers can move a
+                        // value by its last bit): a resumed run then judges the same numbers.
+                        serde_json::from_slice::<Unit>(&bytes).map_err(|e| io_err(&file)(std::io::Error::other(e)))?
                     }
                 };
                 u.point = p;
