@@ -30,6 +30,9 @@ enum Command {
     Sweep(SweepArgs),
     /// Merge the shard directories of one sweep into its results.
     Merge(MergeArgs),
+    /// Search a design file's space (sphere count and positions, plate, set size, any key) for its
+    /// objective; race the finalists; verify them on held-out worlds (docs/optimise.md).
+    Optimise(OptimiseArgs),
     /// Uncertainty budget: every error source of the scenario alone, off and scaled, over realisations.
     Budget(BudgetArgs),
     /// Table 8 of the TriCal paper: the same robot calibrated with the TriCal, a laser tracker and an optical CMM.
@@ -235,6 +238,71 @@ struct SweepArgs {
 }
 
 #[derive(clap::Args, Debug)]
+struct OptimiseArgs {
+    /// Design file (TOML), e.g. scenarios/designs/irb120_spheres.toml.
+    design: PathBuf,
+    /// Directory of the evaluations and of the results.
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// Run only the restarts r with r % K == k (k/K); then `--merge`.
+    #[arg(long, value_parser = parse_shard)]
+    shard: Option<(usize, usize)>,
+    /// Only merge finished restarts: race the finalists, verify, write the results.
+    #[arg(long, conflicts_with = "shard")]
+    merge: bool,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
+    /// Search method replacing the file's: nelder_mead or particle_swarm.
+    #[arg(long, value_parser = parse_method)]
+    method: Option<crate::design::optimise::spec::Method>,
+    /// Skip the figures.
+    #[arg(long)]
+    no_plots: bool,
+}
+
+fn parse_method(s: &str) -> Result<crate::design::optimise::spec::Method, String> {
+    use crate::design::optimise::spec::Method;
+    match s {
+        "nelder_mead" => Ok(Method::NelderMead),
+        "particle_swarm" => Ok(Method::ParticleSwarm),
+        _ => Err(format!("`{s}`: nelder_mead or particle_swarm")),
+    }
+}
+
+fn optimise(args: &OptimiseArgs) -> Result<ExitCode, String> {
+    let spec = app::optimise::OptimiseSpec {
+        file: args.design.clone(),
+        out: args.out.clone(),
+        shard: args.shard,
+        merge: args.merge,
+        threads: args.threads,
+        method: args.method,
+        plots: !args.no_plots,
+    };
+    let r = app::optimise::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
+    println!(
+        "timing: {} restarts, {} designs evaluated in {:.1} s; race and verification {:.1} s",
+        r.restarts, r.evaluations, r.search_s, r.finish_s
+    );
+    if let Some(c) = &r.cost {
+        println!("one world of the winner: {c}");
+    }
+    match (&r.summary, &r.dest) {
+        (Some(s), Some(d)) => {
+            println!("{s}");
+            println!("results in {}", d.display());
+        }
+        _ => println!(
+            "merge the restarts when every shard has run: calsim optimise {} --merge --out {}",
+            args.design.display(),
+            args.out.display()
+        ),
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(clap::Args, Debug)]
 struct MergeArgs {
     /// Shard directories of one sweep (`<out>/<sweep>.shard-k-of-K`).
     #[arg(required = true)]
@@ -346,6 +414,7 @@ pub fn main() -> ExitCode {
         Command::Check(args) => run(args, true),
         Command::Sweep(args) => sweep(args),
         Command::Merge(args) => merge(&args.shards, &args.out),
+        Command::Optimise(args) => optimise(args),
         Command::Budget(args) => budget(args),
         Command::Table8(args) => table8(args),
         Command::Export(args) => export(args),

@@ -9,6 +9,7 @@ pub mod compensate;
 pub mod export;
 pub mod import_urdf;
 pub mod keys;
+pub mod optimise;
 pub mod run;
 pub mod sweep;
 pub mod table8;

@@ -283,6 +283,14 @@ fn grouped<T>(tasks: &[T], key: impl Fn(&T) -> (crate::study::Selection, usize))
 /// Runs one work unit: the point's study in the unit's world, kept as its statistics.
 pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
     let (point, realisation) = (unit / sweep.realisations as usize, (unit % sweep.realisations as usize) as u32);
+    Unit { unit, ..run_world(sweep, point, realisation) }
+}
+
+/// Runs grid point `point` of `sweep` in the world of realisation `realisation` (any index, also
+/// beyond the sweep's count: the optimiser's held-out worlds), kept as its statistics; the unit
+/// index is the sweep's (`point * realisations + realisation`, saturating).
+pub fn run_world(sweep: &Sweep, point: usize, realisation: u32) -> Unit {
+    let unit = point.saturating_mul(sweep.realisations as usize).saturating_add(realisation as usize);
     let th = &sweep.thresholds_mm;
     let mut out =
         Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None };

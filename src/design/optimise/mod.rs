@@ -1,0 +1,538 @@
+//! The optimiser: searches a design file's space (sphere count and positions, plate height and
+//! tilt, any scenario key, set size) for the sweeps' objective, on common worlds, then races the
+//! finalists and verifies them on held-out worlds.
+//!
+//! - **Evaluation.** A design is a scenario; its value in world `r` is the sweep's work unit of
+//!   that scenario in realisation `r` ([`crate::design::sweep::run_world`]), judged by the sweep's
+//!   statistics ([`crate::design::sweep::designs::judge`]): every set size of the study is a
+//!   design too (enumerated in each world: one campaign, one selection per size). Every search
+//!   evaluation runs the same worlds `0..worlds` (common random numbers: two designs differ by
+//!   their design, not by their luck). A design whose geometry is ruled out (points closer than
+//!   the spacing, no {W}) runs nothing and scores its violation's margin; a design whose campaign
+//!   fails counts that world as a failure (P = 0 there), and its score says in how many worlds.
+//! - **Search.** One restart per count of points (and per `restarts`): argmin's Nelder-Mead or
+//!   particle swarm over the unit cube of the other variables ([`search`]), at most `evaluations`
+//!   designs each. Restarts are independent: `--shard k/n` runs the restarts `r % n == k`.
+//! - **Race.** The best `finalists` of each count race on more search worlds (the sweeps' racing,
+//!   [`crate::design::sweep::race`]): worlds are added where the decision is close.
+//! - **Verification.** The best design of each count, and the designs of the sweep files to
+//!   compare with, are evaluated on `held_out` worlds never used in the search (realisations from
+//!   [`HELD_OUT_BASE`] on); the reported figures are those, the search's estimates beside them.
+//!
+//! Every world of every design is one file (`<out>/<name>.evaluations/<design>/r<NNNNNNN>.json`),
+//! written atomically: a killed run resumes where it stopped, and the searches being
+//! deterministic, any thread count and any sharding give the same files and tables.
+
+pub mod plots;
+pub mod reach;
+pub mod results;
+pub mod search;
+pub mod space;
+pub mod spec;
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::design::sweep::designs::{self, DesignRow};
+use crate::design::sweep::objective::Goal;
+use crate::design::sweep::spec::Point;
+use crate::design::sweep::{ShardInfo, Sweep, Unit, run_world, shard_info};
+pub use spec::{DesignError, DesignSpace};
+
+/// The first realisation of the held-out worlds (the search uses realisations below 10,000).
+pub const HELD_OUT_BASE: u32 = 1_000_000;
+
+/// Weight of a constraint's shortfall in a search score (a P(success) is within [0, 1]).
+const PENALTY: f64 = 10.0;
+
+/// Why the optimiser could not run or write.
+#[derive(Debug, thiserror::Error)]
+pub enum OptimiseError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The restarts of a merge are not all there.
+    #[error("{dir}: {why}")]
+    Incomplete {
+        /// The directory of the restarts.
+        dir: String,
+        /// What is missing.
+        why: String,
+    },
+    /// The search library refused its problem.
+    #[error("search: {0}")]
+    Search(String),
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OptimiseError + '_ {
+    move |source| OptimiseError::Io { path: path.display().to_string(), source }
+}
+
+/// A design the search asked for: its restart, its place in the restart, its count of points and
+/// its point of the unit cube.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Asked {
+    /// Restart.
+    pub restart: u32,
+    /// Order within the restart.
+    pub index: u32,
+    /// Count of points.
+    pub count: usize,
+    /// The point of the unit cube.
+    pub x: Vec<f64>,
+}
+
+/// One set size of a design judged over the worlds it ran.
+#[derive(Clone, Debug)]
+pub struct SizeScore {
+    /// The sweep's judgement (estimate, interval, success, campaign hours, feasibility).
+    pub row: DesignRow,
+    /// Its search score (lower is better; constraints' shortfalls added, see [`score_of`]).
+    pub score: f64,
+}
+
+/// A design evaluated: what it is, and how it did.
+#[derive(Clone, Debug)]
+pub struct Evaluated {
+    /// What the search asked.
+    pub asked: Asked,
+    /// The design's values, `key = value`.
+    pub values: Vec<(String, String)>,
+    /// The points in the region's frame, mm.
+    pub points_mm: Vec<[f64; 3]>,
+    /// The scenario table (absent: the geometry rules the design out).
+    pub table: Option<toml::Table>,
+    /// The design's key (sha256 of its scenario, 16 hex digits).
+    pub key: String,
+    /// Geometric violation or refusal: what, and the margin (mm, or 1 for a refusal).
+    pub violation: Option<(String, f64)>,
+    /// Worlds run, and of them failed (the campaign could not run), with the first reason.
+    pub worlds: u32,
+    /// See `worlds`.
+    pub failed: u32,
+    /// See `worlds`.
+    pub first_error: Option<String>,
+    /// Where some world failed: per point, how far it is from what the arm reaches with the
+    /// device in its approach cone, mm ([`reach`]; empty otherwise).
+    pub reach_mm: Vec<f64>,
+    /// Per set size.
+    pub sizes: Vec<SizeScore>,
+    /// The design's score: its best set size's, or the violation's.
+    pub score: f64,
+}
+
+impl Evaluated {
+    /// The best set size (lowest score), if any ran.
+    pub fn best(&self) -> Option<&SizeScore> {
+        self.sizes.iter().min_by(|a, b| a.score.total_cmp(&b.score).then(a.row.design.set_size.cmp(&b.row.design.set_size)))
+    }
+}
+
+/// The search score of one set size's judgement: the objective in the minimising sense (minus
+/// P(success), or the minimised quantity) plus [`PENALTY`] times each constraint's relative
+/// shortfall at the point estimates (the race and the held-out worlds decide at the confidence).
+pub fn score_of(space: &DesignSpace, r: &DesignRow) -> f64 {
+    let o = &space.objective;
+    let value = match o.goal {
+        Goal::MaximiseSuccess => -r.estimate,
+        _ => r.estimate,
+    };
+    let mut penalty = 0.0;
+    if let (Some(target), Some((p, _))) = (o.success_at_least, r.success) {
+        penalty += (target - p).max(0.0);
+    }
+    if let Some(h) = o.campaign_h_at_most {
+        penalty += if r.campaign_h.is_finite() { (r.campaign_h / h - 1.0).max(0.0) } else { 1.0 };
+    }
+    if let Some(n) = o.set_size_at_most {
+        penalty += (f64::from(r.design.set_size) / f64::from(n) - 1.0).max(0.0);
+    }
+    let value = if value.is_finite() { value } else { PENALTY };
+    value + PENALTY * penalty
+}
+
+/// What evaluations share: the space, where worlds are kept, the base scenario's path.
+pub struct Context<'a> {
+    /// The design space.
+    pub space: &'a DesignSpace,
+    /// Directory of the per-world files.
+    pub cache: PathBuf,
+}
+
+impl Context<'_> {
+    /// The sweep-shaped record of one design point (for the sweep's statistics).
+    fn sweep_of(&self, points: Vec<Point>, realisations: u32) -> Sweep {
+        Sweep {
+            name: self.space.name.clone(),
+            realisations,
+            race: None,
+            objective: self.space.objective.clone(),
+            thresholds_mm: self.space.objective.threshold_mm.into_iter().collect(),
+            keys: vec!["design".into()],
+            points,
+            identity: self.space.identity.clone(),
+            predict: false,
+        }
+    }
+
+    /// The scenario of a table as a unit runs it (checked; without the compensated validation).
+    fn point(&self, label: String, table: &toml::Table) -> Result<Point, String> {
+        let text = toml::to_string(table).unwrap_or_default();
+        let mut s = crate::device::from_table(&text, table.clone(), Path::new(&format!("{}#{label}", self.space.name)))
+            .map_err(|e| e.to_string())?;
+        s.study_mut().compensated_validation = false;
+        Ok(Point { values: vec![("design".into(), label)], scenario: s })
+    }
+
+    /// The units of `points` (each `(key, point)`) in `worlds`, read from the per-world files or
+    /// run (in parallel) and written; unit `p * stride + k` for the `k`-th world of point `p`.
+    fn units(&self, points: &[(String, Point)], worlds: &[u32], stride: u32) -> Result<Vec<Unit>, OptimiseError> {
+        let sweep = self.sweep_of(points.iter().map(|(_, p)| p.clone()).collect(), 1);
+        let jobs: Vec<(usize, usize, u32)> =
+            (0..points.len()).flat_map(|p| worlds.iter().enumerate().map(move |(k, &r)| (p, k, r))).collect();
+        let mut units: Vec<Unit> = jobs
+            .par_iter()
+            .map(|&(p, k, r)| -> Result<Unit, OptimiseError> {
+                let dir = self.cache.join(&points[p].0);
+                let file = dir.join(format!("r{r:07}.json"));
+                let mut u = match crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Unit>(&b).ok()) {
+                    Some(u) if u.realisation == r => u,
+                    _ => {
+                        let u = run_world(&sweep, p, r);
+                        fs::create_dir_all(&dir).map_err(io_err(&dir))?;
+                        let bytes = serde_json::to_vec(&Unit { point: 0, unit: r as usize, ..u })
+                            .map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
+                        write_atomically(&file, &bytes).map_err(io_err(&file))?;
+                        // The unit as the file gives it back (JSON's decimal numbers can move a
+                        // value by its last bit): a resumed run then judges the same numbers.
+                        serde_json::from_slice::<Unit>(&bytes).map_err(|e| io_err(&file)(std::io::Error::other(e)))?
+                    }
+                };
+                u.point = p;
+                u.unit = p * stride as usize + k;
+                Ok(u)
+            })
+            .collect::<Result<_, _>>()?;
+        units.sort_by_key(|u| u.unit);
+        Ok(units)
+    }
+
+    /// Evaluates what the search asked on the search worlds `0..worlds`.
+    pub fn evaluate(&self, asked: Asked) -> Result<Evaluated, OptimiseError> {
+        let d = self.space.decode(asked.count, &asked.x);
+        let key = design_key(&d.table);
+        let mut e = Evaluated {
+            asked,
+            values: d.values,
+            points_mm: d.points_mm,
+            table: None,
+            key,
+            violation: d.violation,
+            worlds: 0,
+            failed: 0,
+            first_error: None,
+            reach_mm: Vec::new(),
+            sizes: Vec::new(),
+            score: f64::INFINITY,
+        };
+        if let Some((_, margin)) = &e.violation {
+            e.score = 10.0 * PENALTY + margin / 10.0;
+            return Ok(e);
+        }
+        let point = match self.point(e.key.clone(), &d.table) {
+            Ok(p) => p,
+            Err(why) => {
+                e.violation = Some((format!("the scenario refuses it: {why}"), 1.0));
+                e.score = 10.0 * PENALTY + 0.1;
+                return Ok(e);
+            }
+        };
+        e.table = Some(d.table);
+        let worlds: Vec<u32> = (0..self.space.search.worlds).collect();
+        let units = self.units(&[(e.key.clone(), point.clone())], &worlds, self.space.search.worlds)?;
+        e.worlds = units.len() as u32;
+        e.failed = units.iter().filter(|u| u.error.is_some()).count() as u32;
+        e.first_error = units.iter().find_map(|u| u.error.clone());
+        if e.failed > 0 {
+            e.reach_mm = reach::sphere_margins_mm(point.scenario.as_ref()).unwrap_or_default();
+        }
+        let info = self.info(&self.sweep_of(vec![point], self.space.search.worlds));
+        e.sizes = designs::judge(&info, &units, &[]).into_iter().map(|row| SizeScore { score: score_of(self.space, &row), row }).collect();
+        e.score = match e.best() {
+            Some(b) => b.score,
+            // Every world failed: a violation measured by the worlds (all of them) and by how far
+            // the farthest point is from the arm's reach.
+            None => 2.0 * PENALTY + e.reach_mm.iter().copied().fold(0.0, f64::max) / 100.0,
+        };
+        Ok(e)
+    }
+
+    fn info(&self, sweep: &Sweep) -> ShardInfo {
+        let mut info = shard_info(sweep, 0, 1);
+        info.objective = self.space.objective.clone();
+        info
+    }
+}
+
+/// A design's key: the first 16 hex digits of the sha256 of its scenario.
+pub fn design_key(table: &toml::Table) -> String {
+    use sha2::Digest;
+    let text = toml::to_string(table).unwrap_or_default();
+    format!("{:x}", sha2::Sha256::digest(text.as_bytes()))[..16].to_string()
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension(format!("tmp-{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], ""));
+    fs::write(&tmp, bytes)?;
+    fs::rename(&tmp, path)
+}
+
+/// The restarts of a space: `(count of points, repetition)` in restart order.
+pub fn restarts(space: &DesignSpace) -> Vec<(usize, u32)> {
+    space.counts().into_iter().flat_map(|c| (0..space.search.restarts).map(move |k| (c, k))).collect()
+}
+
+/// The directory of the restarts' records and of the per-world files under `out`.
+pub fn work_dir(out: &Path, name: &str) -> PathBuf {
+    out.join(format!("{name}.evaluations"))
+}
+
+/// The record of restart `r` of `space`: named by the design file's identity and the search's
+/// settings, so that a changed file or method runs its searches again (the per-world files,
+/// named by their scenarios, are reused).
+fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
+    use sha2::Digest;
+    let s = &space.search;
+    let settings =
+        format!("{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}", space.identity, s.method.label(), s.evaluations, s.restarts, s.worlds, s.seed);
+    let key = format!("{:x}", sha2::Sha256::digest(settings.as_bytes()));
+    dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
+}
+
+/// Runs restart `r` (or reads its record when a finished run left one): the search's designs
+/// in the order asked, each evaluated, calling `progress(done)` after each.
+pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync)) -> Result<Vec<Evaluated>, OptimiseError> {
+    let space = ctx.space;
+    let (count, rep) = restarts(space)[r];
+    let file = restart_file(&ctx.cache, space, r);
+    if let Some(asked) = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()) {
+        return asked.into_iter().map(|a| ctx.evaluate(a)).collect();
+    }
+    let mut start = space.start(count);
+    if rep > 0 {
+        // Later repetitions start elsewhere: a point drawn from the restart's own stream.
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(crate::seeds::split_seed(space.search.seed, r as u64));
+        start = start.iter().map(|_| rng.random_range(0.05..0.95)).collect();
+    }
+    let mut out: Vec<Evaluated> = Vec::new();
+    let mut failure: Option<OptimiseError> = None;
+    let seed = crate::seeds::split_seed(space.search.seed, 1000 + r as u64);
+    let mut f = |x: &[f64]| -> f64 {
+        if failure.is_some() {
+            return f64::INFINITY;
+        }
+        let asked = Asked { restart: r as u32, index: out.len() as u32, count, x: x.to_vec() };
+        match ctx.evaluate(asked) {
+            Ok(e) => {
+                let s = e.score;
+                out.push(e);
+                progress(out.len());
+                s
+            }
+            Err(e) => {
+                failure = Some(e);
+                f64::INFINITY
+            }
+        }
+    };
+    search::minimise(space.search.method, &start, space.search.evaluations, seed, &mut f)
+        .map_err(|e| OptimiseError::Search(e.to_string()))?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
+    fs::create_dir_all(&ctx.cache).map_err(io_err(&ctx.cache))?;
+    write_atomically(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
+    Ok(out)
+}
+
+/// Reads the record of every restart (all must have finished).
+pub fn read_restarts(ctx: &Context<'_>) -> Result<Vec<Vec<Asked>>, OptimiseError> {
+    let n = restarts(ctx.space).len();
+    let mut out = Vec::with_capacity(n);
+    for r in 0..n {
+        let file = restart_file(&ctx.cache, ctx.space, r);
+        let asked = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()).ok_or_else(|| {
+            OptimiseError::Incomplete {
+                dir: ctx.cache.display().to_string(),
+                why: format!("restart {r} of {n} has not finished (run its shard: `calsim optimise <file> --shard k/n`)"),
+            }
+        })?;
+        out.push(asked);
+    }
+    Ok(out)
+}
+
+/// A design of the final stages: a label, its scenario table, its key, where it came from.
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    /// What it is (`3 spheres, restart 0 #12`, or `sphere_layout #4`).
+    pub label: String,
+    /// Its count of points (0: a compared design).
+    pub count: usize,
+    /// Its scenario.
+    pub table: toml::Table,
+    /// Its key.
+    pub key: String,
+    /// Its points in the region's frame, mm (empty for a compared design).
+    pub points_mm: Vec<[f64; 3]>,
+    /// Its search score (compared designs: none).
+    pub search_score: Option<f64>,
+    /// Whether it is a compared design (of a sweep file), not the optimiser's.
+    pub compared: bool,
+}
+
+/// The race of the finalists on search worlds, then the held-out verification.
+#[derive(Clone, Debug)]
+pub struct Verdict {
+    /// Every design evaluated by the search, in restart and ask order.
+    pub trace: Vec<Evaluated>,
+    /// The finalists and their race over search worlds (judged rows; the race's plan).
+    pub finalists: Vec<Candidate>,
+    /// See `finalists`.
+    pub race_rows: Vec<DesignRow>,
+    /// Worlds the race ran (most of any finalist).
+    pub race_worlds: u32,
+    /// Designs verified on held-out worlds: the best of each count, then the compared designs.
+    pub verified: Vec<Candidate>,
+    /// Their judged rows on the held-out worlds.
+    pub held_out_rows: Vec<DesignRow>,
+}
+
+/// Races the best designs of the search on more search worlds, then verifies the best of each
+/// count and the compared designs on the held-out worlds; `progress(done, total, stage)`.
+pub fn finish(
+    ctx: &Context<'_>,
+    trace: Vec<Evaluated>,
+    compare: Vec<Candidate>,
+    progress: &(dyn Fn(usize, usize, &str) + Sync),
+) -> Result<Verdict, OptimiseError> {
+    let space = ctx.space;
+    // Finalists: per count, the best distinct designs by search score that ran.
+    let mut finalists: Vec<Candidate> = Vec::new();
+    for count in space.counts() {
+        let mut of: Vec<&Evaluated> = trace.iter().filter(|e| e.asked.count == count && e.table.is_some() && e.best().is_some()).collect();
+        of.sort_by(|a, b| a.score.total_cmp(&b.score).then(a.asked.restart.cmp(&b.asked.restart)).then(a.asked.index.cmp(&b.asked.index)));
+        let mut taken = 0;
+        for e in of {
+            if taken == space.search.finalists || finalists.iter().any(|f| f.key == e.key) {
+                continue;
+            }
+            finalists.push(Candidate {
+                label: format!("{count} points, restart {} #{}", e.asked.restart, e.asked.index),
+                count,
+                table: e.table.clone().expect("filtered"),
+                key: e.key.clone(),
+                points_mm: e.points_mm.clone(),
+                search_score: Some(e.score),
+                compared: false,
+            });
+            taken += 1;
+        }
+    }
+    // The race: the sweeps' racing over the finalists' points, search worlds only.
+    let race = space.search.race.clone();
+    let points: Vec<(String, Point)> = finalists
+        .iter()
+        .map(|c| ctx.point(c.key.clone(), &c.table).map(|p| (c.key.clone(), p)))
+        .collect::<Result<_, _>>()
+        .map_err(OptimiseError::Search)?;
+    let mut sweep = ctx.sweep_of(points.iter().map(|p| p.1.clone()).collect(), race.max);
+    sweep.race = Some(race.clone());
+    let info = ctx.info(&sweep);
+    let mut present: BTreeMap<usize, Unit> = BTreeMap::new();
+    let plan = loop {
+        let plan = crate::design::sweep::race::plan(&info, &present);
+        if plan.complete || points.is_empty() {
+            break plan;
+        }
+        // Missing units grouped by point: each point's worlds read or run.
+        let mut by_point: BTreeMap<usize, Vec<u32>> = BTreeMap::new();
+        for &u in &plan.missing {
+            by_point.entry(u / race.max as usize).or_default().push((u % race.max as usize) as u32);
+        }
+        progress(present.len(), present.len() + plan.missing.len(), "race: worlds of the finalists");
+        let jobs: Vec<Vec<Unit>> = by_point
+            .iter()
+            .map(|(&p, worlds)| {
+                let mut us = ctx.units(std::slice::from_ref(&points[p]), worlds, race.max)?;
+                for u in &mut us {
+                    u.point = p;
+                    u.unit = p * race.max as usize + u.realisation as usize;
+                }
+                Ok(us)
+            })
+            .collect::<Result<_, OptimiseError>>()?;
+        for u in jobs.into_iter().flatten() {
+            present.insert(u.unit, u);
+        }
+    };
+    let units: Vec<Unit> = present.values().cloned().collect();
+    let race_rows = designs::judge(&info, &units, &plan.eliminated);
+    let race_worlds = units.iter().map(|u| u.realisation + 1).max().unwrap_or(0);
+    // The best finalist of each count by the race (its rank among that count's rows).
+    let mut verified: Vec<Candidate> = Vec::new();
+    for count in space.counts() {
+        let best = race_rows.iter().filter(|r| finalists[r.design.point].count == count).min_by_key(|r| r.rank);
+        if let Some(r) = best {
+            verified.push(finalists[r.design.point].clone());
+        }
+    }
+    verified.extend(compare);
+    let held: Vec<u32> = (0..space.held_out).map(|k| HELD_OUT_BASE + k).collect();
+    let vpoints: Vec<(String, Point)> = verified
+        .iter()
+        .map(|c| ctx.point(c.key.clone(), &c.table).map(|p| (c.key.clone(), p)))
+        .collect::<Result<_, _>>()
+        .map_err(OptimiseError::Search)?;
+    progress(0, vpoints.len() * held.len(), "held-out worlds");
+    let vunits = ctx.units(&vpoints, &held, space.held_out)?;
+    let vinfo = ctx.info(&ctx.sweep_of(vpoints.iter().map(|p| p.1.clone()).collect(), space.held_out));
+    let held_out_rows = designs::judge(&vinfo, &vunits, &[]);
+    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows })
+}
+
+/// The designs of a sweep file as candidates to verify beside the optimiser's (each grid point
+/// with the sweep's own fixed keys).
+pub fn compared(path: &Path) -> Result<Vec<Candidate>, crate::design::sweep::SweepError> {
+    let sweep = crate::design::sweep::spec::load(path)?;
+    let stem = sweep.name.clone();
+    Ok(sweep
+        .points
+        .iter()
+        .enumerate()
+        .map(|(p, point)| {
+            let table: toml::Table = point.scenario.header().text.parse().unwrap_or_default();
+            let label = format!("{stem} #{p}: {}", point.values.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", "));
+            Candidate {
+                key: design_key(&table),
+                label,
+                count: 0,
+                table,
+                points_mm: point.scenario.layout_mm(),
+                search_score: None,
+                compared: true,
+            }
+        })
+        .collect())
+}

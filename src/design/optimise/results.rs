@@ -1,0 +1,267 @@
+//! What `calsim optimise` writes (through the io kit, atomically): `trace.parquet` (every design
+//! the search evaluated, its estimate and interval on the search worlds), `race.parquet` (the
+//! finalists on more search worlds), `verified.parquet` (the held-out worlds: the reported
+//! figures), `best_design.toml` (runnable from any directory), `summary.md` and the figures.
+
+use std::path::{Path, PathBuf};
+
+use polars::prelude::Column;
+
+use super::{Candidate, DesignSpace, Verdict};
+use crate::design::sweep::designs::DesignRow;
+use crate::io::table::parquet;
+
+/// Writes one world of the winner into a directory (as `calsim run` writes its results).
+pub type WorldWriter<'a> = &'a dyn Fn(&Path) -> std::io::Result<()>;
+
+/// The optimiser's outcome as the report shows it.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    /// The verdict.
+    pub verdict: Verdict,
+    /// The winner: its index in `verdict.verified` and its held-out row.
+    pub winner: Option<(usize, DesignRow)>,
+}
+
+impl Outcome {
+    /// The winner: the best held-out row of the optimiser's own designs.
+    pub fn of(verdict: Verdict) -> Self {
+        let ours = verdict.verified.iter().filter(|c| !c.compared).count();
+        let winner =
+            verdict.held_out_rows.iter().filter(|r| r.design.point < ours).min_by_key(|r| r.rank).map(|r| (r.design.point, r.clone()));
+        Self { verdict, winner }
+    }
+}
+
+fn f3(x: f64) -> String {
+    if x.is_finite() { format!("{x:.3}") } else { "-".into() }
+}
+
+/// The scenario table of a verified design with its set size as the study's table (and only
+/// selection), for `best_design.toml`.
+pub fn design_file(c: &Candidate, r: &DesignRow, head: &str) -> String {
+    format!("{head}{}", toml::to_string(&design_table(c, r)).unwrap_or_default())
+}
+
+/// The scenario table of a verified design with its set size as the study's table and its
+/// selection the only one.
+pub fn design_table(c: &Candidate, r: &DesignRow) -> toml::Table {
+    let mut table = c.table.clone();
+    let study = table.entry("study").or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let Some(s) = study.as_table_mut() {
+        s.insert("table_set_size".into(), toml::Value::Integer(i64::from(r.design.set_size)));
+        s.insert("selections".into(), toml::Value::Array(vec![toml::Value::String(r.design.selection.clone())]));
+    }
+    table
+}
+
+/// A held-out or race row in words: `P = 0.95 (0.90-0.98), 100 worlds, campaign 2.10 h`.
+pub fn row_words(r: &DesignRow) -> String {
+    format!(
+        "{} ({}-{}) over {} worlds, n = {}, campaign {} h, {}",
+        f3(r.estimate),
+        f3(r.interval.0),
+        f3(r.interval.1),
+        r.worlds,
+        r.design.set_size,
+        f3(r.campaign_h),
+        r.feasibility.label()
+    )
+}
+
+/// The summary in Markdown.
+pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
+    let v = &o.verdict;
+    let mut s = format!(
+        "# {}: {}\n\nObjective: {}{}. Search: {} ({} designs at most per restart, {} restarts) on {} common worlds; \
+         race of the finalists up to {} worlds; verification on {} held-out worlds (realisations from {}).\n\n",
+        space.name,
+        space.path.display(),
+        space.objective.describe(),
+        space.objective.constraints().iter().map(|c| format!("; {c}")).collect::<String>(),
+        space.search.method.label(),
+        space.search.evaluations,
+        super::restarts(space).len(),
+        space.search.worlds,
+        space.search.race.max,
+        space.held_out,
+        super::HELD_OUT_BASE
+    );
+    if let Some((i, r)) = &o.winner {
+        let c = &v.verified[*i];
+        let race = v
+            .race_rows
+            .iter()
+            .filter(|x| v.finalists[x.design.point].key == c.key && x.design.set_size == r.design.set_size)
+            .min_by_key(|x| x.rank);
+        let search = v
+            .trace
+            .iter()
+            .filter(|e| e.key == c.key)
+            .find_map(|e| e.sizes.iter().find(|z| z.row.design.set_size == r.design.set_size).map(|z| z.row.clone()));
+        s += &format!("## The answer\n\n{} ({} sets of {}).\n\n", c.label, r.design.selection, r.design.set_size);
+        s += "| stage | estimate (interval) |\n|---|---|\n";
+        if let Some(x) = search {
+            s += &format!("| search worlds | {} |\n", row_words(&x));
+        }
+        if let Some(x) = race {
+            s += &format!("| race (search worlds) | {} |\n", row_words(x));
+        }
+        s += &format!("| **held-out worlds (reported)** | **{}** |\n\n", row_words(r));
+        s += &format!("Points (region frame, mm): {:?}\n\n", c.points_mm);
+    } else {
+        s += "## No answer\n\nNo design of the search ran in any world.\n\n";
+    }
+    s += "## Held-out worlds: every verified design\n\n| rank | design | selection | n | estimate | interval | P(success) | campaign, h | worlds | failed | feasibility | worlds the leader did better / worse |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    let mut rows: Vec<&DesignRow> = v.held_out_rows.iter().collect();
+    rows.sort_by_key(|r| r.rank);
+    for r in rows {
+        let c = &v.verified[r.design.point];
+        // Worlds in which the leader did better / worse than this design (paired on common worlds).
+        let vs = r.vs_leader.as_ref().map_or("leader".to_string(), |p| {
+            let (better, worse) =
+                if space.objective.maximises() { (p.test.negative, p.test.positive) } else { (p.test.positive, p.test.negative) };
+            format!("{better} / {worse}")
+        });
+        s += &format!(
+            "| {} | {} | {} | {} | {} | {}-{} | {} | {} | {} | {} | {} | {} |\n",
+            r.rank,
+            c.label,
+            r.design.selection,
+            r.design.set_size,
+            f3(r.estimate),
+            f3(r.interval.0),
+            f3(r.interval.1),
+            r.success.map_or("-".into(), |x| f3(x.0)),
+            f3(r.campaign_h),
+            r.worlds,
+            r.failed_worlds,
+            r.feasibility.label(),
+            vs
+        );
+    }
+    let ran = v.trace.iter().filter(|e| e.table.is_some()).count();
+    let ruled = v.trace.len() - ran;
+    s += &format!(
+        "\n## Search\n\n{} designs evaluated ({} ruled out by their geometry or refused, not run); {} finalists raced over up to {} worlds.\n",
+        v.trace.len(),
+        ruled,
+        v.finalists.len(),
+        v.race_worlds
+    );
+    let failing: Vec<&super::Evaluated> = v.trace.iter().filter(|e| e.failed > 0).collect();
+    if !failing.is_empty() {
+        let all = failing.iter().filter(|e| e.failed == e.worlds).count();
+        let margins: Vec<f64> =
+            failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
+        s += &format!(
+            "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by how far their farthest \
+             point is from the arm's reach with the device in its approach cone: {} mm at most, {} mm at least; `trace.parquet` \
+             columns failed_worlds, first_error, reach_margin_mm).\n",
+            failing.len(),
+            all,
+            f3(margins.iter().copied().fold(f64::NAN, f64::max)),
+            f3(margins.iter().copied().fold(f64::NAN, f64::min)),
+        );
+    }
+    s
+}
+
+/// Writes the results into `out/<name>` atomically; `plots` are the figures' inputs.
+pub fn write(
+    out: &Path,
+    space: &DesignSpace,
+    o: &Outcome,
+    plots: Option<&super::plots::OptimisePlotInputs>,
+    manifest: &serde_json::Value,
+    winner_world: Option<WorldWriter<'_>>,
+) -> std::io::Result<PathBuf> {
+    crate::io::out_dir::write_atomically(out, &space.name, |dir| {
+        let v = &o.verdict;
+        let f = |n: &str, x: Vec<f64>| Column::new(n.into(), x);
+        let u = |n: &str, x: Vec<u32>| Column::new(n.into(), x);
+        let s = |n: &str, x: Vec<String>| Column::new(n.into(), x);
+        let best: Vec<Option<&super::SizeScore>> = v.trace.iter().map(|e| e.best()).collect();
+        let bf = |g: &dyn Fn(&DesignRow) -> f64| best.iter().map(|b| b.map_or(f64::NAN, |b| g(&b.row))).collect::<Vec<_>>();
+        parquet(
+            dir,
+            "trace.parquet",
+            vec![
+                u("restart", v.trace.iter().map(|e| e.asked.restart).collect()),
+                u("evaluation", v.trace.iter().map(|e| e.asked.index).collect()),
+                u("count", v.trace.iter().map(|e| e.asked.count as u32).collect()),
+                s("design", v.trace.iter().map(|e| e.key.clone()).collect()),
+                s(
+                    "values",
+                    v.trace.iter().map(|e| e.values.iter().map(|(k, x)| format!("{k} = {x}")).collect::<Vec<_>>().join("; ")).collect(),
+                ),
+                s("x", v.trace.iter().map(|e| format!("{:?}", e.asked.x)).collect()),
+                s("violation", v.trace.iter().map(|e| e.violation.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect()),
+                f("violation_margin", v.trace.iter().map(|e| e.violation.as_ref().map_or(0.0, |x| x.1)).collect()),
+                u("worlds", v.trace.iter().map(|e| e.worlds).collect()),
+                u("failed_worlds", v.trace.iter().map(|e| e.failed).collect()),
+                s("first_error", v.trace.iter().map(|e| e.first_error.clone().unwrap_or_default()).collect()),
+                f("reach_margin_mm", v.trace.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).collect()),
+                u("set_size", best.iter().map(|b| b.map_or(0, |b| b.row.design.set_size)).collect()),
+                f("estimate", bf(&|r| r.estimate)),
+                f("lower", bf(&|r| r.interval.0)),
+                f("upper", bf(&|r| r.interval.1)),
+                f("campaign_h", bf(&|r| r.campaign_h)),
+                f("score", v.trace.iter().map(|e| e.score).collect()),
+            ],
+        )?;
+        let rows_table = |name: &str, rows: &[DesignRow], label: &dyn Fn(usize) -> String| {
+            parquet(
+                dir,
+                name,
+                vec![
+                    s("design", rows.iter().map(|r| label(r.design.point)).collect()),
+                    s("selection", rows.iter().map(|r| r.design.selection.clone()).collect()),
+                    u("set_size", rows.iter().map(|r| r.design.set_size).collect()),
+                    u("worlds", rows.iter().map(|r| r.worlds).collect()),
+                    u("failed_worlds", rows.iter().map(|r| r.failed_worlds).collect()),
+                    f("estimate", rows.iter().map(|r| r.estimate).collect()),
+                    f("lower", rows.iter().map(|r| r.interval.0).collect()),
+                    f("upper", rows.iter().map(|r| r.interval.1).collect()),
+                    f("success", rows.iter().map(|r| r.success.map_or(f64::NAN, |x| x.0)).collect()),
+                    f("campaign_h", rows.iter().map(|r| r.campaign_h).collect()),
+                    s("feasibility", rows.iter().map(|r| r.feasibility.label().to_string()).collect()),
+                    u("rank", rows.iter().map(|r| r.rank as u32).collect()),
+                    Column::new("tied".into(), rows.iter().map(|r| r.tied).collect::<Vec<_>>()),
+                    s("eliminated", rows.iter().map(|r| r.eliminated.as_ref().map(|e| e.1.clone()).unwrap_or_default()).collect()),
+                ],
+            )
+        };
+        rows_table("race.parquet", &v.race_rows, &|p| v.finalists[p].label.clone())?;
+        rows_table("verified.parquet", &v.held_out_rows, &|p| v.verified[p].label.clone())?;
+        if let Some((i, r)) = &o.winner {
+            let head = format!(
+                "# {}: the optimiser's answer, {} ({} sets of {}): held-out {}.\n# `calsim run best_design.toml` redoes its realisation 0 with the figures and the Rerun recording (from any directory).\n",
+                space.name,
+                v.verified[*i].label,
+                r.design.selection,
+                r.design.set_size,
+                row_words(r)
+            );
+            crate::io::out_dir::write_file(&dir.join("best_design.toml"), design_file(&v.verified[*i], r, &head))?;
+        }
+        let mut text = summary(space, o);
+        if let Some(w) = winner_world {
+            let d = dir.join("winner");
+            std::fs::create_dir(&d)?;
+            w(&d)?;
+            text +=
+                "\n`winner/`: the winner's realisation 0 as `calsim run` writes it (tables, figures, the Rerun recording `study.rrd`).\n";
+        }
+        if let Some(p) = plots {
+            let written = super::plots::write(dir, p).map_err(std::io::Error::other)?;
+            text += "\n## Figures\n\n";
+            for w in written {
+                text += &format!("- `{}.png`: {}\n", w.stem, w.caption);
+            }
+        }
+        crate::io::out_dir::write_file(&dir.join("summary.md"), text)?;
+        crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_vec_pretty(manifest).map_err(std::io::Error::other)?)?;
+        Ok(())
+    })
+}

@@ -1,0 +1,517 @@
+//! A design file: the base scenario, the design space over its keys (continuous, integer and
+//! choice variables, and a set of points: the TriCal datum spheres or the SPMS stations, their
+//! count enumerated and each point's position searched within a region), the `[objective]` of
+//! the sweeps, and how to search and verify.
+//!
+//! Every variable maps the unit interval onto its values, so that a design is a point `x` of
+//! `[0, 1]^d` for each count of points (decoded by [`super::space`]); a design the geometry rules
+//! out (two points closer than the spacing, three that define no frame) is a violation with its
+//! margin, never a scenario that fails to load.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::design::sweep::objective::{Objective, ObjectiveFile};
+use crate::design::sweep::race::Race;
+use crate::design::sweep::spec::{get_dotted, set_dotted};
+use crate::device::scenario;
+
+/// A design file that cannot be used: the file, the key, what is wrong.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {key}: {message}")]
+pub struct DesignError {
+    /// The design file.
+    pub path: String,
+    /// The key (dotted, as written).
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+fn err(path: &Path, key: impl Into<String>, message: impl Into<String>) -> DesignError {
+    DesignError { path: path.display().to_string(), key: key.into(), message: message.into() }
+}
+
+/// The design file as written.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DesignFile {
+    base: PathBuf,
+    #[serde(default)]
+    fixed: toml::Table,
+    #[serde(default, rename = "variable")]
+    variables: Vec<VariableFile>,
+    #[serde(default)]
+    points: Option<PointsFile>,
+    objective: ObjectiveFile,
+    #[serde(default)]
+    search: SearchFile,
+    #[serde(default)]
+    verify: VerifyFile,
+}
+
+/// One `[[variable]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct VariableFile {
+    key: String,
+    range: Option<[f64; 2]>,
+    integer: Option<[i64; 2]>,
+    choices: Option<Vec<toml::Value>>,
+    start: Option<toml::Value>,
+}
+
+/// `[points]`: the datum spheres (TriCal) or stations (SPMS).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PointsFile {
+    key: String,
+    count: [i64; 2],
+    region: String,
+    x_mm: [f64; 2],
+    y_mm: [f64; 2],
+    z_mm: Option<[f64; 2]>,
+    height_mm: Option<[f64; 2]>,
+    tilt_deg: Option<[f64; 2]>,
+    min_spacing_mm: f64,
+    start_spacing_mm: Option<f64>,
+    start_height_mm: Option<f64>,
+    start_tilt_deg: Option<f64>,
+    start_offset_mm: Option<[f64; 3]>,
+}
+
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct SearchFile {
+    method: Option<String>,
+    evaluations: Option<u32>,
+    restarts: Option<u32>,
+    worlds: Option<u32>,
+    finalists: Option<u32>,
+    race: Option<RaceFile>,
+    seed: Option<u64>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RaceFile {
+    max: u32,
+    batch: u32,
+}
+
+#[derive(Clone, Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct VerifyFile {
+    held_out: Option<u32>,
+    #[serde(default)]
+    compare: Vec<PathBuf>,
+}
+
+/// What a variable ranges over.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Domain {
+    /// A number within `[lo, hi]`.
+    Range(f64, f64),
+    /// A whole number within `[lo, hi]`.
+    Integer(i64, i64),
+    /// One of these values.
+    Choices(Vec<toml::Value>),
+}
+
+/// A variable over a scenario key.
+#[derive(Clone, Debug)]
+pub struct Variable {
+    /// Dotted scenario key.
+    pub key: String,
+    /// Its values.
+    pub domain: Domain,
+    /// Its start in `[0, 1]`.
+    pub start: f64,
+}
+
+impl Variable {
+    /// The value at `t` in `[0, 1]`.
+    pub fn value(&self, t: f64) -> toml::Value {
+        let t = t.clamp(0.0, 1.0);
+        match &self.domain {
+            Domain::Range(lo, hi) => toml::Value::Float(lo + t * (hi - lo)),
+            Domain::Integer(lo, hi) => toml::Value::Integer(lo + (t * (hi - lo + 1) as f64).floor().min((hi - lo) as f64) as i64),
+            Domain::Choices(c) => c[((t * c.len() as f64).floor() as usize).min(c.len() - 1)].clone(),
+        }
+    }
+
+    fn unit_of(&self, v: &toml::Value) -> Option<f64> {
+        let num = v.as_float().or(v.as_integer().map(|i| i as f64));
+        match &self.domain {
+            Domain::Range(lo, hi) => {
+                num.filter(|x| x.is_finite() && *x >= *lo && *x <= *hi).map(|x| if hi > lo { (x - lo) / (hi - lo) } else { 0.5 })
+            }
+            Domain::Integer(lo, hi) => {
+                v.as_integer().filter(|i| i >= lo && i <= hi).map(|i| ((i - lo) as f64 + 0.5) / ((hi - lo + 1) as f64))
+            }
+            Domain::Choices(c) => c.iter().position(|x| x == v).map(|k| (k as f64 + 0.5) / c.len() as f64),
+        }
+    }
+}
+
+/// Where the points may go.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Region {
+    /// On a plate: `x, y` on the plate, the plate raised `height_mm` and tilted `tilt_deg` about
+    /// the x axis of the scenario's {W} (ranges, or one value each).
+    Plate {
+        /// x on the plate, mm.
+        x_mm: [f64; 2],
+        /// y on the plate, mm.
+        y_mm: [f64; 2],
+        /// Plate height, mm.
+        height_mm: [f64; 2],
+        /// Plate tilt, deg.
+        tilt_deg: [f64; 2],
+    },
+    /// Free within a box of the scenario's frame ({W} of the base scenario, or the robot base for
+    /// SPMS stations), mm.
+    Box {
+        /// x range, mm.
+        x_mm: [f64; 2],
+        /// y range, mm.
+        y_mm: [f64; 2],
+        /// z range, mm.
+        z_mm: [f64; 2],
+    },
+}
+
+/// The points of a design: the key they go to, how many, where.
+#[derive(Clone, Debug)]
+pub struct Points {
+    /// Scenario key (`cell.spheres_w_mm`: the TriCal datum spheres, which define {W}; any other
+    /// key gets the points as they are).
+    pub key: String,
+    /// Fewest and most points (both searched, one stratum per count).
+    pub count: (usize, usize),
+    /// The region.
+    pub region: Region,
+    /// Least distance between two points, mm.
+    pub min_spacing_mm: f64,
+    /// The start: points on a circle this far apart, mm.
+    pub start_spacing_mm: f64,
+    /// The start's plate height and tilt (plate region), mm and deg.
+    pub start_plate: (f64, f64),
+    /// The start circle's first point in the region, mm.
+    pub start_offset_mm: [f64; 3],
+}
+
+/// Which optimiser searches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// argmin's Nelder-Mead simplex, started around the start design.
+    NelderMead,
+    /// argmin's particle swarm over the unit cube.
+    ParticleSwarm,
+}
+
+impl Method {
+    /// The name as the file writes it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::NelderMead => "nelder_mead",
+            Method::ParticleSwarm => "particle_swarm",
+        }
+    }
+}
+
+/// How the search runs.
+#[derive(Clone, Debug)]
+pub struct Search {
+    /// The optimiser.
+    pub method: Method,
+    /// Designs evaluated per restart (the budget).
+    pub evaluations: u32,
+    /// Restarts per count of points.
+    pub restarts: u32,
+    /// Common worlds every search evaluation runs (realisations `0..worlds`).
+    pub worlds: u32,
+    /// Designs taken from the search into the race.
+    pub finalists: u32,
+    /// The race of the finalists on more search worlds.
+    pub race: Race,
+    /// Seed of the optimisers' own draws (the swarm's).
+    pub seed: u64,
+}
+
+/// A loaded, checked design file.
+#[derive(Clone, Debug)]
+pub struct DesignSpace {
+    /// Name (the file's stem).
+    pub name: String,
+    /// The design file.
+    pub path: PathBuf,
+    /// The base scenario with `[fixed]` applied.
+    pub base: toml::Table,
+    /// sha256 of the design file and its base scenario.
+    pub identity: String,
+    /// The variables.
+    pub variables: Vec<Variable>,
+    /// The points, if the design moves any.
+    pub points: Option<Points>,
+    /// The objective.
+    pub objective: Objective,
+    /// The search.
+    pub search: Search,
+    /// Held-out worlds of the verification.
+    pub held_out: u32,
+    /// Sweep files whose designs are verified beside the winner.
+    pub compare: Vec<PathBuf>,
+}
+
+/// Most points of a design.
+pub const MOST_POINTS: usize = 12;
+
+/// Most designs evaluated per restart, most restarts, worlds.
+const MOST_EVALUATIONS: u32 = 100_000;
+
+/// Reads and checks a design file.
+pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
+    let text = crate::io::read_text(path).map_err(|e| err(path, "(file)", format!("cannot read: {e}")))?;
+    let file: DesignFile = {
+        let de = toml::Deserializer::parse(&text).map_err(|e| err(path, "(file)", e.message()))?;
+        serde_path_to_error::deserialize(de).map_err(|e| {
+            let key = e.path().to_string();
+            err(path, key, e.into_inner().message())
+        })?
+    };
+    let objective = file.objective.clone().check().map_err(|(k, m)| err(path, k, m))?;
+    let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
+    let (base_text, mut base) = scenario::read_table(&base_path).map_err(|e| err(path, "base", e.to_string()))?;
+    let device = crate::device::device_of(&base, &base_path).map_err(|e| err(path, "base", e.to_string()))?;
+    let defaults = device.defaults();
+    let original = base.clone();
+    let known = |key: &str| get_dotted(&defaults, key).is_some() || get_dotted(&original, key).is_some();
+    for (k, v) in &file.fixed {
+        if !known(k) {
+            return Err(err(path, format!("fixed.{k}"), format!("not a key of a {} scenario (`calsim keys` lists them)", device.kind())));
+        }
+        set_dotted(&mut base, k, v.clone()).map_err(|m| err(path, format!("fixed.{k}"), m))?;
+    }
+    let mut variables = Vec::new();
+    for (i, v) in file.variables.iter().enumerate() {
+        let at = |k: &str| format!("variable[{i}] ({}).{k}", v.key);
+        if !known(&v.key) {
+            return Err(err(path, at("key"), format!("not a key of a {} scenario (`calsim keys` lists them)", device.kind())));
+        }
+        if file.variables[..i].iter().any(|w| w.key == v.key) {
+            return Err(err(path, at("key"), "the key of an earlier variable: each key once"));
+        }
+        let domain = match (&v.range, &v.integer, &v.choices) {
+            (Some([lo, hi]), None, None) => {
+                if !(lo.is_finite() && hi.is_finite()) {
+                    return Err(err(path, at("range"), format!("[{lo}, {hi}]: finite bounds")));
+                }
+                if lo >= hi {
+                    return Err(err(
+                        path,
+                        at("range"),
+                        format!("[{lo}, {hi}]: empty or reversed (the lower bound first, below the upper)"),
+                    ));
+                }
+                Domain::Range(*lo, *hi)
+            }
+            (None, Some([lo, hi]), None) => {
+                if lo > hi {
+                    return Err(err(path, at("integer"), format!("[{lo}, {hi}]: reversed (the lower bound first)")));
+                }
+                Domain::Integer(*lo, *hi)
+            }
+            (None, None, Some(c)) => {
+                if c.is_empty() {
+                    return Err(err(path, at("choices"), "empty: at least one value"));
+                }
+                Domain::Choices(c.clone())
+            }
+            _ => return Err(err(path, at("range"), "give one of range = [lo, hi], integer = [lo, hi], choices = [...]")),
+        };
+        let mut var = Variable { key: v.key.clone(), domain, start: 0.5 };
+        if let Some(s) = &v.start {
+            var.start = var.unit_of(s).ok_or_else(|| err(path, at("start"), format!("{s}: not one of the variable's values")))?;
+        } else if let Some(current) = get_dotted(&base, &v.key).or_else(|| get_dotted(&defaults, &v.key))
+            && let Some(u) = var.unit_of(current)
+        {
+            var.start = u;
+        }
+        // Every value of the variable must make a scenario of its kind: the ends and the start.
+        for t in [0.0, 1.0, var.start] {
+            let mut probe = base.clone();
+            set_dotted(&mut probe, &v.key, var.value(t)).map_err(|m| err(path, at("key"), m))?;
+            if let Some(s) = check_table(&probe, &base_path) {
+                return Err(err(path, at("key"), format!("value {}: {s}", var.value(t))));
+            }
+        }
+        variables.push(var);
+    }
+    let points = file.points.as_ref().map(|p| points(path, p)).transpose()?;
+    let search = search(path, &file.search)?;
+    let held_out = file.verify.held_out.unwrap_or(100);
+    if !(1..=10_000).contains(&held_out) {
+        return Err(err(path, "verify.held_out", format!("{held_out}: within [1, 10000] held-out worlds")));
+    }
+    let compare: Vec<PathBuf> = file.verify.compare.iter().map(|c| path.parent().unwrap_or(Path::new(".")).join(c)).collect();
+    for (i, c) in compare.iter().enumerate() {
+        if !c.is_file() {
+            return Err(err(path, format!("verify.compare[{i}]"), format!("{}: no such sweep file", c.display())));
+        }
+    }
+    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "design".into());
+    use sha2::Digest;
+    let identity = format!("{:x}", sha2::Sha256::digest(format!("{text}\u{0}{base_text}")));
+    let space = DesignSpace { name, path: path.to_path_buf(), base, identity, variables, points, objective, search, held_out, compare };
+    feasible_somewhere(path, &space)?;
+    Ok(space)
+}
+
+/// Checks a scenario table as its device would load it; `Some(why)` when it would refuse it.
+pub fn check_table(t: &toml::Table, base_path: &Path) -> Option<String> {
+    let text = toml::to_string(t).unwrap_or_default();
+    crate::device::from_table(&text, t.clone(), base_path).err().map(|e| e.to_string())
+}
+
+fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
+    let range = |k: &str, r: [f64; 2]| -> Result<[f64; 2], DesignError> {
+        if !(r[0].is_finite() && r[1].is_finite()) || r[0] > r[1] || r[0].abs() > 5000.0 || r[1].abs() > 5000.0 {
+            return Err(err(path, format!("points.{k}"), format!("[{}, {}]: finite bounds within +-5000, the lower first", r[0], r[1])));
+        }
+        Ok(r)
+    };
+    let [lo, hi] = p.count;
+    if lo > hi || lo < 1 || hi as usize > MOST_POINTS {
+        return Err(err(path, "points.count", format!("[{lo}, {hi}]: from 1 to {MOST_POINTS} points, the lower first")));
+    }
+    if p.key == "cell.spheres_w_mm" && lo < 3 {
+        return Err(err(path, "points.count", format!("[{lo}, {hi}]: three datum spheres at least (they define {{W}})")));
+    }
+    let region = match p.region.as_str() {
+        "plate" => {
+            let angle = |k: &str, r: [f64; 2]| -> Result<[f64; 2], DesignError> {
+                let r = range(k, r)?;
+                if r[0] < -60.0 || r[1] > 60.0 {
+                    return Err(err(path, format!("points.{k}"), format!("[{}, {}]: within [-60, 60] deg", r[0], r[1])));
+                }
+                Ok(r)
+            };
+            Region::Plate {
+                x_mm: range("x_mm", p.x_mm)?,
+                y_mm: range("y_mm", p.y_mm)?,
+                height_mm: range("height_mm", p.height_mm.unwrap_or([0.0, 0.0]))?,
+                tilt_deg: angle("tilt_deg", p.tilt_deg.unwrap_or([0.0, 0.0]))?,
+            }
+        }
+        "box" => Region::Box {
+            x_mm: range("x_mm", p.x_mm)?,
+            y_mm: range("y_mm", p.y_mm)?,
+            z_mm: range("z_mm", p.z_mm.ok_or_else(|| err(path, "points.z_mm", "a box needs z_mm = [lo, hi]"))?)?,
+        },
+        other => return Err(err(path, "points.region", format!("{other:?}: \"plate\" or \"box\""))),
+    };
+    if !(p.min_spacing_mm.is_finite() && p.min_spacing_mm >= 0.0 && p.min_spacing_mm <= 5000.0) {
+        return Err(err(path, "points.min_spacing_mm", format!("{}: a distance within [0, 5000] mm", p.min_spacing_mm)));
+    }
+    let spacing = p.start_spacing_mm.unwrap_or(p.min_spacing_mm.max(100.0) * 1.5);
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(err(path, "points.start_spacing_mm", format!("{spacing}: a distance > 0 mm")));
+    }
+    let finite =
+        |k: &str, v: f64| if v.is_finite() { Ok(v) } else { Err(err(path, format!("points.{k}"), format!("{v}: a finite number"))) };
+    let offset = p.start_offset_mm.unwrap_or([0.0; 3]);
+    for v in offset {
+        finite("start_offset_mm", v)?;
+    }
+    Ok(Points {
+        key: p.key.clone(),
+        count: (lo as usize, hi as usize),
+        region,
+        min_spacing_mm: p.min_spacing_mm,
+        start_spacing_mm: spacing,
+        start_plate: (
+            finite("start_height_mm", p.start_height_mm.unwrap_or(0.0))?,
+            finite("start_tilt_deg", p.start_tilt_deg.unwrap_or(0.0))?,
+        ),
+        start_offset_mm: offset,
+    })
+}
+
+fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
+    let method = match s.method.as_deref() {
+        None | Some("nelder_mead") => Method::NelderMead,
+        Some("particle_swarm") => Method::ParticleSwarm,
+        Some(m) => return Err(err(path, "search.method", format!("{m:?}: \"nelder_mead\" or \"particle_swarm\""))),
+    };
+    let count = |k: &str, v: Option<u32>, default: u32, most: u32| -> Result<u32, DesignError> {
+        let v = v.unwrap_or(default);
+        if !(1..=most).contains(&v) {
+            return Err(err(path, format!("search.{k}"), format!("{v}: within [1, {most}]")));
+        }
+        Ok(v)
+    };
+    let worlds = count("worlds", s.worlds, 10, 10_000)?;
+    let race = match &s.race {
+        None => Race { min: worlds, batch: worlds, max: 4 * worlds, confidence: 0.9 },
+        Some(r) => {
+            if r.max < worlds || r.batch == 0 || r.max > 10_000 {
+                return Err(err(
+                    path,
+                    "search.race",
+                    format!("max = {}, batch = {}: max within [worlds = {worlds}, 10000], batch >= 1", r.max, r.batch),
+                ));
+            }
+            Race { min: worlds, batch: r.batch, max: r.max, confidence: 0.9 }
+        }
+    };
+    Ok(Search {
+        method,
+        evaluations: count("evaluations", s.evaluations, 40, MOST_EVALUATIONS)?,
+        restarts: count("restarts", s.restarts, 1, 100)?,
+        worlds,
+        finalists: count("finalists", s.finalists, 4, 100)?,
+        race,
+        seed: s.seed.unwrap_or(2018),
+    })
+}
+
+/// Whether some design of the space can meet the objective's constraints as the file states
+/// them (the set size budget against the set sizes the study runs): a constraint no design can
+/// meet is refused before anything runs.
+fn feasible_somewhere(path: &Path, space: &DesignSpace) -> Result<(), DesignError> {
+    let sizes: Vec<i64> = get_dotted(&space.base, "study.set_sizes")
+        .and_then(|v| v.as_array())
+        .map(|a| a.iter().filter_map(toml::Value::as_integer).collect())
+        .unwrap_or_default();
+    if let Some(most) = space.objective.set_size_at_most
+        && !sizes.is_empty()
+        && sizes.iter().all(|&n| n > i64::from(most))
+    {
+        return Err(err(
+            path,
+            "objective.set_size_at_most",
+            format!("{most}: no design can meet it: every set size the study runs (study.set_sizes = {sizes:?}) is larger"),
+        ));
+    }
+    if let (Some(p), Some(h)) = (&space.points, space.objective.campaign_h_at_most) {
+        let _ = (p, h);
+    }
+    // The points must fit: the fewest points at the least spacing inside the region.
+    if let Some(p) = &space.points {
+        let (span_x, span_y, span_z) = match &p.region {
+            Region::Plate { x_mm, y_mm, .. } => (x_mm[1] - x_mm[0], y_mm[1] - y_mm[0], 0.0),
+            Region::Box { x_mm, y_mm, z_mm } => (x_mm[1] - x_mm[0], y_mm[1] - y_mm[0], z_mm[1] - z_mm[0]),
+        };
+        let diagonal = (span_x * span_x + span_y * span_y + span_z * span_z).sqrt();
+        if p.count.0 >= 2 && diagonal < p.min_spacing_mm {
+            return Err(err(
+                path,
+                "points.min_spacing_mm",
+                format!("{}: no design can meet it: the region's diagonal is {diagonal:.0} mm, too small for two points", p.min_spacing_mm),
+            ));
+        }
+    }
+    Ok(())
+}

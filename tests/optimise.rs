@@ -1,0 +1,208 @@
+//! `calsim optimise`: bad design files are one line naming the file and the key (exit 2); the
+//! search reaches a known optimum through the design space's own decoding (a two-variable plate
+//! checked against a dense grid); a small TriCal question gives the same bytes for 1 and 2
+//! threads and for its restarts run as 1 or 3 shards, and resumes from its per-world files.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use calsim::design::optimise::{search, spec};
+use common::{calsim, repo, scratch};
+
+/// A design file over `ci_quick.toml` with `body` after the base.
+fn design_file(dir: &Path, name: &str, body: &str) -> PathBuf {
+    let base = repo().join("scenarios/ci_quick.toml");
+    let p = dir.join(name);
+    std::fs::write(&p, format!("base = {:?}\n{body}", base.display().to_string())).unwrap();
+    p
+}
+
+const OBJECTIVE: &str = "[objective]\nmaximise = \"success\"\nstatistic = \"max\"\nthreshold_mm = 0.5\nconfidence = 0.9\n";
+
+/// Runs `calsim optimise` on a design file that must be refused; returns its one line of stderr.
+fn refused(file: &Path, out: &Path) -> String {
+    let o = calsim().args(["optimise"]).arg(file).arg("--out").arg(out).output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "exit 2 expected: {stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "one line: {stderr}");
+    assert!(stderr.contains(&file.display().to_string()), "names the file: {stderr}");
+    stderr
+}
+
+#[test]
+fn bad_design_files_are_one_line_naming_the_file_and_the_key() {
+    let tmp = scratch("optimise-bad");
+    let dir = tmp.path();
+    let cases: [(&str, String, &str); 7] = [
+        (
+            "unknown.toml",
+            format!("[[variable]]\nkey = \"trical.no_such_key\"\nrange = [1.0, 2.0]\n{OBJECTIVE}"),
+            "variable[0] (trical.no_such_key).key",
+        ),
+        ("reversed.toml", format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.02, 0.01]\n{OBJECTIVE}"), "range"),
+        ("empty.toml", format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.02, 0.02]\n{OBJECTIVE}"), "range"),
+        ("nan.toml", format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [nan, 0.02]\n{OBJECTIVE}"), "range"),
+        ("choices.toml", format!("[[variable]]\nkey = \"study.solver\"\nchoices = []\n{OBJECTIVE}"), "choices"),
+        (
+            "unmeetable.toml",
+            format!("[fixed]\n\"study.set_sizes\" = [50, 75]\n{OBJECTIVE}set_size_at_most = 20\n"),
+            "objective.set_size_at_most",
+        ),
+        (
+            "spacing.toml",
+            format!(
+                "[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 4]\nregion = \"plate\"\nx_mm = [0.0, 50.0]\ny_mm = [0.0, 50.0]\nmin_spacing_mm = 200.0\n{OBJECTIVE}"
+            ),
+            "points.min_spacing_mm",
+        ),
+    ];
+    for (name, body, key) in cases {
+        let f = design_file(dir, name, &body);
+        let line = refused(&f, &dir.join("out"));
+        assert!(line.contains(key), "{name}: names {key}: {line}");
+    }
+    // A value out of the scenario's own rules at an end of the range is refused before anything runs.
+    let f = design_file(dir, "rules.toml", &format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 5.0]\n{OBJECTIVE}"));
+    let line = refused(&f, &dir.join("out"));
+    assert!(line.contains("trical.epsilon_mm") && line.contains("value 5"), "{line}");
+}
+
+/// A plate whose three spheres are held at the start (an equilateral triangle 300 mm a side) and
+/// whose height and tilt are the two variables searched; the
+/// synthetic objective is the distance of the spheres' centroid (in the base scenario's {W}) from
+/// a target the plate can reach. The search, through the space's own decoding, lands where a
+/// dense grid over the same two variables puts the optimum.
+#[test]
+fn the_search_reaches_the_optimum_of_a_two_variable_plate_that_a_dense_grid_finds() {
+    let tmp = scratch("optimise-grid");
+    let f = design_file(
+        tmp.path(),
+        "plate.toml",
+        &format!(
+            "[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 3]\nregion = \"plate\"\nx_mm = [0.0, 300.0]\ny_mm = [0.0, 300.0]\nheight_mm = [-100.0, 300.0]\n\
+             tilt_deg = [-30.0, 30.0]\nmin_spacing_mm = 50.0\nstart_spacing_mm = 300.0\n{OBJECTIVE}"
+        ),
+    );
+    let space = spec::load(&f).unwrap();
+    assert_eq!(space.dimensions(3), 8, "height, tilt and two coordinates per sphere (held at the start here)");
+    let target = [150.0, 80.0, 140.0]; // reached inside the ranges: tilt 22.5 deg, height 107 mm
+    let score = |x: &[f64]| {
+        let d = space.decode(3, x);
+        assert!(d.violation.is_none(), "{:?}", d.violation);
+        let c: Vec<f64> = (0..3).map(|k| d.points_mm.iter().map(|p| p[k]).sum::<f64>() / 3.0).collect();
+        c.iter().zip(target).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt()
+    };
+    let start = space.start(3);
+    let with = |h: f64, t: f64| {
+        let mut x = start.clone();
+        x[0] = h;
+        x[1] = t;
+        x
+    };
+    // Dense grid: 201 x 201 over height and tilt.
+    let mut grid = (f64::INFINITY, 0.0, 0.0);
+    for i in 0..=200 {
+        for j in 0..=200 {
+            let (h, t) = (i as f64 / 200.0, j as f64 / 200.0);
+            let v = score(&with(h, t));
+            if v < grid.0 {
+                grid = (v, h, t);
+            }
+        }
+    }
+    for method in [spec::Method::NelderMead, spec::Method::ParticleSwarm] {
+        let mut best = (f64::INFINITY, 0.0, 0.0);
+        let mut f2 = |x: &[f64]| {
+            let v = score(&with(x[0], x[1]));
+            if v < best.0 {
+                best = (v, x[0], x[1]);
+            }
+            v
+        };
+        search::minimise(method, &[start[0], start[1]], 400, 11, &mut f2).unwrap();
+        // The grid's step is 0.005 of each range (2 mm, 0.3 deg): the search must do as well.
+        assert!(best.0 <= grid.0 + 0.5, "{method:?}: best {best:?} against the grid's {grid:?}");
+        assert!((best.1 - grid.1).abs() < 0.02 && (best.2 - grid.2).abs() < 0.02, "{method:?}: {best:?} vs grid {grid:?}");
+    }
+}
+
+/// The hand-found layout (5 spheres 150 mm apart, plate +100 mm, tilted 20 deg) is the start of
+/// the shipped design file: decoding it gives the spheres and plate of cell_sizing.toml's point 3.
+#[test]
+fn the_shipped_design_file_starts_from_the_hand_found_design() {
+    let space = spec::load(&repo().join("scenarios/designs/irb120_spheres.toml")).unwrap();
+    let d = space.decode(5, &space.start(5));
+    assert!(d.violation.is_none(), "{:?}", d.violation);
+    let layout = calsim::design::sweep::spec::circle_layout(5, 150.0);
+    let get = |k: &str| calsim::design::sweep::spec::get_dotted(&d.table, k).cloned().unwrap();
+    let spheres = get("cell.spheres_w_mm");
+    for (k, p) in layout.iter().enumerate() {
+        for j in 0..3 {
+            let v = spheres[k][j].as_float().unwrap();
+            assert!((v - p[j]).abs() < 2e-3, "sphere {k} coordinate {j}: {v} vs {}", p[j]);
+        }
+    }
+    let offset: Vec<f64> = get("cell.plate_offset_mm_deg").as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+    for (a, b) in offset.iter().zip([0.0, 0.0, 100.0, 0.0, 0.0, 20.0]) {
+        assert!((a - b).abs() < 1e-3, "{offset:?}");
+    }
+    // The pool starts at the file's own start (110 per sphere), not the hand-found 120.
+    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(110));
+}
+
+const SMALL: &str = "[fixed]\n\"study.set_sizes\" = [20, 30]\n\"study.table_set_size\" = 30\n\"study.repetitions\" = 2\n\"campaign.validation_poses\" = 60\n\
+    \"campaign.pool_per_sphere\" = 20\n\n[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 3]\nregion = \"plate\"\nx_mm = [0.0, 300.0]\ny_mm = [0.0, 300.0]\n\
+    height_mm = [0.0, 100.0]\ntilt_deg = [0.0, 20.0]\nmin_spacing_mm = 150.0\nstart_spacing_mm = 300.0\n\n[search]\nevaluations = 3\nrestarts = 3\nworlds = 2\nfinalists = 1\n\
+    race = { max = 3, batch = 1 }\n\n[verify]\nheld_out = 2\n";
+
+fn tables(dir: &Path) -> Vec<Vec<u8>> {
+    ["trace.parquet", "race.parquet", "verified.parquet", "best_design.toml"].iter().map(|f| std::fs::read(dir.join(f)).unwrap()).collect()
+}
+
+fn optimise(file: &Path, out: &Path, shard: Option<(usize, usize)>, merge: bool, threads: u32) -> calsim::app::optimise::OptimiseReport {
+    let spec = calsim::app::optimise::OptimiseSpec {
+        file: file.to_path_buf(),
+        out: out.to_path_buf(),
+        shard,
+        merge,
+        threads: Some(threads),
+        method: None,
+        plots: false,
+    };
+    calsim::app::optimise::run(&spec, &calsim::app::Quiet).unwrap()
+}
+
+#[test]
+fn a_small_question_gives_the_same_bytes_for_any_threads_and_shards_and_resumes() {
+    let tmp = scratch("optimise-determinism");
+    let dir = tmp.path();
+    let f = design_file(dir, "q.toml", &format!("{SMALL}{OBJECTIVE}"));
+    let one = dir.join("one");
+    let r = optimise(&f, &one, None, false, 1);
+    assert_eq!(r.restarts, 3, "three restarts of the one count");
+    assert!(r.evaluations <= 9, "at most 3 designs per restart: {}", r.evaluations);
+    let reference = tables(&one.join("q"));
+    optimise(&f, &dir.join("two"), None, false, 2);
+    assert_eq!(tables(&dir.join("two/q")), reference, "1 vs 2 threads");
+    let sharded = dir.join("sharded");
+    for k in 0..3 {
+        let s = optimise(&f, &sharded, Some((k, 3)), false, 2);
+        assert_eq!(s.restarts, 1);
+        assert!(s.dest.is_none(), "a shard does not merge");
+    }
+    optimise(&f, &sharded, None, true, 2);
+    assert_eq!(tables(&sharded.join("q")), reference, "1 vs 3 shards");
+    // A killed run resumes: remove the results and a restart's record, keep the per-world files.
+    std::fs::remove_dir_all(one.join("q")).unwrap();
+    let record = std::fs::read_dir(one.join("q.evaluations"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("restart-001-"))
+        .expect("the record of restart 1");
+    std::fs::remove_file(record).unwrap();
+    optimise(&f, &one, None, false, 2);
+    assert_eq!(tables(&one.join("q")), reference, "resumed from the per-world files");
+    let summary = std::fs::read_to_string(one.join("q/summary.md")).unwrap();
+    assert!(summary.contains("held-out worlds (reported)"), "{summary}");
+}
