@@ -338,7 +338,8 @@ pub struct ShardInfo {
     pub points: Vec<Vec<String>>,
     /// Per grid point, the datum spheres in {W}, mm (TriCal; empty for other devices).
     pub layouts: Vec<Vec<[f64; 3]>>,
-    /// Per grid point, where the robot stands in {W} (TriCal; empty for other devices).
+    /// Per grid point, where the robot stands in {W} (TriCal; empty for other devices; one entry
+    /// when it is the same at every point).
     #[serde(default)]
     pub robots: Vec<Option<crate::device::RobotInCell>>,
     /// The whole scenario of grid point 0 as TOML (what `calsim run` takes to redo it, recording
@@ -412,7 +413,7 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
         keys: sweep.keys.clone(),
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
         layouts: sweep.points.iter().map(|p| p.scenario.layout_mm()).collect(),
-        robots: sweep.points.iter().map(|p| p.scenario.robot_in_cell()).collect(),
+        robots: robots_once(sweep.points.iter().map(|p| p.scenario.robot_in_cell()).collect()),
         scenario: sweep.points.first().map(|p| p.scenario.header().text.clone()).unwrap_or_default(),
         changes: tables.iter().map(|t| record::changes(&base, t)).collect(),
         objective: sweep.objective.clone(),
@@ -420,6 +421,12 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
         shard: k,
         count,
     }
+}
+
+/// Where each point's robot stands, kept once when it is the same at every point (the record
+/// grows with what varies: a 9,001-point sweep of one cell keeps one entry).
+fn robots_once(robots: Vec<Option<crate::device::RobotInCell>>) -> Vec<Option<crate::device::RobotInCell>> {
+    if robots.windows(2).all(|w| w[0] == w[1]) { robots.into_iter().take(1).collect() } else { robots }
 }
 
 /// Runs the units shard `k` of `count` owes to the sweep's current stage (every unit of the shard,

@@ -171,7 +171,7 @@ pub fn write(dir: &Path, info: &ShardInfo, points: &[PointRow], designs: &[Desig
                 Panel {
                     title: format!("{}: {note}", names.point(p)),
                     spheres: info.layouts[p].clone(),
-                    robot: info.robots.get(p).cloned().flatten(),
+                    robot: (if info.robots.len() == 1 { info.robots.first() } else { info.robots.get(p) }).cloned().flatten(),
                     ran: at.is_some(),
                 }
             })

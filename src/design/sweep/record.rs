@@ -208,9 +208,9 @@ pub fn check(info: &ShardInfo, file: &Path) -> Result<Vec<PointStudy>, MergeErro
             return Err(fail(key, format!("{n} entries for {points} grid points")));
         }
     }
-    // Where each point's robot stands (drawn in the layout figures only): none, or one per point,
+    // Where each point's robot stands (drawn in the layout figures only): none, one for every point, or one per point,
     // each finite, within a kilometre, its up axis a unit vector.
-    if !info.robots.is_empty() && info.robots.len() != points {
+    if info.robots.len() > 1 && info.robots.len() != points {
         return Err(fail("robots", format!("{} entries for {points} grid points", info.robots.len())));
     }
     for (p, r) in info.robots.iter().enumerate() {
