@@ -300,7 +300,7 @@ fn realisations(
         Some(toml::Value::Table(t)) => {
             if let Some(k) = t.keys().find(|k| !["max", "confidence", "batch", "min"].contains(&k.as_str())) {
                 // In serde's words, so that `calsim keys sweep` finds the table's fields by probing.
-                return bad("realisations", format!("unknown field `{k}`, expected one of `max`, `min`, `batch`, `confidence` (adaptive realisations)"));
+                return bad(&format!("realisations.{k}"), format!("unknown field `{k}`, expected one of `max`, `min`, `batch`, `confidence` (adaptive realisations)"));
             }
             let max = match t.get("max") {
                 Some(v) => count("realisations.max", v)?,
