@@ -560,7 +560,8 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
     if let Some(d) = &r.distribution {
         println!(
             "\nover {} realisations (realisation 0 is the run above): a figure misses when the interval of its median lies wholly \
-             outside its band, open when it straddles an edge; false-alarm rate {} over the figures checked",
+             outside its band, open when it straddles an edge, unresolved (a failure) when too few worlds gave it a value for a bounded \
+             interval; false-alarm rate {} over the figures checked",
             r.realisations_run, r.false_alarm
         );
         println!("{}", distribution_table(d));

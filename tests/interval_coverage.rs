@@ -171,7 +171,7 @@ fn the_check_over_realisations_keeps_its_false_alarm_rate_and_catches_a_figure_m
     for (k, shift) in [0.0, 0.6].into_iter().enumerate() {
         for _ in 0..trials {
             let runs: Vec<Vec<Check>> = (0..worlds).map(|_| world(&mut rng, shift)).collect();
-            let d = over_realisations(&runs, alpha);
+            let d = over_realisations(&runs, worlds, alpha);
             if d.iter().any(|c| c.pass == Some(false)) {
                 failed[k] += 1;
             }

@@ -267,11 +267,14 @@ fn unidentifiable_parameter_sets_are_refused_at_load() {
     assert!(err.contains("[study] parameters = []") && err.contains("at least one parameter"), "{err}");
 }
 
-/// The rule of a check over realisations: each banded figure's median gets its order-statistic
-/// interval at 1 - 2a/k (here a = 0.05 and k = 2 banded figures: 95 %, over 20 worlds the 6th and
-/// 15th values); inside the band it passes, wholly outside it misses, across an edge it is open
-/// (and passes the gate: no evidence); rows without a bound are reported only; a world without a
-/// value (NaN) is left out of the order statistics.
+/// The rule of a check over realisations: with a = 0.05 and k = 2 bounded figures, the band's
+/// median gets its order-statistic interval at 1 - a/k = 97.5 % (over 20 worlds the 5th and 16th
+/// values: P(Bin(20, 1/2) <= 4) = 0.0059 <= 0.0125 < P(<= 5) = 0.0207), the one-sided rule's at
+/// 1 - 2a/k = 95 %; inside the bound a figure passes, wholly outside it misses, across an edge it
+/// is open (and passes the gate: no evidence); rows without a bound are reported only. A world
+/// without a value (NaN, or a failed study) widens the interval on both sides: one such world
+/// moves the lower end down one rank and leaves the upper one; with 4 worlds (too few at 97.5 %)
+/// the figure is unresolved and fails the gate.
 #[test]
 fn a_check_over_realisations_misses_a_figure_only_when_its_interval_lies_outside_the_band() {
     use calsim::study::check::{Band, Bound, Check, Verdict, over_realisations};
@@ -289,23 +292,53 @@ fn a_check_over_realisations_misses_a_figure_only_when_its_interval_lies_outside
             .collect()
     };
     let verdicts = |d: &[calsim::study::check::DistributionCheck]| (d[0].verdict, d[1].verdict, d[2].verdict);
-    let d = over_realisations(&runs(0.9, 1.1), 0.05);
-    assert!((d[0].confidence - 0.95).abs() < 1e-12);
+    let d = over_realisations(&runs(0.9, 1.1), 20, 0.05);
+    assert!((d[0].confidence - 0.975).abs() < 1e-12 && (d[1].confidence - 0.95).abs() < 1e-12);
     let (lo, hi) = d[0].interval;
-    assert!((lo - (0.9 + 0.2 * 5.0 / 19.0)).abs() < 1e-12 && (hi - (0.9 + 0.2 * 14.0 / 19.0)).abs() < 1e-12, "{lo} {hi}");
+    assert!((lo - (0.9 + 0.2 * 4.0 / 19.0)).abs() < 1e-12 && (hi - (0.9 + 0.2 * 15.0 / 19.0)).abs() < 1e-12, "{lo} {hi}");
     assert_eq!(verdicts(&d), (Some(Verdict::Pass), Some(Verdict::Pass), None));
     assert_eq!(d[2].pass, None);
     // Every value above the band: both bounded rows miss.
-    let d = over_realisations(&runs(1.25, 1.45), 0.05);
+    let d = over_realisations(&runs(1.25, 1.45), 20, 0.05);
     assert_eq!(verdicts(&d), (Some(Verdict::Miss), Some(Verdict::Miss), None));
     assert_eq!((d[0].pass, d[1].pass), (Some(false), Some(false)));
     // Straddling the band's upper edge 1.2 (interval 1.153-1.247): open, not a miss.
-    let d = over_realisations(&runs(1.1, 1.3), 0.05);
+    let d = over_realisations(&runs(1.1, 1.3), 20, 0.05);
     assert_eq!(d[0].verdict, Some(Verdict::Open));
     assert_eq!(d[0].pass, Some(true));
     let mut with_nan = runs(0.9, 1.1);
     with_nan[3][0].value = f64::NAN;
-    assert_eq!(over_realisations(&with_nan, 0.05)[0].count, 19);
+    let d = over_realisations(&with_nan, 20, 0.05)[0].clone();
+    assert_eq!((d.count, d.missing), (19, 1));
+    // The 19 values without world 3 (0.9 + 0.2 * 3 / 19): ranks 4 and 16 of them.
+    let left: Vec<f64> = (0..20).filter(|&i| i != 3).map(|i| 0.9 + 0.2 * f64::from(i) / 19.0).collect();
+    assert_eq!(d.interval, (left[3], left[15]));
+    // A failed study is a world without a row: the same as the NaN.
+    let mut failed = runs(0.9, 1.1);
+    failed.remove(3);
+    assert_eq!(over_realisations(&failed, 20, 0.05)[0].interval, d.interval);
+    // All but 4 worlds failed: unresolved, a failure of the gate; and it stays one however the 4 lie.
+    let few: Vec<Vec<Check>> = runs(0.9, 1.1).into_iter().take(4).collect();
+    let d = over_realisations(&few, 20, 0.05);
+    assert_eq!((d[0].verdict, d[0].pass), (Some(Verdict::Unresolved), Some(false)));
+    assert_eq!((d[1].verdict, d[1].pass), (Some(Verdict::Unresolved), Some(false)));
+    assert_eq!(d[2].pass, None);
+}
+
+/// The fewest worlds a check needs: at a = 0.01 over 6 bounded figures, one band among them, the
+/// band's interval at 1 - 0.01/6 needs P(Bin(n, 1/2) = 0) = 2^-n <= 0.01/12 = 0.00083 (2^-10 =
+/// 0.00098 fails, 2^-11 = 0.00049 holds: 11 worlds); with one-sided bounds only, 2^-n <= 0.01/6
+/// = 0.0017 (2^-9 = 0.0020 fails, 2^-10 holds: 10 worlds).
+#[test]
+fn a_check_over_realisations_names_the_fewest_worlds_that_can_judge_it() {
+    use calsim::study::check::{Band, Bound, Check, fewest_worlds};
+    let rule = |v: f64| Check::rule("rule", "-", v, String::new(), Some(Bound::AtMost(1.0)), |_| String::new());
+    let mut rows: Vec<Check> = (0..5).map(|_| rule(0.5)).collect();
+    rows.push(Check::band("banded", 1.0, 1.0, Some(Band { value: 1.0, tolerance: 0.2 })));
+    assert_eq!(fewest_worlds(&rows, 0.01), 11);
+    rows.pop();
+    rows.push(rule(0.5));
+    assert_eq!(fewest_worlds(&rows, 0.01), 10);
 }
 
 /// The validation with compensated targets is a round trip where the model is exact: the true
@@ -335,27 +368,41 @@ fn compensated_targets_round_trip_on_the_exact_model() {
     }
 }
 
-/// Over several worlds the check judges each figure's median by its interval: with three worlds
-/// no interval at the scenario's confidence is bounded, so every banded figure is open (no
-/// evidence either way) and the check passes; check.json carries the realisations, the
-/// false-alarm rate and a verdict per figure.
+/// A check over fewer worlds than give its figures bounded intervals could judge nothing and would
+/// pass whatever the model: it is refused before it runs, naming the count it needs (ci_quick's 6
+/// bounded figures at a = 0.01, bands among them: 11 worlds). Over 5 worlds at a = 0.5 every
+/// interval is bounded (a band at 1 - 0.5/6 needs 2^-n <= 0.042: n >= 5) and check.json carries
+/// the realisations, the false-alarm rate and a verdict and interval per figure.
 #[test]
-fn a_check_over_too_few_worlds_for_an_interval_reports_every_figure_open_and_passes() {
+fn a_check_over_too_few_worlds_to_judge_is_refused_naming_the_count_it_needs() {
     let tmp = scratch("check-worlds");
     let dir = tmp.path();
+    let args = ["--set-sizes", "50:75:25", "--repetitions", "2", "--no-plots", "--no-recording", "--out"];
+    let out = calsim().args(["check", "scenarios/ci_quick.toml", "--realisations", "3"]).args(args).arg(dir).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    // The run's banner, then the error as one line.
+    let last = stderr.trim().lines().last().unwrap_or("");
+    assert_eq!(stderr.matches("error").count(), 1, "{stderr}");
+    assert!(last.starts_with("error: --realisations: 3:") && last.contains("at least 11 realisations"), "{stderr}");
+    assert!(!dir.join("ci_quick").exists(), "nothing written");
     let out = calsim()
-        .args(["check", "scenarios/ci_quick.toml", "--realisations", "3", "--set-sizes", "50:75:25", "--repetitions", "2"])
-        .args(["--no-plots", "--no-recording", "--out"])
+        .args(["check", "scenarios/ci_quick.toml", "--realisations", "5", "--false-alarm", "0.5"])
+        .args(args)
         .arg(dir)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     let verdict: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("ci_quick/check.json")).unwrap()).unwrap();
-    assert_eq!(verdict["realisations"], 3);
-    assert_eq!(verdict["false_alarm"], 0.01);
+    assert_eq!(verdict["realisations"], 5);
+    assert_eq!(verdict["false_alarm"], 0.5);
     let figures = verdict["figures"].as_array().unwrap();
     let banded: Vec<_> = figures.iter().filter(|f| f["verdict"] != "report").collect();
     assert_eq!(banded.len(), 6);
-    assert!(banded.iter().all(|f| f["verdict"] == "open" && f["interval"].is_null()), "{banded:?}");
+    assert!(
+        banded.iter().all(|f| ["pass", "open", "miss"].contains(&f["verdict"].as_str().unwrap()) && f["interval"].is_array() && f["missing"] == 0),
+        "{banded:?}"
+    );
+    assert_eq!(verdict["pass"], out.status.success());
 }

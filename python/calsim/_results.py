@@ -71,7 +71,11 @@ _DISTRIBUTION_SCHEMA = {
     "median": pl.Float64,
     "p10": pl.Float64,
     "p90": pl.Float64,
+    "interval_lo": pl.Float64,
+    "interval_hi": pl.Float64,
+    "confidence": pl.Float64,
     "count": pl.Int64,
+    "missing": pl.Int64,
     "band": pl.String,
     "result": pl.String,
 }
@@ -80,7 +84,9 @@ _DISTRIBUTION_SCHEMA = {
 class RunResult(Results):
     """What ``run`` and ``check`` did: the results directory, and ``checks`` (the published
     figures beside calsim's, with band and verdict ``pass``, ``miss`` or ``-``), ``distribution``
-    (the same over realisations, or None), ``passed`` / ``missed``, ``timing``, ``warnings``."""
+    (the same over realisations, or None: each figure's median with its interval and confidence,
+    the worlds without a value, and ``pass``, ``open``, ``miss`` or ``unresolved``, the last a
+    failure: too few worlds to judge), ``passed`` / ``missed``, ``timing``, ``warnings``."""
 
     def __init__(self, report: dict) -> None:
         super().__init__(report["dest"])

@@ -331,9 +331,14 @@ fn run<'py>(
                 row.set_item("median", c.median)?;
                 row.set_item("p10", c.p10)?;
                 row.set_item("p90", c.p90)?;
+                row.set_item("interval_lo", c.interval.0)?;
+                row.set_item("interval_hi", c.interval.1)?;
+                row.set_item("confidence", c.confidence)?;
                 row.set_item("count", c.count)?;
+                row.set_item("missing", c.missing)?;
                 row.set_item("band", &c.row.band)?;
-                row.set_item("result", verdict(c.pass))?;
+                // pass, open, miss, unresolved (a failure: too few worlds to judge), or `-`.
+                row.set_item("result", c.verdict.map_or_else(|| "-".to_string(), |v| v.word().to_lowercase()))?;
                 rows.append(row)?;
             }
             d.set_item("distribution", rows)?;

@@ -212,6 +212,15 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     let mut distribution = None;
     let mut realisations_run = 1;
     if count > 1 {
+        // Fewer worlds than give a bounded interval could judge nothing: refused before they run.
+        let fewest = crate::study::check::fewest_worlds(&checks, false_alarm);
+        if (count as usize) < fewest {
+            let key = if spec.realisations.is_some() { "--realisations".to_string() } else { format!("{}: study.check_realisations", spec.scenario.display()) };
+            return Err(Error::input(
+                key,
+                format!("{count}: judging its figures at a false-alarm rate of {false_alarm} takes at least {fewest} realisations (1 runs the plain check)"),
+            ));
+        }
         let others = realisations(count, observer, |r| {
             let seed = crate::seeds::realisation_seed(h.seed, r);
             pool.install(|| scenario.run(seed, &|_, _| {}).and_then(|o| o.checks())).map_err(|e| e.to_string())
@@ -219,10 +228,10 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         let mut runs = vec![checks.clone()];
         runs.extend(others);
         realisations_run = runs.len();
-        distribution = Some(over_realisations(&runs, false_alarm));
+        distribution = Some(over_realisations(&runs, count as usize, false_alarm));
     }
     let check_report = spec.check.then(|| match &distribution {
-        Some(d) => CheckReport::over(&h.name, h.seed, realisations_run, false_alarm, d),
+        Some(d) => CheckReport::over(&h.name, h.seed, count as usize, false_alarm, d),
         None => CheckReport::single(&h.name, h.seed, &checks),
     });
     let t_write = Instant::now();

@@ -142,6 +142,9 @@ pub enum Verdict {
     Open,
     /// The interval lies wholly outside the bound: evidence that the model's median misses it.
     Miss,
+    /// Too few worlds gave the figure for a bounded interval at the confidence asked: no evidence
+    /// was collected, and the gate fails it (a check that cannot judge must not pass).
+    Unresolved,
 }
 
 impl Verdict {
@@ -151,6 +154,7 @@ impl Verdict {
             Verdict::Pass => "pass",
             Verdict::Open => "open",
             Verdict::Miss => "MISS",
+            Verdict::Unresolved => "UNRESOLVED",
         }
     }
 }
@@ -168,16 +172,19 @@ pub struct DistributionCheck {
     pub p90: f64,
     /// The distribution-free interval of the median at `confidence` (order statistics).
     pub interval: (f64, f64),
-    /// The confidence of `interval`: `1 - 2 false_alarm / figures checked` (see [`over_realisations`]).
+    /// The confidence of `interval` (see [`over_realisations`]).
     pub confidence: f64,
     /// Realisations with a finite value.
     pub count: usize,
+    /// Worlds asked for that gave no finite value (the study failed, or the figure was not finite).
+    pub missing: usize,
     /// The published value (where the paper prints one) within P10-P90 of the realisations:
     /// reported, not part of the verdict.
     pub covers_published: Option<bool>,
     /// The verdict, `None` without a bound.
     pub verdict: Option<Verdict>,
-    /// Passed the gate (not [`Verdict::Miss`]), `None` without a bound.
+    /// Passed the gate (neither [`Verdict::Miss`] nor [`Verdict::Unresolved`]), `None` without a
+    /// bound.
     pub pass: Option<bool>,
 }
 
@@ -202,37 +209,92 @@ fn judge(b: &Bound, (lo, hi): (f64, f64)) -> Verdict {
 }
 
 /// The distribution checks of the same rows computed in several realisations (`runs[r][i]` is row
-/// i of realisation r; every realisation has the rows of the first), judged as a test whose
-/// false-alarm rate is at most `false_alarm`.
+/// i of realisation r; every realisation has the rows of the first), out of `worlds` asked for (a
+/// world whose study failed has no row), judged as a test whose false-alarm rate is at most
+/// `false_alarm`.
 ///
-/// Each bounded figure's median over the realisations gets its distribution-free interval at
-/// confidence `1 - 2 a / k` (k figures with a bound, `a = false_alarm`); a figure misses only when
-/// that interval lies wholly outside its bound. When the model's true median of a figure satisfies
-/// the bound, the interval misses it on the far side with probability at most `a / k`, so the
-/// probability that any of the k figures misses is at most `a` (Bonferroni), for any seed and any
-/// number of realisations. Too few realisations give an unbounded interval: every figure is open.
-pub fn over_realisations(runs: &[Vec<Check>], false_alarm: f64) -> Vec<DistributionCheck> {
+/// Each bounded figure's median over the worlds gets its distribution-free interval; a figure
+/// misses only when that interval lies wholly outside its bound. With k bounded figures and
+/// `a = false_alarm`, a one-sided bound's interval has confidence `1 - 2a/k`: when the model's
+/// true median satisfies the bound, the interval lies beyond it with probability at most `a/k`. A
+/// band can be missed on either side, `a/k` each at that confidence, so a band's interval has
+/// confidence `1 - a/k`. Over the k figures a false alarm has probability at most `a`
+/// (Bonferroni), for any seed and any number of worlds.
+///
+/// A world without a finite value (its study failed, or the figure is NaN or infinite in it) is
+/// not left out, which would judge only the worlds that went well: the interval's lower end is
+/// taken with such worlds below every value, its upper end with them above every value, so they
+/// can neither produce a miss nor a pass. An interval left unbounded (too few worlds for the
+/// confidence, or too many without a value) is [`Verdict::Unresolved`], a failure of the gate.
+pub fn over_realisations(runs: &[Vec<Check>], worlds: usize, false_alarm: f64) -> Vec<DistributionCheck> {
     let Some(first) = runs.first() else { return Vec::new() };
     let k = first.iter().filter(|r| r.bound.is_some()).count().max(1);
-    let confidence = 1.0 - 2.0 * false_alarm / k as f64;
+    let worlds = worlds.max(runs.len());
     first
         .iter()
         .enumerate()
         .map(|(i, row)| {
             let values: Vec<f64> = runs.iter().filter_map(|r| r.get(i)).map(|c| c.value).collect();
             let sorted = crate::study::stats::finite_sorted(&values);
+            let missing = worlds - sorted.len();
             let q = |p: f64| crate::study::stats::quantile(&sorted, p);
             let (median, p10, p90) = (q(0.5), q(0.1), q(0.9));
-            let interval = crate::study::interval::median_interval(&sorted, confidence);
+            let confidence = confidence_of(row.bound.as_ref(), k, false_alarm);
+            let interval = interval_with_missing(&sorted, missing, confidence);
             let covers_published = match (row.bound, row.published_value) {
                 (Some(Bound::Band(_)), Some(p)) => Some(p10 <= p && p <= p90),
                 _ => None,
             };
-            let verdict = row.bound.map(|b| judge(&b, interval));
-            let pass = verdict.map(|v| v != Verdict::Miss);
-            DistributionCheck { row: row.clone(), median, p10, p90, interval, confidence, count: sorted.len(), covers_published, verdict, pass }
+            let bounded = interval.0.is_finite() && interval.1.is_finite();
+            let verdict = row.bound.map(|b| if bounded { judge(&b, interval) } else { Verdict::Unresolved });
+            let pass = verdict.map(|v| !matches!(v, Verdict::Miss | Verdict::Unresolved));
+            DistributionCheck {
+                row: row.clone(),
+                median,
+                p10,
+                p90,
+                interval,
+                confidence,
+                count: sorted.len(),
+                missing,
+                covers_published,
+                verdict,
+                pass,
+            }
         })
         .collect()
+}
+
+/// The confidence of a figure's interval among `k` bounded figures at `false_alarm` (see
+/// [`over_realisations`]): `1 - a/k` for a band, `1 - 2a/k` for a one-sided bound.
+pub fn confidence_of(bound: Option<&Bound>, k: usize, false_alarm: f64) -> f64 {
+    let k = k.max(1) as f64;
+    match bound {
+        Some(Bound::Band(_)) => 1.0 - false_alarm / k,
+        _ => 1.0 - 2.0 * false_alarm / k,
+    }
+}
+
+/// The fewest worlds that give a bounded interval to every figure of `rows` at `false_alarm` (when
+/// every world gives every figure a value).
+pub fn fewest_worlds(rows: &[Check], false_alarm: f64) -> usize {
+    let k = rows.iter().filter(|r| r.bound.is_some()).count();
+    let strictest = rows.iter().filter(|r| r.bound.is_some()).map(|r| confidence_of(r.bound.as_ref(), k, false_alarm)).fold(0.0, f64::max);
+    (1..=4096).find(|&n| crate::study::interval::median_ranks(n, strictest).is_some()).unwrap_or(4096)
+}
+
+/// The median interval of `sorted` (finite, ascending) with `missing` further worlds of unknown
+/// value: the lower end with them below every value, the upper end with them above.
+fn interval_with_missing(sorted: &[f64], missing: usize, confidence: f64) -> (f64, f64) {
+    let n = sorted.len() + missing;
+    match crate::study::interval::median_ranks(n, confidence) {
+        Some((j, k)) => {
+            let lo = if j > missing { sorted[j - 1 - missing] } else { f64::NEG_INFINITY };
+            let hi = sorted.get(k - 1).copied().unwrap_or(f64::INFINITY);
+            (lo, hi)
+        }
+        None => (f64::NEG_INFINITY, f64::INFINITY),
+    }
 }
 
 /// The published-versus-reproduced table of a summary, under a heading.
@@ -310,14 +372,14 @@ pub fn distribution_table(rows: &[DistributionCheck]) -> String {
                 d.row.published_value.map_or_else(|| d.row.published.clone(), |v| format!("{v:.3}")),
                 like.clone(),
                 in_the_form_of(like, d.median),
-                range(d.interval.0, d.interval.1),
+                format!("{} ({:.2} %)", range(d.interval.0, d.interval.1), 100.0 * d.confidence),
                 range(d.p10, d.p90),
                 d.row.band.clone(),
             ]
         })
         .collect();
-    let conf = format!("{:.2} % interval", 100.0 * rows.first().map_or(0.0, |d| d.confidence));
-    let head = ["figure", "published", "run 0", "median", conf.as_str(), "P10-P90", "band"];
+    // Bands and one-sided bounds have intervals at different confidences: each cell says its own.
+    let head = ["figure", "published", "run 0", "median", "interval of the median (confidence)", "P10-P90", "band"];
     let w: Vec<usize> = (0..7).map(|k| cells.iter().map(|c| c[k].chars().count()).max().unwrap_or(0).max(head[k].len())).collect();
     let line = |c: [&str; 7], verdict: &str| {
         format!(
@@ -353,7 +415,8 @@ pub struct CheckReport {
     pub scenario: String,
     /// Seed of realisation 0.
     pub seed: u64,
-    /// Realisations the figures were judged over (1: the plain run's values, judged as they are).
+    /// Realisations asked for, the figures judged over them (1: the plain run's values, judged as
+    /// they are); a world whose study failed counts, as a world without values.
     pub realisations: usize,
     /// The test's false-alarm rate (over realisations), the probability of a miss when the model's
     /// medians satisfy every bound.
@@ -389,8 +452,11 @@ pub struct CheckRow {
     pub covers_published: Option<bool>,
     /// The bound as written (`-` for a figure reported without one).
     pub band: String,
-    /// `pass`, `open` (over realisations: no evidence either way), `miss` or `report` (no bound).
+    /// `pass`, `open` (over realisations: no evidence either way), `miss`, `unresolved` (over
+    /// realisations: too few worlds with a value to judge; a failure) or `report` (no bound).
     pub verdict: String,
+    /// Worlds asked for that gave the figure no finite value.
+    pub missing: usize,
 }
 
 impl CheckReport {
@@ -409,6 +475,7 @@ impl CheckReport {
                 covers_published: None,
                 band: c.band.clone(),
                 verdict: c.pass.map_or("report", |p| if p { "pass" } else { "miss" }).to_string(),
+                missing: usize::from(!c.value.is_finite()),
             })
             .collect();
         let (checked, missed) = tally(checks);
@@ -434,8 +501,10 @@ impl CheckReport {
                     Verdict::Pass => "pass",
                     Verdict::Open => "open",
                     Verdict::Miss => "miss",
+                    Verdict::Unresolved => "unresolved",
                 })
                 .to_string(),
+                missing: d.missing,
             })
             .collect();
         let checked = rows.iter().filter(|d| d.pass.is_some()).count();
@@ -463,6 +532,10 @@ impl CheckReport {
             match f.verdict.as_str() {
                 "miss" => {
                     let _ = write!(s, "<failure message=\"{}\"/>", esc(&what));
+                }
+                "unresolved" => {
+                    let why = format!("too few worlds with a value for a bounded interval ({} without one): {what}", f.missing);
+                    let _ = write!(s, "<failure message=\"{}\"/>", esc(&why));
                 }
                 "report" => {
                     let _ = write!(s, "<skipped message=\"reported without a bound: {}\"/>", esc(&what));

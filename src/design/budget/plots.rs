@@ -16,10 +16,14 @@ pub struct TornadoLine {
     pub source: String,
     /// p95 after calibration with the source off, mm.
     pub off_mm: f64,
-    /// The interval of `off_mm` (drawn as an error bar at the bar's end when given), mm.
+    /// Where the change from every source on puts the p95 with the source off: `all_mm` plus the
+    /// interval of the paired per-world difference (drawn as an error bar; one that crosses the
+    /// all-sources line is noise), mm.
     pub off_interval_mm: Option<(f64, f64)>,
     /// Per what-if factor: the factor and the p95 after calibration with the source scaled by it, mm.
     pub scaled_mm: Vec<(f64, f64)>,
+    /// Per what-if factor, as `off_interval_mm` for the scaled source, mm.
+    pub scaled_interval_mm: Vec<Option<(f64, f64)>>,
 }
 
 /// Writes the budget's tornado plot: per source (largest share first), the p95 after calibration
@@ -30,7 +34,7 @@ pub fn write_tornado(dir: &Path, lines: &[TornadoLine], all_mm: f64) -> Result<V
     Ok(vec![Written {
         stem: "budget_tornado".into(),
         caption: format!(
-            "p95 after calibration with each source off or scaled (every other source as in the scenario); line: all sources, {all_mm:.3} mm"
+            "p95 after calibration with each source off or scaled (every other source as in the scenario); line: all sources, {all_mm:.3} mm; error bars: the 95 % interval of each change from all sources on, paired per world (a bar that crosses the line is noise)"
         ),
     }])
 }
@@ -41,12 +45,14 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
     let factors: Vec<f64> = lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
     let mut key = vec![("source off".to_string(), Mark::Bar(pale(BLUE, 0.35)))];
     if lines.iter().any(|l| l.off_interval_mm.is_some()) {
-        key.push(("its interval".to_string(), Mark::Interval(BLACK)));
+        key.push(("its change from all on, 95 % interval over worlds".to_string(), Mark::Interval(BLACK)));
     }
     key.extend(factors.iter().enumerate().map(|(j, f)| (format!("source x{f}"), Mark::Dot(colours[j % colours.len()]))));
     key.push((format!("all sources, {all_mm:.3} mm"), Mark::Line(BLACK)));
     let root = &keyed(root, &key, Side::Bottom)?;
-    let ends = |l: &TornadoLine| l.off_interval_mm.map_or(vec![], |(a, b)| vec![a, b]);
+    let ends = |l: &TornadoLine| {
+        std::iter::once(l.off_interval_mm).chain(l.scaled_interval_mm.iter().copied()).flatten().flat_map(|(a, b)| [a, b]).collect::<Vec<_>>()
+    };
     let values = || {
         lines
             .iter()
@@ -90,6 +96,13 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
     }
     for j in 0..factors.len() {
         let c = colours[j % colours.len()];
+        // Each factor's interval just below its dot, so that the bars of the factors do not overlap.
+        let dy = 0.12 * (j + 1) as f64;
+        for (k, l) in lines.iter().enumerate() {
+            if let Some(Some(ci)) = l.scaled_interval_mm.get(j) {
+                chart.draw_series(interval_bar_h(y(k) - dy, *ci, 0.05, c.stroke_width(2))).map_err(e2s)?;
+            }
+        }
         chart
             .draw_series(lines.iter().enumerate().filter_map(|(k, l)| l.scaled_mm.get(j).map(|v| Circle::new((v.1, y(k)), 5, c.filled()))))
             .map_err(e2s)?;

@@ -134,11 +134,22 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
     let tornado: Vec<super::plots::TornadoLine> = b
         .lines
         .iter()
-        .map(|l| super::plots::TornadoLine {
-            source: b.sources[l.source].label.to_string(),
-            off_mm: l.off_mm,
-            off_interval_mm: None,
-            scaled_mm: l.scaled_mm.clone(),
+        .map(|l| {
+            // The paired change of a configuration from every source on, placed at the all-on p95.
+            let change = |mode: &str, factor: Option<f64>| {
+                b.configs
+                    .iter()
+                    .position(|c| c.mode == mode && c.source == Some(l.source) && factor.is_none_or(|f| c.factor == f))
+                    .and_then(|i| b.against[i])
+                    .map(|p| (b.all_mm + p.interval.0, b.all_mm + p.interval.1))
+            };
+            super::plots::TornadoLine {
+                source: b.sources[l.source].label.to_string(),
+                off_mm: l.off_mm,
+                off_interval_mm: change("off", None),
+                scaled_mm: l.scaled_mm.clone(),
+                scaled_interval_mm: l.scaled_mm.iter().map(|(f, _)| change("scaled", Some(*f))).collect(),
+            }
         })
         .collect();
     let mut drawn = super::plots::write_tornado(dir, &tornado, b.all_mm).map_err(std::io::Error::other)?;
