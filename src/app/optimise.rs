@@ -54,6 +54,7 @@ fn design_err(e: optimise::DesignError) -> Error {
 fn opt_err(e: OptimiseError) -> Error {
     match e {
         OptimiseError::Io { path, source } => Error::Io { path, source },
+        OptimiseError::Record { path, key, why } => Error::input(format!("{path}: {key}"), why),
         other => Error::input("optimise", other.to_string()),
     }
 }

@@ -34,10 +34,12 @@ impl Overrides {
         }
         let st = s.study_mut();
         if let Some(sizes) = &self.set_sizes {
-            st.set_sizes = sizes.clone();
-            if !sizes.contains(&st.table_set_size) {
-                st.table_set_size = *sizes.iter().min_by_key(|n| n.abs_diff(st.table_set_size)).expect("non-empty");
+            // An empty list (a manifest edited by hand: the command line cannot give one) is left
+            // to the re-check below, which names the key.
+            if let Some(&nearest) = sizes.iter().min_by_key(|n| n.abs_diff(st.table_set_size)) {
+                st.table_set_size = nearest;
             }
+            st.set_sizes = sizes.clone();
         }
         if let Some(r) = self.repetitions {
             st.repetitions = r;
@@ -189,7 +191,15 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     if !(1e-6..=0.5).contains(&false_alarm) {
         return Err(Error::input("--false-alarm", format!("{false_alarm}: within [1e-6, 0.5]")));
     }
+    if let Some(r) = spec.realisations
+        && !(1..=crate::study::MAX_CHECK_REALISATIONS).contains(&r)
+    {
+        return Err(Error::input("--realisations", format!("{r}: within [1, {}]", crate::study::MAX_CHECK_REALISATIONS)));
+    }
     if let Some(j) = &spec.junit {
+        if !spec.check {
+            return Err(Error::input("--junit", "the verdict of a check: run `calsim check` to write it"));
+        }
         crate::io::out_dir::vet_file(j, &[&spec.scenario])?;
     }
     crate::io::out_dir::prepare(&spec.out, &h.name)?;

@@ -213,7 +213,7 @@ pub struct Share {
     pub source: usize,
     /// The share of the source alone: the mean over worlds of the square it adds to the floor's
     /// p95, over the mean of the sum of those squares (a ratio of means: worlds are the unit of
-    /// independence, and the squares add where medians do not).
+    /// independence, and the squares add where medians do not), clamped to [0, 1].
     pub share: f64,
     /// Its bootstrap-t interval at [`CONFIDENCE`] over worlds.
     pub interval: (f64, f64),
@@ -235,11 +235,14 @@ pub fn shares(sources: &[Source], configs: &[Config], per_world: &[Vec<f64>]) ->
     let (Some(none), n) = (find("none", None), sources.len()) else { return Vec::new() };
     let alone: Vec<Option<usize>> = (0..n).map(|s| find("alone", Some(s))).collect();
     let worlds = per_world.first().map_or(0, Vec::len);
-    // Per world, the square each source adds alone over the floor; worlds where any is missing left out.
+    // Per world, the square each source adds alone over the floor; worlds where any is missing left
+    // out. Not clamped at zero per world: a source without effect adds noise of either sign, whose
+    // mean is zero only unclamped (clamped, it would get a positive share with an interval above
+    // zero, taken from the others); the share and its interval are clamped to [0, 1] at the end.
     let added: Vec<Vec<f64>> = (0..worlds)
         .filter_map(|r| {
             let floor = per_world[none][r];
-            let row: Vec<f64> = alone.iter().map(|a| a.map_or(f64::NAN, |a| (per_world[a][r].powi(2) - floor.powi(2)).max(0.0))).collect();
+            let row: Vec<f64> = alone.iter().map(|a| a.map_or(f64::NAN, |a| per_world[a][r].powi(2) - floor.powi(2))).collect();
             (floor.is_finite() && row.iter().all(|x| x.is_finite())).then_some(row)
         })
         .collect();
@@ -249,9 +252,9 @@ pub fn shares(sources: &[Source], configs: &[Config], per_world: &[Vec<f64>]) ->
             use rand::SeedableRng;
             // A fixed stream per source: the interval is a function of the results alone.
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xB0D6_E7 + s as u64);
-            let share = if added.len() > 1 { ratio_of_means(&added, s, &all).0 } else { f64::NAN };
-            let interval = bootstrap_t(added.len(), |idx| ratio_of_means(&added, s, idx), RESAMPLES, CONFIDENCE, &mut rng);
             let clamp = |x: f64| x.clamp(0.0, 1.0);
+            let share = if added.len() > 1 { clamp(ratio_of_means(&added, s, &all).0) } else { f64::NAN };
+            let interval = bootstrap_t(added.len(), |idx| ratio_of_means(&added, s, idx), RESAMPLES, CONFIDENCE, &mut rng);
             let effect = alone[s].map_or_else(|| Paired::of(&[], &[], CONFIDENCE), |a| Paired::of(&per_world[a], &per_world[none], CONFIDENCE));
             let resolved = effect.separated(CONFIDENCE) && effect.median > 0.0;
             Share { source: s, share, interval: (clamp(interval.0), clamp(interval.1)), effect, resolved, above_next: None }
@@ -291,11 +294,12 @@ pub fn warnings(sources: &[Source], shares: &[Share], realisations: u32) -> Vec<
         && let Some(second) = shares.get(1)
     {
         w.push(format!(
-            "the {realisations} realisations cannot rank the leading sources: {} and {} (their added squares differ in {} of {} worlds, sign test p = {:.3}); run with more --realisations",
+            "the {} worlds that ran every configuration (of {realisations} realisations) cannot rank the leading sources: {} and {} (the first adds more in {} of the {} worlds where they differ, sign test p = {:.3}); run with more --realisations",
+            p.n,
             sources[first.source].label,
             sources[second.source].label,
-            p.test.positive.max(p.test.negative),
-            p.n,
+            p.test.positive,
+            p.test.positive + p.test.negative,
             p.test.p_value
         ));
     }

@@ -18,6 +18,8 @@
 //! - **Verification.** The best design of each count, and the designs of the sweep files to
 //!   compare with, are evaluated on `held_out` worlds never used in the search (realisations from
 //!   [`HELD_OUT_BASE`] on); the reported figures are those, the search's estimates beside them.
+//!   The winner is the race's first (design, set size and selection, on the search worlds); the
+//!   held-out worlds report it and do not choose it.
 //!
 //! Every world of every design is one file (`<out>/<name>.evaluations/<design>/r<NNNNNNN>.json`),
 //! written atomically: a killed run resumes where it stopped, and the searches being
@@ -71,6 +73,44 @@ pub enum OptimiseError {
     /// The search library refused its problem.
     #[error("search: {0}")]
     Search(String),
+    /// A restart's record is not one this design file's search could have written.
+    #[error("{path}: {key}: {why}")]
+    Record {
+        /// The record.
+        path: String,
+        /// Where in it (`[3].x`).
+        key: String,
+        /// What is wrong.
+        why: String,
+    },
+}
+
+/// A restart record read back (`asked`, from `file`) checked against the search of restart `r`:
+/// its restart, order, count of points and a finite point of the right dimension at every entry
+/// (records come from other machines' shards; a wrong one must not reach the decoding).
+fn check_record(space: &DesignSpace, r: usize, asked: &[Asked], file: &Path) -> Result<(), OptimiseError> {
+    let (count, _) = restarts(space)[r];
+    let fail = |i: usize, k: &str, why: String| OptimiseError::Record { path: file.display().to_string(), key: format!("[{i}].{k}"), why };
+    if asked.len() > space.search.evaluations as usize {
+        return Err(OptimiseError::Record {
+            path: file.display().to_string(),
+            key: "(file)".into(),
+            why: format!("{} designs: more than the search's {} evaluations", asked.len(), space.search.evaluations),
+        });
+    }
+    for (i, a) in asked.iter().enumerate() {
+        if a.restart as usize != r || a.index as usize != i {
+            return Err(fail(i, "restart", format!("restart {} #{}: not entry {i} of restart {r}", a.restart, a.index)));
+        }
+        if a.count != count {
+            return Err(fail(i, "count", format!("{}: restart {r} searches {count} points", a.count)));
+        }
+        let dim = space.dimensions(count);
+        if a.x.len() != dim || a.x.iter().any(|v| !v.is_finite()) {
+            return Err(fail(i, "x", format!("{} values: {dim} finite values expected", a.x.len())));
+        }
+    }
+    Ok(())
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OptimiseError + '_ {
@@ -202,7 +242,7 @@ impl Context<'_> {
         let mut units: Vec<Unit> = jobs
             .par_iter()
             .map(|&(p, k, r)| -> Result<Unit, OptimiseError> {
-                let dir = self.cache.join(&points[p].0);
+                let dir = self.cache.join(&self.space.world_context).join(&points[p].0);
                 let file = dir.join(format!("r{r:07}.json"));
                 let mut u = match crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Unit>(&b).ok()) {
                     Some(u) if u.realisation == r => u,
@@ -325,6 +365,7 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
     let (count, rep) = restarts(space)[r];
     let file = restart_file(&ctx.cache, space, r);
     if let Some(asked) = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()) {
+        check_record(space, r, &asked, &file)?;
         return asked.into_iter().map(|a| ctx.evaluate(a)).collect();
     }
     let mut start = space.start(count);
@@ -378,6 +419,7 @@ pub fn read_restarts(ctx: &Context<'_>) -> Result<Vec<Vec<Asked>>, OptimiseError
                 why: format!("restart {r} of {n} has not finished (run its shard: `calsim optimise <file> --shard k/n`)"),
             }
         })?;
+        check_record(ctx.space, r, &asked, &file)?;
         out.push(asked);
     }
     Ok(out)

@@ -24,11 +24,20 @@ pub struct Outcome {
 }
 
 impl Outcome {
-    /// The winner: the best held-out row of the optimiser's own designs.
+    /// The winner: the design, set size and selection the race ranks first on the search worlds,
+    /// with its held-out row. The held-out worlds only report it: choosing on them too would
+    /// report the luckiest of the verified designs on the worlds that chose it (the winner's
+    /// curse), an optimistic figure.
     pub fn of(verdict: Verdict) -> Self {
-        let ours = verdict.verified.iter().filter(|c| !c.compared).count();
-        let winner =
-            verdict.held_out_rows.iter().filter(|r| r.design.point < ours).min_by_key(|r| r.rank).map(|r| (r.design.point, r.clone()));
+        let winner = verdict.race_rows.iter().min_by_key(|r| r.rank).and_then(|best| {
+            let key = &verdict.finalists.get(best.design.point)?.key;
+            let v = verdict.verified.iter().position(|c| !c.compared && &c.key == key)?;
+            verdict
+                .held_out_rows
+                .iter()
+                .find(|h| h.design.point == v && h.design.set_size == best.design.set_size && h.design.selection == best.design.selection)
+                .map(|h| (v, h.clone()))
+        });
         Self { verdict, winner }
     }
 }

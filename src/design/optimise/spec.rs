@@ -251,6 +251,11 @@ pub struct DesignSpace {
     pub base: toml::Table,
     /// sha256 of the design file and its base scenario.
     pub identity: String,
+    /// What a world's numbers depend on beyond its scenario's text: the objective's thresholds,
+    /// the bytes of the robot file it names and calsim's version (the first 16 hex digits of
+    /// their sha256). The per-world files are kept under it, so that an edited threshold or robot
+    /// file runs its worlds again instead of judging the old ones.
+    pub world_context: String,
     /// The variables.
     pub variables: Vec<Variable>,
     /// The points, if the design moves any.
@@ -364,7 +369,19 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "design".into());
     use sha2::Digest;
     let identity = format!("{:x}", sha2::Sha256::digest(format!("{text}\u{0}{base_text}")));
-    let space = DesignSpace { name, path: path.to_path_buf(), base, identity, variables, points, objective, search, held_out, compare };
+    let robot_bytes = get_dotted(&base, "robot.file")
+        .and_then(|v| v.as_str().map(PathBuf::from))
+        .map(|f| crate::io::read_bytes(&f).map_err(|e| err(path, "robot.file", format!("{}: {e}", f.display()))))
+        .transpose()?
+        .unwrap_or_default();
+    let world_context = {
+        let mut h = sha2::Sha256::new();
+        h.update(format!("{:?}\u{0}{}\u{0}", objective.threshold_mm, env!("CARGO_PKG_VERSION")));
+        h.update(&robot_bytes);
+        format!("{:x}", h.finalize())[..16].to_string()
+    };
+    let space =
+        DesignSpace { name, path: path.to_path_buf(), base, identity, world_context, variables, points, objective, search, held_out, compare };
     feasible_somewhere(path, &space)?;
     Ok(space)
 }
@@ -454,7 +471,8 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
     };
     let worlds = count("worlds", s.worlds, 10, 10_000)?;
     let race = match &s.race {
-        None => Race { min: worlds, batch: worlds, max: 4 * worlds, confidence: 0.9 },
+        // At most 10,000 worlds, as a race written out: the search's worlds stay below 10,000.
+        None => Race { min: worlds, batch: worlds, max: (4 * worlds).min(10_000).max(worlds), confidence: 0.9 },
         Some(r) => {
             if r.max < worlds || r.batch == 0 || r.max > 10_000 {
                 return Err(err(
