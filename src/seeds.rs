@@ -110,6 +110,8 @@ pub mod calibrate {
     pub const SIMULATED_POSES: u64 = 0x4341_4c49_0003;
     /// A simulated measurement file: the robot's unmodelled effects, move and instrument noise.
     pub const SIMULATED_NOISE: u64 = 0x4341_4c49_0004;
+    /// The noise of a plan's simulated worlds (`calibrate::plan::simulate`), per world.
+    pub const PLAN_NOISE: u64 = 0x4341_4c49_0005;
 }
 
 /// The stream of task `index` of a study whose tasks are salted with `salt` (see [`study`]).

@@ -165,6 +165,8 @@ pub struct CalibrationReport {
     pub calibration: Calibration,
     /// The report directory.
     pub dir: PathBuf,
+    /// The measured held-out median beside the plan's simulation of it (`--plan-worlds`).
+    pub plan: Option<plan::PlanComparison>,
 }
 
 /// Where `calsim calibrate` reads and writes.
@@ -178,7 +180,14 @@ pub struct CalibrateSpec {
     pub out: PathBuf,
     /// How to calibrate.
     pub options: Options,
+    /// Worlds of the plan's simulation ([`plan::simulate`]; 0: none), at most [`MOST_PLAN_WORLDS`].
+    pub plan_worlds: usize,
+    /// The plan's noise per coordinate, mm (`None`: the points' own, else the fit's residual).
+    pub plan_noise_mm: Option<f64>,
 }
+
+/// Most worlds of a plan's simulation (each a whole calibration).
+pub const MOST_PLAN_WORLDS: usize = 1000;
 
 /// `calsim calibrate`: reads the robot and measurement files, calibrates, writes the report.
 pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateError> {
@@ -190,9 +199,25 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     let m = measurements::read(&spec.measurements, &robot)?;
     let name = report::directory_name(&spec.measurements);
     crate::io::out_dir::prepare(&spec.out, &name)?;
+    if let Some(s) = spec.plan_noise_mm
+        && !(s.is_finite() && (0.0..=100.0).contains(&s))
+    {
+        return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{s}: within 0 to 100 mm") });
+    }
+    if spec.plan_worlds > MOST_PLAN_WORLDS {
+        return Err(CalibrateError::Option { key: "plan-worlds".into(), message: format!("{}: at most {MOST_PLAN_WORLDS}", spec.plan_worlds) });
+    }
     let calibration = run(&robot, &m, &spec.options)?;
-    let dir = report::write(&spec.out, &name, &calibration).map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
-    Ok(CalibrationReport { calibration, dir })
+    let plan = match spec.plan_worlds {
+        0 => None,
+        n => Some(plan::compare(
+            &calibration,
+            &plan::simulate(&calibration, n, plan::Statistic::Median, spec.options.seed, spec.plan_noise_mm)?,
+        )),
+    };
+    let dir = report::write(&spec.out, &name, &calibration, plan.as_ref())
+        .map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
+    Ok(CalibrationReport { calibration, dir, plan })
 }
 
 fn check_options(o: &Options) -> Result<(), CalibrateError> {

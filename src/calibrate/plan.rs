@@ -5,13 +5,22 @@
 //! worlds, runs [`super::run`] on each simulated file, and collects one figure per world: the
 //! held-out error after calibration (the same statistic as the measured one). [`compare`] puts the
 //! measured figure beside that distribution and says whether it falls inside the simulated
-//! P10-P90; [`write`] adds `plan.md` to a report directory. Building the [`SimulatedOutcome`] is
-//! the scenario layer's part.
+//! P10-P90; the report writes it as `plan.md`.
+//!
+//! [`simulate`] builds the distribution from the calibration itself (`calsim calibrate
+//! --plan-worlds N`): the calibrated robot, the registered sessions and targets taken as the
+//! truth, measured at the file's own joint values with isotropic noise at the fit's residual level,
+//! calibrated again the same way in each world. A measured held-out error inside the simulated
+//! P10-P90 is what the chosen model and that noise explain; one above it says the robot does
+//! something the model does not (or the noise is not independent per point).
 
 use std::fmt::Write as _;
-use std::path::Path;
 
-use super::Calibration;
+use nalgebra::Vector3;
+use rand_distr::{Distribution, Normal};
+
+use super::{Calibration, CalibrateError};
+use crate::robot::{KinState, forward};
 use crate::study::stats::{finite_sorted, quantile};
 
 /// Which held-out statistic the comparison is made on.
@@ -107,7 +116,73 @@ pub fn markdown(p: &PlanComparison) -> String {
     s
 }
 
-/// Writes `plan.md` into the report directory `dir`.
-pub fn write(dir: &Path, p: &PlanComparison) -> std::io::Result<()> {
-    crate::io::out_dir::write_file_atomically(&dir.join("plan.md"), &markdown(p))
+
+/// The noise per coordinate of the simulated worlds, mm: the chosen model's residual RMS over the
+/// points it kept (its fit on every point), over sqrt(3) (three coordinates), or, where the file
+/// gives per-point uncertainties, each point's own.
+pub fn residual_noise_mm(c: &Calibration) -> f64 {
+    let fit = &c.chosen().fit;
+    let kept: Vec<f64> = fit.errors_mm.iter().zip(&fit.outlier).filter(|(e, o)| !**o && e.is_finite()).map(|(e, _)| *e).collect();
+    if kept.is_empty() {
+        return f64::NAN;
+    }
+    (kept.iter().map(|e| e * e).sum::<f64>() / kept.len() as f64 / 3.0).sqrt()
+}
+
+/// The calibration's plan by simulation over `worlds` worlds (see the module's doc): per world,
+/// the measurement file's points replaced by the calibrated robot's positions at the same joint
+/// values (in each session's registered frame, at each target's registered position) plus
+/// noise, calibrated with the same options (no figures), and the chosen model's held-out
+/// `statistic` taken. The noise per coordinate is `noise_mm` (the instrument's, when known: the
+/// plan then says what a robot the model describes completely would give), else a point's own
+/// uncertainty, else the fit's residual level ([`residual_noise_mm`], which takes whatever the
+/// model misses for noise: that plan tests the fit and the poses, not the model's completeness). World `w`'s noise is the stream of `split_seed(seed, w)`: the plan is a
+/// function of the data and the seed, the same for any thread count.
+pub fn simulate(
+    c: &Calibration,
+    worlds: usize,
+    statistic: Statistic,
+    seed: u64,
+    noise_mm: Option<f64>,
+) -> Result<SimulatedOutcome, CalibrateError> {
+    use rayon::prelude::*;
+    let m = &c.measurements;
+    let sigma = noise_mm.unwrap_or_else(|| residual_noise_mm(c));
+    if !(sigma.is_finite() && (0.0..=100.0).contains(&sigma)) {
+        return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{sigma}: within 0 to 100 mm") });
+    }
+    // Per session and target, the calibrated robot placed in the session's frame with the target
+    // as its tool: its forward kinematics is the position the session's instrument reads.
+    let mut placed = Vec::with_capacity(c.bases.len() * c.tools.len());
+    for b in &c.bases {
+        for t in &c.tools {
+            placed.push(c.model.edited(|d| {
+                d.world_from_base = b.session_from_base;
+                d.flange_tcp_mm = t.flange_mm;
+            }));
+        }
+    }
+    let placed: Vec<_> = placed.into_iter().collect::<Result<_, _>>().map_err(|e| CalibrateError::Option {
+        key: "plan-worlds".into(),
+        message: format!("the calibrated robot cannot be placed in a session's frame: {e}"),
+    })?;
+    let mut st = KinState::default();
+    let truth: Vec<Vector3<f64>> =
+        m.points.iter().map(|p| forward(&placed[m.poses[p.pose].session * c.tools.len() + p.target], &mut st, &m.poses[p.pose].q)).collect();
+    let mut opts = c.options.clone();
+    opts.plots = false;
+    let per_world_mm: Vec<f64> = (0..worlds)
+        .into_par_iter()
+        .map(|w| {
+            let mut rng = crate::seeds::stream(crate::seeds::split_seed(seed, w as u64), crate::seeds::calibrate::PLAN_NOISE);
+            let mut mw = m.clone();
+            for (p, t) in mw.points.iter_mut().zip(&truth) {
+                let s = if noise_mm.is_some() { sigma } else { p.sigma_mm.unwrap_or(sigma) };
+                let noise = Normal::new(0.0, s).map_or(Vector3::zeros(), |n| Vector3::from_fn(|_, _| n.sample(&mut rng)));
+                p.measured_mm = t + noise;
+            }
+            super::run(&c.robot, &mw, &opts).ok().and_then(|cw| statistic.of(&cw)).unwrap_or(f64::NAN)
+        })
+        .collect();
+    Ok(SimulatedOutcome { scenario: format!("the calibrated robot, noise {sigma:.4} mm per coordinate"), statistic, per_world_mm })
 }

@@ -18,9 +18,13 @@ pub fn directory_name(path: &Path) -> String {
     format!("{}.calibration", path.file_stem().map_or_else(|| "measurements".into(), |s| s.to_string_lossy()))
 }
 
-/// Writes the report of `c` into `out/<name>`, replacing what was there.
-pub fn write(out: &Path, name: &str, c: &Calibration) -> std::io::Result<PathBuf> {
+/// Writes the report of `c` (with `plan.md` when a plan was simulated) into `out/<name>`, replacing
+/// what was there.
+pub fn write(out: &Path, name: &str, c: &Calibration, plan: Option<&super::plan::PlanComparison>) -> std::io::Result<PathBuf> {
     crate::io::out_dir::write_atomically(out, name, |dir| {
+        if let Some(p) = plan {
+            crate::io::out_dir::write_file(&dir.join("plan.md"), super::plan::markdown(p))?;
+        }
         write_robot(dir, c)?;
         tables(dir, c)?;
         let drawn = if c.options.plots { super::plots::write(dir, c).map_err(std::io::Error::other)? } else { Vec::new() };
