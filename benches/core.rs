@@ -4,10 +4,10 @@
 
 use std::hint::black_box;
 
-use calsim::robot::uniform_configuration;
 use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::{DetmaxOptions, FitOptions, Observation, PoolJacobian, detmax, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
+use calsim::robot::uniform_configuration;
 use calsim::robot::{KinState, ParamSet, forward, tcp_jacobian};
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;

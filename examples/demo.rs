@@ -12,9 +12,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use calsim::robot::uniform_configuration;
 use calsim::identify::{FitOptions, Observation, Solver, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
+use calsim::robot::uniform_configuration;
 use calsim::robot::{KinState, ParamSet, forward};
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -132,4 +132,3 @@ fn demo(args: &Args) -> Result<(), String> {
     println!("total {:.3} s", t0.elapsed().as_secs_f64());
     Ok(())
 }
-

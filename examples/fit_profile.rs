@@ -1,7 +1,7 @@
 //! Repeats one 75-configuration identification, for profilers.
-use calsim::robot::uniform_configuration;
 use calsim::identify::{FitOptions, Observation, identify};
 use calsim::robot::builtin::{trical_2018_nominal, trical_2018_table7};
+use calsim::robot::uniform_configuration;
 use calsim::robot::{KinState, ParamSet, forward};
 use rand::SeedableRng;
 fn main() {

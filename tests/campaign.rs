@@ -3,9 +3,9 @@
 
 mod common;
 
-use calsim::device::trical::campaign::{collision_world, tcp_pose};
 use calsim::cell::world_frame::{distance_matrix, sphere_centres};
 use calsim::cell::{Cell, CellSpec};
+use calsim::device::trical::campaign::{collision_world, tcp_pose};
 use calsim::device::trical::experiment::ExperimentSpec;
 use calsim::identify::{FitOptions, FitOutcome, identify};
 use calsim::robot::builtin::trical_2018_table7;

@@ -3,8 +3,8 @@
 
 mod common;
 
-use calsim::robot::uniform_configuration;
 use calsim::robot::file::RobotFile;
+use calsim::robot::uniform_configuration;
 use calsim::robot::{KinState, forward};
 use common::{calsim, repo, scratch};
 
@@ -178,7 +178,11 @@ fn an_exported_kr6_keeps_its_capsules_and_flange() {
     let s = calsim::device::trical::spec::load(&scenario).unwrap();
     let e = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&e.campaign);
-    let model = calsim::device::trical::study::recompute_task(&e, &before, &s.study, s.header.seed, task).unwrap().expect("the task").model.expect("a model");
+    let model = calsim::device::trical::study::recompute_task(&e, &before, &s.study, s.header.seed, task)
+        .unwrap()
+        .expect("the task")
+        .model
+        .expect("a model");
     let worst = common::largest_tcp_difference(&model, &file.nominal, &model, &mut common::rng(1001));
     assert!(worst < 1e-9, "largest TCP difference {worst:e} mm");
 }

@@ -64,7 +64,10 @@ fn every_shell_command_of_the_readme_is_one_ci_runs() {
             }
             count += 1;
             let calsim = line.starts_with("calsim ") || line.starts_with("cargo run --release -- ");
-            assert!(calsim || script.contains(&format!("{line:?}")) || script.contains(&format!("'{line}'")), "README: {line:?} is run by no CI step");
+            assert!(
+                calsim || script.contains(&format!("{line:?}")) || script.contains(&format!("'{line}'")),
+                "README: {line:?} is run by no CI step"
+            );
         }
     }
     assert!(count >= 10, "the README shows {count} commands");

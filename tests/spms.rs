@@ -2,9 +2,9 @@
 
 mod common;
 
-use calsim::instrument::spms::beams::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
 use calsim::device::spms::iso9283::{ap, rp, summary, test_points};
 use calsim::device::spms::{ReadingError, SensorSpec, Spms, fit_centre, frame_from_points, table2_beams};
+use calsim::instrument::spms::beams::{BeamData, Form, PsoOptions, levenberg_marquardt, pso};
 use nalgebra::{DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;

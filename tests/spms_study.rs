@@ -4,12 +4,12 @@
 
 mod common;
 
-use calsim::identify::least_squares::{FitOptions, FitOutcome};
-use calsim::robot::builtin::{ER20C10_TABLE5, ER20C10_ZERO_RAD, er20c10_table4, er20c10_table5};
-use calsim::robot::{ParamId, UnmodelledSpec};
 use calsim::device::spms::calibration::{ArmSpec, IsoSpec, StationSpec, build, default_parameters, identify_from, iso_test};
 use calsim::device::spms::head::{self, BeamIdSpec, HeadSpec};
 use calsim::device::spms::study::{self, SpmsSpec};
+use calsim::identify::least_squares::{FitOptions, FitOutcome};
+use calsim::robot::builtin::{ER20C10_TABLE5, ER20C10_ZERO_RAD, er20c10_table4, er20c10_table5};
+use calsim::robot::{ParamId, UnmodelledSpec};
 use calsim::study::engine::random_selection;
 
 use common::{calsim, repo, scratch};

@@ -401,7 +401,9 @@ fn a_check_over_too_few_worlds_to_judge_is_refused_naming_the_count_it_needs() {
     let banded: Vec<_> = figures.iter().filter(|f| f["verdict"] != "report").collect();
     assert_eq!(banded.len(), 6);
     assert!(
-        banded.iter().all(|f| ["pass", "open", "miss"].contains(&f["verdict"].as_str().unwrap()) && f["interval"].is_array() && f["missing"] == 0),
+        banded
+            .iter()
+            .all(|f| ["pass", "open", "miss"].contains(&f["verdict"].as_str().unwrap()) && f["interval"].is_array() && f["missing"] == 0),
         "{banded:?}"
     );
     assert_eq!(verdict["pass"], out.status.success());

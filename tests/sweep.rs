@@ -60,7 +60,13 @@ const AXIS: &str = "[[axis]]\nkey = \"trical.epsilon_mm\"\nvalues = [0.010, 0.02
 
 /// Runs the sweep `file` (one shard of it with `shard`) through the library, `threads` workers.
 fn sweep_lib(file: &Path, out: &Path, shard: Option<(usize, usize)>, threads: u32) -> calsim::app::sweep::SweepReport {
-    let spec = calsim::app::sweep::SweepSpec { file: file.to_path_buf(), out: out.to_path_buf(), shard, threads: Some(threads), realisations: None };
+    let spec = calsim::app::sweep::SweepSpec {
+        file: file.to_path_buf(),
+        out: out.to_path_buf(),
+        shard,
+        threads: Some(threads),
+        realisations: None,
+    };
     calsim::app::sweep::run(&spec, &calsim::app::Quiet).unwrap()
 }
 
@@ -368,7 +374,8 @@ fn a_clearly_worse_design_leaves_the_race_early() {
     let dir = tmp.path();
     let f = adaptive_file(dir, "r.toml");
     let m = sweep_lib(&f, dir, None, 2).merged.unwrap();
-    let section = m.summary.split("### Designs that left the race").nth(1).unwrap_or_else(|| panic!("no design left the race:\n{}", m.summary));
+    let section =
+        m.summary.split("### Designs that left the race").nth(1).unwrap_or_else(|| panic!("no design left the race:\n{}", m.summary));
     let row = section.lines().find(|l| l.contains("behind the leader")).unwrap_or_else(|| panic!("none behind:\n{}", m.summary));
     let worlds: u32 = row.split('|').nth(2).unwrap().trim().parse().unwrap_or_else(|_| panic!("{row}\n{}", m.summary));
     assert!(worlds < 8, "left with {worlds} of at most 8 realisations: {row}");
@@ -421,6 +428,7 @@ fn a_records_numbers_come_back_from_json_to_the_bit() {
     values.extend((0..100_000).map(|_| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-6..6))));
     let text = serde_json::to_string(&values).unwrap();
     let back: Vec<f64> = serde_json::from_str(&text).unwrap();
-    let off: Vec<(f64, f64)> = values.iter().zip(&back).filter(|(a, b)| a.to_bits() != b.to_bits()).map(|(a, b)| (*a, *b)).take(3).collect();
+    let off: Vec<(f64, f64)> =
+        values.iter().zip(&back).filter(|(a, b)| a.to_bits() != b.to_bits()).map(|(a, b)| (*a, *b)).take(3).collect();
     assert!(off.is_empty(), "{} values; first off: {off:?}", values.len());
 }

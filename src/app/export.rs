@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use polars::prelude::*;
 use sha2::Digest;
 
-use crate::identify::observability::parameter_covariance;
 use super::Error;
+use crate::identify::observability::parameter_covariance;
 use crate::robot::{ParamId, RobotModel};
 use crate::study::prediction::noise_estimate;
 

@@ -214,9 +214,8 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         threads_label(threads)
     ));
     let device_err = |source| Error::Device { path: spec.scenario.display().to_string(), source };
-    let outcome = pool
-        .install(|| scenario.run(h.seed, &|done, total| observer.progress(done, total, "identifications")))
-        .map_err(device_err)?;
+    let outcome =
+        pool.install(|| scenario.run(h.seed, &|done, total| observer.progress(done, total, "identifications"))).map_err(device_err)?;
     observer.stage_done();
     let checks = pool.install(|| outcome.checks()).map_err(device_err)?;
     let mut distribution = None;
@@ -225,10 +224,16 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         // Fewer worlds than give a bounded interval could judge nothing: refused before they run.
         let fewest = crate::study::check::fewest_worlds(&checks, false_alarm);
         if (count as usize) < fewest {
-            let key = if spec.realisations.is_some() { "--realisations".to_string() } else { format!("{}: study.check_realisations", spec.scenario.display()) };
+            let key = if spec.realisations.is_some() {
+                "--realisations".to_string()
+            } else {
+                format!("{}: study.check_realisations", spec.scenario.display())
+            };
             return Err(Error::input(
                 key,
-                format!("{count}: judging its figures at a false-alarm rate of {false_alarm} takes at least {fewest} realisations (1 runs the plain check)"),
+                format!(
+                    "{count}: judging its figures at a false-alarm rate of {false_alarm} takes at least {fewest} realisations (1 runs the plain check)"
+                ),
             ));
         }
         let others = realisations(count, observer, |r| {

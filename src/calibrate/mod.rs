@@ -205,7 +205,10 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
         return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{s}: within 0 to 100 mm") });
     }
     if spec.plan_worlds > MOST_PLAN_WORLDS {
-        return Err(CalibrateError::Option { key: "plan-worlds".into(), message: format!("{}: at most {MOST_PLAN_WORLDS}", spec.plan_worlds) });
+        return Err(CalibrateError::Option {
+            key: "plan-worlds".into(),
+            message: format!("{}: at most {MOST_PLAN_WORLDS}", spec.plan_worlds),
+        });
     }
     let calibration = run(&robot, &m, &spec.options)?;
     let plan = match spec.plan_worlds {

@@ -19,7 +19,7 @@ use std::fmt::Write as _;
 use nalgebra::Vector3;
 use rand_distr::{Distribution, Normal};
 
-use super::{Calibration, CalibrateError};
+use super::{CalibrateError, Calibration};
 use crate::robot::{KinState, forward};
 use crate::study::stats::{finite_sorted, quantile};
 
@@ -116,7 +116,6 @@ pub fn markdown(p: &PlanComparison) -> String {
     s
 }
 
-
 /// The noise per coordinate of the simulated worlds, mm: the chosen model's residual RMS over the
 /// points it kept (its fit on every point), over sqrt(3) (three coordinates), or, where the file
 /// gives per-point uncertainties, each point's own.
@@ -167,8 +166,11 @@ pub fn simulate(
         message: format!("the calibrated robot cannot be placed in a session's frame: {e}"),
     })?;
     let mut st = KinState::default();
-    let truth: Vec<Vector3<f64>> =
-        m.points.iter().map(|p| forward(&placed[m.poses[p.pose].session * c.tools.len() + p.target], &mut st, &m.poses[p.pose].q)).collect();
+    let truth: Vec<Vector3<f64>> = m
+        .points
+        .iter()
+        .map(|p| forward(&placed[m.poses[p.pose].session * c.tools.len() + p.target], &mut st, &m.poses[p.pose].q))
+        .collect();
     let mut opts = c.options.clone();
     opts.plots = false;
     let per_world_mm: Vec<f64> = (0..worlds)

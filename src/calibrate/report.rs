@@ -55,7 +55,10 @@ fn write_robot(dir: &Path, c: &Calibration) -> std::io::Result<()> {
     let before = crate::robot::file::to_text(before_model, &before_source, &[], capsules, flange) + &coupling;
     crate::io::out_dir::write_file(&dir.join("robot.toml"), robot)?;
     crate::io::out_dir::write_file(&dir.join("before.toml"), before)?;
-    crate::io::out_dir::write_file(&dir.join("robot.urdf"), crate::robot::export::urdf(before_model, &c.model).map_err(std::io::Error::other)?)?;
+    crate::io::out_dir::write_file(
+        &dir.join("robot.urdf"),
+        crate::robot::export::urdf(before_model, &c.model).map_err(std::io::Error::other)?,
+    )?;
     let provenance = format!("calibrate of {}, {} poses", c.measurements.path.display(), c.measurements.poses.len());
     crate::io::out_dir::write_file(&dir.join("calibration.yaml"), crate::robot::export::yaml_overlay(before_model, &c.model, &provenance))
 }

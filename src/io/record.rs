@@ -44,7 +44,8 @@ pub fn save(
     first_series: (&str, &str),
     study_title: &str,
 ) -> Result<(), RecordError> {
-    let (rec, storage) = rerun::RecordingStreamBuilder::new("calsim").recording_name(name).memory().map_err(|e| RecordError(e.to_string()))?;
+    let (rec, storage) =
+        rerun::RecordingStreamBuilder::new("calsim").recording_name(name).memory().map_err(|e| RecordError(e.to_string()))?;
     log(&rec)?;
     blueprint(cell_contents, first_series, study_title)
         .send(&rec, BlueprintActivation { make_active: true, make_default: true })

@@ -42,4 +42,3 @@ pub fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<St
     }
     Ok(out)
 }
-

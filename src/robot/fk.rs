@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Isometry3, Translation3};
 
 use super::file::RobotFile;
-use super::model::{JOINTS, Joints, XyzZyx};
 use super::kinematics::KinState;
+use super::model::{JOINTS, Joints, XyzZyx};
 
 /// Most rows a joints file takes.
 pub const MAX_ROWS: usize = 1_000_000;

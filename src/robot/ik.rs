@@ -16,9 +16,9 @@ use std::f64::consts::PI;
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
+use super::kinematics::KinState;
 use super::kinematics::forward;
 use super::model::{JOINTS, Joints, RobotModel};
-use super::kinematics::KinState;
 
 /// Why no configuration was returned.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

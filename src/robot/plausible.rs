@@ -141,7 +141,10 @@ mod tests {
             let l = model.limits()[i];
             let v: Vec<f64> = configurations(&model).map(|q| q[i]).collect();
             let (lo, hi) = (v.iter().copied().fold(f64::INFINITY, f64::min), v.iter().copied().fold(f64::NEG_INFINITY, f64::max));
-            assert!((lo - l.min.max(-std::f64::consts::PI)).abs() < 1e-12 && (hi - l.max.min(std::f64::consts::PI)).abs() < 1e-12, "joint {i}");
+            assert!(
+                (lo - l.min.max(-std::f64::consts::PI)).abs() < 1e-12 && (hi - l.max.min(std::f64::consts::PI)).abs() < 1e-12,
+                "joint {i}"
+            );
         }
     }
 }

@@ -497,13 +497,15 @@ impl CheckReport {
                 p10_p90: finite((d.p10, d.p90)),
                 covers_published: d.covers_published,
                 band: d.row.band.clone(),
-                verdict: d.verdict.map_or("report", |v| match v {
-                    Verdict::Pass => "pass",
-                    Verdict::Open => "open",
-                    Verdict::Miss => "miss",
-                    Verdict::Unresolved => "unresolved",
-                })
-                .to_string(),
+                verdict: d
+                    .verdict
+                    .map_or("report", |v| match v {
+                        Verdict::Pass => "pass",
+                        Verdict::Open => "open",
+                        Verdict::Miss => "miss",
+                        Verdict::Unresolved => "unresolved",
+                    })
+                    .to_string(),
                 missing: d.missing,
             })
             .collect();

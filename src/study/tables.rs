@@ -67,4 +67,3 @@ pub fn parameter_columns<'a>(
         Column::new("nominal".into(), nv),
     ]
 }
-

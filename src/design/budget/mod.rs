@@ -16,9 +16,9 @@ pub mod results;
 
 use std::path::Path;
 
+use crate::design::sweep::spec::{Sweep, SweepError, from_tables, get_dotted, set_dotted};
 use crate::device::ErrorSource;
 use crate::device::scenario::{self, ScenarioError};
-use crate::design::sweep::spec::{Sweep, SweepError, from_tables, get_dotted, set_dotted};
 
 /// An error source: a label, the scenario keys it scales together, their unit.
 #[derive(Clone, Debug, PartialEq)]
@@ -255,7 +255,8 @@ pub fn shares(sources: &[Source], configs: &[Config], per_world: &[Vec<f64>]) ->
             let clamp = |x: f64| x.clamp(0.0, 1.0);
             let share = if added.len() > 1 { clamp(ratio_of_means(&added, s, &all).0) } else { f64::NAN };
             let interval = bootstrap_t(added.len(), |idx| ratio_of_means(&added, s, idx), RESAMPLES, CONFIDENCE, &mut rng);
-            let effect = alone[s].map_or_else(|| Paired::of(&[], &[], CONFIDENCE), |a| Paired::of(&per_world[a], &per_world[none], CONFIDENCE));
+            let effect =
+                alone[s].map_or_else(|| Paired::of(&[], &[], CONFIDENCE), |a| Paired::of(&per_world[a], &per_world[none], CONFIDENCE));
             let resolved = effect.separated(CONFIDENCE) && effect.median > 0.0;
             Share { source: s, share, interval: (clamp(interval.0), clamp(interval.1)), effect, resolved, above_next: None }
         })

@@ -51,7 +51,11 @@ fn tornado<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, lines: &[TornadoLi
     key.push((format!("all sources, {all_mm:.3} mm"), Mark::Line(BLACK)));
     let root = &keyed(root, &key, Side::Bottom)?;
     let ends = |l: &TornadoLine| {
-        std::iter::once(l.off_interval_mm).chain(l.scaled_interval_mm.iter().copied()).flatten().flat_map(|(a, b)| [a, b]).collect::<Vec<_>>()
+        std::iter::once(l.off_interval_mm)
+            .chain(l.scaled_interval_mm.iter().copied())
+            .flatten()
+            .flat_map(|(a, b)| [a, b])
+            .collect::<Vec<_>>()
     };
     let values = || {
         lines

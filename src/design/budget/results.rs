@@ -94,10 +94,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
             f("effect_p95_mm_lo", b.shares.iter().map(|x| x.effect.interval.0).collect()),
             f("effect_p95_mm_hi", b.shares.iter().map(|x| x.effect.interval.1).collect()),
             Column::new("effect_resolved".into(), b.shares.iter().map(|x| x.resolved).collect::<Vec<_>>()),
-            Column::new(
-                "ranked_above_next".into(),
-                b.shares.iter().map(|x| x.above_next.map(|(_, r)| r)).collect::<Vec<Option<bool>>>(),
-            ),
+            Column::new("ranked_above_next".into(), b.shares.iter().map(|x| x.above_next.map(|(_, r)| r)).collect::<Vec<Option<bool>>>()),
             f("pairing_correlation", b.shares.iter().map(|x| x.effect.correlation).collect()),
         ],
     )?;
@@ -317,7 +314,10 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
         let _ = writeln!(s, "**Warning:** {w}.\n");
     }
     let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
-    let _ = write!(s, "| source | value | share ({conf:.0} % interval) | effect alone, mm | resolved | ranked above next | share (removed, medians) | p95 alone, mm | p95 without it, mm |");
+    let _ = write!(
+        s,
+        "| source | value | share ({conf:.0} % interval) | effect alone, mm | resolved | ranked above next | share (removed, medians) | p95 alone, mm | p95 without it, mm |"
+    );
     for f in &factors {
         let _ = write!(s, " p95 at x{f}, mm (vs all on) |");
     }
@@ -355,7 +355,13 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
                 .position(|c| c.mode == "scaled" && c.source == Some(l.source) && c.factor == *factor)
                 .and_then(|i| b.against[i]);
             let vs = vs.map_or(String::new(), |p| {
-                format!(" ({:+.3}, {:+.3} to {:+.3}{})", p.median, p.interval.0, p.interval.1, if p.separated(super::CONFIDENCE) { "" } else { ", noise" })
+                format!(
+                    " ({:+.3}, {:+.3} to {:+.3}{})",
+                    p.median,
+                    p.interval.0,
+                    p.interval.1,
+                    if p.separated(super::CONFIDENCE) { "" } else { ", noise" }
+                )
             });
             let _ = write!(s, " {}{vs} |", f3(*v));
         }

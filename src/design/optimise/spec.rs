@@ -380,8 +380,19 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
         h.update(&robot_bytes);
         format!("{:x}", h.finalize())[..16].to_string()
     };
-    let space =
-        DesignSpace { name, path: path.to_path_buf(), base, identity, world_context, variables, points, objective, search, held_out, compare };
+    let space = DesignSpace {
+        name,
+        path: path.to_path_buf(),
+        base,
+        identity,
+        world_context,
+        variables,
+        points,
+        objective,
+        search,
+        held_out,
+        compare,
+    };
     feasible_somewhere(path, &space)?;
     Ok(space)
 }

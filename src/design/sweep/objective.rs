@@ -129,7 +129,9 @@ impl ObjectiveFile {
                 None => {
                     return fail(
                         "minimise",
-                        format!("{x:?}: one of \"median\", \"mean\", \"p95\", \"max\" (error after calibration), \"campaign_h\", \"set_size\""),
+                        format!(
+                            "{x:?}: one of \"median\", \"mean\", \"p95\", \"max\" (error after calibration), \"campaign_h\", \"set_size\""
+                        ),
                     );
                 }
             },

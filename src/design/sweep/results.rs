@@ -234,7 +234,8 @@ fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {
     let d = &m.designs;
     let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
-    let vs = |g: &dyn Fn(&crate::study::interval::Paired) -> f64| d.iter().map(|r| r.vs_leader.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
+    let vs =
+        |g: &dyn Fn(&crate::study::interval::Paired) -> f64| d.iter().map(|r| r.vs_leader.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
     let mut cols = vec![u("point", d.iter().map(|r| r.design.point as u32).collect())];
     for (a, key) in m.info.keys.iter().enumerate() {
         cols.push(Column::new(key.as_str().into(), d.iter().map(|r| m.info.points[r.design.point][a].clone()).collect::<Vec<_>>()));
@@ -261,7 +262,10 @@ fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {
         f("campaign_h_median", d.iter().map(|r| r.campaign_h).collect()),
         u("worlds", d.iter().map(|r| r.worlds).collect()),
         u("failed_worlds", d.iter().map(|r| r.failed_worlds).collect()),
-        Column::new("eliminated".into(), d.iter().map(|r| r.eliminated.as_ref().map(|e| e.1.clone()).unwrap_or_default()).collect::<Vec<_>>()),
+        Column::new(
+            "eliminated".into(),
+            d.iter().map(|r| r.eliminated.as_ref().map(|e| e.1.clone()).unwrap_or_default()).collect::<Vec<_>>(),
+        ),
     ]);
     parquet(dir, "designs.parquet", cols)
 }
@@ -345,7 +349,13 @@ pub fn summary(m: &Merged) -> String {
                 // Fractions of successes tie in most worlds: the mean difference and the counts say more.
                 format!("mean {:+.3}; better in {better}, worse in {worse} worlds, p = {:.3}", p.mean, p.test.p_value)
             } else {
-                format!("{} ({}-{}); better in {better}, worse in {worse}, p = {:.3}", f3(p.median), f3(p.interval.0), f3(p.interval.1), p.test.p_value)
+                format!(
+                    "{} ({}-{}); better in {better}, worse in {worse}, p = {:.3}",
+                    f3(p.median),
+                    f3(p.interval.0),
+                    f3(p.interval.1),
+                    p.test.p_value
+                )
             }
         });
         let pairing = r.vs_leader.as_ref().map_or("-".to_string(), |p| format!("{:.2}, {:.0} %", p.correlation, 100.0 * p.variance_saving));
@@ -378,7 +388,11 @@ pub fn summary(m: &Merged) -> String {
             "\n**Leader**: {} ({}){}. {}\n",
             design_label(info, leader),
             leader.feasibility.label(),
-            if leader.feasibility == Feasibility::Undecided { ": its constraints are not confirmed at this confidence; more realisations would decide" } else { "" },
+            if leader.feasibility == Feasibility::Undecided {
+                ": its constraints are not confirmed at this confidence; more realisations would decide"
+            } else {
+                ""
+            },
             if tied.is_empty() {
                 "No other design is tied with it at this confidence.".to_string()
             } else {
@@ -411,8 +425,28 @@ pub fn summary(m: &Merged) -> String {
     let _ = writeln!(s, " campaign, s | realisations |");
     let _ = writeln!(s, "|{}", "---|".repeat(10 + th.len()));
     for p in &table {
-        let cell = |k: usize| format!("{} ({}-{}; P10-P90 {}-{})", f3(p.after[k][0]), f3(p.after_ci[k][0]), f3(p.after_ci[k][1]), f3(p.after[k][1]), f3(p.after[k][2]));
-        let _ = write!(s, "| {} | {} | {} | {} | {} | {} | {} | {} |", p.point, point_label(info, p.point), p.selection, p.set_size, cell(0), cell(1), cell(2), f3(p.before[0]));
+        let cell = |k: usize| {
+            format!(
+                "{} ({}-{}; P10-P90 {}-{})",
+                f3(p.after[k][0]),
+                f3(p.after_ci[k][0]),
+                f3(p.after_ci[k][1]),
+                f3(p.after[k][1]),
+                f3(p.after[k][2])
+            )
+        };
+        let _ = write!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            p.point,
+            point_label(info, p.point),
+            p.selection,
+            p.set_size,
+            cell(0),
+            cell(1),
+            cell(2),
+            f3(p.before[0])
+        );
         for (k, (m, _)) in p.success.iter().enumerate() {
             let _ = write!(s, " {:.2} ({:.2}-{:.2}) |", m, p.success_ci[k][0], p.success_ci[k][1]);
         }
@@ -431,9 +465,10 @@ pub fn summary(m: &Merged) -> String {
             let cells: Vec<String> = sizes
                 .iter()
                 .map(|n| {
-                    points.iter().find(|p| p.point == pt && p.selection == sel && p.set_size == *n).map_or("-".into(), |p| {
-                        format!("{:.2} ({:.2}-{:.2})", p.success[t].0, p.success_ci[t][0], p.success_ci[t][1])
-                    })
+                    points
+                        .iter()
+                        .find(|p| p.point == pt && p.selection == sel && p.set_size == *n)
+                        .map_or("-".into(), |p| format!("{:.2} ({:.2}-{:.2})", p.success[t].0, p.success_ci[t][0], p.success_ci[t][1]))
                 })
                 .collect();
             let _ = writeln!(s, "| {pt} | {sel} | {} |", cells.join(" | "));

@@ -300,7 +300,10 @@ fn realisations(
         Some(toml::Value::Table(t)) => {
             if let Some(k) = t.keys().find(|k| !["max", "confidence", "batch", "min"].contains(&k.as_str())) {
                 // In serde's words, so that `calsim keys sweep` finds the table's fields by probing.
-                return bad(&format!("realisations.{k}"), format!("unknown field `{k}`, expected one of `max`, `min`, `batch`, `confidence` (adaptive realisations)"));
+                return bad(
+                    &format!("realisations.{k}"),
+                    format!("unknown field `{k}`, expected one of `max`, `min`, `batch`, `confidence` (adaptive realisations)"),
+                );
             }
             let max = match t.get("max") {
                 Some(v) => count("realisations.max", v)?,
@@ -375,7 +378,11 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
         return Err(file_err(path, "thresholds_mm", format!("{t} given twice: each threshold once")));
     }
     if let Some((i, a)) = file.axes.iter().enumerate().find(|(i, a)| file.axes[..*i].iter().any(|b| b.key == a.key)) {
-        return Err(file_err(path, &format!("axis[{i}] ({})", a.key), "the key of an earlier axis: each key once (combine its values in one axis)"));
+        return Err(file_err(
+            path,
+            &format!("axis[{i}] ({})", a.key),
+            "the key of an earlier axis: each key once (combine its values in one axis)",
+        ));
     }
     let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
     let (base_text, mut base_table) =

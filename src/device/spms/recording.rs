@@ -131,4 +131,3 @@ fn log_spms(rec: &RecordingStream, spec: &super::study::SpmsSpec, r: &super::stu
     rec.reset_time();
     Ok(())
 }
-

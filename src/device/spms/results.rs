@@ -16,12 +16,12 @@ use crate::io::plot::Written;
 use crate::io::record::Recorder;
 use crate::io::table::{err, parquet, table_hashes};
 use crate::robot::params::display_name;
-use crate::study::check::checks_markdown;
-use crate::study::tables::{parameter_columns, task_columns};
 use crate::study::Selection;
 use crate::study::check::Check;
+use crate::study::check::checks_markdown;
 use crate::study::published::published;
 use crate::study::stats::median;
+use crate::study::tables::{parameter_columns, task_columns};
 
 #[derive(Serialize)]
 struct Manifest<'a> {
@@ -51,7 +51,14 @@ pub struct SpmsExtras<'a> {
 /// Writes every result file of `r` into `dir` (an empty directory).
 ///
 /// Long by design: one block per result table, in the order of the README's list of result files.
-pub fn write(dir: &Path, s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], extras: &SpmsExtras<'_>) -> std::io::Result<()> {
+pub fn write(
+    dir: &Path,
+    s: &SpmsScenario,
+    r: &SpmsResults,
+    f: &SpmsFigures,
+    checks: &[Check],
+    extras: &SpmsExtras<'_>,
+) -> std::io::Result<()> {
     let h = &r.head;
     // Beams: truth and both identifications.
     let (mut which, mut beam, mut px, mut py, mut pz, mut dx, mut dy, mut dz, mut gain, mut perr, mut aerr) =
@@ -222,7 +229,8 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
     );
     o.push_str(&checks_markdown("Published figures", checks));
     let t6 = &published().spms_2023.iso9283;
-    let (own_before, own_after) = (crate::device::spms::iso9283::summary(&t6.ap_before_mm).2, crate::device::spms::iso9283::summary(&t6.ap_after_mm).2);
+    let (own_before, own_after) =
+        (crate::device::spms::iso9283::summary(&t6.ap_before_mm).2, crate::device::spms::iso9283::summary(&t6.ap_after_mm).2);
     let _ = writeln!(
         o,
         "\nTable 6 prints an RMS ({:.3} before, {:.3} after) that is not the RMS of its own five AP values \

@@ -231,7 +231,8 @@ impl Outcome for TrackerOutcome {
             tasks: self.results.tasks.len(),
             timings_s: self.timings,
         };
-        crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err).map_err(io)?).map_err(io)?;
+        crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err).map_err(io)?)
+            .map_err(io)?;
         let drawn = if options.plots {
             let e = &self.experiment;
             let inputs = plots::PlotInputs {

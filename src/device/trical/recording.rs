@@ -15,7 +15,6 @@
 //!   the after-calibration error vectors magnified by [`ERROR_MAGNIFICATION`];
 //! - `study/{validation_mean_mm,validation_max_mm,o1}` on the `task` and `set_size` timelines.
 
-
 use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Vector3};
@@ -84,7 +83,6 @@ pub fn write(
         "study: validation error and O1 per task (timeline `task`)",
     )
 }
-
 
 ///
 /// Long by design: one block per entity of the recording (cell, pool, centring readings,
@@ -235,4 +233,3 @@ fn log_all(rec: &RecordingStream, e: &Experiment, before: &RobotModel, results: 
     rec.reset_time();
     Ok(())
 }
-

@@ -78,7 +78,14 @@ pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &R
     let Report { figures: f, checks, threads, timings, overrides, ref extras } = *report;
     write_tables(dir, r)?;
     let manifest = Manifest {
-        provenance: Provenance::new(&scenario.header.name, &scenario.header.path, &scenario.header.text, scenario.header.seed, overrides, threads),
+        provenance: Provenance::new(
+            &scenario.header.name,
+            &scenario.header.path,
+            &scenario.header.text,
+            scenario.header.seed,
+            overrides,
+            threads,
+        ),
         tables_sha256: table_hashes(dir)?,
         tasks: r.tasks.len(),
         set_sizes: scenario.study.set_sizes.clone(),

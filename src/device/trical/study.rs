@@ -252,11 +252,16 @@ pub fn recompute_task(
     Ok(Some(Recomputed { result, model, set, observations: chosen }))
 }
 
-
 /// The prediction of every identification of a TriCal study at set size `n` that separated the
 /// parameters; `pool_qs` are the configurations the sets index, `validation_qs` the validation
 /// poses; `seed` keys the draws. `None` when no task qualifies.
-pub fn predict(results: &StudyResults, pool_qs: &[Joints], validation_qs: &[Joints], n: usize, seed: u64) -> Option<crate::study::prediction::Prediction> {
+pub fn predict(
+    results: &StudyResults,
+    pool_qs: &[Joints],
+    validation_qs: &[Joints],
+    n: usize,
+    seed: u64,
+) -> Option<crate::study::prediction::Prediction> {
     use crate::study::prediction::{TaskView, predict_tasks};
     let tasks = results.tasks.iter().filter(|t| t.task.set_size == n && !t.id.outcome.is_rank_deficient()).map(|t| TaskView {
         index: t.task.index,
@@ -267,4 +272,3 @@ pub fn predict(results: &StudyResults, pool_qs: &[Joints], validation_qs: &[Join
     });
     predict_tasks(&results.set, &results.truth, tasks, pool_qs, validation_qs, seed)
 }
-

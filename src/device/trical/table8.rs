@@ -67,7 +67,8 @@ pub fn external_instruments(
     let n = study.table_set_size as usize;
     let quiet = |_: usize, _: usize| {};
     let run = |instrument: External| -> Result<[f64; 3], String> {
-        let obs = external_pool(experiment_spec, e, seed, pool_size, &instrument).map_err(|err| format!("{} pool: {err}", what(&instrument)))?;
+        let obs =
+            external_pool(experiment_spec, e, seed, pool_size, &instrument).map_err(|err| format!("{} pool: {err}", what(&instrument)))?;
         let r = run_on_pool(e, before, &study, seed, &obs, &quiet).map_err(|err| err.to_string())?;
         let f = figures::Figures::of(&r, &e.robot.truth, n);
         Ok([f.after_median, f.after_std, f.after_max])

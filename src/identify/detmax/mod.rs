@@ -481,8 +481,8 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    use super::*;
     use super::pool::random_pool;
+    use super::*;
 
     /// A random pool whose columns 0 and 4 are the same in every configuration (as the base
     /// translations are in the TriCal pool).

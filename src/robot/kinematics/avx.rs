@@ -18,10 +18,10 @@ use std::arch::x86_64::{
 use nalgebra::{Matrix3, Vector3};
 
 use super::portable::{angles, base_column, deflected_sincos};
-use crate::robot::model::{JOINTS, Joints, RobotModel};
-use crate::robot::params::{LinkParam, ParamId, ParamSet};
 use super::state::KinState;
 use super::statics::holding_torque;
+use crate::robot::model::{JOINTS, Joints, RobotModel};
+use crate::robot::params::{LinkParam, ParamId, ParamSet};
 
 type V = __m256d;
 

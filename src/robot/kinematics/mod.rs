@@ -25,8 +25,8 @@ use crate::robot::model::{JOINTS, Joints, RobotModel};
 use crate::robot::params::ParamSet;
 pub use batch::{tcp_jacobians_transposed, tcps_world};
 pub(crate) use portable::{forward_portable, tcp_jacobian_portable};
-use state::isometry;
 pub use state::KinState;
+use state::isometry;
 
 /// Forward kinematics with compliance: fills `st` and returns the TCP position in {W}, mm.
 ///
@@ -41,7 +41,6 @@ pub fn forward(model: &RobotModel, st: &mut KinState, q: &Joints) -> Vector3<f64
     }
     forward_portable(model, st, q)
 }
-
 
 /// Identification Jacobian `d p_W / d rho` (3 x p, internal units) at `q` for the parameters in
 /// `set`, written column by column into `jac`; returns the TCP position in {W}, mm.

@@ -187,4 +187,3 @@ pub(super) fn base_column(model: &RobotModel, b: BaseParam, pw: &Vector3<f64>) -
         BaseParam::Gamma => model.base_rot.column(0).cross(&rel),
     }
 }
-

@@ -69,7 +69,11 @@ pub(super) fn tree(robot: &urdf_rs::Robot) -> Result<Tree<'_>, String> {
         let (parent, child) = (j.parent.link.as_str(), j.child.link.as_str());
         for (role, link) in [("parent", parent), ("child", child)] {
             if !defined.contains(link) {
-                return Err(format!("joint {}: its {role} link {} is not defined (no <link name=...> of that name)", few([j.name.as_str()]), few([link])));
+                return Err(format!(
+                    "joint {}: its {role} link {} is not defined (no <link name=...> of that name)",
+                    few([j.name.as_str()]),
+                    few([link])
+                ));
             }
         }
         if parent == child {

@@ -22,7 +22,9 @@ pub struct ImportReport {
 fn preamble(text: &str) -> Vec<String> {
     let head = text.split("<robot").next().unwrap_or("");
     match (head.find("<!--"), head.find("-->")) {
-        (Some(a), Some(b)) if a < b => head[a + 4..b].lines().map(str::trim).filter(|l| !l.is_empty()).map(crate::io::names::escape_controls).collect(),
+        (Some(a), Some(b)) if a < b => {
+            head[a + 4..b].lines().map(str::trim).filter(|l| !l.is_empty()).map(crate::io::names::escape_controls).collect()
+        }
         _ => Vec::new(),
     }
 }
