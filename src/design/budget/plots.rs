@@ -14,7 +14,8 @@ use crate::io::plot::{
 pub struct TornadoLine {
     /// The source's label.
     pub source: String,
-    /// p95 after calibration with the source off, mm.
+    /// p95 after calibration with the source off (the all-on p95 plus the median per-world change,
+    /// where the worlds were paired), mm.
     pub off_mm: f64,
     /// Where the change from every source on puts the p95 with the source off: `all_mm` plus the
     /// interval of the paired per-world difference (drawn as an error bar; one that crosses the
@@ -34,7 +35,7 @@ pub fn write_tornado(dir: &Path, lines: &[TornadoLine], all_mm: f64) -> Result<V
     Ok(vec![Written {
         stem: "budget_tornado".into(),
         caption: format!(
-            "p95 after calibration with each source off or scaled (every other source as in the scenario); line: all sources, {all_mm:.3} mm; error bars: the 95 % interval of each change from all sources on, paired per world (a bar that crosses the line is noise)"
+            "p95 after calibration with each source off or scaled (every other source as in the scenario), each read as a change from all sources on, paired per world: the line, all sources, {all_mm:.3} mm, plus the median per-world change, with its 95 % interval (a bar that crosses the line is noise)"
         ),
     }])
 }
