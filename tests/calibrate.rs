@@ -242,6 +242,7 @@ fn the_calibrated_robot_file_loads_back_with_its_coupling() {
         options: Options { plots: false, ..Options::default() },
         plan_worlds: 0,
         plan_noise_mm: None,
+        plan_effects: None,
     };
     let report = calsim::calibrate::calibrate(&spec).unwrap();
     assert_eq!(report.dir, dir.path().join("out/run.calibration"));
@@ -520,17 +521,18 @@ fn mutated_measurement_values_are_refused_in_one_line_or_calibrated() {
 /// measured held-out median lies among the 20 simulated worlds' (under exchangeability a false
 /// alarm of the range test has probability 2/21; seed fixed); for data from a robot with gear
 /// harmonics the model lacks (30 mdeg, orders 2-40 per turn), the measured median lies above
-/// every simulated world's: the plan says the robot does something the model does not.
+/// every simulated world's: the plan says the robot does something the model does not; planned by
+/// a scenario with those gears (`--plan-scenario`), it lies among the simulated worlds' again.
 #[test]
-fn the_plan_explains_a_complete_model_and_flags_an_unmodelled_effect() {
-    use calsim::calibrate::plan::{Statistic, compare, simulate};
+fn the_plan_explains_a_complete_model_flags_an_unmodelled_effect_and_explains_it_when_planned_with_it() {
+    use calsim::calibrate::plan::{Effects, Statistic, compare, simulate};
     let robot = RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap();
     let truth = truth_on(&robot, &default_params());
     let opts = Options { plots: false, prediction_draws: 10, ..Options::default() };
     let judged = |unmodelled: UnmodelledSpec| {
         let sim = SimulationSpec { unmodelled, ..spec(truth.clone(), &robot, 0.012, vec![]) };
         let c = calsim::calibrate::run(&robot, &measured(&sim, &robot), &opts).unwrap();
-        let plan = simulate(&c, 20, Statistic::Median, 1, Some(0.012)).unwrap();
+        let plan = simulate(&c, 20, Statistic::Median, 1, Some(0.012), None).unwrap();
         let sorted = calsim::study::stats::finite_sorted(&plan.per_world_mm);
         (compare(&c, &plan), sorted)
     };
@@ -538,7 +540,38 @@ fn the_plan_explains_a_complete_model_and_flags_an_unmodelled_effect() {
     assert_eq!(exact.worlds, 20);
     assert!(worlds[0] <= exact.measured_mm && exact.measured_mm <= worlds[19], "{exact:?} {worlds:?}");
     let gears = UnmodelledSpec { transmission_high_mdeg: 30.0, transmission_high_orders: Some([2, 40]), ..UnmodelledSpec::default() };
-    let (missed, worlds) = judged(gears);
+    let (missed, worlds) = judged(gears.clone());
     assert!(missed.measured_mm > worlds[19] && !missed.inside, "{missed:?} {worlds:?}");
-    eprintln!("complete model: {exact:?}\nwith gear harmonics: {missed:?}");
+    // The same data planned by a scenario that knows the gears (their phases and orders drawn
+    // anew in each world): the measured median lies among the simulated worlds' again.
+    let sim = SimulationSpec { unmodelled: gears.clone(), ..spec(truth.clone(), &robot, 0.012, vec![]) };
+    let c = calsim::calibrate::run(&robot, &measured(&sim, &robot), &opts).unwrap();
+    let effects = Effects { source: "the gears".into(), unmodelled: gears, repeatability_mm: 0.0 };
+    let plan = simulate(&c, 20, Statistic::Median, 1, Some(0.012), Some(&effects)).unwrap();
+    let planned = compare(&c, &plan);
+    let worlds = calsim::study::stats::finite_sorted(&plan.per_world_mm);
+    assert!(worlds[0] <= planned.measured_mm && planned.measured_mm <= worlds[19], "{planned:?} {worlds:?}");
+    eprintln!("complete model: {exact:?}\nwith gear harmonics: {missed:?}\nplanned with the gears: {planned:?}");
+}
+
+/// A plan asked for wrongly is one line naming the option and exit 2, before any work: a planning
+/// scenario without plan worlds, one that is not a scenario (a robot file), a plan of 1,001 worlds
+/// and a NaN noise.
+#[test]
+fn a_plan_asked_for_wrongly_is_one_line_naming_the_option() {
+    let dir = common::scratch("calibrate-plan-args");
+    let base = ["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--no-plots", "--out"];
+    for (extra, says) in [
+        (vec!["--plan-scenario", "scenarios/irb120_trical.toml"], "--plan-scenario"),
+        (vec!["--plan-worlds", "3", "--plan-scenario", "robots/irb120.toml"], "robots/irb120.toml"),
+        (vec!["--plan-worlds", "1001"], "--plan-worlds"),
+        (vec!["--plan-worlds", "3", "--plan-noise-mm", "NaN"], "--plan-noise-mm"),
+    ] {
+        let out = common::calsim().args(base).arg(dir.path()).args(&extra).env("RUST_LIB_BACKTRACE", "0").output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {stderr}");
+        assert_eq!(stderr.trim().lines().count(), 1, "{extra:?}: {stderr}");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+        assert!(!dir.path().join("example_measurements.calibration").exists(), "{extra:?}: nothing written");
+    }
 }

@@ -184,6 +184,8 @@ pub struct CalibrateSpec {
     pub plan_worlds: usize,
     /// The plan's noise per coordinate, mm (`None`: the points' own, else the fit's residual).
     pub plan_noise_mm: Option<f64>,
+    /// The planning scenario's robot effects the plan draws in each world (`None`: none).
+    pub plan_effects: Option<plan::Effects>,
 }
 
 /// Most worlds of a plan's simulation (each a whole calibration).
@@ -215,7 +217,7 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
         0 => None,
         n => Some(plan::compare(
             &calibration,
-            &plan::simulate(&calibration, n, plan::Statistic::Median, spec.options.seed, spec.plan_noise_mm)?,
+            &plan::simulate(&calibration, n, plan::Statistic::Median, spec.options.seed, spec.plan_noise_mm, spec.plan_effects.as_ref())?,
         )),
     };
     let dir = report::write(&spec.out, &name, &calibration, plan.as_ref())

@@ -9,8 +9,9 @@
 //!
 //! [`simulate`] builds the distribution from the calibration itself (`calsim calibrate
 //! --plan-worlds N`): the calibrated robot, the registered sessions and targets taken as the
-//! truth, measured at the file's own joint values with isotropic noise at the fit's residual level,
-//! calibrated again the same way in each world. A measured held-out error inside the simulated
+//! truth, measured at the file's own joint values with isotropic noise, calibrated again the same
+//! way in each world; with a planning scenario (`--plan-scenario`), its robot's effects outside the
+//! model and its repeatability are drawn in each world too ([`Effects`]). A measured held-out error inside the simulated
 //! P10-P90 is what the chosen model and that noise explain; one above it says the robot does
 //! something the model does not (or the noise is not independent per point).
 
@@ -143,6 +144,7 @@ pub fn simulate(
     statistic: Statistic,
     seed: u64,
     noise_mm: Option<f64>,
+    effects: Option<&Effects>,
 ) -> Result<SimulatedOutcome, CalibrateError> {
     use rayon::prelude::*;
     let m = &c.measurements;
@@ -165,18 +167,37 @@ pub fn simulate(
         key: "plan-worlds".into(),
         message: format!("the calibrated robot cannot be placed in a session's frame: {e}"),
     })?;
-    let mut st = KinState::default();
-    let truth: Vec<Vector3<f64>> = m
-        .points
-        .iter()
-        .map(|p| forward(&placed[m.poses[p.pose].session * c.tools.len() + p.target], &mut st, &m.poses[p.pose].q))
-        .collect();
+    let targets = c.tools.len();
     let mut opts = c.options.clone();
     opts.plots = false;
     let per_world_mm: Vec<f64> = (0..worlds)
         .into_par_iter()
         .map(|w| {
             let mut rng = crate::seeds::stream(crate::seeds::split_seed(seed, w as u64), crate::seeds::calibrate::PLAN_NOISE);
+            // The link angles of every pose, in the file's order of poses: the joint values
+            // themselves, or the robot of the planning scenario with its effects drawn in this world.
+            let links: Vec<crate::robot::Joints> = match effects {
+                None => m.poses.iter().map(|p| p.q).collect(),
+                Some(e) => {
+                    let reference: crate::robot::Joints = std::array::from_fn(|i| {
+                        let l = c.model.limits()[i];
+                        0.5 * (l.min + l.max)
+                    });
+                    let robot = crate::robot::VirtualRobot::new(c.model.clone(), &e.unmodelled, e.repeatability_mm, &reference, &mut rng);
+                    let mut from = reference;
+                    m.poses
+                        .iter()
+                        .map(|p| {
+                            let l = robot.link_angles(&p.q, &from, &mut rng);
+                            from = p.q;
+                            l
+                        })
+                        .collect()
+                }
+            };
+            let mut st = KinState::default();
+            let truth: Vec<Vector3<f64>> =
+                m.points.iter().map(|p| forward(&placed[m.poses[p.pose].session * targets + p.target], &mut st, &links[p.pose])).collect();
             let mut mw = m.clone();
             for (p, t) in mw.points.iter_mut().zip(&truth) {
                 let s = if noise_mm.is_some() { sigma } else { p.sigma_mm.unwrap_or(sigma) };
@@ -186,5 +207,19 @@ pub fn simulate(
             super::run(&c.robot, &mw, &opts).ok().and_then(|cw| statistic.of(&cw)).unwrap_or(f64::NAN)
         })
         .collect();
-    Ok(SimulatedOutcome { scenario: format!("the calibrated robot, noise {sigma:.4} mm per coordinate"), statistic, per_world_mm })
+    let with = effects.map_or_else(String::new, |e| format!(" with the effects and repeatability of {}", e.source));
+    Ok(SimulatedOutcome { scenario: format!("the calibrated robot{with}, noise {sigma:.4} mm per coordinate"), statistic, per_world_mm })
+}
+
+/// What a planning scenario adds to the calibrated robot in each world of a plan: its effects
+/// outside the kinematic model (drawn per world: harmonics' phases and orders, backlash, encoder
+/// errors) and its ISO 9283 repeatability.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Effects {
+    /// The scenario they come from (for the report).
+    pub source: String,
+    /// The effects outside the model.
+    pub unmodelled: crate::robot::UnmodelledSpec,
+    /// ISO 9283 RP, mm.
+    pub repeatability_mm: f64,
 }

@@ -93,6 +93,13 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     /// figures of a sweep that moves them; empty where the device has none.
     fn layout_mm(&self) -> Vec<[f64; 3]>;
 
+    /// The robot's effects outside its kinematic model and its ISO 9283 repeatability (mm), as the
+    /// scenario draws them in every world: what a calibration's plan (`calsim calibrate
+    /// --plan-scenario`) adds to the calibrated robot. `None` where the device has no robot.
+    fn robot_effects(&self) -> Option<(crate::robot::UnmodelledSpec, f64)> {
+        None
+    }
+
     /// Where the robot stands in the cell's world frame, for the same figures; `None` where the
     /// device draws no cell.
     fn robot_in_cell(&self) -> Option<RobotInCell> {

@@ -91,6 +91,10 @@ impl Scenario for SpmsScenario {
         &mut self.spec.study
     }
 
+    fn robot_effects(&self) -> Option<(crate::robot::UnmodelledSpec, f64)> {
+        Some((self.spec.robot.unmodelled.clone(), self.spec.robot.repeatability_mm))
+    }
+
     fn recheck(&self, path: &str) -> Result<(), ScenarioError> {
         spec::check(&self.spec, path)
     }

@@ -93,6 +93,10 @@ impl Scenario for TrackerScenario {
         &mut self.cell.study
     }
 
+    fn robot_effects(&self) -> Option<(crate::robot::UnmodelledSpec, f64)> {
+        Some((self.cell.experiment.robot.unmodelled.clone(), self.cell.experiment.robot.repeatability_mm))
+    }
+
     fn recheck(&self, path: &str) -> Result<(), ScenarioError> {
         self.cell.recheck(path)?;
         spec::check(self, path)

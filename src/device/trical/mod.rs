@@ -96,6 +96,10 @@ impl Scenario for TricalScenario {
         &mut self.study
     }
 
+    fn robot_effects(&self) -> Option<(crate::robot::UnmodelledSpec, f64)> {
+        Some((self.experiment.robot.unmodelled.clone(), self.experiment.robot.repeatability_mm))
+    }
+
     fn recheck(&self, path: &str) -> Result<(), ScenarioError> {
         spec::check_overrides(self, path)
     }
