@@ -8,7 +8,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::Calibration;
-use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, e2s, heat, legend, range_of, register_font};
+use crate::io::plot::{DrawResult, FAMILY, Mark, PlotError, Side, Written, both, e2s, heat, keyed, range_of, register_font, whole};
 
 /// Writes the figures of `c` into `dir`.
 pub fn write(dir: &Path, c: &Calibration) -> Result<Vec<Written>, PlotError> {
@@ -48,6 +48,13 @@ fn per_point<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
     let ymax = before.errors_mm.iter().chain(&after.errors_mm).copied().filter(|v| v.is_finite()).fold(1e-9, f64::max) * 1.05;
     let title =
         format!("Error per point: before {:.3} mm RMS, after ({}) {:.3} mm RMS", before.stats.rms, c.chosen().name(), after.stats.rms);
+    // The key under the chart: the points fill the whole width.
+    let key = [
+        ("before".to_string(), Mark::Dot(RED)),
+        ("after".to_string(), Mark::Dot(BLUE)),
+        ("outlier (after)".to_string(), Mark::Ring(BLACK)),
+    ];
+    let root = &keyed(root, &key, Side::Bottom)?;
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FAMILY, 20))
         .margin(15)
@@ -55,13 +62,18 @@ fn per_point<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
         .y_label_area_size(65)
         .build_cartesian_2d(0.0..n as f64, 0.0..ymax)
         .map_err(e2s)?;
-    chart.configure_mesh().x_desc("point (file order)").y_desc("position error (mm)").label_style((FAMILY, 13)).draw().map_err(e2s)?;
-    for (fit, colour, label) in [(before, RED, "before"), (after, BLUE, "after")] {
+    chart
+        .configure_mesh()
+        .x_desc("point (file order)")
+        .y_desc("position error (mm)")
+        .x_label_formatter(&whole)
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
+    for (fit, colour) in [(before, RED), (after, BLUE)] {
         chart
             .draw_series(fit.errors_mm.iter().enumerate().map(|(i, e)| Circle::new((i as f64, *e), 2, colour.mix(0.6).filled())))
-            .map_err(e2s)?
-            .label(label)
-            .legend(move |(x, y)| Circle::new((x, y), 3, colour.filled()));
+            .map_err(e2s)?;
     }
     chart
         .draw_series(
@@ -72,10 +84,8 @@ fn per_point<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
                 .filter(|(i, _)| after.outlier[*i])
                 .map(|(i, e)| Circle::new((i as f64, *e), 8, BLACK.stroke_width(2))),
         )
-        .map_err(e2s)?
-        .label("outlier (after)")
-        .legend(|(x, y)| Circle::new((x, y), 6, BLACK.stroke_width(2)));
-    legend(&mut chart, SeriesLabelPosition::UpperRight, 13)
+        .map_err(e2s)?;
+    Ok(())
 }
 
 fn per_joint<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {
@@ -142,6 +152,14 @@ fn held_out<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) 
         })
         .collect();
     let xmax = curves.iter().flat_map(|(_, v)| v.last()).copied().fold(1e-9, f64::max) * 1.05;
+    let colours = [RED, GREEN, MAGENTA, BLUE];
+    // The key under the chart: the curves reach every corner of it.
+    let mut key: Vec<(String, Mark)> =
+        curves.iter().enumerate().map(|(k, (name, _))| (format!("{name}, measured"), Mark::Line(colours[k % colours.len()]))).collect();
+    if c.chosen().held_out.is_some() {
+        key.push((format!("{}: predicted median and p95", c.chosen().name()), Mark::Ring(BLACK)));
+    }
+    let root = &keyed(root, &key, Side::Bottom)?;
     let mut chart = ChartBuilder::on(root)
         .caption(format!("Held-out errors: {}", c.options.split.describe()), (FAMILY, 18))
         .margin(15)
@@ -156,24 +174,19 @@ fn held_out<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) 
         .label_style((FAMILY, 13))
         .draw()
         .map_err(e2s)?;
-    let colours = [RED, GREEN, MAGENTA, BLUE];
-    for (k, (name, v)) in curves.iter().enumerate() {
+    for (k, (_, v)) in curves.iter().enumerate() {
         let colour = colours[k % colours.len()];
         let n = v.len().max(1) as f64;
         chart
             .draw_series(LineSeries::new(v.iter().enumerate().map(|(i, e)| (*e, (i + 1) as f64 / n)), colour.stroke_width(2)))
-            .map_err(e2s)?
-            .label(format!("{name}, measured"))
-            .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], colour.stroke_width(2)));
+            .map_err(e2s)?;
     }
     if let Some(h) = &c.chosen().held_out {
         let pr = &h.predicted;
         let marks = [(pr.median, 0.5), (pr.p95, 0.95)];
         chart
-            .draw_series(marks.iter().filter(|(x, _)| x.is_finite()).map(|&(x, y)| Cross::new((x, y), 8, BLACK.stroke_width(2))))
-            .map_err(e2s)?
-            .label(format!("{}: predicted median and p95", c.chosen().name()))
-            .legend(|(x, y)| Cross::new((x, y), 5, BLACK.stroke_width(2)));
+            .draw_series(marks.iter().filter(|(x, _)| x.is_finite()).map(|&(x, y)| Circle::new((x, y), 7, BLACK.stroke_width(2))))
+            .map_err(e2s)?;
     }
-    legend(&mut chart, SeriesLabelPosition::LowerRight, 13)
+    Ok(())
 }
