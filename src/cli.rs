@@ -720,19 +720,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         options,
         plan_worlds: args.plan_worlds as usize,
         plan_noise_mm: args.plan_noise_mm,
-        plan_effects: match &args.plan_scenario {
-            None => None,
-            Some(path) => {
-                if args.plan_worlds == 0 {
-                    return Err("--plan-scenario: a plan needs --plan-worlds N (N >= 1)".into());
-                }
-                let s = crate::device::load(path).map_err(|e| e.to_string())?;
-                let (unmodelled, repeatability_mm) = s
-                    .robot_effects()
-                    .ok_or_else(|| format!("--plan-scenario: {}: its device has no robot to plan with", path.display()))?;
-                Some(crate::calibrate::plan::Effects { source: path.display().to_string(), unmodelled, repeatability_mm })
-            }
-        },
+        plan_scenario: args.plan_scenario.clone(),
     };
     let report = crate::calibrate::calibrate(&spec).map_err(|e| e.to_string())?;
     println!("{}", crate::calibrate::report::terminal(&report.calibration, &report.dir));

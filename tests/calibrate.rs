@@ -242,7 +242,7 @@ fn the_calibrated_robot_file_loads_back_with_its_coupling() {
         options: Options { plots: false, ..Options::default() },
         plan_worlds: 0,
         plan_noise_mm: None,
-        plan_effects: None,
+        plan_scenario: None,
     };
     let report = calsim::calibrate::calibrate(&spec).unwrap();
     assert_eq!(report.dir, dir.path().join("out/run.calibration"));

@@ -184,8 +184,9 @@ pub struct CalibrateSpec {
     pub plan_worlds: usize,
     /// The plan's noise per coordinate, mm (`None`: the points' own, else the fit's residual).
     pub plan_noise_mm: Option<f64>,
-    /// The planning scenario's robot effects the plan draws in each world (`None`: none).
-    pub plan_effects: Option<plan::Effects>,
+    /// The scenario that planned the calibration: its robot's effects outside the model and its
+    /// repeatability are drawn in each world of the plan (`None`: none).
+    pub plan_scenario: Option<PathBuf>,
 }
 
 /// Most worlds of a plan's simulation (each a whole calibration).
@@ -194,13 +195,6 @@ pub const MOST_PLAN_WORLDS: usize = 1000;
 /// `calsim calibrate`: reads the robot and measurement files, calibrates, writes the report.
 pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateError> {
     check_options(&spec.options)?;
-    // Before any work: the report's name and directory.
-    crate::io::names::of_file(&spec.measurements)?;
-    crate::io::out_dir::vet_dir(&spec.out)?;
-    let robot = RobotFile::load(&spec.robot_file)?;
-    let m = measurements::read(&spec.measurements, &robot)?;
-    let name = report::directory_name(&spec.measurements);
-    crate::io::out_dir::prepare(&spec.out, &name)?;
     if let Some(s) = spec.plan_noise_mm
         && !(s.is_finite() && (0.0..=100.0).contains(&s))
     {
@@ -212,17 +206,38 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
             message: format!("{}: at most {MOST_PLAN_WORLDS}", spec.plan_worlds),
         });
     }
+    let plan_effects = spec.plan_scenario.as_deref().map(|path| plan_effects(path, spec.plan_worlds)).transpose()?;
+    // Before any work: the report's name and directory.
+    crate::io::names::of_file(&spec.measurements)?;
+    crate::io::out_dir::vet_dir(&spec.out)?;
+    let robot = RobotFile::load(&spec.robot_file)?;
+    let m = measurements::read(&spec.measurements, &robot)?;
+    let name = report::directory_name(&spec.measurements);
+    crate::io::out_dir::prepare(&spec.out, &name)?;
     let calibration = run(&robot, &m, &spec.options)?;
     let plan = match spec.plan_worlds {
         0 => None,
         n => Some(plan::compare(
             &calibration,
-            &plan::simulate(&calibration, n, plan::Statistic::Median, spec.options.seed, spec.plan_noise_mm, spec.plan_effects.as_ref())?,
+            &plan::simulate(&calibration, n, plan::Statistic::Median, spec.options.seed, spec.plan_noise_mm, plan_effects.as_ref())?,
         )),
     };
     let dir = report::write(&spec.out, &name, &calibration, plan.as_ref())
         .map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
     Ok(CalibrationReport { calibration, dir, plan })
+}
+
+/// The robot effects of the planning scenario at `path` (any device with a robot), for a plan of
+/// `worlds` worlds.
+fn plan_effects(path: &Path, worlds: usize) -> Result<plan::Effects, CalibrateError> {
+    let bad = |message: String| CalibrateError::Option { key: "plan-scenario".into(), message };
+    if worlds == 0 {
+        return Err(bad("a plan needs --plan-worlds N (N >= 1)".into()));
+    }
+    let s = crate::device::load(path).map_err(|e| bad(e.to_string()))?;
+    let (unmodelled, repeatability_mm) =
+        s.robot_effects().ok_or_else(|| bad(format!("{}: its device has no robot to plan with", path.display())))?;
+    Ok(plan::Effects { source: path.display().to_string(), unmodelled, repeatability_mm })
 }
 
 fn check_options(o: &Options) -> Result<(), CalibrateError> {
