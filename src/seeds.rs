@@ -48,13 +48,17 @@ pub mod experiment {
 pub mod campaign {
     /// CMM measurement of the TCP.
     pub const CMM: u64 = 1;
-    /// Semi-automatic steps (TCP check, locating the spheres).
+    /// Semi-automatic steps (TCP check, locating the spheres): the seed of the streams of their
+    /// targets, one per [`semi_automatic_step`].
     pub const SEMI_AUTOMATIC: u64 = 2;
+    /// Semi-automatic steps: the seed of the streams of their centrings, one per
+    /// [`semi_automatic_step`].
+    pub const SEMI_AUTOMATIC_CENTRING: u64 = 5;
     /// Validation configurations.
     pub const VALIDATION_POSES: u64 = 3;
-    /// Pool targets of sphere k: `POOL_TARGETS + k`.
+    /// Pool targets: the seed of the streams of every try's target, one per [`pool_step`].
     pub const POOL_TARGETS: u64 = 100;
-    /// Centring of pool attempt t of sphere k: `POOL_CENTRING + k * 2^32 + t`.
+    /// Pool centrings: the seed of the streams of every try's centring, one per [`pool_step`].
     pub const POOL_CENTRING: u64 = 1 << 40;
     /// Move and tracker noise of validation pose i: `VALIDATION_NOISE + i`.
     pub const VALIDATION_NOISE: u64 = 1 << 41;
@@ -62,6 +66,22 @@ pub mod campaign {
     pub const INSTRUMENT_POSES: u64 = 4;
     /// Move and instrument noise of pool pose i: `INSTRUMENT_NOISE + i`.
     pub const INSTRUMENT_NOISE: u64 = 1 << 42;
+
+    /// The key of a semi-automatic draw under [`SEMI_AUTOMATIC`] or [`SEMI_AUTOMATIC_CENTRING`]:
+    /// sphere `k`, its configuration `j` (the TCP check takes several on sphere 1) and try `t`
+    /// (`t = 0`: the configuration's approach axis; tries count from 1). The checker bounds `j` to
+    /// 100 and `t` to 100,000 (below 2^20).
+    pub fn semi_automatic_step(k: usize, j: u32, t: u32) -> u64 {
+        ((k as u64) << 32) + (u64::from(j) << 20) + u64::from(t)
+    }
+
+    /// The key of a pool try under [`POOL_TARGETS`] or [`POOL_CENTRING`]: sphere `k`, the kept
+    /// configuration it is for (`slot`, 0-based) and the try `t` of that slot (0-based). The
+    /// checker bounds the spheres to 12, the slots to 10,000 (below 2^16) and a sphere's tries to
+    /// 10^9 (below 2^32).
+    pub fn pool_step(k: usize, slot: u32, t: u32) -> u64 {
+        ((k as u64) << 48) + (u64::from(slot) << 32) + u64::from(t)
+    }
 }
 
 /// The SPMS head's streams, keyed under the scenario seed.
@@ -78,8 +98,12 @@ pub mod spms_head {
 
 /// The SPMS calibration cell's streams, keyed under the scenario seed.
 pub mod spms_cell {
-    /// Physical robot, stations and tool.
-    pub const TRUTH: u64 = 0x4552_3230_0001;
+    /// The physical robot: its unmodelled effects and joint noise.
+    pub const ROBOT: u64 = 0x4552_3230_0004;
+    /// The sphere's true place on the flange.
+    pub const TOOL: u64 = 0x4552_3230_0005;
+    /// Station k's placement error and the tracker's measurement of its frame: `STATION + k`.
+    pub const STATION: u64 = 0x5354_4154_0000_0000;
     /// Pool candidate `index` at station k: `POOL + k * 2^32 + index`.
     pub const POOL: u64 = 0x4552_3230_0100;
     /// ISO 9283 cycles.

@@ -167,10 +167,14 @@ fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
     assert_eq!(full, quick);
 }
 
-/// The reduced study's own world (seed 2018, one realisation) meets the bands of its [expect]
-/// table, and a check leaves the complete result set with its machine-readable verdict
-/// (check.json, and JUnit XML on request) and no temporary directory behind. The check over the
-/// scenario's 20 worlds runs in CI with the release binary (.ci/run).
+/// A check of the reduced study's own world (seed 2018, one realisation) leaves the complete result
+/// set with its machine-readable verdict (check.json, and JUnit XML on request, one test case per
+/// figure and a failure per miss) and no temporary directory behind, and exits by its verdict. The
+/// figures themselves are not judged in one world here: one world is a draw (a check that passes
+/// only at one seed is a regression lock, issue 30), and the world of seed 2018 misses the
+/// after-calibration median's band since the campaign's streams were keyed per try (0.248 mm
+/// against 0.208 +-15 %; the model's median over 400 worlds is 0.181 mm). The gate is the check
+/// over the scenario's 30 worlds, which CI runs with the release binary (.ci/run).
 #[test]
 fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
     let tmp = scratch("check");
@@ -184,16 +188,19 @@ fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    assert!(stdout.contains("figures within their bands"), "{stdout}");
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     let verdict: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("ci_quick/check.json")).unwrap()).unwrap();
-    assert_eq!(verdict["pass"], true);
+    assert_eq!(verdict["pass"], out.status.success(), "{stdout}");
     assert_eq!(verdict["realisations"], 1);
     let figures = verdict["figures"].as_array().unwrap();
-    assert_eq!(figures.iter().filter(|f| f["verdict"] == "pass").count(), 6, "{figures:?}");
+    let judged: Vec<&str> = figures.iter().map(|f| f["verdict"].as_str().unwrap()).filter(|v| *v != "report").collect();
+    assert_eq!(judged.len(), 6, "{figures:?}");
+    assert!(judged.iter().all(|v| ["pass", "miss"].contains(v)), "one world: every banded figure passes or misses, {figures:?}");
+    let misses = judged.iter().filter(|v| **v == "miss").count();
+    assert_eq!(verdict["pass"], misses == 0, "{figures:?}");
     let xml = std::fs::read_to_string(&junit).unwrap();
     let _ = std::fs::remove_file(&junit);
-    assert!(xml.contains("<testsuite name=\"calsim check ci_quick\"") && xml.contains("failures=\"0\""), "{xml}");
+    assert!(xml.contains("<testsuite name=\"calsim check ci_quick\"") && xml.contains(&format!("failures=\"{misses}\"")), "{xml}");
     assert_eq!(xml.matches("<testcase ").count(), figures.len());
     let entries: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(entries, vec!["ci_quick".to_string()], "no temporary directory left: {entries:?}");
@@ -400,11 +407,14 @@ fn a_check_over_too_few_worlds_to_judge_is_refused_naming_the_count_it_needs() {
     let figures = verdict["figures"].as_array().unwrap();
     let banded: Vec<_> = figures.iter().filter(|f| f["verdict"] != "report").collect();
     assert_eq!(banded.len(), 6);
-    assert!(
-        banded
-            .iter()
-            .all(|f| ["pass", "open", "miss"].contains(&f["verdict"].as_str().unwrap()) && f["interval"].is_array() && f["missing"] == 0),
-        "{banded:?}"
-    );
+    // A world whose figure is not a finite number (a spread ratio over 2 repetitions whose sets
+    // coincide) widens that figure's interval on both sides: it is unresolved, never a pass.
+    for f in &banded {
+        if f["missing"] == 0 {
+            assert!(["pass", "open", "miss"].contains(&f["verdict"].as_str().unwrap()) && f["interval"].is_array(), "{f:?}");
+        } else {
+            assert_eq!(f["verdict"], "unresolved", "{f:?}");
+        }
+    }
     assert_eq!(verdict["pass"], out.status.success());
 }

@@ -159,25 +159,26 @@ fn the_kr6_flange_faces_out_of_the_wrist() {
 
 /// The third arm runs the TriCal study from its files: campaign (numeric IK, its own link
 /// capsules, the upside-down {0}, the turned flange) and identification of the 31 parameters. On
-/// 10 sets of 75 the calibration must cut the error several-fold: the after-calibration median
-/// below a third of the before-calibration mean.
+/// 5 sets of 75 in each of 9 worlds (realisations 0-8 of the scenario's seed) the calibration must
+/// cut the error several-fold in the typical world: the median over the worlds of the ratio of the
+/// after-calibration median to the before-calibration mean below a third. Judged over worlds, not
+/// in one: the KR 6's calibration in this cell has a heavy tail (30 worlds of 10 sets,
+/// `cargo run --release --example arm_worlds -- scenarios/kr6r900sixx_trical.toml 30 10`: median
+/// ratio 0.177, 9 of 30 worlds at or above a third, the worst near 0.8: the pool around three
+/// spheres 300 mm apart leaves the base, theta_offs2 and d4 poorly separated for a 900 mm arm),
+/// so a single world is a draw, not the arm's behaviour.
 #[test]
 fn the_kr6_runs_the_trical_study() {
     let mut s = calsim::device::trical::spec::load(&common::repo().join("scenarios/kr6r900sixx_trical.toml")).expect("scenario");
     s.study.set_sizes = vec![75];
-    s.study.repetitions = 10;
+    s.study.repetitions = 5;
     let e = s.experiment.build(s.header.seed).expect("the KR 6 campaign");
     assert_eq!(e.campaign.pool.len(), 360);
     assert_eq!(e.campaign.validation.len(), 506);
-    let before = s.experiment.before_model(&e.campaign);
-    let r = calsim::device::trical::study::run(&e, &before, &s.study, s.header.seed, &|_, _| {}).expect("study");
-    let before_mean = r.before_errors.iter().sum::<f64>() / r.before_errors.len() as f64;
-    let mut medians: Vec<f64> = r.tasks.iter().filter(|t| t.id.outcome.label() == "converged").map(|t| t.validation.median).collect();
-    assert_eq!(medians.len(), 10, "every set identified");
-    medians.sort_by(f64::total_cmp);
-    let median = medians[5];
-    eprintln!("KR 6: before mean {before_mean:.3} mm, after median of medians {median:.3} mm");
-    assert!(median < before_mean / 3.0, "after {median} mm vs before {before_mean} mm");
+    let worlds = common::trical_worlds(&s, 9);
+    let ratio = common::median_ratio(&worlds);
+    eprintln!("KR 6: (before mean, after median) per world {worlds:.3?}; median ratio {ratio:.3}");
+    assert!(ratio < 1.0 / 3.0, "after / before {ratio} over the worlds {worlds:?}");
 }
 
 /// The URDF's collision cylinders become capsules of the same size and place: the KR 6's upper-arm

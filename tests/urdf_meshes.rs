@@ -258,8 +258,11 @@ fn a_bad_mesh_is_one_line_naming_link_and_file() {
 /// The shipped LR Mate runs the TriCal study from its imported file, unedited: its campaign (the
 /// numeric IK, the half-turn flange, the mesh capsules) and the identification of the 31
 /// parameters. Kept small for CI: the scenario's pool (120 configurations per sphere), 150
-/// validation poses, 5 sets of 75; the calibration must cut the error several-fold (the after-calibration median of the
-/// medians below a third of the before-calibration mean).
+/// validation poses, 5 sets of 75, in 9 worlds (realisations 0-8 of the scenario's seed); the
+/// calibration must cut the error several-fold in the typical world: the median over the worlds of
+/// the ratio of the after-calibration median to the before-calibration mean below a third. Judged
+/// over worlds, not in one (30 worlds of 5 sets, `cargo run --release --example arm_worlds --
+/// scenarios/lrmate200ic_trical.toml 30 5`: median ratio 0.132, 5 of 30 worlds at or above a third).
 #[test]
 fn the_shipped_lrmate_runs_the_trical_study() {
     let mut s = calsim::device::trical::spec::load(&common::repo().join("scenarios/lrmate200ic_trical.toml")).expect("scenario");
@@ -269,13 +272,8 @@ fn the_shipped_lrmate_runs_the_trical_study() {
     let e = s.experiment.build(s.header.seed).expect("the LR Mate campaign");
     assert_eq!(e.campaign.pool.len(), 360);
     assert_eq!(e.campaign.validation.len(), 150);
-    let before = s.experiment.before_model(&e.campaign);
-    let r = calsim::device::trical::study::run(&e, &before, &s.study, s.header.seed, &|_, _| {}).expect("study");
-    let before_mean = r.before_errors.iter().sum::<f64>() / r.before_errors.len() as f64;
-    let mut medians: Vec<f64> = r.tasks.iter().filter(|t| t.id.outcome.label() == "converged").map(|t| t.validation.median).collect();
-    assert_eq!(medians.len(), 5, "every set identified");
-    medians.sort_by(f64::total_cmp);
-    let median = medians[2];
-    eprintln!("LR Mate 200iC: before mean {before_mean:.3} mm, after median of medians {median:.3} mm");
-    assert!(median < before_mean / 3.0, "after {median} mm vs before {before_mean} mm");
+    let worlds = common::trical_worlds(&s, 9);
+    let ratio = common::median_ratio(&worlds);
+    eprintln!("LR Mate 200iC: (before mean, after median) per world {worlds:.3?}; median ratio {ratio:.3}");
+    assert!(ratio < 1.0 / 3.0, "after / before {ratio} over the worlds {worlds:?}");
 }

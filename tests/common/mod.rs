@@ -66,3 +66,30 @@ pub fn largest_tcp_difference(a: &RobotModel, b: &RobotModel, limits: &RobotMode
         })
         .fold(0.0, f64::max)
 }
+
+/// The TriCal study of `s` in `worlds` worlds (realisations 0, 1, ... of its seed): per world, the
+/// before-calibration mean error and the median over its converged sets of their validation
+/// medians, mm. Panics when a campaign fails or a set does not converge.
+pub fn trical_worlds(s: &calsim::device::trical::spec::TricalScenario, worlds: u32) -> Vec<(f64, f64)> {
+    (0..worlds)
+        .map(|r| {
+            let seed = calsim::seeds::realisation_seed(s.header.seed, r);
+            let e = s.experiment.build(seed).unwrap_or_else(|err| panic!("world {r}: campaign: {err}"));
+            let before = s.experiment.before_model(&e.campaign);
+            let study = calsim::device::trical::study::run(&e, &before, &s.study, seed, &|_, _| {}).expect("study");
+            let before_mean = study.before_errors.iter().sum::<f64>() / study.before_errors.len() as f64;
+            let mut medians: Vec<f64> =
+                study.tasks.iter().filter(|t| t.id.outcome.label() == "converged").map(|t| t.validation.median).collect();
+            assert_eq!(medians.len(), study.tasks.len(), "world {r}: every set identified");
+            medians.sort_by(f64::total_cmp);
+            (before_mean, medians[medians.len() / 2])
+        })
+        .collect()
+}
+
+/// The median of the worlds' ratios of after-calibration median to before-calibration mean.
+pub fn median_ratio(worlds: &[(f64, f64)]) -> f64 {
+    let mut r: Vec<f64> = worlds.iter().map(|(before, after)| after / before).collect();
+    r.sort_by(f64::total_cmp);
+    r[r.len() / 2]
+}

@@ -272,33 +272,36 @@ fn facing_head(sphere_base: &Vector3<f64>, c_head: &Vector3<f64>) -> Isometry3<f
 /// physical head).
 ///
 /// Long by design: one pass in the order the cell is set up (stations placed and measured, the tool
-/// and the robot drawn, the pool measured station by station), each step drawing from the cell's
-/// one stream; split, the draws would have to be threaded through every piece in the same order.
+/// and the robot drawn, the pool measured station by station). Each piece draws from a stream of its
+/// own ([`streams`]: each station, the tool, the robot, each pool candidate), so that designs with
+/// another number of stations are compared on the same robot and tool (common random numbers).
 pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &IdentifiedHead, seed: u64) -> Result<Cell, CellError> {
     let truth0 = crate::robot::perturb(&arm.truth_model(), &default_parameters(), &arm.spread, &mut stream(seed, streams::SPREAD));
-    let mut rng = stream(seed, streams::TRUTH);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
     let tracker = AxisNoise::new(station.tracker_sigma_um);
     let c_head = Vector3::from(station.sphere_centre_head_mm);
     let mut nominal_heads = Vec::new();
     let mut true_heads = Vec::new();
-    for p in &station.sphere_points_base_mm {
-        let nominal = facing_head(&Vector3::from(*p), &c_head);
-        let dp = Vector3::from_fn(|_, _| normal.sample(&mut rng) * station.placement_error_mm);
-        let da = Vector3::from_fn(|_, _| normal.sample(&mut rng) * station.placement_error_deg.to_radians());
-        true_heads.push(Isometry3::from_parts(
-            Translation3::from(nominal.translation.vector + dp),
-            UnitQuaternion::from_scaled_axis(da) * nominal.rotation,
-        ));
-        nominal_heads.push(nominal);
-    }
     // The tracker measures every head's A1-A3 in its own frame; the heads' frames are then
     // expressed in the first one's as measured.
-    let measured_tracker_from_head: Vec<Isometry3<f64>> =
-        true_heads.iter().map(|t| super::measured_frame(t, &tracker, &mut rng).expect("A1-A3 are not collinear")).collect();
+    let mut measured_tracker_from_head = Vec::new();
+    for (k, p) in station.sphere_points_base_mm.iter().enumerate() {
+        let rng = &mut stream(seed, streams::STATION + k as u64);
+        let nominal = facing_head(&Vector3::from(*p), &c_head);
+        let dp = Vector3::from_fn(|_, _| normal.sample(rng) * station.placement_error_mm);
+        let da = Vector3::from_fn(|_, _| normal.sample(rng) * station.placement_error_deg.to_radians());
+        let true_head = Isometry3::from_parts(
+            Translation3::from(nominal.translation.vector + dp),
+            UnitQuaternion::from_scaled_axis(da) * nominal.rotation,
+        );
+        measured_tracker_from_head.push(super::measured_frame(&true_head, &tracker, rng).expect("A1-A3 are not collinear"));
+        true_heads.push(true_head);
+        nominal_heads.push(nominal);
+    }
     let world_from_tracker = measured_tracker_from_head[0].inverse();
     let tool_nominal = Vector3::from(arm.sphere_flange_mm);
-    let tool_true = tool_nominal + Vector3::from_fn(|_, _| normal.sample(&mut rng) * arm.sphere_flange_error_mm);
+    let tool_rng = &mut stream(seed, streams::TOOL);
+    let tool_true = tool_nominal + Vector3::from_fn(|_, _| normal.sample(tool_rng) * arm.sphere_flange_error_mm);
     let nominal = arm
         .nominal_model()
         .edited(|d| {
@@ -313,7 +316,7 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
         })
         .expect("valid");
     let reference_q: Joints = arm.repeatability_reference_q_deg.map(f64::to_radians);
-    let robot = VirtualRobot::new(truth, &arm.unmodelled, arm.repeatability_mm, &reference_q, &mut rng);
+    let robot = VirtualRobot::new(truth, &arm.unmodelled, arm.repeatability_mm, &reference_q, &mut stream(seed, streams::ROBOT));
     // The controller plans in {S} of the nominal layout.
     let nominal_s_from_base = nominal_heads[0].inverse();
 

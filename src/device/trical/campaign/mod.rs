@@ -18,7 +18,7 @@ use crate::identify::Observation;
 use crate::instrument::laser_tracker::{LaserTracker, rigid_fit};
 use crate::instrument::trical::TriCal;
 use crate::robot::{JOINTS, Joints, KinState, RobotModel, VirtualRobot, forward, inverse, world_from_base};
-use crate::seeds::{campaign as streams, stream};
+use crate::seeds::{campaign as streams, split_seed, stream};
 pub use centring::{Approach, CentringError, CentringResult, centre};
 
 pub use crate::robot::uniform_configuration;
@@ -70,6 +70,10 @@ pub struct PoolEntry {
     pub q_commanded: Joints,
     /// Joint values recorded at the end of the centring, rad.
     pub q: Joints,
+    /// Tries this configuration's slot took (1: its first target was reachable, collision-free and
+    /// centred); each try draws from streams of its own, so two designs whose slot took the same
+    /// tries command the same configuration there.
+    pub tries: u32,
     /// Centring iterations (corrections after the first reading).
     pub iterations: u32,
     /// Modelled time to measure this configuration, s.
@@ -264,7 +268,12 @@ pub fn run(setup: &Setup<'_>, seed: u64) -> Result<Campaign, CampaignError> {
 /// the located spheres. Returns the steps and the model before calibration.
 fn semi_automatic(setup: &Setup<'_>, tcp_cmm: &Vector3<f64>, seed: u64) -> Result<(SemiAutomatic, RobotModel), CampaignError> {
     let Setup { cell, robot, trical, nominal, spec, .. } = *setup;
-    let rng = &mut stream(seed, streams::SEMI_AUTOMATIC);
+    // Each configuration's approach axis, each try's jog and spin and each try's centring draw from
+    // streams of their own ([`streams::semi_automatic_step`]): a centring that takes one iteration
+    // more in another design leaves every later sphere's located configuration (the pool's IK
+    // seeds) where it was.
+    let targets = split_seed(seed, streams::SEMI_AUTOMATIC);
+    let centrings = split_seed(seed, streams::SEMI_AUTOMATIC_CENTRING);
     let down = -Vector3::z();
     let jogging = nominal.edited(|d| d.flange_tcp_mm = *tcp_cmm).expect("valid");
     let mut located_q = Vec::new();
@@ -273,15 +282,19 @@ fn semi_automatic(setup: &Setup<'_>, tcp_cmm: &Vector3<f64>, seed: u64) -> Resul
     for (k, sphere_w) in cell.spheres_w.iter().enumerate() {
         let configs = if k == 0 { spec.tcp_check_configurations.max(1) } else { 1 };
         for j in 0..configs {
-            let axis = if j == 0 { down } else { cone_direction(&down, spec.approach_cone_deg.to_radians() * 0.8, rng) };
+            let key = |t: u32| streams::semi_automatic_step(k, j, t);
+            let axis =
+                if j == 0 { down } else { cone_direction(&down, spec.approach_cone_deg.to_radians() * 0.8, &mut stream(targets, key(0))) };
             let mut done = None;
-            for _ in 0..spec.max_tries_per_configuration {
+            for t in 1..=spec.max_tries_per_configuration {
+                let rng = &mut stream(targets, key(t));
                 let jog = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize() * spec.jog_error_mm;
                 let target = trical.frame6_pose(tcp_pose(&(sphere_w + jog), &axis, rng.random_range(0.0..std::f64::consts::TAU)));
                 let Ok(q) = inverse(&robot.truth, &target, &last_q) else {
                     continue;
                 };
-                if let Ok(res) = centre(&jogging, robot, trical, cell, Approach { sphere: k, q0: q, from: last_q }, rng) {
+                let approach = Approach { sphere: k, q0: q, from: last_q };
+                if let Ok(res) = centre(&jogging, robot, trical, cell, approach, &mut stream(centrings, key(t))) {
                     done = Some(res);
                     break;
                 }
@@ -333,7 +346,12 @@ fn measure_pool(
     let Setup { cell, robot, trical, spec, .. } = *setup;
     let down = -Vector3::z();
     // The spheres' pools are independent (each its own streams), so they are measured in
-    // parallel and joined in sphere order: the same pool for any thread count.
+    // parallel and joined in sphere order: the same pool for any thread count. Each kept
+    // configuration (slot) draws its tries from streams of its own ([`streams::pool_step`]): a try
+    // that fails in one design (a centring that reaches the iteration cap) changes that slot only,
+    // and every other slot holds the same commanded configuration in every design.
+    let targets = split_seed(seed, streams::POOL_TARGETS);
+    let centrings = split_seed(seed, streams::POOL_CENTRING);
     let per_sphere: Vec<Result<SpherePool, CampaignError>> = located_q
         .par_iter()
         .enumerate()
@@ -343,42 +361,46 @@ fn measure_pool(
             let mut centring_failures = 0;
             let mut st = KinState::default();
             let target_w = cell.spheres_w_measured[k];
-            let rng = &mut stream(seed, streams::POOL_TARGETS + k as u64);
             let mut last = *seed_q;
-            let mut kept = 0;
-            let mut tries = 0;
-            while kept < spec.pool_per_sphere {
-                tries += 1;
-                if tries > u64::from(spec.max_tries_per_configuration) * u64::from(spec.pool_per_sphere) {
-                    return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
-                }
-                let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
-                let pose = trical.frame6_pose(tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU)));
-                let Ok(q) = inverse(nominal_model, &pose, seed_q) else {
-                    rejected += 1;
-                    continue;
-                };
-                forward(nominal_model, &mut st, &q);
-                if world.first_collision(&st).is_some() {
-                    rejected += 1;
-                    continue;
-                }
-                let centring_rng = &mut stream(seed, streams::POOL_CENTRING + ((k as u64) << 32) + tries);
-                match centre(nominal_model, robot, trical, cell, Approach { sphere: k, q0: q, from: last }, centring_rng) {
-                    Ok(res) => {
-                        last = res.q;
-                        pool.push(PoolEntry {
-                            sphere: k,
-                            q_commanded: q,
-                            q: res.q,
-                            iterations: res.iterations,
-                            seconds: res.seconds,
-                            true_offset_mm: res.true_offset_mm,
-                            readings: res.readings,
-                        });
-                        kept += 1;
+            let mut tries = 0u64;
+            let limit = u64::from(spec.max_tries_per_configuration) * u64::from(spec.pool_per_sphere);
+            for slot in 0..spec.pool_per_sphere {
+                for t in 0u32.. {
+                    tries += 1;
+                    if tries > limit {
+                        return Err(CampaignError::Exhausted { what: format!("pool of sphere {}", k + 1), tries });
                     }
-                    Err(_) => centring_failures += 1,
+                    let key = streams::pool_step(k, slot, t);
+                    let rng = &mut stream(targets, key);
+                    let axis = cone_direction(&down, spec.approach_cone_deg.to_radians(), rng);
+                    let pose = trical.frame6_pose(tcp_pose(&target_w, &axis, rng.random_range(0.0..std::f64::consts::TAU)));
+                    let Ok(q) = inverse(nominal_model, &pose, seed_q) else {
+                        rejected += 1;
+                        continue;
+                    };
+                    forward(nominal_model, &mut st, &q);
+                    if world.first_collision(&st).is_some() {
+                        rejected += 1;
+                        continue;
+                    }
+                    let approach = Approach { sphere: k, q0: q, from: last };
+                    match centre(nominal_model, robot, trical, cell, approach, &mut stream(centrings, key)) {
+                        Ok(res) => {
+                            last = res.q;
+                            pool.push(PoolEntry {
+                                sphere: k,
+                                q_commanded: q,
+                                q: res.q,
+                                tries: t + 1,
+                                iterations: res.iterations,
+                                seconds: res.seconds,
+                                true_offset_mm: res.true_offset_mm,
+                                readings: res.readings,
+                            });
+                            break;
+                        }
+                        Err(_) => centring_failures += 1,
+                    }
                 }
             }
             Ok((pool, rejected, centring_failures))
