@@ -147,8 +147,9 @@ fn the_shipped_design_file_starts_from_the_hand_found_design() {
     for (a, b) in offset.iter().zip([0.0, 0.0, 100.0, 0.0, 0.0, 20.0]) {
         assert!((a - b).abs() < 1e-3, "{offset:?}");
     }
-    // The pool starts at the file's own start (110 per sphere), not the hand-found 120.
-    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(110));
+    // The pool starts at the paper's 120 per sphere, the centring tolerance at the file's 0.02 mm.
+    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(120));
+    assert_eq!(get("trical.epsilon_mm").as_float(), Some(0.02));
 }
 
 const SMALL: &str = "[fixed]\n\"study.set_sizes\" = [20, 30]\n\"study.table_set_size\" = 30\n\"study.repetitions\" = 2\n\"campaign.validation_poses\" = 60\n\
