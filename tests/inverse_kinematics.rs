@@ -121,6 +121,54 @@ fn numeric_ik_seeded_a_half_turn_away_does_not_accept_the_turned_frame() {
     assert!(solved >= 190, "{solved} of 200 solved");
 }
 
+/// The damped IK ([`damped_from`], the study's fallback for the compensated validation) and the
+/// direct Newton refinement ([`refine_direct`], its first try) do not accept a frame turned a
+/// half-turn from the target either. On the KR 6 (TCP on the joint-6 axis) a seed with joint 6
+/// turned by 180 deg has the TCP on the target and a first-order orientation error of zero, so
+/// both returned the seed itself, 180 deg off (200 of 200). Now each answer is either the target
+/// frame (within 1e-9 mm and 1e-9 rad) or an error naming the turn, and from the configuration
+/// itself both still solve every target.
+///
+/// [`damped_from`]: calsim::robot::ik::damped_from
+/// [`refine_direct`]: calsim::robot::ik::refine_direct
+#[test]
+fn damped_and_direct_ik_seeded_a_half_turn_away_do_not_accept_the_turned_frame() {
+    use calsim::robot::ik::{IkError, damped_from, pose_error, refine_direct};
+    let file = calsim::robot::file::RobotFile::load(&common::repo().join("robots/kr6r900sixx.toml")).expect("the KR 6 loads");
+    let model = file.nominal;
+    assert_eq!(model.data().flange_tcp_mm, nalgebra::Vector3::zeros(), "the TCP on the joint-6 axis");
+    let mut rng = common::rng(33);
+    let (mut refused, mut reached) = (0, 0);
+    for q in common::random_configs(&model, 200, &mut rng) {
+        let target = world_from_tcp(&model, &q);
+        let mut seed = q;
+        seed[5] += if q[5] > 0.0 { -std::f64::consts::PI } else { std::f64::consts::PI };
+        for (name, answer) in
+            [("damped_from", damped_from(&model, &target, &seed)), ("refine_direct", refine_direct(&model, &target, &seed))]
+        {
+            match answer {
+                Ok(sol) => {
+                    let e = pose_error(&model, &sol, &target);
+                    assert!(e.position_mm < 1e-9 && e.orientation_rad < 1e-9, "{name}: q = {q:?}: {e:?}");
+                    reached += 1;
+                }
+                Err(IkError::NoConvergence { orientation_deg, .. }) => {
+                    assert!(orientation_deg > 1.0, "{name}: refused at {orientation_deg} deg");
+                    refused += 1;
+                }
+                Err(e) => panic!("{name}: q = {q:?}: {e}"),
+            }
+        }
+        for (name, answer) in [("damped_from", damped_from(&model, &target, &q)), ("refine_direct", refine_direct(&model, &target, &q))] {
+            let sol = answer.unwrap_or_else(|e| panic!("{name} from the configuration itself: {e}"));
+            let e = pose_error(&model, &sol, &target);
+            assert!(e.position_mm < 1e-9 && e.orientation_rad < 1e-9, "{name}: q = {q:?}: {e:?}");
+        }
+    }
+    eprintln!("seeded a half-turn away: {reached} reached the target frame, {refused} refused");
+    assert_eq!(reached + refused, 400);
+}
+
 /// `compensate` takes targets in the tool frame (the robot file's flange, `flange_rpy_deg`, at the
 /// TCP): on the KR 6 (flange a half-turn from MDH frame 6), targets made from the tool frame at 100
 /// random configurations come back with the tool frame on them (model error below 1e-6 mm and

@@ -190,23 +190,36 @@ pub fn refine(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) 
     newton(model, &Goal::new(model, world_from_tcp), q0)
 }
 
-/// [`refine`] (orientation to first order) with the base orientation taken from the model as it
-/// is stored, not through the base's quaternion (whose iterative construction costs more than the
-/// Newton steps): the same solution to rounding, for callers that need many (the study's
-/// compensated validation).
+/// [`refine_oriented`] with the base orientation taken from the model as it is stored, not
+/// through the base's quaternion (whose iterative construction costs more than the Newton steps):
+/// the same solution to rounding, for callers that need many (the study's compensated
+/// validation). The frame reached is checked against the target's as [`oriented`] does (on the
+/// rotation Newton's last step computed, no further forward kinematics): a frame a half-turn from
+/// the target is [`IkError::NoConvergence`], not a solution.
 pub fn refine_direct(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
     let goal =
         Goal { rb: model.base_rot, p: world_from_tcp.translation.vector, r: world_from_tcp.rotation.to_rotation_matrix().into_inner() };
-    newton(model, &goal, q0)
+    let mut st = KinState::default();
+    let q = newton_in(model, &goal, &mut st, q0)?;
+    let turned = super::rotation::angle(&(goal.rb * st.rot[JOINTS]), &goal.r);
+    if turned < ORIENTATION_TOLERANCE_RAD {
+        Ok(q)
+    } else {
+        Err(IkError::NoConvergence { position_mm: (st.tcp_world() - goal.p).norm(), orientation_deg: turned.to_degrees() })
+    }
 }
 
 /// Newton's method towards `goal` from `q0` (see [`refine`]).
 fn newton(model: &RobotModel, goal: &Goal, q0: &Joints) -> Result<Joints, IkError> {
-    let mut st = KinState::default();
+    newton_in(model, goal, &mut KinState::default(), q0)
+}
+
+/// [`newton`] in `st`, which holds the kinematics of the returned joints on success.
+fn newton_in(model: &RobotModel, goal: &Goal, st: &mut KinState, q0: &Joints) -> Result<Joints, IkError> {
     let mut q = *q0;
     let mut residual = f64::INFINITY;
     for _ in 0..60 {
-        let (rhs, jac) = goal.error_and_jacobian(model, &mut st, &q);
+        let (rhs, jac) = goal.error_and_jacobian(model, st, &q);
         residual = rhs.fixed_rows::<3>(0).norm();
         if residual < 1e-11 && rhs.fixed_rows::<3>(3).norm() < 1e-13 {
             return Ok(q);
@@ -397,14 +410,14 @@ pub fn numeric(model: &RobotModel, world_from_tcp: &Isometry3<f64>, seed: &Joint
     best.map(|(_, q)| q).ok_or(last)
 }
 
-/// Damped least squares from `q0` alone, polished by [`refine`]: the solution of the branch `q0`
-/// is on (near a singularity, where Newton from `q0` diverges), within the limits; orientation to
-/// first order as [`refine`] (the study's compensated validation, which checks positions only and
-/// whose shipped tables were computed this way).
+/// Damped least squares from `q0` alone, polished by [`refine_oriented`]: the solution of the
+/// branch `q0` is on (near a singularity, where Newton from `q0` diverges), within the limits, its
+/// frame the target's (a frame a half-turn away, where the first-order orientation error vanishes
+/// too, is [`IkError::NoConvergence`]; the study's compensated validation falls back on it).
 pub fn damped_from(model: &RobotModel, world_from_tcp: &Isometry3<f64>, q0: &Joints) -> Result<Joints, IkError> {
     let goal = Goal::new(model, world_from_tcp);
     let q = damped(model, &goal, &mut KinState::default(), q0).ok_or(IkError::Unreachable)?;
-    let q = refine(model, world_from_tcp, &q)?;
+    let q = refine_oriented(model, world_from_tcp, &q)?;
     if model.within_limits(&q) { Ok(q) } else { Err(IkError::Limits) }
 }
 
