@@ -215,9 +215,12 @@ tool_mm = [0.0, 0.0, 0.0]
 mass_kg = 0.0
 com_mm = [0.0, 0.0, 0.0]
 ";
-/// The UR5's joints: alpha deg, a mm, theta offset deg, d mm, compliance mdeg/(N m), limits deg,
-/// mass kg, centre of mass mm.
-const UR5_JOINTS: [(f64, f64, f64, f64, f64, (f64, f64), f64, [f64; 3]); 6] = [
+/// A joint of a robot file: alpha deg, a mm, theta offset deg, d mm, compliance mdeg/(N m), limits
+/// deg, mass kg, centre of mass mm.
+type JointRow = (f64, f64, f64, f64, f64, (f64, f64), f64, [f64; 3]);
+
+/// The UR5's joints.
+const UR5_JOINTS: [JointRow; 6] = [
     (0.0, 0.0, 180.0, 89.159, 0.0, (-360.0, 360.0), 3.7, [0.0, 0.0, 0.0]),
     (90.00000001175157, 0.0, -180.0, 0.0, 0.0, (-360.0, 360.0), 8.393, [212.5, 0.0, 136.0]),
     (0.0, 425.0, 0.0, 0.0, 0.0, (-180.0, 180.0), 2.275, [196.125, 0.0, 16.5]),
