@@ -62,6 +62,26 @@ fn bad_design_files_are_one_line_naming_the_file_and_the_key() {
         let line = refused(&f, &dir.join("out"));
         assert!(line.contains(key), "{name}: names {key}: {line}");
     }
+    // The start given point by point: checked against the region, the count and the spacing.
+    let plate = "[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 4]\nregion = \"plate\"\nx_mm = [0.0, 300.0]\ny_mm = [0.0, 300.0]\nmin_spacing_mm = 100.0\n";
+    let starts: [(&str, &str, &str, &str); 6] = [
+        ("start_outside.toml", "[[0.0, 0.0], [300.0, 0.0], [150.0, 400.0]]", "points.start[2]", "outside the region"),
+        ("start_close.toml", "[[0.0, 0.0], [300.0, 0.0], [250.0, 50.0]]", "points.start", "apart, under min_spacing_mm"),
+        (
+            "start_many.toml",
+            "[[0.0, 0.0], [300.0, 0.0], [0.0, 300.0], [300.0, 300.0], [150.0, 150.0]]",
+            "points.start",
+            "more than the most searched",
+        ),
+        ("start_shape.toml", "[[0.0, 0.0, 0.0], [300.0, 0.0, 0.0], [0.0, 300.0, 0.0]]", "points.start[0]", "2 numbers"),
+        ("start_nan.toml", "[[0.0, 0.0], [300.0, nan], [0.0, 300.0]]", "points.start[1]", "finite"),
+        ("start_empty.toml", "[]", "points.start", "empty"),
+    ];
+    for (name, start, key, why) in starts {
+        let f = design_file(dir, name, &format!("{plate}start = {start}\n{OBJECTIVE}"));
+        let line = refused(&f, &dir.join("out"));
+        assert!(line.contains(&format!(": {key}: ")) && line.contains(why), "{name}: names {key} and says {why:?}: {line}");
+    }
     // A value out of the scenario's own rules at an end of the range is refused before anything runs.
     let f = design_file(dir, "rules.toml", &format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 5.0]\n{OBJECTIVE}"));
     let line = refused(&f, &dir.join("out"));
@@ -149,6 +169,42 @@ fn the_shipped_design_file_starts_from_the_hand_found_design() {
     }
     // The pool starts at the file's own start (110 per sphere), not the hand-found 120.
     assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(110));
+}
+
+/// The SPMS design file starts from the shipped scenario's hand-placed stations, point by point:
+/// the search of three stations from all three, of one or two from the first ones (the designs of
+/// the spms_stations sweep); a search of more points than the start gives takes the start's points
+/// and then the circle's points of the same index.
+#[test]
+fn the_spms_design_file_starts_from_the_hand_placed_stations() {
+    let space = spec::load(&repo().join("scenarios/designs/spms_stations.toml")).unwrap();
+    let shipped = [[1200.0, -400.0, 500.0], [1200.0, 400.0, 500.0], [900.0, 0.0, 1100.0]];
+    for count in 1..=3 {
+        let d = space.decode(count, &space.start(count));
+        assert!(d.violation.is_none(), "{:?}", d.violation);
+        assert_eq!(d.points_mm, shipped[..count].to_vec(), "{count} stations");
+        let stations = calsim::design::sweep::spec::get_dotted(&d.table, "station.sphere_points_base_mm").unwrap();
+        assert_eq!(stations.as_array().unwrap().len(), count);
+    }
+    // More points than the start: the start's, then the circle's of the same index.
+    let tmp = scratch("optimise-start");
+    let f = design_file(
+        tmp.path(),
+        "more.toml",
+        &format!(
+            "[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 5]\nregion = \"plate\"\nx_mm = [-300.0, 300.0]\ny_mm = [-300.0, 300.0]\n\
+             min_spacing_mm = 50.0\nstart_spacing_mm = 100.0\nstart = [[-200.0, -200.0], [200.0, -200.0], [0.0, 200.0]]\n{OBJECTIVE}"
+        ),
+    );
+    let space = spec::load(&f).unwrap();
+    let circle = calsim::design::sweep::spec::circle_layout(5, 100.0);
+    let d = space.decode(5, &space.start(5));
+    assert_eq!(d.points_mm[..3], [[-200.0, -200.0, 0.0], [200.0, -200.0, 0.0], [0.0, 200.0, 0.0]]);
+    for k in 3..5 {
+        for j in 0..2 {
+            assert!((d.points_mm[k][j] - circle[k][j]).abs() < 2e-3, "point {k}: {:?} vs the circle's {:?}", d.points_mm[k], circle[k]);
+        }
+    }
 }
 
 const SMALL: &str = "[fixed]\n\"study.set_sizes\" = [20, 30]\n\"study.table_set_size\" = 30\n\"study.repetitions\" = 2\n\"campaign.validation_poses\" = 60\n\

@@ -79,6 +79,7 @@ struct PointsFile {
     start_height_mm: Option<f64>,
     start_tilt_deg: Option<f64>,
     start_offset_mm: Option<[f64; 3]>,
+    start: Option<Vec<Vec<f64>>>,
 }
 
 #[derive(Clone, Debug, Deserialize, Default)]
@@ -200,6 +201,11 @@ pub struct Points {
     pub start_plate: (f64, f64),
     /// The start circle's first point in the region, mm.
     pub start_offset_mm: [f64; 3],
+    /// The start given point by point (`[points] start`), in the region's frame (x, y on the
+    /// plate with z = 0, or x, y, z in the box), mm: a search of fewer points starts from the
+    /// first ones, a search of more from all of them and then the circle's points of the same
+    /// index for the rest. Empty: the circle.
+    pub start_points: Vec<[f64; 3]>,
 }
 
 /// Which optimiser searches.
@@ -453,9 +459,14 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
     for v in offset {
         finite("start_offset_mm", v)?;
     }
+    let start_points = match &p.start {
+        None => Vec::new(),
+        Some(list) => start_points(path, p, list, &region, (lo as usize, hi as usize))?,
+    };
     Ok(Points {
         key: p.key.clone(),
         count: (lo as usize, hi as usize),
+        start_points,
         region,
         min_spacing_mm: p.min_spacing_mm,
         start_spacing_mm: spacing,
@@ -465,6 +476,70 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
         ),
         start_offset_mm: offset,
     })
+}
+
+/// `[points] start`: one point per entry, inside the region, as many as the most points
+/// searched at most, no two closer than the spacing.
+fn start_points(
+    path: &Path,
+    p: &PointsFile,
+    list: &[Vec<f64>],
+    region: &Region,
+    count: (usize, usize),
+) -> Result<Vec<[f64; 3]>, DesignError> {
+    if list.is_empty() {
+        return Err(err(path, "points.start", "empty: one point per entry, or leave the key out (the circle)"));
+    }
+    if list.len() > count.1 {
+        return Err(err(
+            path,
+            "points.start",
+            format!("{} points: more than the most searched (points.count = [{}, {}])", list.len(), count.0, count.1),
+        ));
+    }
+    let inside = |v: f64, r: [f64; 2]| v >= r[0] && v <= r[1];
+    let mut out = Vec::with_capacity(list.len());
+    for (k, q) in list.iter().enumerate() {
+        let at = format!("points.start[{k}]");
+        let (point, fits, ranges) = match region {
+            Region::Plate { x_mm, y_mm, .. } => {
+                if q.len() != 2 {
+                    return Err(err(path, at, format!("{q:?}: x, y on the plate (2 numbers, mm)")));
+                }
+                ([q[0], q[1], 0.0], inside(q[0], *x_mm) && inside(q[1], *y_mm), format!("x_mm = {x_mm:?}, y_mm = {y_mm:?}"))
+            }
+            Region::Box { x_mm, y_mm, z_mm } => {
+                if q.len() != 3 {
+                    return Err(err(path, at, format!("{q:?}: x, y, z in the box (3 numbers, mm)")));
+                }
+                (
+                    [q[0], q[1], q[2]],
+                    inside(q[0], *x_mm) && inside(q[1], *y_mm) && inside(q[2], *z_mm),
+                    format!("x_mm = {x_mm:?}, y_mm = {y_mm:?}, z_mm = {z_mm:?}"),
+                )
+            }
+        };
+        if point.iter().any(|v| !v.is_finite()) {
+            return Err(err(path, at, format!("{q:?}: finite numbers")));
+        }
+        if !fits {
+            return Err(err(path, at, format!("{q:?}: outside the region ({ranges})")));
+        }
+        out.push(point);
+    }
+    for i in 0..out.len() {
+        for j in 0..i {
+            let d = (0..3).map(|c| (out[i][c] - out[j][c]).powi(2)).sum::<f64>().sqrt();
+            if d < p.min_spacing_mm {
+                return Err(err(
+                    path,
+                    "points.start",
+                    format!("points {} and {} are {d:.1} mm apart, under min_spacing_mm = {}", j + 1, i + 1, p.min_spacing_mm),
+                ));
+            }
+        }
+    }
+    Ok(out)
 }
 
 fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
