@@ -82,6 +82,38 @@ fn bad_design_files_are_one_line_naming_the_file_and_the_key() {
         let line = refused(&f, &dir.join("out"));
         assert!(line.contains(&format!(": {key}: ")) && line.contains(why), "{name}: names {key} and says {why:?}: {line}");
     }
+    // [robust]: two models at least, distinct names, known keys the design does not move, a known score.
+    let model = |name: &str, set: &str| format!("{{ name = {name:?}, set = {{ {set} }} }}");
+    let h = "\"robot.unmodelled.transmission_high_mdeg\" = 3.0";
+    let robust: [(&str, String, &str); 6] = [
+        ("robust_one.toml", format!("models = [{}]", model("a", h)), "robust.models: "),
+        ("robust_name.toml", format!("models = [{}, {}]", model("a", h), model("a", h)), "robust.models[1] (a).name"),
+        (
+            "robust_key.toml",
+            format!("models = [{}, {}]", model("a", h), model("b", "\"robot.no_such\" = 1.0")),
+            "robust.models[1] (b).set.robot.no_such",
+        ),
+        (
+            "robust_moved.toml",
+            format!("models = [{}, {}]", model("a", h), model("b", "\"trical.epsilon_mm\" = 0.02")),
+            "robust.models[1] (b).set.trical.epsilon_mm",
+        ),
+        (
+            "robust_rules.toml",
+            format!("models = [{}, {}]", model("a", h), model("b", "\"robot.unmodelled.transmission_high_mdeg\" = -1.0")),
+            "robust.models[1] (b).set",
+        ),
+        ("robust_score.toml", format!("score = \"median\"\nmodels = [{}, {}]", model("a", h), model("b", "")), "robust.score"),
+    ];
+    for (name, body, key) in robust {
+        let f = design_file(
+            dir,
+            name,
+            &format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 0.02]\n{OBJECTIVE}\n[robust]\n{body}\n"),
+        );
+        let line = refused(&f, &dir.join("out"));
+        assert!(line.contains(key), "{name}: names {key}: {line}");
+    }
     // A value out of the scenario's own rules at an end of the range is refused before anything runs.
     let f = design_file(dir, "rules.toml", &format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 5.0]\n{OBJECTIVE}"));
     let line = refused(&f, &dir.join("out"));
@@ -261,4 +293,66 @@ fn a_small_question_gives_the_same_bytes_for_any_threads_and_shards_and_resumes(
     assert_eq!(tables(&one.join("q")), reference, "resumed from the per-world files");
     let summary = std::fs::read_to_string(one.join("q/summary.md")).unwrap();
     assert!(summary.contains("held-out worlds (reported)"), "{summary}");
+}
+
+/// Two error models (one gear harmonic; backlash and no harmonic) of the candidate physics.
+const ROBUST: &str = "[robust]\nscore = \"worst\"\nmodels = [\n  { name = \"harmonic\", set = { \"robot.unmodelled.transmission_high_mdeg\" = 3.4 } },\n  \
+    { name = \"backlash\", set = { \"robot.unmodelled.transmission_high_mdeg\" = 0.0, \"robot.unmodelled.backlash_mdeg\" = 6.0 } },\n]\n";
+
+/// A robust question: every design under each error model on the same worlds, each model's worlds
+/// in their own files (keyed by the scenario the model makes), the same bytes for 1 and 2 threads
+/// and for 1 and 3 shards, resumed from the per-world files; the summary says whether the winner
+/// changes with the model.
+#[test]
+fn a_robust_question_keys_worlds_by_the_model_and_gives_the_same_bytes_for_any_threads_and_shards() {
+    let tmp = scratch("optimise-robust");
+    let dir = tmp.path();
+    let f = design_file(dir, "rq.toml", &format!("{SMALL}{OBJECTIVE}{ROBUST}"));
+    let space = spec::load(&f).unwrap();
+    let robust = space.robust.as_ref().expect("[robust]");
+    assert_eq!(robust.models.len(), 2);
+    assert_eq!(robust.combine, spec::Combine::Worst);
+    // Each model's scenario differs from the design's and from the other model's: so do the keys
+    // its worlds are kept under.
+    let d = space.decode(3, &space.start(3));
+    let keys: Vec<String> = (0..2).map(|m| calsim::design::optimise::design_key(&space.with_model(&d.table, m))).collect();
+    assert_ne!(keys[0], keys[1]);
+    assert!(!keys.contains(&calsim::design::optimise::design_key(&d.table)));
+    let one = dir.join("one");
+    optimise(&f, &one, None, false, 1);
+    let with_robust = |d: &Path| {
+        let mut t = tables(d);
+        t.push(std::fs::read(d.join("robust.parquet")).unwrap());
+        t
+    };
+    let reference = with_robust(&one.join("rq"));
+    // Both models' worlds of the start design are on disk, each under its own key.
+    let evaluations = one.join("rq.evaluations").join(&space.world_context);
+    for k in &keys {
+        for r in 0..2 {
+            let file = evaluations.join(k).join(format!("r{r:07}.json"));
+            assert!(file.is_file(), "the start design's search world {r} under model {k}: {}", file.display());
+        }
+    }
+    optimise(&f, &dir.join("two"), None, false, 2);
+    assert_eq!(with_robust(&dir.join("two/rq")), reference, "1 vs 2 threads");
+    let sharded = dir.join("sharded");
+    for k in 0..3 {
+        optimise(&f, &sharded, Some((k, 3)), false, 2);
+    }
+    optimise(&f, &sharded, None, true, 2);
+    assert_eq!(with_robust(&sharded.join("rq")), reference, "1 vs 3 shards");
+    std::fs::remove_dir_all(one.join("rq")).unwrap();
+    optimise(&f, &one, None, false, 2);
+    assert_eq!(with_robust(&one.join("rq")), reference, "resumed from the per-world files");
+    let summary = std::fs::read_to_string(one.join("rq/summary.md")).unwrap();
+    assert!(summary.contains("## Robust: the winner under each error model"), "{summary}");
+    assert!(summary.contains("| harmonic |") && summary.contains("| backlash |") && summary.contains("| robust (worst) |"), "{summary}");
+    assert!(summary.contains("The winner does not change") || summary.contains("The winner changes"), "{summary}");
+    // robust.parquet: both models' rows and the combined score at both stages.
+    use polars::prelude::SerReader;
+    let df = polars::prelude::ParquetReader::new(std::fs::File::open(one.join("rq/robust.parquet")).unwrap()).finish().unwrap();
+    let models: std::collections::BTreeSet<String> =
+        df.column("model").unwrap().str().unwrap().iter().flatten().map(str::to_string).collect();
+    assert_eq!(models, ["backlash", "harmonic", "robust (worst)"].into_iter().map(String::from).collect());
 }

@@ -29,6 +29,18 @@ impl Outcome {
     /// report the luckiest of the verified designs on the worlds that chose it (the winner's
     /// curse), an optimistic figure.
     pub fn of(verdict: Verdict) -> Self {
+        if let Some(r) = &verdict.robust {
+            // Under [robust], the winner under the combined score (the last choice), with its
+            // held-out row of the first model that has one.
+            let winner = r.choices.last().and_then(|c| {
+                r.held_out.iter().find_map(|rows| {
+                    rows.iter()
+                        .find(|h| h.design.point == c.verified && h.design.set_size == c.set_size && h.design.selection == c.selection)
+                        .map(|h| (c.verified, h.clone()))
+                })
+            });
+            return Self { verdict, winner };
+        }
         let winner = verdict.race_rows.iter().min_by_key(|r| r.rank).and_then(|best| {
             let key = &verdict.finalists.get(best.design.point)?.key;
             let v = verdict.verified.iter().position(|c| !c.compared && &c.key == key)?;
@@ -121,6 +133,9 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
     }
+    if let Some(r) = &v.robust {
+        s += &robust_section(space, v, r);
+    }
     s += "## Held-out worlds: every verified design\n\n| rank | design | selection | n | estimate | interval | P(success) | campaign, h | worlds | failed | feasibility | worlds the leader did better / worse |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     let mut rows: Vec<&DesignRow> = v.held_out_rows.iter().collect();
     rows.sort_by_key(|r| r.rank);
@@ -176,6 +191,80 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
     s
 }
 
+/// The robust table: the winner under each model and under the combined score, each on the
+/// held-out worlds under every model, and whether the winner changes with the error model.
+pub fn robust_section(space: &DesignSpace, v: &Verdict, r: &super::RobustVerdict) -> String {
+    let held = super::combined(space, &r.held_out);
+    let mut s = format!(
+        "## Robust: the winner under each error model\n\nEvery design runs under each of {} error models (`[robust]`: scenario keys set on top of \
+         the design) on the same worlds; its score under the file's objective is combined by their {} (lower is better). The race ran every \
+         finalist under every model on the search worlds 0-{} (no elimination) and chose the winner of each row below; the held-out worlds \
+         (realisations {}-{}) report it under each model. `race.parquet`, `verified.parquet` and the held-out table below hold the first \
+         model's rows ({:?}); `robust.parquet` holds every model's.\n\n| chosen by | design | selection | n | score on the race's worlds |",
+        r.models.len(),
+        r.combine.label(),
+        v.race_worlds.saturating_sub(1),
+        super::HELD_OUT_BASE,
+        super::HELD_OUT_BASE + space.held_out - 1,
+        r.models[0]
+    );
+    for m in &r.models {
+        s += &format!(" held-out under {m}: estimate (interval) |");
+    }
+    s += &format!(" held-out score, {} |\n|---|---|---|---|---|", r.combine.label());
+    s += &"---|".repeat(r.models.len() + 1);
+    s += "\n";
+    for c in &r.choices {
+        s += &format!("| {} | {} | {} | {} | {} |", c.criterion, v.verified[c.verified].label, c.selection, c.set_size, f3(c.race_score));
+        for rows in &r.held_out {
+            let row =
+                rows.iter().find(|h| h.design.point == c.verified && h.design.selection == c.selection && h.design.set_size == c.set_size);
+            s += &match row {
+                Some(h) => format!(
+                    " {} ({}-{}), {} worlds, {} failed |",
+                    f3(h.estimate),
+                    f3(h.interval.0),
+                    f3(h.interval.1),
+                    h.worlds,
+                    h.failed_worlds
+                ),
+                None => " every world failed |".to_string(),
+            };
+        }
+        let comb = held.iter().find(|(k, _, _)| k.0 == c.verified && k.1 == c.selection && k.2 == c.set_size).map(|x| x.2);
+        s += &format!(" {} |\n", comb.map_or("-".into(), f3));
+    }
+    let same = |a: &super::Choice, b: &super::Choice| a.verified == b.verified && a.selection == b.selection && a.set_size == b.set_size;
+    let first = &r.choices[0];
+    let models: Vec<&super::Choice> = r.choices.iter().take(r.models.len()).collect();
+    let robust = r.choices.last().expect("a choice");
+    if r.choices.iter().all(|c| same(c, first)) {
+        s += &format!(
+            "\n**The winner does not change with the error model**: every model and the {} score choose {} ({} sets of {}).\n\n",
+            r.combine.label(),
+            v.verified[first.verified].label,
+            first.selection,
+            first.set_size
+        );
+    } else {
+        let cells = models.iter().map(|c| c.verified).collect::<std::collections::BTreeSet<_>>().len();
+        let differ: Vec<String> = models.iter().filter(|c| !same(c, robust)).map(|c| c.criterion.clone()).collect();
+        s += &format!(
+            "\n**The winner changes with the error model**: the models choose {} distinct design{} ({}); the {} score's winner differs from the choice of {}.\n\n",
+            cells,
+            if cells == 1 { " (the same cell, another set size or selection)" } else { "s" },
+            models
+                .iter()
+                .map(|c| format!("{}: {} {} {}", c.criterion, v.verified[c.verified].label, c.selection, c.set_size))
+                .collect::<Vec<_>>()
+                .join("; "),
+            r.combine.label(),
+            if differ.is_empty() { "no model".to_string() } else { differ.join(", ") }
+        );
+    }
+    s
+}
+
 /// Writes the results into `out/<name>` atomically; `plots` are the figures' inputs.
 pub fn write(
     out: &Path,
@@ -217,6 +306,16 @@ pub fn write(
                 f("upper", bf(&|r| r.interval.1)),
                 f("campaign_h", bf(&|r| r.campaign_h)),
                 f("score", v.trace.iter().map(|e| e.score).collect()),
+                s(
+                    "model_scores",
+                    v.trace
+                        .iter()
+                        .map(|e| {
+                            let names = space.model_names();
+                            e.models.iter().zip(&names).map(|(m, n)| format!("{n} = {}", m.score)).collect::<Vec<_>>().join("; ")
+                        })
+                        .collect(),
+                ),
             ],
         )?;
         let rows_table = |name: &str, rows: &[DesignRow], label: &dyn Fn(usize) -> String| {
@@ -243,6 +342,64 @@ pub fn write(
         };
         rows_table("race.parquet", &v.race_rows, &|p| v.finalists[p].label.clone())?;
         rows_table("verified.parquet", &v.held_out_rows, &|p| v.verified[p].label.clone())?;
+        if let Some(r) = &v.robust {
+            // Every model's rows, race then held-out, and the combined scores.
+            let mut cols: (Vec<String>, Vec<String>, Vec<String>, Vec<String>, Vec<u32>, Vec<u32>, Vec<u32>) = Default::default();
+            let mut nums: (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) = Default::default();
+            let stages: [(&str, &Vec<Vec<DesignRow>>, &dyn Fn(usize) -> String); 2] =
+                [("race", &r.race, &|p| v.finalists[p].label.clone()), ("held_out", &r.held_out, &|p| v.verified[p].label.clone())];
+            for (stage, by_model, label) in stages {
+                for (m, rows) in by_model.iter().enumerate() {
+                    for x in rows {
+                        cols.0.push(stage.into());
+                        cols.1.push(r.models[m].clone());
+                        cols.2.push(label(x.design.point));
+                        cols.3.push(x.design.selection.clone());
+                        cols.4.push(x.design.set_size);
+                        cols.5.push(x.worlds);
+                        cols.6.push(x.failed_worlds);
+                        nums.0.push(x.estimate);
+                        nums.1.push(x.interval.0);
+                        nums.2.push(x.interval.1);
+                        nums.3.push(x.success.map_or(f64::NAN, |y| y.0));
+                        nums.4.push(x.campaign_h);
+                        nums.5.push(super::score_of(space, x));
+                    }
+                }
+                for ((p, sel, n), _, c) in super::combined(space, by_model) {
+                    cols.0.push(stage.into());
+                    cols.1.push(format!("robust ({})", r.combine.label()));
+                    cols.2.push(label(p));
+                    cols.3.push(sel);
+                    cols.4.push(n);
+                    cols.5.push(0);
+                    cols.6.push(0);
+                    for x in [&mut nums.0, &mut nums.1, &mut nums.2, &mut nums.3, &mut nums.4] {
+                        x.push(f64::NAN);
+                    }
+                    nums.5.push(c);
+                }
+            }
+            parquet(
+                dir,
+                "robust.parquet",
+                vec![
+                    s("stage", cols.0),
+                    s("model", cols.1),
+                    s("design", cols.2),
+                    s("selection", cols.3),
+                    u("set_size", cols.4),
+                    u("worlds", cols.5),
+                    u("failed_worlds", cols.6),
+                    f("estimate", nums.0),
+                    f("lower", nums.1),
+                    f("upper", nums.2),
+                    f("success", nums.3),
+                    f("campaign_h", nums.4),
+                    f("score", nums.5),
+                ],
+            )?;
+        }
         if let Some((i, r)) = &o.winner {
             let head = format!(
                 "# {}: the optimiser's answer, {} ({} sets of {}): held-out {}.\n# `calsim run best_design.toml` redoes its realisation 0 with the figures and the Rerun recording (from any directory).\n",
