@@ -121,14 +121,16 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
             .filter(|e| e.key == c.key)
             .find_map(|e| e.sizes.iter().find(|z| z.row.design.set_size == r.design.set_size).map(|z| z.row.clone()));
         s += &format!("## The answer\n\n{} ({} sets of {}).\n\n", c.label, r.design.selection, r.design.set_size);
+        // Under [robust] the rows below are the first model's (the robust table has every model's).
+        let under = v.robust.as_ref().map_or(String::new(), |x| format!(", under {}", x.models[0]));
         s += "| stage | estimate (interval) |\n|---|---|\n";
         if let Some(x) = search {
-            s += &format!("| search worlds | {} |\n", row_words(&x));
+            s += &format!("| search worlds{under} | {} |\n", row_words(&x));
         }
         if let Some(x) = race {
-            s += &format!("| race (search worlds) | {} |\n", row_words(x));
+            s += &format!("| race (search worlds){under} | {} |\n", row_words(x));
         }
-        s += &format!("| **held-out worlds (reported)** | **{}** |\n\n", row_words(r));
+        s += &format!("| **held-out worlds (reported)**{under} | **{}** |\n\n", row_words(r));
         s += &format!("Points (region frame, mm): {:?}\n\n", c.points_mm);
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
