@@ -574,11 +574,25 @@ pub struct Choice {
     pub race_score: f64,
 }
 
+/// A judged row's design: (point, selection, set size).
+pub type RowKey = (usize, String, u32);
+
+/// One (point, selection, set size) under every model: the per-model scores and their combination.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Combined {
+    /// The point, selection and set size.
+    pub key: RowKey,
+    /// Per model, its score (lower is better).
+    pub scores: Vec<f64>,
+    /// The scores combined by `[robust] score`.
+    pub score: f64,
+}
+
 /// Per (point, selection, set size) of rows judged per model (`rows[m]`): the per-model scores
 /// and their combination. A model without the row (every world failed) scores 2 * PENALTY.
-pub fn combined(space: &DesignSpace, rows: &[Vec<DesignRow>]) -> Vec<((usize, String, u32), Vec<f64>, f64)> {
+pub fn combined(space: &DesignSpace, rows: &[Vec<DesignRow>]) -> Vec<Combined> {
     let combine = space.robust.as_ref().map_or(spec::Combine::Mean, |r| r.combine);
-    let mut keys: BTreeMap<(usize, String, u32), Vec<f64>> = BTreeMap::new();
+    let mut keys: BTreeMap<RowKey, Vec<f64>> = BTreeMap::new();
     for (m, rs) in rows.iter().enumerate() {
         for r in rs {
             let k = (r.design.point, r.design.selection.clone(), r.design.set_size);
@@ -586,9 +600,9 @@ pub fn combined(space: &DesignSpace, rows: &[Vec<DesignRow>]) -> Vec<((usize, St
         }
     }
     keys.into_iter()
-        .map(|(k, v)| {
-            let c = combine.of(&v);
-            (k, v, c)
+        .map(|(key, scores)| {
+            let score = combine.of(&scores);
+            Combined { key, scores, score }
         })
         .collect()
 }
@@ -681,10 +695,10 @@ fn finish_robust(
     let race = judged_by_model(ctx, &finalists, &worlds, stride)?;
     let scores = combined(space, &race);
     // The winner under each model, then under the combined score (ties: the first in order).
-    let pick = |c: usize| -> Option<((usize, String, u32), f64)> {
+    let pick = |c: usize| -> Option<(RowKey, f64)> {
         scores
             .iter()
-            .map(|(k, v, comb)| (k, if c < models { v[c] } else { *comb }))
+            .map(|x| (&x.key, if c < models { x.scores[c] } else { x.score }))
             .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(b.0)))
             .map(|(k, s)| (k.clone(), s))
     };
@@ -699,9 +713,10 @@ fn finish_robust(
         }
     };
     for count in space.counts() {
-        let best = scores.iter().filter(|(k, _, _)| finalists[k.0].count == count).min_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
-        if let Some((k, _, _)) = best {
-            add(k.0, &mut verified);
+        let best =
+            scores.iter().filter(|x| finalists[x.key.0].count == count).min_by(|a, b| a.score.total_cmp(&b.score).then(a.key.cmp(&b.key)));
+        if let Some(x) = best {
+            add(x.key.0, &mut verified);
         }
     }
     let mut choices = Vec::new();

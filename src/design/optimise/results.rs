@@ -233,7 +233,7 @@ pub fn robust_section(space: &DesignSpace, v: &Verdict, r: &super::RobustVerdict
                 None => " every world failed |".to_string(),
             };
         }
-        let comb = held.iter().find(|(k, _, _)| k.0 == c.verified && k.1 == c.selection && k.2 == c.set_size).map(|x| x.2);
+        let comb = held.iter().find(|x| x.key == (c.verified, c.selection.clone(), c.set_size)).map(|x| x.score);
         s += &format!(" {} |\n", comb.map_or("-".into(), f3));
     }
     let same = |a: &super::Choice, b: &super::Choice| a.verified == b.verified && a.selection == b.selection && a.set_size == b.set_size;
@@ -265,6 +265,17 @@ pub fn robust_section(space: &DesignSpace, v: &Verdict, r: &super::RobustVerdict
         );
     }
     s
+}
+
+/// A row of `robust.parquet`: a stage, a model (or the combination), a design's judged row.
+struct RobustRow {
+    stage: String,
+    model: String,
+    design: String,
+    /// The judged row (none for the combination).
+    row: Option<DesignRow>,
+    key: super::RowKey,
+    score: f64,
 }
 
 /// Writes the results into `out/<name>` atomically; `plots` are the figures' inputs.
@@ -346,59 +357,50 @@ pub fn write(
         rows_table("verified.parquet", &v.held_out_rows, &|p| v.verified[p].label.clone())?;
         if let Some(r) = &v.robust {
             // Every model's rows, race then held-out, and the combined scores.
-            let mut cols: (Vec<String>, Vec<String>, Vec<String>, Vec<String>, Vec<u32>, Vec<u32>, Vec<u32>) = Default::default();
-            let mut nums: (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) = Default::default();
-            let stages: [(&str, &Vec<Vec<DesignRow>>, &dyn Fn(usize) -> String); 2] =
-                [("race", &r.race, &|p| v.finalists[p].label.clone()), ("held_out", &r.held_out, &|p| v.verified[p].label.clone())];
-            for (stage, by_model, label) in stages {
-                for (m, rows) in by_model.iter().enumerate() {
-                    for x in rows {
-                        cols.0.push(stage.into());
-                        cols.1.push(r.models[m].clone());
-                        cols.2.push(label(x.design.point));
-                        cols.3.push(x.design.selection.clone());
-                        cols.4.push(x.design.set_size);
-                        cols.5.push(x.worlds);
-                        cols.6.push(x.failed_worlds);
-                        nums.0.push(x.estimate);
-                        nums.1.push(x.interval.0);
-                        nums.2.push(x.interval.1);
-                        nums.3.push(x.success.map_or(f64::NAN, |y| y.0));
-                        nums.4.push(x.campaign_h);
-                        nums.5.push(super::score_of(space, x));
-                    }
+            let mut rows: Vec<RobustRow> = Vec::new();
+            let mut add = |stage: &str, by_model: &[Vec<DesignRow>], label: &dyn Fn(usize) -> String| {
+                for (m, rs) in by_model.iter().enumerate() {
+                    rows.extend(rs.iter().map(|x| RobustRow {
+                        stage: stage.into(),
+                        model: r.models[m].clone(),
+                        design: label(x.design.point),
+                        row: Some(x.clone()),
+                        key: (x.design.point, x.design.selection.clone(), x.design.set_size),
+                        score: super::score_of(space, x),
+                    }));
                 }
-                for ((p, sel, n), _, c) in super::combined(space, by_model) {
-                    cols.0.push(stage.into());
-                    cols.1.push(format!("robust ({})", r.combine.label()));
-                    cols.2.push(label(p));
-                    cols.3.push(sel);
-                    cols.4.push(n);
-                    cols.5.push(0);
-                    cols.6.push(0);
-                    for x in [&mut nums.0, &mut nums.1, &mut nums.2, &mut nums.3, &mut nums.4] {
-                        x.push(f64::NAN);
-                    }
-                    nums.5.push(c);
+                for c in super::combined(space, by_model) {
+                    rows.push(RobustRow {
+                        stage: stage.into(),
+                        model: format!("robust ({})", r.combine.label()),
+                        design: label(c.key.0),
+                        row: None,
+                        key: c.key,
+                        score: c.score,
+                    });
                 }
-            }
+            };
+            add("race", &r.race, &|p| v.finalists[p].label.clone());
+            add("held_out", &r.held_out, &|p| v.verified[p].label.clone());
+            let num = |g: &dyn Fn(&DesignRow) -> f64| rows.iter().map(|x| x.row.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
+            let whole = |g: &dyn Fn(&DesignRow) -> u32| rows.iter().map(|x| x.row.as_ref().map_or(0, g)).collect::<Vec<_>>();
             parquet(
                 dir,
                 "robust.parquet",
                 vec![
-                    s("stage", cols.0),
-                    s("model", cols.1),
-                    s("design", cols.2),
-                    s("selection", cols.3),
-                    u("set_size", cols.4),
-                    u("worlds", cols.5),
-                    u("failed_worlds", cols.6),
-                    f("estimate", nums.0),
-                    f("lower", nums.1),
-                    f("upper", nums.2),
-                    f("success", nums.3),
-                    f("campaign_h", nums.4),
-                    f("score", nums.5),
+                    s("stage", rows.iter().map(|x| x.stage.clone()).collect()),
+                    s("model", rows.iter().map(|x| x.model.clone()).collect()),
+                    s("design", rows.iter().map(|x| x.design.clone()).collect()),
+                    s("selection", rows.iter().map(|x| x.key.1.clone()).collect()),
+                    u("set_size", rows.iter().map(|x| x.key.2).collect()),
+                    u("worlds", whole(&|x| x.worlds)),
+                    u("failed_worlds", whole(&|x| x.failed_worlds)),
+                    f("estimate", num(&|x| x.estimate)),
+                    f("lower", num(&|x| x.interval.0)),
+                    f("upper", num(&|x| x.interval.1)),
+                    f("success", num(&|x| x.success.map_or(f64::NAN, |y| y.0))),
+                    f("campaign_h", num(&|x| x.campaign_h)),
+                    f("score", rows.iter().map(|x| x.score).collect()),
                 ],
             )?;
         }
