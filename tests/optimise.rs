@@ -356,3 +356,22 @@ fn a_robust_question_keys_worlds_by_the_model_and_gives_the_same_bytes_for_any_t
         df.column("model").unwrap().str().unwrap().iter().flatten().map(str::to_string).collect();
     assert_eq!(models, ["backlash", "harmonic", "robust (worst)"].into_iter().map(String::from).collect());
 }
+
+/// Every shipped design file loads; the robust one names its three models and scores the worst.
+#[test]
+fn every_shipped_design_file_loads() {
+    let dir = repo().join("scenarios/designs");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            spec::load(&path).unwrap_or_else(|e| panic!("{e}"));
+            n += 1;
+        }
+    }
+    assert!(n >= 4, "{n} design files");
+    let robust = spec::load(&dir.join("irb120_spheres_robust.toml")).unwrap().robust.expect("[robust]");
+    let names: Vec<&str> = robust.models.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["harmonic + payload (default)", "one harmonic", "backlash"]);
+    assert_eq!(robust.combine, spec::Combine::Worst);
+}
