@@ -62,6 +62,58 @@ fn bad_design_files_are_one_line_naming_the_file_and_the_key() {
         let line = refused(&f, &dir.join("out"));
         assert!(line.contains(key), "{name}: names {key}: {line}");
     }
+    // The start given point by point: checked against the region, the count and the spacing.
+    let plate = "[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 4]\nregion = \"plate\"\nx_mm = [0.0, 300.0]\ny_mm = [0.0, 300.0]\nmin_spacing_mm = 100.0\n";
+    let starts: [(&str, &str, &str, &str); 6] = [
+        ("start_outside.toml", "[[0.0, 0.0], [300.0, 0.0], [150.0, 400.0]]", "points.start[2]", "outside the region"),
+        ("start_close.toml", "[[0.0, 0.0], [300.0, 0.0], [250.0, 50.0]]", "points.start", "apart, under min_spacing_mm"),
+        (
+            "start_many.toml",
+            "[[0.0, 0.0], [300.0, 0.0], [0.0, 300.0], [300.0, 300.0], [150.0, 150.0]]",
+            "points.start",
+            "more than the most searched",
+        ),
+        ("start_shape.toml", "[[0.0, 0.0, 0.0], [300.0, 0.0, 0.0], [0.0, 300.0, 0.0]]", "points.start[0]", "2 numbers"),
+        ("start_nan.toml", "[[0.0, 0.0], [300.0, nan], [0.0, 300.0]]", "points.start[1]", "finite"),
+        ("start_empty.toml", "[]", "points.start", "empty"),
+    ];
+    for (name, start, key, why) in starts {
+        let f = design_file(dir, name, &format!("{plate}start = {start}\n{OBJECTIVE}"));
+        let line = refused(&f, &dir.join("out"));
+        assert!(line.contains(&format!(": {key}: ")) && line.contains(why), "{name}: names {key} and says {why:?}: {line}");
+    }
+    // [robust]: two models at least, distinct names, known keys the design does not move, a known score.
+    let model = |name: &str, set: &str| format!("{{ name = {name:?}, set = {{ {set} }} }}");
+    let h = "\"robot.unmodelled.transmission_high_mdeg\" = 3.0";
+    let robust: [(&str, String, &str); 6] = [
+        ("robust_one.toml", format!("models = [{}]", model("a", h)), "robust.models: "),
+        ("robust_name.toml", format!("models = [{}, {}]", model("a", h), model("a", h)), "robust.models[1] (a).name"),
+        (
+            "robust_key.toml",
+            format!("models = [{}, {}]", model("a", h), model("b", "\"robot.no_such\" = 1.0")),
+            "robust.models[1] (b).set.robot.no_such",
+        ),
+        (
+            "robust_moved.toml",
+            format!("models = [{}, {}]", model("a", h), model("b", "\"trical.epsilon_mm\" = 0.02")),
+            "robust.models[1] (b).set.trical.epsilon_mm",
+        ),
+        (
+            "robust_rules.toml",
+            format!("models = [{}, {}]", model("a", h), model("b", "\"robot.unmodelled.transmission_high_mdeg\" = -1.0")),
+            "robust.models[1] (b).set",
+        ),
+        ("robust_score.toml", format!("score = \"median\"\nmodels = [{}, {}]", model("a", h), model("b", "")), "robust.score"),
+    ];
+    for (name, body, key) in robust {
+        let f = design_file(
+            dir,
+            name,
+            &format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 0.02]\n{OBJECTIVE}\n[robust]\n{body}\n"),
+        );
+        let line = refused(&f, &dir.join("out"));
+        assert!(line.contains(key), "{name}: names {key}: {line}");
+    }
     // A value out of the scenario's own rules at an end of the range is refused before anything runs.
     let f = design_file(dir, "rules.toml", &format!("[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 5.0]\n{OBJECTIVE}"));
     let line = refused(&f, &dir.join("out"));
@@ -152,6 +204,42 @@ fn the_shipped_design_file_starts_from_the_hand_found_design() {
     assert_eq!(get("trical.epsilon_mm").as_float(), Some(0.02));
 }
 
+/// The SPMS design file starts from the shipped scenario's hand-placed stations, point by point:
+/// the search of three stations from all three, of one or two from the first ones (the designs of
+/// the spms_stations sweep); a search of more points than the start gives takes the start's points
+/// and then the circle's points of the same index.
+#[test]
+fn the_spms_design_file_starts_from_the_hand_placed_stations() {
+    let space = spec::load(&repo().join("scenarios/designs/spms_stations.toml")).unwrap();
+    let shipped = [[1200.0, -400.0, 500.0], [1200.0, 400.0, 500.0], [900.0, 0.0, 1100.0]];
+    for count in 1..=3 {
+        let d = space.decode(count, &space.start(count));
+        assert!(d.violation.is_none(), "{:?}", d.violation);
+        assert_eq!(d.points_mm, shipped[..count].to_vec(), "{count} stations");
+        let stations = calsim::design::sweep::spec::get_dotted(&d.table, "station.sphere_points_base_mm").unwrap();
+        assert_eq!(stations.as_array().unwrap().len(), count);
+    }
+    // More points than the start: the start's, then the circle's of the same index.
+    let tmp = scratch("optimise-start");
+    let f = design_file(
+        tmp.path(),
+        "more.toml",
+        &format!(
+            "[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 5]\nregion = \"plate\"\nx_mm = [-300.0, 300.0]\ny_mm = [-300.0, 300.0]\n\
+             min_spacing_mm = 50.0\nstart_spacing_mm = 100.0\nstart = [[-200.0, -200.0], [200.0, -200.0], [0.0, 200.0]]\n{OBJECTIVE}"
+        ),
+    );
+    let space = spec::load(&f).unwrap();
+    let circle = calsim::design::sweep::spec::circle_layout(5, 100.0);
+    let d = space.decode(5, &space.start(5));
+    assert_eq!(d.points_mm[..3], [[-200.0, -200.0, 0.0], [200.0, -200.0, 0.0], [0.0, 200.0, 0.0]]);
+    for k in 3..5 {
+        for j in 0..2 {
+            assert!((d.points_mm[k][j] - circle[k][j]).abs() < 2e-3, "point {k}: {:?} vs the circle's {:?}", d.points_mm[k], circle[k]);
+        }
+    }
+}
+
 const SMALL: &str = "[fixed]\n\"study.set_sizes\" = [20, 30]\n\"study.table_set_size\" = 30\n\"study.repetitions\" = 2\n\"campaign.validation_poses\" = 60\n\
     \"campaign.pool_per_sphere\" = 20\n\n[points]\nkey = \"cell.spheres_w_mm\"\ncount = [3, 3]\nregion = \"plate\"\nx_mm = [0.0, 300.0]\ny_mm = [0.0, 300.0]\n\
     height_mm = [0.0, 100.0]\ntilt_deg = [0.0, 20.0]\nmin_spacing_mm = 150.0\nstart_spacing_mm = 300.0\n\n[search]\nevaluations = 3\nrestarts = 3\nworlds = 2\nfinalists = 1\n\
@@ -206,4 +294,85 @@ fn a_small_question_gives_the_same_bytes_for_any_threads_and_shards_and_resumes(
     assert_eq!(tables(&one.join("q")), reference, "resumed from the per-world files");
     let summary = std::fs::read_to_string(one.join("q/summary.md")).unwrap();
     assert!(summary.contains("held-out worlds (reported)"), "{summary}");
+}
+
+/// Two error models (one gear harmonic; backlash and no harmonic) of the candidate physics.
+const ROBUST: &str = "[robust]\nscore = \"worst\"\nmodels = [\n  { name = \"harmonic\", set = { \"robot.unmodelled.transmission_high_mdeg\" = 3.4 } },\n  \
+    { name = \"backlash\", set = { \"robot.unmodelled.transmission_high_mdeg\" = 0.0, \"robot.unmodelled.backlash_mdeg\" = 6.0 } },\n]\n";
+
+/// A robust question: every design under each error model on the same worlds, each model's worlds
+/// in their own files (keyed by the scenario the model makes), the same bytes for 1 and 2 threads
+/// and for 1 and 3 shards, resumed from the per-world files; the summary says whether the winner
+/// changes with the model.
+#[test]
+fn a_robust_question_keys_worlds_by_the_model_and_gives_the_same_bytes_for_any_threads_and_shards() {
+    let tmp = scratch("optimise-robust");
+    let dir = tmp.path();
+    let f = design_file(dir, "rq.toml", &format!("{SMALL}{OBJECTIVE}{ROBUST}"));
+    let space = spec::load(&f).unwrap();
+    let robust = space.robust.as_ref().expect("[robust]");
+    assert_eq!(robust.models.len(), 2);
+    assert_eq!(robust.combine, spec::Combine::Worst);
+    // Each model's scenario differs from the design's and from the other model's: so do the keys
+    // its worlds are kept under.
+    let d = space.decode(3, &space.start(3));
+    let keys: Vec<String> = (0..2).map(|m| calsim::design::optimise::design_key(&space.with_model(&d.table, m))).collect();
+    assert_ne!(keys[0], keys[1]);
+    assert!(!keys.contains(&calsim::design::optimise::design_key(&d.table)));
+    let one = dir.join("one");
+    optimise(&f, &one, None, false, 1);
+    let with_robust = |d: &Path| {
+        let mut t = tables(d);
+        t.push(std::fs::read(d.join("robust.parquet")).unwrap());
+        t
+    };
+    let reference = with_robust(&one.join("rq"));
+    // Both models' worlds of the start design are on disk, each under its own key.
+    let evaluations = one.join("rq.evaluations").join(&space.world_context);
+    for k in &keys {
+        for r in 0..2 {
+            let file = evaluations.join(k).join(format!("r{r:07}.json"));
+            assert!(file.is_file(), "the start design's search world {r} under model {k}: {}", file.display());
+        }
+    }
+    optimise(&f, &dir.join("two"), None, false, 2);
+    assert_eq!(with_robust(&dir.join("two/rq")), reference, "1 vs 2 threads");
+    let sharded = dir.join("sharded");
+    for k in 0..3 {
+        optimise(&f, &sharded, Some((k, 3)), false, 2);
+    }
+    optimise(&f, &sharded, None, true, 2);
+    assert_eq!(with_robust(&sharded.join("rq")), reference, "1 vs 3 shards");
+    std::fs::remove_dir_all(one.join("rq")).unwrap();
+    optimise(&f, &one, None, false, 2);
+    assert_eq!(with_robust(&one.join("rq")), reference, "resumed from the per-world files");
+    let summary = std::fs::read_to_string(one.join("rq/summary.md")).unwrap();
+    assert!(summary.contains("## Robust: the winner under each error model"), "{summary}");
+    assert!(summary.contains("| harmonic |") && summary.contains("| backlash |") && summary.contains("| robust (worst) |"), "{summary}");
+    assert!(summary.contains("The winner does not change") || summary.contains("The winner changes"), "{summary}");
+    // robust.parquet: both models' rows and the combined score at both stages.
+    use polars::prelude::SerReader;
+    let df = polars::prelude::ParquetReader::new(std::fs::File::open(one.join("rq/robust.parquet")).unwrap()).finish().unwrap();
+    let models: std::collections::BTreeSet<String> =
+        df.column("model").unwrap().str().unwrap().iter().flatten().map(str::to_string).collect();
+    assert_eq!(models, ["backlash", "harmonic", "robust (worst)"].into_iter().map(String::from).collect());
+}
+
+/// Every shipped design file loads; the robust one names its three models and scores the worst.
+#[test]
+fn every_shipped_design_file_loads() {
+    let dir = repo().join("scenarios/designs");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            spec::load(&path).unwrap_or_else(|e| panic!("{e}"));
+            n += 1;
+        }
+    }
+    assert!(n >= 4, "{n} design files");
+    let robust = spec::load(&dir.join("irb120_spheres_robust.toml")).unwrap().robust.expect("[robust]");
+    let names: Vec<&str> = robust.models.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["harmonic + payload (default)", "one harmonic", "backlash"]);
+    assert_eq!(robust.combine, spec::Combine::Worst);
 }

@@ -164,9 +164,23 @@ pub struct Evaluated {
     /// Where some world failed: per point, how far it is from what the arm reaches with the
     /// device in its approach cone, mm ([`reach`]; empty otherwise).
     pub reach_mm: Vec<f64>,
-    /// Per set size.
+    /// Per set size (with `[robust]`: each row the first model's that has it, its score the
+    /// models' scores combined).
     pub sizes: Vec<SizeScore>,
     /// The design's score: its best set size's, or the violation's.
+    pub score: f64,
+    /// With `[robust]`: the design under each error model (empty without).
+    pub models: Vec<ModelScore>,
+}
+
+/// A design under one error model of `[robust]` on the worlds it ran.
+#[derive(Clone, Debug)]
+pub struct ModelScore {
+    /// Per set size.
+    pub sizes: Vec<SizeScore>,
+    /// Worlds whose campaign failed.
+    pub failed: u32,
+    /// The design's score under the model: its best set size's, or the failures'.
     pub score: f64,
 }
 
@@ -266,7 +280,21 @@ impl Context<'_> {
         Ok(units)
     }
 
-    /// Evaluates what the search asked on the search worlds `0..worlds`.
+    /// The scenario of `table` under each error model (one without `[robust]`), each keyed by
+    /// its own text: a model's keys are in its per-world files' name, so that no model ever
+    /// reads another's worlds.
+    fn model_points(&self, table: &toml::Table) -> Result<Vec<(String, Point)>, (usize, String)> {
+        (0..self.space.model_names().len())
+            .map(|m| {
+                let t = self.space.with_model(table, m);
+                let key = design_key(&t);
+                self.point(key.clone(), &t).map(|p| (key, p)).map_err(|why| (m, why))
+            })
+            .collect()
+    }
+
+    /// Evaluates what the search asked on the search worlds `0..worlds` (under every error
+    /// model of `[robust]`, on the same worlds).
     pub fn evaluate(&self, asked: Asked) -> Result<Evaluated, OptimiseError> {
         let d = self.space.decode(asked.count, &asked.x);
         let key = design_key(&d.table);
@@ -283,36 +311,87 @@ impl Context<'_> {
             reach_mm: Vec::new(),
             sizes: Vec::new(),
             score: f64::INFINITY,
+            models: Vec::new(),
         };
         if let Some((_, margin)) = &e.violation {
             e.score = 10.0 * PENALTY + margin / 10.0;
             return Ok(e);
         }
-        let point = match self.point(e.key.clone(), &d.table) {
+        let names = self.space.model_names();
+        let points = match self.model_points(&d.table) {
             Ok(p) => p,
-            Err(why) => {
-                e.violation = Some((format!("the scenario refuses it: {why}"), 1.0));
+            Err((m, why)) => {
+                let under = if self.space.robust.is_some() { format!(" under model {:?}", names[m]) } else { String::new() };
+                e.violation = Some((format!("the scenario refuses it{under}: {why}"), 1.0));
                 e.score = 10.0 * PENALTY + 0.1;
                 return Ok(e);
             }
         };
         e.table = Some(d.table);
-        let worlds: Vec<u32> = (0..self.space.search.worlds).collect();
-        let units = self.units(&[(e.key.clone(), point.clone())], &worlds, self.space.search.worlds)?;
-        e.worlds = units.len() as u32;
-        e.failed = units.iter().filter(|u| u.error.is_some()).count() as u32;
+        let stride = self.space.search.worlds;
+        let worlds: Vec<u32> = (0..stride).collect();
+        let units = self.units(&points, &worlds, stride)?;
+        e.worlds = stride;
+        let failed: Vec<u32> =
+            (0..points.len()).map(|m| units.iter().filter(|u| u.point == m && u.error.is_some()).count() as u32).collect();
+        e.failed = failed.iter().copied().max().unwrap_or(0);
         e.first_error = units.iter().find_map(|u| u.error.clone());
         if e.failed > 0 {
-            e.reach_mm = reach::sphere_margins_mm(point.scenario.as_ref()).unwrap_or_default();
+            e.reach_mm = reach::sphere_margins_mm(points[0].1.scenario.as_ref()).unwrap_or_default();
         }
-        let info = self.info(&self.sweep_of(vec![point], self.space.search.worlds));
-        e.sizes = designs::judge(&info, &units, &[]).into_iter().map(|row| SizeScore { score: score_of(self.space, &row), row }).collect();
-        e.score = match e.best() {
-            Some(b) => b.score,
-            // Every world failed: a violation measured by the worlds (all of them) and by how far
-            // the farthest point is from the arm's reach.
-            None => 2.0 * PENALTY + e.reach_mm.iter().copied().fold(0.0, f64::max) / 100.0,
-        };
+        // Every world failed: a violation measured by the worlds (all of them) and by how far
+        // the farthest point is from the arm's reach.
+        let all_failed = 2.0 * PENALTY + e.reach_mm.iter().copied().fold(0.0, f64::max) / 100.0;
+        let info = self.info(&self.sweep_of(points.iter().map(|p| p.1.clone()).collect(), stride));
+        let rows = designs::judge(&info, &units, &[]);
+        let mut per_model: Vec<ModelScore> = (0..points.len())
+            .map(|m| {
+                let sizes: Vec<SizeScore> = rows
+                    .iter()
+                    .filter(|r| r.design.point == m)
+                    .map(|r| {
+                        let mut row = r.clone();
+                        row.design.point = 0;
+                        SizeScore { score: score_of(self.space, &row), row }
+                    })
+                    .collect();
+                let score = sizes.iter().map(|z| z.score).min_by(f64::total_cmp).unwrap_or(all_failed);
+                ModelScore { sizes, failed: failed[m], score }
+            })
+            .collect();
+        match &self.space.robust {
+            None => {
+                let only = per_model.remove(0);
+                e.sizes = only.sizes;
+                e.score = only.score;
+            }
+            Some(r) => {
+                // Per set size and selection: the models' scores combined (a model in which every
+                // world failed scores the failures'); the row shown is the first model's that has it.
+                let mut keys: Vec<(String, u32)> = Vec::new();
+                for m in &per_model {
+                    for z in &m.sizes {
+                        let k = (z.row.design.selection.clone(), z.row.design.set_size);
+                        if !keys.contains(&k) {
+                            keys.push(k);
+                        }
+                    }
+                }
+                fn find<'a>(m: &'a ModelScore, k: &(String, u32)) -> Option<&'a SizeScore> {
+                    m.sizes.iter().find(|z| z.row.design.selection == k.0 && z.row.design.set_size == k.1)
+                }
+                e.sizes = keys
+                    .iter()
+                    .map(|k| {
+                        let scores: Vec<f64> = per_model.iter().map(|m| find(m, k).map_or(all_failed, |z| z.score)).collect();
+                        let row = per_model.iter().find_map(|m| find(m, k)).expect("a model has it").row.clone();
+                        SizeScore { row, score: r.combine.of(&scores) }
+                    })
+                    .collect();
+                e.score = e.best().map_or(all_failed, |b| b.score);
+                e.models = per_model;
+            }
+        }
         Ok(e)
     }
 
@@ -459,6 +538,207 @@ pub struct Verdict {
     pub verified: Vec<Candidate>,
     /// Their judged rows on the held-out worlds.
     pub held_out_rows: Vec<DesignRow>,
+    /// With `[robust]`: every model's race and held-out rows and the winner under each model and
+    /// under the combined score (`race_rows` and `held_out_rows` are then the first model's).
+    pub robust: Option<RobustVerdict>,
+}
+
+/// A robust design's race and verification under each error model.
+#[derive(Clone, Debug)]
+pub struct RobustVerdict {
+    /// The models' names.
+    pub models: Vec<String>,
+    /// How their scores combine.
+    pub combine: spec::Combine,
+    /// Per model, the finalists' rows on the race's search worlds (`0..race.max`, every world).
+    pub race: Vec<Vec<DesignRow>>,
+    /// Per model, the verified designs' rows on the held-out worlds.
+    pub held_out: Vec<Vec<DesignRow>>,
+    /// The winner under each model (in order) and last under the combined score: the best
+    /// (finalist, selection, set size) by that score on the race's worlds, as a verified design.
+    pub choices: Vec<Choice>,
+}
+
+/// A winner under one criterion of a robust design.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Choice {
+    /// A model's name, or `robust (mean)` / `robust (worst)`.
+    pub criterion: String,
+    /// The verified design (index into `Verdict::verified`).
+    pub verified: usize,
+    /// Its selection and set size.
+    pub selection: String,
+    /// See `selection`.
+    pub set_size: u32,
+    /// Its score by the criterion on the race's worlds.
+    pub race_score: f64,
+}
+
+/// A judged row's design: (point, selection, set size).
+pub type RowKey = (usize, String, u32);
+
+/// One (point, selection, set size) under every model: the per-model scores and their combination.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Combined {
+    /// The point, selection and set size.
+    pub key: RowKey,
+    /// Per model, its score (lower is better).
+    pub scores: Vec<f64>,
+    /// The scores combined by `[robust] score`.
+    pub score: f64,
+}
+
+/// Per (point, selection, set size) of rows judged per model (`rows[m]`): the per-model scores
+/// and their combination. A model without the row (every world failed) scores 2 * PENALTY.
+pub fn combined(space: &DesignSpace, rows: &[Vec<DesignRow>]) -> Vec<Combined> {
+    let combine = space.robust.as_ref().map_or(spec::Combine::Mean, |r| r.combine);
+    let mut keys: BTreeMap<RowKey, Vec<f64>> = BTreeMap::new();
+    for (m, rs) in rows.iter().enumerate() {
+        for r in rs {
+            let k = (r.design.point, r.design.selection.clone(), r.design.set_size);
+            keys.entry(k).or_insert_with(|| vec![2.0 * PENALTY; rows.len()])[m] = score_of(space, r);
+        }
+    }
+    keys.into_iter()
+        .map(|(key, scores)| {
+            let score = combine.of(&scores);
+            Combined { key, scores, score }
+        })
+        .collect()
+}
+
+/// Runs (or reads) every candidate under every model on `worlds` and judges each model's
+/// candidates together: the rows per model.
+fn judged_by_model(ctx: &Context<'_>, candidates: &[Candidate], worlds: &[u32], stride: u32) -> Result<Vec<Vec<DesignRow>>, OptimiseError> {
+    let space = ctx.space;
+    let models = space.model_names().len();
+    let n = candidates.len();
+    let mut points: Vec<(String, Point)> = Vec::with_capacity(models * n);
+    for m in 0..models {
+        for c in candidates {
+            let t = space.with_model(&c.table, m);
+            let key = design_key(&t);
+            points.push(ctx.point(key.clone(), &t).map(|p| (key, p)).map_err(OptimiseError::Search)?);
+        }
+    }
+    let units = ctx.units(&points, worlds, stride)?;
+    Ok((0..models)
+        .map(|m| {
+            let of: Vec<Unit> = units
+                .iter()
+                .filter(|u| u.point / n.max(1) == m)
+                .map(|u| {
+                    let mut u = u.clone();
+                    u.point -= m * n;
+                    u.unit -= m * n * stride as usize;
+                    u
+                })
+                .collect();
+            let info = ctx.info(&ctx.sweep_of(points[m * n..(m + 1) * n].iter().map(|p| p.1.clone()).collect(), stride));
+            designs::judge(&info, &of, &[])
+        })
+        .collect())
+}
+
+/// [`finish`] under `[robust]`: finalists per count by the combined score, and each model's best;
+/// every finalist under every model on all the race's worlds (no elimination); the winner under
+/// each model and under the combined score; the best of each count by the combined score, the
+/// winners and the compared designs under every model on the held-out worlds.
+fn finish_robust(
+    ctx: &Context<'_>,
+    trace: Vec<Evaluated>,
+    compare: Vec<Candidate>,
+    progress: &(dyn Fn(usize, usize, &str) + Sync),
+) -> Result<Verdict, OptimiseError> {
+    let space = ctx.space;
+    let r = space.robust.as_ref().expect("robust");
+    let names = space.model_names();
+    let models = names.len();
+    let candidate = |e: &Evaluated, count: usize| Candidate {
+        label: format!("{count} points, restart {} #{}", e.asked.restart, e.asked.index),
+        count,
+        table: e.table.clone().expect("ran"),
+        key: e.key.clone(),
+        points_mm: e.points_mm.clone(),
+        search_score: Some(e.score),
+        compared: false,
+    };
+    let order = |a: &&Evaluated, b: &&Evaluated, sa: f64, sb: f64| {
+        sa.total_cmp(&sb).then(a.asked.restart.cmp(&b.asked.restart)).then(a.asked.index.cmp(&b.asked.index))
+    };
+    let mut finalists: Vec<Candidate> = Vec::new();
+    for count in space.counts() {
+        let ran: Vec<&Evaluated> = trace.iter().filter(|e| e.asked.count == count && e.table.is_some() && e.best().is_some()).collect();
+        let mut of = ran.clone();
+        of.sort_by(|a, b| order(a, b, a.score, b.score));
+        let mut taken = 0;
+        for e in of {
+            if taken == space.search.finalists || finalists.iter().any(|f| f.key == e.key) {
+                continue;
+            }
+            finalists.push(candidate(e, count));
+            taken += 1;
+        }
+        for m in 0..models {
+            let best =
+                ran.iter().filter(|e| !e.models[m].sizes.is_empty()).min_by(|a, b| order(a, b, a.models[m].score, b.models[m].score));
+            if let Some(e) = best
+                && !finalists.iter().any(|f| f.key == e.key)
+            {
+                finalists.push(candidate(e, count));
+            }
+        }
+    }
+    let stride = space.search.race.max;
+    let worlds: Vec<u32> = (0..stride).collect();
+    progress(0, finalists.len() * models * worlds.len(), "race: worlds of the finalists under every model");
+    let race = judged_by_model(ctx, &finalists, &worlds, stride)?;
+    let scores = combined(space, &race);
+    // The winner under each model, then under the combined score (ties: the first in order).
+    let pick = |c: usize| -> Option<(RowKey, f64)> {
+        scores
+            .iter()
+            .map(|x| (&x.key, if c < models { x.scores[c] } else { x.score }))
+            .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(b.0)))
+            .map(|(k, s)| (k.clone(), s))
+    };
+    let mut verified: Vec<Candidate> = Vec::new();
+    let add = |f: usize, verified: &mut Vec<Candidate>| -> usize {
+        match verified.iter().position(|c| c.key == finalists[f].key) {
+            Some(i) => i,
+            None => {
+                verified.push(finalists[f].clone());
+                verified.len() - 1
+            }
+        }
+    };
+    for count in space.counts() {
+        let best =
+            scores.iter().filter(|x| finalists[x.key.0].count == count).min_by(|a, b| a.score.total_cmp(&b.score).then(a.key.cmp(&b.key)));
+        if let Some(x) = best {
+            add(x.key.0, &mut verified);
+        }
+    }
+    let mut choices = Vec::new();
+    for c in 0..=models {
+        if let Some(((f, selection, set_size), race_score)) = pick(c) {
+            let criterion = if c < models { names[c].clone() } else { format!("robust ({})", r.combine.label()) };
+            choices.push(Choice { criterion, verified: add(f, &mut verified), selection, set_size, race_score });
+        }
+    }
+    verified.extend(compare);
+    let held: Vec<u32> = (0..space.held_out).map(|k| HELD_OUT_BASE + k).collect();
+    progress(0, verified.len() * models * held.len(), "held-out worlds under every model");
+    let held_out = judged_by_model(ctx, &verified, &held, space.held_out)?;
+    Ok(Verdict {
+        trace,
+        finalists,
+        race_rows: race[0].clone(),
+        race_worlds: stride,
+        verified,
+        held_out_rows: held_out[0].clone(),
+        robust: Some(RobustVerdict { models: names, combine: r.combine, race, held_out, choices }),
+    })
 }
 
 /// Races the best designs of the search on more search worlds, then verifies the best of each
@@ -470,6 +750,9 @@ pub fn finish(
     progress: &(dyn Fn(usize, usize, &str) + Sync),
 ) -> Result<Verdict, OptimiseError> {
     let space = ctx.space;
+    if space.robust.is_some() {
+        return finish_robust(ctx, trace, compare, progress);
+    }
     // Finalists: per count, the best distinct designs by search score that ran.
     let mut finalists: Vec<Candidate> = Vec::new();
     for count in space.counts() {
@@ -551,7 +834,7 @@ pub fn finish(
     let vunits = ctx.units(&vpoints, &held, space.held_out)?;
     let vinfo = ctx.info(&ctx.sweep_of(vpoints.iter().map(|p| p.1.clone()).collect(), space.held_out));
     let held_out_rows = designs::judge(&vinfo, &vunits, &[]);
-    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows })
+    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows, robust: None })
 }
 
 /// The designs of a sweep file as candidates to verify beside the optimiser's (each grid point

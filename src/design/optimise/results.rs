@@ -29,6 +29,18 @@ impl Outcome {
     /// report the luckiest of the verified designs on the worlds that chose it (the winner's
     /// curse), an optimistic figure.
     pub fn of(verdict: Verdict) -> Self {
+        if let Some(r) = &verdict.robust {
+            // Under [robust], the winner under the combined score (the last choice), with its
+            // held-out row of the first model that has one.
+            let winner = r.choices.last().and_then(|c| {
+                r.held_out.iter().find_map(|rows| {
+                    rows.iter()
+                        .find(|h| h.design.point == c.verified && h.design.set_size == c.set_size && h.design.selection == c.selection)
+                        .map(|h| (c.verified, h.clone()))
+                })
+            });
+            return Self { verdict, winner };
+        }
         let winner = verdict.race_rows.iter().min_by_key(|r| r.rank).and_then(|best| {
             let key = &verdict.finalists.get(best.design.point)?.key;
             let v = verdict.verified.iter().position(|c| !c.compared && &c.key == key)?;
@@ -109,17 +121,22 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
             .filter(|e| e.key == c.key)
             .find_map(|e| e.sizes.iter().find(|z| z.row.design.set_size == r.design.set_size).map(|z| z.row.clone()));
         s += &format!("## The answer\n\n{} ({} sets of {}).\n\n", c.label, r.design.selection, r.design.set_size);
+        // Under [robust] the rows below are the first model's (the robust table has every model's).
+        let under = v.robust.as_ref().map_or(String::new(), |x| format!(", under {}", x.models[0]));
         s += "| stage | estimate (interval) |\n|---|---|\n";
         if let Some(x) = search {
-            s += &format!("| search worlds | {} |\n", row_words(&x));
+            s += &format!("| search worlds{under} | {} |\n", row_words(&x));
         }
         if let Some(x) = race {
-            s += &format!("| race (search worlds) | {} |\n", row_words(x));
+            s += &format!("| race (search worlds){under} | {} |\n", row_words(x));
         }
-        s += &format!("| **held-out worlds (reported)** | **{}** |\n\n", row_words(r));
+        s += &format!("| **held-out worlds (reported)**{under} | **{}** |\n\n", row_words(r));
         s += &format!("Points (region frame, mm): {:?}\n\n", c.points_mm);
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
+    }
+    if let Some(r) = &v.robust {
+        s += &robust_section(space, v, r);
     }
     s += "## Held-out worlds: every verified design\n\n| rank | design | selection | n | estimate | interval | P(success) | campaign, h | worlds | failed | feasibility | worlds the leader did better / worse |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     let mut rows: Vec<&DesignRow> = v.held_out_rows.iter().collect();
@@ -176,6 +193,91 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
     s
 }
 
+/// The robust table: the winner under each model and under the combined score, each on the
+/// held-out worlds under every model, and whether the winner changes with the error model.
+pub fn robust_section(space: &DesignSpace, v: &Verdict, r: &super::RobustVerdict) -> String {
+    let held = super::combined(space, &r.held_out);
+    let mut s = format!(
+        "## Robust: the winner under each error model\n\nEvery design runs under each of {} error models (`[robust]`: scenario keys set on top of \
+         the design) on the same worlds; its score under the file's objective is combined by their {} (lower is better). The race ran every \
+         finalist under every model on the search worlds 0-{} (no elimination) and chose the winner of each row below; the held-out worlds \
+         (realisations {}-{}) report it under each model. `race.parquet`, `verified.parquet` and the held-out table below hold the first \
+         model's rows ({:?}); `robust.parquet` holds every model's.\n\n| chosen by | design | selection | n | score on the race's worlds |",
+        r.models.len(),
+        r.combine.label(),
+        v.race_worlds.saturating_sub(1),
+        super::HELD_OUT_BASE,
+        super::HELD_OUT_BASE + space.held_out - 1,
+        r.models[0]
+    );
+    for m in &r.models {
+        s += &format!(" held-out under {m}: estimate (interval) |");
+    }
+    s += &format!(" held-out score, {} |\n|---|---|---|---|---|", r.combine.label());
+    s += &"---|".repeat(r.models.len() + 1);
+    s += "\n";
+    for c in &r.choices {
+        s += &format!("| {} | {} | {} | {} | {} |", c.criterion, v.verified[c.verified].label, c.selection, c.set_size, f3(c.race_score));
+        for rows in &r.held_out {
+            let row =
+                rows.iter().find(|h| h.design.point == c.verified && h.design.selection == c.selection && h.design.set_size == c.set_size);
+            s += &match row {
+                Some(h) => format!(
+                    " {} ({}-{}), {} worlds, {} failed |",
+                    f3(h.estimate),
+                    f3(h.interval.0),
+                    f3(h.interval.1),
+                    h.worlds,
+                    h.failed_worlds
+                ),
+                None => " every world failed |".to_string(),
+            };
+        }
+        let comb = held.iter().find(|x| x.key == (c.verified, c.selection.clone(), c.set_size)).map(|x| x.score);
+        s += &format!(" {} |\n", comb.map_or("-".into(), f3));
+    }
+    let same = |a: &super::Choice, b: &super::Choice| a.verified == b.verified && a.selection == b.selection && a.set_size == b.set_size;
+    let first = &r.choices[0];
+    let models: Vec<&super::Choice> = r.choices.iter().take(r.models.len()).collect();
+    let robust = r.choices.last().expect("a choice");
+    if r.choices.iter().all(|c| same(c, first)) {
+        s += &format!(
+            "\n**The winner does not change with the error model**: every model and the {} score choose {} ({} sets of {}).\n\n",
+            r.combine.label(),
+            v.verified[first.verified].label,
+            first.selection,
+            first.set_size
+        );
+    } else {
+        let cells = models.iter().map(|c| c.verified).collect::<std::collections::BTreeSet<_>>().len();
+        let differ: Vec<String> = models.iter().filter(|c| !same(c, robust)).map(|c| c.criterion.clone()).collect();
+        s += &format!(
+            "\n**The winner changes with the error model**: the models choose {} distinct design{} ({}); the {} score's winner differs from the choice of {}.\n\n",
+            cells,
+            if cells == 1 { " (the same cell, another set size or selection)" } else { "s" },
+            models
+                .iter()
+                .map(|c| format!("{}: {} {} {}", c.criterion, v.verified[c.verified].label, c.selection, c.set_size))
+                .collect::<Vec<_>>()
+                .join("; "),
+            r.combine.label(),
+            if differ.is_empty() { "no model".to_string() } else { differ.join(", ") }
+        );
+    }
+    s
+}
+
+/// A row of `robust.parquet`: a stage, a model (or the combination), a design's judged row.
+struct RobustRow {
+    stage: String,
+    model: String,
+    design: String,
+    /// The judged row (none for the combination).
+    row: Option<DesignRow>,
+    key: super::RowKey,
+    score: f64,
+}
+
 /// Writes the results into `out/<name>` atomically; `plots` are the figures' inputs.
 pub fn write(
     out: &Path,
@@ -217,6 +319,16 @@ pub fn write(
                 f("upper", bf(&|r| r.interval.1)),
                 f("campaign_h", bf(&|r| r.campaign_h)),
                 f("score", v.trace.iter().map(|e| e.score).collect()),
+                s(
+                    "model_scores",
+                    v.trace
+                        .iter()
+                        .map(|e| {
+                            let names = space.model_names();
+                            e.models.iter().zip(&names).map(|(m, n)| format!("{n} = {}", m.score)).collect::<Vec<_>>().join("; ")
+                        })
+                        .collect(),
+                ),
             ],
         )?;
         let rows_table = |name: &str, rows: &[DesignRow], label: &dyn Fn(usize) -> String| {
@@ -243,6 +355,55 @@ pub fn write(
         };
         rows_table("race.parquet", &v.race_rows, &|p| v.finalists[p].label.clone())?;
         rows_table("verified.parquet", &v.held_out_rows, &|p| v.verified[p].label.clone())?;
+        if let Some(r) = &v.robust {
+            // Every model's rows, race then held-out, and the combined scores.
+            let mut rows: Vec<RobustRow> = Vec::new();
+            let mut add = |stage: &str, by_model: &[Vec<DesignRow>], label: &dyn Fn(usize) -> String| {
+                for (m, rs) in by_model.iter().enumerate() {
+                    rows.extend(rs.iter().map(|x| RobustRow {
+                        stage: stage.into(),
+                        model: r.models[m].clone(),
+                        design: label(x.design.point),
+                        row: Some(x.clone()),
+                        key: (x.design.point, x.design.selection.clone(), x.design.set_size),
+                        score: super::score_of(space, x),
+                    }));
+                }
+                for c in super::combined(space, by_model) {
+                    rows.push(RobustRow {
+                        stage: stage.into(),
+                        model: format!("robust ({})", r.combine.label()),
+                        design: label(c.key.0),
+                        row: None,
+                        key: c.key,
+                        score: c.score,
+                    });
+                }
+            };
+            add("race", &r.race, &|p| v.finalists[p].label.clone());
+            add("held_out", &r.held_out, &|p| v.verified[p].label.clone());
+            let num = |g: &dyn Fn(&DesignRow) -> f64| rows.iter().map(|x| x.row.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
+            let whole = |g: &dyn Fn(&DesignRow) -> u32| rows.iter().map(|x| x.row.as_ref().map_or(0, g)).collect::<Vec<_>>();
+            parquet(
+                dir,
+                "robust.parquet",
+                vec![
+                    s("stage", rows.iter().map(|x| x.stage.clone()).collect()),
+                    s("model", rows.iter().map(|x| x.model.clone()).collect()),
+                    s("design", rows.iter().map(|x| x.design.clone()).collect()),
+                    s("selection", rows.iter().map(|x| x.key.1.clone()).collect()),
+                    u("set_size", rows.iter().map(|x| x.key.2).collect()),
+                    u("worlds", whole(&|x| x.worlds)),
+                    u("failed_worlds", whole(&|x| x.failed_worlds)),
+                    f("estimate", num(&|x| x.estimate)),
+                    f("lower", num(&|x| x.interval.0)),
+                    f("upper", num(&|x| x.interval.1)),
+                    f("success", num(&|x| x.success.map_or(f64::NAN, |y| y.0))),
+                    f("campaign_h", num(&|x| x.campaign_h)),
+                    f("score", rows.iter().map(|x| x.score).collect()),
+                ],
+            )?;
+        }
         if let Some((i, r)) = &o.winner {
             let head = format!(
                 "# {}: the optimiser's answer, {} ({} sets of {}): held-out {}.\n# `calsim run best_design.toml` redoes its realisation 0 with the figures and the Rerun recording (from any directory).\n",

@@ -47,23 +47,29 @@ impl DesignSpace {
     pub fn start(&self, count: usize) -> Vec<f64> {
         let mut x: Vec<f64> = self.variables.iter().map(|v| v.start).collect();
         if let Some(p) = &self.points {
-            let circle = circle_layout(count.max(3), p.start_spacing_mm);
-            let unit = |v: f64, r: [f64; 2]| if r[1] > r[0] { ((v - r[0]) / (r[1] - r[0])).clamp(0.0, 1.0) } else { 0.5 };
+            // The start's points as given, then the circle's points of the same index for the
+            // rest (the circle of `count` points, moved by the offset).
             let o = p.start_offset_mm;
+            let circle: Vec<[f64; 3]> = circle_layout(count.max(3), p.start_spacing_mm)
+                .into_iter()
+                .enumerate()
+                .map(|(k, c)| p.start_points.get(k).copied().unwrap_or([c[0] + o[0], c[1] + o[1], c[2] + o[2]]))
+                .collect();
+            let unit = |v: f64, r: [f64; 2]| if r[1] > r[0] { ((v - r[0]) / (r[1] - r[0])).clamp(0.0, 1.0) } else { 0.5 };
             match &p.region {
                 Region::Plate { x_mm, y_mm, height_mm, tilt_deg } => {
                     x.push(unit(p.start_plate.0, *height_mm));
                     x.push(unit(p.start_plate.1, *tilt_deg));
                     for c in circle.iter().take(count) {
-                        x.push(unit(c[0] + o[0], *x_mm));
-                        x.push(unit(c[1] + o[1], *y_mm));
+                        x.push(unit(c[0], *x_mm));
+                        x.push(unit(c[1], *y_mm));
                     }
                 }
                 Region::Box { x_mm, y_mm, z_mm } => {
                     for c in circle.iter().take(count) {
-                        x.push(unit(c[0] + o[0], *x_mm));
-                        x.push(unit(c[1] + o[1], *y_mm));
-                        x.push(unit(c[2] + o[2], *z_mm));
+                        x.push(unit(c[0], *x_mm));
+                        x.push(unit(c[1], *y_mm));
+                        x.push(unit(c[2], *z_mm));
                     }
                 }
             }

@@ -49,6 +49,25 @@ struct DesignFile {
     search: SearchFile,
     #[serde(default)]
     verify: VerifyFile,
+    #[serde(default)]
+    robust: Option<RobustFile>,
+}
+
+/// `[robust]`: the error models a design is scored over, and how their scores combine.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RobustFile {
+    models: Vec<ModelFile>,
+    score: Option<String>,
+}
+
+/// One error model: a name and scenario keys set on top of every design.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    name: String,
+    #[serde(default)]
+    set: toml::Table,
 }
 
 /// One `[[variable]]`.
@@ -79,6 +98,7 @@ struct PointsFile {
     start_height_mm: Option<f64>,
     start_tilt_deg: Option<f64>,
     start_offset_mm: Option<[f64; 3]>,
+    start: Option<Vec<Vec<f64>>>,
 }
 
 #[derive(Clone, Debug, Deserialize, Default)]
@@ -200,6 +220,11 @@ pub struct Points {
     pub start_plate: (f64, f64),
     /// The start circle's first point in the region, mm.
     pub start_offset_mm: [f64; 3],
+    /// The start given point by point (`[points] start`), in the region's frame (x, y on the
+    /// plate with z = 0, or x, y, z in the box), mm: a search of fewer points starts from the
+    /// first ones, a search of more from all of them and then the circle's points of the same
+    /// index for the rest. Empty: the circle.
+    pub start_points: Vec<[f64; 3]>,
 }
 
 /// Which optimiser searches.
@@ -240,6 +265,54 @@ pub struct Search {
     pub seed: u64,
 }
 
+/// An error model of a robust design: scenario keys set on top of every design.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    /// Its name, as the file writes it.
+    pub name: String,
+    /// The keys it sets (dotted) and their values, in the file's order.
+    pub set: Vec<(String, toml::Value)>,
+}
+
+/// How a robust design's per-model scores combine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Combine {
+    /// Their mean.
+    Mean,
+    /// The worst of them (the largest score).
+    Worst,
+}
+
+impl Combine {
+    /// The name as the file writes it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Combine::Mean => "mean",
+            Combine::Worst => "worst",
+        }
+    }
+
+    /// The combined score of per-model scores (lower is better).
+    pub fn of(self, scores: &[f64]) -> f64 {
+        match self {
+            Combine::Mean => scores.iter().sum::<f64>() / scores.len().max(1) as f64,
+            Combine::Worst => scores.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        }
+    }
+}
+
+/// `[robust]`: a design scored over several error models on the same worlds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Robust {
+    /// The models, in the file's order.
+    pub models: Vec<Model>,
+    /// How their scores combine.
+    pub combine: Combine,
+}
+
+/// Most error models of a robust design.
+pub const MOST_MODELS: usize = 16;
+
 /// A loaded, checked design file.
 #[derive(Clone, Debug)]
 pub struct DesignSpace {
@@ -268,6 +341,29 @@ pub struct DesignSpace {
     pub held_out: u32,
     /// Sweep files whose designs are verified beside the winner.
     pub compare: Vec<PathBuf>,
+    /// The error models a design is scored over (`[robust]`), if any.
+    pub robust: Option<Robust>,
+}
+
+impl DesignSpace {
+    /// `table` under model `m` of `[robust]` (the table itself without `[robust]`).
+    pub fn with_model(&self, table: &toml::Table, m: usize) -> toml::Table {
+        let mut t = table.clone();
+        if let Some(r) = &self.robust {
+            for (k, v) in &r.models[m].set {
+                set_dotted(&mut t, k, v.clone()).expect("checked when the file was loaded");
+            }
+        }
+        t
+    }
+
+    /// The error models' names (one unnamed model without `[robust]`).
+    pub fn model_names(&self) -> Vec<String> {
+        match &self.robust {
+            Some(r) => r.models.iter().map(|m| m.name.clone()).collect(),
+            None => vec![String::new()],
+        }
+    }
 }
 
 /// Most points of a design.
@@ -355,6 +451,11 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
         variables.push(var);
     }
     let points = file.points.as_ref().map(|p| points(path, p)).transpose()?;
+    let robust = file
+        .robust
+        .as_ref()
+        .map(|r| robust(path, r, &base, &base_path, &known, &variables, points.as_ref().map(|p| p.key.as_str())))
+        .transpose()?;
     let search = search(path, &file.search)?;
     let held_out = file.verify.held_out.unwrap_or(100);
     if !(1..=10_000).contains(&held_out) {
@@ -392,6 +493,7 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
         search,
         held_out,
         compare,
+        robust,
     };
     feasible_somewhere(path, &space)?;
     Ok(space)
@@ -453,9 +555,14 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
     for v in offset {
         finite("start_offset_mm", v)?;
     }
+    let start_points = match &p.start {
+        None => Vec::new(),
+        Some(list) => start_points(path, p, list, &region, (lo as usize, hi as usize))?,
+    };
     Ok(Points {
         key: p.key.clone(),
         count: (lo as usize, hi as usize),
+        start_points,
         region,
         min_spacing_mm: p.min_spacing_mm,
         start_spacing_mm: spacing,
@@ -465,6 +572,124 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
         ),
         start_offset_mm: offset,
     })
+}
+
+/// `[points] start`: one point per entry, inside the region, as many as the most points
+/// searched at most, no two closer than the spacing.
+fn start_points(
+    path: &Path,
+    p: &PointsFile,
+    list: &[Vec<f64>],
+    region: &Region,
+    count: (usize, usize),
+) -> Result<Vec<[f64; 3]>, DesignError> {
+    if list.is_empty() {
+        return Err(err(path, "points.start", "empty: one point per entry, or leave the key out (the circle)"));
+    }
+    if list.len() > count.1 {
+        return Err(err(
+            path,
+            "points.start",
+            format!("{} points: more than the most searched (points.count = [{}, {}])", list.len(), count.0, count.1),
+        ));
+    }
+    let inside = |v: f64, r: [f64; 2]| v >= r[0] && v <= r[1];
+    let mut out = Vec::with_capacity(list.len());
+    for (k, q) in list.iter().enumerate() {
+        let at = format!("points.start[{k}]");
+        let (point, fits, ranges) = match region {
+            Region::Plate { x_mm, y_mm, .. } => {
+                if q.len() != 2 {
+                    return Err(err(path, at, format!("{q:?}: x, y on the plate (2 numbers, mm)")));
+                }
+                ([q[0], q[1], 0.0], inside(q[0], *x_mm) && inside(q[1], *y_mm), format!("x_mm = {x_mm:?}, y_mm = {y_mm:?}"))
+            }
+            Region::Box { x_mm, y_mm, z_mm } => {
+                if q.len() != 3 {
+                    return Err(err(path, at, format!("{q:?}: x, y, z in the box (3 numbers, mm)")));
+                }
+                (
+                    [q[0], q[1], q[2]],
+                    inside(q[0], *x_mm) && inside(q[1], *y_mm) && inside(q[2], *z_mm),
+                    format!("x_mm = {x_mm:?}, y_mm = {y_mm:?}, z_mm = {z_mm:?}"),
+                )
+            }
+        };
+        if point.iter().any(|v| !v.is_finite()) {
+            return Err(err(path, at, format!("{q:?}: finite numbers")));
+        }
+        if !fits {
+            return Err(err(path, at, format!("{q:?}: outside the region ({ranges})")));
+        }
+        out.push(point);
+    }
+    for i in 0..out.len() {
+        for j in 0..i {
+            let d = (0..3).map(|c| (out[i][c] - out[j][c]).powi(2)).sum::<f64>().sqrt();
+            if d < p.min_spacing_mm {
+                return Err(err(
+                    path,
+                    "points.start",
+                    format!("points {} and {} are {d:.1} mm apart, under min_spacing_mm = {}", j + 1, i + 1, p.min_spacing_mm),
+                ));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `[robust]`: two or more models with distinct names, each setting scenario keys that no
+/// variable or the points move, every model's base scenario one its device accepts.
+fn robust(
+    path: &Path,
+    r: &RobustFile,
+    base: &toml::Table,
+    base_path: &Path,
+    known: &dyn Fn(&str) -> bool,
+    variables: &[Variable],
+    points_key: Option<&str>,
+) -> Result<Robust, DesignError> {
+    let combine = match r.score.as_deref() {
+        None | Some("mean") => Combine::Mean,
+        Some("worst") => Combine::Worst,
+        Some(s) => return Err(err(path, "robust.score", format!("{s:?}: \"mean\" or \"worst\""))),
+    };
+    if r.models.len() < 2 || r.models.len() > MOST_MODELS {
+        return Err(err(
+            path,
+            "robust.models",
+            format!("{} models: from 2 to {MOST_MODELS} (one model is a design file without [robust])", r.models.len()),
+        ));
+    }
+    let mut models = Vec::new();
+    for (i, m) in r.models.iter().enumerate() {
+        let at = |k: &str| format!("robust.models[{i}] ({}).{k}", m.name);
+        if m.name.trim().is_empty() || m.name.len() > 80 || m.name.chars().any(char::is_control) {
+            return Err(err(path, at("name"), "a name of 1 to 80 printable characters"));
+        }
+        if r.models[..i].iter().any(|o| o.name == m.name) {
+            return Err(err(path, at("name"), "the name of an earlier model: each name once"));
+        }
+        let mut probe = base.clone();
+        let mut set = Vec::new();
+        for (k, v) in &m.set {
+            let key = at(&format!("set.{k}"));
+            if !known(k) {
+                return Err(err(path, key, "not a key of the base scenario's device (`calsim keys` lists them)"));
+            }
+            let moved = points_key == Some(k.as_str()) || (points_key == Some("cell.spheres_w_mm") && k == "cell.plate_offset_mm_deg");
+            if variables.iter().any(|x| &x.key == k) || moved {
+                return Err(err(path, key, "a key the design moves: a model sets physics, not the design"));
+            }
+            set_dotted(&mut probe, k, v.clone()).map_err(|e| err(path, key.clone(), e))?;
+            set.push((k.clone(), v.clone()));
+        }
+        if let Some(why) = check_table(&probe, base_path) {
+            return Err(err(path, at("set"), format!("the base scenario under this model is refused: {why}")));
+        }
+        models.push(Model { name: m.name.clone(), set });
+    }
+    Ok(Robust { models, combine })
 }
 
 fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
