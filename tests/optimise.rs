@@ -199,8 +199,9 @@ fn the_shipped_design_file_starts_from_the_hand_found_design() {
     for (a, b) in offset.iter().zip([0.0, 0.0, 100.0, 0.0, 0.0, 20.0]) {
         assert!((a - b).abs() < 1e-3, "{offset:?}");
     }
-    // The pool starts at the paper's 120 per sphere, the centring tolerance at the file's 0.02 mm.
-    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(120));
+    // The pool starts at the file's 151 per sphere (its sets of 450 stay below a three-sphere
+    // pool), the centring tolerance at the file's 0.02 mm.
+    assert_eq!(get("campaign.pool_per_sphere").as_integer(), Some(151));
     assert_eq!(get("trical.epsilon_mm").as_float(), Some(0.02));
 }
 

@@ -440,15 +440,24 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
         {
             var.start = u;
         }
-        // Every value of the variable must make a scenario of its kind: the ends and the start.
+        variables.push(var);
+    }
+    // Every value of a variable must make a scenario of its kind: its ends and its start, the other
+    // variables at their starts (the design the search starts from; a set size above the base
+    // scenario's pool is a design of a larger pool).
+    let mut start_design = base.clone();
+    for var in &variables {
+        set_dotted(&mut start_design, &var.key, var.value(var.start)).map_err(|m| err(path, "variable", m))?;
+    }
+    for (i, var) in variables.iter().enumerate() {
+        let at = |k: &str| format!("variable[{i}] ({}).{k}", var.key);
         for t in [0.0, 1.0, var.start] {
-            let mut probe = base.clone();
-            set_dotted(&mut probe, &v.key, var.value(t)).map_err(|m| err(path, at("key"), m))?;
+            let mut probe = start_design.clone();
+            set_dotted(&mut probe, &var.key, var.value(t)).map_err(|m| err(path, at("key"), m))?;
             if let Some(s) = check_table(&probe, &base_path) {
                 return Err(err(path, at("key"), format!("value {}: {s}", var.value(t))));
             }
         }
-        variables.push(var);
     }
     let points = file.points.as_ref().map(|p| points(path, p)).transpose()?;
     let robust = file
