@@ -652,6 +652,7 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
 }
 
 fn fk(args: &FkArgs) -> Result<ExitCode, String> {
+    let _inputs = crate::io::inputs::Ledger::open();
     if let Some(out) = &args.out {
         crate::io::out_dir::vet_file(out, &[&args.robot, &args.joints]).map_err(|e| e.to_string())?;
     }
@@ -683,7 +684,9 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
     let text = app::keys::init(&args.kind).map_err(|e| e.to_string())?;
     match &args.file {
         None => print!("{text}"),
-        Some(f) if f.exists() => return Err(format!("{}: exists; calsim init does not replace a file", f.display())),
+        Some(f) if std::fs::symlink_metadata(f).is_ok() => {
+            return Err(format!("{}: exists; calsim init does not replace a file (nor a link)", f.display()));
+        }
         Some(f) => {
             crate::io::out_dir::write_file_atomically(f, &text).map_err(|e| format!("{}: {e}", f.display()))?;
             eprintln!("calsim init: wrote {} (check it with `calsim check {}`)", f.display(), f.display());
@@ -770,9 +773,11 @@ fn export(args: &ExportArgs) -> Result<ExitCode, String> {
         (None, PickArg::Worst) => Pick::Worst(n),
     };
     let out = args.out.clone().unwrap_or_else(|| args.results.parent().map(Path::to_path_buf).unwrap_or_default());
+    let _inputs = crate::io::inputs::Ledger::open();
     crate::io::out_dir::vet_dir(&out).map_err(|e| e.to_string())?;
     let e = app::export::identification(&args.results, pick).map_err(|e| e.to_string())?;
     let name = format!("{}.task-{}", e.scenario, e.task);
+    crate::io::out_dir::prepare(&out, &name).map_err(|e| e.to_string())?;
     let dest = app::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;
     println!(
         "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, robot.urdf, calibration.yaml, before.toml",

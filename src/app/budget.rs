@@ -44,6 +44,7 @@ pub const MOST_FACTORS: usize = 8;
 
 /// Runs the budget of `spec.scenario`.
 pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     let t0 = Instant::now();
     if spec.factors.len() > MOST_FACTORS {
         return Err(Error::input("--factors", format!("{} factors, at most {MOST_FACTORS}", spec.factors.len())));
@@ -53,7 +54,7 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
     let (sources, configs, mut plan) = budget::plan(&spec.scenario, spec.realisations, &spec.factors, spec.repetitions)?;
     plan.predict = true;
     crate::io::out_dir::prepare(&spec.out, &plan.name)?;
-    crate::io::out_dir::prepare(&spec.out, &sweep::shard_dir(Path::new(""), &plan.name, 0, 1).display().to_string())?;
+    crate::io::out_dir::prepare_work(&spec.out, &sweep::shard_dir(Path::new(""), &plan.name, 0, 1).display().to_string(), sweep::SHARD_MARKER)?;
     let (pool, threads) = thread_pool(spec.threads)?;
     observer.started(&format!(
         "calsim budget: {} ({} sources, {} configurations x {} realisations), {}",
@@ -103,6 +104,7 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
             })
         })
         .collect();
+    let overrides: Vec<(String, String)> = spec.repetitions.iter().map(|r| ("study.repetitions".to_string(), r.to_string())).collect();
     let report = BudgetReport {
         name: &plan.name,
         realisations: spec.realisations,
@@ -116,6 +118,7 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
         shares: &shares,
         against: &against,
         warnings: &warnings,
+        overrides: &overrides,
     };
     let dest = budget::results::write(&spec.out, &report).map_err(Error::io(&spec.out))?;
     std::fs::remove_dir_all(&dir).map_err(Error::io(&dir))?;

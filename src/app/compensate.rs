@@ -156,6 +156,7 @@ fn arm_length_mm(model: &RobotModel) -> f64 {
 /// ([`crate::io::out_dir::vet_file`]); when no target can be reached, nothing is written and the
 /// error says how far the nearest target is.
 pub fn run(spec: &CompensateSpec) -> Result<CompensateReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     let mut inputs: Vec<&Path> = vec![&spec.model, &spec.targets];
     inputs.extend(spec.nominal.as_deref());
     if let Some(out) = &spec.out {

@@ -148,8 +148,9 @@ pub fn yaml_overlay(e: &Export) -> String {
     crate::robot::export::yaml_overlay(&e.before, &e.model, &format!("scenario {}, task {}, n = {}", e.scenario, e.task, e.set_size))
 }
 
-/// Writes `robot.toml`, `before.toml` (the model before calibration), `robot.urdf` and
-/// `calibration.yaml` of `e` into `out/<name>` atomically.
+/// Writes `robot.toml`, `before.toml` (the model before calibration), `robot.urdf`,
+/// `calibration.yaml` and `manifest.json` (its provenance: the results directory's files and the
+/// scenario it read) of `e` into `out/<name>` atomically.
 pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
     let source = format!(
         "calsim {} export: scenario {}, task {} (n = {}), validation median {:.4} mm",
@@ -169,7 +170,25 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
         Some(&e.links),
         e.flange.as_ref(),
     );
+    #[derive(serde::Serialize)]
+    struct Manifest<'a> {
+        export: &'a str,
+        task: usize,
+        set_size: usize,
+        validation_median_mm: f64,
+        #[serde(flatten)]
+        provenance: crate::io::manifest::Provenance,
+    }
+    let manifest = Manifest {
+        export: &e.scenario,
+        task: e.task,
+        set_size: e.set_size,
+        validation_median_mm: e.validation_median_mm,
+        provenance: crate::io::manifest::Provenance::of_run(&[]),
+    };
+    let manifest = serde_json::to_string_pretty(&manifest).map_err(std::io::Error::other)? + "\n";
     crate::io::out_dir::write_atomically(out, name, |dir| {
+        crate::io::out_dir::write_file(&dir.join("manifest.json"), &manifest)?;
         crate::io::out_dir::write_file(&dir.join("robot.toml"), &robot)?;
         crate::io::out_dir::write_file(&dir.join("before.toml"), &before)?;
         crate::io::out_dir::write_file(&dir.join("robot.urdf"), &urdf)?;

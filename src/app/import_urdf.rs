@@ -20,6 +20,7 @@ pub struct Imported {
 /// result and it reproduces the converted arm. `out` is vetted first: never the URDF, a device or
 /// a pipe, nor a file inside other results.
 pub fn run(urdf: &Path, out: &Path, options: &ImportOptions) -> Result<Imported, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     crate::io::out_dir::vet_file(out, &[urdf])?;
     let report = crate::robot::urdf::import(urdf, out, options)?;
     let lines = report.lines(urdf, out);

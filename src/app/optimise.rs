@@ -61,19 +61,21 @@ fn opt_err(e: OptimiseError) -> Error {
 
 /// Runs the optimiser of `spec.file` (or one shard of its restarts, or only their merge).
 pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     crate::io::names::of_file(&spec.file)?;
     let mut space = optimise::spec::load(&spec.file).map_err(design_err)?;
     if let Some(m) = spec.method {
         space.search.method = m;
     }
     let (pool, threads) = thread_pool(spec.threads)?;
+    // Every input read (the compared scenarios too) before the outputs are vetted against them.
+    let compare: Vec<optimise::Candidate> =
+        space.compare.iter().map(|p| optimise::compared(p)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect();
     crate::io::out_dir::prepare(&spec.out, &format!("{}.evaluations", space.name))?;
     let merge = spec.merge || spec.shard.is_none();
     if merge {
         crate::io::out_dir::prepare(&spec.out, &space.name)?;
     }
-    let compare: Vec<optimise::Candidate> =
-        space.compare.iter().map(|p| optimise::compared(p)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect();
     let ctx = Context { space: &space, cache: optimise::work_dir(&spec.out, &space.name) };
     let (k, count) = spec.shard.unwrap_or((0, 1));
     let all = optimise::restarts(&space);
@@ -142,16 +144,20 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         }
     }
     let plots = spec.plots.then(|| plot_inputs(&space, &outcome));
-    let manifest = serde_json::json!({
+    let overrides: Vec<(String, String)> = spec.method.iter().map(|m| ("search.method".to_string(), format!("\"{}\"", m.label()))).collect();
+    let mut manifest = serde_json::json!({
         "design_file": std::path::absolute(&spec.file).unwrap_or_else(|_| spec.file.clone()).display().to_string(),
         "identity": space.identity,
-        "threads": threads,
         "search_s": search_s,
         "finish_s": report.finish_s,
         "evaluations": outcome.verdict.trace.len(),
         "winner_timing": report.cost,
-        "crate_version": env!("CARGO_PKG_VERSION"),
     });
+    if let (Some(m), serde_json::Value::Object(block)) =
+        (manifest.as_object_mut(), serde_json::to_value(crate::io::manifest::Provenance::of_run(&overrides)).map_err(|e| Error::input("manifest", e.to_string()))?)
+    {
+        m.extend(block);
+    }
     let options = crate::device::WriteOptions { threads, plots: spec.plots, recording: spec.plots, overrides: Vec::new() };
     let write_world = |dir: &std::path::Path| -> std::io::Result<()> {
         match &world {

@@ -183,6 +183,7 @@ fn wrong_command(path: &Path, e: crate::device::ScenarioError) -> Error {
 /// Runs the study of `spec.scenario`, writes its results, compares its figures (and, with
 /// realisations, judges them over that many worlds).
 pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     let scenario = load(&spec.scenario, &spec.overrides)?;
     let h = scenario.header();
     let study = scenario.study();
@@ -200,7 +201,7 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         if !spec.check {
             return Err(Error::input("--junit", "the verdict of a check: run `calsim check` to write it"));
         }
-        crate::io::out_dir::vet_file(j, &[&spec.scenario])?;
+        crate::io::out_dir::vet_output_file("--junit", j, &[&spec.scenario])?;
     }
     crate::io::out_dir::prepare(&spec.out, &h.name)?;
     let (pool, threads) = thread_pool(spec.threads)?;

@@ -57,12 +57,13 @@ pub struct MergeReport {
 
 /// Runs the sweep of `spec.file` (or one shard of it), then, unsharded, merges it.
 pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     let t0 = Instant::now();
     // The sweep's name is its file's stem: one path component, checked before anything runs.
     crate::io::names::of_file(&spec.file)?;
     let sweep = sweep::spec::load_with(&spec.file, spec.realisations)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
-    crate::io::out_dir::prepare(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string())?;
+    crate::io::out_dir::prepare_work(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string(), sweep::SHARD_MARKER)?;
     if spec.shard.is_none() {
         crate::io::out_dir::prepare(&spec.out, &sweep.name)?;
     }
@@ -100,6 +101,7 @@ pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Err
 /// Merges the shard directories of one sweep into `out/<sweep>`; every unit failing is an error
 /// naming the sweep (its results are written first, with the reasons).
 pub fn merge(shards: &[PathBuf], out: &Path) -> Result<MergeReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     let (info, units) = sweep::read_shards(shards)?;
     let plan = sweep::complete(&info, &units)?;
     crate::io::out_dir::prepare(out, &info.name)?;

@@ -194,6 +194,7 @@ pub const MOST_PLAN_WORLDS: usize = 1000;
 
 /// `calsim calibrate`: reads the robot and measurement files, calibrates, writes the report.
 pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateError> {
+    let _inputs = crate::io::inputs::Ledger::open();
     check_options(&spec.options)?;
     if let Some(s) = spec.plan_noise_mm
         && !(s.is_finite() && (0.0..=100.0).contains(&s))

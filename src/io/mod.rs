@@ -2,11 +2,13 @@
 //! input calsim reads goes through [`read_text`], [`read_bytes`] or [`read_bytes_at_most`], a test
 //! keeps it so), the shape of an XML input checked before it is parsed (`xml`), the names calsim
 //! makes directories from (`names`), the atomic results directory and the vetting of output paths
-//! (`out_dir`), parquet tables and their hashes (`table`), the provenance of a manifest
+//! (`out_dir`: the one writer and its safety rule), parquet tables and their hashes (`table`), the
+//! ledger of the files a command read (`inputs`), the provenance block of every manifest
 //! (`manifest`), the plot kit (`plot`) and the recording kit (`record`). It computes no figure and
 //! imports no device, study, sweep or budget: each producer computes its own figures and renders
 //! them through it.
 
+pub mod inputs;
 pub mod manifest;
 pub mod names;
 pub mod out_dir;
@@ -60,6 +62,15 @@ pub const MOST_TABLE_BYTES: u64 = 1 << 30;
 /// The bytes of an input file of at most `most` bytes (a CSV of a million rows, a mesh, a result
 /// table), checked by [`check_input`] and read no further than that.
 pub fn read_bytes_at_most(path: &Path, most: u64) -> std::io::Result<Vec<u8>> {
+    let bytes = read_own(path, most)?;
+    inputs::record(path, &bytes);
+    Ok(bytes)
+}
+
+/// The bytes of a file calsim wrote and reads back as its own (a results directory's manifest
+/// when it decides whether it may replace it, the tables it hashes): checked as for
+/// [`read_bytes_at_most`] but not recorded as an input of the command ([`inputs`]).
+pub(crate) fn read_own(path: &Path, most: u64) -> std::io::Result<Vec<u8>> {
     check_input(path, Some(most))?;
     let mut bytes = Vec::new();
     std::fs::File::open(path)?.take(most + 1).read_to_end(&mut bytes)?;

@@ -1,7 +1,21 @@
-//! The results directory `out/<name>`: checked before a study starts, replaced atomically when it
-//! ends, and cleared of what killed runs left; and every output path vetted before the work
-//! starts ([`vet_dir`], [`vet_file`]): an output is never an input, a device, a pipe or a socket,
-//! and never lies inside the results of another run.
+//! The one writer of results and its one safety rule. The results directory `out/<name>` is
+//! checked before a study starts, replaced atomically when it ends, and cleared of what killed runs
+//! left; every output path is vetted before the work starts ([`prepare`], [`vet_dir`],
+//! [`vet_output_file`]).
+//!
+//! The rule, the same for every command: calsim replaces or deletes only what it made.
+//! - A directory it would replace (`out/<name>`) must be absent, empty, or a calsim results
+//!   directory (recognised by its `manifest.json`, [`is_results_dir`]); a work directory
+//!   (a sweep's shard) must be absent, empty or hold its marker file ([`prepare_work`]).
+//! - Never one that holds, or is, an input of the run: every file the command read so far
+//!   ([`crate::io::inputs`]: the scenario, the design or sweep file, their base scenarios, the robot
+//!   file a scenario names, measurements, targets, files named by keys).
+//! - Never an output file (`--junit`, the `--out` of one file) that is one of those inputs, a
+//!   device, a pipe or a directory, nor one inside the results of another run.
+//! - Symbolic links are resolved: a link into any of these is refused as they are.
+//!
+//! A refusal is one line naming the flag, the path and why, found before anything runs; the
+//! atomic swap checks the rule again, so that nothing the rule protects is ever replaced.
 //!
 //! A run writes everything into `out/.<name>.tmp-<pid>` and then exchanges it with `out/<name>` in
 //! one `renameat2(RENAME_EXCHANGE)`: at any instant `out/<name>` is either the old complete
@@ -19,6 +33,16 @@ pub enum OutDirError {
     /// `out` or `out/<name>` is in the way.
     #[error("{path}: {why}")]
     InTheWay {
+        /// The path.
+        path: String,
+        /// What is wrong and what to do.
+        why: String,
+    },
+    /// The rule refuses an output of a command: the flag, the path and why.
+    #[error("{flag} {path}: {why}")]
+    Refused {
+        /// The option that named the output (`--out`, `--junit`).
+        flag: String,
         /// The path.
         path: String,
         /// What is wrong and what to do.
@@ -42,34 +66,23 @@ fn in_the_way(path: &Path, why: impl Into<String>) -> OutDirError {
     OutDirError::InTheWay { path: shown(path), why: why.into() }
 }
 
-/// `path` made absolute with its existing part resolved (symbolic links, `..`), so that its
-/// ancestors are the directories it really lies in.
 fn resolved(path: &Path) -> PathBuf {
-    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-    let mut existing = absolute.as_path();
-    let mut rest = Vec::new();
-    loop {
-        if let Ok(real) = fs::canonicalize(existing) {
-            return rest.iter().rev().fold(real, |p, c| p.join(c));
-        }
-        match (existing.parent(), existing.file_name()) {
-            (Some(parent), Some(name)) => {
-                rest.push(name.to_os_string());
-                existing = parent;
-            }
-            _ => return absolute,
-        }
-    }
+    crate::io::inputs::resolved(path)
 }
 
-/// Whether `dir` holds the `manifest.json` of a calsim result (a run, sweep, budget, export or
-/// calibration): a JSON object with calsim's `crate_version`.
+fn refused(flag: &str, path: &Path, why: impl Into<String>) -> OutDirError {
+    OutDirError::Refused { flag: flag.to_string(), path: shown(path), why: why.into() }
+}
+
+/// Whether `dir` holds the `manifest.json` of a calsim result (a run, sweep, budget, optimisation,
+/// export or calibration): a JSON object with calsim's `crate_version` (its provenance block,
+/// [`crate::io::manifest::Provenance`]).
 pub fn is_results_dir(dir: &Path) -> bool {
     let manifest = dir.join("manifest.json");
     if !manifest.is_file() {
         return false;
     }
-    crate::io::read_bytes(&manifest)
+    crate::io::read_own(&manifest, crate::io::MOST_INPUT_BYTES)
         .ok()
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
         .is_some_and(|v| v.get("crate_version").is_some())
@@ -117,23 +130,32 @@ fn kind(meta: &fs::Metadata) -> &'static str {
     }
 }
 
-/// Refuses, before any work, an output file `out` that cannot be written in place of what is
-/// there: an existing object that is not a regular file (a device, a pipe, a socket, a directory),
-/// one of the command's `inputs` (the same file under any name), a file inside the results of
-/// another run ([`vet_dir`]), or a file whose directory does not exist.
+/// [`vet_output_file`] of the output file named by `--out`.
 pub fn vet_file(out: &Path, inputs: &[&Path]) -> Result<(), OutDirError> {
+    vet_output_file("--out", out, inputs)
+}
+
+/// Refuses, before any work, an output file `out` (named by the option `flag`) that cannot be
+/// written in place of what is there: an existing object that is not a regular file (a device, a
+/// pipe, a socket, a directory), an input of the command (one of `inputs` or any file it read so
+/// far, [`crate::io::inputs`]; the same file under any name, through any link), a file inside the
+/// results of another run ([`vet_dir`]), or a file whose directory does not exist.
+pub fn vet_output_file(flag: &str, out: &Path, inputs: &[&Path]) -> Result<(), OutDirError> {
     use std::os::unix::fs::MetadataExt;
     if let Ok(meta) = fs::metadata(out) {
         if !meta.is_file() {
-            return Err(in_the_way(out, format!("is {}: --out names a regular file calsim writes (it is left as it is)", kind(&meta))));
+            return Err(refused(flag, out, format!("is {}: {flag} names a regular file calsim writes (it is left as it is)", kind(&meta))));
         }
-        for input in inputs {
-            if let Ok(m) = fs::metadata(input)
+        let read = crate::io::inputs::read_so_far();
+        let all = inputs.iter().map(|p| p.to_path_buf()).chain(read.into_iter().map(|i| i.path));
+        for input in all {
+            if let Ok(m) = fs::metadata(&input)
                 && (m.dev(), m.ino()) == (meta.dev(), meta.ino())
             {
-                return Err(in_the_way(
+                return Err(refused(
+                    flag,
                     out,
-                    format!("is the input {}: writing it would replace it; choose another --out (it is left as it is)", shown(input)),
+                    format!("is the input {} of this run: writing it would replace it; choose another {flag} (it is left as it is)", shown(&input)),
                 ));
             }
         }
@@ -141,16 +163,66 @@ pub fn vet_file(out: &Path, inputs: &[&Path]) -> Result<(), OutDirError> {
     let real = resolved(out);
     let parent = real.parent().map(Path::to_path_buf).unwrap_or_default();
     if !parent.is_dir() {
-        return Err(in_the_way(out, format!("its directory {} does not exist", shown(&parent))));
+        return Err(refused(flag, out, format!("its directory {} does not exist", shown(&parent))));
     }
     inside_results(out, &real)
 }
 
+/// Why calsim may not replace or delete the directory `dest` (named through the option `flag`),
+/// by the rule of this module: it exists and is not a directory (a file, a symbolic link), it is
+/// a directory with contents that is not calsim's (`is_ours` says what is), or it holds an input
+/// of the command ([`crate::io::inputs::read_so_far`]). `None`: it may be replaced.
+fn may_not_replace(flag: &str, dest: &Path, is_ours: &dyn Fn(&Path) -> bool, what: &str) -> Option<OutDirError> {
+    let meta = fs::symlink_metadata(dest).ok()?;
+    if !meta.is_dir() {
+        return Some(refused(flag, dest, "exists and is not a directory: move it away or choose another --out (it is left as it is)"));
+    }
+    let real = resolved(dest);
+    if let Some(i) = crate::io::inputs::read_so_far().into_iter().find(|i| i.path.starts_with(&real)) {
+        return Some(refused(
+            flag,
+            dest,
+            format!(
+                "holds {}, an input of this run: writing the results there would replace it; choose another {flag} (it is left as it is)",
+                shown(&i.path)
+            ),
+        ));
+    }
+    let empty = fs::read_dir(dest).map(|mut d| d.next().is_none()).unwrap_or(false);
+    (!empty && !is_ours(dest)).then(|| {
+        refused(
+            flag,
+            dest,
+            format!("is not {what} (calsim replaces only directories it made): move it away or choose another {flag} (it is left as it is)"),
+        )
+    })
+}
+
+/// [`prepare`] for the results directory `out/<name>`: it may be replaced when it is absent,
+/// empty, or a calsim results directory holding no input of the run.
+fn results_in_the_way(dest: &Path) -> Option<OutDirError> {
+    may_not_replace("--out", dest, &is_results_dir, "a calsim results directory (it has no calsim manifest.json)")
+}
+
 /// Checks, before anything runs, that the results of `name` can be written under `out`: `name` is
 /// one plain path component ([`crate::io::names`]), `out` is (or can be made) a writable directory
-/// outside other results ([`vet_dir`]) and `out/<name>` is absent or a directory. Removes the
-/// temporary directories of runs that no longer exist. Returns `out/<name>`.
+/// outside other results ([`vet_dir`]) and `out/<name>` may be replaced by the rule of this module
+/// (absent, empty, or calsim's results holding no input of the run). Removes the temporary
+/// directories of runs that no longer exist. Returns `out/<name>`.
 pub fn prepare(out: &Path, name: &str) -> Result<PathBuf, OutDirError> {
+    prepare_with(out, name, &results_in_the_way)
+}
+
+/// [`prepare`] for a work directory `out/<name>` that calsim fills and deletes itself (a sweep's
+/// shard): absent, empty, or holding the file `marker` (`sweep.json`) that calsim writes first,
+/// and no input of the run.
+pub fn prepare_work(out: &Path, name: &str, marker: &str) -> Result<PathBuf, OutDirError> {
+    let ours = |d: &Path| d.join(marker).is_file();
+    let what = format!("a calsim work directory (it has no {marker})");
+    prepare_with(out, name, &|dest| may_not_replace("--out", dest, &ours, &what))
+}
+
+fn prepare_with(out: &Path, name: &str, in_the_way_at: &dyn Fn(&Path) -> Option<OutDirError>) -> Result<PathBuf, OutDirError> {
     if let Some(why) = crate::io::names::rule_broken(name) {
         return Err(bad_name(out, name, why));
     }
@@ -158,13 +230,11 @@ pub fn prepare(out: &Path, name: &str) -> Result<PathBuf, OutDirError> {
     if out.exists() && !out.is_dir() {
         return Err(in_the_way(out, "is not a directory (--out names the directory the results go in)"));
     }
-    fs::create_dir_all(out).map_err(io_err(out))?;
     let dest = out.join(name);
-    if let Ok(meta) = fs::symlink_metadata(&dest)
-        && !meta.is_dir()
-    {
-        return Err(in_the_way(&dest, "exists and is not a directory: move it away or choose another --out (it is left as it is)"));
+    if let Some(e) = in_the_way_at(&dest) {
+        return Err(e);
     }
+    fs::create_dir_all(out).map_err(io_err(out))?;
     remove_stale(out, name).map_err(io_err(out))?;
     // Writable: make and remove this run's temporary directory now, not after the study.
     let probe = temporary(out, name);
@@ -213,14 +283,19 @@ fn alive(pid: u32) -> bool {
 /// Runs `fill` on a fresh temporary directory beside `out/<name>` and puts it in place of
 /// `out/<name>` atomically; on failure the temporary directory is removed, `out/<name>` is left
 /// as it was and the error names `<name>` (and the file, when `fill` wrote through
-/// [`write_file`]). `name` and `out` are vetted as by [`prepare`] first.
+/// [`write_file`]). `name` and `out` are vetted as by [`prepare`] first, and `out/<name>` again
+/// just before the swap: only results calsim made, holding no input, are ever replaced.
 pub fn write_atomically(out: &Path, name: &str, fill: impl FnOnce(&Path) -> io::Result<()>) -> io::Result<PathBuf> {
     if let Some(why) = crate::io::names::rule_broken(name) {
         return Err(io::Error::new(io::ErrorKind::InvalidInput, bad_name(out, name, why).to_string()));
     }
-    vet_dir(out).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
-    fs::create_dir_all(out)?;
+    let refused = |e: OutDirError| io::Error::new(io::ErrorKind::InvalidInput, e.to_string());
+    vet_dir(out).map_err(refused)?;
     let dest = out.join(name);
+    if let Some(e) = results_in_the_way(&dest) {
+        return Err(refused(e));
+    }
+    fs::create_dir_all(out)?;
     let tmp = temporary(out, name);
     if tmp.exists() {
         fs::remove_dir_all(&tmp)?;
@@ -229,6 +304,11 @@ pub fn write_atomically(out: &Path, name: &str, fill: impl FnOnce(&Path) -> io::
     if let Err(e) = fill(&tmp) {
         let _ = fs::remove_dir_all(&tmp);
         return Err(io::Error::new(e.kind(), format!("{}: {e}", crate::io::names::escape_controls(name))));
+    }
+    // The rule once more at the swap: what is there now may be replaced.
+    if let Some(e) = results_in_the_way(&dest) {
+        let _ = fs::remove_dir_all(&tmp);
+        return Err(refused(e));
     }
     if dest.is_dir() {
         match rustix::fs::renameat_with(rustix::fs::CWD, &tmp, rustix::fs::CWD, &dest, rustix::fs::RenameFlags::EXCHANGE) {
@@ -269,7 +349,7 @@ pub fn named(path: &Path) -> impl FnOnce(io::Error) -> io::Error + '_ {
 /// the new text, never a part; on failure the partial file is removed. A `path` that exists and is
 /// not a regular file (a device, a pipe) is refused and left as it is; a symbolic link to a file
 /// keeps pointing at it, the file replaced.
-pub fn write_file_atomically(path: &Path, text: &str) -> io::Result<()> {
+pub fn write_file_atomically(path: &Path, text: impl AsRef<[u8]>) -> io::Result<()> {
     let path = match fs::metadata(path) {
         Ok(meta) if !meta.is_file() => {
             return Err(io::Error::new(io::ErrorKind::InvalidInput, format!("is {}: calsim writes regular files only", kind(&meta))));
@@ -289,7 +369,7 @@ pub fn write_file_atomically(path: &Path, text: &str) -> io::Result<()> {
         .write(true)
         .create_new(true)
         .open(&tmp)
-        .and_then(|mut f| std::io::Write::write_all(&mut f, text.as_bytes()))
+        .and_then(|mut f| std::io::Write::write_all(&mut f, text.as_ref()))
         .and_then(|()| fs::rename(&tmp, &path));
     if result.is_err() {
         let _ = fs::remove_file(&tmp);

@@ -36,7 +36,7 @@ pub fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<St
         let path = entry?.path();
         if path.extension().is_some_and(|e| e == "parquet") {
             let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-            let bytes = crate::io::read_bytes_at_most(&path, crate::io::MOST_TABLE_BYTES).map_err(crate::io::out_dir::named(&path))?;
+            let bytes = crate::io::read_own(&path, crate::io::MOST_TABLE_BYTES).map_err(crate::io::out_dir::named(&path))?;
             out.insert(name, format!("{:x}", Sha256::digest(bytes)));
         }
     }

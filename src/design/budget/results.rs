@@ -4,7 +4,6 @@
 //! configuration) and a tornado plot, with `manifest.json` (the table's sha256).
 
 use std::fmt::Write as _;
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use polars::prelude::*;
@@ -43,6 +42,8 @@ pub struct BudgetReport<'a> {
     pub against: &'a [Option<Paired>],
     /// What the worlds cannot tell.
     pub warnings: &'a [String],
+    /// The command-line changes to the scenario (`key`, TOML value), as the manifest records them.
+    pub overrides: &'a [(String, String)],
 }
 
 /// Writes the budget into `out/<name>`, replacing what was there.
@@ -118,16 +119,17 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
         tables_sha256: std::collections::BTreeMap<String, String>,
         realisations: u32,
         configurations: usize,
-        crate_version: &'static str,
+        #[serde(flatten)]
+        provenance: crate::io::manifest::Provenance,
     }
     let m = Manifest {
         budget: b.name,
         tables_sha256: table_hashes(dir)?,
         realisations: b.realisations,
         configurations: n,
-        crate_version: env!("CARGO_PKG_VERSION"),
+        provenance: crate::io::manifest::Provenance::of_run(b.overrides),
     };
-    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
+    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
     // The tornado in the order of the shares table, every bar and dot a change from every source
     // on read per world: at the all-on p95 plus the median of the paired differences, with their
     // interval (the medians over worlds of two configurations' p95 differ by more than the
@@ -181,7 +183,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
     for w in drawn {
         let _ = writeln!(text, "\n![{}]({}.png)\n\n{} ([SVG]({}.svg))", w.caption, w.stem, w.caption, w.stem);
     }
-    fs::write(dir.join("summary.md"), text)?;
+    crate::io::out_dir::write_file(&dir.join("summary.md"), text)?;
     Ok(())
 }
 

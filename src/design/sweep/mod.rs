@@ -368,6 +368,10 @@ impl ShardInfo {
     }
 }
 
+/// The file a shard directory holds from its start (its record): how the writer knows the
+/// directory as calsim's own ([`crate::io::out_dir::prepare_work`]).
+pub const SHARD_MARKER: &str = "sweep.json";
+
 /// The shard directory of shard `k` of `count` of `sweep` under `out`.
 pub fn shard_dir(out: &Path, name: &str, k: usize, count: usize) -> PathBuf {
     out.join(format!("{name}.shard-{k}-of-{count}"))
@@ -381,11 +385,9 @@ fn unit_file_stem(unit: usize) -> String {
     format!("u{unit:07}")
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename: a reader sees all or nothing.
+/// Writes `bytes` to `path` through the kit's atomic writer: a reader sees all or nothing.
 fn write_file_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
-    fs::write(&tmp, bytes)?;
-    fs::rename(&tmp, path)
+    crate::io::out_dir::write_file_atomically(path, bytes)
 }
 
 /// What one run of a shard did.

@@ -8,7 +8,6 @@
 //! directory exchanged with the old results atomically.
 
 use std::fmt::Write as _;
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use polars::prelude::*;
@@ -61,7 +60,8 @@ struct Manifest<'a> {
     realisations: u32,
     units: usize,
     failed_units: usize,
-    crate_version: &'static str,
+    #[serde(flatten)]
+    provenance: crate::io::manifest::Provenance,
 }
 
 /// The best and the worst design by the objective as scenario files of their own,
@@ -99,7 +99,7 @@ fn write_extremes(dir: &Path, m: &Merged) -> std::io::Result<()> {
             d.feasibility.label(),
             d.worlds
         );
-        fs::write(dir.join(file), head + &toml::to_string(&table).map_err(std::io::Error::other)?)?;
+        crate::io::out_dir::write_file(&dir.join(file), head + &toml::to_string(&table).map_err(std::io::Error::other)?)?;
     }
     Ok(())
 }
@@ -215,9 +215,9 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
         realisations: info.realisations,
         units: units.len(),
         failed_units: units.iter().filter(|x| x.error.is_some()).count(),
-        crate_version: env!("CARGO_PKG_VERSION"),
+        provenance: crate::io::manifest::Provenance::of_run(&[]),
     };
-    fs::write(dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
     write_extremes(dir, m)?;
     let drawn = super::plots::write(dir, info, points, &m.designs).map_err(std::io::Error::other)?;
     let mut text = summary(m);
@@ -225,7 +225,7 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
     for w in drawn {
         let _ = writeln!(text, "![{}]({}.png)\n\n{} ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
     }
-    fs::write(dir.join("summary.md"), text)?;
+    crate::io::out_dir::write_file(&dir.join("summary.md"), text)?;
     Ok(())
 }
 

@@ -11,7 +11,7 @@ use serde::Serialize;
 use super::plots::SpmsPlotInputs;
 use super::spec::SpmsScenario;
 use super::study::{SpmsFigures, SpmsResults, SpmsTimings};
-use crate::io::manifest::Provenance;
+use crate::io::manifest::ScenarioHead;
 use crate::io::plot::Written;
 use crate::io::record::Recorder;
 use crate::io::table::{err, parquet, table_hashes};
@@ -26,7 +26,7 @@ use crate::study::tables::{parameter_columns, task_columns};
 #[derive(Serialize)]
 struct Manifest<'a> {
     #[serde(flatten)]
-    provenance: Provenance<'a>,
+    provenance: ScenarioHead<'a>,
     tables_sha256: std::collections::BTreeMap<String, String>,
     kind: &'static str,
     tasks: usize,
@@ -155,7 +155,7 @@ pub fn write(
     )?;
 
     let manifest = Manifest {
-        provenance: Provenance::new(&s.header.name, &s.header.path, &s.header.text, s.header.seed, extras.overrides, extras.threads),
+        provenance: ScenarioHead::new(&s.header.name, &s.header.path, &s.header.text, s.header.seed, extras.overrides),
         tables_sha256: table_hashes(dir)?,
         kind: "spms",
         tasks: t.len(),

@@ -26,7 +26,7 @@ use super::{
     Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
 };
 use crate::identify::Observation;
-use crate::io::manifest::Provenance;
+use crate::io::manifest::ScenarioHead;
 use crate::io::record::{RecordError, Rr, heat, p3};
 use crate::io::table::{err, table_hashes};
 use crate::robot::Joints;
@@ -218,7 +218,7 @@ impl Outcome for TrackerOutcome {
         #[derive(serde::Serialize)]
         struct Manifest<'a> {
             #[serde(flatten)]
-            provenance: Provenance<'a>,
+            provenance: ScenarioHead<'a>,
             kind: &'static str,
             instrument: &'static str,
             pool: usize,
@@ -227,7 +227,7 @@ impl Outcome for TrackerOutcome {
             timings_s: [f64; 3],
         }
         let manifest = Manifest {
-            provenance: Provenance::new(&h.name, &h.path, &h.text, h.seed, &options.overrides, options.threads),
+            provenance: ScenarioHead::new(&h.name, &h.path, &h.text, h.seed, &options.overrides),
             kind: "tracker",
             instrument: self.scenario.external().label(),
             pool: self.pool.len(),

@@ -13,7 +13,7 @@ use super::figures::Figures;
 use super::plots::PlotInputs;
 use super::spec::TricalScenario;
 use super::study::StudyResults;
-use crate::io::manifest::Provenance;
+use crate::io::manifest::ScenarioHead;
 use crate::io::plot::Written;
 use crate::io::record::Recorder;
 use crate::io::table::{err, parquet, table_hashes};
@@ -39,7 +39,7 @@ pub struct Timings {
 #[derive(Serialize)]
 struct Manifest<'a> {
     #[serde(flatten)]
-    provenance: Provenance<'a>,
+    provenance: ScenarioHead<'a>,
     tables_sha256: std::collections::BTreeMap<String, String>,
     tasks: usize,
     set_sizes: Vec<u32>,
@@ -75,17 +75,10 @@ pub struct Report<'a> {
 /// Writes every result file of `r` into `dir` (an empty directory): the tables, the manifest, the
 /// recording, the figures and the summary.
 pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
-    let Report { figures: f, checks, threads, timings, overrides, ref extras } = *report;
+    let Report { figures: f, checks, threads: _, timings, overrides, ref extras } = *report;
     write_tables(dir, r)?;
     let manifest = Manifest {
-        provenance: Provenance::new(
-            &scenario.header.name,
-            &scenario.header.path,
-            &scenario.header.text,
-            scenario.header.seed,
-            overrides,
-            threads,
-        ),
+        provenance: ScenarioHead::new(&scenario.header.name, &scenario.header.path, &scenario.header.text, scenario.header.seed, overrides),
         tables_sha256: table_hashes(dir)?,
         tasks: r.tasks.len(),
         set_sizes: scenario.study.set_sizes.clone(),
