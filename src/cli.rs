@@ -620,6 +620,14 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
             r.name,
             args.out.display()
         ),
+        None if !r.adaptive => println!(
+            "sweep incomplete: {} work units of other shards still to run; when every shard has run, merge the shards with: \
+             calsim merge {}/{}.shard-*-of-{count} --out {}",
+            r.plan.missing.len(),
+            args.out.display(),
+            r.name,
+            args.out.display()
+        ),
         None => println!(
             "adaptive sweep at stage {}: {} work units still to run in this stage (this shard's and others'); when every shard \
              of this stage has run, run every shard again for the next stage, then merge",
@@ -697,6 +705,10 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
 
 fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
     use crate::calibrate::{CalibrateSpec, Options, validation::Split};
+    // The plan's flags without a plan: refused as --plan-scenario is.
+    if args.plan_noise_mm.is_some() && args.plan_worlds == 0 {
+        return Err("--plan-noise-mm: a plan needs --plan-worlds N (N >= 1)".into());
+    }
     let defaults = Options::default();
     let params = match &args.params {
         Some(names) => Some(ParamSet::from_names(names).map_err(|e| format!("--params: {e}"))?),

@@ -557,6 +557,8 @@ fn a_sweep_of_9001_points_keeps_a_record_that_merge_reads() {
             campaign_s: 7000.0,
             rows: vec![row],
             prediction: None,
+            design: None,
+            digest: None,
         };
         std::fs::write(shard.join(format!("units/u{p:07}.json")), serde_json::to_vec(&unit).unwrap()).unwrap();
     }

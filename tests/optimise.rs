@@ -379,3 +379,238 @@ fn every_shipped_design_file_loads() {
     assert_eq!(names, ["harmonic + payload (default)", "one harmonic", "backlash"]);
     assert_eq!(robust.combine, spec::Combine::Worst);
 }
+
+/// Keys that name other keys are resolved at load, and a region too small for the count at the
+/// spacing is refused: one line naming the file and the key the user wrote, exit 2. A syntax error
+/// gives its line; an integer range whose values a float cannot all hold is refused naming it.
+#[test]
+fn keys_regions_and_syntax_of_a_design_file_are_checked_at_load_naming_what_the_user_wrote() {
+    let tmp = scratch("optimise-keys");
+    let dir = tmp.path();
+    let points = |key: &str, count: &str, side: f64, spacing: f64| {
+        format!(
+            "[points]\nkey = {key:?}\ncount = {count}\nregion = \"plate\"\nx_mm = [0.0, {side:?}]\ny_mm = [0.0, {side:?}]\nmin_spacing_mm = {spacing:?}\n{OBJECTIVE}"
+        )
+    };
+    let cases: [(&str, String, &str, &str); 6] = [
+        ("bogus_key.toml", points("cell.bogus_mm", "[3, 3]", 600.0, 100.0), "points.key", "not a key"),
+        ("scalar_key.toml", points("trical.epsilon_mm", "[3, 3]", 600.0, 100.0), "points.key", "not a list of points"),
+        ("six_small.toml", points("cell.spheres_w_mm", "[6, 6]", 150.0, 100.0), "points.min_spacing_mm", "6 points"),
+        ("six_of_range.toml", points("cell.spheres_w_mm", "[3, 6]", 150.0, 100.0), "points.min_spacing_mm", "points.count = [3, 6]"),
+        ("syntax.toml", format!("{OBJECTIVE}\n[search]\nevaluations = = 3\n"), "line 8", ""),
+        (
+            "integer.toml",
+            format!("[[variable]]\nkey = \"seed\"\ninteger = [0, 9223372036854775807]\n{OBJECTIVE}"),
+            "variable[0] (seed).integer",
+            "2^53",
+        ),
+    ];
+    for (name, body, key, why) in cases {
+        let f = design_file(dir, name, &body);
+        let line = refused(&f, &dir.join("out"));
+        assert!(line.contains(key) && line.contains(why), "{name}: names {key} and says {why:?}: {line}");
+    }
+    // The bound refuses only what cannot fit: four corners of a square of the spacing's side, a
+    // fifth in the middle of one a little over sqrt 2 times it, two ends of a segment.
+    assert!(spec::may_fit(4, [100.0, 100.0, 0.0], 100.0));
+    assert!(spec::may_fit(5, [141.5, 141.5, 0.0], 100.0));
+    assert!(!spec::may_fit(5, [140.0, 140.0, 0.0], 100.0));
+    assert!(spec::may_fit(2, [100.0, 0.0, 0.0], 100.0));
+    assert!(!spec::may_fit(3, [199.0, 0.0, 0.0], 100.0));
+    assert!(spec::may_fit(8, [100.0, 100.0, 100.0], 100.0), "a cube's corners");
+    assert!(!spec::may_fit(12, [30.0, 30.0, 30.0], 100.0));
+}
+
+/// The files a resume reads back, tampered at random (seeded): the per-world files (a negative
+/// error, a set size not the study's, no rows, a negative campaign time, counts beyond the
+/// repetitions, a plausible edit, cut short, swapped between designs or worlds) and the restart
+/// records (empty, a point outside the unit box, reordered, cut short, another restart's, another
+/// search's). Each is refused in one line naming a file of the run, exit 2, or, where the files are
+/// still what calsim wrote (reformatted, removed, a killed run's temporary left beside them), the
+/// resume gives the untampered run's tables and leaves no temporary. Every kind runs once in CI;
+/// `CALSIM_PROPERTY_CASES=N` runs N cases.
+#[test]
+fn tampered_resume_records_are_refused_in_one_line_or_give_the_untampered_tables() {
+    use proptest::test_runner::{RngAlgorithm, TestRng};
+    use rand::RngExt;
+    use serde_json::{Value, json};
+    let tmp = scratch("optimise-records");
+    let dir = tmp.path();
+    let f = design_file(dir, "q.toml", &format!("{SMALL}{OBJECTIVE}"));
+    let first = dir.join("first");
+    optimise(&f, &first, None, false, 2);
+    let reference = tables(&first.join("q"));
+    // Another search's record: the same question searched from another seed.
+    let other = design_file(dir, "o.toml", &format!("{}{OBJECTIVE}", SMALL.replace("[search]\n", "[search]\nseed = 7\n")));
+    optimise(&other, &dir.join("other"), None, false, 2);
+    let other_records = files_named(&dir.join("other/o.evaluations"), "restart-");
+    let evals = first.join("q.evaluations");
+    let records = files_named(&evals, "restart-");
+    let worlds = files_named(&evals, "r0");
+    assert_eq!(records.len(), 3);
+    assert!(worlds.len() > 10, "{} per-world files", worlds.len());
+    const KINDS: usize = 22;
+    let cases: usize = std::env::var("CALSIM_PROPERTY_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(KINDS);
+    let mut rng = TestRng::from_seed(RngAlgorithm::ChaCha, &[45; 32]);
+    for case in 0..cases {
+        let kind = case % KINDS;
+        let out = dir.join(format!("case{case}"));
+        copy_dir(&evals, &out.join("q.evaluations"));
+        let at = |p: &Path| out.join("q.evaluations").join(p.strip_prefix(&evals).unwrap());
+        let world = &worlds[rng.random_range(0..worlds.len())];
+        let record = &records[rng.random_range(0..records.len())];
+        let json_of = |p: &Path| serde_json::from_slice::<Value>(&std::fs::read(at(p)).unwrap()).unwrap();
+        let put = |p: &Path, v: &Value| std::fs::write(at(p), serde_json::to_vec(v).unwrap()).unwrap();
+        // A row of the world's unit, edited (a world whose campaign failed has none: its time is edited).
+        let edit_row = |k: &str, v: Value| {
+            let mut u = json_of(world);
+            match u["rows"].as_array_mut().and_then(|r| r.first_mut()) {
+                Some(r) => r[k] = v,
+                None => u["campaign_s"] = json!(-1.0),
+            }
+            put(world, &u);
+        };
+        // (what was done, whether the files are still calsim's, the files the refusal may name)
+        let mut named = vec![world.clone()];
+        let (what, valid) = match kind {
+            0 => (edit_row("after_median_mm", json!(-5.0)), false),
+            1 => (edit_row("set_size", json!(999)), false),
+            2 => {
+                let mut u = json_of(world);
+                u["rows"] = json!([]);
+                (put(world, &u), false)
+            }
+            3 => {
+                let mut u = json_of(world);
+                u["campaign_s"] = json!(-1e8);
+                (put(world, &u), false)
+            }
+            4 => (edit_row("no_model", json!(99)), false),
+            5 => {
+                let mut u = json_of(world);
+                let x = u["before_mm"][0].as_f64().unwrap_or(1.0);
+                u["before_mm"][0] = json!(x * 1.01 + 1e-3);
+                (put(world, &u), false)
+            }
+            6 => {
+                let b = std::fs::read(at(world)).unwrap();
+                (std::fs::write(at(world), &b[..rng.random_range(0..b.len())]).unwrap(), false)
+            }
+            7 => {
+                // A world in place of the same world of another design.
+                let pairs: Vec<(&PathBuf, &PathBuf)> = worlds
+                    .iter()
+                    .flat_map(|w| worlds.iter().filter(move |o| o.file_name() == w.file_name() && *o != w).map(move |o| (w, o)))
+                    .collect();
+                let (w, o) = pairs[rng.random_range(0..pairs.len())];
+                named = vec![w.clone(), o.clone()];
+                (std::fs::copy(at(o), at(w)).map(|_| ()).unwrap(), false)
+            }
+            8 => {
+                // Another world of the same design.
+                let same: Vec<&PathBuf> = worlds.iter().filter(|w| w.parent() == world.parent() && *w != world).collect();
+                let o = same[rng.random_range(0..same.len())];
+                named.push(o.clone());
+                (std::fs::copy(at(o), at(world)).map(|_| ()).unwrap(), false)
+            }
+            9 => (put(world, &Value::Null), false),
+            10 => {
+                let u = json_of(world);
+                (std::fs::write(at(world), serde_json::to_vec_pretty(&u).unwrap()).unwrap(), true)
+            }
+            11 => (std::fs::remove_file(at(world)).unwrap(), true),
+            12 => {
+                named = vec![record.clone()];
+                (put(record, &json!([])), false)
+            }
+            13 => {
+                named = vec![record.clone()];
+                let mut a = json_of(record);
+                a[0]["x"][0] = json!(1.5);
+                (put(record, &a), false)
+            }
+            14 => {
+                named = vec![record.clone()];
+                let mut a = json_of(record);
+                a.as_array_mut().unwrap().reverse();
+                (put(record, &a), false)
+            }
+            15 => {
+                named = vec![record.clone()];
+                let mut a = json_of(record);
+                a.as_array_mut().unwrap().truncate(1);
+                (put(record, &a), false)
+            }
+            16 => {
+                // Another restart's record in this one's place.
+                let o = records.iter().find(|r| *r != record).unwrap();
+                named = vec![record.clone(), o.clone()];
+                (std::fs::copy(at(o), at(record)).map(|_| ()).unwrap(), false)
+            }
+            17 => {
+                // Another search's record of the same restart in its place.
+                let i = records.iter().position(|r| r == record).unwrap();
+                named = vec![record.clone()];
+                (std::fs::copy(&other_records[i], at(record)).map(|_| ()).unwrap(), false)
+            }
+            18 => {
+                named = vec![record.clone()];
+                let b = std::fs::read(at(record)).unwrap();
+                (std::fs::write(at(record), &b[..rng.random_range(0..b.len())]).unwrap(), false)
+            }
+            19 => (std::fs::remove_file(at(record)).unwrap(), true),
+            20 => {
+                let a = json_of(record);
+                (std::fs::write(at(record), serde_json::to_vec_pretty(&a).unwrap()).unwrap(), true)
+            }
+            _ => {
+                // A killed run's temporaries beside a per-world file and the records.
+                std::fs::write(at(world).with_extension("tmp-999999999-ThreadId3"), b"{\"unit\":").unwrap();
+                (std::fs::write(at(record).with_extension("tmp-999999999-ThreadId1"), b"[").unwrap(), true)
+            }
+        };
+        let () = what;
+        let o = calsim().args(["optimise"]).arg(&f).arg("--out").arg(&out).args(["--threads", "2", "--no-plots"]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+        let temporaries: Vec<PathBuf> =
+            files_named(&out.join("q.evaluations"), "").into_iter().filter(|p| p.to_string_lossy().contains(".tmp-")).collect();
+        assert!(temporaries.is_empty(), "case {case} (kind {kind}): temporaries left: {temporaries:?}");
+        if valid {
+            assert_eq!(o.status.code(), Some(0), "case {case} (kind {kind}): {stderr}");
+            assert_eq!(tables(&out.join("q")), reference, "case {case} (kind {kind}): the untampered run's tables");
+        } else {
+            assert_eq!(o.status.code(), Some(2), "case {case} (kind {kind}) refused: {stderr}");
+            let line = stderr.trim();
+            assert_eq!(line.lines().count(), 1, "case {case} (kind {kind}): one line: {stderr}");
+            assert!(
+                named.iter().any(|p| line.contains(&at(p).display().to_string())),
+                "case {case} (kind {kind}): names the file ({named:?}): {line}"
+            );
+            assert!(!out.join("q").exists(), "case {case} (kind {kind}): no results from a refused resume");
+        }
+    }
+}
+
+/// Files under `dir` (recursively) whose name starts with `prefix`, sorted.
+fn files_named(dir: &Path, prefix: &str) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(files_named(&p, prefix));
+        } else if p.file_name().unwrap().to_string_lossy().starts_with(prefix) {
+            out.push(p);
+        }
+    }
+    out.sort();
+    out
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let p = e.unwrap().path();
+        let dest = to.join(p.file_name().unwrap());
+        if p.is_dir() { copy_dir(&p, &dest) } else { std::fs::copy(&p, &dest).map(|_| ()).unwrap() }
+    }
+}

@@ -34,16 +34,17 @@ pub const MAX_TARGETS: usize = 1_000_000;
 /// Reads the targets of `path`; an error names the file, the line and the column.
 pub fn read_targets(path: &Path) -> Result<Vec<Isometry3<f64>>, Error> {
     let at = |line: u64, what: String| Error::input(format!("{}: line {line}", path.display()), what);
-    let bytes = crate::io::read_bytes_at_most(path, 256 << 20).map_err(Error::io(path))?;
+    let bytes = crate::io::read_bytes_at_most(path, crate::io::MOST_CSV_BYTES).map_err(Error::io(path))?;
     let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(bytes.as_slice());
     let header: Vec<String> = r.headers().map_err(|e| at(1, e.to_string()))?.iter().map(str::to_string).collect();
     if header != TARGET_COLUMNS {
         return Err(at(1, format!("header {:?}: expected {}", header.join(","), TARGET_COLUMNS.join(","))));
     }
     let mut out = Vec::new();
+    let mut lines = crate::io::Lines::default();
     for rec in r.records() {
-        let rec = rec.map_err(|e| at(crate::robot::fk::line_at(&bytes, e.position()), e.to_string()))?;
-        let line = crate::robot::fk::line_at(&bytes, rec.position());
+        let rec = rec.map_err(|e| at(crate::robot::fk::line_at(&mut lines, &bytes, e.position()), e.to_string()))?;
+        let line = crate::robot::fk::line_at(&mut lines, &bytes, rec.position());
         if out.len() == MAX_TARGETS {
             return Err(at(line, format!("more than {MAX_TARGETS} targets")));
         }

@@ -129,7 +129,17 @@ fn tasks_table(dir: &Path) -> Result<Vec<(usize, usize, f64)>, Error> {
     let path = dir.join("tasks.parquet");
     let bytes = crate::io::read_bytes_at_most(&path, crate::io::MOST_TABLE_BYTES).map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
     let df = ParquetReader::new(std::io::Cursor::new(bytes)).finish().map_err(|e| err(dir, format!("tasks.parquet: {e}")))?;
-    let col = |name: &str| df.column(name).map_err(|e| err(dir, format!("tasks.parquet: {e}")));
+    let col = |name: &str| {
+        df.column(name).map_err(|_| {
+            err(
+                dir,
+                format!(
+                    "tasks.parquet has no column {name}: export redoes an identification judged by its validation median \
+                     (a TriCal or tracker run's results), and these results have none (an SPMS study reports ISO 9283 figures)"
+                ),
+            )
+        })
+    };
     let task = col("task")?.cast(&DataType::UInt64).map_err(|e| err(dir, e))?;
     let size = col("set_size")?.cast(&DataType::UInt64).map_err(|e| err(dir, e))?;
     let median = col("validation_median_mm")?.cast(&DataType::Float64).map_err(|e| err(dir, e))?;

@@ -55,6 +55,7 @@ fn opt_err(e: OptimiseError) -> Error {
     match e {
         OptimiseError::Io { path, source } => Error::Io { path, source },
         OptimiseError::Record { path, key, why } => Error::input(format!("{path}: {key}"), why),
+        OptimiseError::World { path, why } => Error::input(path, why),
         other => Error::input("optimise", other.to_string()),
     }
 }
@@ -77,6 +78,8 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         crate::io::out_dir::prepare(&spec.out, &space.name)?;
     }
     let ctx = Context { space: &space, cache: optimise::work_dir(&spec.out, &space.name) };
+    // A killed run's temporaries (a per-world file or a record cut short by the kill) go first.
+    optimise::remove_stale_temporaries(&ctx.cache, &space.world_context).map_err(opt_err)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
     let all = optimise::restarts(&space);
     observer.started(&format!(
@@ -121,9 +124,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         return Ok(report);
     }
     let t1 = Instant::now();
-    let asked = optimise::read_restarts(&ctx).map_err(opt_err)?;
-    let trace: Vec<optimise::Evaluated> =
-        pool.install(|| asked.into_iter().flatten().map(|a| ctx.evaluate(a)).collect::<Result<Vec<_>, _>>()).map_err(opt_err)?;
+    let trace: Vec<optimise::Evaluated> = pool.install(|| optimise::read_restarts(&ctx)).map_err(opt_err)?;
     let verdict = pool
         .install(|| optimise::finish(&ctx, trace, compare, &|done, total, what| observer.progress(done, total, what)))
         .map_err(opt_err)?;

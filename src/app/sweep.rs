@@ -38,6 +38,8 @@ pub struct SweepReport {
     /// Where the sweep stands after this run: complete, or the stage whose units other shards
     /// still owe (adaptive sweeps run stage by stage).
     pub plan: sweep::race::Plan,
+    /// Whether its realisations are adaptive (a race run stage by stage).
+    pub adaptive: bool,
     /// The merge, when the sweep ran whole.
     pub merged: Option<MergeReport>,
 }
@@ -89,6 +91,7 @@ pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Err
         shard_dir: dir.clone(),
         shard: (k, count),
         plan: run.plan,
+        adaptive: sweep.race.is_some(),
         merged: None,
     };
     if spec.shard.is_none() {

@@ -59,6 +59,39 @@ pub fn read_bytes(path: &Path) -> std::io::Result<Vec<u8>> {
 /// may have is far smaller).
 pub const MOST_TABLE_BYTES: u64 = 1 << 30;
 
+/// Most bytes of a CSV input of `calsim fk` (joints) and `calsim compensate` (targets), and of a
+/// mesh: a million rows of six values with room to spare.
+pub const MOST_CSV_BYTES: u64 = 256 << 20;
+
+/// The 1-based lines of positions in one text, asked in increasing order (a reader's records):
+/// each answer counts the line breaks since the last, so that a file's lines cost one pass over
+/// it, however many records it has (a position before the last one asked is counted from the
+/// start again).
+#[derive(Debug, Default)]
+pub struct Lines {
+    /// The byte counted up to.
+    at: usize,
+    /// Line breaks before `at`.
+    breaks: u64,
+}
+
+impl Lines {
+    /// The line at which a record starting at byte `pos` of `bytes` lies. After a CRLF a reader's
+    /// record offset can point at the line break before the record: line breaks are skipped.
+    pub fn line_at(&mut self, bytes: &[u8], pos: u64) -> u64 {
+        let mut start = (pos as usize).min(bytes.len());
+        while start < bytes.len() && matches!(bytes[start], b'\r' | b'\n') {
+            start += 1;
+        }
+        if start < self.at {
+            *self = Self::default();
+        }
+        self.breaks += bytes[self.at..start].iter().filter(|b| **b == b'\n').count() as u64;
+        self.at = start;
+        1 + self.breaks
+    }
+}
+
 /// The bytes of an input file of at most `most` bytes (a CSV of a million rows, a mesh, a result
 /// table), checked by [`check_input`] and read no further than that.
 pub fn read_bytes_at_most(path: &Path, most: u64) -> std::io::Result<Vec<u8>> {

@@ -80,35 +80,27 @@ pub enum JointsCsvError {
     },
 }
 
-/// Most bytes a joints file takes (a million rows of six values).
-const MOST_BYTES: u64 = 256 << 20;
-
-/// The 1-based line at which a record starting at byte `pos` of `bytes` lies (counted here:
-/// the csv crate's own line count misses the line break of a CRLF header).
-pub(crate) fn line_at(bytes: &[u8], pos: Option<&csv::Position>) -> u64 {
-    let Some(p) = pos else { return 0 };
-    // After a CRLF the record's offset can point at the line break before it: skip line breaks.
-    let mut start = (p.byte() as usize).min(bytes.len());
-    while start < bytes.len() && matches!(bytes[start], b'\r' | b'\n') {
-        start += 1;
-    }
-    1 + bytes[..start].iter().filter(|b| **b == b'\n').count() as u64
+/// The 1-based line of a record at `pos` of `bytes` (counted by `lines`: the csv crate's own line
+/// count misses the line break of a CRLF header); 0 without a position.
+pub(crate) fn line_at(lines: &mut crate::io::Lines, bytes: &[u8], pos: Option<&csv::Position>) -> u64 {
+    pos.map_or(0, |p| lines.line_at(bytes, p.byte()))
 }
 
 /// Reads the joint values (rad) of `path`.
 pub fn read_joints(path: &Path) -> Result<Vec<Joints>, JointsCsvError> {
     let p = || path.to_path_buf();
     let file_error = |e: &dyn std::fmt::Display| JointsCsvError::File { path: p(), reason: e.to_string() };
-    let bytes = crate::io::read_bytes_at_most(path, MOST_BYTES).map_err(|e| file_error(&e))?;
+    let bytes = crate::io::read_bytes_at_most(path, crate::io::MOST_CSV_BYTES).map_err(|e| file_error(&e))?;
     let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).flexible(true).from_reader(bytes.as_slice());
     let header: Vec<String> = r.headers().map_err(|e| file_error(&e))?.iter().map(str::to_string).collect();
     if header != JOINT_COLUMNS {
         return Err(JointsCsvError::Header { path: p(), found: header.join(",") });
     }
     let mut out = Vec::new();
+    let mut lines = crate::io::Lines::default();
     for rec in r.records() {
         let rec = rec.map_err(|e| file_error(&e))?;
-        let line = line_at(&bytes, rec.position());
+        let line = line_at(&mut lines, &bytes, rec.position());
         if out.len() == MAX_ROWS {
             return Err(JointsCsvError::Rows { path: p(), reason: format!("more than {MAX_ROWS} rows") });
         }

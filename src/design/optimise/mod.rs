@@ -41,6 +41,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::design::sweep::designs::{self, DesignRow};
 use crate::design::sweep::objective::Goal;
+use crate::design::sweep::record::PointStudy;
 use crate::design::sweep::spec::Point;
 use crate::design::sweep::{ShardInfo, Sweep, Unit, run_world, shard_info};
 pub use spec::{DesignError, DesignSpace};
@@ -73,6 +74,14 @@ pub enum OptimiseError {
     /// The search library refused its problem.
     #[error("search: {0}")]
     Search(String),
+    /// A per-world file is not one this design's world could have written.
+    #[error("{path}: {why}")]
+    World {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        why: String,
+    },
     /// A restart's record is not one this design file's search could have written.
     #[error("{path}: {key}: {why}")]
     Record {
@@ -91,6 +100,13 @@ pub enum OptimiseError {
 fn check_record(space: &DesignSpace, r: usize, asked: &[Asked], file: &Path) -> Result<(), OptimiseError> {
     let (count, _) = restarts(space)[r];
     let fail = |i: usize, k: &str, why: String| OptimiseError::Record { path: file.display().to_string(), key: format!("[{i}].{k}"), why };
+    if asked.is_empty() {
+        return Err(OptimiseError::Record {
+            path: file.display().to_string(),
+            key: "(file)".into(),
+            why: "no designs: a finished restart asked at least one".into(),
+        });
+    }
     if asked.len() > space.search.evaluations as usize {
         return Err(OptimiseError::Record {
             path: file.display().to_string(),
@@ -106,8 +122,11 @@ fn check_record(space: &DesignSpace, r: usize, asked: &[Asked], file: &Path) -> 
             return Err(fail(i, "count", format!("{}: restart {r} searches {count} points", a.count)));
         }
         let dim = space.dimensions(count);
-        if a.x.len() != dim || a.x.iter().any(|v| !v.is_finite()) {
-            return Err(fail(i, "x", format!("{} values: {dim} finite values expected", a.x.len())));
+        if a.x.len() != dim {
+            return Err(fail(i, "x", format!("{} values: {dim} values expected", a.x.len())));
+        }
+        if let Some((k, v)) = a.x.iter().enumerate().find(|(_, v)| !(0.0..=1.0).contains(*v)) {
+            return Err(fail(i, &format!("x[{k}]"), format!("{v}: not within the unit box [0, 1]")));
         }
     }
     Ok(())
@@ -251,6 +270,8 @@ impl Context<'_> {
     /// run (in parallel) and written; unit `p * stride + k` for the `k`-th world of point `p`.
     fn units(&self, points: &[(String, Point)], worlds: &[u32], stride: u32) -> Result<Vec<Unit>, OptimiseError> {
         let sweep = self.sweep_of(points.iter().map(|(_, p)| p.clone()).collect(), 1);
+        let studies: Vec<PointStudy> = points.iter().map(|(_, p)| PointStudy::of(p.scenario.as_ref())).collect();
+        let thresholds = sweep.thresholds_mm.len();
         let jobs: Vec<(usize, usize, u32)> =
             (0..points.len()).flat_map(|p| worlds.iter().enumerate().map(move |(k, &r)| (p, k, r))).collect();
         let mut units: Vec<Unit> = jobs
@@ -258,12 +279,14 @@ impl Context<'_> {
             .map(|&(p, k, r)| -> Result<Unit, OptimiseError> {
                 let dir = self.cache.join(&self.space.world_context).join(&points[p].0);
                 let file = dir.join(format!("r{r:07}.json"));
-                let mut u = match crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Unit>(&b).ok()) {
-                    Some(u) if u.realisation == r => u,
-                    _ => {
+                let design = format!("{}/{}", self.space.world_context, points[p].0);
+                let mut u = match read_world(&file, r, &design, &studies[p], thresholds)? {
+                    Some(u) => u,
+                    None => {
                         let u = run_world(&sweep, p, r);
                         fs::create_dir_all(&dir).map_err(io_err(&dir))?;
-                        let bytes = serde_json::to_vec(&Unit { point: 0, unit: r as usize, ..u })
+                        let u = Unit { point: 0, unit: r as usize, design: Some(design), digest: None, ..u };
+                        let bytes = serde_json::to_vec(&Unit { digest: Some(unit_digest(&u)), ..u })
                             .map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
                         write_atomically(&file, &bytes).map_err(io_err(&file))?;
                         // The unit as the file gives it back (JSON's decimal numbers can move a
@@ -409,10 +432,106 @@ pub fn design_key(table: &toml::Table) -> String {
     format!("{:x}", sha2::Sha256::digest(text.as_bytes()))[..16].to_string()
 }
 
+/// Writes `bytes` to `path` through a temporary file beside it (`<stem>.tmp-<pid>-<thread>`) and
+/// a rename; a failing write removes its temporary.
 fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let tmp = path.with_extension(format!("tmp-{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], ""));
-    fs::write(&tmp, bytes)?;
-    fs::rename(&tmp, path)
+    let written = fs::write(&tmp, bytes).and_then(|()| fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// The process id in the name of a temporary of [`write_atomically`], if `name` is one.
+fn temporary_pid(name: &str) -> Option<u32> {
+    let (_, rest) = name.split_once(".tmp-")?;
+    rest.split('-').next()?.parse().ok()
+}
+
+/// Whether process `pid` exists (Linux: `/proc/<pid>`; elsewhere every process counts as alive,
+/// so that nothing a running process writes is removed).
+fn alive(pid: u32) -> bool {
+    !Path::new("/proc/self").exists() || Path::new(&format!("/proc/{pid}")).exists()
+}
+
+/// Removes the temporaries of [`write_atomically`] that a killed run left in `dir` (the restart
+/// records) and in the per-world directories of `dir/<world context>/<design>/`: those of
+/// processes that are gone. Returns how many it removed.
+pub fn remove_stale_temporaries(dir: &Path, world_context: &str) -> Result<usize, OptimiseError> {
+    let mut removed = 0;
+    let sweep_dir = |d: &Path, removed: &mut usize| -> Result<(), OptimiseError> {
+        let entries = match fs::read_dir(d) {
+            Ok(e) => e,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(io_err(d)(e)),
+        };
+        for entry in entries {
+            let entry = entry.map_err(io_err(d))?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if let Some(pid) = temporary_pid(&name)
+                && pid != std::process::id()
+                && !alive(pid)
+                && entry.file_type().map_err(io_err(d))?.is_file()
+            {
+                fs::remove_file(entry.path()).map_err(io_err(&entry.path()))?;
+                *removed += 1;
+            }
+        }
+        Ok(())
+    };
+    sweep_dir(dir, &mut removed)?;
+    let worlds = dir.join(world_context);
+    if let Ok(designs) = fs::read_dir(&worlds) {
+        for entry in designs {
+            let entry = entry.map_err(io_err(&worlds))?;
+            if entry.file_type().map_err(io_err(&worlds))?.is_dir() {
+                sweep_dir(&entry.path(), &mut removed)?;
+            }
+        }
+    }
+    Ok(removed)
+}
+
+/// The unit in the per-world file `file` of world `r` of `design` (`<world context>/<key>`),
+/// checked whole: its JSON, its world, its design, and what it reports against what the design's
+/// study promises (`study`, at `thresholds` thresholds; [`Unit::check_values`], the sweeps'
+/// check). `None`: there is no such file (the world has not run).
+fn read_world(file: &Path, r: u32, design: &str, study: &PointStudy, thresholds: usize) -> Result<Option<Unit>, OptimiseError> {
+    let fail = |why: String| OptimiseError::World { path: file.display().to_string(), why };
+    let bytes = match crate::io::read_bytes(file) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(fail(e.to_string())),
+    };
+    let u: Unit =
+        serde_json::from_slice(&bytes).map_err(|e| fail(format!("not a per-world file calsim writes: {}", one_line(&e.to_string()))))?;
+    if u.realisation != r || u.unit != r as usize || u.point != 0 {
+        return Err(fail(format!(
+            "holds world {} (unit {}, point {}), not world {r} its name gives",
+            u.realisation, u.unit, u.point
+        )));
+    }
+    if u.design.as_deref() != Some(design) {
+        return Err(fail(format!("design = {:?}: a world of another design or run, not of {design:?}", u.design.as_deref().unwrap_or(""))));
+    }
+    u.check_values(study, thresholds).map_err(fail)?;
+    let digest = unit_digest(&Unit { digest: None, ..u.clone() });
+    if u.digest.as_deref() != Some(digest.as_str()) {
+        return Err(fail("digest: not the sha256 of the unit calsim wrote (the file was edited)".into()));
+    }
+    Ok(Some(u))
+}
+
+/// The sha256 of `u`'s JSON (hexadecimal): a per-world file's digest of itself without it.
+fn unit_digest(u: &Unit) -> String {
+    use sha2::Digest;
+    format!("{:x}", sha2::Sha256::digest(serde_json::to_vec(u).expect("plain data")))
+}
+
+/// `s` on one line (a parser's message can span several).
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// The restarts of a space: `(count of points, repetition)` in restart order.
@@ -437,16 +556,34 @@ fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
     dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
 }
 
-/// Runs restart `r` (or reads its record when a finished run left one): the search's designs
-/// in the order asked, each evaluated, calling `progress(done)` after each.
+/// The record of restart `r` if a finished run left one, checked ([`check_record`]); a record that
+/// cannot be read or parsed is refused naming it.
+fn read_record(ctx: &Context<'_>, r: usize) -> Result<Option<Vec<Asked>>, OptimiseError> {
+    let file = restart_file(&ctx.cache, ctx.space, r);
+    let fail = |why: String| OptimiseError::Record { path: file.display().to_string(), key: "(file)".into(), why };
+    let bytes = match crate::io::read_bytes(&file) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(fail(e.to_string())),
+    };
+    let asked: Vec<Asked> =
+        serde_json::from_slice(&bytes).map_err(|e| fail(format!("not a restart record calsim writes: {}", one_line(&e.to_string()))))?;
+    check_record(ctx.space, r, &asked, &file)?;
+    Ok(Some(asked))
+}
+
+/// Runs restart `r`: the search's designs in the order asked, each evaluated (its worlds read from
+/// the per-world files where a run left them), calling `progress(done)` after each. The search is
+/// deterministic and evaluating a design whose worlds are kept costs their reading: a restart
+/// whose record a finished run left is searched again, and the record must be exactly what the
+/// search asks (a record edited, cut short, reordered or of another search is refused naming its
+/// entry); without a record, the record is written.
 pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync)) -> Result<Vec<Evaluated>, OptimiseError> {
     let space = ctx.space;
     let (count, rep) = restarts(space)[r];
     let file = restart_file(&ctx.cache, space, r);
-    if let Some(asked) = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()) {
-        check_record(space, r, &asked, &file)?;
-        return asked.into_iter().map(|a| ctx.evaluate(a)).collect();
-    }
+    let record = read_record(ctx, r)?;
+    let mismatch = |key: String, why: String| OptimiseError::Record { path: file.display().to_string(), key, why };
     let mut start = space.start(count);
     if rep > 0 {
         // Later repetitions start elsewhere: a point drawn from the restart's own stream.
@@ -462,6 +599,16 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
             return f64::INFINITY;
         }
         let asked = Asked { restart: r as u32, index: out.len() as u32, count, x: x.to_vec() };
+        if let Some(rec) = &record
+            && rec.get(out.len()) != Some(&asked)
+        {
+            let i = out.len();
+            failure = Some(match rec.get(i) {
+                Some(_) => mismatch(format!("[{i}].x"), "not the design the search asks at this entry (the record was edited, reordered or written by another search)".into()),
+                None => mismatch("(file)".into(), format!("{} designs: the search asks more (the record was cut short)", rec.len())),
+            });
+            return f64::INFINITY;
+        }
         match ctx.evaluate(asked) {
             Ok(e) => {
                 let s = e.score;
@@ -480,26 +627,35 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
     if let Some(e) = failure {
         return Err(e);
     }
-    let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
-    fs::create_dir_all(&ctx.cache).map_err(io_err(&ctx.cache))?;
-    write_atomically(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
-    Ok(out)
+    match record {
+        Some(rec) if rec.len() != out.len() => {
+            Err(mismatch("(file)".into(), format!("{} designs: the search asks {} (the record holds designs it never asked)", rec.len(), out.len())))
+        }
+        Some(_) => Ok(out),
+        None => {
+            let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
+            fs::create_dir_all(&ctx.cache).map_err(io_err(&ctx.cache))?;
+            write_atomically(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
+            Ok(out)
+        }
+    }
 }
 
-/// Reads the record of every restart (all must have finished).
-pub fn read_restarts(ctx: &Context<'_>) -> Result<Vec<Vec<Asked>>, OptimiseError> {
+/// Every restart's designs, evaluated, in restart order: all must have finished (their records
+/// there), and each record is checked by searching its restart again ([`run_restart`]).
+pub fn read_restarts(ctx: &Context<'_>) -> Result<Vec<Evaluated>, OptimiseError> {
     let n = restarts(ctx.space).len();
-    let mut out = Vec::with_capacity(n);
     for r in 0..n {
-        let file = restart_file(&ctx.cache, ctx.space, r);
-        let asked = crate::io::read_bytes(&file).ok().and_then(|b| serde_json::from_slice::<Vec<Asked>>(&b).ok()).ok_or_else(|| {
-            OptimiseError::Incomplete {
+        if read_record(ctx, r)?.is_none() {
+            return Err(OptimiseError::Incomplete {
                 dir: ctx.cache.display().to_string(),
                 why: format!("restart {r} of {n} has not finished (run its shard: `calsim optimise <file> --shard k/n`)"),
-            }
-        })?;
-        check_record(ctx.space, r, &asked, &file)?;
-        out.push(asked);
+            });
+        }
+    }
+    let mut out = Vec::new();
+    for r in 0..n {
+        out.extend(run_restart(ctx, r, &|_| {})?);
     }
     Ok(out)
 }

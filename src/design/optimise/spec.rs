@@ -376,7 +376,7 @@ const MOST_EVALUATIONS: u32 = 100_000;
 pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
     let text = crate::io::read_text(path).map_err(|e| err(path, "(file)", format!("cannot read: {e}")))?;
     let file: DesignFile = {
-        let de = toml::Deserializer::parse(&text).map_err(|e| err(path, "(file)", e.message()))?;
+        let de = toml::Deserializer::parse(&text).map_err(|e| err(path, scenario::position(&text, e.span()), e.message()))?;
         serde_path_to_error::deserialize(de).map_err(|e| {
             let key = e.path().to_string();
             err(path, key, e.into_inner().message())
@@ -422,6 +422,11 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
                 if lo > hi {
                     return Err(err(path, at("integer"), format!("[{lo}, {hi}]: reversed (the lower bound first)")));
                 }
+                // The values are taken through a float: bounds where every integer is one.
+                const MOST_INTEGER: i64 = 1 << 53;
+                if !(-MOST_INTEGER..=MOST_INTEGER).contains(lo) || !(-MOST_INTEGER..=MOST_INTEGER).contains(hi) {
+                    return Err(err(path, at("integer"), format!("[{lo}, {hi}]: bounds within +-{MOST_INTEGER} (2^53)")));
+                }
                 Domain::Integer(*lo, *hi)
             }
             (None, None, Some(c)) => {
@@ -460,6 +465,22 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
         }
     }
     let points = file.points.as_ref().map(|p| points(path, p)).transpose()?;
+    if let Some(p) = &points {
+        // The key the points go to: a key of the scenario that holds a list of points.
+        match get_dotted(&base, &p.key).or_else(|| get_dotted(&defaults, &p.key)) {
+            None => {
+                return Err(err(path, "points.key", format!("{:?}: not a key of a {} scenario (`calsim keys` lists them)", p.key, device.kind())));
+            }
+            Some(toml::Value::Array(_)) => {}
+            Some(v) => {
+                return Err(err(
+                    path,
+                    "points.key",
+                    format!("{:?}: a {} in the scenario, not a list of points (the points go to a key holding [[x, y, z], ...])", p.key, v.type_str()),
+                ));
+            }
+        }
+    }
     let robust = file
         .robust
         .as_ref()
@@ -581,6 +602,36 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
         ),
         start_offset_mm: offset,
     })
+}
+
+/// The greatest smallest distance of `n` points in the unit square, `n` = 2 to 12 (Schaer, Nurmela
+/// and Ostergard; the proven optima of the packing literature).
+const SQUARE_SPREAD: [f64; 11] =
+    [std::f64::consts::SQRT_2, 1.035276, 1.0, 0.707107, 0.600925, 0.535898, 0.517638, 0.5, 0.421280, 0.398207, 0.388730];
+
+/// Whether `n` points at least `s` apart may fit a box of `sides` (mm, a plate's third 0): false
+/// only where a bound proves they cannot: a segment holds `L / s + 1`; a rectangle at most Oler's
+/// `2 A / (sqrt 3 s^2) + P / (2 s) + 1`, and no more than the square of its longer side holds
+/// (the table's optima, with a margin of 1e-3); a box no more than its volume grown by `s` holds
+/// balls of diameter `s`.
+pub fn may_fit(n: usize, sides: [f64; 3], s: f64) -> bool {
+    if n <= 1 || s <= 0.0 {
+        return true;
+    }
+    let mut d = sides.map(|x| x.max(0.0) / s);
+    d.sort_by(|a, b| b.total_cmp(a));
+    let n_f = n as f64;
+    if d[1] == 0.0 {
+        return n_f <= (d[0] + 1e-9).floor() + 1.0;
+    }
+    if d[2] == 0.0 {
+        let oler = 2.0 / 3f64.sqrt() * d[0] * d[1] + (d[0] + d[1]) + 1.0;
+        if n_f > oler + 1e-9 {
+            return false;
+        }
+        return !(n <= 12 && d[0] * SQUARE_SPREAD[n - 2] * (1.0 + 1e-3) < 1.0);
+    }
+    n_f <= (d[0] + 1.0) * (d[1] + 1.0) * (d[2] + 1.0) / (std::f64::consts::PI / 6.0)
 }
 
 /// `[points] start`: one point per entry, inside the region, as many as the most points
@@ -761,18 +812,22 @@ fn feasible_somewhere(path: &Path, space: &DesignSpace) -> Result<(), DesignErro
     if let (Some(p), Some(h)) = (&space.points, space.objective.campaign_h_at_most) {
         let _ = (p, h);
     }
-    // The points must fit: the fewest points at the least spacing inside the region.
+    // The points must fit: every count searched at the least spacing inside the region.
     if let Some(p) = &space.points {
-        let (span_x, span_y, span_z) = match &p.region {
-            Region::Plate { x_mm, y_mm, .. } => (x_mm[1] - x_mm[0], y_mm[1] - y_mm[0], 0.0),
-            Region::Box { x_mm, y_mm, z_mm } => (x_mm[1] - x_mm[0], y_mm[1] - y_mm[0], z_mm[1] - z_mm[0]),
+        let (sides, dims) = match &p.region {
+            Region::Plate { x_mm, y_mm, .. } => ([x_mm[1] - x_mm[0], y_mm[1] - y_mm[0], 0.0], 2),
+            Region::Box { x_mm, y_mm, z_mm } => ([x_mm[1] - x_mm[0], y_mm[1] - y_mm[0], z_mm[1] - z_mm[0]], 3),
         };
-        let diagonal = (span_x * span_x + span_y * span_y + span_z * span_z).sqrt();
-        if p.count.0 >= 2 && diagonal < p.min_spacing_mm {
+        if !may_fit(p.count.1, sides, p.min_spacing_mm) {
+            let shown = sides[..dims].iter().map(|x| format!("{x}")).collect::<Vec<_>>().join(" x ");
+            let region = if dims == 2 { "plate" } else { "box" };
             return Err(err(
                 path,
                 "points.min_spacing_mm",
-                format!("{}: no design can meet it: the region's diagonal is {diagonal:.0} mm, too small for two points", p.min_spacing_mm),
+                format!(
+                    "{}: no design of {} points (points.count = [{}, {}]) can meet it: they cannot be that far apart in the {region} of {shown} mm",
+                    p.min_spacing_mm, p.count.1, p.count.0, p.count.1
+                ),
             ));
         }
     }

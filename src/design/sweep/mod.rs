@@ -127,6 +127,14 @@ pub struct Unit {
     /// The linear prediction at the table set size, when the sweep asks for it (TriCal).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prediction: Option<crate::study::prediction::Prediction>,
+    /// The design a unit of the optimiser belongs to (`<world context>/<design key>`, the
+    /// directory its per-world file is kept in); a sweep's units have none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub design: Option<String>,
+    /// An optimiser's unit: the sha256 of its JSON written without this field (an edit of the
+    /// file, however plausible its numbers, is seen); a sweep's units have none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub digest: Option<String>,
 }
 
 /// Largest error a unit may report, mm (1000 km: beyond any arm, however badly calibrated).
@@ -160,7 +168,19 @@ impl Unit {
                 sweep.count
             ));
         }
-        self.check_rows(&studies[self.point])?;
+        if let Some(d) = &self.design {
+            return Err(format!("design = {d:?}: a unit of the optimiser's, not of a sweep"));
+        }
+        self.check_values(&studies[self.point], sweep.thresholds_mm.len())
+    }
+
+    /// Whether what this unit reports can be a unit of a grid point whose study promises `study`
+    /// judged at `thresholds` thresholds: exactly the promised rows (none when the unit could not
+    /// run), counts within their repetitions, one count per threshold, every error, time and O1
+    /// absent (NaN) or a finite number >= 0. The check the sweeps' merge and the optimiser's
+    /// resume hold every unit file to.
+    pub fn check_values(&self, study: &record::PointStudy, thresholds: usize) -> Result<(), String> {
+        self.check_rows(study)?;
         let size = |what: &str, x: f64, most: f64| {
             if x.is_nan() || (0.0..=most).contains(&x) { Ok(()) } else { Err(format!("{what} = {x}: not within [0, {most:e}]")) }
         };
@@ -188,12 +208,12 @@ impl Unit {
                 ("p95_within", &r.p95_within),
                 ("median_within", &r.median_within),
             ] {
-                if counts.len() != sweep.thresholds_mm.len() || counts.iter().any(|&c| c > r.repetitions) {
+                if counts.len() != thresholds || counts.iter().any(|&c| c > r.repetitions) {
                     return Err(format!(
                         "{} = {counts:?}: one count of at most {} repetitions per threshold ({} thresholds)",
                         at(k),
                         r.repetitions,
-                        sweep.thresholds_mm.len()
+                        thresholds
                     ));
                 }
             }
@@ -293,7 +313,7 @@ pub fn run_world(sweep: &Sweep, point: usize, realisation: u32) -> Unit {
     let unit = point.saturating_mul(sweep.realisations as usize).saturating_add(realisation as usize);
     let th = &sweep.thresholds_mm;
     let mut out =
-        Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None };
+        Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None, design: None, digest: None };
     let s = &sweep.points[point].scenario;
     let seed = crate::seeds::realisation_seed(s.header().seed, realisation);
     let outcome = match s.run(seed, &|_, _| {}) {

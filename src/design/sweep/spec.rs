@@ -319,7 +319,11 @@ fn realisations(
                 },
             };
             if min > max {
-                return bad("realisations.min", format!("{min}: above max = {max}"));
+                // Name the key written: min, or batch when min is left to its default (batch).
+                return match t.contains_key("min") {
+                    true => bad("realisations.min", format!("{min}: above max = {max}")),
+                    false => bad("realisations.batch", format!("{batch}: above max = {max} (min, not given, is the batch)")),
+                };
             }
             (max, Some(super::race::Race { min, batch, max, confidence: c }))
         }
