@@ -52,9 +52,6 @@ pyo3::create_exception!(
     "A data file (measurements, joint values, targets) is unusable: `path` the file, `key` the line and column, `value` the field."
 );
 
-/// Most realisations and shards a command takes (the CLI's bounds).
-const MOST_REALISATIONS: u32 = 10_000;
-const MOST_SHARDS: usize = 100_000;
 
 /// What a Python exception carries beside its message.
 #[derive(Default)]
@@ -299,14 +296,6 @@ fn detached<T: Send>(
     }
 }
 
-fn check_realisations(py: Python<'_>, r: u32) -> PyResult<()> {
-    if (1..=MOST_REALISATIONS).contains(&r) {
-        Ok(())
-    } else {
-        Err(input(py, "realisations", format!("{r}: within [1, {MOST_REALISATIONS}]")))
-    }
-}
-
 /// Runs (or checks) the study of a scenario of any device: `calsim run` / `calsim check`.
 #[pyfunction]
 #[pyo3(signature = (scenario, *, out, check, seed=None, set_sizes=None, repetitions=None, threads=None, realisations=None, false_alarm=None, plots=true, recording=true, progress=None))]
@@ -326,9 +315,6 @@ fn run<'py>(
     recording: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if let Some(r) = realisations {
-        check_realisations(py, r)?;
-    }
     if let Some(sizes) = &set_sizes
         && sizes.is_empty()
     {
@@ -435,14 +421,6 @@ fn sweep<'py>(
     realisations: Option<u32>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if let Some(r) = realisations {
-        check_realisations(py, r)?;
-    }
-    if let Some((k, n)) = shard
-        && (n == 0 || n > MOST_SHARDS || k >= n)
-    {
-        return Err(input(py, "shard", format!("({k}, {n}): (k, K) with 1 <= K <= {MOST_SHARDS} and 0 <= k < K")));
-    }
     let spec = app::sweep::SweepSpec { file, out, shard, threads, realisations };
     let (r, warnings) = detached(py, progress, |o| app::sweep::run(&spec, o))?;
     let d = PyDict::new(py);
@@ -484,15 +462,6 @@ fn budget<'py>(
     threads: Option<u32>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_realisations(py, realisations)?;
-    if let Some(f) = factors.iter().find(|f| !(f.is_finite() && (0.0..=100.0).contains(*f))) {
-        return Err(input(py, "factors", format!("{f}: a factor within [0, 100]")));
-    }
-    if let Some(r) = repetitions
-        && !(1..=calsim::study::MAX_REPETITIONS).contains(&r)
-    {
-        return Err(input(py, "repetitions", format!("{r}: within [1, {}]", calsim::study::MAX_REPETITIONS)));
-    }
     let spec = app::budget::BudgetSpec { scenario, out, realisations, factors, repetitions, threads };
     let (r, warnings) = detached(py, progress, |o| app::budget::run(&spec, o))?;
     let d = PyDict::new(py);
@@ -623,14 +592,6 @@ fn optimise<'py>(
         Some("particle_swarm") => Some(Method::ParticleSwarm),
         Some(other) => return Err(input(py, "method", format!("{other:?}: \"nelder_mead\" or \"particle_swarm\""))),
     };
-    if merge && shard.is_some() {
-        return Err(input(py, "merge", "merge and shard exclude each other: merge the restarts when every shard has run"));
-    }
-    if let Some((k, n)) = shard
-        && (n == 0 || n > MOST_SHARDS || k >= n)
-    {
-        return Err(input(py, "shard", format!("({k}, {n}): (k, K) with 1 <= K <= {MOST_SHARDS} and 0 <= k < K")));
-    }
     let spec = app::optimise::OptimiseSpec { file, out, shard, merge, threads, method, plots };
     let (r, warnings) = detached(py, progress, |o| app::optimise::run(&spec, o))?;
     let d = PyDict::new(py);

@@ -254,6 +254,14 @@ def test_a_bad_sweep_file_is_a_sweep_error_naming_the_key(tmp_path: Path) -> Non
     assert e.value.path == str(f) and e.value.key == "trical.epsilon_mm"
 
 
+@pytest.mark.parametrize("keywords, key", [(dict(shard=(2, 2)), "shard"), (dict(shard=(0, 0)), "shard"), (dict(realisations=0), "realisations")])
+def test_a_bad_sweep_keyword_is_an_input_error_naming_it(tmp_path: Path, keywords: dict[str, Any], key: str) -> None:
+    with pytest.raises(calsim.InputError) as e:
+        calsim.sweep(small_sweep(tmp_path), out=tmp_path / "out", progress=False, **keywords)
+    assert e.value.key == key and str(e.value).startswith(f"{key}: ")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_merge_of_a_directory_that_is_no_shard_is_a_merge_error(tmp_path: Path) -> None:
     with pytest.raises(calsim.MergeError) as e:
         calsim.merge([tmp_path], out=tmp_path / "out")
@@ -266,8 +274,11 @@ def test_a_budget_returns_its_table_and_prediction(tmp_path: Path) -> None:
     budget, prediction = r.tables["budget"], r.tables["prediction"]
     assert budget.height > 0 and prediction.height > 0
     assert "transmission errors" in r.summary
-    with pytest.raises(calsim.InputError):
-        calsim.budget(QUICK, out=tmp_path, factors=[float("nan")], progress=False)
+    for keywords, key in [(dict(factors=[float("nan")]), "factors"), (dict(realisations=0), "realisations"), (dict(repetitions=0), "repetitions")]:
+        with pytest.raises(calsim.InputError) as e:
+            calsim.budget(QUICK, out=tmp_path / "bad", progress=False, **keywords)  # type: ignore[arg-type]
+        assert e.value.key == key and str(e.value).startswith(f"{key}: ")
+    assert not (tmp_path / "bad").exists()
 
 
 def test_export_redoes_the_median_identification_and_writes_the_model(small_run: calsim.RunResult, tmp_path: Path) -> None:
