@@ -12,11 +12,11 @@ use std::time::{Duration, Instant};
 
 use calsim::app::{self, Observer};
 use calsim::calibrate::CalibrateError;
-use calsim::robot::fk::JointsCsvError;
 use calsim::design::budget::BudgetError as CoreBudgetError;
 use calsim::design::sweep::{MergeError as CoreMergeError, SweepError as CoreSweepError};
 use calsim::device::ScenarioError as CoreScenarioError;
 use calsim::io::out_dir::OutDirError;
+use calsim::robot::fk::JointsCsvError;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -52,7 +52,6 @@ pyo3::create_exception!(
     "A data file (measurements, joint values, targets) is unusable: `path` the file, `key` the line and column, `value` the field."
 );
 
-
 /// What a Python exception carries beside its message.
 #[derive(Default)]
 struct Fault {
@@ -77,7 +76,9 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
             (PyErr::new::<MergeError, _>(message), Fault { path: Some(path), ..Fault::default() })
         }
         app::Error::Urdf(u) => (PyErr::new::<RobotFileError, _>(message), Fault { path: Some(u.path), ..Fault::default() }),
-        app::Error::RobotFile(r) | app::Error::Calibrate(CalibrateError::Robot(r)) => (PyErr::new::<RobotFileError, _>(message), robot_fault(&r)),
+        app::Error::RobotFile(r) | app::Error::Calibrate(CalibrateError::Robot(r)) => {
+            (PyErr::new::<RobotFileError, _>(message), robot_fault(&r))
+        }
         app::Error::Joints(j) => (PyErr::new::<DataError, _>(message), joints_fault(&j)),
         app::Error::Calibrate(CalibrateError::Measurements(m)) => {
             let key = [m.line.map(|l| format!("line {l}")), m.column.clone()].into_iter().flatten().collect::<Vec<_>>().join(": ");
@@ -101,7 +102,9 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         app::Error::Calibrate(CalibrateError::Io { path, .. }) => {
             (PyErr::new::<FileError, _>(message), Fault { path: Some(path.display().to_string()), ..Fault::default() })
         }
-        app::Error::Calibrate(CalibrateError::Name(n)) => (PyErr::new::<InputError, _>(message), Fault { path: Some(n.file), ..Fault::default() }),
+        app::Error::Calibrate(CalibrateError::Name(n)) => {
+            (PyErr::new::<InputError, _>(message), Fault { path: Some(n.file), ..Fault::default() })
+        }
         app::Error::OutDir(OutDirError::InTheWay { path, .. }) => {
             (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() })
         }
