@@ -2,9 +2,11 @@
 
 Runs a reduced TriCal study (the 2018 paper's cell and robot, 3 set sizes x 5 repetitions),
 looks at its published figures and tables as polars DataFrames, exports the calibrated model,
-runs a two-point design sweep over realisations, and shows an error as Python sees it. Install
-the package first: `pip install "./python[progress]"` from the repository's root. Results go to
-the directory given as the first argument (default: a new temporary directory).
+runs a two-point design sweep over realisations, calibrates a robot from measurements held in a
+polars DataFrame and compensates targets with it, and shows an error as Python sees it. Install
+the package first (a wheel: `pip install calsim-*.whl`; or `pip install "./python[progress]"` from
+the repository's root). Results go to the directory given as the first argument (default: a new
+temporary directory), never to the repository's `results/`.
 """
 
 import sys
@@ -59,7 +61,17 @@ sweep_file.write_text(
 s = calsim.sweep(sweep_file, out=out)
 print(s.tables["points"])
 
-# 5. Errors are exceptions naming the file, the key and the value.
+# 5. A real robot: measurements as a DataFrame (a tracker export joined with a joint log would give
+#    the same columns), calibrated as the CLI calibrates the file; then the joint values that put
+#    the calibrated TCP on each target, and the Cartesian targets for a nominal-only controller.
+measurements = pl.read_csv(REPO / "docs" / "calibrate" / "example_measurements.csv", comment_prefix="#")
+cal = calsim.calibrate(REPO / "robots" / "irb120.toml", measurements, out=out, name="example", header={"joints": "controller"})
+print(cal)
+print(cal.tables["models"].select("model", "parameters", "chosen", "held_out_rms_mm").sort("parameters"))
+comp = calsim.compensate(cal, pl.read_csv(REPO / "docs" / "examples" / "targets.csv"), nominal=cal)
+print(comp.joints.select("q1_deg", "q2_deg", "q3_deg", "model_error_mm", "nominal_x_mm"))
+
+# 6. Errors are exceptions naming the file, the key and the value.
 try:
     calsim.run(SCENARIO, out=out, repetitions=0, progress=False)
 except calsim.ScenarioError as e:

@@ -9,7 +9,6 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::app::{self, Observer};
-use crate::robot::ParamSet;
 use crate::study::check::{distribution_table, terminal_table};
 
 /// calsim: simulation and Monte Carlo studies of robot calibration with low-cost 3D measuring devices.
@@ -660,16 +659,10 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
 }
 
 fn fk(args: &FkArgs) -> Result<ExitCode, String> {
-    let _inputs = crate::io::inputs::Ledger::open();
-    if let Some(out) = &args.out {
-        crate::io::out_dir::vet_file(out, &[&args.robot, &args.joints]).map_err(|e| e.to_string())?;
-    }
-    let file = crate::robot::file::RobotFile::load(&args.robot).map_err(|e| e.to_string())?;
-    let joints = crate::robot::fk::read_joints(&args.joints).map_err(|e| e.to_string())?;
-    let text = crate::robot::fk::to_csv(&crate::robot::fk::fk_rows(&file, &joints));
-    match &args.out {
-        Some(out) => crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| format!("{}: {e}", out.display()))?,
-        None => print!("{text}"),
+    let spec = app::fk::FkSpec { robot: args.robot.clone(), joints: args.joints.clone(), out: args.out.clone() };
+    let r = app::fk::run(&spec).map_err(|e| e.to_string())?;
+    if args.out.is_none() {
+        print!("{}", r.csv);
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -704,40 +697,20 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
 }
 
 fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
-    use crate::calibrate::{CalibrateSpec, Options, validation::Split};
-    // The plan's flags without a plan: refused as --plan-scenario is.
-    if args.plan_noise_mm.is_some() && args.plan_worlds == 0 {
-        return Err("--plan-noise-mm: a plan needs --plan-worlds N (N >= 1)".into());
-    }
-    let defaults = Options::default();
-    let params = match &args.params {
-        Some(names) => Some(ParamSet::from_names(names).map_err(|e| format!("--params: {e}"))?),
-        None => None,
-    };
-    let split = match (&args.hold_out_session, args.hold_out) {
-        (Some(session), _) => Split::Session(session.clone()),
-        (None, Some(fraction)) => Split::Poses { fraction },
-        (None, None) => defaults.split.clone(),
-    };
-    let options = Options {
-        params,
-        folds: args.folds as usize,
-        split,
+    let spec = app::calibrate::CalibrateArgs {
+        folds: args.folds,
+        hold_out: args.hold_out,
+        hold_out_session: args.hold_out_session.clone(),
         seed: args.seed,
-        outlier_threshold: args.outlier_threshold.unwrap_or(defaults.outlier_threshold),
-        plots: !args.no_plots,
-        ..defaults
-    };
-    let spec = CalibrateSpec {
-        robot_file: args.robot.clone(),
-        measurements: args.measurements.clone(),
-        out: args.out.clone(),
-        options,
-        plan_worlds: args.plan_worlds as usize,
+        params: args.params.clone(),
+        outlier_threshold: args.outlier_threshold,
+        plan_worlds: args.plan_worlds,
         plan_noise_mm: args.plan_noise_mm,
         plan_scenario: args.plan_scenario.clone(),
+        plots: !args.no_plots,
+        ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())
     };
-    let report = crate::calibrate::calibrate(&spec).map_err(|e| e.to_string())?;
+    let report = app::calibrate::run(&spec).map_err(|e| e.to_string())?;
     println!("{}", crate::calibrate::report::terminal(&report.calibration, &report.dir));
     if let Some(p) = &report.plan {
         let [a, b, c] = p.simulated_mm;

@@ -11,6 +11,10 @@ released, and its tables come back as polars DataFrames::
     r.tables["tasks"]           # one row per identification (DataFrame)
     r.figures                   # the PNG figures written
 
+The real-robot path as well: :func:`import_urdf` (an arm's URDF as a robot file), :func:`calibrate`
+(measurements from a CSV file or a polars DataFrame), :func:`compensate` (targets from a CSV file
+or a DataFrame) and :func:`fk`; and :func:`optimise` and :func:`table8`.
+
 Errors are :class:`CalsimError` subclasses whose message is the CLI's one line, with the file
 (``path``), the key (``key``) and the value (``value``) as attributes where known.
 """
@@ -19,14 +23,21 @@ from __future__ import annotations
 
 import operator
 import os
+import re
+import shutil
+import tempfile
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
+
+import polars as pl
 
 from . import _calsim
 from ._calsim import (
     BudgetError,
     CalsimError,
+    DataError,
     FileError,
     InputError,
     MergeError,
@@ -36,7 +47,19 @@ from ._calsim import (
     SweepError,
 )
 from ._progress import Progress, observer
-from ._results import BudgetResult, ExportResult, Results, RunResult, SweepResult
+from ._results import (
+    BudgetResult,
+    CalibrationResult,
+    CompensateResult,
+    ExportResult,
+    FkResult,
+    ImportResult,
+    OptimiseResult,
+    Results,
+    RunResult,
+    SweepResult,
+    Table8Result,
+)
 
 __version__ = _calsim.__version__
 
@@ -47,11 +70,23 @@ __all__ = [
     "merge",
     "budget",
     "export",
+    "calibrate",
+    "optimise",
+    "compensate",
+    "table8",
+    "import_urdf",
+    "fk",
     "Results",
     "RunResult",
     "SweepResult",
     "BudgetResult",
     "ExportResult",
+    "CalibrationResult",
+    "OptimiseResult",
+    "CompensateResult",
+    "Table8Result",
+    "ImportResult",
+    "FkResult",
     "Progress",
     "CalsimError",
     "CalsimWarning",
@@ -63,16 +98,17 @@ __all__ = [
     "InputError",
     "StudyError",
     "FileError",
+    "DataError",
 ]
 
-PathLike = str | os.PathLike
+PathLike = str | os.PathLike[str]
 
 
 def _whole(key: str, v: object, lo: int, hi: int) -> int:
     """``v`` as a whole number within [lo, hi] (the type's range: the command checks the rule),
     else an InputError naming ``key``."""
     try:
-        n = operator.index(v)
+        n = operator.index(v)  # type: ignore[call-overload, arg-type, unused-ignore]
     except TypeError:
         raise _input(key, f"{v!r} is not a whole number") from None
     if not lo <= n <= hi:
@@ -156,7 +192,20 @@ def check(
     return _run(scenario, True, out, seed, set_sizes, repetitions, threads, realisations, false_alarm, plots, recording, progress)
 
 
-def _run(scenario, check_, out, seed, set_sizes, repetitions, threads, realisations, false_alarm, plots, recording, progress) -> RunResult:
+def _run(
+    scenario: PathLike,
+    check_: bool,
+    out: PathLike,
+    seed: int | None,
+    set_sizes: Iterable[int] | None,
+    repetitions: int | None,
+    threads: int | None,
+    realisations: int | None,
+    false_alarm: float | None,
+    plots: bool,
+    recording: bool,
+    progress: Progress,
+) -> RunResult:
     with observer(progress) as callback:
         report = _calsim.run(
             Path(scenario),
@@ -176,7 +225,7 @@ def _run(scenario, check_, out, seed, set_sizes, repetitions, threads, realisati
     return RunResult(report)
 
 
-def _warn(report: dict) -> None:
+def _warn(report: Mapping[str, Any]) -> None:
     # Warnings reach Python's warnings machinery from the calling thread, after the command.
     for line in report.get("warnings", []):
         warnings.warn(line, CalsimWarning, stacklevel=3)
@@ -202,7 +251,7 @@ def sweep(
         report = _calsim.sweep(
             Path(file),
             out=Path(out),
-            shard=None if shard is None else tuple(_whole("shard", k, 0, 2**63) for k in shard),
+            shard=_shard(shard),
             threads=_optional("threads", threads, _U32),
             realisations=_optional("realisations", realisations, _U32),
             progress=callback,
@@ -256,12 +305,250 @@ def export(
     """Exports one identification of a TriCal results directory (``calsim export``): the robot
     file with each parameter's standard deviation, the model before calibration, a URDF and a YAML
     overlay, in ``<out>/<scenario>.task-<N>`` (``out`` defaults to beside the results)."""
-    if isinstance(results, Results):
-        results = results.dest
+    path = results.dest if isinstance(results, Results) else Path(results)
+    if path is None:
+        raise _input("results", f"{results!r}: results with no directory (one shard of a sweep)")
     report = _calsim.export(
-        Path(results),
+        path,
         task=_optional("task", task, 2**63),
         set_size=_optional("set_size", set_size, 2**63),
-        pick=pick, out=None if out is None else Path(out)
+        pick=pick,
+        out=None if out is None else Path(out),
     )
     return ExportResult(report)
+
+
+def _shard(shard: tuple[int, int] | None) -> tuple[int, int] | None:
+    if shard is None:
+        return None
+    if isinstance(shard, str | bytes) or len(shard) != 2:
+        raise _input("shard", f"{shard!r}: a pair (k, K) of whole numbers")
+    return (_whole("shard", shard[0], 0, 2**63), _whole("shard", shard[1], 0, 2**63))
+
+
+def _real(key: str, v: object) -> float | None:
+    """``v`` as a float (None stays None), else an InputError naming ``key``; the command checks
+    its range."""
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise _input(key, f"{v!r} is not a number")
+    return float(v)
+
+
+_STEM = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+
+
+def _frame_csv(frame: pl.DataFrame, key: str, name: str, columns: Sequence[str] | None, header: Mapping[str, str] | None, dir: Path) -> Path:
+    """Writes ``frame`` as ``dir/<name>.csv`` (``columns`` in that order, when given; ``header``
+    as ``# key = value`` lines before the column names). Floats are written to round-trip: the
+    command reads the frame's values bit for bit."""
+    if not _STEM.fullmatch(name):
+        raise _input("name", f"{name!r}: a file name of letters, digits, '.', '_' and '-'")
+    if columns is not None:
+        missing = [c for c in columns if c not in frame.columns]
+        if missing:
+            raise _input(key, f"the frame has no column {', '.join(missing)} (it needs {','.join(columns)})")
+        frame = frame.select(columns)
+    path = dir / f"{name}.csv"
+    with open(path, "w", newline="") as f:
+        for k, v in (header or {}).items():
+            if "\n" in f"{k}{v}" or "=" in k:
+                raise _input("header", f"{k!r} = {v!r}: a key and a value of one line each")
+            f.write(f"# {k} = {v}\n")
+        frame.write_csv(f)
+    return path
+
+
+def calibrate(
+    robot: PathLike,
+    measurements: PathLike | pl.DataFrame,
+    *,
+    out: PathLike = "results",
+    name: str = "measurements",
+    header: Mapping[str, str] | None = None,
+    folds: int = 5,
+    hold_out: float | None = None,
+    hold_out_session: str | None = None,
+    seed: int = 1,
+    params: Sequence[str] | None = None,
+    outlier_threshold: float | None = None,
+    plan_worlds: int = 0,
+    plan_noise_mm: float | None = None,
+    plan_scenario: PathLike | None = None,
+    plots: bool = True,
+) -> CalibrationResult:
+    """Calibrates a real robot from measured data (``calsim calibrate``): the report, the
+    calibrated ``robot.toml``, URDF and YAML in ``out/<measurements stem>.calibration``.
+
+    ``measurements`` is a CSV file in the layout of docs/calibrate.md, or a polars DataFrame with
+    the same columns (``pose``, ``session``, ``target``, ``q1_deg`` ... ``q6_deg``, ``x_mm``,
+    ``y_mm``, ``z_mm``, optional ``sigma_mm``; the units in the names as in the file): a joined
+    tracker export and joint log, say. A frame is written as ``<name>.csv`` (with ``header`` as
+    its ``# key = value`` lines, e.g. ``{"joints": "model"}``) to a temporary directory,
+    calibrated as the CLI calibrates that file (the same tables, bit for bit), and kept in the
+    report as ``measurements.csv``; the report goes to ``out/<name>.calibration``.
+    """
+    keywords: dict[str, Any] = dict(
+        out=Path(out),
+        folds=_whole("folds", folds, 0, _U32),
+        hold_out=_real("hold_out", hold_out),
+        hold_out_session=hold_out_session,
+        seed=_whole("seed", seed, 0, _U64),
+        params=None if params is None else _names("params", params),
+        outlier_threshold=_real("outlier_threshold", outlier_threshold),
+        plan_worlds=_whole("plan_worlds", plan_worlds, 0, _U32),
+        plan_noise_mm=_real("plan_noise_mm", plan_noise_mm),
+        plan_scenario=None if plan_scenario is None else Path(plan_scenario),
+        plots=plots,
+    )
+    if not isinstance(measurements, pl.DataFrame):
+        if header is not None:
+            raise _input("header", "for a DataFrame of measurements: a file carries its own header lines")
+        return CalibrationResult(_calsim.calibrate(Path(robot), Path(measurements), **keywords))
+    with tempfile.TemporaryDirectory(prefix="calsim-measurements-") as tmp:
+        csv = _frame_csv(measurements, "measurements", name, None, header, Path(tmp))
+        report = _calsim.calibrate(Path(robot), csv, **keywords)
+        shutil.copyfile(csv, Path(report["dest"]) / "measurements.csv")
+    return CalibrationResult(report)
+
+
+def _names(key: str, names: Sequence[str]) -> list[str]:
+    if isinstance(names, str):
+        names = names.split(",")
+    out = [n.strip() for n in names]
+    if not all(isinstance(n, str) for n in out):
+        raise _input(key, f"{names!r}: names of parameters (e.g. ['a2', 'd4'])")
+    return out
+
+
+def optimise(
+    file: PathLike,
+    *,
+    out: PathLike = "results",
+    shard: tuple[int, int] | None = None,
+    merge: bool = False,
+    threads: int | None = None,
+    method: str | None = None,
+    plots: bool = True,
+    progress: Progress = True,
+) -> OptimiseResult:
+    """Searches a design file's space for its objective, races the finalists and verifies them on
+    held-out worlds (``calsim optimise``); results in ``out/<design>``. With ``shard=(k, K)``
+    only the restarts r with r % K == k run (no results: then ``merge=True``); ``method``
+    (``"nelder_mead"`` or ``"particle_swarm"``) replaces the file's."""
+    with observer(progress) as callback:
+        report = _calsim.optimise(
+            Path(file),
+            out=Path(out),
+            shard=_shard(shard),
+            merge=merge,
+            threads=_optional("threads", threads, _U32),
+            method=method,
+            plots=plots,
+            progress=callback,
+        )
+    _warn(report)
+    return OptimiseResult(report)
+
+
+def _model_path(model: PathLike | ExportResult | CalibrationResult) -> Path:
+    if isinstance(model, ExportResult | CalibrationResult):
+        return model.robot_file
+    return Path(model)
+
+
+_TARGETS = ["x_mm", "y_mm", "z_mm", "alpha_deg", "beta_deg", "gamma_deg"]
+_JOINTS = ["q1_deg", "q2_deg", "q3_deg", "q4_deg", "q5_deg", "q6_deg"]
+
+
+def compensate(
+    model: PathLike | ExportResult | CalibrationResult,
+    targets: PathLike | pl.DataFrame,
+    *,
+    nominal: PathLike | ExportResult | CalibrationResult | None = None,
+    out: PathLike | None = None,
+) -> CompensateResult:
+    """The joint values that put the calibrated model's TCP on each target, and with ``nominal``
+    the Cartesian targets to command a controller that knows only its nominal model
+    (``calsim compensate``). ``model`` is a robot file, or the result of :func:`export` or
+    :func:`calibrate` (its ``robot.toml``; for ``nominal`` its ``before.toml``). ``targets``: a
+    CSV file or a DataFrame with the columns ``x_mm, y_mm, z_mm, alpha_deg, beta_deg,
+    gamma_deg`` (the tool frame in {W}). ``out``: also write the CSV there. A target the model
+    cannot reach has nulls in its row (``unreachable`` in the CSV) and a CalsimWarning."""
+    nominal_path: Path | None
+    if isinstance(nominal, ExportResult | CalibrationResult):
+        nominal_path = nominal.dest / "before.toml"
+    else:
+        nominal_path = None if nominal is None else Path(nominal)
+    keywords: dict[str, Any] = dict(nominal=nominal_path, out=None if out is None else Path(out))
+    if isinstance(targets, pl.DataFrame):
+        with tempfile.TemporaryDirectory(prefix="calsim-targets-") as tmp:
+            csv = _frame_csv(targets, "targets", "targets", _TARGETS, None, Path(tmp))
+            report = _calsim.compensate(_model_path(model), csv, **keywords)
+    else:
+        report = _calsim.compensate(_model_path(model), Path(targets), **keywords)
+    _warn(report)
+    return CompensateResult(report, None if out is None else Path(out))
+
+
+def table8(
+    scenario: PathLike,
+    *,
+    realisations: int = 1,
+    pool: int = 360,
+    threads: int | None = None,
+    progress: Progress = True,
+) -> Table8Result:
+    """Table 8 of the TriCal paper (``calsim table8``): the robot of a TriCal scenario calibrated
+    with the TriCal, a laser tracker and an optical CMM in each of ``realisations`` worlds, the
+    medians beside the published rows; ``pool`` configurations per external instrument."""
+    with observer(progress) as callback:
+        report = _calsim.table8(
+            Path(scenario),
+            realisations=_whole("realisations", realisations, 0, _U32),
+            pool=_whole("pool", pool, 0, _U32),
+            threads=_optional("threads", threads, _U32),
+            progress=callback,
+        )
+    _warn(report)
+    return Table8Result(report)
+
+
+def import_urdf(
+    urdf: PathLike,
+    *,
+    out: PathLike,
+    package_root: PathLike | None = None,
+    visual_meshes: bool = False,
+) -> ImportResult:
+    """Converts a URDF arm (a serial chain of six revolute joints) into the calsim robot file
+    ``out`` (``calsim import-urdf``); ``package_root`` holds the packages ``package://`` mesh
+    names point into; ``visual_meshes`` fits a link's capsule to its visual meshes where it has no
+    collision geometry. An existing file is not replaced unless calsim wrote it."""
+    report = _calsim.import_urdf(
+        Path(urdf),
+        out=Path(out),
+        package_root=None if package_root is None else Path(package_root),
+        visual_meshes=visual_meshes,
+    )
+    return ImportResult(report)
+
+
+def fk(
+    robot: PathLike | ExportResult | CalibrationResult,
+    joints: PathLike | pl.DataFrame,
+    *,
+    out: PathLike | None = None,
+) -> FkResult:
+    """The tool frame, gravity torques and joint deflections of a robot file's arm at each row of
+    ``joints`` (``calsim fk``): a CSV file or a DataFrame with the columns ``q1_deg`` ...
+    ``q6_deg``. ``out``: also write the CSV there."""
+    keywords: dict[str, Any] = dict(out=None if out is None else Path(out))
+    if isinstance(joints, pl.DataFrame):
+        with tempfile.TemporaryDirectory(prefix="calsim-joints-") as tmp:
+            csv = _frame_csv(joints, "joints", "joints", _JOINTS, None, Path(tmp))
+            report = _calsim.fk(_model_path(robot), csv, **keywords)
+    else:
+        report = _calsim.fk(_model_path(robot), Path(joints), **keywords)
+    return FkResult(report)

@@ -13,6 +13,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any, TextIO
 
 Callback = Callable[[str, str, int, int], object]
 Progress = bool | Callback | None
@@ -40,14 +41,16 @@ class Bars:
     """Shows a command's progress: a tqdm bar per stage (``tqdm.auto``: a widget in a notebook),
     or without tqdm the start line and one line per finished stage on standard error."""
 
-    def __init__(self, file=None) -> None:
+    def __init__(self, file: TextIO | None = None) -> None:
+        self._tqdm: Any
         try:
-            from tqdm.auto import tqdm
+            from tqdm.auto import tqdm  # type: ignore[import-untyped, unused-ignore]
+
+            self._tqdm = tqdm
         except ImportError:
-            tqdm = None
-        self._tqdm = tqdm
-        self._file = file or sys.stderr
-        self._bar = None
+            self._tqdm = None
+        self._file: TextIO = file or sys.stderr
+        self._bar: Any = None
         self._last: tuple[str, int, int] | None = None
         self._lock = threading.Lock()
 

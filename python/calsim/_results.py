@@ -3,11 +3,16 @@ the parquet files calsim wrote), its figures and summary, and what the command r
 
 from __future__ import annotations
 
+import io
 import json
+from collections.abc import Mapping
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import polars as pl
+
+Report = Mapping[str, Any]
 
 
 class Results:
@@ -15,7 +20,7 @@ class Results:
     ``figures`` (the PNG files), ``summary`` (``summary.md``) and ``manifest`` (``manifest.json``)."""
 
     def __init__(self, dest: str | Path | None) -> None:
-        self.dest = None if dest is None else Path(dest)
+        self.dest: Path | None = None if dest is None else Path(dest)
 
     @cached_property
     def tables(self) -> dict[str, pl.DataFrame]:
@@ -43,10 +48,13 @@ class Results:
         return path.read_text() if path is not None and path.is_file() else ""
 
     @property
-    def manifest(self) -> dict:
+    def manifest(self) -> dict[str, Any]:
         """``manifest.json``: scenario and its hash, seed, version, overrides, table hashes, timings."""
         path = None if self.dest is None else self.dest / "manifest.json"
-        return json.loads(path.read_text()) if path is not None and path.is_file() else {}
+        if path is None or not path.is_file():
+            return {}
+        manifest: dict[str, Any] = json.loads(path.read_text())
+        return manifest
 
     def __repr__(self) -> str:
         names = ", ".join(self.tables) if self.dest is not None else "none"
@@ -88,7 +96,7 @@ class RunResult(Results):
     the worlds without a value, and ``pass``, ``open``, ``miss`` or ``unresolved``, the last a
     failure: too few worlds to judge), ``passed`` / ``missed``, ``timing``, ``warnings``."""
 
-    def __init__(self, report: dict) -> None:
+    def __init__(self, report: Report) -> None:
         super().__init__(report["dest"])
         self.name: str = report["name"]
         self.kind: str = report["kind"]
@@ -99,9 +107,9 @@ class RunResult(Results):
         self.checked: int = report["checked"]
         self.missed: int = report["missed"]
         self.warnings: list[str] = list(report["warnings"])
-        self.checks = pl.DataFrame(report["checks"], schema=_CHECK_SCHEMA)
+        self.checks: pl.DataFrame = pl.DataFrame(report["checks"], schema=_CHECK_SCHEMA)
         dist = report["distribution"]
-        self.distribution = None if dist is None else pl.DataFrame(dist, schema=_DISTRIBUTION_SCHEMA)
+        self.distribution: pl.DataFrame | None = None if dist is None else pl.DataFrame(dist, schema=_DISTRIBUTION_SCHEMA)
 
     @property
     def passed(self) -> bool:
@@ -119,17 +127,17 @@ class SweepResult(Results):
     """What a sweep or a merge did: the merged results (``tables['points']``, ``tables['sweep']``,
     the figures), the work units and how many failed; for one shard, ``shard_dir`` and no tables."""
 
-    def __init__(self, report: dict) -> None:
+    def __init__(self, report: Report) -> None:
         merged = report.get("merged")
         super().__init__(None if merged is None else merged["dest"])
         self.name: str = report["name"]
         self.units: int = merged["units"] if merged else report["units"]
         self.failed: int = merged["failed"] if merged else 0
         self.run_s: float | None = report.get("run_s")
-        self.shard: tuple[int, int] | None = tuple(report["shard"]) if "shard" in report else None
-        self.shard_dir = Path(report["shard_dir"]) if "shard_dir" in report else None
+        self.shard: tuple[int, int] | None = (report["shard"][0], report["shard"][1]) if "shard" in report else None
+        self.shard_dir: Path | None = Path(report["shard_dir"]) if "shard_dir" in report else None
         self.warnings: list[str] = list(report.get("warnings", []))
-        self._summary = merged["summary"] if merged else ""
+        self._summary: str = merged["summary"] if merged else ""
 
     @property
     def summary(self) -> str:
@@ -141,7 +149,7 @@ class BudgetResult(Results):
     ``tables['prediction']`` (the linear prediction beside the Monte Carlo), the figures and the
     budget table as text (``summary``)."""
 
-    def __init__(self, report: dict) -> None:
+    def __init__(self, report: Report) -> None:
         super().__init__(report["dest"])
         self.units: int = report["units"]
         self.run_s: float = report["run_s"]
@@ -157,13 +165,13 @@ class ExportResult:
     """An exported identification: ``dest`` holds ``robot.toml`` (the identified model with each
     parameter's standard deviation), ``before.toml``, ``robot.urdf`` and ``calibration.yaml``."""
 
-    def __init__(self, report: dict) -> None:
-        self.dest = Path(report["dest"])
+    def __init__(self, report: Report) -> None:
+        self.dest: Path = Path(report["dest"])
         self.scenario: str = report["scenario"]
         self.task: int = report["task"]
         self.set_size: int = report["set_size"]
         self.validation_median_mm: float = report["validation_median_mm"]
-        self.files = [self.dest / f for f in report["files"]]
+        self.files: list[Path] = [self.dest / f for f in report["files"]]
 
     @property
     def robot_file(self) -> Path:
@@ -175,3 +183,128 @@ class ExportResult:
             f"ExportResult(task={self.task}, set_size={self.set_size}, "
             f"validation_median_mm={self.validation_median_mm:.4f}, dest={str(self.dest)!r})"
         )
+
+
+class CalibrationResult(Results):
+    """What a calibration did: the report directory (``tables['points']``, ``models``,
+    ``parameters``, ``bases``, ``tools``, ``correlation``, the figures, ``summary.md``), the model
+    chosen by its held-out error (``model``: ``offsets``, ``geometric`` or ``compliance``), the
+    CLI's report (``report``) and, with ``plan_worlds``, the plan's comparison (``plan``: the
+    measured held-out statistic beside the simulated one with its P10-P90, and ``inside``)."""
+
+    def __init__(self, report: Report) -> None:
+        super().__init__(report["dest"])
+        self.dest: Path = Path(report["dest"])
+        self.model: str = report["model"]
+        self.report: str = report["report"]
+        self.plan: dict[str, Any] | None = None if report["plan"] is None else dict(report["plan"])
+
+    @property
+    def robot_file(self) -> Path:
+        """The calibrated model as a robot file (``calsim compensate`` takes it)."""
+        return self.dest / "robot.toml"
+
+    def __repr__(self) -> str:
+        return f"CalibrationResult(model={self.model!r}, dest={str(self.dest)!r}, figures={len(self.figures)})"
+
+
+class OptimiseResult(Results):
+    """What an optimisation did: the results directory (None for one shard of the restarts),
+    the restarts and designs this run evaluated, the timings, the summary and the winner's timing
+    line (``cost``)."""
+
+    def __init__(self, report: Report) -> None:
+        super().__init__(report["dest"])
+        self.name: str = report["name"]
+        self.restarts: int = report["restarts"]
+        self.evaluations: int = report["evaluations"]
+        self.search_s: float = report["search_s"]
+        self.finish_s: float = report["finish_s"]
+        self.cost: str | None = report["cost"]
+        self.warnings: list[str] = list(report["warnings"])
+        self._summary: str = report["summary"] or ""
+
+    @property
+    def summary(self) -> str:
+        return self._summary
+
+
+def _csv_frame(text: str, null_values: list[str]) -> pl.DataFrame:
+    """A CSV text of calsim as a frame: every column but ``within_limits`` a float (the CSV's
+    shortest round-trip decimals, read back bit for bit)."""
+    header = text.split("\n", 1)[0].split(",")
+    schema = {c: (pl.Boolean if c == "within_limits" else pl.Float64) for c in header}
+    return pl.read_csv(io.StringIO(text), schema=schema, null_values=null_values)
+
+
+class CompensateResult:
+    """The compensated targets: ``joints`` (per target ``q1_deg`` ... ``q6_deg``, the model's
+    ``model_error_mm`` and ``model_error_deg`` at them and, with a nominal model, the
+    ``nominal_*`` Cartesian target to command; nulls where the model cannot reach the target),
+    ``csv`` (the CLI's text), ``unreachable`` (1-based target numbers) and ``out`` (the CSV
+    written, or None)."""
+
+    def __init__(self, report: Report, out: Path | None) -> None:
+        self.csv: str = report["csv"]
+        self.targets: int = report["targets"]
+        self.unreachable: list[int] = list(report["unreachable"])
+        self.warnings: list[str] = list(report["warnings"])
+        self.out = out
+        self.joints: pl.DataFrame = _csv_frame(self.csv, ["unreachable", ""])
+
+    def __repr__(self) -> str:
+        return f"CompensateResult(targets={self.targets}, unreachable={len(self.unreachable)})"
+
+
+_TABLE8_SCHEMA = {
+    "instrument": pl.String,
+    "published_median_mm": pl.Float64,
+    "calsim_median_mm": pl.Float64,
+    "published_std_mm": pl.Float64,
+    "calsim_std_mm": pl.Float64,
+    "published_max_mm": pl.Float64,
+    "calsim_max_mm": pl.Float64,
+    "median_p10_mm": pl.Float64,
+    "median_p90_mm": pl.Float64,
+}
+
+
+class Table8Result:
+    """Table 8: ``table`` (per instrument, TriCal, laser tracker and optical CMM, the published
+    median, std and max after calibration beside calsim's, each the median over the worlds, with
+    the P10-P90 of the median over them), ``worlds`` calibrated, ``run_s``, ``warnings``."""
+
+    def __init__(self, report: Report) -> None:
+        self.table: pl.DataFrame = pl.DataFrame(report["rows"], schema=_TABLE8_SCHEMA)
+        self.worlds: int = report["worlds"]
+        self.run_s: float = report["run_s"]
+        self.warnings: list[str] = list(report["warnings"])
+
+    def __repr__(self) -> str:
+        return f"Table8Result(worlds={self.worlds}, instruments={self.table['instrument'].to_list()})"
+
+
+class ImportResult:
+    """An imported URDF: ``robot_file`` (the robot file written) and ``lines`` (what became of
+    the geometry, masses, meshes and passive joints)."""
+
+    def __init__(self, report: Report) -> None:
+        self.robot_file: Path = Path(report["out"])
+        self.lines: list[str] = list(report["lines"])
+
+    def __repr__(self) -> str:
+        return f"ImportResult(robot_file={str(self.robot_file)!r})"
+
+
+class FkResult:
+    """The arm at each row of the joints: ``table`` (the joint values, the tool frame ``x_mm``
+    ... ``gamma_deg`` in {W}, gravity torques ``tau*_nm``, deflections ``deflection*_mdeg`` and
+    ``within_limits``) and ``csv`` (the CLI's text)."""
+
+    def __init__(self, report: Report) -> None:
+        self.csv: str = report["csv"]
+        self.rows: int = report["rows"]
+        self.table: pl.DataFrame = _csv_frame(self.csv, [])
+
+    def __repr__(self) -> str:
+        return f"FkResult(rows={self.rows})"

@@ -11,10 +11,12 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use calsim::app::{self, Observer};
+use calsim::calibrate::CalibrateError;
 use calsim::design::budget::BudgetError as CoreBudgetError;
 use calsim::design::sweep::{MergeError as CoreMergeError, SweepError as CoreSweepError};
 use calsim::device::ScenarioError as CoreScenarioError;
 use calsim::io::out_dir::OutDirError;
+use calsim::robot::fk::JointsCsvError;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -43,11 +45,12 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(calsim, StudyError, CalsimError, "A study could not run: its campaign failed, or no identification gave a model.");
 pyo3::create_exception!(calsim, FileError, CalsimError, "A file could not be read or written.");
-
-/// Most worker threads, realisations and shards a command takes (the CLI's bounds).
-const MOST_THREADS: u32 = app::MOST_THREADS;
-const MOST_REALISATIONS: u32 = 10_000;
-const MOST_SHARDS: usize = 100_000;
+pyo3::create_exception!(
+    calsim,
+    DataError,
+    CalsimError,
+    "A data file (measurements, joint values, targets) is unusable: `path` the file, `key` the line and column, `value` the field."
+);
 
 /// What a Python exception carries beside its message.
 #[derive(Default)]
@@ -72,7 +75,36 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         app::Error::Merge(CoreMergeError::Shard { path, .. } | CoreMergeError::Record { path, .. }) => {
             (PyErr::new::<MergeError, _>(message), Fault { path: Some(path), ..Fault::default() })
         }
-        app::Error::Urdf(_) | app::Error::RobotFile(_) => (PyErr::new::<RobotFileError, _>(message), Fault::default()),
+        app::Error::Urdf(u) => (PyErr::new::<RobotFileError, _>(message), Fault { path: Some(u.path), ..Fault::default() }),
+        app::Error::RobotFile(r) | app::Error::Calibrate(CalibrateError::Robot(r)) => {
+            (PyErr::new::<RobotFileError, _>(message), robot_fault(&r))
+        }
+        app::Error::Joints(j) => (PyErr::new::<DataError, _>(message), joints_fault(&j)),
+        app::Error::Calibrate(CalibrateError::Measurements(m)) => {
+            let key = [m.line.map(|l| format!("line {l}")), m.column.clone()].into_iter().flatten().collect::<Vec<_>>().join(": ");
+            let fault = Fault { path: Some(m.path.display().to_string()), key: (!key.is_empty()).then_some(key), value: None };
+            (PyErr::new::<DataError, _>(message), fault)
+        }
+        app::Error::Calibrate(CalibrateError::Option { key, message: why }) => {
+            let keyword = key.replace('-', "_");
+            (PyErr::new::<InputError, _>(format!("{keyword}: {why}")), Fault { key: Some(keyword), ..Fault::default() })
+        }
+        app::Error::Calibrate(CalibrateError::NoModel { path, model, .. }) => (
+            PyErr::new::<StudyError, _>(message),
+            Fault { path: Some(path.display().to_string()), key: Some(model.to_string()), ..Fault::default() },
+        ),
+        app::Error::Calibrate(CalibrateError::OutDir(OutDirError::InTheWay { path, .. })) => {
+            (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() })
+        }
+        app::Error::Calibrate(CalibrateError::OutDir(OutDirError::Io { path, .. })) => {
+            (PyErr::new::<FileError, _>(message), Fault { path: Some(path), ..Fault::default() })
+        }
+        app::Error::Calibrate(CalibrateError::Io { path, .. }) => {
+            (PyErr::new::<FileError, _>(message), Fault { path: Some(path.display().to_string()), ..Fault::default() })
+        }
+        app::Error::Calibrate(CalibrateError::Name(n)) => {
+            (PyErr::new::<InputError, _>(message), Fault { path: Some(n.file), ..Fault::default() })
+        }
         app::Error::OutDir(OutDirError::InTheWay { path, .. }) => {
             (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() })
         }
@@ -83,7 +115,7 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         app::Error::NoModel { scenario, .. } => {
             (PyErr::new::<StudyError, _>(message), Fault { path: Some(scenario), key: Some("study.parameters".into()), ..Fault::default() })
         }
-        app::Error::Input { what, .. } => (PyErr::new::<InputError, _>(message), Fault { path: Some(what), ..Fault::default() }),
+        app::Error::Input { what, why } => input_fault(what, why, message),
         app::Error::Name(n) => (PyErr::new::<InputError, _>(message), Fault { path: Some(n.file), ..Fault::default() }),
     };
     let value = err.value(py);
@@ -92,6 +124,40 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         let _ = value.setattr(name, v);
     }
     err
+}
+
+/// The exception of an input error: an option (`--threads`) becomes the keyword (`threads`) in
+/// the message and the key; `file: line 3` becomes the file and the key (the line).
+fn input_fault(what: String, why: String, message: String) -> (PyErr, Fault) {
+    if let Some(option) = what.strip_prefix("--") {
+        let keyword = option.replace('-', "_");
+        return (PyErr::new::<InputError, _>(format!("{keyword}: {why}")), Fault { key: Some(keyword), ..Fault::default() });
+    }
+    let fault = match what.split_once(": ") {
+        Some((file, key)) if std::path::Path::new(file).exists() => {
+            Fault { path: Some(file.to_string()), key: Some(key.to_string()), ..Fault::default() }
+        }
+        _ => Fault { path: Some(what), ..Fault::default() },
+    };
+    (PyErr::new::<InputError, _>(message), fault)
+}
+
+/// The file and field of a robot file's error.
+fn robot_fault(e: &calsim::robot::file::RobotFileError) -> Fault {
+    Fault { path: Some(e.path.display().to_string()), key: Some(e.field.clone()), value: None }
+}
+
+/// The file, line (and column) and value of a joints file's error.
+fn joints_fault(e: &JointsCsvError) -> Fault {
+    let path = |p: &std::path::Path| Some(p.display().to_string());
+    match e {
+        JointsCsvError::File { path: p, .. } | JointsCsvError::Rows { path: p, .. } => Fault { path: path(p), ..Fault::default() },
+        JointsCsvError::Header { path: p, found } => Fault { path: path(p), key: Some("line 1".into()), value: Some(found.clone()) },
+        JointsCsvError::Fields { path: p, line, .. } => Fault { path: path(p), key: Some(format!("line {line}")), value: None },
+        JointsCsvError::Value { path: p, line, name, value, .. } => {
+            Fault { path: path(p), key: Some(format!("line {line}: {name}")), value: Some(value.clone()) }
+        }
+    }
 }
 
 /// The file a path of an error names, without a note the message adds to it (" (with
@@ -233,23 +299,6 @@ fn detached<T: Send>(
     }
 }
 
-fn check_threads(py: Python<'_>, threads: Option<u32>) -> PyResult<()> {
-    match threads {
-        Some(t) if !(1..=MOST_THREADS).contains(&t) => {
-            Err(input(py, "threads", format!("{t}: a number of worker threads within [1, {MOST_THREADS}]")))
-        }
-        _ => Ok(()),
-    }
-}
-
-fn check_realisations(py: Python<'_>, r: u32) -> PyResult<()> {
-    if (1..=MOST_REALISATIONS).contains(&r) {
-        Ok(())
-    } else {
-        Err(input(py, "realisations", format!("{r}: within [1, {MOST_REALISATIONS}]")))
-    }
-}
-
 /// Runs (or checks) the study of a scenario of any device: `calsim run` / `calsim check`.
 #[pyfunction]
 #[pyo3(signature = (scenario, *, out, check, seed=None, set_sizes=None, repetitions=None, threads=None, realisations=None, false_alarm=None, plots=true, recording=true, progress=None))]
@@ -269,10 +318,6 @@ fn run<'py>(
     recording: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_threads(py, threads)?;
-    if let Some(r) = realisations {
-        check_realisations(py, r)?;
-    }
     if let Some(sizes) = &set_sizes
         && sizes.is_empty()
     {
@@ -379,15 +424,6 @@ fn sweep<'py>(
     realisations: Option<u32>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_threads(py, threads)?;
-    if let Some(r) = realisations {
-        check_realisations(py, r)?;
-    }
-    if let Some((k, n)) = shard
-        && (n == 0 || n > MOST_SHARDS || k >= n)
-    {
-        return Err(input(py, "shard", format!("({k}, {n}): (k, K) with 1 <= K <= {MOST_SHARDS} and 0 <= k < K")));
-    }
     let spec = app::sweep::SweepSpec { file, out, shard, threads, realisations };
     let (r, warnings) = detached(py, progress, |o| app::sweep::run(&spec, o))?;
     let d = PyDict::new(py);
@@ -429,16 +465,6 @@ fn budget<'py>(
     threads: Option<u32>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_threads(py, threads)?;
-    check_realisations(py, realisations)?;
-    if let Some(f) = factors.iter().find(|f| !(f.is_finite() && (0.0..=100.0).contains(*f))) {
-        return Err(input(py, "factors", format!("{f}: a factor within [0, 100]")));
-    }
-    if let Some(r) = repetitions
-        && !(1..=calsim::study::MAX_REPETITIONS).contains(&r)
-    {
-        return Err(input(py, "repetitions", format!("{r}: within [1, {}]", calsim::study::MAX_REPETITIONS)));
-    }
     let spec = app::budget::BudgetSpec { scenario, out, realisations, factors, repetitions, threads };
     let (r, warnings) = detached(py, progress, |o| app::budget::run(&spec, o))?;
     let d = PyDict::new(py);
@@ -490,6 +516,183 @@ fn export<'py>(
     Ok(d)
 }
 
+/// Calibrates a real robot from a measurement file: `calsim calibrate`.
+#[pyfunction]
+#[pyo3(signature = (robot, measurements, *, out, folds=5, hold_out=None, hold_out_session=None, seed=1, params=None, outlier_threshold=None, plan_worlds=0, plan_noise_mm=None, plan_scenario=None, plots=true))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate<'py>(
+    py: Python<'py>,
+    robot: PathBuf,
+    measurements: PathBuf,
+    out: PathBuf,
+    folds: u32,
+    hold_out: Option<f64>,
+    hold_out_session: Option<String>,
+    seed: u64,
+    params: Option<Vec<String>>,
+    outlier_threshold: Option<f64>,
+    plan_worlds: u32,
+    plan_noise_mm: Option<f64>,
+    plan_scenario: Option<PathBuf>,
+    plots: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let args = app::calibrate::CalibrateArgs {
+        folds,
+        hold_out,
+        hold_out_session,
+        seed,
+        params,
+        outlier_threshold,
+        plan_worlds,
+        plan_noise_mm,
+        plan_scenario,
+        plots,
+        ..app::calibrate::CalibrateArgs::new(robot, measurements, out)
+    };
+    let (r, _) = detached(py, None, |_| app::calibrate::run(&args))?;
+    let c = &r.calibration;
+    let d = PyDict::new(py);
+    d.set_item("dest", &r.dir)?;
+    d.set_item("model", c.models[c.chosen].kind.map_or("before", |k| k.name()))?;
+    d.set_item("report", calsim::calibrate::report::terminal(c, &r.dir))?;
+    match &r.plan {
+        None => d.set_item("plan", py.None())?,
+        Some(p) => {
+            let plan = PyDict::new(py);
+            plan.set_item("scenario", &p.scenario)?;
+            plan.set_item("statistic", p.statistic.name())?;
+            plan.set_item("measured_mm", p.measured_mm)?;
+            plan.set_item("simulated_p10_mm", p.simulated_mm[0])?;
+            plan.set_item("simulated_mm", p.simulated_mm[1])?;
+            plan.set_item("simulated_p90_mm", p.simulated_mm[2])?;
+            plan.set_item("worlds", p.worlds)?;
+            plan.set_item("inside", p.inside)?;
+            d.set_item("plan", plan)?;
+        }
+    }
+    Ok(d)
+}
+
+/// Searches a design file's space, races and verifies the finalists: `calsim optimise`.
+#[pyfunction]
+#[pyo3(signature = (file, *, out, shard=None, merge=false, threads=None, method=None, plots=true, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn optimise<'py>(
+    py: Python<'py>,
+    file: PathBuf,
+    out: PathBuf,
+    shard: Option<(usize, usize)>,
+    merge: bool,
+    threads: Option<u32>,
+    method: Option<String>,
+    plots: bool,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use calsim::design::optimise::spec::Method;
+    let method = match method.as_deref() {
+        None => None,
+        Some("nelder_mead") => Some(Method::NelderMead),
+        Some("particle_swarm") => Some(Method::ParticleSwarm),
+        Some(other) => return Err(input(py, "method", format!("{other:?}: \"nelder_mead\" or \"particle_swarm\""))),
+    };
+    let spec = app::optimise::OptimiseSpec { file, out, shard, merge, threads, method, plots };
+    let (r, warnings) = detached(py, progress, |o| app::optimise::run(&spec, o))?;
+    let d = PyDict::new(py);
+    d.set_item("name", &r.name)?;
+    d.set_item("restarts", r.restarts)?;
+    d.set_item("evaluations", r.evaluations)?;
+    d.set_item("search_s", r.search_s)?;
+    d.set_item("finish_s", r.finish_s)?;
+    d.set_item("dest", &r.dest)?;
+    d.set_item("summary", &r.summary)?;
+    d.set_item("cost", &r.cost)?;
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
+/// The joint targets (and corrected Cartesian targets) of TCP targets: `calsim compensate`.
+#[pyfunction]
+#[pyo3(signature = (model, targets, *, nominal=None, out=None))]
+fn compensate<'py>(
+    py: Python<'py>,
+    model: PathBuf,
+    targets: PathBuf,
+    nominal: Option<PathBuf>,
+    out: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let spec = app::compensate::CompensateSpec { model, targets, nominal, out };
+    let (r, _) = detached(py, None, |_| app::compensate::run(&spec))?;
+    let d = PyDict::new(py);
+    d.set_item("csv", &r.csv)?;
+    d.set_item("targets", r.targets)?;
+    d.set_item("unreachable", &r.unreachable)?;
+    d.set_item("warnings", r.unreachable_line().into_iter().collect::<Vec<_>>())?;
+    Ok(d)
+}
+
+/// Table 8 of the TriCal paper over realisations: `calsim table8`.
+#[pyfunction]
+#[pyo3(signature = (scenario, *, realisations=1, pool=360, threads=None, progress=None))]
+fn table8<'py>(
+    py: Python<'py>,
+    scenario: PathBuf,
+    realisations: u32,
+    pool: u32,
+    threads: Option<u32>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let spec = app::table8::Table8Spec { scenario, realisations, pool, threads };
+    let (r, warnings) = detached(py, progress, |o| app::table8::run(&spec, o))?;
+    let rows = PyList::empty(py);
+    for row in &r.rows {
+        let x = PyDict::new(py);
+        x.set_item("instrument", row.instrument)?;
+        for (k, what) in ["median", "std", "max"].iter().enumerate() {
+            x.set_item(format!("published_{what}_mm"), row.published[k])?;
+            x.set_item(format!("calsim_{what}_mm"), row.calsim[k])?;
+        }
+        x.set_item("median_p10_mm", row.median_p10_p90[0])?;
+        x.set_item("median_p90_mm", row.median_p10_p90[1])?;
+        rows.append(x)?;
+    }
+    let d = PyDict::new(py);
+    d.set_item("rows", rows)?;
+    d.set_item("worlds", r.worlds)?;
+    d.set_item("run_s", r.run_s)?;
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
+/// A URDF arm as a calsim robot file: `calsim import-urdf`.
+#[pyfunction]
+#[pyo3(signature = (urdf, *, out, package_root=None, visual_meshes=false))]
+fn import_urdf<'py>(
+    py: Python<'py>,
+    urdf: PathBuf,
+    out: PathBuf,
+    package_root: Option<PathBuf>,
+    visual_meshes: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let options = app::import_urdf::ImportOptions { package_root, visual_fallback: visual_meshes };
+    let (r, _) = detached(py, None, |_| app::import_urdf::run(&urdf, &out, &options))?;
+    let d = PyDict::new(py);
+    d.set_item("out", &r.out)?;
+    d.set_item("lines", &r.lines)?;
+    Ok(d)
+}
+
+/// The tool frame, gravity torques and deflections at joint values: `calsim fk`.
+#[pyfunction]
+#[pyo3(signature = (robot, joints, *, out=None))]
+fn fk<'py>(py: Python<'py>, robot: PathBuf, joints: PathBuf, out: Option<PathBuf>) -> PyResult<Bound<'py, PyDict>> {
+    let spec = app::fk::FkSpec { robot, joints, out };
+    let (r, _) = detached(py, None, |_| app::fk::run(&spec))?;
+    let d = PyDict::new(py);
+    d.set_item("csv", &r.csv)?;
+    d.set_item("rows", r.rows)?;
+    Ok(d)
+}
+
 /// The native module.
 #[pymodule]
 fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -504,11 +707,18 @@ fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("InputError", py.get_type::<InputError>())?;
     m.add("StudyError", py.get_type::<StudyError>())?;
     m.add("FileError", py.get_type::<FileError>())?;
+    m.add("DataError", py.get_type::<DataError>())?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(budget, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(optimise, m)?)?;
+    m.add_function(wrap_pyfunction!(compensate, m)?)?;
+    m.add_function(wrap_pyfunction!(table8, m)?)?;
+    m.add_function(wrap_pyfunction!(import_urdf, m)?)?;
+    m.add_function(wrap_pyfunction!(fk, m)?)?;
     Ok(())
 }
 

@@ -26,7 +26,11 @@ INPUTS = ["scenarios", "robots", "docs", "reference", "python"]
 RUN_BY_CI = {
     "cargo test --locked": "cargo test --locked",
     "bash .ci/run": "",  # CI itself
-    'pip install "./python[progress]"': 'bin/pip" install --quiet --disable-pip-version-check "./python[progress,test]"',
+    # The package as pip builds it from the clone (maturin, its build backend) is the wheel that
+    # .ci/run builds with maturin and installs into a fresh venv without Rust.
+    'pip install "./python[progress]"': 'bin/maturin" build --release --strip',
+    "pip install maturin && (cd python && maturin build --release --strip --out ../dist)": 'bin/maturin" build --release --strip',
+    'pip install "$(ls dist/calsim-*.whl)[progress]"': 'bin/pip" install --quiet --disable-pip-version-check "$wheel[progress]"',
 }
 
 

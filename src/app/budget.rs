@@ -39,6 +39,9 @@ pub struct BudgetRun {
     pub summary: String,
 }
 
+/// Most realisations a budget takes.
+pub const MOST_REALISATIONS: u32 = 10_000;
+
 /// Most what-if factors a budget takes.
 pub const MOST_FACTORS: usize = 8;
 
@@ -48,6 +51,17 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
     let t0 = Instant::now();
     if spec.factors.len() > MOST_FACTORS {
         return Err(Error::input("--factors", format!("{} factors, at most {MOST_FACTORS}", spec.factors.len())));
+    }
+    if let Some(f) = spec.factors.iter().find(|f| !(f.is_finite() && (0.0..=100.0).contains(*f))) {
+        return Err(Error::input("--factors", format!("{f}: a factor within [0, 100]")));
+    }
+    if !(1..=MOST_REALISATIONS).contains(&spec.realisations) {
+        return Err(Error::input("--realisations", format!("{}: within [1, {MOST_REALISATIONS}]", spec.realisations)));
+    }
+    if let Some(r) = spec.repetitions
+        && !(1..=crate::study::MAX_REPETITIONS).contains(&r)
+    {
+        return Err(Error::input("--repetitions", format!("{r}: within [1, {}]", crate::study::MAX_REPETITIONS)));
     }
     // The budget's name is the scenario file's stem: one path component, checked before anything runs.
     crate::io::names::of_file(&spec.scenario)?;

@@ -1,12 +1,15 @@
 //! The application layer, as cargo's `ops` beside its thin commands: every command of calsim as a
 //! library function that takes a spec and returns a report value (`run`, `check`, `sweep`,
-//! `merge`, `budget`, `table8`, `export`, `compensate`, `import_urdf`). The CLI, the tests and the
+//! `merge`, `budget`, `table8`, `export`, `compensate`, `import_urdf`, `calibrate`, `fk`,
+//! `optimise`). The CLI, the tests and the
 //! Python package are its callers; it knows no terminal: what happens while a command runs reaches
 //! an [`Observer`], which sees the state and never steers it.
 
 pub mod budget;
+pub mod calibrate;
 pub mod compensate;
 pub mod export;
+pub mod fk;
 pub mod import_urdf;
 pub mod keys;
 pub mod optimise;
@@ -60,6 +63,12 @@ pub enum Error {
     /// A robot file is unusable.
     #[error(transparent)]
     RobotFile(#[from] crate::robot::file::RobotFileError),
+    /// A joints file is unusable.
+    #[error(transparent)]
+    Joints(#[from] crate::robot::fk::JointsCsvError),
+    /// A calibration cannot run (its robot file, its measurements, an option, the fit).
+    #[error(transparent)]
+    Calibrate(#[from] crate::calibrate::CalibrateError),
     /// The results cannot go where they were asked to.
     #[error(transparent)]
     OutDir(#[from] OutDirError),
@@ -125,6 +134,9 @@ pub const MOST_THREADS: u32 = 1024;
 /// rayon; set but empty counts as unset), else every core.
 pub fn thread_pool(threads: Option<u32>) -> Result<(rayon::ThreadPool, usize), Error> {
     let asked = match threads {
+        Some(t) if !(1..=MOST_THREADS).contains(&t) => {
+            return Err(Error::input("--threads", format!("{t}: a number of worker threads within [1, {MOST_THREADS}]")));
+        }
         Some(t) => t,
         None => match std::env::var_os("RAYON_NUM_THREADS").filter(|v| !v.is_empty()) {
             None => 0,

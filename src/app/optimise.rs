@@ -63,6 +63,14 @@ fn opt_err(e: OptimiseError) -> Error {
 /// Runs the optimiser of `spec.file` (or one shard of its restarts, or only their merge).
 pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseReport, Error> {
     let _inputs = crate::io::inputs::Ledger::open();
+    if let Some((k, n)) = spec.shard {
+        if n == 0 || n > super::sweep::MOST_SHARDS || k >= n {
+            return Err(Error::input("--shard", format!("{k}/{n}: k/K with 1 <= K <= {} and 0 <= k < K", super::sweep::MOST_SHARDS)));
+        }
+        if spec.merge {
+            return Err(Error::input("--merge", "merge or one shard of the restarts, not both: merge when every shard has run"));
+        }
+    }
     crate::io::names::of_file(&spec.file)?;
     let mut space = optimise::spec::load(&spec.file).map_err(design_err)?;
     if let Some(m) = spec.method {

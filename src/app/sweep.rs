@@ -57,12 +57,27 @@ pub struct MergeReport {
     pub summary: String,
 }
 
+/// Most shards of a sweep.
+pub const MOST_SHARDS: usize = 100_000;
+/// Most realisations a sweep takes (the most of an adaptive one).
+pub const MOST_REALISATIONS: u32 = 10_000;
+
 /// Runs the sweep of `spec.file` (or one shard of it), then, unsharded, merges it.
 pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Error> {
     let _inputs = crate::io::inputs::Ledger::open();
     let t0 = Instant::now();
     // The sweep's name is its file's stem: one path component, checked before anything runs.
     crate::io::names::of_file(&spec.file)?;
+    if let Some((k, n)) = spec.shard
+        && (n == 0 || n > MOST_SHARDS || k >= n)
+    {
+        return Err(Error::input("--shard", format!("{k}/{n}: k/K with 1 <= K <= {MOST_SHARDS} and 0 <= k < K")));
+    }
+    if let Some(r) = spec.realisations
+        && !(1..=MOST_REALISATIONS).contains(&r)
+    {
+        return Err(Error::input("--realisations", format!("{r}: within [1, {MOST_REALISATIONS}]")));
+    }
     let sweep = sweep::spec::load_with(&spec.file, spec.realisations)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
     crate::io::out_dir::prepare_work(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string(), sweep::SHARD_MARKER)?;

@@ -46,6 +46,11 @@ pub struct Table8Report {
     pub run_s: f64,
 }
 
+/// Most realisations of a Table 8.
+pub const MOST_REALISATIONS: u32 = 10_000;
+/// Configurations of an external instrument's pool.
+pub const POOL: std::ops::RangeInclusive<u32> = 100..=100_000;
+
 /// Median, std and max after calibration (medians over the repetitions at the table set size) of
 /// the TriCal, the laser tracker and the optical CMM in one world.
 fn world(s: &TricalScenario, seed: u64, pool_size: u32) -> Result<[[f64; 3]; 3], String> {
@@ -60,6 +65,12 @@ fn world(s: &TricalScenario, seed: u64, pool_size: u32) -> Result<[[f64; 3]; 3],
 
 /// Calibrates the robot of `spec.scenario` with the three instruments in each world.
 pub fn run(spec: &Table8Spec, observer: &dyn Observer) -> Result<Table8Report, Error> {
+    if !(1..=MOST_REALISATIONS).contains(&spec.realisations) {
+        return Err(Error::input("--realisations", format!("{}: within [1, {MOST_REALISATIONS}]", spec.realisations)));
+    }
+    if !POOL.contains(&spec.pool) {
+        return Err(Error::input("--pool", format!("{}: within [{}, {}]", spec.pool, POOL.start(), POOL.end())));
+    }
     let t0 = Instant::now();
     let s = trical::spec::load(&spec.scenario)?;
     let (pool, threads) = thread_pool(spec.threads)?;

@@ -1,0 +1,104 @@
+//! `calibrate`: a real robot calibrated from measured data (the options of the CLI made into
+//! [`crate::calibrate::Options`]; every bound is checked by [`crate::calibrate::calibrate`]).
+
+use std::path::PathBuf;
+
+use super::Error;
+use crate::calibrate::{CalibrateError, CalibrateSpec, CalibrationReport, Options, validation::Split};
+use crate::robot::ParamSet;
+
+/// What `calibrate` is asked, as the CLI's options give it.
+#[derive(Clone, Debug)]
+pub struct CalibrateArgs {
+    /// The robot file.
+    pub robot: PathBuf,
+    /// The measurement file (CSV).
+    pub measurements: PathBuf,
+    /// The directory the report goes to (in `<measurements stem>.calibration`).
+    pub out: PathBuf,
+    /// Cross-validation folds.
+    pub folds: u32,
+    /// Fraction of each session's poses held out (`None`: the default, unless a session is held out).
+    pub hold_out: Option<f64>,
+    /// Hold out every pose of this session instead.
+    pub hold_out_session: Option<String>,
+    /// Seed of the split, the folds and the prediction's draws.
+    pub seed: u64,
+    /// Robot parameters of the most complete model by name (`None`: the default set).
+    pub params: Option<Vec<String>>,
+    /// Outlier threshold, robust standard deviations (`None`: the default).
+    pub outlier_threshold: Option<f64>,
+    /// Worlds of the plan's simulation (0: none).
+    pub plan_worlds: u32,
+    /// The plan's noise per coordinate, mm.
+    pub plan_noise_mm: Option<f64>,
+    /// The scenario that planned the calibration.
+    pub plan_scenario: Option<PathBuf>,
+    /// Draw the figures.
+    pub plots: bool,
+}
+
+impl CalibrateArgs {
+    /// The CLI's defaults for `robot` and `measurements`, the report in `out`.
+    pub fn new(robot: PathBuf, measurements: PathBuf, out: PathBuf) -> Self {
+        let d = Options::default();
+        Self {
+            robot,
+            measurements,
+            out,
+            folds: d.folds as u32,
+            hold_out: None,
+            hold_out_session: None,
+            seed: d.seed,
+            params: None,
+            outlier_threshold: None,
+            plan_worlds: 0,
+            plan_noise_mm: None,
+            plan_scenario: None,
+            plots: true,
+        }
+    }
+
+    /// The library's spec of these options (a parameter name that is none is an error of `params`).
+    pub fn spec(&self) -> Result<CalibrateSpec, Error> {
+        let defaults = Options::default();
+        let option = |key: &str, message: String| Error::Calibrate(CalibrateError::Option { key: key.into(), message });
+        let params = match &self.params {
+            Some(names) => Some(ParamSet::from_names(names).map_err(|e| option("params", e.to_string()))?),
+            None => None,
+        };
+        // The plan's flags without a plan: refused as --plan-scenario is.
+        if self.plan_noise_mm.is_some() && self.plan_worlds == 0 {
+            return Err(option("plan-noise-mm", "a plan needs --plan-worlds N (N >= 1)".into()));
+        }
+        let split = match (&self.hold_out_session, self.hold_out) {
+            (Some(_), Some(f)) => return Err(option("hold-out", format!("{f}: either a fraction or a session held out, not both"))),
+            (Some(session), None) => Split::Session(session.clone()),
+            (None, Some(fraction)) => Split::Poses { fraction },
+            (None, None) => defaults.split.clone(),
+        };
+        let options = Options {
+            params,
+            folds: self.folds as usize,
+            split,
+            seed: self.seed,
+            outlier_threshold: self.outlier_threshold.unwrap_or(defaults.outlier_threshold),
+            plots: self.plots,
+            ..defaults
+        };
+        Ok(CalibrateSpec {
+            robot_file: self.robot.clone(),
+            measurements: self.measurements.clone(),
+            out: self.out.clone(),
+            options,
+            plan_worlds: self.plan_worlds as usize,
+            plan_noise_mm: self.plan_noise_mm,
+            plan_scenario: self.plan_scenario.clone(),
+        })
+    }
+}
+
+/// Calibrates and writes the report (`<out>/<measurements stem>.calibration`).
+pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport, Error> {
+    Ok(crate::calibrate::calibrate(&args.spec()?)?)
+}
