@@ -72,3 +72,29 @@ fn every_shell_command_of_the_readme_is_one_ci_runs() {
     }
     assert!(count >= 10, "the README shows {count} commands");
 }
+
+/// The quick start's output block is what its first command prints, line for line: the study of
+/// `scenarios/irb120_trical.toml` run as the README runs it (the figures and the recording skipped,
+/// which changes no printed line), its stdout the block followed by one line of wall times.
+#[test]
+fn the_quick_start_output_is_what_the_command_prints() {
+    let readme = std::fs::read_to_string(common::repo().join("README.md")).expect("README.md");
+    let quick = readme.split("## Quick start").nth(1).expect("a Quick start section");
+    assert!(quick.contains("cargo run --release -- run scenarios/irb120_trical.toml"), "the quick start runs another command");
+    let block = quick.split("```text\n").nth(1).and_then(|b| b.split("```").next()).expect("an output block in the Quick start");
+    let tmp = common::scratch("readme");
+    let out = common::calsim()
+        .args(["run", "scenarios/irb120_trical.toml", "--no-plots", "--no-recording", "--out"])
+        .arg(tmp.path())
+        .output()
+        .expect("calsim runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8(out.stdout).expect("UTF-8");
+    let (printed, timing) = stdout.trim_end().rsplit_once('\n').expect("more than one line");
+    assert!(timing.starts_with("timing: study ") && timing.contains("results written in"), "last line: {timing}");
+    let (printed, block) = (printed.trim_end(), block.trim_end());
+    for (k, (a, b)) in printed.lines().zip(block.lines()).enumerate() {
+        assert_eq!(a, b, "line {} of the README's output block differs from what the command prints", k + 1);
+    }
+    assert_eq!(printed.lines().count(), block.lines().count(), "the command prints:\n{printed}");
+}
