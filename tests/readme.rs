@@ -53,6 +53,7 @@ fn every_shell_command_of_the_readme_is_one_ci_runs() {
     let readme = std::fs::read_to_string(repo.join("README.md")).expect("README.md");
     let ci = std::fs::read_to_string(repo.join(".ci/run")).expect(".ci/run");
     assert!(ci.contains("scripts/ci/readme_commands.py"), ".ci/run does not run the README's commands");
+    assert!(ci.contains("scripts/ci/doc_numbers.py"), ".ci/run does not compare the documented numbers with their commands");
     let script = std::fs::read_to_string(repo.join("scripts/ci/readme_commands.py")).expect("the script");
     let mut count = 0;
     for block in readme.split("```sh\n").skip(1) {

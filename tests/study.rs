@@ -171,9 +171,8 @@ fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
 /// set with its machine-readable verdict (check.json, and JUnit XML on request, one test case per
 /// figure and a failure per miss) and no temporary directory behind, and exits by its verdict. The
 /// figures themselves are not judged in one world here: one world is a draw (a check that passes
-/// only at one seed is a regression lock, issue 30), and the world of seed 2018 misses the
-/// after-calibration median's band since the campaign's streams were keyed per try (0.248 mm
-/// against 0.208 +-15 %; the model's median over 400 worlds is 0.181 mm). The gate is the check
+/// only at one seed is a regression lock), and the world of seed 2018 lies outside the
+/// after-calibration median's band (0.248 mm against 0.208 +-15 %). The gate is the check
 /// over the scenario's 30 worlds, which CI runs with the release binary (.ci/run).
 #[test]
 fn ci_check_of_the_reduced_scenario_passes_and_writes_every_result() {
