@@ -121,12 +121,22 @@ def sweep_table(out: str) -> str:
     )
 
 
+def run_block(out: str) -> str:
+    """The terminal output of a run, its last line (the wall times) written as `timing: ...`."""
+    lines = out.rstrip("\n").split("\n")
+    if not lines[-1].startswith("timing: "):
+        raise SystemExit(f"doc_numbers: the run's last line is not its timing: {lines[-1]!r}")
+    return "```text\n" + "\n".join(lines[:-1]) + "\ntiming: ...\n```\n"
+
+
 # name: (page, command, how the excerpt is made from the command's stdout)
 EXCERPTS = {
     "readme-check": ("README.md", CHECK_30, readme_check),
     "readme-budget": ("README.md", BUDGET, readme_budget),
     "guide-budget": ("docs/guide-budget.md", BUDGET, guide_budget),
     "guide-sweeps-layout": ("docs/guide-sweeps.md", SWEEP, sweep_table),
+    "guide-reproduce-trical": ("docs/guide-reproduce.md", "calsim run scenarios/irb120_trical.toml --no-plots --no-recording", run_block),
+    "guide-reproduce-spms": ("docs/guide-reproduce.md", "calsim run scenarios/er20c10_spms.toml --no-plots --no-recording", run_block),
 }
 
 
