@@ -252,8 +252,8 @@ pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks:
         let _ = writeln!(
             s,
             "A parameter whose interval (its mean +- 2 standard deviations of the representative set's fit, sigma^2 (J^T J)^-1 \
-             with sigma from the fit's residuals) is wider than its value is not determined by the sets: it is shown as such, \
-             not compared with the truth.\n"
+             with sigma from the fit's residuals) holds zero, 2 standard deviations larger than its value, is not determined by \
+             the sets: it is shown as such, not compared with the truth.\n"
         );
     }
     let _ = writeln!(
@@ -263,7 +263,7 @@ pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks:
     );
     for (j, p) in f.table7.iter().enumerate() {
         if let Some(half) = fit.as_ref().and_then(|v| v.get(j)).map(|sd| 2.0 * sd)
-            && !(half < p.mean.abs())
+            && (half.is_nan() || half >= p.mean.abs())
         {
             let (pm, ps) = p.published.map(|(m, sd)| (format!("{m:.3}"), format!("{sd:.3}"))).unwrap_or(("-".into(), "-".into()));
             let _ = writeln!(
