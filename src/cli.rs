@@ -375,6 +375,10 @@ struct RunArgs {
     /// Also write the check's verdict as JUnit XML to this file (check.json is always written).
     #[arg(long)]
     junit: Option<PathBuf>,
+    /// Also print the figures of realisation 0, the one world whose results are written (`check`
+    /// over several worlds prints only the verdict over them without it).
+    #[arg(long)]
+    single_world: bool,
 }
 
 /// Set sizes given on the command line.
@@ -567,17 +571,35 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         check,
     };
     let r = app::run::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
-    println!("{}", terminal_table(&r.checks));
-    println!("timing: {}, results written in {:.3} s (recording {:.3} s) to {}", r.timing, r.write_s, r.recording_s, r.dest.display());
-    if let Some(d) = &r.distribution {
-        println!(
-            "\nover {} realisations (realisation 0 is the run above): a figure misses when the interval of its median lies wholly \
-             outside its band, open when it straddles an edge, unresolved (a failure) when too few worlds gave it a value for a bounded \
-             interval; false-alarm rate {} over the figures checked",
-            r.realisations_run, r.false_alarm
-        );
-        println!("{}", distribution_table(d));
+    let timing = format!("timing: {}, results written in {:.3} s (recording {:.3} s) to {}", r.timing, r.write_s, r.recording_s, r.dest.display());
+    match &r.distribution {
+        Some(d) => {
+            println!(
+                "over {} realisations: a figure misses when the interval of its median lies wholly outside its band, open when it \
+                 straddles an edge, unresolved (a failure) when too few worlds gave it a value for a bounded interval; false-alarm \
+                 rate {} over the figures checked",
+                r.realisations_run, r.false_alarm
+            );
+            println!("{}", distribution_table(d));
+            if args.single_world || !check {
+                println!("realisation 0, the world whose results are written (one draw of each figure):");
+                println!("{}", terminal_table(&r.checks, false));
+            }
+        }
+        // A check over one world judges that world's values; a run shows them as one draw.
+        None if check => println!("{}", terminal_table(&r.checks, true)),
+        None => {
+            println!("{}", terminal_table(&r.checks, false));
+            println!("One simulated world: one draw of each figure. Whether the model reproduces a figure is judged over worlds:");
+            // The scenario's own check when it judges over worlds; otherwise the worlds to ask for.
+            let worlds = match r.check_worlds {
+                (n, _) if n > 1 => String::new(),
+                (_, fewest) => format!(" --realisations {}", fewest.max(30)),
+            };
+            println!("`calsim check {}{worlds}`.", args.scenario.display());
+        }
     }
+    println!("{timing}");
     if !check {
         return Ok(ExitCode::SUCCESS);
     }

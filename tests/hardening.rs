@@ -1,4 +1,4 @@
-//! The third round of hardening (issue 34): nothing a user gives calsim crashes it, hangs it,
+//! Hardening: nothing a user gives calsim crashes it, hangs it,
 //! overwrites their files or is silently accepted. One test per class of bad input, each through
 //! the binary: exit code 2 (1 for `compensate` with some targets out of reach), one line on
 //! standard error naming the file (and key), nothing written, no temporary directory left.

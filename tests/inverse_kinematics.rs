@@ -172,7 +172,7 @@ fn damped_and_direct_ik_seeded_a_half_turn_away_do_not_accept_the_turned_frame()
 /// `compensate` takes targets in the tool frame (the robot file's flange, `flange_rpy_deg`, at the
 /// TCP): on the KR 6 (flange a half-turn from MDH frame 6), targets made from the tool frame at 100
 /// random configurations come back with the tool frame on them (model error below 1e-6 mm and
-/// 1e-6 deg), where the flange used to be ignored and the tool came back turned 180 deg.
+/// 1e-6 deg), not turned 180 deg as a tool whose flange were ignored would come back.
 #[test]
 fn compensate_reaches_targets_in_the_flange_frame() {
     let file = calsim::robot::file::RobotFile::load(&common::repo().join("robots/kr6r900sixx.toml")).expect("the KR 6 loads");

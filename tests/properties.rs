@@ -1,4 +1,4 @@
-//! Property tests of the input surfaces (issue 34): a real, valid input is mutated at random
+//! Property tests of the input surfaces: a real, valid input is mutated at random
 //! (lines dropped, repeated, swapped or cut short, numbers made extreme, junk put in; for the JSON
 //! of a shard, keys dropped, elements duplicated, arrays grown and shrunk, numbers made NaN or
 //! huge) and given to the command that reads it. Every case must end in exit 0, or in exit 2 with

@@ -53,6 +53,7 @@ fn every_shell_command_of_the_readme_is_one_ci_runs() {
     let readme = std::fs::read_to_string(repo.join("README.md")).expect("README.md");
     let ci = std::fs::read_to_string(repo.join(".ci/run")).expect(".ci/run");
     assert!(ci.contains("scripts/ci/readme_commands.py"), ".ci/run does not run the README's commands");
+    assert!(ci.contains("scripts/ci/doc_numbers.py"), ".ci/run does not compare the documented numbers with their commands");
     let script = std::fs::read_to_string(repo.join("scripts/ci/readme_commands.py")).expect("the script");
     let mut count = 0;
     for block in readme.split("```sh\n").skip(1) {
@@ -71,4 +72,37 @@ fn every_shell_command_of_the_readme_is_one_ci_runs() {
         }
     }
     assert!(count >= 10, "the README shows {count} commands");
+}
+
+/// The quick start's output block is what its first command prints, line for line: the study of
+/// `scenarios/irb120_trical.toml` run as the README runs it (the figures and the recording skipped,
+/// which changes no printed line), its stdout the block line for line, the wall times (which vary)
+/// written `timing: ...`.
+#[test]
+fn the_quick_start_output_is_what_the_command_prints() {
+    let readme = std::fs::read_to_string(common::repo().join("README.md")).expect("README.md");
+    let quick = readme.split("## Quick start").nth(1).expect("a Quick start section");
+    assert!(quick.contains("cargo run --release -- run scenarios/irb120_trical.toml"), "the quick start runs another command");
+    let block = quick.split("```text\n").nth(1).and_then(|b| b.split("```").next()).expect("an output block in the Quick start");
+    let tmp = common::scratch("readme");
+    let out = common::calsim()
+        .args(["run", "scenarios/irb120_trical.toml", "--no-plots", "--no-recording", "--out"])
+        .arg(tmp.path())
+        .output()
+        .expect("calsim runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8(out.stdout).expect("UTF-8");
+    let (printed, timing) = stdout.trim_end().rsplit_once('\n').expect("more than one line");
+    assert!(timing.starts_with("timing: study ") && timing.contains("results written in"), "last line: {timing}");
+    let block = block.trim_end().strip_suffix("timing: ...").expect("the block ends with the line of wall times, `timing: ...`");
+    let (printed, block) = (printed.trim_end(), block.trim_end());
+    for (k, (a, b)) in printed.lines().zip(block.lines()).enumerate() {
+        assert_eq!(a, b, "line {} of the README's output block differs from what the command prints", k + 1);
+    }
+    assert_eq!(printed.lines().count(), block.lines().count(), "the command prints:\n{printed}");
+    // One world is one draw: no verdict, and another study's rows say so.
+    assert!(!printed.contains("MISS") && !printed.lines().any(|l| l.ends_with(" pass")), "{printed}");
+    let table8: Vec<&str> = printed.lines().filter(|l| l.starts_with("Table 8, laser tracker") || l.starts_with("Table 8, optical CMM")).collect();
+    assert_eq!(table8.len(), 6, "{printed}");
+    assert!(table8.iter().all(|l| l.ends_with("another study, ref. [9]")), "{table8:?}");
 }

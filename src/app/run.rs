@@ -146,6 +146,9 @@ pub struct RunReport {
     pub false_alarm: f64,
     /// The verdict as written to `check.json` (a check only).
     pub check_report: Option<CheckReport>,
+    /// The scenario's `study.check_realisations` (the worlds `check` judges over by default), and
+    /// the fewest worlds that judge every figure at the scenario's false-alarm rate.
+    pub check_worlds: (u32, usize),
 }
 
 impl RunReport {
@@ -269,6 +272,7 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     if let Some(w) = fit_health(&spec.scenario, outcome.fits())? {
         observer.warning(&w);
     }
+    let check_worlds = (study.check_realisations, crate::study::check::fewest_worlds(&checks, study.check_false_alarm));
     Ok(RunReport {
         name: h.name.clone(),
         kind,
@@ -283,6 +287,7 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         realisations_run,
         false_alarm,
         check_report,
+        check_worlds,
     })
 }
 

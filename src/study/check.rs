@@ -75,6 +75,9 @@ pub struct Check {
     pub bound: Option<Bound>,
     /// Passed, or `None` when the scenario sets no band for it.
     pub pass: Option<bool>,
+    /// Why the figure lies outside what the model simulates (a figure of another study's
+    /// instrument), shown instead of a comparison of one world with the band.
+    pub scope: Option<String>,
 }
 
 impl Check {
@@ -108,6 +111,24 @@ impl Check {
             band: bound.as_ref().map(&describe).unwrap_or_else(|| "-".into()),
             bound,
             pass: bound.map(|b| b.holds(value)),
+            scope: None,
+        }
+    }
+
+    /// The figure marked as outside the model's scope, with the reason shown beside it.
+    pub fn outside_scope(mut self, why: &str) -> Self {
+        self.scope = Some(why.into());
+        self
+    }
+
+    /// What one world says of the figure: `in band`, `outside band`, the reason it lies outside
+    /// the model's scope, or `-` without a bound. One world is one draw: no verdict.
+    pub fn this_world(&self) -> &str {
+        match (&self.scope, self.pass) {
+            (Some(why), _) => why,
+            (None, Some(true)) => "in band",
+            (None, Some(false)) => "outside band",
+            (None, None) => "-",
         }
     }
 
@@ -297,28 +318,43 @@ fn interval_with_missing(sorted: &[f64], missing: usize, confidence: f64) -> (f6
     }
 }
 
-/// The published-versus-reproduced table of a summary, under a heading.
+/// The published-versus-reproduced table of a summary (one world), under a heading: each figure
+/// of this world beside its band, without a verdict (one world is one draw; `calsim check` judges
+/// the figures over worlds).
 pub fn checks_markdown(heading: &str, checks: &[Check]) -> String {
-    let mut s = format!("## {heading}\n\n| figure | published | calsim | band | result |\n|---|---|---|---|---|\n");
+    let mut s = format!(
+        "## {heading}\n\nOne simulated world, one draw of each figure; whether the model reproduces a figure is judged over \
+         worlds by `calsim check`.\n\n| figure | published | calsim (this world) | band | this world |\n|---|---|---|---|---|\n"
+    );
     for c in checks {
-        let v = if c.pass == Some(false) { "**miss**" } else { c.verdict() };
-        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, v);
+        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, c.this_world());
     }
     s
 }
 
-/// The comparison as a text table for the terminal (columns as wide as their widest cell).
-pub fn terminal_table(rows: &[Check]) -> String {
+/// The comparison as a text table for the terminal (columns as wide as their widest cell). With
+/// `verdict`, the last column is the check's verdict on these values (`pass`, `MISS`); without,
+/// what this one world says of each figure ([`Check::this_world`]).
+pub fn terminal_table(rows: &[Check], verdict: bool) -> String {
     let width = |head: &str, f: &dyn Fn(&Check) -> usize| rows.iter().map(f).max().unwrap_or(0).max(head.len());
+    let (head_c, head_v) = if verdict { ("calsim", "result") } else { ("this world", "this world") };
     let wf = width("figure", &|r| r.figure.chars().count());
     let wp = width("published", &|r| r.published.chars().count());
-    let wc = width("calsim", &|r| r.reproduced.chars().count()).max(10);
+    let wc = width(head_c, &|r| r.reproduced.chars().count()).max(10);
     let wb = width("band", &|r| r.band.chars().count());
     let mut s = String::new();
-    let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  result", "figure", "published", "calsim", "band");
+    let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  {head_v}", "figure", "published", head_c, "band");
     for r in rows {
-        let verdict = if r.pass == Some(false) { "MISS" } else { r.verdict() };
-        let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  {verdict}", r.figure, r.published, r.reproduced, r.band);
+        let last = match (verdict, r.pass) {
+            (true, Some(false)) => "MISS",
+            (true, _) => r.verdict(),
+            (false, _) => r.this_world(),
+        };
+        let last = match (&r.scope, verdict) {
+            (Some(why), true) => format!("{last} ({why})"),
+            _ => last.to_string(),
+        };
+        let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  {last}", r.figure, r.published, r.reproduced, r.band);
     }
     s
 }
@@ -402,7 +438,9 @@ pub fn distribution_table(rows: &[DistributionCheck]) -> String {
     };
     let mut s = line(head, "result");
     for (d, c) in rows.iter().zip(&cells) {
-        s.push_str(&line([&c[0], &c[1], &c[2], &c[3], &c[4], &c[5], &c[6]], d.verdict.map_or("-", Verdict::word)));
+        let verdict = d.verdict.map_or("-", Verdict::word);
+        let verdict = d.row.scope.as_ref().map_or_else(|| verdict.to_string(), |why| format!("{verdict} ({why})"));
+        s.push_str(&line([&c[0], &c[1], &c[2], &c[3], &c[4], &c[5], &c[6]], &verdict));
     }
     s
 }

@@ -133,8 +133,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
     // The tornado in the order of the shares table, every bar and dot a change from every source
     // on read per world: at the all-on p95 plus the median of the paired differences, with their
     // interval (the medians over worlds of two configurations' p95 differ by more than the
-    // paired change where the worlds spread: repeatability x2 read 0.459 against 0.348 mm while
-    // the per-world change was -0.019 mm, -0.111 to +0.114).
+    // paired change where the worlds spread).
     let order: Vec<usize> = b.shares.iter().map(|s| s.source).chain(b.lines.iter().map(|l| l.source)).collect();
     let mut lines: Vec<&super::Line> = b.lines.iter().collect();
     lines.sort_by_key(|l| order.iter().position(|&s| s == l.source).unwrap_or(usize::MAX));
@@ -317,34 +316,45 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
     let _ = writeln!(
         s,
         "p95 of the validation error after calibration at the table set size, median over realisations: {} mm with every \
-         source, {} mm with none (the solver's floor). Share (removed, medians): the square of what removing a source saves \
-         from the whole (medians over realisations), over the sum; where it differs from the share by more than 0.15 the \
-         sources interact.\n",
+         source, {} mm with none (the solver's floor).\n",
         f3(b.all_mm),
         f3(b.none_mm)
     );
     let conf = 100.0 * super::CONFIDENCE;
     let _ = writeln!(
         s,
-        "Over worlds (the unit of independence: every configuration runs in the same worlds): share = the mean over worlds of \
-         the square a source adds alone to the floor's p95, over the mean of the sum of those squares, with its {conf:.0} % \
-         bootstrap-t interval; effect = the p95 alone minus the floor's, median of the per-world differences with its {conf:.0} % \
-         interval; resolved: the sign test over worlds tells the effect from none; ranked: tells this source's added square from \
-         the next one's. (Before the intervals, the share was the medians' squares over their sum: it moved with a few worlds.)\n"
+        "Every figure of this table is read per world (the unit of independence: every configuration runs in the same worlds). \
+         Share: the mean over worlds of the square a source adds alone to the floor's p95, over the mean of the sum of those \
+         squares, with its {conf:.0} % bootstrap-t interval; effect: the p95 alone minus the floor's, median of the per-world \
+         differences with its {conf:.0} % interval; resolved: the sign test over worlds tells the effect from none; ranked: tells \
+         this source's added square from the next one's; at xF: the change of the p95 from every source on when the source is \
+         scaled by F, median of the per-world differences with its {conf:.0} % interval (`noise`: not told from none).\n"
     );
     for w in b.warnings {
         let _ = writeln!(s, "**Warning:** {w}.\n");
     }
     let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
-    let _ = write!(
-        s,
-        "| source | value | share ({conf:.0} % interval) | effect alone, mm | resolved | ranked above next | share (removed, medians) | p95 alone, mm | p95 without it, mm |"
-    );
+    let _ = write!(s, "| source | value | share ({conf:.0} % interval) | effect alone, mm | resolved | ranked above next |");
     for f in &factors {
-        let _ = write!(s, " p95 at x{f}, mm (vs all on) |");
+        let _ = write!(s, " at x{f}, mm |");
     }
-    let _ = writeln!(s, " interaction |");
-    let _ = writeln!(s, "|{}", "---|".repeat(10 + factors.len()));
+    let _ = writeln!(s, "\n|{}", "---|".repeat(6 + factors.len()));
+    // The paired change of configuration (`mode`, factor) of `source` from every source on.
+    let paired = |source: usize, mode: &str, factor: Option<f64>| {
+        b.configs
+            .iter()
+            .position(|c| c.mode == mode && c.source == Some(source) && factor.is_none_or(|f| c.factor == f))
+            .and_then(|i| b.against[i])
+            .map_or("-".to_string(), |p| {
+                format!(
+                    "{:+.3} ({:+.3} to {:+.3}){}",
+                    p.median,
+                    p.interval.0,
+                    p.interval.1,
+                    if p.separated(super::CONFIDENCE) { "" } else { ", noise" }
+                )
+            })
+    };
     for sh in b.shares {
         let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
         let src = &b.sources[l.source];
@@ -356,7 +366,7 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
         let e = &sh.effect;
         let _ = write!(
             s,
-            "| {} | {value} | {:.2} ({:.2}-{:.2}) | {} ({}-{}) | {} | {} | {:.2} | {} | {} |",
+            "| {} | {value} | {:.2} ({:.2}-{:.2}) | {} ({}-{}) | {} | {} |",
             src.label,
             sh.share,
             sh.interval.0,
@@ -366,26 +376,47 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
             f3(e.interval.1),
             if sh.resolved { "yes" } else { "no: within the noise" },
             sh.above_next.map_or("-", |(_, r)| if r { "yes" } else { "no" }),
-            l.share_removed,
-            f3(l.alone_mm),
-            f3(l.off_mm)
         );
-        for (factor, v) in &l.scaled_mm {
-            let vs = b
-                .configs
-                .iter()
-                .position(|c| c.mode == "scaled" && c.source == Some(l.source) && c.factor == *factor)
-                .and_then(|i| b.against[i]);
-            let vs = vs.map_or(String::new(), |p| {
-                format!(
-                    " ({:+.3}, {:+.3} to {:+.3}{})",
-                    p.median,
-                    p.interval.0,
-                    p.interval.1,
-                    if p.separated(super::CONFIDENCE) { "" } else { ", noise" }
-                )
-            });
-            let _ = write!(s, " {}{vs} |", f3(*v));
+        for (factor, _) in &l.scaled_mm {
+            let _ = write!(s, " {} |", paired(l.source, "scaled", Some(*factor)));
+        }
+        let _ = writeln!(s);
+    }
+    let _ = writeln!(
+        s,
+        "\n### Detail: medians of separate configurations\n\n\
+         The p95 of each configuration as a median over the worlds, each configuration on its own (not paired per world). \
+         Share (removed, medians): the square of what removing a source saves from the whole, medians over realisations, over \
+         the sum; where it differs from the share above by more than 0.15 the sources interact. Two medians over worlds that \
+         spread differ by more than the per-world change: what removing or scaling a source buys is the paired change (the \
+         column `off` here, `at xF` above); where a difference of medians is not, the row says `medians only`.\n"
+    );
+    let _ = write!(s, "| source | share (removed, medians) | p95 alone, mm | p95 without it, mm | off, mm (paired) |");
+    for f in &factors {
+        let _ = write!(s, " p95 at x{f}, mm |");
+    }
+    let _ = writeln!(s, " interaction |\n|{}", "---|".repeat(6 + factors.len()));
+    for sh in b.shares {
+        let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
+        let off = b
+            .configs
+            .iter()
+            .position(|c| c.mode == "off" && c.source == Some(l.source))
+            .and_then(|i| b.against[i]);
+        // The medians' difference a reader would take for the saving, beside the paired change.
+        let medians_only = off.is_some_and(|p| !p.separated(super::CONFIDENCE)) && (b.all_mm - l.off_mm).abs() > 0.02;
+        let _ = write!(
+            s,
+            "| {} | {:.2}{} | {} | {} | {} |",
+            b.sources[l.source].label,
+            l.share_removed,
+            if medians_only { " (medians only: the paired change is noise)" } else { "" },
+            f3(l.alone_mm),
+            f3(l.off_mm),
+            paired(l.source, "off", None)
+        );
+        for (_, v) in &l.scaled_mm {
+            let _ = write!(s, " {} |", f3(*v));
         }
         let interacts = (sh.share - l.share_removed).abs() > 0.15;
         let _ = writeln!(s, " {} |", if interacts { "yes" } else { "" });

@@ -170,6 +170,21 @@ pub fn write_tables(dir: &Path, r: &StudyResults) -> std::io::Result<()> {
 
 /// The summary: the paper's Tables 7 and 8 and before/after figures next to calsim's.
 ///
+/// Each identified parameter's standard deviation (in the unit Table 7 shows) from the fit of the
+/// representative set at `n`: `sigma^2 (J^T J)^-1` with sigma from the fit's residuals, as `calsim
+/// export` writes it. `None` when that set cannot be refitted or its covariance is singular.
+fn fit_std(scenario: &TricalScenario, r: &StudyResults, n: usize) -> Option<Vec<f64>> {
+    use crate::device::Scenario as _;
+    let (index, _) = super::figures::representative(r, n)?;
+    let refit = scenario.refit(index).ok()??;
+    let model = refit.model?;
+    let (count, m) = (refit.observations.len(), refit.set.len());
+    let sigma = crate::study::prediction::noise_estimate(refit.residual_rms_mm, count, m);
+    let qs: Vec<_> = refit.observations.iter().map(|o| o.q).collect();
+    let cov = crate::identify::observability::parameter_covariance(&model, &refit.set, &qs, sigma)?;
+    Some(refit.set.ids().iter().enumerate().map(|(j, id)| id.unit().from_internal(cov[(j, j)].max(0.0).sqrt())).collect())
+}
+
 /// Long by design: the summary document top to bottom, one block per section.
 pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks: &[Check], drawn: &[Written]) -> String {
     let mut s = String::new();
@@ -225,12 +240,32 @@ pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks:
         );
     }
     let _ = writeln!(s, "\n## Table 7: identified parameters over the sets of {}\n", f.table_n);
+    let fit = fit_std(scenario, r, f.table_n);
+    if fit.is_some() {
+        let _ = writeln!(
+            s,
+            "A parameter whose interval (its mean +- 2 standard deviations of the representative set's fit, sigma^2 (J^T J)^-1 \
+             with sigma from the fit's residuals) holds zero, 2 standard deviations larger than its value, is not determined by \
+             the sets: it is shown as such, not compared with the truth.\n"
+        );
+    }
     let _ = writeln!(
         s,
         "| parameter | unit | truth | mean | std | min | max | paper mean | paper std | std within x3 | mean \
              within 3 std |\n|---|---|---|---|---|---|---|---|---|---|---|"
     );
-    for p in &f.table7 {
+    for (j, p) in f.table7.iter().enumerate() {
+        if let Some(half) = fit.as_ref().and_then(|v| v.get(j)).map(|sd| 2.0 * sd)
+            && (half.is_nan() || half >= p.mean.abs())
+        {
+            let (pm, ps) = p.published.map(|(m, sd)| (format!("{m:.3}"), format!("{sd:.3}"))).unwrap_or(("-".into(), "-".into()));
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.4} | not determined ({:.4} +- {:.4}) | {:.4} | {:.4} | {:.4} | {} | {} | - | - |",
+                p.name, p.unit, p.truth, p.mean, half, p.std, p.min, p.max, pm, ps
+            );
+            continue;
+        }
         let (pm, ps) = p.published.map(|(m, sd)| (format!("{m:.3}"), format!("{sd:.3}"))).unwrap_or(("-".into(), "-".into()));
         let yes = |b: Option<bool>| match b {
             Some(true) => "yes",

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Re-runs the commands behind the docs' expensive figures (minutes each, too long for CI) and
+# writes each one's summary.md to docs/generated/<name>.md, headed by the command and the commit
+# that made it. The cheap figures are kept by scripts/ci/doc_numbers.py (CI); this script ends
+# by running it with --write, so that every number of the docs is remade.
+#
+# Usage: bash scripts/docs/regenerate.sh [NAME...]   (no name: all of them)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME:-/root}/.cache/calsim-target}"
+cargo build --release --locked --bin calsim
+calsim="$CARGO_TARGET_DIR/release/calsim"
+commit="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src Cargo.toml Cargo.lock scenarios robots reference || echo '+local changes')"
+scratch="$(mktemp -d)"
+trap 'rm -rf "$scratch"' EXIT
+mkdir -p docs/generated
+
+# name | command (given --out, except table8, which prints only)
+runs=(
+    "optimise-irb120-spheres|optimise scenarios/designs/irb120_spheres.toml"
+    "optimise-spms-stations|optimise scenarios/designs/spms_stations.toml"
+    "optimise-spms-stations-three|optimise scenarios/designs/spms_stations_three.toml"
+    "optimise-irb120-spheres-robust|optimise scenarios/designs/irb120_spheres_robust.toml"
+    "table8|table8 scenarios/irb120_trical.toml --realisations 20"
+    "budget-spms|budget scenarios/er20c10_spms.toml --realisations 20"
+)
+for run in "${runs[@]}"; do
+    IFS='|' read -r name command <<<"$run"
+    if [ $# -gt 0 ] && [[ " $* " != *" $name "* ]]; then
+        continue
+    fi
+    echo "regenerate: $name: calsim $command"
+    start=$SECONDS
+    out=(--out "$scratch/$name")
+    [[ $command == table8* ]] && out=()
+    # shellcheck disable=SC2086
+    "$calsim" $command "${out[@]}" >"$scratch/$name.stdout"
+    summary="$(find "$scratch/$name" -maxdepth 2 -name summary.md 2>/dev/null | head -n 1)"
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`calsim $command\` at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        if [ -n "$summary" ]; then
+            cat "$summary"
+        else
+            echo '```text'
+            cat "$scratch/$name.stdout"
+            echo '```'
+        fi
+    } >"docs/generated/$name.md"
+    echo "regenerate: $name: docs/generated/$name.md"
+done
+
+python3 scripts/ci/doc_numbers.py "$calsim" --write
