@@ -10,6 +10,7 @@ pub mod export;
 pub mod import_urdf;
 pub mod keys;
 pub mod optimise;
+pub mod plan;
 pub mod run;
 pub mod sweep;
 pub mod table8;
