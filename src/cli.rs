@@ -44,6 +44,9 @@ enum Command {
     ImportUrdf(ImportUrdfArgs),
     /// Calibrate a real robot from measured data (docs/calibrate.md): robot file, URDF, YAML and a report.
     Calibrate(CalibrateArgs),
+    /// The poses to measure on a real robot with a laser tracker, and the accuracy they will buy
+    /// (docs/plan.md): a calibrate measurement file to fill, a joint list, a tour, plan.md.
+    Plan(PlanArgs),
     /// The tool frame, gravity torques and joint deflections of a robot file's arm at each row of
     /// a joints CSV (header q1_deg,...,q6_deg).
     Fk(FkArgs),
@@ -122,6 +125,21 @@ struct CalibrateArgs {
     /// Skip the figures.
     #[arg(long)]
     no_plots: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct PlanArgs {
+    /// The plan file (TOML, keys in docs/plan.md).
+    plan: PathBuf,
+    /// Directory the plan goes to (in `<plan stem>.plan`).
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// Worker threads (default: RAYON_NUM_THREADS, else every core).
+    #[arg(long)]
+    threads: Option<u32>,
+    /// Also write simulated.csv: the poses measured on the robot file's truth with the tracker's noise.
+    #[arg(long)]
+    simulate: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -437,6 +455,7 @@ pub fn main() -> ExitCode {
         Command::Compensate(args) => compensate(args),
         Command::ImportUrdf(args) => import_urdf(args),
         Command::Calibrate(args) => calibrate(args),
+        Command::Plan(args) => plan(args),
         Command::Fk(args) => fk(args),
         Command::Keys(args) => keys(args),
         Command::Init(args) => init(args),
@@ -715,6 +734,29 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
             eprintln!("calsim init: wrote {} (check it with `calsim check {}`)", f.display(), f.display());
         }
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
+    let spec = app::plan::PlanSpec { file: args.plan.clone(), out: args.out.clone(), threads: args.threads, simulate: args.simulate };
+    let r = app::plan::plan(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
+    let p = &r.outcome.prediction;
+    let [a, b, c] = p.quantiles_mm;
+    println!(
+        "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
+        r.plan.poses,
+        r.plan.validation,
+        r.outcome.pool.qs.len(),
+        r.outcome.pool.tried,
+        r.outcome.o1.0,
+        r.outcome.o1.1,
+        p.worlds,
+        r.seconds
+    );
+    if !p.unidentifiable.is_empty() {
+        println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
+    }
+    println!("poses.csv, joints.txt, tour.csv and plan.md in {}", r.dir.display());
     Ok(ExitCode::SUCCESS)
 }
 

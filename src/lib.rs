@@ -11,6 +11,7 @@ pub mod identify;
 pub mod instrument;
 pub mod io;
 pub mod numeric;
+pub mod plan;
 pub mod robot;
 pub mod seeds;
 pub mod study;

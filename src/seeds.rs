@@ -138,6 +138,22 @@ pub mod calibrate {
     pub const PLAN_NOISE: u64 = 0x4341_4c49_0005;
 }
 
+/// The streams of `calsim plan`, keyed under the plan file's `seed`.
+pub mod plan {
+    /// The pool's candidates: candidate i draws from `stream(split_seed(seed, POOL), i)`.
+    pub const POOL: u64 = 0x504c_414e_0001;
+    /// DETMAX's random start.
+    pub const DETMAX: u64 = 0x504c_414e_0002;
+    /// The random set DETMAX's set is compared with.
+    pub const RANDOM: u64 = 0x504c_414e_0003;
+    /// The pilot world's measurement noise.
+    pub const PILOT: u64 = 0x504c_414e_0004;
+    /// The seed of the simulated worlds (`calibrate::plan::simulate`).
+    pub const WORLDS: u64 = 0x504c_414e_0005;
+    /// The measurements written by `--simulate`.
+    pub const SIMULATE: u64 = 0x504c_414e_0006;
+}
+
 /// The stream of task `index` of a study whose tasks are salted with `salt` (see [`study`]).
 pub fn task_stream(seed: u64, salt: u64, index: usize) -> ChaCha8Rng {
     stream(split_seed(seed, salt), index as u64)

@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The top-level modules, lowest first: a module may name only modules before it.
-const LAYERS: [&str; 13] =
-    ["numeric", "seeds", "io", "robot", "identify", "cell", "instrument", "study", "device", "design", "calibrate", "app", "cli"];
+const LAYERS: [&str; 14] =
+    ["numeric", "seeds", "io", "robot", "identify", "cell", "instrument", "study", "device", "design", "calibrate", "plan", "app", "cli"];
 
 /// Devices built on another device's world (tracker on the TriCal cell), by folder.
 const BUILT_ON: [(&str, &str); 1] = [("tracker", "trical")];

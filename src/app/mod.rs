@@ -13,6 +13,7 @@ pub mod fk;
 pub mod import_urdf;
 pub mod keys;
 pub mod optimise;
+pub mod plan;
 pub mod run;
 pub mod sweep;
 pub mod table8;

@@ -1,0 +1,91 @@
+//! `calsim plan`: reads a plan file, plans on the worker pool, writes `<out>/<plan stem>.plan/`
+//! (`poses.csv`, `joints.txt`, `tour.csv`, `plan.md`, and `simulated.csv` with `--simulate`).
+
+use std::path::{Path, PathBuf};
+
+use super::{Error, Observer};
+use crate::io::out_dir::{write_atomically, write_file};
+use crate::plan::{Outcome, Plan};
+
+/// What `calsim plan` is asked.
+#[derive(Clone, Debug)]
+pub struct PlanSpec {
+    /// The plan file.
+    pub file: PathBuf,
+    /// The directory the plan goes in (`<out>/<plan stem>.plan`).
+    pub out: PathBuf,
+    /// Worker threads (`None`: `RAYON_NUM_THREADS`, else every core).
+    pub threads: Option<u32>,
+    /// Also write `simulated.csv`: the poses measured on the robot file's truth with the tracker's noise.
+    pub simulate: bool,
+}
+
+/// What `calsim plan` returns.
+#[derive(Debug)]
+pub struct PlanReport {
+    /// The checked plan.
+    pub plan: Plan,
+    /// What it computed.
+    pub outcome: Outcome,
+    /// The directory written.
+    pub dir: PathBuf,
+    /// Wall-clock seconds of the planning (pool, DETMAX, tour) and of the prediction together.
+    pub seconds: f64,
+}
+
+/// Reads and checks a plan file.
+pub fn load(file: &Path) -> Result<Plan, Error> {
+    let text = crate::io::read_text(file).map_err(|e| Error::input(file.display().to_string(), e.to_string()))?;
+    crate::plan::parse(file, &text).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))
+}
+
+/// `calsim plan`.
+pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Error> {
+    let plan = load(&spec.file)?;
+    let name = format!("{}.plan", crate::io::names::of_file(&spec.file)?);
+    crate::io::out_dir::prepare(&spec.out, &name)?;
+    let (pool, threads) = super::thread_pool(spec.threads)?;
+    observer.started(&format!(
+        "calsim plan: {} ({} poses from a pool of {}, {} validation, {} worlds), {}",
+        spec.file.display(),
+        plan.poses,
+        plan.pool,
+        plan.validation,
+        plan.worlds,
+        super::threads_label(threads)
+    ));
+    let t0 = std::time::Instant::now();
+    let outcome = pool.install(|| crate::plan::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+    let simulated = if spec.simulate {
+        let cell = crate::plan::cell::Cell::new(&plan).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+        let (positions, _) = crate::plan::measure(&plan, &cell, &outcome.rows, crate::seeds::plan::SIMULATE)
+            .map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+        Some(crate::plan::csv(
+            &plan,
+            &outcome.rows,
+            Some(&positions),
+            &["SIMULATED by calsim plan --simulate: the robot file's truth (its nominal where it gives none) at the plan's poses, positions in the".into(),
+              "robot base frame, the tracker's noise at each point's distance; no effect outside the model".into()],
+        ))
+    } else {
+        None
+    };
+    let seconds = t0.elapsed().as_secs_f64();
+    let files = [
+        ("poses.csv", crate::plan::csv(&plan, &outcome.rows, None, &[])),
+        ("joints.txt", crate::plan::joint_list(&plan, &outcome.rows)),
+        ("tour.csv", crate::plan::tour_csv(&plan, &outcome)),
+        ("plan.md", crate::plan::markdown(&plan, &outcome)),
+    ];
+    let dir = write_atomically(&spec.out, &name, |d| {
+        for (f, text) in &files {
+            write_file(&d.join(f), text)?;
+        }
+        if let Some(text) = &simulated {
+            write_file(&d.join("simulated.csv"), text)?;
+        }
+        Ok(())
+    })
+    .map_err(Error::io(&spec.out))?;
+    Ok(PlanReport { plan, outcome, dir, seconds })
+}
