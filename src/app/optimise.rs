@@ -80,7 +80,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     // Every input read (the compared scenarios too) before the outputs are vetted against them.
     let compare: Vec<optimise::Candidate> =
         space.compare.iter().map(|p| optimise::compared(p)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect();
-    crate::io::out_dir::prepare(&spec.out, &format!("{}.evaluations", space.name))?;
+    crate::io::out_dir::prepare_cache(&spec.out, &format!("{}.evaluations", space.name))?;
     let merge = spec.merge || spec.shard.is_none();
     if merge {
         crate::io::out_dir::prepare(&spec.out, &space.name)?;

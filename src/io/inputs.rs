@@ -1,18 +1,18 @@
 //! The inputs of a command, from the one place every input passes: while a [`Ledger`] is open,
 //! each file read through the kit's readers ([`crate::io::read_text`], [`crate::io::read_bytes`],
-//! [`crate::io::read_bytes_at_most`]) is recorded, on whatever thread reads it, by its resolved
+//! [`crate::io::read_bytes_at_most`]) on the thread that opened it is recorded, by its resolved
 //! path (symbolic links and `..` followed) and the sha256 of the bytes read. A loaded scenario,
 //! sweep, design or measurement file has thereby told the ledger every file it read (the base
 //! scenarios, the robot file its `robot.file` names, the files its keys name), and the writer
 //! ([`crate::io::out_dir`]) refuses to replace any of them, or any directory holding one; the
 //! manifest's provenance lists them ([`crate::io::manifest::Provenance`]).
 //!
-//! Every command of `app` (and `calibrate`) opens a ledger at its start. Ledgers open at once (two
-//! commands in one process) each record every read: a command then counts the other's inputs as
-//! its own, which can only refuse more.
+//! Every command of `app` (and `calibrate`) opens a ledger at its start, on the thread that loads
+//! its inputs (the worker threads of its study read none). A ledger belongs to its thread, so two
+//! commands running at once in one process (tests, a Python program) keep their inputs apart.
 
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use sha2::{Digest, Sha256};
 
@@ -25,69 +25,76 @@ pub struct Input {
     pub sha256: String,
 }
 
-/// The open ledgers: an id and the inputs recorded since it opened.
-static OPEN: Mutex<Vec<(u64, Vec<Input>)>> = Mutex::new(Vec::new());
+thread_local! {
+    /// This thread's open ledgers: an id and the inputs recorded since it opened.
+    static OPEN: RefCell<Vec<(u64, Vec<Input>)>> = const { RefCell::new(Vec::new()) };
+}
 static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
-fn open_ledgers() -> std::sync::MutexGuard<'static, Vec<(u64, Vec<Input>)>> {
-    OPEN.lock().unwrap_or_else(|e| e.into_inner())
+fn with_open<T>(f: impl FnOnce(&mut Vec<(u64, Vec<Input>)>) -> T) -> T {
+    OPEN.with(|o| f(&mut o.borrow_mut()))
 }
 
 /// The record of the files read while it is open (closed when dropped).
 #[must_use = "the ledger records only while it is held"]
 pub struct Ledger {
     id: u64,
+    /// A ledger stays on the thread whose reads it records.
+    _thread: std::marker::PhantomData<*const ()>,
 }
 
 impl Ledger {
-    /// Opens a ledger: from now on every file read is recorded in it.
+    /// Opens a ledger: from now on every file this thread reads is recorded in it.
     pub fn open() -> Self {
         let id = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        open_ledgers().push((id, Vec::new()));
-        Self { id }
+        with_open(|o| o.push((id, Vec::new())));
+        Self { id, _thread: std::marker::PhantomData }
     }
 
     /// The files recorded in this ledger, in the order first read.
     pub fn inputs(&self) -> Vec<Input> {
-        open_ledgers().iter().find(|(id, _)| *id == self.id).map(|(_, i)| i.clone()).unwrap_or_default()
+        with_open(|o| o.iter().find(|(id, _)| *id == self.id).map(|(_, i)| i.clone()).unwrap_or_default())
     }
 }
 
 impl Drop for Ledger {
     fn drop(&mut self) {
-        open_ledgers().retain(|(id, _)| *id != self.id);
+        with_open(|o| o.retain(|(id, _)| *id != self.id));
     }
 }
 
-/// Records the read of `path` that gave `bytes` in every open ledger (nothing when none is open).
-/// A file read twice keeps its first record.
+/// Records the read of `path` that gave `bytes` in every ledger open on this thread (nothing when
+/// none is). A file read twice keeps its first record.
 pub(crate) fn record(path: &Path, bytes: &[u8]) {
-    let mut open = open_ledgers();
-    if open.is_empty() {
-        return;
-    }
-    let path = resolved(path);
-    let mut sha256 = None;
-    for (_, inputs) in open.iter_mut() {
-        if !inputs.iter().any(|i| i.path == path) {
-            let sha256 = sha256.get_or_insert_with(|| format!("{:x}", Sha256::digest(bytes))).clone();
-            inputs.push(Input { path: path.clone(), sha256 });
+    with_open(|open| {
+        if open.is_empty() {
+            return;
         }
-    }
-}
-
-/// Every file read while any ledger is open, in the order first read (the union of the open
-/// ledgers: what the writer must never replace).
-pub fn read_so_far() -> Vec<Input> {
-    let mut out: Vec<Input> = Vec::new();
-    for (_, inputs) in open_ledgers().iter() {
-        for i in inputs {
-            if !out.iter().any(|o| o.path == i.path) {
-                out.push(i.clone());
+        let path = resolved(path);
+        let mut sha256 = None;
+        for (_, inputs) in open.iter_mut() {
+            if !inputs.iter().any(|i| i.path == path) {
+                let sha256 = sha256.get_or_insert_with(|| format!("{:x}", Sha256::digest(bytes))).clone();
+                inputs.push(Input { path: path.clone(), sha256 });
             }
         }
-    }
-    out
+    })
+}
+
+/// Every file read on this thread while a ledger is open, in the order first read (the union of
+/// its open ledgers: what the writer must never replace).
+pub fn read_so_far() -> Vec<Input> {
+    with_open(|open| {
+        let mut out: Vec<Input> = Vec::new();
+        for (_, inputs) in open.iter() {
+            for i in inputs {
+                if !out.iter().any(|o| o.path == i.path) {
+                    out.push(i.clone());
+                }
+            }
+        }
+        out
+    })
 }
 
 /// The inputs a manifest lists: [`read_so_far`] less calsim's own intermediate files (the work
@@ -162,8 +169,14 @@ mod tests {
         let b = tmp.path().join("b.toml");
         std::fs::write(&b, "y").unwrap();
         crate::io::read_text(&b).unwrap();
+        assert!(read_so_far().is_empty(), "no ledger open on this thread");
         let later = Ledger::open();
         assert!(later.inputs().iter().all(|i| i.path != std::fs::canonicalize(&b).unwrap()));
+        // A read on another thread is not this thread's command's.
+        let c = tmp.path().join("c.toml");
+        std::fs::write(&c, "z").unwrap();
+        std::thread::scope(|s| s.spawn(|| crate::io::read_text(&c).unwrap()).join().unwrap());
+        assert!(later.inputs().is_empty());
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //! The rule, the same for every command: calsim replaces or deletes only what it made.
 //! - A directory it would replace (`out/<name>`) must be absent, empty, or a calsim results
 //!   directory (recognised by its `manifest.json`, [`is_results_dir`]); a work directory
-//!   (a sweep's shard) must be absent, empty or hold its marker file ([`prepare_work`]).
+//!   (a sweep's shard) must be absent, empty or hold its marker file ([`prepare_work`]); a cache
+//!   that calsim only adds to ([`prepare_cache`]) is never deleted.
 //! - Never one that holds, or is, an input of the run: every file the command read so far
 //!   ([`crate::io::inputs`]: the scenario, the design or sweep file, their base scenarios, the robot
 //!   file a scenario names, measurements, targets, files named by keys).
@@ -220,6 +221,13 @@ pub fn prepare_work(out: &Path, name: &str, marker: &str) -> Result<PathBuf, Out
     let ours = |d: &Path| d.join(marker).is_file();
     let what = format!("a calsim work directory (it has no {marker})");
     prepare_with(out, name, &|dest| may_not_replace("--out", dest, &ours, &what))
+}
+
+/// [`prepare`] for a cache directory `out/<name>` that calsim only adds its own records to and
+/// never deletes (an optimisation's evaluations, which later runs reuse): any directory holding no
+/// input of the run.
+pub fn prepare_cache(out: &Path, name: &str) -> Result<PathBuf, OutDirError> {
+    prepare_with(out, name, &|dest| may_not_replace("--out", dest, &|_| true, "a calsim cache directory"))
 }
 
 fn prepare_with(out: &Path, name: &str, in_the_way_at: &dyn Fn(&Path) -> Option<OutDirError>) -> Result<PathBuf, OutDirError> {
