@@ -567,3 +567,58 @@ fn a_sweep_of_9001_points_keeps_a_record_that_merge_reads() {
     assert_eq!((m.units, m.failed), (9001, 0));
     assert!(m.summary.contains("9001 grid points"), "{}", &m.summary[..200]);
 }
+
+/// The readers of `fk` and `compensate` take time in proportion to their rows (each record's line
+/// is counted on from the last, never from the file's start): a file past the row cap is refused at
+/// once, and a bad value after 300,000 CRLF rows is named at its line, both within [`BOUND`].
+#[test]
+fn tabular_readers_answer_large_files_at_once_naming_the_line() {
+    use std::fmt::Write as _;
+    let tmp = scratch("readers-large");
+    let dir = tmp.path();
+    let robot = repo().join("robots/irb120.toml");
+    // Past the cap: 1,000,001 rows.
+    let mut joints = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n");
+    let mut targets = String::from("x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n");
+    for _ in 0..1_000_001 {
+        joints.push_str("0,0,0,0,30,0\n");
+        targets.push_str("400,0,500,0,90,0\n");
+    }
+    let (j, t) = (dir.join("many_joints.csv"), dir.join("many_targets.csv"));
+    std::fs::write(&j, &joints).unwrap();
+    std::fs::write(&t, &targets).unwrap();
+    refused(dir, &["fk", s(&robot), s(&j)], &[s(&j), "more than 1000000 rows"]);
+    refused(dir, &["compensate", s(&robot), s(&t)], &[s(&t), "more than 1000000 targets"]);
+    // A bad value on the last of 300,000 CRLF rows: line 300,001 (the header is line 1).
+    let rows = 300_000;
+    let mut joints = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\r\n");
+    let mut targets = String::from("x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\r\n");
+    for i in 0..rows {
+        let bad = i + 1 == rows;
+        write!(joints, "{},0,0,0,30,0\r\n", if bad { "nope" } else { "1" }).unwrap();
+        write!(targets, "{},0,500,0,90,0\r\n", if bad { "nope" } else { "400" }).unwrap();
+    }
+    std::fs::write(&j, &joints).unwrap();
+    std::fs::write(&t, &targets).unwrap();
+    refused(dir, &["fk", s(&robot), s(&j)], &[s(&j), "line 300001", "q1_deg"]);
+    refused(dir, &["compensate", s(&robot), s(&t)], &[s(&t), "line 300001", "x_mm"]);
+}
+
+/// A refusal names what the user wrote: adaptive realisations whose batch exceeds their most name
+/// `batch` (not the `min` they left out), and the plan's noise without a plan names
+/// `--plan-noise-mm` (as `--plan-scenario` without a plan is refused).
+#[test]
+fn refusals_name_the_key_or_flag_the_user_wrote() {
+    let tmp = scratch("named-as-written");
+    let dir = tmp.path();
+    let base = repo().join("scenarios/ci_quick.toml");
+    let f = dir.join("adaptive.toml");
+    std::fs::write(&f, format!("base = {:?}\nrealisations = {{ max = 4, batch = 100 }}\nthresholds_mm = [1.0]\n", base.display().to_string()))
+        .unwrap();
+    let line = refused(dir, &["sweep", s(&f), "--out", "out"], &[s(&f), "realisations.batch", "100", "max = 4"]);
+    assert!(!line.contains("realisations.min"), "{line}");
+    let m = repo().join("docs/calibrate/example_measurements.csv");
+    let robot = repo().join("robots/irb120.toml");
+    refused(dir, &["calibrate", s(&robot), s(&m), "--plan-noise-mm", "0.01", "--out", "out"], &["--plan-noise-mm", "--plan-worlds"]);
+    assert!(!dir.join("out").exists(), "nothing written");
+}
