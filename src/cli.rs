@@ -9,7 +9,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::app::{self, Observer};
-use crate::study::check::{distribution_table, terminal_table};
+use crate::study::check::{distribution_table, terminal_table, terminal_table_with_spread};
 
 /// calsim: simulation and Monte Carlo studies of robot calibration with low-cost 3D measuring devices.
 #[derive(Parser, Debug)]
@@ -608,7 +608,10 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         // A check over one world judges that world's values; a run shows them as one draw.
         None if check => println!("{}", terminal_table(&r.checks, true)),
         None => {
-            println!("{}", terminal_table(&r.checks, false));
+            match &r.cached_spread {
+                Some((worlds, spread)) => println!("{}", terminal_table_with_spread(&r.checks, *worlds, spread)),
+                None => println!("{}", terminal_table(&r.checks, false)),
+            }
             println!("One simulated world: one draw of each figure. Whether the model reproduces a figure is judged over worlds:");
             // The scenario's own check when it judges over worlds; otherwise the worlds to ask for.
             let worlds = match r.check_worlds {

@@ -452,3 +452,28 @@ fn a_check_over_worlds_prints_the_single_world_only_on_request() {
     assert!(world.contains("in band") || world.contains("outside band"), "{world}");
     assert!(!world.lines().any(|l| l.ends_with("MISS") || l.ends_with(" pass")), "one world has no verdict:\n{world}");
 }
+
+/// A run whose world is realisation 0 of an earlier check over worlds in the same results
+/// directory (its tables byte-identical) shows each figure's P10-P90 over those worlds beside this
+/// world's value and keeps the check's `check.json`; a run of another world does not.
+#[test]
+fn a_run_shows_the_spread_of_an_earlier_check_of_its_own_world() {
+    let tmp = scratch("run-spread");
+    let small = ["--set-sizes", "50:75:25", "--repetitions", "2", "--no-plots", "--no-recording", "--out"];
+    let go = |args: &[&str]| {
+        let out = calsim().args(args).args(small).arg(tmp.path()).output().unwrap();
+        assert!(matches!(out.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    go(&["check", "scenarios/ci_quick.toml", "--realisations", "5", "--false-alarm", "0.5"]);
+    let check: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(tmp.path().join("ci_quick/check.json")).unwrap()).unwrap();
+    let same = go(&["run", "scenarios/ci_quick.toml"]);
+    assert!(same.lines().next().unwrap().ends_with("P10-P90 over 5 worlds"), "{same}");
+    let p = check["figures"].as_array().unwrap().iter().find(|f| f["figure"] == "before calibration: max error, mm").unwrap()["p10_p90"].clone();
+    let row = same.lines().find(|l| l.starts_with("before calibration: max error, mm")).unwrap();
+    assert!(row.ends_with(&format!("{:.3} to {:.3}", p[0].as_f64().unwrap(), p[1].as_f64().unwrap())), "{row} against {p}");
+    assert!(tmp.path().join("ci_quick/check.json").exists(), "the check's verdict kept");
+    let other = go(&["run", "scenarios/ci_quick.toml", "--seed", "7"]);
+    assert!(!other.contains("P10-P90 over"), "another world: {other}");
+    assert!(!tmp.path().join("ci_quick/check.json").exists(), "another world's results carry no check");
+}

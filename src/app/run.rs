@@ -146,6 +146,10 @@ pub struct RunReport {
     pub false_alarm: f64,
     /// The verdict as written to `check.json` (a check only).
     pub check_report: Option<CheckReport>,
+    /// Each figure's P10-P90 over worlds from an earlier `check` of the same world (its
+    /// realisation 0's tables byte-identical to this run's, in the same results directory), by
+    /// figure name, with the number of worlds; kept in the results as `check.json`.
+    pub cached_spread: Option<(usize, std::collections::BTreeMap<String, [f64; 2]>)>,
     /// The scenario's `study.check_realisations` (the worlds `check` judges over by default), and
     /// the fewest worlds that judge every figure at the scenario's false-alarm rate.
     pub check_worlds: (u32, usize),
@@ -253,6 +257,9 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         Some(d) => CheckReport::over(&h.name, h.seed, count as usize, false_alarm, d),
         None => CheckReport::single(&h.name, h.seed, &checks),
     });
+    // A plain run keeps an earlier check over worlds of the same results directory when its world
+    // turns out to be this one (checked below on the tables' hashes).
+    let earlier = (!spec.check && count == 1).then(|| earlier_check(&spec.out.join(&h.name))).flatten();
     let t_write = Instant::now();
     let options = WriteOptions { threads, plots: spec.plots, recording: spec.recording, overrides: spec.overrides.pairs() };
     let mut written = Default::default();
@@ -268,6 +275,13 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     if let (Some(j), Some(c)) = (&spec.junit, &check_report) {
         crate::io::out_dir::write_file_atomically(j, &c.junit()).map_err(Error::io(j))?;
     }
+    let cached_spread = match earlier {
+        Some((tables, text, spread)) if tables_of(&dest).as_ref() == Some(&tables) => {
+            crate::io::out_dir::write_file(&dest.join("check.json"), text).map_err(Error::io(&spec.out))?;
+            Some(spread)
+        }
+        _ => None,
+    };
     let write_s = t_write.elapsed().as_secs_f64();
     if let Some(w) = fit_health(&spec.scenario, outcome.fits())? {
         observer.warning(&w);
@@ -288,7 +302,34 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         false_alarm,
         check_report,
         check_worlds,
+        cached_spread,
     })
+}
+
+/// The tables' hashes a results directory's manifest records.
+fn tables_of(dir: &Path) -> Option<serde_json::Value> {
+    let text = crate::io::read_text(&dir.join("manifest.json")).ok()?;
+    serde_json::from_str::<serde_json::Value>(&text).ok()?.get("tables_sha256").cloned()
+}
+
+/// An earlier check over several worlds in `dir`: its manifest's table hashes, the text of its
+/// `check.json`, and its worlds with each figure's P10-P90. `None` for anything else (no check, a
+/// check of one world, a file calsim cannot read).
+#[allow(clippy::type_complexity)]
+fn earlier_check(dir: &Path) -> Option<(serde_json::Value, String, (usize, std::collections::BTreeMap<String, [f64; 2]>))> {
+    let tables = tables_of(dir)?;
+    let text = crate::io::read_text(&dir.join("check.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let worlds = usize::try_from(v.get("realisations")?.as_u64()?).ok().filter(|&n| n > 1)?;
+    let mut spread = std::collections::BTreeMap::new();
+    for f in v.get("figures")?.as_array()? {
+        if let (Some(name), Some([a, b])) = (f.get("figure").and_then(|x| x.as_str()), f.get("p10_p90").and_then(|x| x.as_array()).map(|a| a.as_slice())) {
+            if let (Some(a), Some(b)) = (a.as_f64(), b.as_f64()) {
+                spread.insert(name.to_string(), [a, b]);
+            }
+        }
+    }
+    Some((tables, text, (worlds, spread)))
 }
 
 /// One line when identifications failed: how many gave no model (and which parameters they could

@@ -359,6 +359,26 @@ pub fn terminal_table(rows: &[Check], verdict: bool) -> String {
     s
 }
 
+/// [`terminal_table`] without verdict, with a last column: each figure's P10-P90 over `worlds`
+/// worlds of an earlier check (`spread`, by figure name; `-` for a figure it does not give), in
+/// the form of the row's value.
+pub fn terminal_table_with_spread(rows: &[Check], worlds: usize, spread: &std::collections::BTreeMap<String, [f64; 2]>) -> String {
+    let head = format!("P10-P90 over {worlds} worlds");
+    let cells: Vec<String> = rows
+        .iter()
+        .map(|r| spread.get(&r.figure).map_or("-".to_string(), |[a, b]| format!("{} to {}", in_the_form_of(&r.reproduced, *a), in_the_form_of(&r.reproduced, *b))))
+        .collect();
+    let table = terminal_table(rows, false);
+    let lines: Vec<&str> = table.lines().collect();
+    let w = lines.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+    let mut s = String::new();
+    for (k, line) in lines.iter().enumerate() {
+        let cell = if k == 0 { head.as_str() } else { cells.get(k - 1).map_or("", String::as_str) };
+        let _ = writeln!(s, "{line:<w$}  {cell}");
+    }
+    s
+}
+
 /// `v` written in the form of `like`, a row's reproduced value: `+54.1 %` (a fraction shown in
 /// percent, sign kept), `29 of 31` (a count: whole, or one decimal for a quantile between counts),
 /// `6.54` (as many decimals); a value with no such form as `0.123`.
