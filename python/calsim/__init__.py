@@ -76,6 +76,8 @@ __all__ = [
     "table8",
     "import_urdf",
     "fk",
+    "keys",
+    "init",
     "Results",
     "RunResult",
     "SweepResult",
@@ -552,3 +554,40 @@ def fk(
     else:
         report = _calsim.fk(_model_path(robot), Path(joints), **keywords)
     return FkResult(report)
+
+
+def _named(e: InputError, command: str, keyword: str, value: str) -> InputError:
+    """The library's refusal of a name for ``command`` as an error of the keyword it came in."""
+    if e.path == command:
+        e.path, e.key, e.value = None, keyword, value
+    return e
+
+
+def keys(name: str) -> pl.DataFrame:
+    """Every key of a scenario file of a device (``"trical"``, ``"spms"``, ``"tracker"``), of a
+    sweep file (``"sweep"``) or of a robot file (``"robot"``), as ``calsim keys`` lists it: one row
+    per key with its ``unit``, ``default``, ``rule`` and ``note`` (SOURCED / ASSUMED / FITTED),
+    made from the loaders themselves."""
+    try:
+        report = _calsim.keys(name)
+    except InputError as e:
+        raise _named(e, "keys", "name", name) from None
+    return pl.DataFrame(report["rows"], schema={"key": pl.String, "unit": pl.String, "default": pl.String, "rule": pl.String, "note": pl.String})
+
+
+def init(kind: str, file: PathLike | None = None) -> str:
+    """A commented starting scenario of a device (``calsim init``), every key at its default: the
+    text, also written to ``file`` when given (never replacing an existing file)."""
+    try:
+        text = _calsim.init(kind)
+    except InputError as e:
+        raise _named(e, "init", "kind", kind) from None
+    if file is not None:
+        try:
+            with open(file, "x") as f:
+                f.write(text)
+        except FileExistsError:
+            e2 = _input("file", f"{os.fspath(file)}: exists; calsim init does not replace a file")
+            e2.path = os.fspath(file)
+            raise e2 from None
+    return text

@@ -693,6 +693,44 @@ fn fk<'py>(py: Python<'py>, robot: PathBuf, joints: PathBuf, out: Option<PathBuf
     Ok(d)
 }
 
+/// The reference of every key of a scenario (a device's kind), sweep or robot file: `calsim keys`.
+/// Each row: the key, its unit, default, rules and note; with `text`, the CLI's text too.
+#[pyfunction]
+#[pyo3(signature = (name))]
+fn keys<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
+    let name = name.to_string();
+    let ((rows, text), _) = detached(py, None, |_| Ok((app::keys::reference(&name)?, app::keys::text(&name)?)))?;
+    let list = PyList::empty(py);
+    for r in &rows {
+        let row = PyDict::new(py);
+        row.set_item("key", &r.key)?;
+        row.set_item("unit", r.unit)?;
+        row.set_item("default", &r.default)?;
+        row.set_item("rule", &r.rule)?;
+        row.set_item("note", &r.note)?;
+        list.append(row)?;
+    }
+    let d = PyDict::new(py);
+    d.set_item("rows", list)?;
+    d.set_item("text", text)?;
+    Ok(d)
+}
+
+/// The names `keys` takes: the devices' kinds, `sweep` and `robot`.
+#[pyfunction]
+fn key_names() -> Vec<&'static str> {
+    app::keys::names()
+}
+
+/// A commented starting scenario of a device, every key at its default: `calsim init`.
+#[pyfunction]
+#[pyo3(signature = (kind))]
+fn init(py: Python<'_>, kind: &str) -> PyResult<String> {
+    let kind = kind.to_string();
+    let (text, _) = detached(py, None, |_| app::keys::init(&kind))?;
+    Ok(text)
+}
+
 /// The native module.
 #[pymodule]
 fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -719,6 +757,9 @@ fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(table8, m)?)?;
     m.add_function(wrap_pyfunction!(import_urdf, m)?)?;
     m.add_function(wrap_pyfunction!(fk, m)?)?;
+    m.add_function(wrap_pyfunction!(keys, m)?)?;
+    m.add_function(wrap_pyfunction!(key_names, m)?)?;
+    m.add_function(wrap_pyfunction!(init, m)?)?;
     Ok(())
 }
 

@@ -296,3 +296,31 @@ def test_bad_table8_arguments_name_the_key(keywords: dict[str, int], key: str) -
     with pytest.raises(calsim.ScenarioError) as e2:
         calsim.table8(REPO / "scenarios" / "missing.toml", progress=False)
     assert e2.value.path == str(REPO / "scenarios" / "missing.toml")
+
+
+def test_keys_gives_the_cli_reference_as_a_frame() -> None:
+    for name in ("trical", "sweep", "robot"):
+        frame = calsim.keys(name)
+        assert frame.columns == ["key", "unit", "default", "rule", "note"] and frame.height > 5
+        text = cli("keys", name).stdout.decode()
+        # Every key of the frame starts a line of the CLI's list, in the same order.
+        lines = text.splitlines()
+        positions = [next((i for i, line in enumerate(lines) if line.startswith(f"{k} ")), -1) for k in frame["key"].to_list()]
+        assert -1 not in positions and positions == sorted(positions)
+    assert "trical.epsilon_mm" in calsim.keys("trical")["key"].to_list()
+    with pytest.raises(calsim.InputError) as e:
+        calsim.keys("tricall")
+    assert (e.value.key, e.value.value) == ("name", "tricall") and "one of" in str(e.value)
+
+
+def test_init_gives_the_cli_scenario_and_never_replaces_a_file(tmp_path: Path) -> None:
+    text = calsim.init("trical", tmp_path / "cell.toml")
+    assert text.encode() == cli("init", "trical").stdout == (tmp_path / "cell.toml").read_bytes()
+    r = calsim.run(tmp_path / "cell.toml", out=tmp_path, set_sizes=[30], repetitions=1, plots=False, recording=False, progress=False)
+    assert r.kind == "trical" and r.tables["tasks"].height == 1
+    with pytest.raises(calsim.InputError) as e:
+        calsim.init("trical", tmp_path / "cell.toml")
+    assert e.value.key == "file" and e.value.path == str(tmp_path / "cell.toml")
+    with pytest.raises(calsim.InputError) as e:
+        calsim.init("laser", tmp_path / "other.toml")
+    assert (e.value.key, e.value.value) == ("kind", "laser") and not (tmp_path / "other.toml").exists()
