@@ -161,7 +161,10 @@ def main() -> int:
                 continue
             if command not in outputs:
                 argv = command.split()
-                r = subprocess.run([str(calsim), *argv[1:], "--out", str(work / "results")], cwd=work, capture_output=True, text=True,
+                # Each command its own results directory: a run beside an earlier check of its world
+                # would print that check's spread.
+                out = work / f"results-{len(outputs)}"
+                r = subprocess.run([str(calsim), *argv[1:], "--out", str(out)], cwd=work, capture_output=True, text=True,
                                    env=dict(os.environ, RUST_LIB_BACKTRACE="0"))
                 if r.returncode not in (0, 1):
                     print(f"doc_numbers: {command}: exit {r.returncode}\n{r.stderr[-2000:]}", file=sys.stderr)
