@@ -1017,3 +1017,53 @@ pub fn compared(path: &Path) -> Result<Vec<Candidate>, crate::design::sweep::Swe
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temporaries(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> =
+            fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.contains(".tmp-")).collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_failing_write_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        // The rename cannot replace a directory that holds a file.
+        let target = dir.path().join("r0000000.json");
+        fs::create_dir(&target).unwrap();
+        fs::write(target.join("x"), b"x").unwrap();
+        assert!(write_atomically(&target, b"{}").is_err());
+        assert!(temporaries(dir.path()).is_empty(), "{:?}", temporaries(dir.path()));
+        // And a written file leaves none either.
+        let ok = dir.path().join("r0000001.json");
+        write_atomically(&ok, b"{}").unwrap();
+        assert_eq!(fs::read(&ok).unwrap(), b"{}");
+        assert!(temporaries(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn temporaries_of_gone_processes_are_removed_and_a_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let design = dir.path().join("ctx").join("0123456789abcdef");
+        fs::create_dir_all(&design).unwrap();
+        let mine = format!("r0000000.tmp-{}-ThreadId2", std::process::id());
+        for (d, name) in [
+            (dir.path(), "restart-000-abc.tmp-999999999-ThreadId1".to_string()),
+            (design.as_path(), "r0000001.tmp-999999999-ThreadId7".to_string()),
+            (design.as_path(), mine.clone()),
+            (design.as_path(), "r0000002.json".to_string()),
+        ] {
+            fs::write(d.join(name), b"x").unwrap();
+        }
+        assert_eq!(remove_stale_temporaries(dir.path(), "ctx").unwrap(), 2);
+        assert!(temporaries(dir.path()).is_empty());
+        assert_eq!(temporaries(&design), vec![mine]);
+        assert!(design.join("r0000002.json").exists(), "a per-world file is not a temporary");
+        // A work directory not made yet has nothing to remove.
+        assert_eq!(remove_stale_temporaries(&dir.path().join("none"), "ctx").unwrap(), 0);
+    }
+}
