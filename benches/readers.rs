@@ -104,8 +104,9 @@ fn main() {
     for n in CALIBRATE_SIZES {
         let p = dir.path().join(format!("measurements-{n}.csv"));
         match measurements_file(&p, n) {
-            Some(()) => calibrate
-                .push((n, time(3, || assert_eq!(calsim::calibrate::measurements::read(&p, &robot).unwrap().points.len(), n)))),
+            Some(()) => {
+                calibrate.push((n, time(3, || assert_eq!(calsim::calibrate::measurements::read(&p, &robot).unwrap().points.len(), n))))
+            }
             None => println!("calibrate: {n} rows exceed the {} MiB input bound: not timed", calsim::io::MOST_INPUT_BYTES >> 20),
         }
     }

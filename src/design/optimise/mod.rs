@@ -507,10 +507,7 @@ fn read_world(file: &Path, r: u32, design: &str, study: &PointStudy, thresholds:
     let u: Unit =
         serde_json::from_slice(&bytes).map_err(|e| fail(format!("not a per-world file calsim writes: {}", one_line(&e.to_string()))))?;
     if u.realisation != r || u.unit != r as usize || u.point != 0 {
-        return Err(fail(format!(
-            "holds world {} (unit {}, point {}), not world {r} its name gives",
-            u.realisation, u.unit, u.point
-        )));
+        return Err(fail(format!("holds world {} (unit {}, point {}), not world {r} its name gives", u.realisation, u.unit, u.point)));
     }
     if u.design.as_deref() != Some(design) {
         return Err(fail(format!("design = {:?}: a world of another design or run, not of {design:?}", u.design.as_deref().unwrap_or(""))));
@@ -604,7 +601,10 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         {
             let i = out.len();
             failure = Some(match rec.get(i) {
-                Some(_) => mismatch(format!("[{i}].x"), "not the design the search asks at this entry (the record was edited, reordered or written by another search)".into()),
+                Some(_) => mismatch(
+                    format!("[{i}].x"),
+                    "not the design the search asks at this entry (the record was edited, reordered or written by another search)".into(),
+                ),
                 None => mismatch("(file)".into(), format!("{} designs: the search asks more (the record was cut short)", rec.len())),
             });
             return f64::INFINITY;
@@ -628,9 +628,10 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         return Err(e);
     }
     match record {
-        Some(rec) if rec.len() != out.len() => {
-            Err(mismatch("(file)".into(), format!("{} designs: the search asks {} (the record holds designs it never asked)", rec.len(), out.len())))
-        }
+        Some(rec) if rec.len() != out.len() => Err(mismatch(
+            "(file)".into(),
+            format!("{} designs: the search asks {} (the record holds designs it never asked)", rec.len(), out.len()),
+        )),
         Some(_) => Ok(out),
         None => {
             let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
@@ -1023,8 +1024,11 @@ mod tests {
     use super::*;
 
     fn temporaries(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> =
-            fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.contains(".tmp-")).collect();
+        let mut names: Vec<String> = fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-"))
+            .collect();
         names.sort();
         names
     }
