@@ -613,8 +613,11 @@ fn refusals_name_the_key_or_flag_the_user_wrote() {
     let dir = tmp.path();
     let base = repo().join("scenarios/ci_quick.toml");
     let f = dir.join("adaptive.toml");
-    std::fs::write(&f, format!("base = {:?}\nrealisations = {{ max = 4, batch = 100 }}\nthresholds_mm = [1.0]\n", base.display().to_string()))
-        .unwrap();
+    std::fs::write(
+        &f,
+        format!("base = {:?}\nrealisations = {{ max = 4, batch = 100 }}\nthresholds_mm = [1.0]\n", base.display().to_string()),
+    )
+    .unwrap();
     let line = refused(dir, &["sweep", s(&f), "--out", "out"], &[s(&f), "realisations.batch", "100", "max = 4"]);
     assert!(!line.contains("realisations.min"), "{line}");
     let m = repo().join("docs/calibrate/example_measurements.csv");

@@ -507,10 +507,7 @@ fn read_world(file: &Path, r: u32, design: &str, study: &PointStudy, thresholds:
     let u: Unit =
         serde_json::from_slice(&bytes).map_err(|e| fail(format!("not a per-world file calsim writes: {}", one_line(&e.to_string()))))?;
     if u.realisation != r || u.unit != r as usize || u.point != 0 {
-        return Err(fail(format!(
-            "holds world {} (unit {}, point {}), not world {r} its name gives",
-            u.realisation, u.unit, u.point
-        )));
+        return Err(fail(format!("holds world {} (unit {}, point {}), not world {r} its name gives", u.realisation, u.unit, u.point)));
     }
     if u.design.as_deref() != Some(design) {
         return Err(fail(format!("design = {:?}: a world of another design or run, not of {design:?}", u.design.as_deref().unwrap_or(""))));
@@ -604,7 +601,10 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         {
             let i = out.len();
             failure = Some(match rec.get(i) {
-                Some(_) => mismatch(format!("[{i}].x"), "not the design the search asks at this entry (the record was edited, reordered or written by another search)".into()),
+                Some(_) => mismatch(
+                    format!("[{i}].x"),
+                    "not the design the search asks at this entry (the record was edited, reordered or written by another search)".into(),
+                ),
                 None => mismatch("(file)".into(), format!("{} designs: the search asks more (the record was cut short)", rec.len())),
             });
             return f64::INFINITY;
@@ -628,9 +628,10 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         return Err(e);
     }
     match record {
-        Some(rec) if rec.len() != out.len() => {
-            Err(mismatch("(file)".into(), format!("{} designs: the search asks {} (the record holds designs it never asked)", rec.len(), out.len())))
-        }
+        Some(rec) if rec.len() != out.len() => Err(mismatch(
+            "(file)".into(),
+            format!("{} designs: the search asks {} (the record holds designs it never asked)", rec.len(), out.len()),
+        )),
         Some(_) => Ok(out),
         None => {
             let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
@@ -1016,4 +1017,57 @@ pub fn compared(path: &Path) -> Result<Vec<Candidate>, crate::design::sweep::Swe
             }
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temporaries(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-"))
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_failing_write_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        // The rename cannot replace a directory that holds a file.
+        let target = dir.path().join("r0000000.json");
+        fs::create_dir(&target).unwrap();
+        fs::write(target.join("x"), b"x").unwrap();
+        assert!(write_atomically(&target, b"{}").is_err());
+        assert!(temporaries(dir.path()).is_empty(), "{:?}", temporaries(dir.path()));
+        // And a written file leaves none either.
+        let ok = dir.path().join("r0000001.json");
+        write_atomically(&ok, b"{}").unwrap();
+        assert_eq!(fs::read(&ok).unwrap(), b"{}");
+        assert!(temporaries(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn temporaries_of_gone_processes_are_removed_and_a_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let design = dir.path().join("ctx").join("0123456789abcdef");
+        fs::create_dir_all(&design).unwrap();
+        let mine = format!("r0000000.tmp-{}-ThreadId2", std::process::id());
+        for (d, name) in [
+            (dir.path(), "restart-000-abc.tmp-999999999-ThreadId1".to_string()),
+            (design.as_path(), "r0000001.tmp-999999999-ThreadId7".to_string()),
+            (design.as_path(), mine.clone()),
+            (design.as_path(), "r0000002.json".to_string()),
+        ] {
+            fs::write(d.join(name), b"x").unwrap();
+        }
+        assert_eq!(remove_stale_temporaries(dir.path(), "ctx").unwrap(), 2);
+        assert!(temporaries(dir.path()).is_empty());
+        assert_eq!(temporaries(&design), vec![mine]);
+        assert!(design.join("r0000002.json").exists(), "a per-world file is not a temporary");
+        // A work directory not made yet has nothing to remove.
+        assert_eq!(remove_stale_temporaries(&dir.path().join("none"), "ctx").unwrap(), 0);
+    }
 }

@@ -469,14 +469,22 @@ pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
         // The key the points go to: a key of the scenario that holds a list of points.
         match get_dotted(&base, &p.key).or_else(|| get_dotted(&defaults, &p.key)) {
             None => {
-                return Err(err(path, "points.key", format!("{:?}: not a key of a {} scenario (`calsim keys` lists them)", p.key, device.kind())));
+                return Err(err(
+                    path,
+                    "points.key",
+                    format!("{:?}: not a key of a {} scenario (`calsim keys` lists them)", p.key, device.kind()),
+                ));
             }
             Some(toml::Value::Array(_)) => {}
             Some(v) => {
                 return Err(err(
                     path,
                     "points.key",
-                    format!("{:?}: a {} in the scenario, not a list of points (the points go to a key holding [[x, y, z], ...])", p.key, v.type_str()),
+                    format!(
+                        "{:?}: a {} in the scenario, not a list of points (the points go to a key holding [[x, y, z], ...])",
+                        p.key,
+                        v.type_str()
+                    ),
                 ));
             }
         }

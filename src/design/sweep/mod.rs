@@ -312,8 +312,18 @@ pub fn run_unit(sweep: &Sweep, unit: usize) -> Unit {
 pub fn run_world(sweep: &Sweep, point: usize, realisation: u32) -> Unit {
     let unit = point.saturating_mul(sweep.realisations as usize).saturating_add(realisation as usize);
     let th = &sweep.thresholds_mm;
-    let mut out =
-        Unit { unit, point, realisation, error: None, before_mm: [f64::NAN; 3], campaign_s: 0.0, rows: Vec::new(), prediction: None, design: None, digest: None };
+    let mut out = Unit {
+        unit,
+        point,
+        realisation,
+        error: None,
+        before_mm: [f64::NAN; 3],
+        campaign_s: 0.0,
+        rows: Vec::new(),
+        prediction: None,
+        design: None,
+        digest: None,
+    };
     let s = &sweep.points[point].scenario;
     let seed = crate::seeds::realisation_seed(s.header().seed, realisation);
     let outcome = match s.run(seed, &|_, _| {}) {
