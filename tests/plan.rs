@@ -244,11 +244,11 @@ fn every_planned_pose_is_feasible_by_an_independent_computation() {
 }
 
 /// One simulated file against the plan's 80 % band: at seed 3 the held-out median (0.0188 mm) lies
-/// just above P90 (0.0184 mm; median 0.0151, 20 worlds). Whether this is the one draw in five an
-/// 80 % band misses or a bias of the prediction (pooled isotropic noise, the calibrated pilot robot
-/// as the worlds' truth) is not yet measured: ignored until it is, over many simulated files.
+/// just above P90 (0.0184 mm; median 0.0151, 20 worlds). On the shipped plan at seeds 1-8 the
+/// outcome falls inside the band in 6 of 8 (docs/plan.md, Limits), as an 80 % band should: one
+/// draw is too weak a check to keep in the suite until it runs over many seeds.
 #[test]
-#[ignore = "fails at seed 3: 0.0188 mm against P10-P90 0.0121-0.0184 mm; coverage over many files not yet measured"]
+#[ignore = "one draw against an 80 % band: outside at seed 3 (0.0188 mm against P10-P90 0.0121-0.0184 mm); 6 of 8 seeds inside on the shipped plan"]
 fn plan_simulate_calibrate_lands_inside_the_plans_p10_p90() {
     let r = run();
     let spec = calsim::calibrate::CalibrateSpec {
