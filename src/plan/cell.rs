@@ -86,8 +86,8 @@ impl Cell {
         let head = plan.tracker.position_mm;
         let mut with_head = obstacles(plan);
         with_head.push(Obstacle::capsule("tracker head", head, head, plan.tracker.head_radius_mm));
-        let collide = CollisionWorld::new(&links, &device, with_head);
-        let sight = CollisionWorld::new(&links, &device, obstacles(plan));
+        let mut collide = CollisionWorld::new(&links, &device, with_head);
+        let mut sight = CollisionWorld::new(&links, &device, obstacles(plan));
         let model = plan
             .robot
             .nominal
@@ -97,6 +97,13 @@ impl Cell {
                 d.limits = plan.limits;
             })
             .map_err(|e| PlanError::new(&plan.path, "robot", e.to_string()))?;
+        // The pairs of bodies that touch at the home pose (every joint at zero, within the limits)
+        // are left out of the self-collision test, as an allowed-collision matrix leaves them out.
+        let home: Joints = std::array::from_fn(|i| 0.0_f64.clamp(plan.limits[i].min, plan.limits[i].max));
+        let mut st = KinState::default();
+        forward(&model, &mut st, &home);
+        collide.allow_pairs_touching_at(&st);
+        sight.allow_pairs_touching_at(&st);
         let t = &plan.tracker;
         let cell = Self {
             model,

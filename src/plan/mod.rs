@@ -39,27 +39,28 @@ pub const TRAINING: &str = "A";
 pub const VALIDATION: &str = "V";
 
 /// Calibrate's identifiability check (`registration::prune`) on the configurations `qs` measured
-/// at every target of `plan` in one session: the robot parameters of `set` they separate, and
+/// at the first `targets` targets of `plan` in one session: the robot parameters of `set` they separate, and
 /// those they cannot, named with the unknowns they move the points alike with.
-pub fn identifiable(plan: &Plan, cell: &Cell, qs: &[Joints], set: &ParamSet) -> Result<(ParamSet, Vec<Unidentifiable>), PlanError> {
+pub fn identifiable(plan: &Plan, cell: &Cell, qs: &[Joints], set: &ParamSet, targets: usize) -> Result<(ParamSet, Vec<Unidentifiable>), PlanError> {
     use crate::calibrate::problem::{Layout, Obs, Problem};
     let mut st = KinState::default();
-    let mut obs = Vec::with_capacity(qs.len() * plan.targets.len());
+    let targets = targets.clamp(1, plan.targets.len());
+    let mut obs = Vec::with_capacity(qs.len() * targets);
     for q in qs {
         forward(&cell.model, &mut st, q);
-        for k in 0..plan.targets.len() {
+        for k in 0..targets {
             obs.push(Obs { q: *q, measured_mm: cell.target(&st, k).0, session: 0, target: k, sigma: 1.0 });
         }
     }
-    let layout = Layout { robot: set.clone(), sessions: 1, targets: plan.targets.len() };
+    let layout = Layout { robot: set.clone(), sessions: 1, targets };
     let mut frames_x = vec![0.0; 6];
-    for t in &plan.targets {
+    for t in &plan.targets[..targets] {
         frames_x.extend(t.frame6_mm.iter());
     }
     let x0 = crate::calibrate::validation::start_values(&layout, &cell.model, &frames_x);
     let problem = Problem { start: &cell.model, layout, obs: &obs };
     let idx: Vec<usize> = (0..obs.len()).collect();
-    let names: Vec<String> = plan.targets.iter().map(|t| t.name.clone()).collect();
+    let names: Vec<String> = plan.targets[..targets].iter().map(|t| t.name.clone()).collect();
     crate::calibrate::registration::prune(&problem, &x0, &idx, (&[TRAINING.to_string()], &names)).map_err(|e| {
         PlanError::new(&plan.path, "target", format!("the poses cannot fix {}: the targets need poses that turn the flange more", e.names.join(", ")))
     })
@@ -358,6 +359,13 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     );
     let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | pilot world, mm | model chosen in the pilot |\n|---|---|---|---|---|");
     let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {:.4} | {} |\n", p.pilot_median_mm, p.pilot_chosen);
+    if p.pilot_median_mm > c {
+        let _ = writeln!(
+            s,
+            "The pilot world lies above P90: the robot file's truth holds what the {} model does not describe (its calibrated robot, the worlds' truth, does not): a richer model would calibrate that robot better.\n",
+            plan.model.name()
+        );
+    }
     let _ = writeln!(
         s,
         "A robot the model describes completely, measured with this noise, calibrates to this. Effects outside the model (gear harmonics, backlash, temperature) add to it: `calsim calibrate --plan-worlds N` on the measured file says whether the robot does.\n"

@@ -109,9 +109,10 @@ pub fn validation(plan: &Plan, cell: &Cell, qs: &[Joints], n: usize) -> Result<V
 }
 
 /// The identification problem DETMAX scores: the model's robot parameters the pool can
-/// separate (calibrate's identifiability check on the pool), a base and a tool at the first target.
+/// separate at the first target (calibrate's identifiability check on the pool), a base and a
+/// tool at the first target.
 pub fn detmax_set(plan: &Plan, cell: &Cell, qs: &[Joints]) -> Result<ParamSet, PlanError> {
-    let robot = super::identifiable(plan, cell, qs, &model_params(plan.model))?.0;
+    let robot = super::identifiable(plan, cell, qs, &model_params(plan.model), 1)?.0;
     let mut ids = robot.ids().to_vec();
     ids.extend([BaseParam::X, BaseParam::Y, BaseParam::Z, BaseParam::Alpha, BaseParam::Beta, BaseParam::Gamma].map(ParamId::Base));
     ids.extend((0..3).map(ParamId::Tool));
