@@ -49,6 +49,26 @@ fn refused(root: &Path, args: &[&str], flag: &str, says: &str) {
     assert!(before == after, "{args:?}: some file's bytes changed");
 }
 
+/// The manifest at `path`, after checking its provenance block: the version, the commit the
+/// binary was built from, the command line, the inputs with their sha256, the overrides, and no
+/// thread count.
+fn provenance(path: &Path) -> serde_json::Value {
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+    assert_eq!(m["crate_version"], env!("CARGO_PKG_VERSION"), "{m}");
+    let commit = m["git_commit"].as_str().unwrap();
+    assert!(commit == "unknown" || (commit.len() == 40 && commit.bytes().all(|b| b.is_ascii_hexdigit())), "{m}");
+    assert!(m["command_line"].as_array().unwrap().len() > 1, "{m}");
+    assert!(m["inputs"].as_array().unwrap().iter().all(|i| i["sha256"].as_str().is_some_and(|h| h.len() == 64)), "{m}");
+    assert!(m["overrides"].is_array(), "{m}");
+    assert!(m.get("threads").is_none(), "{m}");
+    m
+}
+
+fn sha256(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    format!("{:x}", sha2::Sha256::digest(bytes))
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -154,6 +174,11 @@ fn sweep_merge_budget_and_optimise_refuse_an_out_that_holds_an_input_or_is_not_c
     std::fs::create_dir_all(&nested).unwrap();
     std::fs::rename(&shard, nested.join("sw3.shard-0-of-1")).unwrap();
     refused(t, &["merge", s(&nested.join("sw3.shard-0-of-1")), "--out", s(&t.join("h"))], "--out", "an input of this run");
+    // Merged elsewhere: the sweep's manifest carries the provenance block.
+    let o = calsim().args(["merge", s(&nested.join("sw3.shard-0-of-1")), "--out", s(&t.join("merged"))]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m = provenance(&t.join("merged/sw3/manifest.json"));
+    assert!(m["command_line"].as_array().unwrap().iter().any(|a| a == "merge"), "{m}");
 
     // budget: the scenario inside `<scenario>.budget`, a user's directory of that name.
     let bs = write(&t.join("b/ci_quick.budget/ci_quick.toml"), quick_text(None));
@@ -192,10 +217,28 @@ fn calibrate_export_and_the_file_writers_refuse_their_inputs() {
     a.extend(["1", "--out", s(&res)]);
     let o = calsim().args(&a).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The run's manifest: its block lists the scenario and the robot file it names, with their sha256.
+    let m = provenance(&res.join("ci_quick/manifest.json"));
+    let listed = |p: &Path| {
+        let real = std::fs::canonicalize(p).unwrap();
+        let bytes = std::fs::read(p).unwrap();
+        m["inputs"].as_array().unwrap().iter().any(|i| i["path"] == s(&real) && i["sha256"] == sha256(&bytes))
+    };
+    assert!(listed(&scenario) && listed(&repo().join("robots/irb120.toml")), "{m}");
+    assert_eq!(m["overrides"][0], serde_json::json!(["study.set_sizes", "[20, 30]"]), "{m}");
     write(&t.join("x/ci_quick.task-0/notes.txt"), "mine");
     refused(t, &["export", s(&res.join("ci_quick")), "--task", "0", "--out", s(&t.join("x"))], "--out", "not a calsim results directory");
     // Export into the results directory it reads: refused (inside other results).
     refused(t, &["export", s(&res.join("ci_quick")), "--task", "0", "--out", s(&res.join("ci_quick"))], "--out", "results directory");
+    // Exported elsewhere: a manifest with the block, listing the results it read; exported again
+    // over its own earlier export (a calsim directory holding no input): replaced.
+    for _ in 0..2 {
+        let o = calsim().args(["export", s(&res.join("ci_quick")), "--task", "0", "--out", s(&t.join("ok"))]).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let m = provenance(&t.join("ok/ci_quick.task-0/manifest.json"));
+    let results_manifest = std::fs::canonicalize(res.join("ci_quick/manifest.json")).unwrap();
+    assert!(m["inputs"].as_array().unwrap().iter().any(|i| i["path"] == s(&results_manifest)), "{m}");
 
     // compensate --out: the model, the targets, a link to the targets.
     let model = write(&t.join("model.toml"), std::fs::read(repo().join("robots/irb120.toml")).unwrap());
