@@ -824,13 +824,7 @@ fn export(args: &ExportArgs) -> Result<ExitCode, String> {
         (None, PickArg::Best) => Pick::Best(n),
         (None, PickArg::Worst) => Pick::Worst(n),
     };
-    let out = args.out.clone().unwrap_or_else(|| args.results.parent().map(Path::to_path_buf).unwrap_or_default());
-    let _inputs = crate::io::inputs::Ledger::open();
-    crate::io::out_dir::vet_dir(&out).map_err(|e| e.to_string())?;
-    let e = app::export::identification(&args.results, pick).map_err(|e| e.to_string())?;
-    let name = format!("{}.task-{}", e.scenario, e.task);
-    crate::io::out_dir::prepare(&out, &name).map_err(|e| e.to_string())?;
-    let dest = app::export::write(&out, &name, &e).map_err(|err| format!("{}: {err}", out.display()))?;
+    let (e, dest) = app::export::run(&args.results, pick, args.out.as_deref()).map_err(|e| e.to_string())?;
     println!(
         "exported task {} (n = {}, validation median {:.4} mm) to {}: robot.toml, robot.urdf, calibration.yaml, before.toml",
         e.task,

@@ -499,13 +499,7 @@ fn export<'py>(
         (None, "worst") => Pick::Worst(set_size),
         (None, other) => return Err(input(py, "pick", format!("{other:?}: one of \"median\", \"best\", \"worst\""))),
     };
-    let out = out.unwrap_or_else(|| results.parent().map(PathBuf::from).unwrap_or_default());
-    let ((e, dest), _) = detached(py, None, |_| {
-        let e = app::export::identification(&results, pick)?;
-        let name = format!("{}.task-{}", e.scenario, e.task);
-        let dest = app::export::write(&out, &name, &e).map_err(app::Error::io(&out))?;
-        Ok((e, dest))
-    })?;
+    let ((e, dest), _) = detached(py, None, |_| app::export::run(&results, pick, out.as_deref()))?;
     let d = PyDict::new(py);
     d.set_item("dest", &dest)?;
     d.set_item("scenario", &e.scenario)?;

@@ -153,6 +153,21 @@ fn tasks_table(dir: &Path) -> Result<Vec<(usize, usize, f64)>, Error> {
         .collect())
 }
 
+/// `export`: the identification `pick` of the results directory `results` written to
+/// `out/<scenario>.task-<task>` (`out` defaults to the directory holding `results`). The output is
+/// vetted before anything is read and prepared before anything is written ([`crate::io::out_dir`]);
+/// returns the export and the directory written.
+pub fn run(results: &Path, pick: Pick, out: Option<&Path>) -> Result<(Export, PathBuf), Error> {
+    let out = out.map(Path::to_path_buf).unwrap_or_else(|| results.parent().map(Path::to_path_buf).unwrap_or_default());
+    let _inputs = crate::io::inputs::Ledger::open();
+    crate::io::out_dir::vet_dir(&out)?;
+    let e = identification(results, pick)?;
+    let name = format!("{}.task-{}", e.scenario, e.task);
+    crate::io::out_dir::prepare(&out, &name)?;
+    let dest = write(&out, &name, &e).map_err(Error::io(&out))?;
+    Ok((e, dest))
+}
+
 /// The YAML overlay of `e` ([`crate::robot::export::yaml_overlay`]).
 pub fn yaml_overlay(e: &Export) -> String {
     crate::robot::export::yaml_overlay(&e.before, &e.model, &format!("scenario {}, task {}, n = {}", e.scenario, e.task, e.set_size))

@@ -41,6 +41,7 @@ pub fn load(file: &Path) -> Result<Plan, Error> {
 
 /// `calsim plan`.
 pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
     let plan = load(&spec.file)?;
     let name = format!("{}.plan", crate::io::names::of_file(&spec.file)?);
     crate::io::out_dir::prepare(&spec.out, &name)?;
