@@ -92,12 +92,16 @@ struct CalibrateArgs {
     /// Cross-validation folds.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
     folds: u32,
-    /// Fraction of each session's poses held out (default 0.2).
-    #[arg(long, conflicts_with = "hold_out_session")]
+    /// Fraction of each session's poses held out, drawn at random (default: the file's `split`
+    /// column when it has one, else 0.2).
+    #[arg(long, conflicts_with_all = ["hold_out_session", "hold_out_file"])]
     hold_out: Option<f64>,
     /// Hold out every pose of this session instead.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "hold_out_file")]
     hold_out_session: Option<String>,
+    /// Hold out the poses listed in this CSV file (columns `session,pose`, a row per pose).
+    #[arg(long)]
+    hold_out_file: Option<PathBuf>,
     /// Seed of the split, the folds and the prediction's draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -107,6 +111,10 @@ struct CalibrateArgs {
     /// Outlier threshold, robust standard deviations of a point's residual (default 4.5943).
     #[arg(long)]
     outlier_threshold: Option<f64>,
+    /// What flagged points do: `off` (none flagged), `report` (flagged, listed, kept in every fit
+    /// and figure) or `reject` (flagged, listed, left out of every fit and figure).
+    #[arg(long, default_value = "report", value_parser = ["off", "report", "reject"])]
+    outliers: String,
     /// Also simulate the calibration's plan over this many worlds (the calibrated robot taken as
     /// the truth, the fit's residual as noise, calibrated again each time) and set the measured
     /// held-out median beside it (plan.md); 0: none.
@@ -699,10 +707,14 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         Some(names) => Some(ParamSet::from_names(names).map_err(|e| format!("--params: {e}"))?),
         None => None,
     };
-    let split = match (&args.hold_out_session, args.hold_out) {
-        (Some(session), _) => Split::Session(session.clone()),
-        (None, Some(fraction)) => Split::Poses { fraction },
-        (None, None) => defaults.split.clone(),
+    let split = match (&args.hold_out_session, args.hold_out, &args.hold_out_file) {
+        (Some(session), _, _) => Split::Session(session.clone()),
+        (None, Some(fraction), _) => Split::Poses { fraction },
+        (None, None, Some(file)) => Split::Listed {
+            source: file.display().to_string(),
+            poses: crate::calibrate::measurements::read_pose_list(file).map_err(|e| format!("--hold-out-file: {e}"))?,
+        },
+        (None, None, None) => defaults.split.clone(),
     };
     let options = Options {
         params,
@@ -710,6 +722,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         split,
         seed: args.seed,
         outlier_threshold: args.outlier_threshold.unwrap_or(defaults.outlier_threshold),
+        outliers: crate::calibrate::OutlierMode::parse(&args.outliers).unwrap_or(defaults.outliers),
         plots: !args.no_plots,
         ..defaults
     };
@@ -723,6 +736,9 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         plan_scenario: args.plan_scenario.clone(),
     };
     let report = crate::calibrate::calibrate(&spec).map_err(|e| e.to_string())?;
+    if let Some(line) = crate::calibrate::report::outlier_warning(&report.calibration) {
+        eprintln!("{line}");
+    }
     println!("{}", crate::calibrate::report::terminal(&report.calibration, &report.dir));
     if let Some(p) = &report.plan {
         let [a, b, c] = p.simulated_mm;
