@@ -94,12 +94,16 @@ struct CalibrateArgs {
     /// Cross-validation folds.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
     folds: u32,
-    /// Fraction of each session's poses held out (default 0.2).
-    #[arg(long, conflicts_with = "hold_out_session")]
+    /// Fraction of each session's poses held out, drawn at random (default: the file's `split`
+    /// column when it has one, else 0.2).
+    #[arg(long, conflicts_with_all = ["hold_out_session", "hold_out_file"])]
     hold_out: Option<f64>,
     /// Hold out every pose of this session instead.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "hold_out_file")]
     hold_out_session: Option<String>,
+    /// Hold out the poses listed in this CSV file (columns `session,pose`, a row per pose).
+    #[arg(long)]
+    hold_out_file: Option<PathBuf>,
     /// Seed of the split, the folds and the prediction's draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -109,6 +113,10 @@ struct CalibrateArgs {
     /// Outlier threshold, robust standard deviations of a point's residual (default 4.5943).
     #[arg(long)]
     outlier_threshold: Option<f64>,
+    /// What flagged points do: `off` (none flagged), `report` (flagged, listed, kept in every fit
+    /// and figure) or `reject` (flagged, listed, left out of every fit and figure).
+    #[arg(long, default_value = "report", value_parser = ["off", "report", "reject"])]
+    outliers: String,
     /// Also simulate the calibration's plan over this many worlds (the calibrated robot taken as
     /// the truth, the fit's residual as noise, calibrated again each time) and set the measured
     /// held-out median beside it (plan.md); 0: none.
@@ -768,9 +776,11 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         folds: args.folds,
         hold_out: args.hold_out,
         hold_out_session: args.hold_out_session.clone(),
+        hold_out_file: args.hold_out_file.clone(),
         seed: args.seed,
         params: args.params.clone(),
         outlier_threshold: args.outlier_threshold,
+        outliers: Some(args.outliers.clone()),
         plan_worlds: args.plan_worlds,
         plan_noise_mm: args.plan_noise_mm,
         plan_scenario: args.plan_scenario.clone(),
@@ -778,6 +788,9 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())
     };
     let report = app::calibrate::run(&spec).map_err(|e| e.to_string())?;
+    if let Some(line) = crate::calibrate::report::outlier_warning(&report.calibration) {
+        eprintln!("{line}");
+    }
     println!("{}", crate::calibrate::report::terminal(&report.calibration, &report.dir));
     if let Some(p) = &report.plan {
         let [a, b, c] = p.simulated_mm;

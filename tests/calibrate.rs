@@ -90,7 +90,8 @@ fn calibrate_recovers_a_coupled_robot_in_moved_sessions_within_its_predicted_std
     let m = measured(&s, &robot);
     assert!(m.coupled);
     assert_eq!((m.points.len(), m.poses.len(), m.sessions.len(), m.targets.len()), (240, 120, 3, 2));
-    let c = run(&robot, &m, &Options { plots: false, ..Options::default() }).unwrap();
+    let outliers = calsim::calibrate::OutlierMode::Reject;
+    let c = run(&robot, &m, &Options { plots: false, outliers, ..Options::default() }).unwrap();
 
     assert_eq!(c.chosen().kind, Some(ModelKind::Compliance), "chosen by held-out error");
     let mut unidentifiable: Vec<&str> = c.chosen().unidentifiable.iter().map(|u| u.name.as_str()).collect();
@@ -574,4 +575,174 @@ fn a_plan_asked_for_wrongly_is_one_line_naming_the_option() {
         assert!(stderr.contains(says), "{extra:?}: {stderr}");
         assert!(!dir.path().join("example_measurements.calibration").exists(), "{extra:?}: nothing written");
     }
+}
+
+/// The simulated file of the coupled IRB 120 (Table 7's joint offsets, 12 um noise) with a
+/// `split` column: every fifth pose of every session held out, and session A's held-out points
+/// moved by `shift_mm` along x (a fault only the held-out poses carry). Returns the file with the
+/// column and the file of the training rows alone (no column).
+fn split_files(robot: &RobotFile, offsets: &ParamSet, shift_mm: f64) -> (String, String) {
+    let text = to_csv(&spec(truth_on(robot, offsets), robot, 0.012, vec![]));
+    let (mut with_column, mut train) = (String::new(), String::new());
+    for l in text.lines() {
+        if l.starts_with('#') {
+            with_column.push_str(&format!("{l}\n"));
+            train.push_str(&format!("{l}\n"));
+        } else if l.starts_with("pose,") {
+            with_column.push_str(&format!("{l},split\n"));
+            train.push_str(&format!("{l}\n"));
+        } else {
+            let f: Vec<&str> = l.split(',').collect();
+            let held = f[0][1..].parse::<usize>().unwrap() % 5 == 0;
+            if !held {
+                train.push_str(&format!("{l}\n"));
+                with_column.push_str(&format!("{l},train\n"));
+                continue;
+            }
+            let x: f64 = f[9].parse().unwrap();
+            let x = if f[1] == "A" { x + shift_mm } else { x };
+            with_column.push_str(&format!("{},{x},{},{},holdout\n", f[..9].join(","), f[10], f[11]));
+        }
+    }
+    (with_column, train)
+}
+
+/// The joint-offset parameters (one model: a fixed choice whatever the folds say).
+fn offsets_only() -> ParamSet {
+    ParamSet::from_names(&["theta_offs2", "theta_offs3", "theta_offs4", "theta_offs5", "theta_offs6"]).unwrap()
+}
+
+fn read_parquet(path: &Path) -> polars::prelude::DataFrame {
+    use polars::prelude::SerReader;
+    polars::prelude::ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
+}
+
+/// A split given by the file's `split` column: the held-out errors in `points.parquet` are those
+/// the test computes with its own code, from a calibration of the training rows alone (its robot,
+/// bases and tools; the forward kinematics to frame 6, the session's base and the target's
+/// position) at every held-out row of the file: the held-out poses fit nothing, not even their
+/// session's base. Session A's held-out points carry a 0.3 mm fault: a base registered on them
+/// would hide it; their held-out errors show it.
+#[test]
+fn a_split_column_holds_out_its_poses_and_their_errors_are_the_training_fits() {
+    let robot_dir = common::scratch("calibrate-split");
+    let robot_path = robot_dir.path().join("irb120_coupled.toml");
+    std::fs::write(&robot_path, coupled_irb120_text()).unwrap();
+    let robot = RobotFile::load(&robot_path).unwrap();
+    let offsets = offsets_only();
+    let (with_column, train) = split_files(&robot, &offsets, 0.3);
+    let csv = write_csv(robot_dir.path(), "split.csv", &with_column);
+    let opts = Options { params: Some(offsets.clone()), outliers: calsim::calibrate::OutlierMode::Off, plots: false, ..Options::default() };
+    let spec = calsim::calibrate::CalibrateSpec {
+        robot_file: robot_path.clone(),
+        measurements: csv,
+        out: robot_dir.path().join("out"),
+        options: opts.clone(),
+        plan_worlds: 0,
+        plan_noise_mm: None,
+        plan_scenario: None,
+    };
+    let report = calsim::calibrate::calibrate(&spec).unwrap();
+    assert_eq!(report.calibration.options.split, Split::Column, "the file's column is the default split");
+    let points = read_parquet(&report.dir.join("points.parquet"));
+    let n = points.height();
+    let (lines, held, errors) = (
+        points.column("line").unwrap().u64().unwrap(),
+        points.column("held_out").unwrap().bool().unwrap(),
+        points.column("held_out_error_mm").unwrap().f64().unwrap(),
+    );
+    let lines: Vec<u64> = (0..n).map(|i| lines.get(i).unwrap()).collect();
+    let held: Vec<bool> = (0..n).map(|i| held.get(i).unwrap()).collect();
+    let errors: Vec<Option<f64>> = (0..n).map(|i| errors.get(i)).collect();
+
+    // The training rows alone, calibrated: the model the held-out rows are predicted by.
+    let only = run(&robot, &measurements::parse(Path::new("train.csv"), &train, &robot).unwrap(), &opts).unwrap();
+    let text_lines: Vec<&str> = with_column.lines().collect();
+    let coupling = robot.coupling.as_ref().unwrap();
+    let (mut shifted, mut others) = (Vec::new(), Vec::new());
+    let mut compared = 0;
+    for ((line, held), error) in lines.iter().zip(&held).zip(&errors) {
+        let f: Vec<&str> = text_lines[*line as usize - 1].split(',').collect();
+        assert_eq!(*held, f[12] == "holdout", "line {line}: held out as the column says");
+        if !held {
+            assert!(error.is_none_or(f64::is_nan), "line {line}: a training point has no held-out error");
+            continue;
+        }
+        let v = |k: usize| f[k].parse::<f64>().unwrap();
+        let q_controller: [f64; 6] = std::array::from_fn(|j| v(3 + j).to_radians());
+        let q = coupling.model_from_controller(&q_controller);
+        let model = &only.model;
+        let base_from_frame6 = calsim::robot::world_from_base(model).inverse()
+            * calsim::robot::world_from_flange(model, &mut calsim::robot::KinState::default(), &q);
+        let session = only.bases.iter().find(|b| b.session == f[1]).unwrap().session_from_base.isometry();
+        let tool = only.tools.iter().find(|t| t.target == f[2]).unwrap().flange_mm;
+        let tool6 = robot.flange.map_or(tool, |r| r * tool);
+        let predicted = session * (base_from_frame6 * nalgebra::Point3::from(tool6));
+        let own = (Vector3::new(v(9), v(10), v(11)) - predicted.coords).norm();
+        let theirs = error.expect("a held-out point has its error");
+        assert!((own - theirs).abs() < 1e-6, "line {line}: held-out error {theirs} mm, the test's own {own} mm");
+        compared += 1;
+        if f[1] == "A" { shifted.push(own) } else { others.push(own) }
+    }
+    assert_eq!(compared, with_column.lines().filter(|l| l.ends_with(",holdout")).count());
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    eprintln!("held-out mean error: session A (0.3 mm fault) {:.4} mm, B and C {:.4} mm", mean(&shifted), mean(&others));
+    assert!(mean(&shifted) > 0.25, "the fault of the held-out poses is not registered away");
+    assert!(mean(&others) < 0.1);
+}
+
+/// `--outliers`: the shipped example's point of line 66 (0.88 mm off) is flagged and named on
+/// standard error by default (`report`: kept in every fit), left out under `reject`, not flagged
+/// under `off`; a held-out outlier's held-out figures come with and without it, and the figures
+/// the report leads with are those of the points the mode keeps.
+#[test]
+fn outliers_are_reported_loudly_and_the_held_out_figures_come_with_and_without_them() {
+    let root = common::repo();
+    let run_cli = |mode: Option<&str>| {
+        let out = common::scratch("calibrate-outliers");
+        let mut cmd = common::calsim();
+        cmd.args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--no-plots", "--out"]).arg(out.path());
+        if let Some(m) = mode {
+            cmd.args(["--outliers", m]);
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (String::from_utf8_lossy(&o.stdout).to_string(), String::from_utf8_lossy(&o.stderr).to_string())
+    };
+    let (stdout, stderr) = run_cli(None);
+    assert!(stderr.contains("WARNING: 1 point of 240 flagged as outliers (line 66), kept in every fit"), "{stderr}");
+    assert!(stdout.contains("outliers: 1 (line 66); kept in every figure (--outliers report)"), "{stdout}");
+    let (stdout, stderr) = run_cli(Some("reject"));
+    assert!(stderr.contains("(line 66), LEFT OUT of every fit and figure"), "{stderr}");
+    assert!(stdout.contains("(--outliers reject)"), "{stdout}");
+    let (stdout, stderr) = run_cli(Some("off"));
+    assert!(!stderr.contains("WARNING"), "{stderr}");
+    assert!(stdout.contains("outliers: 0 (--outliers off: none flagged)"), "{stdout}");
+
+    // The outlier's pose held out (with four more poses of its session).
+    let robot = RobotFile::load(&root.join("robots/irb120.toml")).unwrap();
+    let m = measurements::read(&root.join("docs/calibrate/example_measurements.csv"), &robot).unwrap();
+    let bad = m.points.iter().position(|p| p.line == 66).unwrap();
+    let pose = &m.poses[m.points[bad].pose];
+    let mut poses = vec![(m.sessions[pose.session].clone(), pose.label.clone())];
+    poses.extend(
+        m.poses
+            .iter()
+            .filter(|p| p.session == pose.session && p.label != pose.label)
+            .take(4)
+            .map(|p| (m.sessions[p.session].clone(), p.label.clone())),
+    );
+    let split = Split::Listed { source: "test".into(), poses };
+    let mut seen = Vec::new();
+    for outliers in [calsim::calibrate::OutlierMode::Report, calsim::calibrate::OutlierMode::Reject] {
+        let c = run(&robot, &m, &Options { plots: false, split: split.clone(), outliers, ..Options::default() }).unwrap();
+        assert!(c.flagged[bad]);
+        let h = c.chosen().held_out.as_ref().unwrap();
+        assert_eq!(h.flagged, 1);
+        assert!(h.with_flagged.rms > 1.5 * h.without_flagged.rms, "{} against {}", h.with_flagged.rms, h.without_flagged.rms);
+        let lead = if outliers == calsim::calibrate::OutlierMode::Report { &h.with_flagged } else { &h.without_flagged };
+        assert_eq!(h.measured, *lead);
+        seen.push(c.chosen().fit.stats.rms);
+    }
+    assert!(seen[0] > seen[1], "the fit keeps the outlier under `report`: RMS {} against {}", seen[0], seen[1]);
 }

@@ -512,7 +512,7 @@ fn export<'py>(
 
 /// Calibrates a real robot from a measurement file: `calsim calibrate`.
 #[pyfunction]
-#[pyo3(signature = (robot, measurements, *, out, folds=5, hold_out=None, hold_out_session=None, seed=1, params=None, outlier_threshold=None, plan_worlds=0, plan_noise_mm=None, plan_scenario=None, plots=true))]
+#[pyo3(signature = (robot, measurements, *, out, folds=5, hold_out=None, hold_out_session=None, hold_out_file=None, seed=1, params=None, outlier_threshold=None, outliers=None, plan_worlds=0, plan_noise_mm=None, plan_scenario=None, plots=true))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate<'py>(
     py: Python<'py>,
@@ -522,9 +522,11 @@ fn calibrate<'py>(
     folds: u32,
     hold_out: Option<f64>,
     hold_out_session: Option<String>,
+    hold_out_file: Option<PathBuf>,
     seed: u64,
     params: Option<Vec<String>>,
     outlier_threshold: Option<f64>,
+    outliers: Option<String>,
     plan_worlds: u32,
     plan_noise_mm: Option<f64>,
     plan_scenario: Option<PathBuf>,
@@ -534,9 +536,11 @@ fn calibrate<'py>(
         folds,
         hold_out,
         hold_out_session,
+        hold_out_file,
         seed,
         params,
         outlier_threshold,
+        outliers,
         plan_worlds,
         plan_noise_mm,
         plan_scenario,

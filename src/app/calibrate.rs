@@ -22,12 +22,16 @@ pub struct CalibrateArgs {
     pub hold_out: Option<f64>,
     /// Hold out every pose of this session instead.
     pub hold_out_session: Option<String>,
+    /// Hold out the poses listed in this CSV file (columns `session,pose`).
+    pub hold_out_file: Option<PathBuf>,
     /// Seed of the split, the folds and the prediction's draws.
     pub seed: u64,
     /// Robot parameters of the most complete model by name (`None`: the default set).
     pub params: Option<Vec<String>>,
     /// Outlier threshold, robust standard deviations (`None`: the default).
     pub outlier_threshold: Option<f64>,
+    /// What flagged points do: `off`, `report` or `reject` (`None`: the default).
+    pub outliers: Option<String>,
     /// Worlds of the plan's simulation (0: none).
     pub plan_worlds: u32,
     /// The plan's noise per coordinate, mm.
@@ -49,9 +53,11 @@ impl CalibrateArgs {
             folds: d.folds as u32,
             hold_out: None,
             hold_out_session: None,
+            hold_out_file: None,
             seed: d.seed,
             params: None,
             outlier_threshold: None,
+            outliers: None,
             plan_worlds: 0,
             plan_noise_mm: None,
             plan_scenario: None,
@@ -71,11 +77,22 @@ impl CalibrateArgs {
         if self.plan_noise_mm.is_some() && self.plan_worlds == 0 {
             return Err(option("plan-noise-mm", "a plan needs --plan-worlds N (N >= 1)".into()));
         }
-        let split = match (&self.hold_out_session, self.hold_out) {
-            (Some(_), Some(f)) => return Err(option("hold-out", format!("{f}: either a fraction or a session held out, not both"))),
-            (Some(session), None) => Split::Session(session.clone()),
-            (None, Some(fraction)) => Split::Poses { fraction },
-            (None, None) => defaults.split.clone(),
+        let split = match (&self.hold_out_session, self.hold_out, &self.hold_out_file) {
+            (Some(_), Some(f), _) => return Err(option("hold-out", format!("{f}: either a fraction or a session held out, not both"))),
+            (_, Some(f), Some(_)) => return Err(option("hold-out", format!("{f}: either a fraction or a file of held-out poses, not both"))),
+            (Some(_), None, Some(_)) => return Err(option("hold-out-file", "either a session or a file of held-out poses, not both".into())),
+            (Some(session), None, None) => Split::Session(session.clone()),
+            (None, Some(fraction), None) => Split::Poses { fraction },
+            (None, None, Some(file)) => Split::Listed {
+                source: file.display().to_string(),
+                poses: crate::calibrate::measurements::read_pose_list(file).map_err(|e| option("hold-out-file", e.to_string()))?,
+            },
+            (None, None, None) => defaults.split.clone(),
+        };
+        let outliers = match &self.outliers {
+            None => defaults.outliers,
+            Some(name) => crate::calibrate::OutlierMode::parse(name)
+                .ok_or_else(|| option("outliers", format!("{name:?}: one of \"off\", \"report\", \"reject\"")))?,
         };
         let options = Options {
             params,
@@ -83,6 +100,7 @@ impl CalibrateArgs {
             split,
             seed: self.seed,
             outlier_threshold: self.outlier_threshold.unwrap_or(defaults.outlier_threshold),
+            outliers,
             plots: self.plots,
             ..defaults
         };

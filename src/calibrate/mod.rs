@@ -39,6 +39,7 @@ use crate::robot::{LinkParam, ParamId, ParamSet};
 use measurements::{MeasurementError, Measurements};
 use problem::{Layout, Obs, Problem, SolveOptions};
 use registration::{Raw, Unidentifiable, Unplaced};
+pub use robust::OutlierMode;
 use robust::{RobustFit, fit_without, robust_fit};
 use validation::{HeldOutSpec, Split, SplitError, free_columns};
 
@@ -95,6 +96,8 @@ pub struct Options {
     pub seed: u64,
     /// Outlier threshold in robust standard deviations of a point's residual norm.
     pub outlier_threshold: f64,
+    /// What the flagged points do: nothing flagged, flagged and kept, flagged and left out.
+    pub outliers: OutlierMode,
     /// Parameter-error draws of the predicted held-out errors.
     pub prediction_draws: usize,
     /// Draw the figures.
@@ -106,9 +109,10 @@ impl Default for Options {
         Self {
             params: None,
             folds: 5,
-            split: Split::Poses { fraction: 0.2 },
+            split: Split::Default,
             seed: 1,
             outlier_threshold: robust::DEFAULT_THRESHOLD,
+            outliers: OutlierMode::Report,
             prediction_draws: 200,
             plots: true,
         }
@@ -251,6 +255,11 @@ fn check_options(o: &Options) -> Result<(), CalibrateError> {
     {
         return bad("hold-out", format!("{fraction}: a fraction above 0 and at most 0.5"));
     }
+    if let Split::Session(l) = &o.split
+        && l.is_empty()
+    {
+        return bad("hold-out-session", "an empty label".into());
+    }
     if !(o.outlier_threshold.is_finite() && (2.0..=100.0).contains(&o.outlier_threshold)) {
         return bad("outlier-threshold", format!("{}: within 2 to 100 robust standard deviations", o.outlier_threshold));
     }
@@ -389,34 +398,44 @@ fn candidates(
 pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibration, CalibrateError> {
     check_options(opts)?;
     let full = opts.params.clone().unwrap_or_else(default_params);
-    let assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(|e| CalibrateError::Option {
-        key: "hold-out-session".into(),
-        message: match e {
-            SplitError::UnknownSession(l) => format!("{l}: no such session in {}", m.path.display()),
-            SplitError::OneSession => format!("{} has one session: none can be held out", m.path.display()),
-            SplitError::TargetOnlyThere(t) => format!("target {t} is measured in that session only"),
-        },
-    })?;
+    let split_error = |e: SplitError| CalibrateError::Option { key: opts.split.option().into(), message: e.message(&m.path) };
+    let opts = &Options { split: validation::resolve(m, &opts.split).map_err(split_error)?, ..opts.clone() };
+    let assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
     let s = setup(robot, m)?;
     let cands = candidates(robot, m, &s, &full)?;
     let sopts = SolveOptions::default();
     // Outliers are a property of the data, decided once by the most complete model's robust fit
-    // on every point (a simpler model would take its own misfit for outliers); every fit and
-    // statistic below leaves out the same points.
-    let (outliers, outliers_by) = {
+    // on every point (a simpler model would take its own misfit for outliers). `flagged` are the
+    // points the rule flags; `outliers` the points every fit and statistic below leaves out (the
+    // flagged ones under `OutlierMode::Reject`, none otherwise).
+    let (flagged, outliers_by) = {
         let (kind, layout, _) = cands.last().expect("at least one model");
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let all: Vec<usize> = (0..s.obs.len()).collect();
         let x0 = validation::start_values(layout, &robot.nominal, &s.frames_x);
-        (robust_fit(&problem, &x0, &free_columns(&problem, &all, true), &all, opts.outlier_threshold, &sopts).outlier, kind.name())
+        let flagged = match opts.outliers {
+            OutlierMode::Off => vec![false; s.obs.len()],
+            OutlierMode::Report | OutlierMode::Reject => {
+                robust_fit(&problem, &x0, &free_columns(&problem, &all, true), &all, opts.outlier_threshold, &sopts).outlier
+            }
+        };
+        (flagged, kind.name())
+    };
+    let outliers = match opts.outliers {
+        OutlierMode::Reject => flagged.clone(),
+        OutlierMode::Off | OutlierMode::Report => vec![false; s.obs.len()],
     };
     let point_fold: Vec<Option<usize>> = m.points.iter().map(|p| assignment.fold[p.pose]).collect();
     let held: Vec<usize> = (0..m.points.len()).filter(|&i| assignment.held_out[m.points[i].pose]).collect();
     let train: Vec<usize> = (0..m.points.len()).filter(|&i| !assignment.held_out[m.points[i].pose]).collect();
-    let register: Vec<usize> = match &opts.split {
-        Split::Session(l) => m.sessions.iter().position(|x| x == l).into_iter().collect(),
-        Split::Poses { .. } => Vec::new(),
-    };
+    // A session held out whole has no base from the training fit: its base is registered on its
+    // own points. Every other session's base is the training fit's (the held-out poses fix nothing).
+    let register: Vec<usize> = (0..m.sessions.len())
+        .filter(|&k| {
+            let mut poses = m.poses.iter().enumerate().filter(|(_, p)| p.session == k);
+            poses.all(|(p, _)| assignment.held_out[p])
+        })
+        .collect();
     let evaluate = |kind: Option<ModelKind>, layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
@@ -428,12 +447,19 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let free = free_columns(&problem, &train, with_robot);
         let mask = |idx: &[usize]| idx.iter().map(|&i| outliers[i]).collect::<Vec<bool>>();
         let fit = fit_without(&problem, &x0, &free, &train, &mask(&train), &sopts);
-        let spec =
-            HeldOutSpec { test: &held, register: &register, outliers: &outliers, draws: opts.prediction_draws, key, seed: opts.seed };
+        let spec = HeldOutSpec {
+            test: &held,
+            register: &register,
+            outliers: &outliers,
+            flagged: &flagged,
+            draws: opts.prediction_draws,
+            key,
+            seed: opts.seed,
+        };
         let held_out = fit.solved.outcome.is_converged().then(|| validation::held_out(&problem, &fit, &free, &spec, &sopts));
         let all: Vec<usize> = (0..s.obs.len()).collect();
         let all_fit = fit_without(&problem, &x0, &free_columns(&problem, &all, with_robot), &all, &outliers, &sopts);
-        let fit = point_fit(&problem, &all_fit);
+        let fit = point_fit(&problem, &all_fit, &flagged);
         (ModelResult { kind, layout, unidentifiable: fixed, cv, held_out, fit, against_chosen: (f64::NAN, f64::NAN, 0) }, all_fit)
     };
     let empty = ParamSet::new(vec![]).expect("no parameter");
@@ -445,7 +471,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         models[k].against_chosen = validation::paired_difference(&models[k].cv, &models[chosen].cv);
     }
     let fit = fits.into_iter().nth(chosen).expect("a fit per model");
-    finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by }, fit)
+    finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by, flagged: flagged.clone() }, fit)
 }
 
 /// The directory `calsim calibrate` writes for the measurement file `path` under `out`.

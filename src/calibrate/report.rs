@@ -246,14 +246,14 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     let m = &c.measurements;
     let _ = writeln!(
         s,
-        "calsim calibrate: {} from {}{} ({} points, {} poses, {} sessions, {} targets)",
+        "calsim calibrate: {} from {}{} ({}, {}, {}, {})",
         c.model.name(),
         m.path.display(),
         if m.header.simulated { " (simulated data)" } else { "" },
-        m.points.len(),
-        m.poses.len(),
-        m.sessions.len(),
-        m.targets.len()
+        count(m.points.len(), "point"),
+        count(m.poses.len(), "pose"),
+        count(m.sessions.len(), "session"),
+        count(m.targets.len(), "target")
     );
     let _ = writeln!(
         s,
@@ -277,9 +277,67 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
         1..=10 => format!(" ({})", lines.join(", ")),
         n => format!(" ({}, and {} more in summary.md)", lines[..10].join(", "), n - 10),
     };
-    let _ = writeln!(s, "outliers: {}{shown}", lines.len());
+    let mode = match c.options.outliers {
+        super::OutlierMode::Off => " (--outliers off: none flagged)",
+        super::OutlierMode::Report => "; kept in every figure (--outliers report)",
+        super::OutlierMode::Reject => "; left out of every figure (--outliers reject)",
+    };
+    let _ = writeln!(s, "outliers: {}{shown}{mode}", lines.len());
+    if let Some(h) = c.chosen().held_out.as_ref().filter(|h| h.flagged > 0) {
+        let _ = writeln!(
+            s,
+            "held-out RMS of the chosen model: {:.4} mm with the {} flagged, {:.4} mm without",
+            h.with_flagged.rms,
+            count(h.flagged, "point"),
+            h.without_flagged.rms
+        );
+    }
     let _ = write!(s, "report, robot.toml, robot.urdf and calibration.yaml in {}", dir.display());
     s
+}
+
+/// `n` and the noun, plural unless `n` is 1 ("1 session", "3 sessions").
+fn count(n: usize, noun: &str) -> String {
+    if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
+}
+
+/// The loud line `calsim calibrate` writes to standard error when the outlier rule flags points:
+/// how many, what was done with them, and the chosen model's held-out RMS with and without them.
+pub fn outlier_warning(c: &Calibration) -> Option<String> {
+    let flagged: Vec<usize> = (0..c.flagged.len()).filter(|&i| c.flagged[i]).collect();
+    if flagged.is_empty() {
+        return None;
+    }
+    let m = &c.measurements;
+    let mut lines: Vec<String> = flagged.iter().take(10).map(|&i| m.points[i].line.to_string()).collect();
+    if flagged.len() > 10 {
+        lines.push(format!("and {} more", flagged.len() - 10));
+    }
+    let done = match c.options.outliers {
+        super::OutlierMode::Reject => "LEFT OUT of every fit and figure (--outliers reject)",
+        _ => "kept in every fit and figure (--outliers report; `reject` leaves them out)",
+    };
+    let held = c
+        .chosen()
+        .held_out
+        .as_ref()
+        .filter(|h| h.flagged > 0)
+        .map(|h| {
+            format!(
+                "; held-out RMS of the chosen model {:.4} mm with the {} flagged, {:.4} mm without",
+                h.with_flagged.rms,
+                count(h.flagged, "point"),
+                h.without_flagged.rms
+            )
+        })
+        .unwrap_or_default();
+    Some(format!(
+        "calsim calibrate: WARNING: {} of {} flagged as outliers ({} {}), {done}{held}",
+        count(flagged.len(), "point"),
+        m.points.len(),
+        if flagged.len() == 1 { "line" } else { "lines" },
+        lines.join(", ")
+    ))
 }
 
 fn stats_cells(s: &ErrorStats) -> String {
@@ -297,13 +355,13 @@ pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
     }
     let _ = writeln!(
         s,
-        "Robot file {}; {} points at {} poses in {} sessions ({}), {} targets ({}){}; joints: {}.\n",
+        "Robot file {}; {} at {} in {} ({}), {} ({}){}; joints: {}.\n",
         c.robot.path.display(),
-        m.points.len(),
-        m.poses.len(),
-        m.sessions.len(),
+        count(m.points.len(), "point"),
+        count(m.poses.len(), "pose"),
+        count(m.sessions.len(), "session"),
         m.sessions.join(", "),
-        m.targets.len(),
+        count(m.targets.len(), "target"),
         m.targets.join(", "),
         if m.rows_left_out > 0 { format!(", {} rows of other targets left out (`# targets`)", m.rows_left_out) } else { String::new() },
         if m.coupled { "the controller's values, through the robot file's [[coupling]]" } else { "as given (no coupling)" }
@@ -382,6 +440,19 @@ fn held_out_section(s: &mut String, c: &Calibration) {
             }
         }
     }
+    let flagged_held = c.chosen().held_out.as_ref().map_or(0, |h| h.flagged);
+    if flagged_held > 0 {
+        let _ = writeln!(
+            s,
+            "\nWith and without the {} flagged as outliers (measured; mean | median | p95 | max | RMS):\n\n| model | with | without |\n|---|---|---|",
+            count(flagged_held, "held-out point")
+        );
+        for r in std::iter::once(&c.before).chain(&c.models) {
+            if let Some(h) = &r.held_out {
+                let _ = writeln!(s, "| {} | {} | {} |", r.name(), stats_cells(&h.with_flagged), stats_cells(&h.without_flagged));
+            }
+        }
+    }
     let (b, a) = (&c.before.fit, &c.chosen().fit);
     let _ = writeln!(
         s,
@@ -398,12 +469,22 @@ fn outliers_section(s: &mut String, c: &Calibration) {
     let f = &c.chosen().fit;
     let m = &c.measurements;
     let flagged: Vec<usize> = (0..f.outlier.len()).filter(|&i| f.outlier[i]).collect();
+    let done = match c.options.outliers {
+        super::OutlierMode::Off => "`--outliers off`: no point is flagged; every fit and statistic of this report uses every point.",
+        super::OutlierMode::Report => {
+            "`--outliers report`: the flagged points are listed here and kept in every fit and statistic of this report \
+             (`--outliers reject` leaves them out); the held-out errors are given with and without them below."
+        }
+        super::OutlierMode::Reject => {
+            "`--outliers reject`: every fit and statistic of this report leaves out the flagged points; the held-out errors are \
+             given with and without them below."
+        }
+    };
     let _ = writeln!(
         s,
         "## Outliers\n\nOutliers are decided once, by the {} model's robust fit on every point: a point whose residual exceeds {} \
          robust standard deviations (a Gaussian point does so with probability {:.1e}) is flagged, the fit repeated without the \
-         flagged points until the flags settle. Every fit and statistic of this report leaves out the same points; they are listed \
-         here. {} of {} points flagged.\n",
+         flagged points until the flags settle. {done} {} of {} points flagged.\n",
         c.outliers_by,
         c.options.outlier_threshold,
         chi3_tail(c.options.outlier_threshold),

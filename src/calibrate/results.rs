@@ -75,9 +75,9 @@ pub struct PointFit {
     pub residual_base_mm: Vec<Vector3<f64>>,
     /// Per point: residual norm over the robust scale.
     pub normalized: Vec<f64>,
-    /// Per point: an outlier of the data (left out of the fit).
+    /// Per point: flagged by the outlier rule (left out of the fit under `--outliers reject`).
     pub outlier: Vec<bool>,
-    /// Statistics of the errors of the points not flagged, mm.
+    /// Statistics of the errors of the points the fit used (every point but the rejected ones), mm.
     pub stats: ErrorStats,
     /// The a-posteriori noise per coordinate of unit weight (mm without per-point uncertainties).
     pub sigma_hat: f64,
@@ -134,6 +134,8 @@ pub struct Calibration {
     pub points_base_mm: Vec<Vector3<f64>>,
     /// The model whose robust fit on every point decided the outliers (the most complete).
     pub outliers_by: &'static str,
+    /// Per point: flagged by the outlier rule (left out only under `--outliers reject`).
+    pub flagged: Vec<bool>,
 }
 
 impl ModelResult {
@@ -151,7 +153,7 @@ impl Calibration {
 }
 
 /// The per-point view of a fit on every point.
-pub(super) fn point_fit(problem: &Problem<'_>, fit: &RobustFit) -> PointFit {
+pub(super) fn point_fit(problem: &Problem<'_>, fit: &RobustFit, flagged: &[bool]) -> PointFit {
     let n = problem.obs.len();
     let errors = problem.errors(&fit.solved.x, &fit.idx).unwrap_or_else(|| vec![Vector3::repeat(f64::NAN); n]);
     let residual_base_mm: Vec<Vector3<f64>> = errors
@@ -167,7 +169,7 @@ pub(super) fn point_fit(problem: &Problem<'_>, fit: &RobustFit) -> PointFit {
         errors_mm,
         residual_base_mm,
         normalized: fit.normalized.clone(),
-        outlier: fit.outlier.clone(),
+        outlier: flagged.to_vec(),
         sigma_hat: fit.sigma_hat,
     }
 }
@@ -184,11 +186,12 @@ pub(super) struct Parts<'a> {
     pub(super) chosen: usize,
     pub(super) full: &'a ParamSet,
     pub(super) outliers_by: &'static str,
+    pub(super) flagged: Vec<bool>,
 }
 
 /// The chosen model's estimates and covariance from its fit on every point.
 pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, CalibrateError> {
-    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, outliers_by } = parts;
+    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, outliers_by, flagged } = parts;
     let r = &models[chosen];
     let layout = &r.layout;
     let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
@@ -231,6 +234,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         tools,
         points_base_mm,
         outliers_by,
+        flagged,
     })
 }
 

@@ -25,6 +25,35 @@ const LEAST_SCALE: f64 = 1e-6;
 /// Rounds of fitting and flagging at most.
 const MOST_ROUNDS: usize = 10;
 
+/// What the outlier rule does with the points it flags (`--outliers`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutlierMode {
+    /// No point is flagged.
+    Off,
+    /// Points are flagged and reported, and kept in every fit and statistic (the default: the
+    /// figures then include every measured point, and a flagged point cannot hide what the model
+    /// misses).
+    Report,
+    /// Points are flagged, reported and left out of every fit and statistic.
+    Reject,
+}
+
+impl OutlierMode {
+    /// The option's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            OutlierMode::Off => "off",
+            OutlierMode::Report => "report",
+            OutlierMode::Reject => "reject",
+        }
+    }
+
+    /// The mode named `s` (`off`, `report`, `reject`).
+    pub fn parse(s: &str) -> Option<Self> {
+        [OutlierMode::Off, OutlierMode::Report, OutlierMode::Reject].into_iter().find(|m| m.name() == s)
+    }
+}
+
 /// A fit with its outliers.
 #[derive(Clone, Debug)]
 pub struct RobustFit {

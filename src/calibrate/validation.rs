@@ -18,6 +18,8 @@ use crate::study::stats::{ErrorStats, finite_sorted, quantile};
 /// Which points are held out of the fit whose errors the report gives.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Split {
+    /// The file's `split` column when it has one, else 20 % of each session's poses drawn at random.
+    Default,
     /// A fraction of every session's poses, drawn at random (`--seed`).
     Poses {
         /// Fraction of the poses held out, (0, 0.5].
@@ -25,14 +27,42 @@ pub enum Split {
     },
     /// Every pose of one session (its base registered on its own points).
     Session(String),
+    /// The poses the file's `split` column marks `holdout`.
+    Column,
+    /// The poses listed, as (session, pose) labels (`--hold-out-file`).
+    Listed {
+        /// Where the list comes from (named in the report).
+        source: String,
+        /// The poses, as (session, pose).
+        poses: Vec<(String, String)>,
+    },
 }
 
 impl Split {
     /// The split in words, for the report.
     pub fn describe(&self) -> String {
         match self {
+            Split::Default => "the file's split column, else 20 % of each session's poses drawn at random".into(),
             Split::Poses { fraction } => format!("{:.0} % of each session's poses, drawn at random", fraction * 100.0),
             Split::Session(s) => format!("every pose of session {s} (its base registered on its own points)"),
+            Split::Column => "the poses the file's split column marks holdout (a session held out whole has its base registered on \
+                              its own points; any other session's base is the training fit's)"
+                .into(),
+            Split::Listed { source, poses } => format!(
+                "the {} poses listed in {source} (a session held out whole has its base registered on its own points; any other \
+                 session's base is the training fit's)",
+                poses.len()
+            ),
+        }
+    }
+
+    /// The option that asks for this split (for messages).
+    pub fn option(&self) -> &'static str {
+        match self {
+            Split::Default | Split::Column => "split",
+            Split::Poses { .. } => "hold-out",
+            Split::Session(_) => "hold-out-session",
+            Split::Listed { .. } => "hold-out-file",
         }
     }
 }
@@ -44,8 +74,43 @@ pub enum SplitError {
     UnknownSession(String),
     /// One session only: none can be held out.
     OneSession,
-    /// A target measured in the held-out session only: its position is unknown to the training fit.
+    /// A target measured in the held-out poses only: its position is unknown to the training fit.
     TargetOnlyThere(String),
+    /// The file gives its split (a `split` column) and an option asks for another.
+    ColumnAndOption,
+    /// `Split::Column` on a file without a `split` column.
+    NoColumn,
+    /// A listed pose (session, pose) is not in the file.
+    UnknownPose(String, String),
+    /// The split holds no pose out.
+    NoneHeldOut,
+    /// The split holds out every pose.
+    AllHeldOut,
+    /// A session keeps some poses for training, but too few to fix its base: (session, poses kept).
+    TooFewKept(String, usize),
+}
+
+impl SplitError {
+    /// The error in words (`source`: the measurement file).
+    pub fn message(&self, source: &std::path::Path) -> String {
+        let file = source.display();
+        match self {
+            SplitError::UnknownSession(l) => format!("{l}: no such session in {file}"),
+            SplitError::OneSession => format!("{file} has one session: none can be held out"),
+            SplitError::TargetOnlyThere(t) => format!("target {t} is measured in held-out poses only: the training fit cannot place it"),
+            SplitError::ColumnAndOption => {
+                format!("{file} gives its split in the column `split`: drop the option or the column")
+            }
+            SplitError::NoColumn => format!("{file} has no `split` column"),
+            SplitError::UnknownPose(s, p) => format!("pose {p} of session {s} is not in {file}"),
+            SplitError::NoneHeldOut => "no pose is held out".into(),
+            SplitError::AllHeldOut => "every pose is held out: nothing is left to fit".into(),
+            SplitError::TooFewKept(s, n) => format!(
+                "session {s} keeps {n} training poses: hold out all of its poses (its base is then registered on them) or keep at least \
+                 {KEEP_POSES} to fit its base"
+            ),
+        }
+    }
 }
 
 /// The split and folds of the poses.
@@ -62,12 +127,28 @@ pub struct Assignment {
 /// Fewest training poses a session keeps when a fraction of its poses is held out.
 const KEEP_POSES: usize = 4;
 
+/// The split `split` resolved for the file `m`: [`Split::Default`] becomes the file's column when it
+/// has one, else 20 % of each session's poses; an option beside a file's column is an error.
+pub fn resolve(m: &Measurements, split: &Split) -> Result<Split, SplitError> {
+    match split {
+        Split::Default if m.split_column => Ok(Split::Column),
+        Split::Default => Ok(Split::Poses { fraction: 0.2 }),
+        Split::Column if !m.split_column => Err(SplitError::NoColumn),
+        Split::Column => Ok(Split::Column),
+        _ if m.split_column => Err(SplitError::ColumnAndOption),
+        other => Ok(other.clone()),
+    }
+}
+
 /// Assigns the poses of `m` to the held-out set and to `folds` folds, with the stream `seed`
-/// (poses are shuffled within each session; folds are balanced across sessions).
+/// (poses are shuffled within each session; folds are balanced across sessions). `split` is
+/// resolved first ([`resolve`]).
 pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Result<Assignment, SplitError> {
+    let split = resolve(m, split)?;
     let mut rng = crate::seeds::stream(seed, crate::seeds::calibrate::SPLIT);
     let mut held_out = vec![false; m.poses.len()];
-    match split {
+    match &split {
+        Split::Default => unreachable!("resolved above"),
         Split::Poses { fraction } => {
             for s in 0..m.sessions.len() {
                 let mut poses: Vec<usize> = (0..m.poses.len()).filter(|&p| m.poses[p].session == s).collect();
@@ -86,10 +167,40 @@ pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Resul
             for (p, pose) in m.poses.iter().enumerate() {
                 held_out[p] = pose.session == s;
             }
-            for (t, target) in m.targets.iter().enumerate() {
-                if !m.points.iter().any(|pt| pt.target == t && !held_out[pt.pose]) {
-                    return Err(SplitError::TargetOnlyThere(target.clone()));
-                }
+        }
+        Split::Column => {
+            for (p, pose) in m.poses.iter().enumerate() {
+                held_out[p] = pose.held_out == Some(true);
+            }
+        }
+        Split::Listed { poses, .. } => {
+            for (session, label) in poses {
+                let p = m
+                    .poses
+                    .iter()
+                    .position(|x| &x.label == label && &m.sessions[x.session] == session)
+                    .ok_or_else(|| SplitError::UnknownPose(session.clone(), label.clone()))?;
+                held_out[p] = true;
+            }
+        }
+    }
+    if !matches!(split, Split::Poses { .. }) {
+        if !held_out.iter().any(|h| *h) {
+            return Err(SplitError::NoneHeldOut);
+        }
+        if held_out.iter().all(|h| *h) {
+            return Err(SplitError::AllHeldOut);
+        }
+        for (s, label) in m.sessions.iter().enumerate() {
+            let kept = (0..m.poses.len()).filter(|&p| m.poses[p].session == s && !held_out[p]).count();
+            let all = (0..m.poses.len()).filter(|&p| m.poses[p].session == s).count();
+            if kept > 0 && kept < all && kept < KEEP_POSES {
+                return Err(SplitError::TooFewKept(label.clone(), kept));
+            }
+        }
+        for (t, target) in m.targets.iter().enumerate() {
+            if !m.points.iter().any(|pt| pt.target == t && !held_out[pt.pose]) {
+                return Err(SplitError::TargetOnlyThere(target.clone()));
             }
         }
     }
@@ -129,10 +240,16 @@ pub fn free_columns(problem: &Problem<'_>, idx: &[usize], robot: bool) -> Vec<us
 pub struct HeldOut {
     /// Per held-out point: its error, mm (NaN when the model gave none).
     pub errors_mm: Vec<f64>,
-    /// Per held-out point: an outlier of the data (left out of the statistics, counted).
+    /// Per held-out point: left out of the statistics (a flagged point under `--outliers reject`).
     pub outlier: Vec<bool>,
-    /// Statistics of the errors of the points not flagged, mm.
+    /// Statistics of the errors of the points not left out, mm.
     pub measured: ErrorStats,
+    /// Held-out points flagged by the outlier rule (whatever `--outliers` does with them).
+    pub flagged: usize,
+    /// Statistics of every held-out point's error, flagged ones included, mm.
+    pub with_flagged: ErrorStats,
+    /// Statistics of the held-out points not flagged, mm.
+    pub without_flagged: ErrorStats,
     /// The same statistics predicted from the training fit's covariance and noise estimate
     /// (parameter errors drawn from `N(0, C)` plus the points' own noise); `max` is the median
     /// over the draws of the largest error.
@@ -147,8 +264,10 @@ pub struct HeldOutSpec<'a> {
     pub test: &'a [usize],
     /// Sessions whose bases are registered on the held-out points (a held-out session).
     pub register: &'a [usize],
-    /// Per problem point: an outlier of the data (left out of every fit and statistic).
+    /// Per problem point: left out of every fit and statistic.
     pub outliers: &'a [bool],
+    /// Per problem point: flagged by the outlier rule.
+    pub flagged: &'a [bool],
     /// Parameter-error draws of the prediction.
     pub draws: usize,
     /// The stream key of the draws (under the calibration's seed).
@@ -179,7 +298,12 @@ pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: 
         max: f64::NAN,
         rms: f64::NAN,
     });
-    HeldOut { errors_mm, outlier, measured, predicted, points: kept.len() }
+    let of =
+        |keep: &dyn Fn(usize) -> bool| ErrorStats::of(&(0..spec.test.len()).filter(|&k| keep(k)).map(|k| errors_mm[k]).collect::<Vec<_>>());
+    let with_flagged = of(&|_| true);
+    let without_flagged = of(&|k| !spec.flagged[spec.test[k]]);
+    let flagged = spec.test.iter().filter(|&&i| spec.flagged[i]).count();
+    HeldOut { errors_mm, outlier, measured, predicted, points: kept.len(), flagged, with_flagged, without_flagged }
 }
 
 /// The predicted error statistics at the held-out points `kept` (positions in `spec.test`).

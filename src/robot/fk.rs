@@ -159,11 +159,15 @@ pub fn fk_rows(file: &RobotFile, joints: &[Joints]) -> Vec<FkRow> {
     let mut st = KinState::default();
     joints
         .iter()
-        .map(|q| {
+        .map(|q_row| {
+            // The rows are the controller's values: the robot file's [[coupling]] turns them into
+            // the model's joint angles.
+            let q_model = file.coupling.as_ref().map_or(*q_row, |c| c.model_from_controller(q_row));
+            let q = &q_model;
             super::kinematics::forward(model, &mut st, q);
             let offsets: Joints = std::array::from_fn(|i| q[i] + model.links()[i].theta_offset);
             FkRow {
-                q: *q,
+                q: *q_row,
                 tool: XyzZyx::from_isometry(&tool_frame(file, &st, model)),
                 torque_nm: st.tau,
                 deflection_rad: std::array::from_fn(|i| st.theta()[i] - offsets[i]),

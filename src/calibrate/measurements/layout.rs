@@ -26,6 +26,8 @@ pub(super) enum Column {
     Sigma(f64),
     /// Quaternion component (w, x, y, z), ignored.
     Quaternion(usize),
+    /// The pose's part in a fixed split: `train` or `holdout`.
+    Split,
 }
 
 impl Column {
@@ -39,15 +41,22 @@ impl Column {
             Column::Coordinate(k, _) => 9 + k,
             Column::Sigma(_) => 12,
             Column::Quaternion(k) => 13 + k,
+            Column::Split => 17,
         }
     }
 }
 
 /// The names a missing slot is asked for by.
-const SLOT_NAMES: [&str; 17] = [
+const SLOT_NAMES: [&str; SLOTS] = [
     "pose", "session", "target", "q1_deg", "q2_deg", "q3_deg", "q4_deg", "q5_deg", "q6_deg", "x_mm", "y_mm", "z_mm", "sigma_mm", "quat_w",
-    "quat_x", "quat_y", "quat_z",
+    "quat_x", "quat_y", "quat_z", "split",
 ];
+/// Number of quantities a file's columns can hold.
+const SLOTS: usize = 18;
+/// The split column's value of a pose the fit uses.
+pub const TRAIN: &str = "train";
+/// The split column's value of a held-out pose.
+pub const HOLDOUT: &str = "holdout";
 
 fn length_unit(unit: &str) -> Option<f64> {
     match unit {
@@ -76,6 +85,7 @@ fn column(name: &str) -> Result<Column, String> {
         "quat_x" => return Ok(Column::Quaternion(1)),
         "quat_y" => return Ok(Column::Quaternion(2)),
         "quat_z" => return Ok(Column::Quaternion(3)),
+        "split" => return Ok(Column::Split),
         _ => {}
     }
     let (quantity, unit) = name.split_once('_').unwrap_or((name, ""));
@@ -105,8 +115,8 @@ fn column(name: &str) -> Result<Column, String> {
     if quantity == "sigma" {
         return length(&|f| Column::Sigma(f));
     }
-    Err("unknown column (the layout's columns: pose, session, target, q1_deg..q6_deg, x_mm, y_mm, z_mm; optional sigma_mm and \
-         quat_w, quat_x, quat_y, quat_z)"
+    Err("unknown column (the layout's columns: pose, session, target, q1_deg..q6_deg, x_mm, y_mm, z_mm; optional sigma_mm, \
+         quat_w, quat_x, quat_y, quat_z and split)"
         .into())
 }
 
@@ -115,14 +125,14 @@ pub(super) struct Layout {
     /// The column names, as the file gives them.
     pub(super) names: Vec<String>,
     columns: Vec<Column>,
-    slots: [Option<usize>; 17],
+    slots: [Option<usize>; SLOTS],
 }
 
 impl Layout {
     /// The layout of the column names `names`; an error names the column and what is wrong.
     pub(super) fn new(names: Vec<String>) -> Result<Self, (String, String)> {
         let mut columns: Vec<Column> = Vec::with_capacity(names.len());
-        let mut slots: [Option<usize>; 17] = [None; 17];
+        let mut slots: [Option<usize>; SLOTS] = [None; SLOTS];
         for (i, name) in names.iter().enumerate() {
             let c = column(name).map_err(|m| (name.clone(), m))?;
             if let Some(first) = slots[c.slot()].replace(i) {
@@ -135,12 +145,17 @@ impl Layout {
                 return Err((name.to_string(), "missing column (the layout needs pose, session, target, q1..q6, x, y, z)".into()));
             }
         }
-        let quaternion = slots[13..].iter().filter(|s| s.is_some()).count();
+        let quaternion = slots[13..17].iter().filter(|s| s.is_some()).count();
         if quaternion != 0 && quaternion != 4 {
             let missing = (13..17).find(|&s| slots[s].is_none()).map_or("quat_w", |s| SLOT_NAMES[s]);
             return Err((missing.to_string(), "missing column: the quaternion takes quat_w, quat_x, quat_y and quat_z".into()));
         }
         Ok(Self { names, columns, slots })
+    }
+
+    /// The file has a split column.
+    pub(super) fn has_split(&self) -> bool {
+        self.slots[17].is_some()
     }
 
     /// The file's name of joint column `k` (0-based).
@@ -160,6 +175,8 @@ pub(super) struct Row {
     pub(super) xyz: Vector3<f64>,
     /// Uncertainty per coordinate, mm.
     pub(super) sigma: Option<f64>,
+    /// The split column's value: held out (`None`: no such column).
+    pub(super) held_out: Option<bool>,
 }
 
 impl Row {
@@ -173,6 +190,7 @@ impl Row {
             q: [0.0; JOINTS],
             xyz: Vector3::zeros(),
             sigma: None,
+            held_out: None,
         };
         let mut quaternion = [0.0; 4];
         for ((field, c), name) in record.iter().zip(columns).zip(names) {
@@ -203,6 +221,13 @@ impl Row {
                     row.sigma = Some(v);
                 }
                 Column::Quaternion(k) => quaternion[k] = number(field).map_err(err)?,
+                Column::Split => {
+                    row.held_out = Some(match field {
+                        TRAIN => false,
+                        HOLDOUT => true,
+                        _ => return Err(err(format!("{field:?}: `{TRAIN}` (the fit uses the pose) or `{HOLDOUT}` (held out)"))),
+                    })
+                }
             }
         }
         if columns.iter().any(|c| matches!(c, Column::Quaternion(_))) {

@@ -6,7 +6,8 @@
 //! values and the target's position in the session's frame. Units are in the column names
 //! (`q1_deg` or `q1_rad`, `x_mm`, `x_m` or `x_um`); an optional `sigma_<unit>` column gives each
 //! point's standard uncertainty per coordinate; optional `quat_w,quat_x,quat_y,quat_z` columns
-//! (an instrument's orientation reading) are checked and ignored. Comment lines before the
+//! (an instrument's orientation reading) are checked and ignored; an optional `split` column
+//! (`train` or `holdout`, the same for every row of a pose) fixes the held-out poses. Comment lines before the
 //! column names may carry header keys (`# joints = controller`, `# targets = A, B`, `# frame =
 //! ...`, `# simulated = true`, `# robot = ...`, `# format = calsim-measurements-1`).
 //!
@@ -78,6 +79,8 @@ pub struct Pose {
     pub q: Joints,
     /// The first line of the pose.
     pub line: u64,
+    /// The file's split column for this pose: held out (`None`: the file has no split column).
+    pub held_out: Option<bool>,
 }
 
 /// One measured target position.
@@ -114,6 +117,8 @@ pub struct Measurements {
     pub rows_left_out: usize,
     /// The coupling was applied to the joint columns.
     pub coupled: bool,
+    /// The file has a split column (`train` or `holdout` per pose).
+    pub split_column: bool,
 }
 
 /// Reads and checks the measurement file `path` for the arm of `robot` (its joint limits, and its
@@ -154,6 +159,7 @@ pub fn parse(path: &Path, text: &str, robot: &RobotFile) -> Result<Measurements,
         points: Vec::new(),
         rows_left_out: 0,
         coupled: coupling.is_some(),
+        split_column: layout.has_split(),
     };
     let mut index = Index::default();
     for record in reader.records() {
@@ -212,12 +218,17 @@ impl Measurements {
                     let message = format!("pose {} of session {} has other joint values on line {}", row.pose, row.session, first.line);
                     return Err((joints.layout.joint(k).to_string(), message));
                 }
+                if first.held_out != row.held_out {
+                    let message =
+                        format!("pose {} of session {} is in the other part of the split on line {}", row.pose, row.session, first.line);
+                    return Err(("split".into(), message));
+                }
                 p
             }
             None => {
                 let q = joints.coupling.map_or(row.q, |c| c.model_from_controller(&row.q));
                 check_limits(joints, &q)?;
-                self.poses.push(Pose { label: row.pose.clone(), session, q_file: row.q, q, line });
+                self.poses.push(Pose { label: row.pose.clone(), session, q_file: row.q, q, line, held_out: row.held_out });
                 index.poses.insert((session, row.pose.clone()), self.poses.len() - 1);
                 self.poses.len() - 1
             }
@@ -308,4 +319,54 @@ fn check_counts(m: &Measurements) -> Result<(), (u64, &'static str, String)> {
         }
     }
     Ok(())
+}
+
+/// Reads a list of poses (`--hold-out-file`): CSV with the columns `session` and `pose` (in any
+/// order; `#` comment lines), one pose per row; every error names the file and the line.
+pub fn read_pose_list(path: &Path) -> Result<Vec<(String, String)>, MeasurementError> {
+    let fail = |line: Option<u64>, column: Option<&str>, message: String| MeasurementError {
+        path: path.into(),
+        line,
+        column: column.map(str::to_string),
+        message,
+    };
+    let bytes = crate::io::read_bytes(path).map_err(|e| fail(None, None, e.to_string()))?;
+    let text = String::from_utf8(bytes).map_err(|_| fail(None, None, "not UTF-8 text".into()))?;
+    let mut reader = csv::ReaderBuilder::new().comment(Some(b'#')).trim(csv::Trim::All).from_reader(text.as_bytes());
+    let names: Vec<String> = reader.headers().map_err(|e| fail(None, None, csv_message(&e)))?.iter().map(str::to_string).collect();
+    let col = |want: &str| {
+        names
+            .iter()
+            .position(|n| n == want)
+            .ok_or_else(|| fail(Some(1), Some(want), "missing column (a pose list has the columns session, pose)".into()))
+    };
+    let (s, p) = (col("session")?, col("pose")?);
+    if let Some(other) = names.iter().find(|n| *n != "session" && *n != "pose") {
+        return Err(fail(Some(1), Some(other), "unknown column (a pose list has the columns session, pose)".into()));
+    }
+    let mut out: Vec<(String, String)> = Vec::new();
+    let mut seen: std::collections::HashSet<(String, String)> = std::collections::HashSet::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| fail(e.position().map(|p| p.line()), None, csv_message(&e)))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let field = |k: usize, name: &str| {
+            let v = record.get(k).unwrap_or("");
+            if v.is_empty() || v.chars().count() > 64 || v.chars().any(char::is_control) {
+                return Err(fail(Some(line), Some(name), "a label of 1 to 64 printable characters".into()));
+            }
+            Ok(v.to_string())
+        };
+        let pose = (field(s, "session")?, field(p, "pose")?);
+        if !seen.insert(pose.clone()) {
+            return Err(fail(Some(line), Some("pose"), format!("pose {} of session {} is listed twice", pose.1, pose.0)));
+        }
+        if out.len() >= MAX_ROWS {
+            return Err(fail(Some(line), None, format!("more than {MAX_ROWS} poses")));
+        }
+        out.push(pose);
+    }
+    if out.is_empty() {
+        return Err(fail(None, None, "no pose listed (a row `session,pose` per held-out pose)".into()));
+    }
+    Ok(out)
 }
