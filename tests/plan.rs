@@ -201,8 +201,9 @@ fn every_planned_pose_is_feasible_by_an_independent_computation() {
     let mut poses = 0;
     for line in csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("pose,")).step_by(2) {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(&f[9..12], ["", "", ""], "{line}: position columns empty");
-        let q: [f64; 6] = std::array::from_fn(|i| f[3 + i].parse::<f64>().unwrap().to_radians());
+        assert_eq!(&f[10..13], ["", "", ""], "{line}: position columns empty");
+        assert!(f[3] == "train" || f[3] == "holdout", "{line}: split column");
+        let q: [f64; 6] = std::array::from_fn(|i| f[4 + i].parse::<f64>().unwrap().to_radians());
         for i in 0..6 {
             assert!(q[i] >= limits[i][0].to_radians() - 1e-12 && q[i] <= limits[i][1].to_radians() + 1e-12, "{line}: joint {}", i + 1);
         }

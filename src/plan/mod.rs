@@ -13,8 +13,8 @@
 //! ```
 //!
 //! The poses go out as a `calibrate` measurement file (joint columns filled, position columns
-//! empty): training poses in session `A`, validation poses in session `V`, which `calsim calibrate
-//! --hold-out-session V` holds out. Every stream is keyed under the plan's seed (`seeds::plan`):
+//! empty), one session `A`: training poses marked `train` in the `split` column, validation poses
+//! marked `holdout`, which `calsim calibrate` holds out without registering anything on them. Every stream is keyed under the plan's seed (`seeds::plan`):
 //! the plan is the same for any thread count.
 
 pub mod cell;
@@ -33,10 +33,12 @@ use crate::robot::{Joints, KinState, ParamSet, forward};
 use cell::Cell;
 pub use spec::{Plan, PlanError, parse};
 
-/// Session label of the training poses.
+/// Session label of the plan's poses.
 pub const TRAINING: &str = "A";
-/// Session label of the validation poses (`calsim calibrate --hold-out-session V`).
-pub const VALIDATION: &str = "V";
+/// The `split` value of the validation poses (`calsim calibrate` holds them out).
+pub const VALIDATION: &str = "holdout";
+/// The `split` value of the training poses.
+pub const TRAIN: &str = "train";
 
 /// Calibrate's identifiability check (`registration::prune`) on the configurations `qs` measured
 /// at the first `targets` targets of `plan` in one session: the robot parameters of `set` they separate, and
@@ -66,13 +68,15 @@ pub fn identifiable(plan: &Plan, cell: &Cell, qs: &[Joints], set: &ParamSet, tar
     })
 }
 
-/// One row of the plan's measurement file: pose label, session, model joint angles.
+/// One row of the plan's measurement file: pose label, session, split, model joint angles.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseRow {
     /// Label (`p001`, `v001`).
     pub label: String,
-    /// Session (`A` training, `V` validation).
+    /// Session (`A`).
     pub session: &'static str,
+    /// Its part of the split: `train` or `holdout` (a validation pose).
+    pub split: &'static str,
     /// The model's joint angles, rad.
     pub q: Joints,
 }
@@ -144,8 +148,8 @@ pub fn run(plan: &Plan) -> Result<Outcome, PlanError> {
         crate::identify::detmax::o1_of(&jac, &s)
     };
     let mut rows: Vec<PoseRow> =
-        chosen.iter().enumerate().map(|(k, &i)| PoseRow { label: format!("p{:03}", k + 1), session: TRAINING, q: training[i] }).collect();
-    rows.extend(val.iter().enumerate().map(|(k, &i)| PoseRow { label: format!("v{:03}", k + 1), session: VALIDATION, q: pool.qs[i] }));
+        chosen.iter().enumerate().map(|(k, &i)| PoseRow { label: format!("p{:03}", k + 1), session: TRAINING, split: TRAIN, q: training[i] }).collect();
+    rows.extend(val.iter().enumerate().map(|(k, &i)| PoseRow { label: format!("v{:03}", k + 1), session: TRAINING, split: VALIDATION, q: pool.qs[i] }));
     let qs: Vec<Joints> = rows.iter().map(|r| r.q).collect();
     let tour = select::tour(&cell, &qs);
     let colliding_moves = select::colliding_moves(&cell, &qs, &tour.0);
@@ -168,13 +172,13 @@ pub fn csv(plan: &Plan, rows: &[PoseRow], positions: Option<&[Vec<Vector3<f64>>]
     for c in comments {
         let _ = writeln!(s, "# {c}");
     }
-    s.push_str("pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
+    s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
     for (r, row) in rows.iter().enumerate() {
         let qc = plan.robot.coupling.as_ref().map_or(row.q, |c| c.controller_from_model(&row.q));
         let q: Vec<String> = qc.iter().map(|v| format!("{}", v.to_degrees())).collect();
         for (k, t) in plan.targets.iter().enumerate() {
             let xyz = positions.map_or_else(|| ",,".to_string(), |p| format!("{},{},{}", p[r][k].x, p[r][k].y, p[r][k].z));
-            let _ = writeln!(s, "{},{},{},{},{xyz}", row.label, row.session, t.name, q.join(","));
+            let _ = writeln!(s, "{},{},{},{},{},{xyz}", row.label, row.session, t.name, row.split, q.join(","));
         }
     }
     s
@@ -219,11 +223,11 @@ pub fn measure(plan: &Plan, cell: &Cell, rows: &[PoseRow], key: u64) -> Result<(
 }
 
 /// The calibrate options of the plan: the model's parameters as the most complete model, the
-/// validation session held out (else a fifth of the poses), no figures.
+/// validation poses held out by the file's `split` column (else a fifth of the poses), no figures.
 pub fn calibrate_options(plan: &Plan) -> Options {
     Options {
         params: Some(spec::model_params(plan.model)),
-        split: if plan.validation > 0 { Split::Session(VALIDATION.into()) } else { Split::Poses { fraction: 0.2 } },
+        split: if plan.validation > 0 { Split::Column } else { Split::Poses { fraction: 0.2 } },
         seed: plan.seed,
         plots: false,
         ..Options::default()
@@ -263,29 +267,29 @@ pub fn predict(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<Prediction,
     })
 }
 
-/// The plain joint list: one line per pose, label, session and the controller's joint values in
+/// The plain joint list: one line per pose, label, split and the controller's joint values in
 /// degrees (6 decimals).
 pub fn joint_list(plan: &Plan, rows: &[PoseRow]) -> String {
-    let mut s = String::from("# pose session q1_deg q2_deg q3_deg q4_deg q5_deg q6_deg (controller values)\n");
+    let mut s = String::from("# pose split q1_deg q2_deg q3_deg q4_deg q5_deg q6_deg (controller values)\n");
     for r in rows {
         let qc = plan.robot.coupling.as_ref().map_or(r.q, |c| c.controller_from_model(&r.q));
         let q: Vec<String> = qc.iter().map(|v| format!("{:.6}", v.to_degrees())).collect();
-        let _ = writeln!(s, "{} {} {}", r.label, r.session, q.join(" "));
+        let _ = writeln!(s, "{} {} {}", r.label, r.split, q.join(" "));
     }
     s
 }
 
-/// The tour as CSV: step, pose, session, joint values (deg, controller), the move to it (largest
+/// The tour as CSV: step, pose, split, joint values (deg, controller), the move to it (largest
 /// joint change, deg).
 pub fn tour_csv(plan: &Plan, o: &Outcome) -> String {
-    let mut s = String::from("step,pose,session,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
+    let mut s = String::from("step,pose,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
     let mut prev: Option<Joints> = None;
     for (k, &i) in o.tour.0.iter().enumerate() {
         let r = &o.rows[i];
         let qc = plan.robot.coupling.as_ref().map_or(r.q, |c| c.controller_from_model(&r.q));
         let q: Vec<String> = qc.iter().map(|v| format!("{:.6}", v.to_degrees())).collect();
         let step = prev.map_or(0.0, |p| p.iter().zip(&r.q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        let _ = writeln!(s, "{},{},{},{},{step:.3}", k + 1, r.label, r.session, q.join(","));
+        let _ = writeln!(s, "{},{},{},{},{step:.3}", k + 1, r.label, r.split, q.join(","));
         prev = Some(r.q);
     }
     s
@@ -319,7 +323,7 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     let _ = writeln!(s, "- Training: {} poses chosen by DETMAX from {} (session {TRAINING} in `poses.csv`).", plan.poses, plan.pool);
     let _ = writeln!(
         s,
-        "- Validation: {} poses spread over the workspace of interest (session {VALIDATION}; calibrate with `--hold-out-session {VALIDATION}`).",
+        "- Validation: {} poses spread over the workspace of interest (marked `{VALIDATION}` in the `split` column of `poses.csv`: `calsim calibrate` holds them out).",
         plan.validation
     );
     let _ = writeln!(
