@@ -75,7 +75,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     }
     let compare: Vec<optimise::Candidate> =
         space.compare.iter().map(|p| optimise::compared(p)).collect::<Result<Vec<_>, _>>()?.into_iter().flatten().collect();
-    let ctx = Context { space: &space, cache: optimise::work_dir(&spec.out, &space.name) };
+    let ctx = Context::new(&space, optimise::work_dir(&spec.out, &space.name));
     // A killed run's temporaries (a per-world file or a record cut short by the kill) go first.
     optimise::remove_stale_temporaries(&ctx.cache, &space.world_context).map_err(opt_err)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));

@@ -111,6 +111,7 @@ struct SearchFile {
     finalists: Option<u32>,
     race: Option<RaceFile>,
     seed: Option<u64>,
+    score: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -246,6 +247,34 @@ impl Method {
     }
 }
 
+/// What the search minimises for an objective of `maximise = "success"` (the race, the
+/// verification and the answer are judged by P(success) whichever it is).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SearchScore {
+    /// The empirical quantile over the search worlds, at the target probability
+    /// (`success_at_least`, 0.95 without it), of each world's error statistic (its median over
+    /// repetitions; a world whose campaign failed counts as [`QUANTILE_CAP`] times the threshold),
+    /// divided by the threshold: below 1 where the target is met on those worlds, and still
+    /// falling as the errors fall where P(success) has reached 1.
+    Quantile,
+    /// Minus P(success) over the search worlds (steps of 1 / (worlds x repetitions); flat at -1
+    /// once every world succeeds).
+    Success,
+}
+
+/// Where a failed world's error is put in the quantile score, in thresholds.
+pub const QUANTILE_CAP: f64 = 10.0;
+
+impl SearchScore {
+    /// The name as the file writes it.
+    pub fn label(self) -> &'static str {
+        match self {
+            SearchScore::Quantile => "quantile",
+            SearchScore::Success => "success",
+        }
+    }
+}
+
 /// How the search runs.
 #[derive(Clone, Debug)]
 pub struct Search {
@@ -263,6 +292,8 @@ pub struct Search {
     pub race: Race,
     /// Seed of the optimisers' own draws (the swarm's).
     pub seed: u64,
+    /// What the search minimises for `maximise = "success"` (`[search] score`).
+    pub score: SearchScore,
 }
 
 /// An error model of a robust design: scenario keys set on top of every design.
@@ -758,6 +789,11 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
         Some("particle_swarm") => Method::ParticleSwarm,
         Some(m) => return Err(err(path, "search.method", format!("{m:?}: \"nelder_mead\" or \"particle_swarm\""))),
     };
+    let score = match s.score.as_deref() {
+        None | Some("quantile") => SearchScore::Quantile,
+        Some("success") => SearchScore::Success,
+        Some(m) => return Err(err(path, "search.score", format!("{m:?}: \"quantile\" or \"success\""))),
+    };
     let count = |k: &str, v: Option<u32>, default: u32, most: u32| -> Result<u32, DesignError> {
         let v = v.unwrap_or(default);
         if !(1..=most).contains(&v) {
@@ -788,6 +824,7 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
         finalists: count("finalists", s.finalists, 4, 100)?,
         race,
         seed: s.seed.unwrap_or(2018),
+        score,
     })
 }
 
