@@ -132,7 +132,11 @@ fn the_quantile_score_reaches_a_known_optimum_where_p_success_saturates_and_stop
     // Its score at the best design is the 0.9 quantile of the ten worlds' largest errors over the
     // threshold: (0.1 + 0.6 d^2 + 0.005 x 8.1) / 0.5 (order statistics 9 and 10 of 0..9 x 0.005).
     let at_best = trace.iter().map(|e| e.score).fold(f64::INFINITY, f64::min);
-    let expected = (0.1 + 0.6 * distance(&best).powi(2) + 0.005 * 8.1) / 0.5;
+    // (at the design as decoded: its values rounded to the resolution of their ranges)
+    let d = quantile.decode(0, &best);
+    let get = |k: &str| get_dotted(&d.table, k).and_then(|v| v.as_float()).unwrap();
+    let t = [unit_of(get("trical.wait_s"), 0.5, 2.0), unit_of(get("trical.approach_move_s"), 2.0, 6.0)];
+    let expected = (0.1 + 0.6 * distance(&t).powi(2) + 0.005 * 8.1) / 0.5;
     assert!((at_best - expected).abs() < 1e-9, "score {at_best} against {expected}");
 }
 
@@ -162,4 +166,17 @@ fn the_quantile_score_is_the_empirical_quantile_over_the_threshold_with_failed_w
     // At 0.95: between 0.4 / 0.5 = 0.8 and the failed world's cap of 10 thresholds, 0.8 of the way.
     assert!((optimise::quantile_score(&v, 0.95, 0.5) - (0.8 + 0.8 * (10.0 - 0.8))).abs() < 1e-12);
     assert!(optimise::quantile_score(&[f64::NAN], 0.9, 0.5).is_nan());
+}
+
+/// A range variable's value is rounded to four digits below the range's leading one, never -0.0:
+/// the shipped TriCal file's epsilon start is 0.02 exactly.
+#[test]
+fn range_values_are_tidy_at_the_resolution_of_their_range() {
+    assert_eq!(spec::at_resolution(0.019999999999999997, 0.025), 0.02);
+    assert_eq!(spec::at_resolution(123.456789, 400.0), 123.46);
+    assert!(spec::at_resolution(-1e-9, 400.0).is_sign_positive());
+    let space = spec::load(&repo().join("scenarios/designs/irb120_spheres.toml")).unwrap();
+    let d = space.decode(5, &space.start(5));
+    let epsilon = get_dotted(&d.table, "trical.epsilon_mm").and_then(|v| v.as_float()).unwrap();
+    assert_eq!(epsilon.to_string(), "0.02");
 }

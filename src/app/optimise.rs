@@ -174,7 +174,7 @@ fn plot_inputs(space: &DesignSpace, o: &results::Outcome) -> OptimisePlotInputs 
     let convergence = (0..restarts.len())
         .map(|r| {
             let scores: Vec<f64> = v.trace.iter().filter(|e| e.asked.restart as usize == r).map(|e| e.score).collect();
-            (format!("{} points, restart {}", restarts[r].0, restarts[r].1), scores)
+            (format!("restart {r}: {} points", restarts[r].0), scores)
         })
         .collect();
     let ours = v.verified.iter().filter(|c| !c.compared).count();
@@ -190,7 +190,13 @@ fn plot_inputs(space: &DesignSpace, o: &results::Outcome) -> OptimisePlotInputs 
         let (reach, base) = reach_of(&space.base, &space.path);
         (c.points_mm.clone(), reach, base)
     });
-    OptimisePlotInputs { convergence, front, objective: space.objective.describe(), cell }
+    let o = &space.objective;
+    let target = match o.goal {
+        crate::design::sweep::objective::Goal::MaximiseSuccess => o.success_at_least,
+        crate::design::sweep::objective::Goal::MinimiseError(_) => o.threshold_mm,
+        _ => None,
+    };
+    OptimisePlotInputs { convergence, front, objective: o.describe(), cell, target, budget_h: o.campaign_h_at_most }
 }
 
 /// Tool points the arm of a TriCal base scenario reaches (sampled in its joint limits, in the

@@ -156,7 +156,7 @@ impl Variable {
     pub fn value(&self, t: f64) -> toml::Value {
         let t = t.clamp(0.0, 1.0);
         match &self.domain {
-            Domain::Range(lo, hi) => toml::Value::Float(lo + t * (hi - lo)),
+            Domain::Range(lo, hi) => toml::Value::Float(at_resolution(lo + t * (hi - lo), hi - lo)),
             Domain::Integer(lo, hi) => toml::Value::Integer(lo + (t * (hi - lo + 1) as f64).floor().min((hi - lo) as f64) as i64),
             Domain::Choices(c) => c[((t * c.len() as f64).floor() as usize).min(c.len() - 1)].clone(),
         }
@@ -174,6 +174,23 @@ impl Variable {
             Domain::Choices(c) => c.iter().position(|x| x == v).map(|k| (k as f64 + 0.5) / c.len() as f64),
         }
     }
+}
+
+/// `v` rounded to the resolution of a range `width` wide: four decimal digits below its leading
+/// one (0.019999999999999997 in a range of 0.025 is 0.02), and never -0.0.
+pub fn at_resolution(v: f64, width: f64) -> f64 {
+    if !(v.is_finite() && width.is_finite() && width > 0.0) {
+        return v;
+    }
+    let digits = 4 - width.log10().floor() as i32;
+    let r = if digits >= 0 {
+        let f = 10f64.powi(digits);
+        (v * f).round() / f
+    } else {
+        let f = 10f64.powi(-digits);
+        (v / f).round() * f
+    };
+    r + 0.0
 }
 
 /// Where the points may go.
