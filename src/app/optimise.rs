@@ -85,7 +85,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     if merge {
         crate::io::out_dir::prepare(&spec.out, &space.name)?;
     }
-    let ctx = Context { space: &space, cache: optimise::work_dir(&spec.out, &space.name) };
+    let ctx = Context::new(&space, optimise::work_dir(&spec.out, &space.name));
     // A killed run's temporaries (a per-world file or a record cut short by the kill) go first.
     optimise::remove_stale_temporaries(&ctx.cache, &space.world_context).map_err(opt_err)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
@@ -188,7 +188,7 @@ fn plot_inputs(space: &DesignSpace, o: &results::Outcome) -> OptimisePlotInputs 
     let convergence = (0..restarts.len())
         .map(|r| {
             let scores: Vec<f64> = v.trace.iter().filter(|e| e.asked.restart as usize == r).map(|e| e.score).collect();
-            (format!("{} points, restart {}", restarts[r].0, restarts[r].1), scores)
+            (format!("restart {r}: {} points", restarts[r].0), scores)
         })
         .collect();
     let ours = v.verified.iter().filter(|c| !c.compared).count();
@@ -204,7 +204,13 @@ fn plot_inputs(space: &DesignSpace, o: &results::Outcome) -> OptimisePlotInputs 
         let (reach, base) = reach_of(&space.base, &space.path);
         (c.points_mm.clone(), reach, base)
     });
-    OptimisePlotInputs { convergence, front, objective: space.objective.describe(), cell }
+    let o = &space.objective;
+    let target = match o.goal {
+        crate::design::sweep::objective::Goal::MaximiseSuccess => o.success_at_least,
+        crate::design::sweep::objective::Goal::MinimiseError(_) => o.threshold_mm,
+        _ => None,
+    };
+    OptimisePlotInputs { convergence, front, objective: o.describe(), cell, target, budget_h: o.campaign_h_at_most }
 }
 
 /// Tool points the arm of a TriCal base scenario reaches (sampled in its joint limits, in the

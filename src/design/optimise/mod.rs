@@ -233,15 +233,76 @@ pub fn score_of(space: &DesignSpace, r: &DesignRow) -> f64 {
     value + PENALTY * penalty
 }
 
+/// The search score of one set size's judgement with its per-world values of the objective's
+/// error statistic (`per_world`, +inf where the world's campaign failed, NaN where it has none):
+/// for `maximise = "success"` under `[search] score = "quantile"`, the quantile score
+/// ([`spec::SearchScore::Quantile`], [`quantile_score`]) plus the campaign and set size
+/// constraints' shortfalls as in [`score_of`]; otherwise [`score_of`].
+pub fn search_score(space: &DesignSpace, r: &DesignRow, per_world: &[f64]) -> f64 {
+    let o = &space.objective;
+    let Some(threshold) = o.threshold_mm.filter(|_| o.goal == Goal::MaximiseSuccess && space.search.score == spec::SearchScore::Quantile)
+    else {
+        return score_of(space, r);
+    };
+    let value = quantile_score(per_world, o.success_at_least.unwrap_or(0.95), threshold);
+    let mut penalty = 0.0;
+    if let Some(h) = o.campaign_h_at_most {
+        penalty += if r.campaign_h.is_finite() { (r.campaign_h / h - 1.0).max(0.0) } else { 1.0 };
+    }
+    if let Some(n) = o.set_size_at_most {
+        penalty += (f64::from(r.design.set_size) / f64::from(n) - 1.0).max(0.0);
+    }
+    let value = if value.is_finite() { value } else { PENALTY };
+    value + PENALTY * penalty
+}
+
+/// The empirical quantile at `level` (linear between order statistics: at `(n - 1) level`) of
+/// per-world errors over `threshold` (each capped at [`spec::QUANTILE_CAP`] thresholds, a failed
+/// world's +inf with them; NaN left out); NaN without a value.
+pub fn quantile_score(per_world: &[f64], level: f64, threshold: f64) -> f64 {
+    let mut v: Vec<f64> =
+        per_world.iter().filter(|x| !x.is_nan()).map(|x| (x / threshold).min(spec::QUANTILE_CAP)).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let h = (v.len() - 1) as f64 * level.clamp(0.0, 1.0);
+    let (lo, hi) = (v[h.floor() as usize], v[h.ceil() as usize]);
+    lo + (h - h.floor()) * (hi - lo)
+}
+
+/// Where a design's worlds come from: the device's own work unit ([`Devices`]), or another
+/// source of the same units (a synthetic problem with a known optimum, for the search's tests).
+pub trait WorldSource: Sync {
+    /// The unit of point `point` of `sweep` in realisation `realisation`.
+    fn run(&self, sweep: &Sweep, point: usize, realisation: u32) -> Unit;
+}
+
+/// The device's own work unit ([`run_world`]).
+pub struct Devices;
+
+impl WorldSource for Devices {
+    fn run(&self, sweep: &Sweep, point: usize, realisation: u32) -> Unit {
+        run_world(sweep, point, realisation)
+    }
+}
+
 /// What evaluations share: the space, where worlds are kept, the base scenario's path.
 pub struct Context<'a> {
     /// The design space.
     pub space: &'a DesignSpace,
     /// Directory of the per-world files.
     pub cache: PathBuf,
+    /// Where worlds come from ([`Devices`] but in tests of the search).
+    pub worlds: &'a dyn WorldSource,
 }
 
-impl Context<'_> {
+impl<'a> Context<'a> {
+    /// The context of `space` keeping its worlds under `cache`, run by the devices.
+    pub fn new(space: &'a DesignSpace, cache: PathBuf) -> Self {
+        Self { space, cache, worlds: &Devices }
+    }
+
     /// The sweep-shaped record of one design point (for the sweep's statistics).
     fn sweep_of(&self, points: Vec<Point>, realisations: u32) -> Sweep {
         Sweep {
@@ -283,7 +344,7 @@ impl Context<'_> {
                 let mut u = match read_world(&file, r, &design, &studies[p], thresholds)? {
                     Some(u) => u,
                     None => {
-                        let u = run_world(&sweep, p, r);
+                        let u = self.worlds.run(&sweep, p, r);
                         fs::create_dir_all(&dir).map_err(io_err(&dir))?;
                         let u = Unit { point: 0, unit: r as usize, design: Some(design), digest: None, ..u };
                         let bytes = serde_json::to_vec(&Unit { digest: Some(unit_digest(&u)), ..u })
@@ -367,15 +428,22 @@ impl Context<'_> {
         let all_failed = 2.0 * PENALTY + e.reach_mm.iter().copied().fold(0.0, f64::max) / 100.0;
         let info = self.info(&self.sweep_of(points.iter().map(|p| p.1.clone()).collect(), stride));
         let rows = designs::judge(&info, &units, &[]);
+        // Each design's per-world values of the error statistic (for the quantile score).
+        let per_world = designs::values(&info, &units, Goal::MinimiseError(self.space.objective.statistic));
         let mut per_model: Vec<ModelScore> = (0..points.len())
             .map(|m| {
                 let sizes: Vec<SizeScore> = rows
                     .iter()
                     .filter(|r| r.design.point == m)
                     .map(|r| {
+                        let values: Vec<f64> = per_world
+                            .iter()
+                            .find(|(d, _, _)| *d == r.design)
+                            .map(|(_, _, v)| v.iter().map(|x| x.1).collect())
+                            .unwrap_or_default();
                         let mut row = r.clone();
                         row.design.point = 0;
-                        SizeScore { score: score_of(self.space, &row), row }
+                        SizeScore { score: search_score(self.space, &row, &values), row }
                     })
                     .collect();
                 let score = sizes.iter().map(|z| z.score).min_by(f64::total_cmp).unwrap_or(all_failed);
@@ -547,8 +615,16 @@ pub fn work_dir(out: &Path, name: &str) -> PathBuf {
 fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
     use sha2::Digest;
     let s = &space.search;
-    let settings =
-        format!("{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}", space.identity, s.method.label(), s.evaluations, s.restarts, s.worlds, s.seed);
+    let settings = format!(
+        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}",
+        space.identity,
+        s.method.label(),
+        s.evaluations,
+        s.restarts,
+        s.worlds,
+        s.seed,
+        s.score.label()
+    );
     let key = format!("{:x}", sha2::Sha256::digest(settings.as_bytes()));
     dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
 }

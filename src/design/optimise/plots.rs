@@ -24,6 +24,11 @@ pub struct OptimisePlotInputs {
     /// The winning cell: its points in the region's frame, mm, and sampled reachable tool points
     /// of the arm in the same frame (empty where the device has none), the base's origin.
     pub cell: Option<CellDrawing>,
+    /// The objective's target on the front's y axis (the least P(success), or the error
+    /// threshold of a minimised error), if it has one.
+    pub target: Option<f64>,
+    /// The campaign budget, h, if the objective has one.
+    pub budget_h: Option<f64>,
 }
 
 /// Writes the figures into `dir`.
@@ -109,8 +114,9 @@ fn convergence<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePl
 fn front<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInputs) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
     let pts: Vec<&(String, f64, [f64; 3], bool)> = p.front.iter().filter(|d| d.1.is_finite() && d.2[0].is_finite()).collect();
-    let xr = range_of(pts.iter().map(|d| d.1), 0.08);
-    let yr = range_of(pts.iter().flat_map(|d| [d.2[1], d.2[2]]), 0.08);
+    let xr = range_of(pts.iter().map(|d| d.1).chain(p.budget_h), 0.08);
+    let yr = range_of(pts.iter().flat_map(|d| [d.2[1], d.2[2]]).chain(p.target), 0.08);
+    let (x0, x1, y0, y1) = (xr.start, xr.end, yr.start, yr.end);
     let mut chart = ChartBuilder::on(root)
         .caption("Held-out worlds: campaign time against the objective", (FAMILY, 18))
         .margin(15)
@@ -125,6 +131,22 @@ fn front<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInpu
         .label_style((FAMILY, 13))
         .draw()
         .map_err(e2s)?;
+    let grey = RGBColor(90, 90, 90);
+    if let Some(t) = p.target {
+        chart
+            .draw_series(std::iter::once(PathElement::new(vec![(x0, t), (x1, t)], grey.stroke_width(1))))
+            .map_err(e2s)?
+            .label(format!("target {t}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], grey.stroke_width(1)));
+    }
+    if let Some(h) = p.budget_h {
+        let dash = RGBColor(160, 110, 0);
+        chart
+            .draw_series(DashedLineSeries::new(vec![(h, y0), (h, y1)], 6, 4, dash.stroke_width(1)))
+            .map_err(e2s)?
+            .label(format!("campaign budget {h} h"))
+            .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], dash.stroke_width(1)));
+    }
     for (ours, colour, label) in [(true, RED, "optimiser (best of each count)"), (false, BLUE, "compared designs")] {
         let of: Vec<&&(String, f64, [f64; 3], bool)> = pts.iter().filter(|d| d.3 == ours).collect();
         chart.draw_series(of.iter().map(|d| PathElement::new(vec![(d.1, d.2[1]), (d.1, d.2[2])], colour.stroke_width(2)))).map_err(e2s)?;
@@ -135,7 +157,11 @@ fn front<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInpu
             .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
         if ours {
             chart
-                .draw_series(of.iter().map(|d| Text::new(d.0.split(',').next().unwrap_or("").to_string(), (d.1, d.2[0]), (FAMILY, 12))))
+                .draw_series(of.iter().map(|d| {
+                    // Beside the marker, not over it: 8 px right, 14 px up.
+                    EmptyElement::at((d.1, d.2[0]))
+                        + Text::new(d.0.split(',').next().unwrap_or("").to_string(), (8, -14), (FAMILY, 12))
+                }))
                 .map_err(e2s)?;
         }
     }

@@ -68,12 +68,86 @@ pub fn design_file(c: &Candidate, r: &DesignRow, head: &str) -> String {
 /// selection the only one.
 pub fn design_table(c: &Candidate, r: &DesignRow) -> toml::Table {
     let mut table = c.table.clone();
+    for (_, v) in table.iter_mut() {
+        no_negative_zero(v);
+    }
     let study = table.entry("study").or_insert_with(|| toml::Value::Table(toml::Table::new()));
     if let Some(s) = study.as_table_mut() {
         s.insert("table_set_size".into(), toml::Value::Integer(i64::from(r.design.set_size)));
         s.insert("selections".into(), toml::Value::Array(vec![toml::Value::String(r.design.selection.clone())]));
     }
     table
+}
+
+/// Every `-0.0` in `v` written `0.0` (the same number, tidy in a file).
+fn no_negative_zero(v: &mut toml::Value) {
+    match v {
+        toml::Value::Float(x) if *x == 0.0 => *x = 0.0,
+        toml::Value::Array(a) => a.iter_mut().for_each(no_negative_zero),
+        toml::Value::Table(t) => t.iter_mut().for_each(|(_, x)| no_negative_zero(x)),
+        _ => {}
+    }
+}
+
+/// The objective's verdict on a held-out row in words: each constraint met (its confidence bound
+/// on the right side of the target), not met (on the wrong side) or not shown (the interval
+/// holds the target: more worlds would decide).
+pub fn status_words(space: &DesignSpace, r: &DesignRow) -> String {
+    use crate::study::interval::{clopper_pearson_lower, clopper_pearson_upper};
+    let o = &space.objective;
+    let mut out = Vec::new();
+    if let (Some(target), Some((p, _))) = (o.success_at_least, r.success) {
+        let n = f64::from(r.worlds);
+        let (lo, hi) = (clopper_pearson_lower(p * n, n, o.confidence), clopper_pearson_upper(p * n, n, o.confidence));
+        let what = format!("P({} <= {} mm) >= {target} at {} % confidence", o.statistic.label(), o.threshold_mm.unwrap_or(f64::NAN), o.confidence * 100.0);
+        out.push(if lo >= target {
+            format!("{what}: **met** (P = {} over {} worlds, its lower bound {} >= {target})", f3(p), r.worlds, f3(lo))
+        } else if hi < target {
+            format!("{what}: **not met** (P = {} over {} worlds, its upper bound {} < {target})", f3(p), r.worlds, f3(hi))
+        } else {
+            format!(
+                "{what}: **not shown** (P = {} over {} worlds, bounds {}-{} hold {target}: more worlds would decide)",
+                f3(p),
+                r.worlds,
+                f3(lo),
+                f3(hi)
+            )
+        });
+    }
+    if let Some(h) = o.campaign_h_at_most {
+        let met = r.campaign_h <= h;
+        out.push(format!("campaign {} h <= {h} h: **{}**", f3(r.campaign_h), if met { "met" } else { "not met" }));
+    }
+    if let Some(n) = o.set_size_at_most {
+        out.push(format!("set size {} <= {n}: **{}**", r.design.set_size, if r.design.set_size <= n { "met" } else { "not met" }));
+    }
+    out.join("; ")
+}
+
+/// The FITTED values of the base scenario (`section.key = value`, from its text's comments), the
+/// error model a design's figures rest on; empty when the file cannot be read or has none.
+pub fn fitted_values(space: &DesignSpace) -> Vec<String> {
+    let base = crate::io::read_text(&space.path)
+        .ok()
+        .and_then(|t| t.parse::<toml::Table>().ok())
+        .and_then(|t| t.get("base").and_then(|b| b.as_str()).map(PathBuf::from));
+    let Some(base) = base else { return Vec::new() };
+    let Ok(text) = crate::io::read_text(&space.path.parent().unwrap_or(Path::new(".")).join(base)) else { return Vec::new() };
+    let mut section = String::new();
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let l = line.trim();
+        if l.starts_with('[') {
+            section = l.trim_matches(|c| c == '[' || c == ']').to_string();
+        } else if let Some((kv, note)) = l.split_once('#')
+            && note.contains("FITTED")
+            && let Some((k, v)) = kv.split_once('=')
+        {
+            let key = if section.is_empty() { k.trim().to_string() } else { format!("{section}.{}", k.trim()) };
+            out.push(format!("`{key} = {}`", v.trim()));
+        }
+    }
+    out
 }
 
 /// A held-out or race row in words: `P = 0.95 (0.90-0.98), 100 worlds, campaign 2.10 h`.
@@ -132,6 +206,57 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
         }
         s += &format!("| **held-out worlds (reported)**{under} | **{}** |\n\n", row_words(r));
         s += &format!("Points (region frame, mm): {:?}\n\n", c.points_mm);
+        let status = status_words(space, r);
+        if !status.is_empty() {
+            s += &format!("Status on the held-out worlds: {status}.\n\n");
+        }
+        s += "Answer rule: the race's first on the search worlds (`race.parquet` rank 1): the designs meeting every constraint at the \
+              confidence first, then those the worlds leave undecided, then the rest; within each the best objective estimate; ties \
+              by the finalists' order (count, then search score), then selection, then the smaller set size. The held-out worlds \
+              report the answer and do not choose it (chosen on them, the figure would be the luckiest of the verified designs on \
+              the worlds that chose it).\n\n";
+        if v.robust.is_none() {
+            let above: Vec<&DesignRow> = v.held_out_rows.iter().filter(|h| h.rank < r.rank).collect();
+            if above.is_empty() {
+                s += "The held-out table below ranks the answer first.\n\n";
+            } else {
+                s += &format!(
+                    "The held-out table below ranks the answer {} of {}: above it {}. The race, on the search worlds, put the answer \
+                     first; the held-out figures of the designs above it are each the best of several on the same worlds, and \
+                     the paired column says whether the worlds separate them.\n\n",
+                    r.rank,
+                    v.held_out_rows.len(),
+                    above
+                        .iter()
+                        .map(|h| format!("{} ({} sets of {}: {})", v.verified[h.design.point].label, h.design.selection, h.design.set_size, f3(h.estimate)))
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                );
+            }
+        }
+        let fitted = fitted_values(space);
+        let models = match &v.robust {
+            Some(x) => format!("the {} error models of `[robust]` ({})", x.models.len(), x.models.join(", ")),
+            None => "one error model, the base scenario's (`[robust]` scores a design over several)".to_string(),
+        };
+        s += &format!(
+            "Error model: the figures rest on {models}{}.\n\n",
+            if fitted.is_empty() { String::new() } else { format!("; its FITTED values: {}", fitted.join(", ")) }
+        );
+        if space.objective.goal == crate::design::sweep::objective::Goal::MaximiseSuccess {
+            s += &format!(
+                "Search score: {}.\n\n",
+                match space.search.score {
+                    super::spec::SearchScore::Quantile => format!(
+                        "the {} quantile over the search worlds of each world's {} error over the threshold (`[search] score = \"quantile\"`), \
+                         plus the constraints' shortfalls; the race and the answer are judged by P(success)",
+                        space.objective.success_at_least.unwrap_or(0.95),
+                        space.objective.statistic.label()
+                    ),
+                    super::spec::SearchScore::Success => "minus P(success) over the search worlds (`[search] score = \"success\"`), plus the constraints' shortfalls".to_string(),
+                }
+            );
+        }
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
     }

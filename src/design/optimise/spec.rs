@@ -111,6 +111,7 @@ struct SearchFile {
     finalists: Option<u32>,
     race: Option<RaceFile>,
     seed: Option<u64>,
+    score: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -155,7 +156,7 @@ impl Variable {
     pub fn value(&self, t: f64) -> toml::Value {
         let t = t.clamp(0.0, 1.0);
         match &self.domain {
-            Domain::Range(lo, hi) => toml::Value::Float(lo + t * (hi - lo)),
+            Domain::Range(lo, hi) => toml::Value::Float(at_resolution(lo + t * (hi - lo), hi - lo)),
             Domain::Integer(lo, hi) => toml::Value::Integer(lo + (t * (hi - lo + 1) as f64).floor().min((hi - lo) as f64) as i64),
             Domain::Choices(c) => c[((t * c.len() as f64).floor() as usize).min(c.len() - 1)].clone(),
         }
@@ -173,6 +174,23 @@ impl Variable {
             Domain::Choices(c) => c.iter().position(|x| x == v).map(|k| (k as f64 + 0.5) / c.len() as f64),
         }
     }
+}
+
+/// `v` rounded to the resolution of a range `width` wide: four decimal digits below its leading
+/// one (0.019999999999999997 in a range of 0.025 is 0.02), and never -0.0.
+pub fn at_resolution(v: f64, width: f64) -> f64 {
+    if !(v.is_finite() && width.is_finite() && width > 0.0) {
+        return v;
+    }
+    let digits = 4 - width.log10().floor() as i32;
+    let r = if digits >= 0 {
+        let f = 10f64.powi(digits);
+        (v * f).round() / f
+    } else {
+        let f = 10f64.powi(-digits);
+        (v / f).round() * f
+    };
+    r + 0.0
 }
 
 /// Where the points may go.
@@ -246,6 +264,34 @@ impl Method {
     }
 }
 
+/// What the search minimises for an objective of `maximise = "success"` (the race, the
+/// verification and the answer are judged by P(success) whichever it is).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SearchScore {
+    /// The empirical quantile over the search worlds, at the target probability
+    /// (`success_at_least`, 0.95 without it), of each world's error statistic (its median over
+    /// repetitions; a world whose campaign failed counts as [`QUANTILE_CAP`] times the threshold),
+    /// divided by the threshold: below 1 where the target is met on those worlds, and still
+    /// falling as the errors fall where P(success) has reached 1.
+    Quantile,
+    /// Minus P(success) over the search worlds (steps of 1 / (worlds x repetitions); flat at -1
+    /// once every world succeeds).
+    Success,
+}
+
+/// Where a failed world's error is put in the quantile score, in thresholds.
+pub const QUANTILE_CAP: f64 = 10.0;
+
+impl SearchScore {
+    /// The name as the file writes it.
+    pub fn label(self) -> &'static str {
+        match self {
+            SearchScore::Quantile => "quantile",
+            SearchScore::Success => "success",
+        }
+    }
+}
+
 /// How the search runs.
 #[derive(Clone, Debug)]
 pub struct Search {
@@ -263,6 +309,8 @@ pub struct Search {
     pub race: Race,
     /// Seed of the optimisers' own draws (the swarm's).
     pub seed: u64,
+    /// What the search minimises for `maximise = "success"` (`[search] score`).
+    pub score: SearchScore,
 }
 
 /// An error model of a robust design: scenario keys set on top of every design.
@@ -766,6 +814,11 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
         Some("particle_swarm") => Method::ParticleSwarm,
         Some(m) => return Err(err(path, "search.method", format!("{m:?}: \"nelder_mead\" or \"particle_swarm\""))),
     };
+    let score = match s.score.as_deref() {
+        None | Some("quantile") => SearchScore::Quantile,
+        Some("success") => SearchScore::Success,
+        Some(m) => return Err(err(path, "search.score", format!("{m:?}: \"quantile\" or \"success\""))),
+    };
     let count = |k: &str, v: Option<u32>, default: u32, most: u32| -> Result<u32, DesignError> {
         let v = v.unwrap_or(default);
         if !(1..=most).contains(&v) {
@@ -796,6 +849,7 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
         finalists: count("finalists", s.finalists, 4, 100)?,
         race,
         seed: s.seed.unwrap_or(2018),
+        score,
     })
 }
 

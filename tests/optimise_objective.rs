@@ -1,0 +1,182 @@
+//! The optimiser's search score on a synthetic problem with a known optimum, through the same
+//! interface as a device's worlds (`design::optimise::WorldSource`): where every design near the
+//! start succeeds in every world, P(success) is flat at 1 and the search cannot move; the quantile
+//! score (`[search] score = "quantile"`, the default) keeps falling towards the optimum and the
+//! search reaches it.
+
+mod common;
+
+use calsim::design::optimise::{self, Context, Evaluated, WorldSource, spec};
+use calsim::design::sweep::record::PointStudy;
+use calsim::design::sweep::spec::get_dotted;
+use calsim::design::sweep::{Sweep, Unit, UnitRow};
+use common::{repo, scratch};
+
+/// The optimum in the unit square of the two variables.
+const OPTIMUM: [f64; 2] = [0.3, 0.7];
+
+/// A synthetic world: the largest error of every calibration in world `r` of the design at `t`
+/// (unit coordinates) is `0.1 + 0.6 |t - OPTIMUM|^2 + 0.005 (r mod 10)` mm, within the 0.5 mm
+/// threshold over most of the square (P(success) = 1 there), least at the optimum.
+struct Bowl;
+
+fn unit_of(value: f64, lo: f64, hi: f64) -> f64 {
+    (value - lo) / (hi - lo)
+}
+
+impl WorldSource for Bowl {
+    fn run(&self, sweep: &Sweep, point: usize, realisation: u32) -> Unit {
+        let s = sweep.points[point].scenario.as_ref();
+        let table: toml::Table = s.header().text.parse().expect("a scenario's text");
+        let get = |k: &str| get_dotted(&table, k).and_then(|v| v.as_float()).expect(k);
+        let t = [unit_of(get("trical.wait_s"), 0.5, 2.0), unit_of(get("trical.approach_move_s"), 2.0, 6.0)];
+        let d2: f64 = t.iter().zip(OPTIMUM).map(|(a, b)| (a - b).powi(2)).sum();
+        let e = 0.1 + 0.6 * d2 + 0.005 * f64::from(realisation % 10);
+        let study = PointStudy::of(s);
+        let within = |th: &f64| if e <= *th { study.repetitions } else { 0 };
+        let counts: Vec<u32> = sweep.thresholds_mm.iter().map(within).collect();
+        let rows = study
+            .selections
+            .iter()
+            .flat_map(|sel| {
+                let counts = counts.clone();
+                study.set_sizes.iter().map(move |&n| UnitRow {
+                    selection: sel.to_string(),
+                    set_size: n,
+                    table: n == study.table_set_size,
+                    repetitions: study.repetitions,
+                    no_model: 0,
+                    after_median_mm: e / 2.0,
+                    after_p95_mm: e * 0.9,
+                    after_max_mm: e,
+                    after_mean_mm: e / 2.0,
+                    max_within: counts.clone(),
+                    mean_within: counts.clone(),
+                    p95_within: counts.clone(),
+                    median_within: counts.clone(),
+                    o1_median: f64::NAN,
+                })
+            })
+            .collect();
+        Unit {
+            unit: point * sweep.realisations as usize + realisation as usize,
+            point,
+            realisation,
+            error: None,
+            before_mm: [1.0, 2.0, 3.0],
+            campaign_s: 3600.0,
+            rows,
+            prediction: None,
+            design: None,
+            digest: None,
+        }
+    }
+}
+
+/// The design file: two variables (their start away from the optimum), P(max <= 0.5 mm) >= 0.9
+/// maximised, `score` the search's score (absent: the default).
+fn space(dir: &std::path::Path, score: Option<&str>) -> spec::DesignSpace {
+    let base = repo().join("scenarios/ci_quick.toml");
+    let score = score.map_or(String::new(), |s| format!("score = \"{s}\"\n"));
+    let text = format!(
+        "base = {:?}\n[fixed]\n\"study.set_sizes\" = [20]\n\"study.table_set_size\" = 20\n\"study.repetitions\" = 2\n\n\
+         [[variable]]\nkey = \"trical.wait_s\"\nrange = [0.5, 2.0]\nstart = 1.4\n\n\
+         [[variable]]\nkey = \"trical.approach_move_s\"\nrange = [2.0, 6.0]\nstart = 3.6\n\n\
+         [objective]\nmaximise = \"success\"\nstatistic = \"max\"\nthreshold_mm = 0.5\nconfidence = 0.9\nsuccess_at_least = 0.9\n\n\
+         [search]\nmethod = \"nelder_mead\"\nevaluations = 60\nworlds = 10\n{score}",
+        base.display().to_string()
+    );
+    let name = format!("bowl-{}.toml", score.len());
+    let f = dir.join(name);
+    std::fs::write(&f, text).unwrap();
+    spec::load(&f).unwrap()
+}
+
+/// The search's designs on the synthetic worlds, and the best (lowest score, the first of ties).
+fn search(space: &spec::DesignSpace, dir: &std::path::Path) -> (Vec<Evaluated>, Vec<f64>) {
+    let ctx = Context { space, cache: dir.join(format!("{}.evaluations", space.name)), worlds: &Bowl };
+    let trace = optimise::run_restart(&ctx, 0, &|_| {}).unwrap();
+    let best = trace
+        .iter()
+        .min_by(|a, b| a.score.total_cmp(&b.score).then(a.asked.index.cmp(&b.asked.index)))
+        .expect("evaluated")
+        .asked
+        .x
+        .clone();
+    (trace, best)
+}
+
+fn distance(x: &[f64]) -> f64 {
+    x.iter().zip(OPTIMUM).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt()
+}
+
+#[test]
+fn the_quantile_score_reaches_a_known_optimum_where_p_success_saturates_and_stops_the_search() {
+    let tmp = scratch("optimise-bowl");
+    let quantile = space(tmp.path(), None);
+    assert_eq!(quantile.search.score, spec::SearchScore::Quantile, "the default");
+    let success = space(tmp.path(), Some("success"));
+    let start = quantile.start(0);
+    assert!(distance(&start) > 0.4, "the start {start:?} is away from the optimum");
+
+    // P(success): every design the search asks succeeds in every world (score -1), so the simplex
+    // has nothing to follow and the best design is the start.
+    let (trace, best) = search(&success, tmp.path());
+    assert!(trace.iter().all(|e| e.score == -1.0), "saturated: {:?}", trace.iter().map(|e| e.score).collect::<Vec<_>>());
+    assert!(distance(&best) > 0.4, "P(success) left the start {start:?} for {best:?}");
+
+    // The quantile: the search follows the errors down to the optimum.
+    let (trace, best) = search(&quantile, tmp.path());
+    assert!(trace.len() <= 60);
+    assert!(distance(&best) < 0.03, "the quantile score's best {best:?} against the optimum {OPTIMUM:?}");
+    // Its score at the best design is the 0.9 quantile of the ten worlds' largest errors over the
+    // threshold: (0.1 + 0.6 d^2 + 0.005 x 8.1) / 0.5 (order statistics 9 and 10 of 0..9 x 0.005).
+    let at_best = trace.iter().map(|e| e.score).fold(f64::INFINITY, f64::min);
+    // (at the design as decoded: its values rounded to the resolution of their ranges)
+    let d = quantile.decode(0, &best);
+    let get = |k: &str| get_dotted(&d.table, k).and_then(|v| v.as_float()).unwrap();
+    let t = [unit_of(get("trical.wait_s"), 0.5, 2.0), unit_of(get("trical.approach_move_s"), 2.0, 6.0)];
+    let expected = (0.1 + 0.6 * distance(&t).powi(2) + 0.005 * 8.1) / 0.5;
+    assert!((at_best - expected).abs() < 1e-9, "score {at_best} against {expected}");
+}
+
+#[test]
+fn the_search_score_key_is_checked_naming_it() {
+    let tmp = scratch("optimise-score-key");
+    let base = repo().join("scenarios/ci_quick.toml");
+    let f = tmp.path().join("bad.toml");
+    std::fs::write(
+        &f,
+        format!(
+            "base = {:?}\n[objective]\nmaximise = \"success\"\nthreshold_mm = 0.5\n[search]\nscore = \"p95\"\n",
+            base.display().to_string()
+        ),
+    )
+    .unwrap();
+    let e = spec::load(&f).unwrap_err();
+    assert_eq!(e.key, "search.score");
+    assert!(e.message.contains("\"quantile\" or \"success\""), "{}", e.message);
+}
+
+#[test]
+fn the_quantile_score_is_the_empirical_quantile_over_the_threshold_with_failed_worlds_capped() {
+    let v = [0.1, 0.2, 0.3, 0.4, f64::INFINITY, f64::NAN];
+    // Five values (NaN left out): at (5 - 1) x 0.5 = 2, the third: 0.3 / 0.5.
+    assert!((optimise::quantile_score(&v, 0.5, 0.5) - 0.6).abs() < 1e-12);
+    // At 0.95: between 0.4 / 0.5 = 0.8 and the failed world's cap of 10 thresholds, 0.8 of the way.
+    assert!((optimise::quantile_score(&v, 0.95, 0.5) - (0.8 + 0.8 * (10.0 - 0.8))).abs() < 1e-12);
+    assert!(optimise::quantile_score(&[f64::NAN], 0.9, 0.5).is_nan());
+}
+
+/// A range variable's value is rounded to four digits below the range's leading one, never -0.0:
+/// the shipped TriCal file's epsilon start is 0.02 exactly.
+#[test]
+fn range_values_are_tidy_at_the_resolution_of_their_range() {
+    assert_eq!(spec::at_resolution(0.019999999999999997, 0.025), 0.02);
+    assert_eq!(spec::at_resolution(123.456789, 400.0), 123.46);
+    assert!(spec::at_resolution(-1e-9, 400.0).is_sign_positive());
+    let space = spec::load(&repo().join("scenarios/designs/irb120_spheres.toml")).unwrap();
+    let d = space.decode(5, &space.start(5));
+    let epsilon = get_dotted(&d.table, "trical.epsilon_mm").and_then(|v| v.as_float()).unwrap();
+    assert_eq!(epsilon.to_string(), "0.02");
+}
