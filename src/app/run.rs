@@ -308,8 +308,14 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
 
 /// The tables' hashes a results directory's manifest records.
 fn tables_of(dir: &Path) -> Option<serde_json::Value> {
-    let text = crate::io::read_text(&dir.join("manifest.json")).ok()?;
+    let text = own_text(&dir.join("manifest.json"))?;
     serde_json::from_str::<serde_json::Value>(&text).ok()?.get("tables_sha256").cloned()
+}
+
+/// The text of a file of an earlier results directory, read back as calsim's own (not an input of
+/// the run: the writer may replace the directory holding it).
+fn own_text(path: &Path) -> Option<String> {
+    String::from_utf8(crate::io::read_own(path, crate::io::MOST_INPUT_BYTES).ok()?).ok()
 }
 
 /// An earlier check over several worlds in `dir`: its manifest's table hashes, the text of its
@@ -318,7 +324,7 @@ fn tables_of(dir: &Path) -> Option<serde_json::Value> {
 #[allow(clippy::type_complexity)]
 fn earlier_check(dir: &Path) -> Option<(serde_json::Value, String, (usize, std::collections::BTreeMap<String, [f64; 2]>))> {
     let tables = tables_of(dir)?;
-    let text = crate::io::read_text(&dir.join("check.json")).ok()?;
+    let text = own_text(&dir.join("check.json"))?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
     let worlds = usize::try_from(v.get("realisations")?.as_u64()?).ok().filter(|&n| n > 1)?;
     let mut spread = std::collections::BTreeMap::new();
