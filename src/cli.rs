@@ -430,7 +430,27 @@ fn parse_sizes(s: &str) -> Result<SetSizes, String> {
 }
 
 /// Entry point of the binary.
+/// Output piped into a reader that stops early (`calsim plan ... | head -n 1`): the print that finds
+/// the pipe closed ends the process quietly with the shells' status for SIGPIPE (128 + 13), as a
+/// Unix filter does, instead of a panic's backtrace. Every other panic keeps the default report.
+fn quiet_on_a_closed_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or_default();
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        default(info);
+    }));
+}
+
 pub fn main() -> ExitCode {
+    quiet_on_a_closed_pipe();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

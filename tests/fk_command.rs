@@ -160,3 +160,31 @@ fn fk_rows_go_through_the_coupling() {
         assert!(d < 1e-9, "tool frame {d} mm off the uncoupled file's at the model's angles");
     }
 }
+
+/// Output piped into a reader that stops at once (`calsim fk ... | head -n 1`): the process ends
+/// quietly with the status of SIGPIPE (141), no panic and no backtrace. 20,000 rows print far more
+/// than a pipe holds, so the write meets the closed pipe whatever the timing.
+#[test]
+fn a_reader_that_stops_early_ends_the_output_quietly() {
+    let tmp = common::scratch("fk-pipe");
+    let joints = tmp.path().join("joints.csv");
+    let mut text = String::from("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n");
+    for k in 0..20_000 {
+        let a = f64::from(k % 90) - 45.0;
+        text.push_str(&format!("{a},{},{},0,{},0\n", a / 3.0, a / 4.0, a / 2.0));
+    }
+    std::fs::write(&joints, text).unwrap();
+    let mut child = common::calsim()
+        .args(["fk"])
+        .arg(common::repo().join("robots/irb120.toml"))
+        .arg(&joints)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(141), "{err}");
+    assert!(!err.contains("panicked") && !err.contains("backtrace"), "{err}");
+}
