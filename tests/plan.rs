@@ -244,28 +244,35 @@ fn every_planned_pose_is_feasible_by_an_independent_computation() {
     assert_eq!(poses, 48, "40 training and 8 validation poses");
 }
 
-/// One simulated file against the plan's 80 % band: at seed 3 the held-out median (0.0188 mm) lies
-/// just above P90 (0.0184 mm; median 0.0151, 20 worlds). On the shipped plan at seeds 1-8 the
-/// outcome falls inside the band in 6 of 8 (docs/plan.md, Limits), as an 80 % band should: one
-/// draw is too weak a check to keep in the suite until it runs over many seeds.
+/// The round trip plan -> simulated measurements -> calibrate over 10 seeds of the small plan: the
+/// calibrated held-out median lands inside the plan's P10-P90 (an 80 % band) in at least 5 of the
+/// 10 (for a band that holds 80 %, fewer than 5 happen with probability 0.0064, Binomial(10, 0.8)).
 #[test]
-#[ignore = "one draw against an 80 % band: outside at seed 3 (0.0188 mm against P10-P90 0.0121-0.0184 mm); 6 of 8 seeds inside on the shipped plan"]
 fn plan_simulate_calibrate_lands_inside_the_plans_p10_p90() {
-    let r = run();
-    let spec = calsim::calibrate::CalibrateSpec {
-        robot_file: root().join("robots/irb120.toml"),
-        measurements: r.report.dir.join("simulated.csv"),
-        out: r.dir.join("calibration"),
-        options: calsim::plan::calibrate_options(&r.report.plan),
-        plan_worlds: 0,
-        plan_noise_mm: None,
-        plan_scenario: None,
-    };
-    let c = calsim::calibrate::calibrate(&spec).unwrap();
-    let measured = calsim::calibrate::plan::Statistic::Median.of(&c.calibration).unwrap();
-    let [p10, median, p90] = r.report.outcome.prediction.quantiles_mm;
-    assert!(p10 <= measured && measured <= p90, "held-out median {measured} mm outside the plan's P10-P90 {p10}-{p90} (median {median})");
-    assert!(r.report.outcome.prediction.worlds == 20);
+    let dir = scratch("round-trip");
+    let mut inside = Vec::new();
+    for seed in 1..=10u64 {
+        let file = dir.join(format!("seed{seed}.toml"));
+        std::fs::write(&file, plan_text(|t| t.replace("seed = 3", &format!("seed = {seed}")))).unwrap();
+        let r = plan(&PlanSpec { file, out: dir.join(format!("out{seed}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
+        let spec = calsim::calibrate::CalibrateSpec {
+            robot_file: root().join("robots/irb120.toml"),
+            measurements: r.dir.join("simulated.csv"),
+            out: dir.join(format!("calibration{seed}")),
+            options: calsim::plan::calibrate_options(&r.plan),
+            plan_worlds: 0,
+            plan_noise_mm: None,
+            plan_scenario: None,
+        };
+        let c = calsim::calibrate::calibrate(&spec).unwrap();
+        let measured = calsim::calibrate::plan::Statistic::Median.of(&c.calibration).unwrap();
+        let [p10, _, p90] = r.outcome.prediction.quantiles_mm;
+        assert_eq!(r.outcome.prediction.worlds, 20);
+        inside.push((seed, p10 <= measured && measured <= p90, measured, p10, p90));
+    }
+    let count = inside.iter().filter(|x| x.1).count();
+    eprintln!("round trip: inside the plan's P10-P90 in {count} of 10 seeds");
+    assert!(count >= 5, "inside the plan's P10-P90 in {count} of 10 seeds: {inside:?}");
 }
 
 fn refused(edit: impl Fn(String) -> String, key: &str) -> String {
