@@ -429,7 +429,6 @@ fn parse_sizes(s: &str) -> Result<SetSizes, String> {
     Ok(SetSizes((a..=b).step_by(step as usize).collect()))
 }
 
-/// Entry point of the binary.
 /// Output piped into a reader that stops early (`calsim plan ... | head -n 1`): the print that finds
 /// the pipe closed ends the process quietly with the shells' status for SIGPIPE (128 + 13), as a
 /// Unix filter does, instead of a panic's backtrace. Every other panic keeps the default report.
@@ -449,6 +448,7 @@ fn quiet_on_a_closed_pipe() {
     }));
 }
 
+/// Entry point of the binary.
 pub fn main() -> ExitCode {
     quiet_on_a_closed_pipe();
     let cli = match Cli::try_parse() {

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The acceptance table of issue 32 for every arm calsim was checked on, in one command.
+"""The arm table of docs/robots.md for every arm calsim was checked on, in one command.
 
 Usage: scripts/robots/arm_table.py [--abb DIR] [--abb-experimental DIR] [--fanuc DIR]
            [--universal-robot DIR] [--calsim target/release/calsim] [--configs 500]

@@ -223,14 +223,21 @@ pub fn score_of(space: &DesignSpace, r: &DesignRow) -> f64 {
     if let (Some(target), Some((p, _))) = (o.success_at_least, r.success) {
         penalty += (target - p).max(0.0);
     }
+    let penalty = with_constraint_shortfalls(o, r, penalty);
+    let value = if value.is_finite() { value } else { PENALTY };
+    value + PENALTY * penalty
+}
+
+/// `penalty` plus the campaign and set size constraints' relative shortfalls of `r` (a campaign
+/// that has no finite time falls short by 1).
+fn with_constraint_shortfalls(o: &crate::design::sweep::objective::Objective, r: &DesignRow, mut penalty: f64) -> f64 {
     if let Some(h) = o.campaign_h_at_most {
         penalty += if r.campaign_h.is_finite() { (r.campaign_h / h - 1.0).max(0.0) } else { 1.0 };
     }
     if let Some(n) = o.set_size_at_most {
         penalty += (f64::from(r.design.set_size) / f64::from(n) - 1.0).max(0.0);
     }
-    let value = if value.is_finite() { value } else { PENALTY };
-    value + PENALTY * penalty
+    penalty
 }
 
 /// The search score of one set size's judgement with its per-world values of the objective's
@@ -245,13 +252,7 @@ pub fn search_score(space: &DesignSpace, r: &DesignRow, per_world: &[f64]) -> f6
         return score_of(space, r);
     };
     let value = quantile_score(per_world, o.success_at_least.unwrap_or(0.95), threshold);
-    let mut penalty = 0.0;
-    if let Some(h) = o.campaign_h_at_most {
-        penalty += if r.campaign_h.is_finite() { (r.campaign_h / h - 1.0).max(0.0) } else { 1.0 };
-    }
-    if let Some(n) = o.set_size_at_most {
-        penalty += (f64::from(r.design.set_size) / f64::from(n) - 1.0).max(0.0);
-    }
+    let penalty = with_constraint_shortfalls(o, r, 0.0);
     let value = if value.is_finite() { value } else { PENALTY };
     value + PENALTY * penalty
 }
