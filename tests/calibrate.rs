@@ -147,6 +147,10 @@ fn a_noise_free_round_trip_recovers_the_injected_robot_exactly() {
     let truth = truth_on(&robot, &identifiable);
     let s = spec(truth.clone(), &robot, 0.0, vec![]);
     let c = run(&robot, &measured(&s, &robot), &Options { plots: false, ..Options::default() }).unwrap();
+    // Every injected parameter is determined by noise-free data: none is kept nominal by the rule.
+    for e in c.estimates.iter().filter(|e| identifiable.position(e.id).is_some()) {
+        assert_eq!(e.status, ParamStatus::Identified, "{}", e.id.name());
+    }
     for e in c.estimates.iter().filter(|e| e.status == ParamStatus::Identified) {
         let t = e.id.get(truth.data());
         assert!((e.value - t).abs() < 1e-9, "{}: {} against {t}", e.id.name(), e.value);
@@ -223,6 +227,54 @@ fn the_shipped_example_and_its_report_are_reproduced() {
             panic!("{file} differs from the shipped one");
         }
     }
+}
+
+/// On the shipped example, every parameter exported as identified meets the rule of
+/// `calibrate::DETERMINED` (its value at least two standard deviations from zero, read from
+/// summary.md's table), every one kept nominal by it says so on the terminal, and no exported
+/// compliance in robot.toml is positive (a negative stiffness in calsim's sign convention).
+#[test]
+fn undetermined_and_impossible_parameters_are_kept_nominal_on_the_shipped_example() {
+    let out = common::scratch("calibrate-determined");
+    let run = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--no-plots", "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let terminal = String::from_utf8_lossy(&run.stdout);
+    let dir = out.path().join("example_measurements.calibration");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let (mut identified, mut kept) = (0, Vec::new());
+    let table = summary.split("## Parameters of the calibrated robot").nth(1).unwrap().split("\n## ").next().unwrap();
+    for row in table.lines().filter(|l| l.starts_with("| ") && l.ends_with(" |")) {
+        let cells: Vec<&str> = row.trim_matches('|').split(" | ").map(str::trim).collect();
+        if cells.len() != 8 || cells[0] == "parameter" {
+            continue;
+        }
+        let (value, std): (f64, f64) = (cells[3].parse().unwrap(), cells[5].parse().unwrap());
+        if cells[7] == "identified" {
+            identified += 1;
+            assert!(value.abs() >= 2.0 * std, "{row}");
+            if cells[0].starts_with('c') {
+                assert!(value <= 0.0, "{row}");
+            }
+        } else if cells[7].starts_with("not determined (kept nominal)") {
+            assert_eq!(cells[2].parse::<f64>().unwrap(), value, "{row}");
+            kept.push(cells[0].to_string());
+        }
+    }
+    assert!(identified > 10, "{summary}");
+    assert!(kept.iter().any(|k| k == "c6"), "{summary}");
+    for k in &kept {
+        assert!(terminal.contains(&format!("{k}: not determined (kept nominal): ")), "{k}: {terminal}");
+    }
+    let toml = std::fs::read_to_string(dir.join("robot.toml")).unwrap();
+    let compliances: Vec<f64> =
+        toml.lines().filter_map(|l| l.strip_prefix("compliance_mdeg_per_nm = ")).map(|v| v.parse().unwrap()).collect();
+    assert_eq!(compliances.len(), 6);
+    assert!(compliances.iter().all(|&c| c <= 0.0), "{compliances:?}");
+    assert_eq!(compliances[5], 0.0, "c6 kept at its nominal value");
 }
 
 /// The calibrated robot file loads back as the calibrated model (its TCP to 1e-9 mm at 1,000
