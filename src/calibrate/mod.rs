@@ -503,14 +503,17 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by, flagged: flagged.clone() }, fit)
 }
 
-/// The rule a freed robot parameter's fit on every point must meet to be exported as identified:
+/// The rule a freed joint compliance's fit on every point must meet to be exported as identified:
 /// its value at least `DETERMINED` standard deviations from zero (an interval of two standard
-/// deviations either side narrower than the value), and a joint compliance not positive (the sign
-/// of a negative stiffness in `theta = q + theta_offs + c tau`, `tau` the holding torque: see
-/// [`crate::robot::kinematics::statics`]). A parameter that breaks it is kept at its nominal value and the model refitted without it.
+/// deviations either side narrower than the value), and not positive (the sign of a negative
+/// stiffness in `theta = q + theta_offs + c tau`, `tau` the holding torque: see
+/// [`crate::robot::kinematics::statics`]). A compliance that breaks it is kept at its nominal value
+/// and the model refitted without it. Geometric parameters are not dropped by it: a small true
+/// deviation kept nominal biases the others beyond their standard deviations; the summary lists
+/// their corrections within two standard deviations of zero.
 pub const DETERMINED: f64 = 2.0;
 
-/// The robot parameter of `problem`'s layout that `fit` (on every point, columns `free`) leaves
+/// The joint compliance of `problem`'s layout that `fit` (on every point, columns `free`) leaves
 /// least determined by [`DETERMINED`]'s rule, with the reason (none: every one meets it). One at a
 /// time, because the others move once it is fixed: a positive compliance first (the most
 /// positive in standard deviations), else the smallest value in standard deviations.
@@ -522,7 +525,11 @@ fn undetermined(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Vec<(
         let (value, std) = (fit.solved.x[k], cov[(c, c)].max(0.0).sqrt());
         let u = id.unit();
         let shown = format!("{:.5} +- {:.5} {}", u.from_internal(value), u.from_internal(std), u.symbol());
-        let impossible = matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. }) && value > 0.0;
+        let compliance = matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. });
+        if !compliance {
+            continue;
+        }
+        let impossible = value > 0.0;
         // NaN (a zero standard deviation at a zero value) counts as undetermined.
         let t = if impossible { -value / std } else { (value / std).abs() };
         let t = if t.is_nan() { f64::NEG_INFINITY } else { t };
