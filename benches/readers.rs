@@ -1,6 +1,6 @@
 //! The tabular readers' growth with their input: `calsim fk`'s joints reader, `calsim compensate`'s
 //! targets reader and `calsim calibrate`'s measurement reader, each timed on files of 10k, 100k and
-//! 1M rows (calibrate's on 1k, 10k and 90k, the rows its byte bound holds), with the growth exponent between
+//! 1M rows (calibrate's on 1k, 10k and 90k), with the growth exponent between
 //! the smallest and the largest size (1: linear). A scaling measurement, not a timed test:
 //! `cargo bench --bench readers`.
 
@@ -11,8 +11,8 @@ use std::time::Instant;
 /// Rows of the files timed.
 const SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
 
-/// Rows of calibrate's files timed: its measurement file is a text input of at most 16 MiB, which
-/// holds about 93,000 rows of the shipped example's 179 bytes.
+/// Rows of calibrate's files timed (its measurement file is a CSV input within
+/// `io::MOST_CSV_BYTES` and 1,000,000 rows; the shipped example's rows are 179 bytes).
 const CALIBRATE_SIZES: [usize; 3] = [1_000, 10_000, 90_000];
 
 /// The fastest of `runs` timings of `f`, s.

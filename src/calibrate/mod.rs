@@ -436,7 +436,28 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             poses.all(|(p, _)| assignment.held_out[p])
         })
         .collect();
-    let evaluate = |kind: Option<ModelKind>, layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
+    let all: Vec<usize> = (0..s.obs.len()).collect();
+    let evaluate = |kind: Option<ModelKind>, mut layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
+        // The fit on every point first: the parameters it leaves undetermined are kept nominal and
+        // the model refitted without them, until every freed parameter meets the rule; the
+        // cross-validation and the held-out fit then use the model that remains.
+        let mut undetermined_params: Vec<(String, String)> = Vec::new();
+        let all_fit = loop {
+            let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
+            let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+            let free = free_columns(&problem, &all, !layout.robot.is_empty());
+            let all_fit = fit_without(&problem, &x0, &free, &all, &outliers, &sopts);
+            let drop = match kind {
+                Some(_) if !layout.robot.is_empty() && all_fit.solved.outcome.is_converged() => undetermined(&problem, &all_fit, &free),
+                _ => vec![],
+            };
+            if drop.is_empty() {
+                break all_fit;
+            }
+            let keep: Vec<ParamId> = layout.robot.ids().iter().copied().filter(|id| drop.iter().all(|(d, _)| d != id)).collect();
+            undetermined_params.extend(drop.into_iter().map(|(id, why)| (id.name(), why)));
+            layout = registration::with_robot(&layout, ParamSet::new(keep).expect("a subset of a set"));
+        };
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let with_robot = !layout.robot.is_empty();
@@ -457,10 +478,18 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             seed: opts.seed,
         };
         let held_out = fit.solved.outcome.is_converged().then(|| validation::held_out(&problem, &fit, &free, &spec, &sopts));
-        let all: Vec<usize> = (0..s.obs.len()).collect();
-        let all_fit = fit_without(&problem, &x0, &free_columns(&problem, &all, with_robot), &all, &outliers, &sopts);
         let fit = point_fit(&problem, &all_fit, &flagged);
-        (ModelResult { kind, layout, unidentifiable: fixed, cv, held_out, fit, against_chosen: (f64::NAN, f64::NAN, 0) }, all_fit)
+        let r = ModelResult {
+            kind,
+            layout,
+            unidentifiable: fixed,
+            undetermined: undetermined_params,
+            cv,
+            held_out,
+            fit,
+            against_chosen: (f64::NAN, f64::NAN, 0),
+        };
+        (r, all_fit)
     };
     let empty = ParamSet::new(vec![]).expect("no parameter");
     let before = evaluate(None, registration::with_robot(&cands[0].1, empty), vec![], 0).0;
@@ -472,6 +501,51 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     }
     let fit = fits.into_iter().nth(chosen).expect("a fit per model");
     finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by, flagged: flagged.clone() }, fit)
+}
+
+/// The rule a freed joint compliance's fit on every point must meet to be exported as identified:
+/// its value at least `DETERMINED` standard deviations from zero (an interval of two standard
+/// deviations either side narrower than the value), and not positive (the sign of a negative
+/// stiffness in `theta = q + theta_offs + c tau`, `tau` the holding torque: see
+/// [`crate::robot::kinematics::statics`]). A compliance that breaks it is kept at its nominal value
+/// and the model refitted without it. Geometric parameters are not dropped by it: a small true
+/// deviation kept nominal biases the others beyond their standard deviations; the summary lists
+/// their corrections within two standard deviations of zero.
+pub const DETERMINED: f64 = 2.0;
+
+/// The joint compliance of `problem`'s layout that `fit` (on every point, columns `free`) leaves
+/// least determined by [`DETERMINED`]'s rule, with the reason (none: every one meets it). One at a
+/// time, because the others move once it is fixed: a positive compliance first (the most
+/// positive in standard deviations), else the smallest value in standard deviations.
+fn undetermined(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Vec<(ParamId, String)> {
+    let Some(cov) = robust::covariance(problem, fit, free) else { return vec![] };
+    let mut worst: Option<(bool, f64, ParamId, String)> = None;
+    for (k, id) in problem.layout.robot.ids().iter().enumerate() {
+        let Some(c) = free.iter().position(|&f| f == k) else { continue };
+        let (value, std) = (fit.solved.x[k], cov[(c, c)].max(0.0).sqrt());
+        let u = id.unit();
+        let shown = format!("{:.5} +- {:.5} {}", u.from_internal(value), u.from_internal(std), u.symbol());
+        let compliance = matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. });
+        if !compliance {
+            continue;
+        }
+        let impossible = value > 0.0;
+        // NaN (a zero standard deviation at a zero value) counts as undetermined.
+        let t = if impossible { -value / std } else { (value / std).abs() };
+        let t = if t.is_nan() { f64::NEG_INFINITY } else { t };
+        let why = if impossible {
+            format!("a positive compliance, a negative stiffness ({shown}; a joint deflects against its holding torque)")
+        } else if t < DETERMINED {
+            format!("its interval is wider than its value ({shown}: |value| < {DETERMINED} std)")
+        } else {
+            continue;
+        };
+        let worse = worst.as_ref().is_none_or(|(n, w, _, _)| (impossible && !*n) || (impossible == *n && t < *w));
+        if worse {
+            worst = Some((impossible, t, *id, why));
+        }
+    }
+    worst.map(|(_, _, id, why)| (id, why)).into_iter().collect()
 }
 
 /// The directory `calsim calibrate` writes for the measurement file `path` under `out`.

@@ -122,6 +122,7 @@ fn status(s: &ParamStatus) -> String {
         ParamStatus::Identified => "identified".into(),
         ParamStatus::NotInModel => "not in the model".into(),
         ParamStatus::Unidentifiable(with) => format!("unidentifiable (with {})", with.join(" ")),
+        ParamStatus::NotDetermined(why) => format!("not determined (kept nominal): {why}"),
     }
 }
 
@@ -269,6 +270,9 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     let unid: Vec<String> = c.chosen().unidentifiable.iter().map(|u| u.name.clone()).collect();
     if !unid.is_empty() {
         let _ = writeln!(s, "kept nominal (the poses cannot separate them): {}", unid.join(", "));
+    }
+    for (name, why) in &c.chosen().undetermined {
+        let _ = writeln!(s, "{name}: not determined (kept nominal): {why}");
     }
     let f = &c.chosen().fit;
     let lines: Vec<String> = (0..f.outlier.len()).filter(|&i| f.outlier[i]).map(|i| format!("line {}", m.points[i].line)).collect();

@@ -24,6 +24,9 @@ pub enum ParamStatus {
     NotInModel,
     /// The poses cannot separate it from these unknowns (kept nominal).
     Unidentifiable(Vec<String>),
+    /// Freed, but its fit broke [`super::DETERMINED`]'s rule (kept nominal, the model refitted
+    /// without it): the reason.
+    NotDetermined(String),
 }
 
 /// A robot parameter's estimate, internal units.
@@ -92,6 +95,9 @@ pub struct ModelResult {
     pub layout: Layout,
     /// Robot parameters the poses cannot separate, kept nominal.
     pub unidentifiable: Vec<Unidentifiable>,
+    /// Robot parameters whose fit on every point broke [`super::DETERMINED`]'s rule, kept nominal
+    /// and the model refitted without them: name and reason.
+    pub undetermined: Vec<(String, String)>,
     /// Cross-validation on the training poses.
     pub cv: CrossValidation,
     /// Errors at the held-out points of a fit on the training points (`None`: that fit failed).
@@ -250,11 +256,15 @@ fn estimates(full: &ParamSet, r: &ModelResult, nominal: &RobotModel, x: &[f64], 
                     Estimate { id: *id, nominal: value0, value: x[k], std: cov[(k, k)].max(0.0).sqrt(), status: ParamStatus::Identified }
                 }
                 None => {
-                    let status = r
-                        .unidentifiable
-                        .iter()
-                        .find(|u| u.name == id.name())
-                        .map_or(ParamStatus::NotInModel, |u| ParamStatus::Unidentifiable(u.with.clone()));
+                    let name = id.name();
+                    let status = match r.undetermined.iter().find(|(n, _)| *n == name) {
+                        Some((_, why)) => ParamStatus::NotDetermined(why.clone()),
+                        None => r
+                            .unidentifiable
+                            .iter()
+                            .find(|u| u.name == name)
+                            .map_or(ParamStatus::NotInModel, |u| ParamStatus::Unidentifiable(u.with.clone())),
+                    };
                     Estimate { id: *id, nominal: value0, value: value0, std: f64::NAN, status }
                 }
             }

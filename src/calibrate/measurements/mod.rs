@@ -36,7 +36,7 @@ pub const MIN_POSES_PER_SESSION: usize = 5;
 /// Fewest points of a target: its position in the flange frame has 3 unknowns (the same
 /// reasoning as for sessions).
 pub const MIN_POINTS_PER_TARGET: usize = 5;
-/// Most rows a file takes (the input cap of 16 MiB allows about 150,000 rows in practice).
+/// Most rows a file takes (within the CSV inputs' cap, `io::MOST_CSV_BYTES`).
 pub const MAX_ROWS: usize = 1_000_000;
 /// Joint values of two rows of one pose agree to this, rad (well below any encoder's resolution).
 const SAME_POSE_RAD: f64 = 1e-9;
@@ -125,7 +125,7 @@ pub struct Measurements {
 /// coupling unless the file says `# joints = model`).
 pub fn read(path: &Path, robot: &RobotFile) -> Result<Measurements, MeasurementError> {
     let fail = |line: Option<u64>, message: String| MeasurementError { path: path.into(), line, column: None, message };
-    let bytes = crate::io::read_bytes(path).map_err(|e| fail(None, e.to_string()))?;
+    let bytes = crate::io::read_bytes_at_most(path, crate::io::MOST_CSV_BYTES).map_err(|e| fail(None, e.to_string()))?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let line = e.as_bytes()[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() as u64 + 1;
         fail(Some(line), "not UTF-8 text".into())
