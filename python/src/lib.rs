@@ -105,6 +105,11 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         app::Error::Calibrate(CalibrateError::Name(n)) => {
             (PyErr::new::<InputError, _>(message), Fault { path: Some(n.file), ..Fault::default() })
         }
+        app::Error::OutDir(OutDirError::Refused { flag, path, .. })
+        | app::Error::Calibrate(CalibrateError::OutDir(OutDirError::Refused { flag, path, .. })) => {
+            let keyword = flag.trim_start_matches('-').replace('-', "_");
+            (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some(keyword), ..Fault::default() })
+        }
         app::Error::OutDir(OutDirError::InTheWay { path, .. }) => {
             (PyErr::new::<InputError, _>(message), Fault { path: Some(path), key: Some("out".into()), ..Fault::default() })
         }

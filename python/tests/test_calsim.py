@@ -307,3 +307,15 @@ def test_the_readme_python_recipe_runs(tmp_path: Path, monkeypatch: pytest.Monke
     # Wherever the recipe puts its results: the study's tables and the exported model.
     assert list((tmp_path / "results").rglob("irb120_trical/tasks.parquet"))
     assert list((tmp_path / "results").rglob("irb120_trical.task-*/robot.toml"))
+
+
+def test_an_out_that_holds_the_scenario_is_refused_and_nothing_changes(tmp_path: Path) -> None:
+    scenario = tmp_path / "ci_quick" / "ci_quick.toml"
+    scenario.parent.mkdir()
+    shutil.copy(QUICK, scenario)
+    before = scenario.read_bytes()
+    with pytest.raises(calsim.InputError) as e:
+        calsim.run(scenario, out=tmp_path, **SMALL)
+    assert e.value.key == "out" and "input of this run" in str(e.value)
+    assert scenario.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["ci_quick", "ci_quick.toml"]
