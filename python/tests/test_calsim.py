@@ -313,9 +313,11 @@ def test_an_out_that_holds_the_scenario_is_refused_and_nothing_changes(tmp_path:
     scenario = tmp_path / "ci_quick" / "ci_quick.toml"
     scenario.parent.mkdir()
     shutil.copy(QUICK, scenario)
+    (tmp_path / "robots").mkdir()
+    shutil.copy(REPO / "robots" / "irb120.toml", tmp_path / "robots" / "irb120.toml")  # the scenario's robot.file
     before = scenario.read_bytes()
     with pytest.raises(calsim.InputError) as e:
         calsim.run(scenario, out=tmp_path, **SMALL)
     assert e.value.key == "out" and "input of this run" in str(e.value)
     assert scenario.read_bytes() == before
-    assert sorted(p.name for p in tmp_path.rglob("*")) == ["ci_quick", "ci_quick.toml"]
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["ci_quick", "ci_quick.toml", "irb120.toml", "robots"]

@@ -73,10 +73,6 @@ impl CalibrateArgs {
             Some(names) => Some(ParamSet::from_names(names).map_err(|e| option("params", e.to_string()))?),
             None => None,
         };
-        // The plan's flags without a plan: refused as --plan-scenario is.
-        if self.plan_noise_mm.is_some() && self.plan_worlds == 0 {
-            return Err(option("plan-noise-mm", "a plan needs --plan-worlds N (N >= 1)".into()));
-        }
         let split = match (&self.hold_out_session, self.hold_out, &self.hold_out_file) {
             (Some(_), Some(f), _) => return Err(option("hold-out", format!("{f}: either a fraction or a session held out, not both"))),
             (_, Some(f), Some(_)) => return Err(option("hold-out", format!("{f}: either a fraction or a file of held-out poses, not both"))),

@@ -205,6 +205,10 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     {
         return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{s}: within 0 to 100 mm") });
     }
+    // The plan's flags without a plan: refused as --plan-scenario is.
+    if spec.plan_noise_mm.is_some() && spec.plan_worlds == 0 {
+        return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: "a plan needs --plan-worlds N (N >= 1)".into() });
+    }
     if spec.plan_worlds > MOST_PLAN_WORLDS {
         return Err(CalibrateError::Option {
             key: "plan-worlds".into(),
