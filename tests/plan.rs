@@ -107,7 +107,7 @@ fn run() -> &'static Run {
 fn one_and_two_threads_write_the_same_bytes() {
     let r = run();
     let names: Vec<&str> = r.files_1.iter().map(|(n, _)| n.as_str()).collect();
-    assert_eq!(names, ["joints.txt", "plan.md", "poses.csv", "simulated.csv", "tour.csv"]);
+    assert_eq!(names, ["joints.txt", "manifest.json", "plan.md", "poses.csv", "simulated.csv", "tour.csv"]);
     assert_eq!(r.files_1, r.files_2);
     assert!(r.dir.exists());
 }
@@ -323,4 +323,21 @@ fn the_shipped_plan_file_is_accepted() {
     let file = root().join("scenarios/plans/irb120_tracker.toml");
     let p = calsim::app::plan::load(&file).unwrap();
     assert_eq!((p.poses, p.pool, p.validation), (60, 2000, 20));
+}
+
+/// A plan's directory is a calsim results directory (its manifest carries the provenance block and
+/// names the plan file among its inputs): the same plan runs again into the same `--out`.
+#[test]
+fn a_plan_runs_again_into_its_own_results_directory() {
+    let dir = scratch("again");
+    let file = dir.join("small.toml");
+    std::fs::write(&file, plan_text(|t| t)).unwrap();
+    let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false };
+    let first = plan(&spec, &calsim::app::Quiet).unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(first.dir.join("manifest.json")).unwrap()).unwrap();
+    let inputs = manifest["inputs"].as_array().unwrap();
+    assert!(inputs.iter().any(|i| i["path"].as_str().unwrap().ends_with("small.toml")), "{manifest}");
+    assert!(manifest["git_commit"].is_string());
+    let again = plan(&spec, &calsim::app::Quiet).unwrap();
+    assert_eq!(std::fs::read(first.dir.join("poses.csv")).unwrap(), std::fs::read(again.dir.join("poses.csv")).unwrap());
 }

@@ -78,7 +78,17 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         ("tour.csv", crate::plan::tour_csv(&plan, &outcome)),
         ("plan.md", crate::plan::markdown(&plan, &outcome)),
     ];
+    #[derive(serde::Serialize)]
+    struct Manifest<'a> {
+        plan: &'a str,
+        simulate: bool,
+        #[serde(flatten)]
+        provenance: crate::io::manifest::Provenance,
+    }
+    let manifest = Manifest { plan: &name, simulate: spec.simulate, provenance: crate::io::manifest::Provenance::of_run(&[]) };
+    let manifest = serde_json::to_string_pretty(&manifest).map_err(|e| Error::io(&spec.out)(std::io::Error::other(e)))? + "\n";
     let dir = write_atomically(&spec.out, &name, |d| {
+        write_file(&d.join("manifest.json"), &manifest)?;
         for (f, text) in &files {
             write_file(&d.join(f), text)?;
         }
