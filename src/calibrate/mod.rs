@@ -71,7 +71,7 @@ impl ModelKind {
     }
 
     /// The parameters of `full` this model frees.
-    fn subset(self, full: &ParamSet) -> ParamSet {
+    pub fn subset(self, full: &ParamSet) -> ParamSet {
         let keep = |id: &ParamId| match (self, id) {
             (ModelKind::Offsets, ParamId::Link { kind, .. }) => *kind == LinkParam::ThetaOffset,
             (ModelKind::Geometric, ParamId::Link { kind, .. }) => *kind != LinkParam::Compliance,

@@ -10,7 +10,7 @@ use serde::Deserialize;
 use crate::calibrate::ModelKind;
 use crate::instrument::laser_tracker::LaserTrackerSpec;
 use crate::robot::file::RobotFile;
-use crate::robot::{JOINTS, JointLimit, LinkParam, ParamId, ParamSet};
+use crate::robot::{JOINTS, JointLimit, ParamSet};
 
 /// A plan file's fault: the file, the key, what is wrong.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -227,13 +227,7 @@ pub struct Plan {
 
 /// The robot parameters of `kind` among calibrate's default set (its most complete model).
 pub fn model_params(kind: ModelKind) -> ParamSet {
-    let keep = |id: &ParamId| match (kind, id) {
-        (ModelKind::Offsets, ParamId::Link { kind, .. }) => *kind == LinkParam::ThetaOffset,
-        (ModelKind::Geometric, ParamId::Link { kind, .. }) => *kind != LinkParam::Compliance,
-        (ModelKind::Compliance, _) => true,
-        _ => false,
-    };
-    ParamSet::new(crate::calibrate::default_params().ids().iter().copied().filter(keep).collect()).expect("a subset of a set")
+    kind.subset(&crate::calibrate::default_params())
 }
 
 /// Unknowns of the one-target identification DETMAX scores: the model's robot parameters, a base
