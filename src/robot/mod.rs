@@ -8,6 +8,7 @@ pub mod file;
 pub mod fk;
 pub mod ik;
 pub mod kinematics;
+pub mod learned;
 pub mod mesh;
 pub mod model;
 pub mod params;
@@ -27,4 +28,5 @@ pub use kinematics::{
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx, uniform_configuration};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use truth::{DeviationSpec, SpreadSpec, deviate, perturb};
+pub use learned::{LearnedEffects, LearnedHarmonic};
 pub use virtual_robot::{UnmodelledSpec, VirtualRobot};

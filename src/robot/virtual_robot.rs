@@ -63,6 +63,8 @@ pub struct VirtualRobot {
     pub half_backlash: [f64; JOINTS],
     /// Standard deviation of the joint-level noise of a move, rad.
     pub sigma_q: f64,
+    /// The effects a calibration learned (a twin's `[learned]` table), drawn for this world.
+    pub learned: Option<super::learned::DrawnEffects>,
 }
 
 impl VirtualRobot {
@@ -99,12 +101,23 @@ impl VirtualRobot {
         });
         let half_backlash = [(spec.backlash_mdeg * 1e-3).to_radians() / 2.0; JOINTS];
         let sigma_q = repeatability_mm / repeatability_per_radian(&truth, reference_q);
-        Self { truth, harmonics, half_backlash, sigma_q }
+        Self { truth, harmonics, half_backlash, sigma_q, learned: None }
+    }
+
+    /// This robot with the learned effects of a twin drawn once for this world (their
+    /// coefficients from their fitted distributions; see [`super::learned`]). Draws from `rng`
+    /// only when `learned` has an effect.
+    pub fn with_learned<R: Rng + ?Sized>(mut self, learned: Option<&super::learned::LearnedEffects>, rng: &mut R) -> Self {
+        if let Some(l) = learned.filter(|l| !l.is_none()) {
+            self.learned = Some(l.draw(&self.truth, rng));
+        }
+        self
     }
 
     /// Link angles after a move to `q` coming from `from`, with a fresh draw of the joint noise.
     pub fn link_angles<R: Rng + ?Sized>(&self, q: &Joints, from: &Joints, rng: &mut R) -> Joints {
         let noise = Normal::new(0.0, self.sigma_q.max(0.0)).expect("finite sigma");
+        let learned = self.learned.as_ref().map_or([0.0; JOINTS], |l| l.joint_errors(q, from));
         std::array::from_fn(|i| {
             let tx: f64 = self.harmonics[i].iter().map(|h| h.amplitude * (h.order * q[i] + h.phase).sin()).sum();
             let lag = if q[i] > from[i] {
@@ -114,7 +127,7 @@ impl VirtualRobot {
             } else {
                 0.0
             };
-            q[i] + tx + lag + if self.sigma_q > 0.0 { noise.sample(rng) } else { 0.0 }
+            q[i] + tx + lag + learned[i] + if self.sigma_q > 0.0 { noise.sample(rng) } else { 0.0 }
         })
     }
 

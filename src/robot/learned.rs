@@ -1,0 +1,303 @@
+//! What a calibration learned about a robot beyond its model: the `[learned]` table of a robot
+//! file (the twin `calsim calibrate` writes), and its effect on the link angles of a move.
+//!
+//! ```toml
+//! [learned]
+//! source = "calsim calibrate of m.csv (geometric model, calibration split)"
+//! repeatability_mm = 0.012          # ISO 9283 RP of a move (joint noise scaled as the scenarios')
+//! pose_error_mdeg = 1.5             # per-joint error the effects below leave, repeatable per pose
+//! backlash_mdeg = [0, 6, 4, 0, 0, 0]      # full width per joint: the link lags half of it
+//! backlash_std_mdeg = [0, 1, 1, 0, 0, 0]
+//! sag_mdeg_per_m = [0, 9, 5, 0, 0, 0]     # joint error per metre of a TCP mass's lever arm
+//! sag_std_mdeg_per_m = [0, 2, 2, 0, 0, 0]
+//!
+//! [[learned.harmonic]]              # delta theta_j = sin_mdeg sin(order q_j) + cos_mdeg cos(order q_j)
+//! joint = 2
+//! order = 1
+//! sin_mdeg = 12.3
+//! cos_mdeg = -4.0
+//! std_mdeg = 1.2                    # standard deviation of each coefficient
+//! ```
+//!
+//! Each world of a simulation draws the coefficients once from their fitted distribution
+//! ([`LearnedEffects::draw`]): a plan with the twin carries what the calibration could not pin
+//! down. The per-pose error is drawn as encoder-like harmonics of orders in the thousands (each
+//! joint's error repeatable at a joint value, unrelated from one pose to the next), of RMS
+//! `pose_error_mdeg`.
+
+use std::f64::consts::PI;
+
+use rand::{Rng, RngExt};
+use rand_distr::{Distribution, Normal, Uniform};
+use serde::{Deserialize, Serialize};
+
+use super::kinematics::gravity_torques;
+use super::model::{Inertial, JOINTS, Joints, RobotModel};
+
+/// The most harmonics a `[learned]` table may carry.
+pub const MOST_HARMONICS: usize = 600;
+
+/// Encoder-like harmonics per joint that carry the per-pose error.
+const POSE_ERROR_HARMONICS: usize = 4;
+
+/// One learned harmonic of a joint's transmission error.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LearnedHarmonic {
+    /// Joint, 1..=6.
+    pub joint: usize,
+    /// Periods per turn of the joint (positive, at most 100000).
+    pub order: f64,
+    /// Coefficient of `sin(order q)`, mdeg.
+    pub sin_mdeg: f64,
+    /// Coefficient of `cos(order q)`, mdeg.
+    pub cos_mdeg: f64,
+    /// Standard deviation of each coefficient, mdeg.
+    #[serde(default)]
+    pub std_mdeg: f64,
+}
+
+/// The `[learned]` table of a robot file.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LearnedEffects {
+    /// Where it was learned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// ISO 9283 repeatability of a move, mm.
+    #[serde(default)]
+    pub repeatability_mm: f64,
+    /// RMS of the per-pose joint error the effects leave, mdeg (repeatable at a pose).
+    #[serde(default)]
+    pub pose_error_mdeg: f64,
+    /// Backlash per joint, full width, mdeg.
+    #[serde(default)]
+    pub backlash_mdeg: [f64; JOINTS],
+    /// Standard deviation of each backlash width, mdeg.
+    #[serde(default)]
+    pub backlash_std_mdeg: [f64; JOINTS],
+    /// Gravity sag per joint: joint error per metre of the lever arm of a mass at the TCP about
+    /// the joint's axis (its holding torque per kg and per g), mdeg/m.
+    #[serde(default)]
+    pub sag_mdeg_per_m: [f64; JOINTS],
+    /// Standard deviation of each sag coefficient, mdeg/m.
+    #[serde(default)]
+    pub sag_std_mdeg_per_m: [f64; JOINTS],
+    /// Transmission harmonics.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub harmonic: Vec<LearnedHarmonic>,
+}
+
+/// One world's draw of [`LearnedEffects`], in rad.
+#[derive(Clone, Debug)]
+pub struct DrawnEffects {
+    /// `(joint 0-based, order, sin coefficient, cos coefficient)`, rad.
+    pub harmonics: Vec<(usize, f64, f64, f64)>,
+    /// Half the backlash per joint, rad.
+    pub half_backlash: [f64; JOINTS],
+    /// Sag per joint, rad per metre of lever arm.
+    pub sag_per_m: [f64; JOINTS],
+    /// The arm that gives the lever arms: the truth without link masses, 1 kg at the TCP
+    /// (`None`: no sag).
+    sag_arm: Option<RobotModel>,
+}
+
+impl LearnedEffects {
+    /// The first key whose value is out of its range, with what is wrong (`learned.`-relative key).
+    pub fn check(&self) -> Result<(), (String, String)> {
+        let bad = |key: String, message: &str| Err((key, message.to_string()));
+        let within = |v: f64, most: f64| v.is_finite() && (0.0..=most).contains(&v);
+        if !within(self.repeatability_mm, 100.0) {
+            return bad("repeatability_mm".into(), "within 0 to 100 mm");
+        }
+        if !within(self.pose_error_mdeg, 1.0e5) {
+            return bad("pose_error_mdeg".into(), "within 0 to 100000 mdeg");
+        }
+        for (name, v, most, what) in [
+            ("backlash_mdeg", &self.backlash_mdeg, 1.0e5, "a width within 0 to 100000 mdeg"),
+            ("backlash_std_mdeg", &self.backlash_std_mdeg, 1.0e5, "within 0 to 100000 mdeg"),
+            ("sag_std_mdeg_per_m", &self.sag_std_mdeg_per_m, 1.0e6, "within 0 to 1000000 mdeg/m"),
+        ] {
+            if let Some(j) = v.iter().position(|&x| !within(x, most)) {
+                return bad(format!("{name}[{j}]"), what);
+            }
+        }
+        if let Some(j) = self.sag_mdeg_per_m.iter().position(|x| !(x.is_finite() && x.abs() <= 1.0e6)) {
+            return bad(format!("sag_mdeg_per_m[{j}]"), "within -1000000 to 1000000 mdeg/m");
+        }
+        if self.harmonic.len() > MOST_HARMONICS {
+            return bad("harmonic".into(), "at most 600 harmonics");
+        }
+        for (k, h) in self.harmonic.iter().enumerate() {
+            if !(1..=JOINTS).contains(&h.joint) {
+                return bad(format!("harmonic[{k}].joint"), "a joint 1 to 6");
+            }
+            if !(h.order.is_finite() && h.order > 0.0 && h.order <= 1.0e5) {
+                return bad(format!("harmonic[{k}].order"), "periods per turn above 0, at most 100000");
+            }
+            for (name, v) in [("sin_mdeg", h.sin_mdeg), ("cos_mdeg", h.cos_mdeg)] {
+                if !(v.is_finite() && v.abs() <= 1.0e5) {
+                    return bad(format!("harmonic[{k}].{name}"), "within -100000 to 100000 mdeg");
+                }
+            }
+            if !within(h.std_mdeg, 1.0e5) {
+                return bad(format!("harmonic[{k}].std_mdeg"), "within 0 to 100000 mdeg");
+            }
+        }
+        Ok(())
+    }
+
+    /// No effect at all (every amplitude zero).
+    pub fn is_none(&self) -> bool {
+        self.repeatability_mm == 0.0
+            && self.pose_error_mdeg == 0.0
+            && self.backlash_mdeg.iter().all(|&x| x == 0.0)
+            && self.sag_mdeg_per_m.iter().all(|&x| x == 0.0)
+            && self.harmonic.iter().all(|h| h.sin_mdeg == 0.0 && h.cos_mdeg == 0.0)
+    }
+
+    /// One world's effects on `truth`: every coefficient drawn from its normal distribution
+    /// (a backlash width kept non-negative), the per-pose error as encoder-like harmonics of
+    /// random orders and phases. Draws from `rng` in a fixed order.
+    pub fn draw<R: Rng + ?Sized>(&self, truth: &RobotModel, rng: &mut R) -> DrawnEffects {
+        let mdeg = |x: f64| (x * 1e-3).to_radians();
+        let unit = Normal::new(0.0, 1.0).expect("unit normal");
+        let mut around = |mean: f64, std: f64| mean + std * unit.sample(rng);
+        let mut harmonics: Vec<(usize, f64, f64, f64)> = self
+            .harmonic
+            .iter()
+            .map(|h| (h.joint - 1, h.order, mdeg(around(h.sin_mdeg, h.std_mdeg)), mdeg(around(h.cos_mdeg, h.std_mdeg))))
+            .collect();
+        let half_backlash = std::array::from_fn(|j| mdeg(around(self.backlash_mdeg[j], self.backlash_std_mdeg[j]).max(0.0)) / 2.0);
+        let sag_per_m: Joints = std::array::from_fn(|j| mdeg(around(self.sag_mdeg_per_m[j], self.sag_std_mdeg_per_m[j])));
+        if self.pose_error_mdeg > 0.0 {
+            // Each harmonic's RMS is amplitude / sqrt(2); POSE_ERROR_HARMONICS of them per joint.
+            let amplitude = mdeg(self.pose_error_mdeg) * (2.0 / POSE_ERROR_HARMONICS as f64).sqrt();
+            let phase = Uniform::new(0.0, 2.0 * PI).expect("range");
+            for j in 0..JOINTS {
+                for _ in 0..POSE_ERROR_HARMONICS {
+                    let order = rng.random_range(1000..=4000) as f64;
+                    let p = phase.sample(rng);
+                    harmonics.push((j, order, amplitude * p.cos(), amplitude * p.sin()));
+                }
+            }
+        }
+        let sag_arm = sag_per_m.iter().any(|&s| s != 0.0).then(|| {
+            truth
+                .edited(|d| {
+                    d.links_inertial = [Inertial::NONE; JOINTS];
+                    d.payload = Inertial { mass_kg: 1.0, com_mm: d.flange_tcp_mm };
+                    for l in &mut d.links {
+                        l.compliance = 0.0;
+                    }
+                })
+                .expect("the truth with a unit mass at its TCP")
+        });
+        DrawnEffects { harmonics, half_backlash, sag_per_m, sag_arm }
+    }
+}
+
+impl DrawnEffects {
+    /// The joint errors at commanded `q` coming from `from`, rad: harmonics of `q`, backlash by
+    /// the approach direction, sag by the TCP's lever arms.
+    pub fn joint_errors(&self, q: &Joints, from: &Joints) -> Joints {
+        let mut e = [0.0; JOINTS];
+        for &(j, order, s, c) in &self.harmonics {
+            let x = order * q[j];
+            e[j] += s * x.sin() + c * x.cos();
+        }
+        for j in 0..JOINTS {
+            e[j] += if q[j] > from[j] {
+                -self.half_backlash[j]
+            } else if q[j] < from[j] {
+                self.half_backlash[j]
+            } else {
+                0.0
+            };
+        }
+        if let Some(arm) = &self.sag_arm {
+            let g = arm.data().gravity_base.norm();
+            if g > 0.0 {
+                let tau = gravity_torques(arm, q);
+                for j in 0..JOINTS {
+                    e[j] += self.sag_per_m[j] * tau[j] / g;
+                }
+            }
+        }
+        e
+    }
+}
+
+/// The lever arm of a 1 kg mass at the TCP about each joint's axis at `q`, metres with the sign of
+/// its holding torque (the column a sag coefficient multiplies): zero where the model has no gravity.
+pub fn lever_arms_m(truth: &RobotModel, q: &Joints) -> Joints {
+    let arm = truth
+        .edited(|d| {
+            d.links_inertial = [Inertial::NONE; JOINTS];
+            d.payload = Inertial { mass_kg: 1.0, com_mm: d.flange_tcp_mm };
+            for l in &mut d.links {
+                l.compliance = 0.0;
+            }
+        })
+        .expect("the truth with a unit mass at its TCP");
+    let g = arm.data().gravity_base.norm();
+    if g == 0.0 {
+        return [0.0; JOINTS];
+    }
+    let tau = gravity_torques(&arm, q);
+    std::array::from_fn(|j| tau[j] / g)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::builtin::irb120;
+    use rand::SeedableRng;
+
+    #[test]
+    fn the_example_of_the_module_doc_parses_and_checks() {
+        let text = "repeatability_mm = 0.012\npose_error_mdeg = 1.5\nbacklash_mdeg = [0, 6, 4, 0, 0, 0]\n\
+                    [[harmonic]]\njoint = 2\norder = 1\nsin_mdeg = 12.3\ncos_mdeg = -4.0\nstd_mdeg = 1.2\n";
+        let l: LearnedEffects = toml::from_str(text).expect("parses");
+        assert_eq!(l.harmonic.len(), 1);
+        assert!(l.check().is_ok());
+        let mut bad = l.clone();
+        bad.harmonic[0].joint = 7;
+        assert_eq!(bad.check().unwrap_err().0, "harmonic[0].joint");
+        let mut bad = l;
+        bad.backlash_mdeg[1] = f64::NAN;
+        assert_eq!(bad.check().unwrap_err().0, "backlash_mdeg[1]");
+    }
+
+    #[test]
+    fn a_draw_without_spread_applies_the_coefficients_exactly() {
+        let truth = irb120();
+        let mut l = LearnedEffects { backlash_mdeg: [0.0, 6.0, 0.0, 0.0, 0.0, 0.0], ..Default::default() };
+        l.harmonic.push(LearnedHarmonic { joint: 3, order: 2.0, sin_mdeg: 10.0, cos_mdeg: -5.0, std_mdeg: 0.0 });
+        let d = l.draw(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1));
+        let q = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6];
+        let from = [0.0; JOINTS];
+        let e = d.joint_errors(&q, &from);
+        let mdeg = |x: f64| (x * 1e-3).to_radians();
+        assert!((e[2] - (mdeg(10.0) * (0.6f64).sin() + mdeg(-5.0) * (0.6f64).cos())).abs() < 1e-15);
+        assert!((e[1] + mdeg(3.0)).abs() < 1e-15, "coming from below, the link lags half the width");
+        assert_eq!(e[0], 0.0);
+    }
+
+    #[test]
+    fn the_lever_arm_of_joint_two_is_the_horizontal_reach_from_its_axis() {
+        // At q = 0 the IRB 120 stands upright with the wrist ahead: a central difference of the TCP
+        // height against joint 2 is the horizontal lever arm (up to the sign convention of the torque).
+        let truth = irb120();
+        let q = [0.0, 0.3, 0.2, 0.0, 0.4, 0.0];
+        let l = lever_arms_m(&truth, &q);
+        let h = 1e-6;
+        let z = |dq: f64| {
+            let mut qq = q;
+            qq[1] += dq;
+            crate::robot::tcp_world(&truth, &qq).z
+        };
+        let dz_dq = (z(h) - z(-h)) / (2.0 * h) * 1e-3;
+        assert!((l[1].abs() - dz_dq.abs()).abs() < 1e-6, "lever {} against d z / d q2 {}", l[1], dz_dq);
+    }
+}
