@@ -618,7 +618,8 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         check,
     };
     let r = app::run::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
-    let timing = format!("timing: {}, results written in {:.3} s (recording {:.3} s) to {}", r.timing, r.write_s, r.recording_s, r.dest.display());
+    let timing =
+        format!("timing: {}, results written in {:.3} s (recording {:.3} s) to {}", r.timing, r.write_s, r.recording_s, r.dest.display());
     match &r.distribution {
         Some(d) => {
             println!(

@@ -96,13 +96,8 @@ fn space(dir: &std::path::Path, score: Option<&str>) -> spec::DesignSpace {
 fn search(space: &spec::DesignSpace, dir: &std::path::Path) -> (Vec<Evaluated>, Vec<f64>) {
     let ctx = Context { space, cache: dir.join(format!("{}.evaluations", space.name)), worlds: &Bowl };
     let trace = optimise::run_restart(&ctx, 0, &|_| {}).unwrap();
-    let best = trace
-        .iter()
-        .min_by(|a, b| a.score.total_cmp(&b.score).then(a.asked.index.cmp(&b.asked.index)))
-        .expect("evaluated")
-        .asked
-        .x
-        .clone();
+    let best =
+        trace.iter().min_by(|a, b| a.score.total_cmp(&b.score).then(a.asked.index.cmp(&b.asked.index))).expect("evaluated").asked.x.clone();
     (trace, best)
 }
 

@@ -207,7 +207,12 @@ fn calibrate_export_and_the_file_writers_refuse_their_inputs() {
     refused(t, &["calibrate", "robots/irb120.toml", s(&m), "--no-plots", "--out", s(&t.join("d"))], "--out", "an input of this run");
     let m2 = write(&t.join("meas/m.csv"), &csv);
     write(&t.join("u/m.calibration/report.docx"), "mine");
-    refused(t, &["calibrate", "robots/irb120.toml", s(&m2), "--no-plots", "--out", s(&t.join("u"))], "--out", "not a calsim results directory");
+    refused(
+        t,
+        &["calibrate", "robots/irb120.toml", s(&m2), "--no-plots", "--out", s(&t.join("u"))],
+        "--out",
+        "not a calsim results directory",
+    );
 
     // export: into a user's directory of the export's name (results of a real run).
     let scenario = write(&t.join("s/ci_quick.toml"), quick_text(None));

@@ -254,7 +254,8 @@ fn plan_simulate_calibrate_lands_inside_the_plans_p10_p90() {
     for seed in 1..=10u64 {
         let file = dir.join(format!("seed{seed}.toml"));
         std::fs::write(&file, plan_text(|t| t.replace("seed = 3", &format!("seed = {seed}")))).unwrap();
-        let r = plan(&PlanSpec { file, out: dir.join(format!("out{seed}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
+        let r =
+            plan(&PlanSpec { file, out: dir.join(format!("out{seed}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
         let spec = calsim::calibrate::CalibrateSpec {
             robot_file: root().join("robots/irb120.toml"),
             measurements: r.dir.join("simulated.csv"),
@@ -310,7 +311,8 @@ fn the_command_exits_2_with_one_line_on_a_bad_plan() {
     let dir = scratch("cli");
     let file = dir.join("bad.toml");
     std::fs::write(&file, plan_text(|t| t.replace("incidence_max_deg = 45.0", "incidence_max_deg = -inf"))).unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_calsim")).arg("plan").arg(&file).arg("--out").arg(dir.join("out")).output().unwrap();
+    let o =
+        std::process::Command::new(env!("CARGO_BIN_EXE_calsim")).arg("plan").arg(&file).arg("--out").arg(dir.join("out")).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8(o.stderr).unwrap();
     let lines: Vec<&str> = err.lines().collect();

@@ -102,7 +102,8 @@ fn the_quick_start_output_is_what_the_command_prints() {
     assert_eq!(printed.lines().count(), block.lines().count(), "the command prints:\n{printed}");
     // One world is one draw: no verdict, and another study's rows say so.
     assert!(!printed.contains("MISS") && !printed.lines().any(|l| l.ends_with(" pass")), "{printed}");
-    let table8: Vec<&str> = printed.lines().filter(|l| l.starts_with("Table 8, laser tracker") || l.starts_with("Table 8, optical CMM")).collect();
+    let table8: Vec<&str> =
+        printed.lines().filter(|l| l.starts_with("Table 8, laser tracker") || l.starts_with("Table 8, optical CMM")).collect();
     assert_eq!(table8.len(), 6, "{printed}");
     assert!(table8.iter().all(|l| l.ends_with("another study, ref. [9]")), "{table8:?}");
 }

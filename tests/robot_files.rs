@@ -73,6 +73,31 @@ fn a_bad_robot_file_is_one_line_naming_the_file_and_the_field() {
     assert!(e.contains("collision[8].a_mm[1]"), "{e}");
 }
 
+/// A twin's `[learned]` table: read with the file, and a bad value is one line naming its key.
+#[test]
+fn a_learned_table_is_read_and_its_bad_values_named() {
+    let table = "\n[learned]\nrepeatability_mm = 0.01\nbacklash_mdeg = [0.0, 5.0, 3.0, 0.0, 0.0, 0.0]\n\n\
+                 [[learned.harmonic]]\njoint = 2\norder = 1.0\nsin_mdeg = 10.0\ncos_mdeg = -2.0\nstd_mdeg = 1.0\n";
+    let text = std::fs::read_to_string(shipped("irb120.toml")).unwrap() + table;
+    let tmp = common::scratch("robot-files-learned");
+    let path = tmp.path().join("twin.toml");
+    std::fs::write(&path, &text).unwrap();
+    let f = RobotFile::load(&path).expect("a twin loads");
+    let l = f.learned.expect("its [learned] table");
+    assert_eq!((l.repeatability_mm, l.backlash_mdeg[1], l.harmonic[0].joint, l.harmonic[0].sin_mdeg), (0.01, 5.0, 2, 10.0));
+    let with = |from: &'static str, to: &'static str| move |t: &str| (t.to_string() + table).replacen(from, to, 1);
+    let e = bad("joint.toml", with("joint = 2", "joint = 9"));
+    assert!(e.contains("learned.harmonic[0].joint"), "{e}");
+    let e = bad("order.toml", with("order = 1.0", "order = -1.0"));
+    assert!(e.contains("learned.harmonic[0].order"), "{e}");
+    let e = bad("rp.toml", with("repeatability_mm = 0.01", "repeatability_mm = nan"));
+    assert!(e.contains("learned.repeatability_mm"), "{e}");
+    let e = bad("backlash.toml", with("[0.0, 5.0, 3.0", "[0.0, -5.0, 3.0"));
+    assert!(e.contains("learned.backlash_mdeg[1]"), "{e}");
+    let e = bad("unknown.toml", with("repeatability_mm = 0.01", "repeatability_mm = 0.01\nbacklash = 3.0"));
+    assert!(e.contains("backlash"), "{e}");
+}
+
 /// A TriCal scenario whose robot file gives no collision capsules is refused before anything runs:
 /// one line naming the scenario, `robot.file`, the robot file and `collision`.
 #[test]

@@ -435,7 +435,19 @@ fn a_check_over_too_few_worlds_to_judge_is_refused_naming_the_count_it_needs() {
 #[test]
 fn a_check_over_worlds_prints_the_single_world_only_on_request() {
     let tmp = scratch("check-single-world");
-    let args = ["--realisations", "5", "--false-alarm", "0.5", "--set-sizes", "50:75:25", "--repetitions", "2", "--no-plots", "--no-recording", "--out"];
+    let args = [
+        "--realisations",
+        "5",
+        "--false-alarm",
+        "0.5",
+        "--set-sizes",
+        "50:75:25",
+        "--repetitions",
+        "2",
+        "--no-plots",
+        "--no-recording",
+        "--out",
+    ];
     let run = |extra: &[&str]| {
         let out = calsim().args(["check", "scenarios/ci_quick.toml"]).args(args).arg(tmp.path()).args(extra).output().unwrap();
         assert!(matches!(out.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&out.stderr));
@@ -469,7 +481,8 @@ fn a_run_shows_the_spread_of_an_earlier_check_of_its_own_world() {
     let check: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(tmp.path().join("ci_quick/check.json")).unwrap()).unwrap();
     let same = go(&["run", "scenarios/ci_quick.toml"]);
     assert!(same.lines().next().unwrap().ends_with("P10-P90 over 5 worlds"), "{same}");
-    let p = check["figures"].as_array().unwrap().iter().find(|f| f["figure"] == "before calibration: max error, mm").unwrap()["p10_p90"].clone();
+    let p = check["figures"].as_array().unwrap().iter().find(|f| f["figure"] == "before calibration: max error, mm").unwrap()["p10_p90"]
+        .clone();
     let row = same.lines().find(|l| l.starts_with("before calibration: max error, mm")).unwrap();
     assert!(row.ends_with(&format!("{:.3} to {:.3}", p[0].as_f64().unwrap(), p[1].as_f64().unwrap())), "{row} against {p}");
     assert!(tmp.path().join("ci_quick/check.json").exists(), "the check's verdict kept");

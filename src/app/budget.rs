@@ -68,7 +68,11 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
     let (sources, configs, mut plan) = budget::plan(&spec.scenario, spec.realisations, &spec.factors, spec.repetitions)?;
     plan.predict = true;
     crate::io::out_dir::prepare(&spec.out, &plan.name)?;
-    crate::io::out_dir::prepare_work(&spec.out, &sweep::shard_dir(Path::new(""), &plan.name, 0, 1).display().to_string(), sweep::SHARD_MARKER)?;
+    crate::io::out_dir::prepare_work(
+        &spec.out,
+        &sweep::shard_dir(Path::new(""), &plan.name, 0, 1).display().to_string(),
+        sweep::SHARD_MARKER,
+    )?;
     let (pool, threads) = thread_pool(spec.threads)?;
     observer.started(&format!(
         "calsim budget: {} ({} sources, {} configurations x {} realisations), {}",

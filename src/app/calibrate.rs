@@ -75,8 +75,12 @@ impl CalibrateArgs {
         };
         let split = match (&self.hold_out_session, self.hold_out, &self.hold_out_file) {
             (Some(_), Some(f), _) => return Err(option("hold-out", format!("{f}: either a fraction or a session held out, not both"))),
-            (_, Some(f), Some(_)) => return Err(option("hold-out", format!("{f}: either a fraction or a file of held-out poses, not both"))),
-            (Some(_), None, Some(_)) => return Err(option("hold-out-file", "either a session or a file of held-out poses, not both".into())),
+            (_, Some(f), Some(_)) => {
+                return Err(option("hold-out", format!("{f}: either a fraction or a file of held-out poses, not both")));
+            }
+            (Some(_), None, Some(_)) => {
+                return Err(option("hold-out-file", "either a session or a file of held-out poses, not both".into()));
+            }
             (Some(session), None, None) => Split::Session(session.clone()),
             (None, Some(fraction), None) => Split::Poses { fraction },
             (None, None, Some(file)) => Split::Listed {

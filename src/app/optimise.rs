@@ -153,7 +153,8 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         }
     }
     let plots = spec.plots.then(|| plot_inputs(&space, &outcome));
-    let overrides: Vec<(String, String)> = spec.method.iter().map(|m| ("search.method".to_string(), format!("\"{}\"", m.label()))).collect();
+    let overrides: Vec<(String, String)> =
+        spec.method.iter().map(|m| ("search.method".to_string(), format!("\"{}\"", m.label()))).collect();
     let mut manifest = serde_json::json!({
         "design_file": std::path::absolute(&spec.file).unwrap_or_else(|_| spec.file.clone()).display().to_string(),
         "identity": space.identity,
@@ -162,9 +163,10 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         "evaluations": outcome.verdict.trace.len(),
         "winner_timing": report.cost,
     });
-    if let (Some(m), serde_json::Value::Object(block)) =
-        (manifest.as_object_mut(), serde_json::to_value(crate::io::manifest::Provenance::of_run(&overrides)).map_err(|e| Error::input("manifest", e.to_string()))?)
-    {
+    if let (Some(m), serde_json::Value::Object(block)) = (
+        manifest.as_object_mut(),
+        serde_json::to_value(crate::io::manifest::Provenance::of_run(&overrides)).map_err(|e| Error::input("manifest", e.to_string()))?,
+    ) {
         m.extend(block);
     }
     let options = crate::device::WriteOptions { threads, plots: spec.plots, recording: spec.plots, overrides: Vec::new() };

@@ -329,7 +329,9 @@ fn earlier_check(dir: &Path) -> Option<(serde_json::Value, String, (usize, std::
     let worlds = usize::try_from(v.get("realisations")?.as_u64()?).ok().filter(|&n| n > 1)?;
     let mut spread = std::collections::BTreeMap::new();
     for f in v.get("figures")?.as_array()? {
-        if let (Some(name), Some([a, b])) = (f.get("figure").and_then(|x| x.as_str()), f.get("p10_p90").and_then(|x| x.as_array()).map(|a| a.as_slice())) {
+        if let (Some(name), Some([a, b])) =
+            (f.get("figure").and_then(|x| x.as_str()), f.get("p10_p90").and_then(|x| x.as_array()).map(|a| a.as_slice()))
+        {
             if let (Some(a), Some(b)) = (a.as_f64(), b.as_f64()) {
                 spread.insert(name.to_string(), [a, b]);
             }

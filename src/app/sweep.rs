@@ -80,7 +80,11 @@ pub fn run(spec: &SweepSpec, observer: &dyn Observer) -> Result<SweepReport, Err
     }
     let sweep = sweep::spec::load_with(&spec.file, spec.realisations)?;
     let (k, count) = spec.shard.unwrap_or((0, 1));
-    crate::io::out_dir::prepare_work(&spec.out, &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string(), sweep::SHARD_MARKER)?;
+    crate::io::out_dir::prepare_work(
+        &spec.out,
+        &shard_dir(Path::new(""), &sweep.name, k, count).display().to_string(),
+        sweep::SHARD_MARKER,
+    )?;
     if spec.shard.is_none() {
         crate::io::out_dir::prepare(&spec.out, &sweep.name)?;
     }

@@ -156,7 +156,10 @@ pub fn vet_output_file(flag: &str, out: &Path, inputs: &[&Path]) -> Result<(), O
                 return Err(refused(
                     flag,
                     out,
-                    format!("is the input {} of this run: writing it would replace it; choose another {flag} (it is left as it is)", shown(&input)),
+                    format!(
+                        "is the input {} of this run: writing it would replace it; choose another {flag} (it is left as it is)",
+                        shown(&input)
+                    ),
                 ));
             }
         }
@@ -194,7 +197,9 @@ fn may_not_replace(flag: &str, dest: &Path, is_ours: &dyn Fn(&Path) -> bool, wha
         refused(
             flag,
             dest,
-            format!("is not {what} (calsim replaces only directories it made): move it away or choose another {flag} (it is left as it is)"),
+            format!(
+                "is not {what} (calsim replaces only directories it made): move it away or choose another {flag} (it is left as it is)"
+            ),
         )
     })
 }

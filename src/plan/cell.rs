@@ -82,7 +82,8 @@ impl Cell {
     pub fn new(plan: &Plan) -> Result<Self, PlanError> {
         let links = plan.robot.capsules.clone().expect("a plan's robot has capsules (checked)");
         let r = plan.tracker.smr_diameter_mm / 2.0;
-        let device: Vec<CapsuleSpec> = plan.targets.iter().map(|t| CapsuleSpec { a: t.frame6_mm.into(), b: t.frame6_mm.into(), radius: r }).collect();
+        let device: Vec<CapsuleSpec> =
+            plan.targets.iter().map(|t| CapsuleSpec { a: t.frame6_mm.into(), b: t.frame6_mm.into(), radius: r }).collect();
         let head = plan.tracker.position_mm;
         let mut with_head = obstacles(plan);
         with_head.push(Obstacle::capsule("tracker head", head, head, plan.tracker.head_radius_mm));
@@ -129,7 +130,10 @@ impl Cell {
             return Err(PlanError::new(
                 &plan.path,
                 "tracker.position_mm",
-                format!("the tracker is inside the arm: its head (radius {} mm) meets {} at the middle of the joint limits", t.head_radius_mm, c.a),
+                format!(
+                    "the tracker is inside the arm: its head (radius {} mm) meets {} at the middle of the joint limits",
+                    t.head_radius_mm, c.a
+                ),
             ));
         }
         Ok(cell)

@@ -43,7 +43,13 @@ pub const TRAIN: &str = "train";
 /// Calibrate's identifiability check (`registration::prune`) on the configurations `qs` measured
 /// at the first `targets` targets of `plan` in one session: the robot parameters of `set` they separate, and
 /// those they cannot, named with the unknowns they move the points alike with.
-pub fn identifiable(plan: &Plan, cell: &Cell, qs: &[Joints], set: &ParamSet, targets: usize) -> Result<(ParamSet, Vec<Unidentifiable>), PlanError> {
+pub fn identifiable(
+    plan: &Plan,
+    cell: &Cell,
+    qs: &[Joints],
+    set: &ParamSet,
+    targets: usize,
+) -> Result<(ParamSet, Vec<Unidentifiable>), PlanError> {
     use crate::calibrate::problem::{Layout, Obs, Problem};
     let mut st = KinState::default();
     let targets = targets.clamp(1, plan.targets.len());
@@ -64,7 +70,11 @@ pub fn identifiable(plan: &Plan, cell: &Cell, qs: &[Joints], set: &ParamSet, tar
     let idx: Vec<usize> = (0..obs.len()).collect();
     let names: Vec<String> = plan.targets[..targets].iter().map(|t| t.name.clone()).collect();
     crate::calibrate::registration::prune(&problem, &x0, &idx, (&[TRAINING.to_string()], &names)).map_err(|e| {
-        PlanError::new(&plan.path, "target", format!("the poses cannot fix {}: the targets need poses that turn the flange more", e.names.join(", ")))
+        PlanError::new(
+            &plan.path,
+            "target",
+            format!("the poses cannot fix {}: the targets need poses that turn the flange more", e.names.join(", ")),
+        )
     })
 }
 
@@ -137,7 +147,8 @@ pub fn run(plan: &Plan) -> Result<Outcome, PlanError> {
         ));
     }
     let val = select::validation(plan, &cell, &pool.qs, plan.validation)?;
-    let training: Vec<Joints> = pool.qs.iter().enumerate().filter(|(i, _)| val.binary_search(i).is_err()).map(|(_, q)| *q).take(plan.pool).collect();
+    let training: Vec<Joints> =
+        pool.qs.iter().enumerate().filter(|(i, _)| val.binary_search(i).is_err()).map(|(_, q)| *q).take(plan.pool).collect();
     let set = select::detmax_set(plan, &cell, &training)?;
     let jac = select::pool_jacobian(plan, &cell, &training, &set)?;
     let (chosen, o1) = select::choose(plan, &jac, plan.poses)?;
@@ -147,9 +158,17 @@ pub fn run(plan: &Plan) -> Result<Outcome, PlanError> {
         s.sort_unstable();
         crate::identify::detmax::o1_of(&jac, &s)
     };
-    let mut rows: Vec<PoseRow> =
-        chosen.iter().enumerate().map(|(k, &i)| PoseRow { label: format!("p{:03}", k + 1), session: TRAINING, split: TRAIN, q: training[i] }).collect();
-    rows.extend(val.iter().enumerate().map(|(k, &i)| PoseRow { label: format!("v{:03}", k + 1), session: TRAINING, split: VALIDATION, q: pool.qs[i] }));
+    let mut rows: Vec<PoseRow> = chosen
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| PoseRow { label: format!("p{:03}", k + 1), session: TRAINING, split: TRAIN, q: training[i] })
+        .collect();
+    rows.extend(val.iter().enumerate().map(|(k, &i)| PoseRow {
+        label: format!("v{:03}", k + 1),
+        session: TRAINING,
+        split: VALIDATION,
+        q: pool.qs[i],
+    }));
     let qs: Vec<Joints> = rows.iter().map(|r| r.q).collect();
     let tour = select::tour(&cell, &qs);
     let colliding_moves = select::colliding_moves(&cell, &qs, &tour.0);
@@ -245,17 +264,18 @@ pub fn predict(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<Prediction,
     let m = crate::calibrate::measurements::parse(pilot_path, &text, &plan.robot).map_err(|e| fail(e.to_string()))?;
     let c = crate::calibrate::run(&plan.robot, &m, &calibrate_options(plan)).map_err(|e| fail(e.to_string()))?;
     let noise_mm = (sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len() as f64).sqrt();
-    let sim = crate::calibrate::plan::simulate(&c, plan.worlds, Statistic::Median, crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS), Some(noise_mm), None)
-        .map_err(|e| fail(e.to_string()))?;
+    let sim = crate::calibrate::plan::simulate(
+        &c,
+        plan.worlds,
+        Statistic::Median,
+        crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS),
+        Some(noise_mm),
+        None,
+    )
+    .map_err(|e| fail(e.to_string()))?;
     let sorted = crate::study::stats::finite_sorted(&sim.per_world_mm);
     let q = |p: f64| crate::numeric::quantile(&sorted, p);
-    let unidentifiable = c
-        .models
-        .iter()
-        .rev()
-        .find(|r| r.kind.is_some())
-        .map(|r| r.unidentifiable.clone())
-        .unwrap_or_default();
+    let unidentifiable = c.models.iter().rev().find(|r| r.kind.is_some()).map(|r| r.unidentifiable.clone()).unwrap_or_default();
     Ok(Prediction {
         pilot_chosen: c.chosen().kind.map_or("before", |k| k.name()),
         pilot_median_mm: Statistic::Median.of(&c).unwrap_or(f64::NAN),
@@ -342,7 +362,11 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
         if o.colliding_moves.is_empty() {
             "none".to_string()
         } else {
-            o.colliding_moves.iter().map(|(a, b)| format!("{} -> {}", o.rows[o.tour.0[*a]].label, o.rows[o.tour.0[*b]].label)).collect::<Vec<_>>().join(", ")
+            o.colliding_moves
+                .iter()
+                .map(|(a, b)| format!("{} -> {}", o.rows[o.tour.0[*a]].label, o.rows[o.tour.0[*b]].label))
+                .collect::<Vec<_>>()
+                .join(", ")
         }
     );
     let _ = writeln!(s, "## Parameters the plan cannot identify\n");
@@ -350,7 +374,12 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
         let _ = writeln!(s, "None of the {} model's parameters.\n", plan.model.name());
     } else {
         for u in &p.unidentifiable {
-            let _ = writeln!(s, "- {} (moves the points as {} do): kept nominal", u.name, if u.with.is_empty() { "nothing else".into() } else { u.with.join(", ") });
+            let _ = writeln!(
+                s,
+                "- {} (moves the points as {} do): kept nominal",
+                u.name,
+                if u.with.is_empty() { "nothing else".into() } else { u.with.join(", ") }
+            );
         }
         s.push('\n');
     }
@@ -375,7 +404,10 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
         "A robot the model describes completely, measured with this noise, calibrates to this. Effects outside the model (gear harmonics, backlash, temperature) add to it: `calsim calibrate --plan-worlds N` on the measured file says whether the robot does.\n"
     );
     let _ = writeln!(s, "## Files\n");
-    let _ = writeln!(s, "- `poses.csv`: the calibrate measurement file, joint columns filled, position columns to fill with the tracker's readings.");
+    let _ = writeln!(
+        s,
+        "- `poses.csv`: the calibrate measurement file, joint columns filled, position columns to fill with the tracker's readings."
+    );
     let _ = writeln!(s, "- `joints.txt`: the same poses as a plain joint list.");
     let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
     s

@@ -89,11 +89,15 @@ pub fn validation(plan: &Plan, cell: &Cell, qs: &[Joints], n: usize) -> Result<V
         return Err(PlanError::new(
             &plan.path,
             "cell.workspace_min_mm",
-            format!("{} feasible poses of the pool put the first target in the workspace of interest: fewer than validation = {n}", inside.len()),
+            format!(
+                "{} feasible poses of the pool put the first target in the workspace of interest: fewer than validation = {n}",
+                inside.len()
+            ),
         ));
     }
     let centre = (plan.workspace.min + plan.workspace.max) / 2.0;
-    let first = (0..inside.len()).min_by(|&a, &b| (inside[a].1 - centre).norm().total_cmp(&(inside[b].1 - centre).norm())).expect("not empty");
+    let first =
+        (0..inside.len()).min_by(|&a, &b| (inside[a].1 - centre).norm().total_cmp(&(inside[b].1 - centre).norm())).expect("not empty");
     let mut chosen = vec![first];
     let mut nearest: Vec<f64> = inside.iter().map(|(_, p)| (p - inside[first].1).norm()).collect();
     while chosen.len() < n {
@@ -121,7 +125,10 @@ pub fn detmax_set(plan: &Plan, cell: &Cell, qs: &[Joints]) -> Result<ParamSet, P
 
 /// The pool's scaled identification Jacobians at the first target for `set`.
 pub fn pool_jacobian(plan: &Plan, cell: &Cell, qs: &[Joints], set: &ParamSet) -> Result<PoolJacobian, PlanError> {
-    let model = cell.model.edited(|d| d.flange_tcp_mm = plan.targets[0].frame6_mm).map_err(|e| PlanError::new(&plan.path, "target", e.to_string()))?;
+    let model = cell
+        .model
+        .edited(|d| d.flange_tcp_mm = plan.targets[0].frame6_mm)
+        .map_err(|e| PlanError::new(&plan.path, "target", e.to_string()))?;
     Ok(PoolJacobian::new(&model, set, qs))
 }
 

@@ -276,30 +276,45 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
             RobotFile::load(&file).map_err(|e| {
                 err(
                     "robot",
-                    format!("{} (a robot file relative to the plan, or a built-in arm: {})", e.to_string().replace('\n', " "), BUILTIN.join(", ")),
+                    format!(
+                        "{} (a robot file relative to the plan, or a built-in arm: {})",
+                        e.to_string().replace('\n', " "),
+                        BUILTIN.join(", ")
+                    ),
                 )
             })?
         }
     };
     if robot.capsules.is_none() {
-        return Err(err("robot", format!("{} has no [[collision]] capsules: a plan needs them to keep the poses free of collision", raw.robot)));
+        return Err(err(
+            "robot",
+            format!("{} has no [[collision]] capsules: a plan needs them to keep the poses free of collision", raw.robot),
+        ));
     }
-    let model = ModelKind::ALL.into_iter().find(|k| k.name() == raw.model).ok_or_else(|| {
-        err("model", format!("\"{}\" is not a calibrate model (offsets, geometric, compliance)", raw.model))
-    })?;
+    let model = ModelKind::ALL
+        .into_iter()
+        .find(|k| k.name() == raw.model)
+        .ok_or_else(|| err("model", format!("\"{}\" is not a calibrate model (offsets, geometric, compliance)", raw.model)))?;
     // Sizes.
     let m = unknowns(model);
     if raw.poses < m {
         return Err(err(
             "poses",
-            format!("{} is below the {m} parameters of the {} model with a base and a tool (its robot parameters, 6, 3)", raw.poses, model.name()),
+            format!(
+                "{} is below the {m} parameters of the {} model with a base and a tool (its robot parameters, 6, 3)",
+                raw.poses,
+                model.name()
+            ),
         ));
     }
     if raw.poses > MOST_POSES {
         return Err(err("poses", format!("{} is above {MOST_POSES}", raw.poses)));
     }
     if raw.validation != 0 && !(FEWEST_VALIDATION..=MOST_POSES).contains(&raw.validation) {
-        return Err(err("validation", format!("{}: 0 (none) or {FEWEST_VALIDATION} to {MOST_POSES} (a held-out session fixes its own frame)", raw.validation)));
+        return Err(err(
+            "validation",
+            format!("{}: 0 (none) or {FEWEST_VALIDATION} to {MOST_POSES} (a held-out session fixes its own frame)", raw.validation),
+        ));
     }
     if raw.pool <= raw.poses || raw.pool > MOST_POOL {
         return Err(err("pool", format!("{}: more than the {} poses, at most {MOST_POOL}", raw.pool, raw.poses)));
@@ -319,7 +334,10 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
     finite("tracker.min_range_mm", &[t.min_range_mm])?;
     finite("tracker.max_range_mm", &[t.max_range_mm])?;
     if !(t.min_range_mm >= 0.0 && t.max_range_mm > t.min_range_mm) {
-        return Err(err("tracker.max_range_mm", format!("{}: above min_range_mm ({}) and min_range_mm >= 0", t.max_range_mm, t.min_range_mm)));
+        return Err(err(
+            "tracker.max_range_mm",
+            format!("{}: above min_range_mm ({}) and min_range_mm >= 0", t.max_range_mm, t.min_range_mm),
+        ));
     }
     for (key, v) in [("tracker.head_radius_mm", t.head_radius_mm), ("tracker.smr_diameter_mm", t.smr_diameter_mm)] {
         if !(v.is_finite() && v > 0.0 && v <= 2000.0) {

@@ -101,6 +101,9 @@ struct File {
     /// Joints the controller reports coupled (see [`super::coupling`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     coupling: Vec<super::coupling::CouplingRow>,
+    /// What a calibration learned beyond the model (a twin; see [`super::learned`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    learned: Option<super::learned::LearnedEffects>,
 }
 
 #[derive(Debug, Deserialize, Serialize)]
@@ -171,6 +174,8 @@ pub struct RobotFile {
     pub flange: Option<Matrix3<f64>>,
     /// The controller's joint coupling (`None`: the controller reports the model's joint angles).
     pub coupling: Option<super::coupling::JointCoupling>,
+    /// What a calibration learned beyond the model (`None`: the file has no `[learned]` table).
+    pub learned: Option<super::learned::LearnedEffects>,
 }
 
 /// A loaded robot file shared by the copies of a scenario (equal when read from the same path).
@@ -298,6 +303,7 @@ fn file_of(
         truth: BTreeMap::new(),
         std: std.iter().map(|(id, v)| (id.name(), id.unit().from_internal(*v))).collect(),
         coupling: Vec::new(),
+        learned: None,
     }
 }
 
@@ -494,7 +500,10 @@ impl RobotFile {
             Some(caps)
         };
         let coupling = if f.coupling.is_empty() { None } else { Some(super::coupling::JointCoupling::from_rows(&f.coupling)?) };
-        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std, capsules, flange, coupling };
+        if let Some(l) = &f.learned {
+            l.check().map_err(|(key, message)| (format!("learned.{key}"), message))?;
+        }
+        let file = Self { path: path.to_path_buf(), source: f.source, nominal, truth, std, capsules, flange, coupling, learned: f.learned };
         file.truth_on(&file.nominal).map_err(|e| ("truth".to_string(), e))?;
         // Values each within range that together describe no arm.
         super::plausible::check(&file)?;

@@ -25,8 +25,8 @@ pub use kinematics::{
     KinState, forward, gravity_torques, tcp_jacobian, tcp_jacobian_matrix, tcp_jacobians_transposed, tcp_world, tcps_world,
     world_from_base, world_from_flange,
 };
+pub use learned::{LearnedEffects, LearnedHarmonic};
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx, uniform_configuration};
 pub use params::{BaseParam, LinkParam, ParamError, ParamId, ParamSet, Unit};
 pub use truth::{DeviationSpec, SpreadSpec, deviate, perturb};
-pub use learned::{LearnedEffects, LearnedHarmonic};
 pub use virtual_robot::{UnmodelledSpec, VirtualRobot};

@@ -366,7 +366,11 @@ pub fn terminal_table_with_spread(rows: &[Check], worlds: usize, spread: &std::c
     let head = format!("P10-P90 over {worlds} worlds");
     let cells: Vec<String> = rows
         .iter()
-        .map(|r| spread.get(&r.figure).map_or("-".to_string(), |[a, b]| format!("{} to {}", in_the_form_of(&r.reproduced, *a), in_the_form_of(&r.reproduced, *b))))
+        .map(|r| {
+            spread
+                .get(&r.figure)
+                .map_or("-".to_string(), |[a, b]| format!("{} to {}", in_the_form_of(&r.reproduced, *a), in_the_form_of(&r.reproduced, *b)))
+        })
         .collect();
     let table = terminal_table(rows, false);
     let lines: Vec<&str> = table.lines().collect();

@@ -398,11 +398,7 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
     let _ = writeln!(s, " interaction |\n|{}", "---|".repeat(6 + factors.len()));
     for sh in b.shares {
         let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
-        let off = b
-            .configs
-            .iter()
-            .position(|c| c.mode == "off" && c.source == Some(l.source))
-            .and_then(|i| b.against[i]);
+        let off = b.configs.iter().position(|c| c.mode == "off" && c.source == Some(l.source)).and_then(|i| b.against[i]);
         // The medians' difference a reader would take for the saving, beside the paired change.
         let medians_only = off.is_some_and(|p| !p.separated(super::CONFIDENCE)) && (b.all_mm - l.off_mm).abs() > 0.02;
         let _ = write!(

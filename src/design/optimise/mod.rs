@@ -261,8 +261,7 @@ pub fn search_score(space: &DesignSpace, r: &DesignRow, per_world: &[f64]) -> f6
 /// per-world errors over `threshold` (each capped at [`spec::QUANTILE_CAP`] thresholds, a failed
 /// world's +inf with them; NaN left out); NaN without a value.
 pub fn quantile_score(per_world: &[f64], level: f64, threshold: f64) -> f64 {
-    let mut v: Vec<f64> =
-        per_world.iter().filter(|x| !x.is_nan()).map(|x| (x / threshold).min(spec::QUANTILE_CAP)).collect();
+    let mut v: Vec<f64> = per_world.iter().filter(|x| !x.is_nan()).map(|x| (x / threshold).min(spec::QUANTILE_CAP)).collect();
     if v.is_empty() {
         return f64::NAN;
     }

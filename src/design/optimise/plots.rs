@@ -159,8 +159,7 @@ fn front<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInpu
             chart
                 .draw_series(of.iter().map(|d| {
                     // Beside the marker, not over it: 8 px right, 14 px up.
-                    EmptyElement::at((d.1, d.2[0]))
-                        + Text::new(d.0.split(',').next().unwrap_or("").to_string(), (8, -14), (FAMILY, 12))
+                    EmptyElement::at((d.1, d.2[0])) + Text::new(d.0.split(',').next().unwrap_or("").to_string(), (8, -14), (FAMILY, 12))
                 }))
                 .map_err(e2s)?;
         }

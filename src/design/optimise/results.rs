@@ -99,7 +99,12 @@ pub fn status_words(space: &DesignSpace, r: &DesignRow) -> String {
     if let (Some(target), Some((p, _))) = (o.success_at_least, r.success) {
         let n = f64::from(r.worlds);
         let (lo, hi) = (clopper_pearson_lower(p * n, n, o.confidence), clopper_pearson_upper(p * n, n, o.confidence));
-        let what = format!("P({} <= {} mm) >= {target} at {} % confidence", o.statistic.label(), o.threshold_mm.unwrap_or(f64::NAN), o.confidence * 100.0);
+        let what = format!(
+            "P({} <= {} mm) >= {target} at {} % confidence",
+            o.statistic.label(),
+            o.threshold_mm.unwrap_or(f64::NAN),
+            o.confidence * 100.0
+        );
         out.push(if lo >= target {
             format!("{what}: **met** (P = {} over {} worlds, its lower bound {} >= {target})", f3(p), r.worlds, f3(lo))
         } else if hi < target {
@@ -228,7 +233,13 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
                     v.held_out_rows.len(),
                     above
                         .iter()
-                        .map(|h| format!("{} ({} sets of {}: {})", v.verified[h.design.point].label, h.design.selection, h.design.set_size, f3(h.estimate)))
+                        .map(|h| format!(
+                            "{} ({} sets of {}: {})",
+                            v.verified[h.design.point].label,
+                            h.design.selection,
+                            h.design.set_size,
+                            f3(h.estimate)
+                        ))
                         .collect::<Vec<_>>()
                         .join("; ")
                 );
@@ -253,7 +264,9 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
                         space.objective.success_at_least.unwrap_or(0.95),
                         space.objective.statistic.label()
                     ),
-                    super::spec::SearchScore::Success => "minus P(success) over the search worlds (`[search] score = \"success\"`), plus the constraints' shortfalls".to_string(),
+                    super::spec::SearchScore::Success =>
+                        "minus P(success) over the search worlds (`[search] score = \"success\"`), plus the constraints' shortfalls"
+                            .to_string(),
                 }
             );
         }

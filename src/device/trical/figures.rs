@@ -66,7 +66,9 @@ pub fn table8_checks(tracker: [f64; 3], cmm: [f64; 3], expect: &ExpectSpec) -> V
         // The published rows come from the authors' earlier study (ref. [9]), with a setup of its
         // own that the virtual cell does not simulate (docs/findings.md, Table 8).
         let scope = "another study, ref. [9]";
-        rows.push(Check::band(&format!("Table 8, {name}: median error after calibration, mm"), row.median_mm, v[0], band).outside_scope(scope));
+        rows.push(
+            Check::band(&format!("Table 8, {name}: median error after calibration, mm"), row.median_mm, v[0], band).outside_scope(scope),
+        );
         rows.push(Check::band(&format!("Table 8, {name}: std, mm"), row.std_mm, v[1], None).outside_scope(scope));
         rows.push(Check::band(&format!("Table 8, {name}: max, mm"), row.max_mm, v[2], None).outside_scope(scope));
     }
