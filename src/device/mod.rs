@@ -285,8 +285,29 @@ pub struct RobotInCell {
 }
 
 impl RobotInCell {
-    /// The robot `arm` where its `world_from_base` puts it, and its reach.
+    /// The robot `arm` where its `world_from_base` puts it, and its reach. The points of a sweep
+    /// mostly share their arm: the last few arms' answers are kept per thread and returned for an
+    /// equal arm (the same bits as computing them again).
     pub fn of(arm: &RobotModel) -> Self {
+        const KEPT: usize = 8;
+        thread_local! {
+            static RECENT: std::cell::RefCell<Vec<(crate::robot::RobotData, RobotInCell)>> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        if let Some(hit) = RECENT.with(|r| r.borrow().iter().find(|(d, _)| d == arm.data()).map(|(_, c)| c.clone())) {
+            return hit;
+        }
+        let computed = Self::compute(arm);
+        RECENT.with(|r| {
+            let mut r = r.borrow_mut();
+            if r.len() == KEPT {
+                r.remove(0);
+            }
+            r.push((arm.data().clone(), computed.clone()));
+        });
+        computed
+    }
+
+    fn compute(arm: &RobotModel) -> Self {
         let world_from_base = crate::robot::world_from_base(arm);
         let up = world_from_base.rotation * nalgebra::Vector3::z();
         let base = world_from_base.translation.vector;
@@ -300,7 +321,7 @@ impl RobotInCell {
             for b in 0..41 {
                 for c in 0..5 {
                     let q = [0.0, grid(1, a, 41), grid(2, b, 41), 0.0, grid(4, c, 5), 0.0];
-                    let tcp = crate::robot::tcp_world(arm, &q);
+                    let tcp = crate::robot::forward(arm, &mut state, &q);
                     reach = reach.max((tcp - shoulder).norm());
                     let d = tcp - base;
                     horizontal = horizontal.max((d - up * d.dot(&up)).norm());

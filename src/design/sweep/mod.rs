@@ -435,7 +435,7 @@ pub struct ShardRun {
 /// The record of `sweep` that shard `k` of `count` writes as its `sweep.json`.
 pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
     // Every point's text is calsim's own TOML of a table it loaded (`spec::load`, `from_tables`).
-    let tables: Vec<toml::Table> = sweep.points.iter().map(|p| toml::from_str(&p.scenario.header().text).unwrap_or_default()).collect();
+    let tables: Vec<toml::Table> = sweep.points.par_iter().map(|p| toml::from_str(&p.scenario.header().text).unwrap_or_default()).collect();
     let base = tables.first().cloned().unwrap_or_default();
     ShardInfo {
         name: sweep.name.clone(),
@@ -444,10 +444,10 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
         thresholds_mm: sweep.thresholds_mm.clone(),
         keys: sweep.keys.clone(),
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),
-        layouts: sweep.points.iter().map(|p| p.scenario.layout_mm()).collect(),
-        robots: robots_once(sweep.points.iter().map(|p| p.scenario.robot_in_cell()).collect()),
+        layouts: sweep.points.par_iter().map(|p| p.scenario.layout_mm()).collect(),
+        robots: robots_once(sweep.points.par_iter().map(|p| p.scenario.robot_in_cell()).collect()),
         scenario: sweep.points.first().map(|p| p.scenario.header().text.clone()).unwrap_or_default(),
-        changes: tables.iter().map(|t| record::changes(&base, t)).collect(),
+        changes: tables.par_iter().map(|t| record::changes(&base, t)).collect(),
         objective: sweep.objective.clone(),
         race: sweep.race.clone(),
         shard: k,
@@ -479,7 +479,7 @@ pub fn run_shard(sweep: &Sweep, out: &Path, k: usize, count: usize, progress: &(
             crate::io::MOST_INPUT_BYTES >> 20
         )));
     }
-    let studies: Vec<record::PointStudy> = sweep.points.iter().map(|p| record::PointStudy::of(p.scenario.as_ref())).collect();
+    let studies: Vec<record::PointStudy> = sweep.points.par_iter().map(|p| record::PointStudy::of(p.scenario.as_ref())).collect();
     fs::create_dir_all(dir.join("units"))?;
     let info_path = dir.join("sweep.json");
     if info_path.exists() {

@@ -404,8 +404,9 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
         return Err(file_err(path, "realisations", format!("{units} work units (points x realisations): at most 1e6")));
     }
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "sweep".into());
-    let mut points = Vec::with_capacity(tuples.len());
-    for (p, idx) in tuples.iter().enumerate() {
+    // Every point built and checked in parallel (a large grid's load is most of a small shard's
+    // cost); the first failing point in grid order is the one reported.
+    let build = |p: usize, idx: &Vec<usize>| -> Result<Point, SweepError> {
         let mut t = base_table.clone();
         let mut shown_values = Vec::new();
         for (a, &k) in idx.iter().enumerate() {
@@ -425,8 +426,13 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
             axis: if axis.is_empty() { "(base)".into() } else { axis.clone() },
             error: Box::new(e),
         })?;
-        points.push(Point { values: shown_values, scenario });
-    }
+        Ok(Point { values: shown_values, scenario })
+    };
+    let built: Vec<Result<Point, SweepError>> = {
+        use rayon::prelude::*;
+        tuples.par_iter().enumerate().map(|(p, idx)| build(p, idx)).collect()
+    };
+    let points = built.into_iter().collect::<Result<Vec<Point>, SweepError>>()?;
     use sha2::Digest;
     let identity = format!("{:x}", sha2::Sha256::digest(format!("{text}\u{0}{base_text}")));
     Ok(Sweep {
