@@ -154,6 +154,20 @@ pub mod plan {
     pub const SIMULATE: u64 = 0x504c_414e_0006;
 }
 
+/// Fixed streams of quantities that are functions of their inputs alone (no scenario seed).
+pub mod fixed {
+    /// The draws that estimate a robot's ISO 9283 repeatability per radian of joint noise
+    /// (`robot::virtual_robot`).
+    pub const REPEATABILITY: u64 = 9283;
+    /// The bootstrap of a budget's share of source `s`: `BUDGET_SHARE + s`.
+    pub const BUDGET_SHARE: u64 = 0xB0D6_E7;
+}
+
+/// A generator seeded with `seed` itself (for the [`fixed`] streams).
+pub fn fixed_stream(seed: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(seed)
+}
+
 /// The stream of task `index` of a study whose tasks are salted with `salt` (see [`study`]).
 pub fn task_stream(seed: u64, salt: u64, index: usize) -> ChaCha8Rng {
     stream(split_seed(seed, salt), index as u64)

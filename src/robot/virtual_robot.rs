@@ -7,7 +7,7 @@
 
 use std::f64::consts::PI;
 
-use rand::{Rng, RngExt, SeedableRng};
+use rand::{Rng, RngExt};
 use rand_distr::{Distribution, Normal, Uniform};
 use serde::Deserialize;
 
@@ -167,7 +167,7 @@ fn repeatability_per_radian(model: &RobotModel, q: &Joints) -> f64 {
             (forward(model, &mut st, &qk) - p0) / h
         })
         .collect();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9283);
+    let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::REPEATABILITY);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
     let n = 20_000;
     let d: Vec<f64> = (0..n).map(|_| cols.iter().map(|c| c * normal.sample(&mut rng)).sum::<nalgebra::Vector3<f64>>().norm()).collect();

@@ -249,9 +249,8 @@ pub fn shares(sources: &[Source], configs: &[Config], per_world: &[Vec<f64>]) ->
     let all: Vec<usize> = (0..added.len()).collect();
     let mut out: Vec<Share> = (0..n)
         .map(|s| {
-            use rand::SeedableRng;
             // A fixed stream per source: the interval is a function of the results alone.
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xB0D6_E7 + s as u64);
+            let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::BUDGET_SHARE + s as u64);
             let clamp = |x: f64| x.clamp(0.0, 1.0);
             let share = if added.len() > 1 { clamp(ratio_of_means(&added, s, &all).0) } else { f64::NAN };
             let interval = bootstrap_t(added.len(), |idx| ratio_of_means(&added, s, idx), RESAMPLES, CONFIDENCE, &mut rng);
