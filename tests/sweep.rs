@@ -104,7 +104,13 @@ fn the_sweep_and_merge_commands_shard_and_merge() {
     let shard = dir.join("c.shard-0-of-1");
     let o = run(&["merge", shard.to_str().unwrap()], dir);
     assert!(String::from_utf8_lossy(&o.stdout).contains("merged 2 work units (0 failed)"), "{}", String::from_utf8_lossy(&o.stdout));
-    assert!(dir.join("c/points.parquet").exists());
+    // The axis's column holds its values as numbers, as the sweep file writes them.
+    use polars::prelude::SerReader;
+    let points = polars::prelude::ParquetReader::new(std::fs::File::open(dir.join("c/points.parquet")).unwrap()).finish().unwrap();
+    let axis = points.column("trical.epsilon_mm").expect("the axis's column");
+    let mut values: Vec<f64> = axis.f64().expect("numbers").into_no_null_iter().collect();
+    values.dedup();
+    assert_eq!(values, [0.01, 0.02], "one row per point and selection, in point order");
     // The best design file runs from any working directory: here from a directory that holds
     // neither the sweep, its base scenario nor the robot file.
     let elsewhere = scratch("sweep-cli-elsewhere");

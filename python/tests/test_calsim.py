@@ -238,6 +238,9 @@ def test_a_sweep_returns_its_points_and_shards_merge_to_the_same_tables(tmp_path
     assert whole.units == 2 * 2 and whole.failed == 0
     points = whole.tables["points"]
     assert sorted(set(points["point"].to_list())) == [0, 1]
+    # The axis's values are numbers, as the sweep file writes them.
+    assert points["trical.epsilon_mm"].dtype == pl.Float64
+    assert sorted(set(points["trical.epsilon_mm"].to_list())) == [0.01, 0.02]
     assert "P(max" in whole.summary or "p95" in whole.summary
     shards = [calsim.sweep(f, out=tmp_path / "sharded", shard=(k, 2), threads=1, progress=False) for k in range(2)]
     assert all(s.dest is None and s.tables == {} for s in shards)

@@ -104,6 +104,19 @@ fn write_extremes(dir: &Path, m: &Merged) -> std::io::Result<()> {
     Ok(())
 }
 
+/// The column of axis `key` from its values as written (TOML): integers where every value is an
+/// integer, numbers where every value is a number, else the values' text (arrays, strings).
+fn axis_column<'a>(key: &str, values: impl Iterator<Item = &'a str>) -> Column {
+    let values: Vec<&str> = values.collect();
+    if let Some(v) = values.iter().map(|v| v.parse::<i64>().ok()).collect::<Option<Vec<i64>>>() {
+        return Column::new(key.into(), v);
+    }
+    if let Some(v) = values.iter().map(|v| v.parse::<f64>().ok().filter(|x| x.is_finite())).collect::<Option<Vec<f64>>>() {
+        return Column::new(key.into(), v);
+    }
+    Column::new(key.into(), values.iter().map(|v| v.to_string()).collect::<Vec<String>>())
+}
+
 /// The axis values of a point, `key = value, ...`.
 pub fn point_label(info: &ShardInfo, p: usize) -> String {
     info.keys.iter().zip(&info.points[p]).map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
@@ -131,7 +144,7 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
         u("realisation", rows.iter().map(|(x, _)| x.realisation).collect()),
     ];
     for (a, key) in info.keys.iter().enumerate() {
-        cols.push(Column::new(key.as_str().into(), rows.iter().map(|(x, _)| info.points[x.point][a].clone()).collect::<Vec<_>>()));
+        cols.push(axis_column(key, rows.iter().map(|(x, _)| info.points[x.point][a].as_str())));
     }
     cols.extend([
         Column::new("error".into(), rows.iter().map(|(x, _)| x.error.clone().unwrap_or_default()).collect::<Vec<_>>()),
@@ -163,7 +176,7 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
 
     let mut cols = vec![u("point", points.iter().map(|p| p.point as u32).collect())];
     for (a, key) in info.keys.iter().enumerate() {
-        cols.push(Column::new(key.as_str().into(), points.iter().map(|p| info.points[p.point][a].clone()).collect::<Vec<_>>()));
+        cols.push(axis_column(key, points.iter().map(|p| info.points[p.point][a].as_str())));
     }
     cols.extend([
         Column::new("selection".into(), points.iter().map(|p| p.selection.clone()).collect::<Vec<_>>()),
@@ -238,7 +251,7 @@ fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {
         |g: &dyn Fn(&crate::study::interval::Paired) -> f64| d.iter().map(|r| r.vs_leader.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
     let mut cols = vec![u("point", d.iter().map(|r| r.design.point as u32).collect())];
     for (a, key) in m.info.keys.iter().enumerate() {
-        cols.push(Column::new(key.as_str().into(), d.iter().map(|r| m.info.points[r.design.point][a].clone()).collect::<Vec<_>>()));
+        cols.push(axis_column(key, d.iter().map(|r| m.info.points[r.design.point][a].as_str())));
     }
     cols.extend([
         Column::new("selection".into(), d.iter().map(|r| r.design.selection.clone()).collect::<Vec<_>>()),
