@@ -29,6 +29,7 @@ pub mod plots;
 pub mod reach;
 pub mod results;
 pub mod search;
+pub mod sheet;
 pub mod space;
 pub mod spec;
 

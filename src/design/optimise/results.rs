@@ -21,6 +21,8 @@ pub struct Outcome {
     pub verdict: Verdict,
     /// The winner: its index in `verdict.verified` and its held-out row.
     pub winner: Option<(usize, DesignRow)>,
+    /// The winner's cell as a machinist builds it (TriCal designs).
+    pub sheet: Option<super::sheet::CellSheet>,
 }
 
 impl Outcome {
@@ -28,7 +30,18 @@ impl Outcome {
     /// with its held-out row. The held-out worlds only report it: choosing on them too would
     /// report the luckiest of the verified designs on the worlds that chose it (the winner's
     /// curse), an optimistic figure.
-    pub fn of(verdict: Verdict) -> Self {
+    pub fn of(space: &DesignSpace, verdict: Verdict) -> Self {
+        let mut o = Self::chosen(verdict);
+        o.sheet = o.winner.as_ref().and_then(|(i, r)| {
+            let table = design_table(&o.verdict.verified[*i], r);
+            let text = toml::to_string(&table).unwrap_or_default();
+            let s = crate::device::from_table(&text, table, &space.path).ok()?;
+            super::sheet::CellSheet::of(s.as_ref())
+        });
+        o
+    }
+
+    fn chosen(verdict: Verdict) -> Self {
         if let Some(r) = &verdict.robust {
             // Under [robust], the winner under the combined score (the last choice), with its
             // held-out row of the first model that has one.
@@ -39,7 +52,7 @@ impl Outcome {
                         .map(|h| (c.verified, h.clone()))
                 })
             });
-            return Self { verdict, winner };
+            return Self { verdict, winner, sheet: None };
         }
         let winner = verdict.race_rows.iter().min_by_key(|r| r.rank).and_then(|best| {
             let key = &verdict.finalists.get(best.design.point)?.key;
@@ -50,7 +63,7 @@ impl Outcome {
                 .find(|h| h.design.point == v && h.design.set_size == best.design.set_size && h.design.selection == best.design.selection)
                 .map(|h| (v, h.clone()))
         });
-        Self { verdict, winner }
+        Self { verdict, winner, sheet: None }
     }
 }
 
@@ -155,6 +168,24 @@ pub fn fitted_values(space: &DesignSpace) -> Vec<String> {
     out
 }
 
+/// What the search minimises, in words.
+pub fn score_words(space: &DesignSpace) -> String {
+    let o = &space.objective;
+    let shortfalls = "plus 10 times the constraints' relative shortfalls";
+    match (o.goal, space.search.score) {
+        (crate::design::sweep::objective::Goal::MaximiseSuccess, super::spec::SearchScore::Quantile) => format!(
+            "the {} quantile over the search worlds of each world's {} error over the threshold (`[search] score = \"quantile\"`), \
+             {shortfalls}; the race and the answer are judged by P(success)",
+            o.success_at_least.unwrap_or(0.95),
+            o.statistic.label()
+        ),
+        (crate::design::sweep::objective::Goal::MaximiseSuccess, super::spec::SearchScore::Success) => {
+            format!("minus P(success) over the search worlds (`[search] score = \"success\"`), {shortfalls}")
+        }
+        _ => format!("the objective's estimate over the search worlds ({}), {shortfalls}", o.describe()),
+    }
+}
+
 /// A held-out or race row in words: `P = 0.95 (0.90-0.98), 100 worlds, campaign 2.10 h`.
 pub fn row_words(r: &DesignRow) -> String {
     format!(
@@ -210,7 +241,7 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
             s += &format!("| race (search worlds){under} | {} |\n", row_words(x));
         }
         s += &format!("| **held-out worlds (reported)**{under} | **{}** |\n\n", row_words(r));
-        s += &format!("Points (region frame, mm): {:?}\n\n", c.points_mm);
+        s += &format!("Points as searched (the region's frame, mm): {:?}\n\n", c.points_mm);
         let status = status_words(space, r);
         if !status.is_empty() {
             s += &format!("Status on the held-out worlds: {status}.\n\n");
@@ -254,24 +285,12 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
             "Error model: the figures rest on {models}{}.\n\n",
             if fitted.is_empty() { String::new() } else { format!("; its FITTED values: {}", fitted.join(", ")) }
         );
-        if space.objective.goal == crate::design::sweep::objective::Goal::MaximiseSuccess {
-            s += &format!(
-                "Search score: {}.\n\n",
-                match space.search.score {
-                    super::spec::SearchScore::Quantile => format!(
-                        "the {} quantile over the search worlds of each world's {} error over the threshold (`[search] score = \"quantile\"`), \
-                         plus the constraints' shortfalls; the race and the answer are judged by P(success)",
-                        space.objective.success_at_least.unwrap_or(0.95),
-                        space.objective.statistic.label()
-                    ),
-                    super::spec::SearchScore::Success =>
-                        "minus P(success) over the search worlds (`[search] score = \"success\"`), plus the constraints' shortfalls"
-                            .to_string(),
-                }
-            );
-        }
+        s += &format!("Search score: {}.\n\n", score_words(space));
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
+    }
+    if let Some(sheet) = &o.sheet {
+        s += &sheet.markdown();
     }
     if let Some(r) = &v.robust {
         s += &robust_section(space, v, r);
@@ -552,6 +571,9 @@ pub fn write(
                 row_words(r)
             );
             crate::io::out_dir::write_file(&dir.join("best_design.toml"), design_file(&v.verified[*i], r, &head))?;
+        }
+        if let Some(sheet) = &o.sheet {
+            crate::io::out_dir::write_file(&dir.join("spheres.csv"), sheet.csv())?;
         }
         let mut text = summary(space, o);
         if let Some(w) = winner_world {
