@@ -775,6 +775,8 @@ pub struct Verdict {
     /// With `[robust]`: every model's race and held-out rows and the winner under each model and
     /// under the combined score (`race_rows` and `held_out_rows` are then the first model's).
     pub robust: Option<RobustVerdict>,
+    /// Without `[robust]`: the answer rule's row of `race_rows` ([`answer_of`]) and how it chose.
+    pub answer: Option<(usize, AnswerBasis)>,
 }
 
 /// A robust design's race and verification under each error model.
@@ -972,7 +974,44 @@ fn finish_robust(
         verified,
         held_out_rows: held_out[0].clone(),
         robust: Some(RobustVerdict { models: names, combine: r.combine, race, held_out, choices }),
+        answer: None,
     })
+}
+
+/// How the answer rule chose the answer among the race's rows ([`answer_of`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AnswerBasis {
+    /// Some rows meet every constraint at the confidence: the one with the smallest campaign.
+    SmallestMeeting,
+    /// No row meets every constraint at the confidence (or the objective sets no least P(success)
+    /// to meet): the race's first.
+    RaceFirst,
+}
+
+/// The answer rule over the race's rows (designs, set sizes and selections of the finalists on the
+/// search worlds): for `maximise = "success"` with `success_at_least`, the rows meeting every
+/// constraint at the confidence (feasible), the smallest campaign first, then the smaller set
+/// size, then the higher estimate, then the race's order; without such a row, or for another
+/// objective, the race's first (feasible, then undecided, then the rest; the best estimate
+/// within each). Returns the row's index in `rows`.
+pub fn answer_of(space: &DesignSpace, rows: &[DesignRow]) -> Option<(usize, AnswerBasis)> {
+    use crate::design::sweep::designs::Feasibility;
+    let o = &space.objective;
+    let first = || rows.iter().enumerate().min_by_key(|(_, r)| r.rank).map(|(i, _)| (i, AnswerBasis::RaceFirst));
+    if !(o.goal == Goal::MaximiseSuccess && o.success_at_least.is_some()) {
+        return first();
+    }
+    let meeting = rows.iter().enumerate().filter(|(_, r)| r.feasibility == Feasibility::Feasible).min_by(|(_, a), (_, b)| {
+        a.campaign_h
+            .total_cmp(&b.campaign_h)
+            .then(a.design.set_size.cmp(&b.design.set_size))
+            .then(b.estimate.total_cmp(&a.estimate))
+            .then(a.rank.cmp(&b.rank))
+    });
+    match meeting {
+        Some((i, _)) => Some((i, AnswerBasis::SmallestMeeting)),
+        None => first(),
+    }
 }
 
 /// Races the best designs of the search on more search worlds, then verifies the best of each
@@ -1049,12 +1088,20 @@ pub fn finish(
     let units: Vec<Unit> = present.values().cloned().collect();
     let race_rows = designs::judge(&info, &units, &plan.eliminated);
     let race_worlds = units.iter().map(|u| u.realisation + 1).max().unwrap_or(0);
-    // The best finalist of each count by the race (its rank among that count's rows).
+    // The best finalist of each count by the race (its rank among that count's rows), and the
+    // answer's finalist (the answer rule's row) if it is not one of them.
     let mut verified: Vec<Candidate> = Vec::new();
     for count in space.counts() {
         let best = race_rows.iter().filter(|r| finalists[r.design.point].count == count).min_by_key(|r| r.rank);
         if let Some(r) = best {
             verified.push(finalists[r.design.point].clone());
+        }
+    }
+    let answer = answer_of(space, &race_rows);
+    if let Some((i, _)) = answer {
+        let f = &finalists[race_rows[i].design.point];
+        if !verified.iter().any(|c| c.key == f.key) {
+            verified.push(f.clone());
         }
     }
     verified.extend(compare);
@@ -1068,7 +1115,7 @@ pub fn finish(
     let vunits = ctx.units(&vpoints, &held, space.held_out)?;
     let vinfo = ctx.info(&ctx.sweep_of(vpoints.iter().map(|p| p.1.clone()).collect(), space.held_out));
     let held_out_rows = designs::judge(&vinfo, &vunits, &[]);
-    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows, robust: None })
+    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows, robust: None, answer })
 }
 
 /// The designs of a sweep file as candidates to verify beside the optimiser's (each grid point
