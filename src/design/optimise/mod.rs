@@ -350,7 +350,7 @@ impl<'a> Context<'a> {
                         let u = Unit { point: 0, unit: r as usize, design: Some(design), digest: None, ..u };
                         let bytes = serde_json::to_vec(&Unit { digest: Some(unit_digest(&u)), ..u })
                             .map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
-                        write_atomically(&file, &bytes).map_err(io_err(&file))?;
+                        crate::io::out_dir::write_cache_file(&file, &bytes).map_err(io_err(&file))?;
                         // The unit as the file gives it back (JSON's decimal numbers can move a
                         // value by its last bit): a resumed run then judges the same numbers.
                         serde_json::from_slice::<Unit>(&bytes).map_err(|e| io_err(&file)(std::io::Error::other(e)))?
@@ -501,61 +501,22 @@ pub fn design_key(table: &toml::Table) -> String {
     format!("{:x}", sha2::Sha256::digest(text.as_bytes()))[..16].to_string()
 }
 
-/// Writes `bytes` to `path` through a temporary file beside it (`<stem>.tmp-<pid>-<thread>`) and
-/// a rename; a failing write removes its temporary.
-fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = path.with_extension(format!("tmp-{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], ""));
-    let written = fs::write(&tmp, bytes).and_then(|()| fs::rename(&tmp, path));
-    if written.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    written
-}
-
-/// The process id in the name of a temporary of [`write_atomically`], if `name` is one.
-fn temporary_pid(name: &str) -> Option<u32> {
-    let (_, rest) = name.split_once(".tmp-")?;
-    rest.split('-').next()?.parse().ok()
-}
-
-/// Whether process `pid` exists (Linux: `/proc/<pid>`; elsewhere every process counts as alive,
-/// so that nothing a running process writes is removed).
-fn alive(pid: u32) -> bool {
-    !Path::new("/proc/self").exists() || Path::new(&format!("/proc/{pid}")).exists()
-}
-
-/// Removes the temporaries of [`write_atomically`] that a killed run left in `dir` (the restart
-/// records) and in the per-world directories of `dir/<world context>/<design>/`: those of
-/// processes that are gone. Returns how many it removed.
+/// Removes the temporaries of the cache writer ([`crate::io::out_dir::write_cache_file`]) that a
+/// killed run left in `dir` (the restart records) and in the per-world directories of
+/// `dir/<world context>/<design>/`: those of processes that are gone. Returns how many it removed.
 pub fn remove_stale_temporaries(dir: &Path, world_context: &str) -> Result<usize, OptimiseError> {
-    let mut removed = 0;
-    let sweep_dir = |d: &Path, removed: &mut usize| -> Result<(), OptimiseError> {
-        let entries = match fs::read_dir(d) {
-            Ok(e) => e,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-            Err(e) => return Err(io_err(d)(e)),
-        };
-        for entry in entries {
-            let entry = entry.map_err(io_err(d))?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if let Some(pid) = temporary_pid(&name)
-                && pid != std::process::id()
-                && !alive(pid)
-                && entry.file_type().map_err(io_err(d))?.is_file()
-            {
-                fs::remove_file(entry.path()).map_err(io_err(&entry.path()))?;
-                *removed += 1;
-            }
-        }
-        Ok(())
+    use crate::io::out_dir::{OutDirError, remove_stale_cache_temporaries};
+    let err = |e: OutDirError| match e {
+        OutDirError::Io { path, source } => OptimiseError::Io { path, source },
+        other => OptimiseError::Io { path: dir.display().to_string(), source: std::io::Error::other(other.to_string()) },
     };
-    sweep_dir(dir, &mut removed)?;
+    let mut removed = remove_stale_cache_temporaries(dir).map_err(err)?;
     let worlds = dir.join(world_context);
     if let Ok(designs) = fs::read_dir(&worlds) {
         for entry in designs {
             let entry = entry.map_err(io_err(&worlds))?;
             if entry.file_type().map_err(io_err(&worlds))?.is_dir() {
-                sweep_dir(&entry.path(), &mut removed)?;
+                removed += remove_stale_cache_temporaries(&entry.path()).map_err(err)?;
             }
         }
     }
@@ -713,7 +674,7 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         None => {
             let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
             fs::create_dir_all(&ctx.cache).map_err(io_err(&ctx.cache))?;
-            write_atomically(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
+            crate::io::out_dir::write_cache_file(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
             Ok(out)
         }
     }
@@ -1155,22 +1116,6 @@ mod tests {
             .collect();
         names.sort();
         names
-    }
-
-    #[test]
-    fn a_failing_write_leaves_no_temporary() {
-        let dir = tempfile::tempdir().unwrap();
-        // The rename cannot replace a directory that holds a file.
-        let target = dir.path().join("r0000000.json");
-        fs::create_dir(&target).unwrap();
-        fs::write(target.join("x"), b"x").unwrap();
-        assert!(write_atomically(&target, b"{}").is_err());
-        assert!(temporaries(dir.path()).is_empty(), "{:?}", temporaries(dir.path()));
-        // And a written file leaves none either.
-        let ok = dir.path().join("r0000001.json");
-        write_atomically(&ok, b"{}").unwrap();
-        assert_eq!(fs::read(&ok).unwrap(), b"{}");
-        assert!(temporaries(dir.path()).is_empty());
     }
 
     #[test]
