@@ -104,3 +104,27 @@ fn the_kernels_name_no_io_randomness_tables_or_recording() {
     }
     assert!(wrong.is_empty(), "kernels reaching out:\n{}", wrong.join("\n"));
 }
+
+/// One writer puts files in place: renaming a file over another (the atomic step of a results
+/// directory, an output file or a cache file) happens in `io` alone (`io::out_dir`), so that every
+/// command writes through the one rule of what may be replaced.
+#[test]
+fn only_io_renames_files_into_place() {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut wrong = Vec::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        if rel.starts_with("io") {
+            continue;
+        }
+        let text = code(f);
+        for forbidden in ["fs::rename", "renameat"] {
+            if text.contains(forbidden) {
+                wrong.push(format!("{}: names {forbidden}", rel.display()));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "writers beside io::out_dir:\n{}", wrong.join("\n"));
+}

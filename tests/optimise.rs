@@ -207,6 +207,111 @@ fn the_shipped_design_file_starts_from_the_hand_found_design() {
     assert!((epsilon - 0.02).abs() < 1e-12, "{epsilon}");
 }
 
+/// The cell drawing and the spheres' table of a design, read back from the scenario's own values:
+/// the base where the scenario's nominal base stands once the plate has moved (eq. 7 composed
+/// here: translation, then Rz Ry Rx), each sphere's base-frame coordinates the inverse of that
+/// transform applied to its {W} coordinates, the plate's top the collision world's plate, and
+/// every panel of the drawing placing these same points.
+#[test]
+fn the_cell_drawing_and_table_place_the_base_spheres_and_plate_where_the_scenario_has_them() {
+    use calsim::design::optimise::{plots::cell_panels, sheet::CellSheet};
+    use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+    let base_file = repo().join("scenarios/irb120_trical.toml");
+    let mut table: toml::Table = std::fs::read_to_string(&base_file).unwrap().parse().unwrap();
+    let spheres = [[0.0, 0.0, 0.0], [250.0, 0.0, 0.0], [100.0, 220.0, 0.0], [300.0, 180.0, 0.0]];
+    let offset = [30.0, -20.0, 100.0, 5.0, -3.0, 20.0];
+    let floats = |v: &[f64]| toml::Value::Array(v.iter().map(|x| toml::Value::Float(*x)).collect());
+    calsim::design::sweep::spec::set_dotted(
+        &mut table,
+        "cell.spheres_w_mm",
+        toml::Value::Array(spheres.iter().map(|p| floats(p)).collect()),
+    )
+    .unwrap();
+    calsim::design::sweep::spec::set_dotted(&mut table, "cell.plate_offset_mm_deg", floats(&offset)).unwrap();
+    let nominal: Vec<f64> = table["robot"]["nominal_base_mm_deg"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+    let text = toml::to_string(&table).unwrap();
+    let scenario = calsim::device::from_table(&text, table, &base_file).unwrap();
+    let sheet = CellSheet::of(scenario.as_ref()).expect("a TriCal scenario");
+    // eq. 7 by hand: T = D(x, y, z) Rz(alpha) Ry(beta) Rx(gamma).
+    let frame = |v: &[f64]| {
+        let r = |axis: Vector3<f64>, deg: f64| UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians());
+        Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), r(Vector3::z(), v[3]) * r(Vector3::y(), v[4]) * r(Vector3::x(), v[5]))
+    };
+    let world_from_base = frame(&offset).inverse() * frame(&nominal);
+    let drawn = sheet.world_from_base_iso();
+    assert!((drawn.translation.vector - world_from_base.translation.vector).norm() < 1e-9, "{drawn} vs {world_from_base}");
+    assert!(drawn.rotation.angle_to(&world_from_base.rotation) < 1e-12);
+    let to_base = |p: [f64; 3]| world_from_base.inverse() * Point3::from(Vector3::from(p));
+    // spheres.csv: the {W} values of the scenario and their base-frame images (to its 0.001 mm).
+    let csv = sheet.csv();
+    let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').skip(1).map(|v| v.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), spheres.len(), "{csv}");
+    for (row, p) in rows.iter().zip(&spheres) {
+        let b = to_base(*p);
+        for (got, want) in row.iter().zip([p[0], p[1], p[2], b.x, b.y, b.z]) {
+            assert!((got - want).abs() <= 5e-4, "{got} vs {want} in {csv}");
+        }
+    }
+    // The plate's top: the top face of the collision world's plate (cell::solids, base frame).
+    let spec: calsim::cell::CellSpec = scenario_cell(&sheet, &spheres);
+    let cell = calsim::cell::Cell {
+        spec: spec.clone(),
+        spheres_w: spheres.iter().map(|p| Vector3::from(*p)).collect(),
+        ball_diameters_mm: vec![spec.ball_diameter_mm; spheres.len()],
+        spheres_w_measured: spheres.iter().map(|p| Vector3::from(*p)).collect(),
+    };
+    let solids = calsim::cell::solids::cell_solids(&cell, &world_from_base.inverse(), &Vector3::z());
+    let (half, pose) = solids
+        .iter()
+        .find_map(|s| match s {
+            calsim::cell::solids::Solid::Cuboid { name: "plate", half, pose } => Some((*half, *pose)),
+            _ => None,
+        })
+        .unwrap();
+    let top: Vec<Point3<f64>> = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+        .iter()
+        .map(|(a, b)| pose * Point3::new(a * half.x, b * half.y, half.z))
+        .collect();
+    let panels = cell_panels(&sheet);
+    assert_eq!(panels.len(), 4);
+    let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6;
+    // {W} from above and from the side: the spheres as the scenario gives them, the base at its place.
+    let base_w = world_from_base.translation.vector;
+    for (panel, (a, b)) in panels[..2].iter().zip([(0, 1), (0, 2)]) {
+        for ((_, q), p) in panel.spheres.iter().zip(&spheres) {
+            assert!(near(*q, [p[a], p[b]]), "{}: {q:?} vs {p:?}", panel.title);
+        }
+        assert!(near(panel.base, [base_w[a], base_w[b]]), "{}: base {:?} vs {base_w}", panel.title, panel.base);
+    }
+    // The base frame from above: the spheres' base-frame images, the base at its origin, the plate's top.
+    let above = &panels[2];
+    assert!(near(above.base, [0.0, 0.0]));
+    for ((label, q), p) in above.spheres.iter().zip(&spheres) {
+        let b = to_base(*p);
+        assert!(near(*q, [b.x, b.y]), "{q:?} vs {b}");
+        assert!(label.ends_with(&format!("(z {:.1})", b.z)), "the height in the label: {label} vs {}", b.z);
+    }
+    for (q, t) in above.plate.iter().zip(&top) {
+        assert!(near(*q, [t.x, t.y]), "plate corner {q:?} vs the collision world's {t}");
+    }
+    // The side view along the plate's slope: the plate's top corners at their heights.
+    let heights: Vec<f64> = panels[3].plate.iter().map(|q| q[1]).collect();
+    for (h, t) in heights.iter().zip(&top) {
+        assert!((h - t.z).abs() < 1e-6, "{h} vs {}", t.z);
+    }
+    assert!(!sheet.reach_w_mm.is_empty(), "tool points the arm reaches");
+}
+
+/// The cell specification of the base scenario with `spheres` (the sheet's plate margin and riser).
+fn scenario_cell(sheet: &calsim::design::optimise::sheet::CellSheet, spheres: &[[f64; 3]]) -> calsim::cell::CellSpec {
+    let text = std::fs::read_to_string(repo().join("scenarios/irb120_trical.toml")).unwrap();
+    let table: toml::Table = text.parse().unwrap();
+    let mut spec: calsim::cell::CellSpec = table["cell"].clone().try_into().unwrap();
+    spec.spheres_w_mm = spheres.to_vec();
+    spec.plate_offset_mm_deg = sheet.plate_offset_mm_deg;
+    spec
+}
+
 /// The SPMS design file starts from the shipped scenario's hand-placed stations, point by point:
 /// the search of three stations from all three, of one or two from the first ones (the designs of
 /// the spms_stations sweep); a search of more points than the start gives takes the start's points
@@ -297,6 +402,32 @@ fn a_small_question_gives_the_same_bytes_for_any_threads_and_shards_and_resumes(
     assert_eq!(tables(&one.join("q")), reference, "resumed from the per-world files");
     let summary = std::fs::read_to_string(one.join("q/summary.md")).unwrap();
     assert!(summary.contains("held-out worlds (reported)"), "{summary}");
+    // spheres.csv: best_design.toml's spheres in {W}, and in the base frame of the base its
+    // values place (the nominal base moved by the inverse of the plate's offset, eq. 7).
+    let best: toml::Table = std::fs::read_to_string(one.join("q/best_design.toml")).unwrap().parse().unwrap();
+    let floats = |v: &toml::Value| -> Vec<f64> { v.as_array().unwrap().iter().map(|x| x.as_float().unwrap()).collect() };
+    let frame = |v: &[f64]| {
+        let r = |axis: nalgebra::Vector3<f64>, deg: f64| {
+            nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians())
+        };
+        nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::new(v[0], v[1], v[2]),
+            r(nalgebra::Vector3::z(), v[3]) * r(nalgebra::Vector3::y(), v[4]) * r(nalgebra::Vector3::x(), v[5]),
+        )
+    };
+    let world_from_base =
+        frame(&floats(&best["cell"]["plate_offset_mm_deg"])).inverse() * frame(&floats(&best["robot"]["nominal_base_mm_deg"]));
+    let csv = std::fs::read_to_string(one.join("q/spheres.csv")).unwrap();
+    let spheres: Vec<Vec<f64>> = best["cell"]["spheres_w_mm"].as_array().unwrap().iter().map(&floats).collect();
+    assert_eq!(csv.lines().count(), spheres.len() + 1, "{csv}");
+    for (line, p) in csv.lines().skip(1).zip(&spheres) {
+        let row: Vec<f64> = line.split(',').skip(1).map(|v| v.parse().unwrap()).collect();
+        let b = world_from_base.inverse() * nalgebra::Point3::new(p[0], p[1], p[2]);
+        for (got, want) in row.iter().zip([p[0], p[1], p[2], b.x, b.y, b.z]) {
+            assert!((got - want).abs() <= 5e-4, "{got} vs {want}: {csv}");
+        }
+    }
+    assert!(summary.contains("## The cell to build"), "{summary}");
 }
 
 /// Two error models (one gear harmonic; backlash and no harmonic) of the candidate physics.

@@ -18,6 +18,8 @@ mkdir -p docs/generated
 # name | command (given --out, except table8, which prints only)
 runs=(
     "optimise-irb120-spheres|optimise scenarios/designs/irb120_spheres.toml"
+    "optimise-irb120-spheres-from-paper|optimise scenarios/designs/irb120_spheres_from_paper.toml"
+    "optimise-irb120-spheres-from-random|optimise scenarios/designs/irb120_spheres_from_random.toml"
     "optimise-spms-stations|optimise scenarios/designs/spms_stations.toml"
     "optimise-spms-stations-three|optimise scenarios/designs/spms_stations_three.toml"
     "optimise-irb120-spheres-robust|optimise scenarios/designs/irb120_spheres_robust.toml"

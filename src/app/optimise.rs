@@ -138,7 +138,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         .map_err(opt_err)?;
     observer.stage_done();
     report.finish_s = t1.elapsed().as_secs_f64();
-    let outcome = results::Outcome::of(verdict);
+    let outcome = results::Outcome::of(&space, verdict);
     // Where a world's time goes: the winner's realisation 0 run again, its timing line.
     let mut world: Option<Box<dyn crate::device::Outcome>> = None;
     if let Some((i, r)) = &outcome.winner {
@@ -201,38 +201,20 @@ fn plot_inputs(space: &DesignSpace, o: &results::Outcome) -> OptimisePlotInputs 
             front.push((c.label.clone(), r.campaign_h, [r.estimate, r.interval.0, r.interval.1], p < ours));
         }
     }
-    let cell = o.winner.as_ref().map(|(i, _)| {
-        let c = &v.verified[*i];
-        let (reach, base) = reach_of(&space.base, &space.path);
-        (c.points_mm.clone(), reach, base)
-    });
+    let cell = o.sheet.clone();
     let o = &space.objective;
     let target = match o.goal {
         crate::design::sweep::objective::Goal::MaximiseSuccess => o.success_at_least,
         crate::design::sweep::objective::Goal::MinimiseError(_) => o.threshold_mm,
         _ => None,
     };
-    OptimisePlotInputs { convergence, front, objective: o.describe(), cell, target, budget_h: o.campaign_h_at_most }
-}
-
-/// Tool points the arm of a TriCal base scenario reaches (sampled in its joint limits, in the
-/// scenario's {W}), and its base's origin there; empty for other devices.
-fn reach_of(base: &toml::Table, path: &std::path::Path) -> (Vec<[f64; 3]>, [f64; 3]) {
-    use rand::{RngExt, SeedableRng};
-    let text = toml::to_string(base).unwrap_or_default();
-    let Ok(s) = crate::device::from_table(&text, base.clone(), path) else { return (Vec::new(), [0.0; 3]) };
-    let Some(t) = s.as_any().downcast_ref::<crate::device::trical::spec::TricalScenario>() else { return (Vec::new(), [0.0; 3]) };
-    let model = t.experiment.truth();
-    let b = model.data().world_from_base;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let mut st = crate::robot::KinState::default();
-    let limits = *model.limits();
-    let pts = (0..1500)
-        .map(|_| {
-            let q = std::array::from_fn(|j| rng.random_range(limits[j].min..=limits[j].max));
-            let p = crate::robot::kinematics::forward(&model, &mut st, &q);
-            [p.x, p.y, p.z]
-        })
-        .collect();
-    (pts, [b.x, b.y, b.z])
+    OptimisePlotInputs {
+        convergence,
+        front,
+        objective: o.describe(),
+        score: results::score_words(space),
+        cell,
+        target,
+        budget_h: o.campaign_h_at_most,
+    }
 }

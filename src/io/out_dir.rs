@@ -18,6 +18,11 @@
 //! A refusal is one line naming the flag, the path and why, found before anything runs; the
 //! atomic swap checks the rule again, so that nothing the rule protects is ever replaced.
 //!
+//! Single files go in place the same way: an output file through `<file>.partial`
+//! ([`write_file_atomically`]), a file of a cache that a worker pool and shards fill at once
+//! through a temporary of its process and thread ([`write_cache_file`]); no other module renames
+//! a file into place.
+//!
 //! A run writes everything into `out/.<name>.tmp-<pid>` and then exchanges it with `out/<name>` in
 //! one `renameat2(RENAME_EXCHANGE)`: at any instant `out/<name>` is either the old complete
 //! results or the new complete results, never a mixture and never missing, even under kill -9.
@@ -390,9 +395,94 @@ pub fn write_file_atomically(path: &Path, text: impl AsRef<[u8]>) -> io::Result<
     result
 }
 
+/// Writes `bytes` to the file `path` of a cache that several threads or processes may fill at once
+/// with the same contents (an optimisation's per-world files and restart records, written from a
+/// worker pool and from shards): through a temporary beside it named by the process and the thread
+/// (`<stem>.tmp-<pid>-<thread>`), renamed into place, so that no two writers share a temporary and
+/// `path` holds a whole file or none; a failing write removes its temporary. The temporaries of a
+/// killed process are removed by [`remove_stale_cache_temporaries`].
+pub fn write_cache_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let tmp = path.with_extension(format!("tmp-{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], ""));
+    let written = fs::write(&tmp, bytes).and_then(|()| fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// The process id in the name of a temporary of [`write_cache_file`], if `name` is one.
+fn cache_temporary_pid(name: &str) -> Option<u32> {
+    let (_, rest) = name.split_once(".tmp-")?;
+    rest.split('-').next()?.parse().ok()
+}
+
+/// Removes from the directory `dir` the temporaries of [`write_cache_file`] (regular files) whose
+/// process is gone; a directory that does not exist has none. Returns how many it removed.
+pub fn remove_stale_cache_temporaries(dir: &Path) -> Result<usize, OutDirError> {
+    let entries = match fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(io_err(dir)(e)),
+    };
+    let mut removed = 0;
+    for entry in entries {
+        let entry = entry.map_err(io_err(dir))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if let Some(pid) = cache_temporary_pid(&name)
+            && pid != std::process::id()
+            && !alive(pid)
+            && entry.file_type().map_err(io_err(dir))?.is_file()
+        {
+            fs::remove_file(entry.path()).map_err(io_err(&entry.path()))?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn cache_temporaries(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-"))
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_failing_cache_write_leaves_no_temporary() {
+        let tmp = scratch();
+        // The rename cannot replace a directory that holds a file.
+        let target = tmp.path().join("r0000000.json");
+        fs::create_dir(&target).unwrap();
+        fs::write(target.join("x"), b"x").unwrap();
+        assert!(write_cache_file(&target, b"{}").is_err());
+        assert!(cache_temporaries(tmp.path()).is_empty(), "{:?}", cache_temporaries(tmp.path()));
+        // And a written file leaves none either.
+        let ok = tmp.path().join("r0000001.json");
+        write_cache_file(&ok, b"{}").unwrap();
+        assert_eq!(fs::read(&ok).unwrap(), b"{}");
+        assert!(cache_temporaries(tmp.path()).is_empty());
+    }
+
+    #[test]
+    fn cache_temporaries_of_gone_processes_are_removed_and_a_live_ones_kept() {
+        let tmp = scratch();
+        let mine = format!("r0000000.tmp-{}-ThreadId2", std::process::id());
+        for name in ["r0000001.tmp-999999999-ThreadId7", mine.as_str(), "r0000002.json"] {
+            fs::write(tmp.path().join(name), b"x").unwrap();
+        }
+        fs::create_dir(tmp.path().join("d.tmp-999999999-ThreadId1")).unwrap();
+        assert_eq!(remove_stale_cache_temporaries(tmp.path()).unwrap(), 1);
+        assert_eq!(cache_temporaries(tmp.path()), vec!["d.tmp-999999999-ThreadId1".to_string(), mine]);
+        assert!(tmp.path().join("r0000002.json").exists(), "a cache file is not a temporary");
+        assert_eq!(remove_stale_cache_temporaries(&tmp.path().join("none")).unwrap(), 0);
+    }
 
     fn scratch() -> tempfile::TempDir {
         tempfile::Builder::new().prefix("calsim-out-dir-").tempdir().unwrap()

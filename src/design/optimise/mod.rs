@@ -29,6 +29,7 @@ pub mod plots;
 pub mod reach;
 pub mod results;
 pub mod search;
+pub mod sheet;
 pub mod space;
 pub mod spec;
 
@@ -349,7 +350,7 @@ impl<'a> Context<'a> {
                         let u = Unit { point: 0, unit: r as usize, design: Some(design), digest: None, ..u };
                         let bytes = serde_json::to_vec(&Unit { digest: Some(unit_digest(&u)), ..u })
                             .map_err(|e| io_err(&file)(std::io::Error::other(e)))?;
-                        write_atomically(&file, &bytes).map_err(io_err(&file))?;
+                        crate::io::out_dir::write_cache_file(&file, &bytes).map_err(io_err(&file))?;
                         // The unit as the file gives it back (JSON's decimal numbers can move a
                         // value by its last bit): a resumed run then judges the same numbers.
                         serde_json::from_slice::<Unit>(&bytes).map_err(|e| io_err(&file)(std::io::Error::other(e)))?
@@ -500,61 +501,22 @@ pub fn design_key(table: &toml::Table) -> String {
     format!("{:x}", sha2::Sha256::digest(text.as_bytes()))[..16].to_string()
 }
 
-/// Writes `bytes` to `path` through a temporary file beside it (`<stem>.tmp-<pid>-<thread>`) and
-/// a rename; a failing write removes its temporary.
-fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = path.with_extension(format!("tmp-{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], ""));
-    let written = fs::write(&tmp, bytes).and_then(|()| fs::rename(&tmp, path));
-    if written.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    written
-}
-
-/// The process id in the name of a temporary of [`write_atomically`], if `name` is one.
-fn temporary_pid(name: &str) -> Option<u32> {
-    let (_, rest) = name.split_once(".tmp-")?;
-    rest.split('-').next()?.parse().ok()
-}
-
-/// Whether process `pid` exists (Linux: `/proc/<pid>`; elsewhere every process counts as alive,
-/// so that nothing a running process writes is removed).
-fn alive(pid: u32) -> bool {
-    !Path::new("/proc/self").exists() || Path::new(&format!("/proc/{pid}")).exists()
-}
-
-/// Removes the temporaries of [`write_atomically`] that a killed run left in `dir` (the restart
-/// records) and in the per-world directories of `dir/<world context>/<design>/`: those of
-/// processes that are gone. Returns how many it removed.
+/// Removes the temporaries of the cache writer ([`crate::io::out_dir::write_cache_file`]) that a
+/// killed run left in `dir` (the restart records) and in the per-world directories of
+/// `dir/<world context>/<design>/`: those of processes that are gone. Returns how many it removed.
 pub fn remove_stale_temporaries(dir: &Path, world_context: &str) -> Result<usize, OptimiseError> {
-    let mut removed = 0;
-    let sweep_dir = |d: &Path, removed: &mut usize| -> Result<(), OptimiseError> {
-        let entries = match fs::read_dir(d) {
-            Ok(e) => e,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-            Err(e) => return Err(io_err(d)(e)),
-        };
-        for entry in entries {
-            let entry = entry.map_err(io_err(d))?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            if let Some(pid) = temporary_pid(&name)
-                && pid != std::process::id()
-                && !alive(pid)
-                && entry.file_type().map_err(io_err(d))?.is_file()
-            {
-                fs::remove_file(entry.path()).map_err(io_err(&entry.path()))?;
-                *removed += 1;
-            }
-        }
-        Ok(())
+    use crate::io::out_dir::{OutDirError, remove_stale_cache_temporaries};
+    let err = |e: OutDirError| match e {
+        OutDirError::Io { path, source } => OptimiseError::Io { path, source },
+        other => OptimiseError::Io { path: dir.display().to_string(), source: std::io::Error::other(other.to_string()) },
     };
-    sweep_dir(dir, &mut removed)?;
+    let mut removed = remove_stale_cache_temporaries(dir).map_err(err)?;
     let worlds = dir.join(world_context);
     if let Ok(designs) = fs::read_dir(&worlds) {
         for entry in designs {
             let entry = entry.map_err(io_err(&worlds))?;
             if entry.file_type().map_err(io_err(&worlds))?.is_dir() {
-                sweep_dir(&entry.path(), &mut removed)?;
+                removed += remove_stale_cache_temporaries(&entry.path()).map_err(err)?;
             }
         }
     }
@@ -712,7 +674,7 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         None => {
             let asked: Vec<&Asked> = out.iter().map(|e| &e.asked).collect();
             fs::create_dir_all(&ctx.cache).map_err(io_err(&ctx.cache))?;
-            write_atomically(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
+            crate::io::out_dir::write_cache_file(&file, &serde_json::to_vec(&asked).expect("plain data")).map_err(io_err(&file))?;
             Ok(out)
         }
     }
@@ -774,6 +736,8 @@ pub struct Verdict {
     /// With `[robust]`: every model's race and held-out rows and the winner under each model and
     /// under the combined score (`race_rows` and `held_out_rows` are then the first model's).
     pub robust: Option<RobustVerdict>,
+    /// Without `[robust]`: the answer rule's row of `race_rows` ([`answer_of`]) and how it chose.
+    pub answer: Option<(usize, AnswerBasis)>,
 }
 
 /// A robust design's race and verification under each error model.
@@ -971,7 +935,44 @@ fn finish_robust(
         verified,
         held_out_rows: held_out[0].clone(),
         robust: Some(RobustVerdict { models: names, combine: r.combine, race, held_out, choices }),
+        answer: None,
     })
+}
+
+/// How the answer rule chose the answer among the race's rows ([`answer_of`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AnswerBasis {
+    /// Some rows meet every constraint at the confidence: the one with the smallest campaign.
+    SmallestMeeting,
+    /// No row meets every constraint at the confidence (or the objective sets no least P(success)
+    /// to meet): the race's first.
+    RaceFirst,
+}
+
+/// The answer rule over the race's rows (designs, set sizes and selections of the finalists on the
+/// search worlds): for `maximise = "success"` with `success_at_least`, the rows meeting every
+/// constraint at the confidence (feasible), the smallest campaign first, then the smaller set
+/// size, then the higher estimate, then the race's order; without such a row, or for another
+/// objective, the race's first (feasible, then undecided, then the rest; the best estimate
+/// within each). Returns the row's index in `rows`.
+pub fn answer_of(space: &DesignSpace, rows: &[DesignRow]) -> Option<(usize, AnswerBasis)> {
+    use crate::design::sweep::designs::Feasibility;
+    let o = &space.objective;
+    let first = || rows.iter().enumerate().min_by_key(|(_, r)| r.rank).map(|(i, _)| (i, AnswerBasis::RaceFirst));
+    if !(o.goal == Goal::MaximiseSuccess && o.success_at_least.is_some()) {
+        return first();
+    }
+    let meeting = rows.iter().enumerate().filter(|(_, r)| r.feasibility == Feasibility::Feasible).min_by(|(_, a), (_, b)| {
+        a.campaign_h
+            .total_cmp(&b.campaign_h)
+            .then(a.design.set_size.cmp(&b.design.set_size))
+            .then(b.estimate.total_cmp(&a.estimate))
+            .then(a.rank.cmp(&b.rank))
+    });
+    match meeting {
+        Some((i, _)) => Some((i, AnswerBasis::SmallestMeeting)),
+        None => first(),
+    }
 }
 
 /// Races the best designs of the search on more search worlds, then verifies the best of each
@@ -1048,12 +1049,20 @@ pub fn finish(
     let units: Vec<Unit> = present.values().cloned().collect();
     let race_rows = designs::judge(&info, &units, &plan.eliminated);
     let race_worlds = units.iter().map(|u| u.realisation + 1).max().unwrap_or(0);
-    // The best finalist of each count by the race (its rank among that count's rows).
+    // The best finalist of each count by the race (its rank among that count's rows), and the
+    // answer's finalist (the answer rule's row) if it is not one of them.
     let mut verified: Vec<Candidate> = Vec::new();
     for count in space.counts() {
         let best = race_rows.iter().filter(|r| finalists[r.design.point].count == count).min_by_key(|r| r.rank);
         if let Some(r) = best {
             verified.push(finalists[r.design.point].clone());
+        }
+    }
+    let answer = answer_of(space, &race_rows);
+    if let Some((i, _)) = answer {
+        let f = &finalists[race_rows[i].design.point];
+        if !verified.iter().any(|c| c.key == f.key) {
+            verified.push(f.clone());
         }
     }
     verified.extend(compare);
@@ -1067,7 +1076,7 @@ pub fn finish(
     let vunits = ctx.units(&vpoints, &held, space.held_out)?;
     let vinfo = ctx.info(&ctx.sweep_of(vpoints.iter().map(|p| p.1.clone()).collect(), space.held_out));
     let held_out_rows = designs::judge(&vinfo, &vunits, &[]);
-    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows, robust: None })
+    Ok(Verdict { trace, finalists, race_rows, race_worlds, verified, held_out_rows, robust: None, answer })
 }
 
 /// The designs of a sweep file as candidates to verify beside the optimiser's (each grid point
@@ -1107,22 +1116,6 @@ mod tests {
             .collect();
         names.sort();
         names
-    }
-
-    #[test]
-    fn a_failing_write_leaves_no_temporary() {
-        let dir = tempfile::tempdir().unwrap();
-        // The rename cannot replace a directory that holds a file.
-        let target = dir.path().join("r0000000.json");
-        fs::create_dir(&target).unwrap();
-        fs::write(target.join("x"), b"x").unwrap();
-        assert!(write_atomically(&target, b"{}").is_err());
-        assert!(temporaries(dir.path()).is_empty(), "{:?}", temporaries(dir.path()));
-        // And a written file leaves none either.
-        let ok = dir.path().join("r0000001.json");
-        write_atomically(&ok, b"{}").unwrap();
-        assert_eq!(fs::read(&ok).unwrap(), b"{}");
-        assert!(temporaries(dir.path()).is_empty());
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! The optimiser's figures: convergence of each restart, the Pareto front of campaign time
-//! against P(success) on the held-out worlds, and the winning cell to scale in {W}.
+//! against P(success) on the held-out worlds, and the winning cell to scale in {W} and in the
+//! robot's base frame.
 
 use std::path::Path;
 
@@ -8,9 +9,7 @@ use plotters::prelude::*;
 
 use crate::io::plot::{DrawResult, FAMILY, PlotError, Written, both, e2s, legend, range_of, register_font};
 
-/// The winning cell: its points in the region's frame, sampled reachable tool points in the same
-/// frame, and the base's origin, mm.
-pub type CellDrawing = (Vec<[f64; 3]>, Vec<[f64; 3]>, [f64; 3]);
+use super::sheet::{CellSheet, tidy};
 
 /// What the figures draw.
 pub struct OptimisePlotInputs {
@@ -21,9 +20,10 @@ pub struct OptimisePlotInputs {
     pub front: Vec<(String, f64, [f64; 3], bool)>,
     /// The objective in words (the y axis of the front).
     pub objective: String,
-    /// The winning cell: its points in the region's frame, mm, and sampled reachable tool points
-    /// of the arm in the same frame (empty where the device has none), the base's origin.
-    pub cell: Option<CellDrawing>,
+    /// What the search score is, in words (the convergence figure's caption).
+    pub score: String,
+    /// The winning cell (TriCal designs).
+    pub cell: Option<CellSheet>,
     /// The objective's target on the front's y axis (the least P(success), or the error
     /// threshold of a minimised error), if it has one.
     pub target: Option<f64>,
@@ -38,9 +38,11 @@ pub fn write(dir: &Path, p: &OptimisePlotInputs) -> Result<Vec<Written>, PlotErr
     both!(dir, "optimise_convergence", |root| convergence(root, p));
     out.push(Written {
         stem: "optimise_convergence".into(),
-        caption: "Best search score so far per restart against the designs evaluated (lower is better: minus P(success) plus the \
-                  constraints' shortfalls; designs the geometry rules out score 100 and more)"
-            .into(),
+        caption: format!(
+            "Best search score so far per restart against the designs evaluated (lower is better: {}; designs the geometry \
+             rules out score 100 and more, designs whose every world fails 20 and more)",
+            p.score
+        ),
     });
     if !p.front.is_empty() {
         both!(dir, "optimise_front", |root| front(root, p));
@@ -51,12 +53,15 @@ pub fn write(dir: &Path, p: &OptimisePlotInputs) -> Result<Vec<Written>, PlotErr
                 .into(),
         });
     }
-    if p.cell.is_some() {
-        both!(dir, "optimise_cell", |root| cell(root, p));
+    if let Some(sheet) = &p.cell {
+        let panels = cell_panels(sheet);
+        both!(dir, "optimise_cell", (1400, 1400), |root| cell(root, &panels));
         out.push(Written {
             stem: "optimise_cell".into(),
-            caption: "The winning cell to scale in the base scenario's {W}: the points (red), the robot base (black square) and tool \
-                      points the arm reaches (grey), from above and from the side"
+            caption: "The winning cell to scale, in {W} (top) and in the robot's base frame (bottom), from above and from the side: \
+                      the sphere centres (red, numbered, with their height z), the plate's top (blue), the robot base's origin \
+                      (black, its x axis 100 mm long) and the tool points the arm reaches with the device in its approach cone \
+                      (grey); the coordinates are in `spheres.csv` and the summary"
                 .into(),
         });
     }
@@ -168,35 +173,165 @@ fn front<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInpu
     Ok(())
 }
 
-fn cell<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &OptimisePlotInputs) -> DrawResult {
+/// One panel of the cell drawing: what it draws in its own plane, mm.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellPanel {
+    /// Its title.
+    pub title: String,
+    /// Its axes.
+    pub x_desc: String,
+    /// See `x_desc`.
+    pub y_desc: String,
+    /// The spheres: label and position.
+    pub spheres: Vec<(String, [f64; 2])>,
+    /// The robot base's origin, and the tip of its x axis (100 mm).
+    pub base: [f64; 2],
+    /// See `base`.
+    pub base_x: [f64; 2],
+    /// The outline of the plate's top (its corners in order).
+    pub plate: Vec<[f64; 2]>,
+    /// The reachable tool points.
+    pub reach: Vec<[f64; 2]>,
+}
+
+/// The four panels of the cell drawing: {W} from above (x, y) and from the side (x, z), the base
+/// frame from above (x, y) and from the side along the plate's slope (the horizontal direction of
+/// the plate's normal in the base frame, or x for a level plate; against z).
+pub fn cell_panels(s: &CellSheet) -> Vec<CellPanel> {
+    let w_from_b = s.world_from_base_iso();
+    let base_x_w = w_from_b * nalgebra::Point3::new(100.0, 0.0, 0.0);
+    let normal_b = w_from_b.rotation.inverse() * nalgebra::Vector3::z();
+    let h = nalgebra::Vector2::new(normal_b.x, normal_b.y);
+    let u = if h.norm() > 1e-6 { h.normalize() } else { nalgebra::Vector2::x() };
+    let mut out = Vec::new();
+    type Projection<'a> = &'a dyn Fn([f64; 3]) -> [f64; 2];
+    let mut panel = |title: String, x_desc: &str, y_desc: &str, to: &dyn Fn([f64; 3]) -> [f64; 3], proj: Projection<'_>| {
+        let sphere_label = |k: usize, p: [f64; 3]| format!("{} (z {})", k + 1, tidy(p[2], 1));
+        out.push(CellPanel {
+            title,
+            x_desc: x_desc.into(),
+            y_desc: y_desc.into(),
+            spheres: s.spheres_w_mm.iter().enumerate().map(|(k, p)| (sphere_label(k, to(*p)), proj(to(*p)))).collect(),
+            base: proj(to(s.base_origin_w_mm())),
+            base_x: proj(to([base_x_w.x, base_x_w.y, base_x_w.z])),
+            plate: s.plate_top_w_mm.iter().map(|p| proj(to(*p))).collect(),
+            reach: s.reach_w_mm.iter().map(|p| proj(to(*p))).collect(),
+        });
+    };
+    let in_w = |p: [f64; 3]| p;
+    let in_base = |p: [f64; 3]| s.to_base(p);
+    panel("{W} from above".into(), "x in {W}, mm", "y in {W}, mm", &in_w, &|p| [p[0], p[1]]);
+    panel("{W} from the side".into(), "x in {W}, mm", "z in {W}, mm", &in_w, &|p| [p[0], p[2]]);
+    panel("base frame from above".into(), "x in the base frame, mm", "y in the base frame, mm", &in_base, &|p| [p[0], p[1]]);
+    panel(
+        format!("base frame from the side, along the plate's slope ({}, {}) of x, y", tidy(u.x, 2), tidy(u.y, 2)),
+        "along the slope in the base frame, mm",
+        "z in the base frame, mm",
+        &in_base,
+        &|p| [u.x * p[0] + u.y * p[1], p[2]],
+    );
+    out
+}
+
+/// Ranges of a panel's axes holding every point drawn, padded by 50 mm and widened on one axis so
+/// that a millimetre is as long on both axes of a plot area of `px` pixels (to scale).
+fn to_scale(p: &CellPanel, px: (u32, u32)) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
+    let all: Vec<[f64; 2]> =
+        p.spheres.iter().map(|x| x.1).chain([p.base, p.base_x]).chain(p.plate.iter().copied()).chain(p.reach.iter().copied()).collect();
+    let lo = |k: usize| all.iter().map(|q| q[k]).fold(f64::INFINITY, f64::min) - 50.0;
+    let hi = |k: usize| all.iter().map(|q| q[k]).fold(f64::NEG_INFINITY, f64::max) + 50.0;
+    let (mut x, mut y) = ((lo(0), hi(0)), (lo(1), hi(1)));
+    let (w, h) = (f64::from(px.0.max(1)), f64::from(px.1.max(1)));
+    let per_px = ((x.1 - x.0) / w).max((y.1 - y.0) / h);
+    let grow = |r: (f64, f64), n: f64| {
+        let c = (r.0 + r.1) / 2.0;
+        (c - per_px * n / 2.0, c + per_px * n / 2.0)
+    };
+    x = grow(x, w);
+    y = grow(y, h);
+    (x.0..x.1, y.0..y.1)
+}
+
+fn cell<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, panels: &[CellPanel]) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
-    let Some((points, reach, base)) = &p.cell else { return Ok(()) };
-    let panels = root.split_evenly((1, 2));
-    for (panel, (a, b, title)) in panels.iter().zip([(0, 1, "from above: x, y in {W}, mm"), (0, 2, "from the side: x, z in {W}, mm")]) {
-        let all = || points.iter().chain(reach.iter()).chain(std::iter::once(base));
-        let lo = all().map(|q| q[a].min(q[b])).fold(f64::INFINITY, f64::min);
-        let hi = all().map(|q| q[a].max(q[b])).fold(f64::NEG_INFINITY, f64::max);
-        // One scale on both axes: the cell to scale.
-        let (lo, hi) = (lo - 50.0, hi + 50.0);
-        let mut chart = ChartBuilder::on(panel)
-            .caption(title, (FAMILY, 14))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(50)
-            .build_cartesian_2d(lo..hi, lo..hi)
+    let (margin, x_area, y_area) = (10u32, 40u32, 60u32);
+    for (area, p) in root.split_evenly((2, 2)).iter().zip(panels) {
+        let area = area.titled(&p.title, (FAMILY, 15)).map_err(e2s)?;
+        let (w, h) = area.dim_in_pixel();
+        let (xr, yr) = to_scale(p, (w.saturating_sub(2 * margin + y_area), h.saturating_sub(2 * margin + x_area)));
+        let mut chart = ChartBuilder::on(&area)
+            .margin(margin)
+            .x_label_area_size(x_area)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(xr, yr)
             .map_err(e2s)?;
-        chart.configure_mesh().label_style((FAMILY, 11)).draw().map_err(e2s)?;
-        chart.draw_series(reach.iter().map(|q| Circle::new((q[a], q[b]), 1, RGBColor(200, 200, 200).filled()))).map_err(e2s)?;
+        chart.configure_mesh().x_desc(p.x_desc.as_str()).y_desc(p.y_desc.as_str()).label_style((FAMILY, 12)).draw().map_err(e2s)?;
+        let grey = RGBColor(200, 200, 200);
         chart
-            .draw_series(std::iter::once(Rectangle::new(
-                [(base[a] - 20.0, base[b] - 20.0), (base[a] + 20.0, base[b] + 20.0)],
-                BLACK.filled(),
-            )))
-            .map_err(e2s)?;
-        chart.draw_series(points.iter().map(|q| Circle::new((q[a], q[b]), 5, RED.filled()))).map_err(e2s)?;
+            .draw_series(p.reach.iter().map(|q| Circle::new((q[0], q[1]), 1, grey.filled())))
+            .map_err(e2s)?
+            .label("tool points reached (device in its cone)")
+            .legend(move |(x, y)| Circle::new((x, y), 3, grey.filled()));
+        // Edge by edge: a side view folds the outline back on itself, and a wide path's joins
+        // at such turns would spike.
+        let edges = p.plate.iter().zip(p.plate.iter().cycle().skip(1)).map(|(a, b)| (a[0], a[1], b[0], b[1]));
         chart
-            .draw_series(points.iter().enumerate().map(|(k, q)| Text::new(format!("{}", k + 1), (q[a] + 12.0, q[b] + 12.0), (FAMILY, 12))))
+            .draw_series(edges.map(|(x0, y0, x1, y1)| PathElement::new(vec![(x0, y0), (x1, y1)], BLUE.stroke_width(2))))
+            .map_err(e2s)?
+            .label("plate top")
+            .legend(move |(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], BLUE.stroke_width(2)));
+        chart
+            .draw_series(std::iter::once(PathElement::new(vec![(p.base[0], p.base[1]), (p.base_x[0], p.base_x[1])], BLACK.stroke_width(2))))
             .map_err(e2s)?;
+        chart
+            .draw_series(std::iter::once(Circle::new((p.base[0], p.base[1]), 6, BLACK.filled())))
+            .map_err(e2s)?
+            .label("robot base origin, x axis")
+            .legend(move |(x, y)| Circle::new((x, y), 4, BLACK.filled()));
+        chart
+            .draw_series(p.spheres.iter().map(|(_, q)| Circle::new((q[0], q[1]), 5, RED.filled())))
+            .map_err(e2s)?
+            .label("sphere centres (number, z)")
+            .legend(move |(x, y)| Circle::new((x, y), 4, RED.filled()));
+        chart
+            .draw_series(p.spheres.iter().map(|(l, q)| EmptyElement::at((q[0], q[1])) + Text::new(l.clone(), (7, -16), (FAMILY, 12))))
+            .map_err(e2s)?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight, 11)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A millimetre is as many pixels on both axes, whatever the points' spread and the area.
+    #[test]
+    fn the_cell_panels_are_to_scale() {
+        let panel = CellPanel {
+            title: String::new(),
+            x_desc: String::new(),
+            y_desc: String::new(),
+            spheres: vec![("1".into(), [0.0, 0.0]), ("2".into(), [300.0, 20.0])],
+            base: [150.0, -250.0],
+            base_x: [150.0, -150.0],
+            plate: vec![[-40.0, -40.0], [340.0, -40.0], [340.0, 60.0], [-40.0, 60.0]],
+            reach: vec![[900.0, 10.0]],
+        };
+        for px in [(600, 400), (400, 600), (640, 640)] {
+            let (x, y) = to_scale(&panel, px);
+            let (mx, my) = ((x.end - x.start) / f64::from(px.0), (y.end - y.start) / f64::from(px.1));
+            assert!((mx - my).abs() < 1e-9 * mx, "{px:?}: {mx} vs {my} mm per pixel");
+            for q in panel
+                .spheres
+                .iter()
+                .map(|s| s.1)
+                .chain([panel.base, panel.base_x])
+                .chain(panel.plate.iter().copied())
+                .chain(panel.reach.iter().copied())
+            {
+                assert!(x.contains(&q[0]) && y.contains(&q[1]), "{q:?} outside {x:?} x {y:?}");
+            }
+        }
+    }
 }

@@ -18,10 +18,10 @@ use crate::robot::{JOINTS, KinState, forward};
 /// Configurations sampled.
 const SAMPLES: usize = 20_000;
 
-/// Per datum sphere of a TriCal scenario, the distance from its centre to the nearest sampled
-/// tool point the arm reaches with the device within the approach cone, mm (`None`: not a
-/// TriCal scenario).
-pub fn sphere_margins_mm(s: &dyn Scenario) -> Option<Vec<f64>> {
+/// The tool points of a TriCal scenario's true arm, sampled within its joint limits, whose device
+/// axis lies within the campaign's approach cone around the vertical, in the scenario's {W}, mm
+/// (`None`: not a TriCal scenario).
+pub fn tool_points_w(s: &dyn Scenario) -> Option<Vec<Vector3<f64>>> {
     let t = s.as_any().downcast_ref::<TricalScenario>()?;
     let model = t.experiment.truth();
     let cone = t.experiment.campaign.approach_cone_deg.to_radians().cos();
@@ -38,6 +38,15 @@ pub fn sphere_margins_mm(s: &dyn Scenario) -> Option<Vec<f64>> {
             points.push(tcp);
         }
     }
+    Some(points)
+}
+
+/// Per datum sphere of a TriCal scenario, the distance from its centre to the nearest sampled
+/// tool point the arm reaches with the device within the approach cone ([`tool_points_w`]), mm
+/// (`None`: not a TriCal scenario).
+pub fn sphere_margins_mm(s: &dyn Scenario) -> Option<Vec<f64>> {
+    let points = tool_points_w(s)?;
+    let t = s.as_any().downcast_ref::<TricalScenario>()?;
     let spheres = &t.experiment.cell.spheres_w_mm;
     Some(
         spheres

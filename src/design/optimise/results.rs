@@ -21,14 +21,27 @@ pub struct Outcome {
     pub verdict: Verdict,
     /// The winner: its index in `verdict.verified` and its held-out row.
     pub winner: Option<(usize, DesignRow)>,
+    /// The winner's cell as a machinist builds it (TriCal designs).
+    pub sheet: Option<super::sheet::CellSheet>,
 }
 
 impl Outcome {
-    /// The winner: the design, set size and selection the race ranks first on the search worlds,
-    /// with its held-out row. The held-out worlds only report it: choosing on them too would
+    /// The winner: the design, set size and selection the answer rule takes from the race's rows
+    /// on the search worlds ([`super::answer_of`]), with its held-out row. The held-out worlds only report it: choosing on them too would
     /// report the luckiest of the verified designs on the worlds that chose it (the winner's
     /// curse), an optimistic figure.
-    pub fn of(verdict: Verdict) -> Self {
+    pub fn of(space: &DesignSpace, verdict: Verdict) -> Self {
+        let mut o = Self::chosen(verdict);
+        o.sheet = o.winner.as_ref().and_then(|(i, r)| {
+            let table = design_table(&o.verdict.verified[*i], r);
+            let text = toml::to_string(&table).unwrap_or_default();
+            let s = crate::device::from_table(&text, table, &space.path).ok()?;
+            super::sheet::CellSheet::of(s.as_ref())
+        });
+        o
+    }
+
+    fn chosen(verdict: Verdict) -> Self {
         if let Some(r) = &verdict.robust {
             // Under [robust], the winner under the combined score (the last choice), with its
             // held-out row of the first model that has one.
@@ -39,9 +52,9 @@ impl Outcome {
                         .map(|h| (c.verified, h.clone()))
                 })
             });
-            return Self { verdict, winner };
+            return Self { verdict, winner, sheet: None };
         }
-        let winner = verdict.race_rows.iter().min_by_key(|r| r.rank).and_then(|best| {
+        let winner = verdict.answer.and_then(|(i, _)| verdict.race_rows.get(i)).and_then(|best| {
             let key = &verdict.finalists.get(best.design.point)?.key;
             let v = verdict.verified.iter().position(|c| !c.compared && &c.key == key)?;
             verdict
@@ -50,7 +63,7 @@ impl Outcome {
                 .find(|h| h.design.point == v && h.design.set_size == best.design.set_size && h.design.selection == best.design.selection)
                 .map(|h| (v, h.clone()))
         });
-        Self { verdict, winner }
+        Self { verdict, winner, sheet: None }
     }
 }
 
@@ -155,6 +168,125 @@ pub fn fitted_values(space: &DesignSpace) -> Vec<String> {
     out
 }
 
+/// The answer rule in words, how it chose the answer `r` (a held-out row of `v`), and, when the
+/// held-out table does not rank the answer first, why each design above it is not the answer.
+pub fn answer_words(space: &DesignSpace, v: &Verdict, r: &DesignRow) -> String {
+    use super::AnswerBasis;
+    let o = &space.objective;
+    if v.robust.is_some() {
+        return "Answer rule: the winner under the combined score of `[robust]` on the race's worlds (the table below). The held-out \
+                worlds report the answer and do not choose it.\n\n"
+            .to_string();
+    }
+    let mut s = String::from("Answer rule: ");
+    let meet_rule = o.goal == crate::design::sweep::objective::Goal::MaximiseSuccess && o.success_at_least.is_some();
+    if meet_rule {
+        s += "of the race's rows (every finalist, set size and selection on the search worlds, `race.parquet`), those that meet \
+              every constraint at the confidence; of them the smallest campaign, ties broken by the smaller set size, then the \
+              higher P, then the race's order. Without such a row, the race's first (rank 1: the undecided designs before those \
+              that fail a constraint, the highest P within each). ";
+    } else {
+        s += "the race's first on the search worlds (`race.parquet` rank 1): the designs meeting every constraint at the confidence \
+              first, then those the worlds leave undecided, then the rest; within each the best objective estimate; ties by the \
+              finalists' order (count, then search score), then selection, then the smaller set size. ";
+    }
+    s += "The held-out worlds report the answer and do not choose it (chosen on them, the figure would be the luckiest of the \
+          verified designs on the worlds that chose it).\n\n";
+    let basis = v.answer.map(|a| a.1);
+    let worlds = v.race_worlds;
+    if meet_rule {
+        s += &match basis {
+            Some(AnswerBasis::SmallestMeeting) => {
+                let n = v.race_rows.iter().filter(|x| x.feasibility == crate::design::sweep::designs::Feasibility::Feasible).count();
+                format!(
+                    "Here: {n} of the race's rows meet every constraint at the confidence; the answer is the one with the smallest campaign.\n\n"
+                )
+            }
+            _ => {
+                let n = f64::from(worlds);
+                let best = crate::study::interval::clopper_pearson_lower(n, n, o.confidence);
+                format!(
+                    "Here: no row of the race meets every constraint at {} % confidence on its {worlds} worlds{}; the answer is the race's first.\n\n",
+                    o.confidence * 100.0,
+                    if best < o.success_at_least.unwrap_or(0.0) {
+                        format!(
+                            " (even {worlds} successes of {worlds} bound P below by {} < {}: the race cannot show P >= {} at this confidence)",
+                            f3(best),
+                            o.success_at_least.unwrap_or(0.0),
+                            o.success_at_least.unwrap_or(0.0)
+                        )
+                    } else {
+                        String::new()
+                    }
+                )
+            }
+        };
+    }
+    let above: Vec<&DesignRow> = v.held_out_rows.iter().filter(|h| h.rank < r.rank).collect();
+    if above.is_empty() {
+        s += "The held-out table below ranks the answer first.\n\n";
+        return s;
+    }
+    let answer_race = v.answer.and_then(|(i, _)| v.race_rows.get(i));
+    let why = |h: &DesignRow| -> String {
+        let c = &v.verified[h.design.point];
+        let head = format!("{} ({} sets of {}: {})", c.label, h.design.selection, h.design.set_size, f3(h.estimate));
+        if c.compared {
+            return format!("{head}: a compared design (a sweep file's), not a finalist the rule chooses from");
+        }
+        let raced = v.race_rows.iter().find(|x| {
+            v.finalists[x.design.point].key == c.key && x.design.selection == h.design.selection && x.design.set_size == h.design.set_size
+        });
+        match (raced, answer_race) {
+            (Some(x), Some(a)) if basis == Some(AnswerBasis::SmallestMeeting) => {
+                if x.feasibility != crate::design::sweep::designs::Feasibility::Feasible {
+                    format!("{head}: on the race's worlds it does not meet every constraint at the confidence ({})", x.feasibility.label())
+                } else if x.campaign_h > a.campaign_h {
+                    format!("{head}: it meets them too, with a longer campaign ({} h against {} h)", f3(x.campaign_h), f3(a.campaign_h))
+                } else {
+                    format!("{head}: it meets them too, at the same campaign with a larger set or lower P on the race's worlds")
+                }
+            }
+            (Some(x), Some(a)) => format!(
+                "{head}: the race ranks it {} (P = {} over {} worlds, {}) below the answer (P = {}, {})",
+                x.rank,
+                f3(x.estimate),
+                x.worlds,
+                x.feasibility.label(),
+                f3(a.estimate),
+                a.feasibility.label()
+            ),
+            _ => format!("{head}: not a row of the race"),
+        }
+    };
+    s += &format!(
+        "The held-out table below ranks the answer {} of {}; above it: {}. The held-out worlds report these figures and choose \
+         nothing: the paired column (worlds the leader did better / worse) says whether they separate the designs.\n\n",
+        r.rank,
+        v.held_out_rows.len(),
+        above.iter().map(|h| why(h)).collect::<Vec<_>>().join("; ")
+    );
+    s
+}
+
+/// What the search minimises, in words.
+pub fn score_words(space: &DesignSpace) -> String {
+    let o = &space.objective;
+    let shortfalls = "plus 10 times the constraints' relative shortfalls";
+    match (o.goal, space.search.score) {
+        (crate::design::sweep::objective::Goal::MaximiseSuccess, super::spec::SearchScore::Quantile) => format!(
+            "the {} quantile over the search worlds of each world's {} error over the threshold (`[search] score = \"quantile\"`), \
+             {shortfalls}; the race and the answer are judged by P(success)",
+            o.success_at_least.unwrap_or(0.95),
+            o.statistic.label()
+        ),
+        (crate::design::sweep::objective::Goal::MaximiseSuccess, super::spec::SearchScore::Success) => {
+            format!("minus P(success) over the search worlds (`[search] score = \"success\"`), {shortfalls}")
+        }
+        _ => format!("the objective's estimate over the search worlds ({}), {shortfalls}", o.describe()),
+    }
+}
+
 /// A held-out or race row in words: `P = 0.95 (0.90-0.98), 100 worlds, campaign 2.10 h`.
 pub fn row_words(r: &DesignRow) -> String {
     format!(
@@ -210,41 +342,12 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
             s += &format!("| race (search worlds){under} | {} |\n", row_words(x));
         }
         s += &format!("| **held-out worlds (reported)**{under} | **{}** |\n\n", row_words(r));
-        s += &format!("Points (region frame, mm): {:?}\n\n", c.points_mm);
+        s += &format!("Points as searched (the region's frame, mm): {:?}\n\n", c.points_mm);
         let status = status_words(space, r);
         if !status.is_empty() {
             s += &format!("Status on the held-out worlds: {status}.\n\n");
         }
-        s += "Answer rule: the race's first on the search worlds (`race.parquet` rank 1): the designs meeting every constraint at the \
-              confidence first, then those the worlds leave undecided, then the rest; within each the best objective estimate; ties \
-              by the finalists' order (count, then search score), then selection, then the smaller set size. The held-out worlds \
-              report the answer and do not choose it (chosen on them, the figure would be the luckiest of the verified designs on \
-              the worlds that chose it).\n\n";
-        if v.robust.is_none() {
-            let above: Vec<&DesignRow> = v.held_out_rows.iter().filter(|h| h.rank < r.rank).collect();
-            if above.is_empty() {
-                s += "The held-out table below ranks the answer first.\n\n";
-            } else {
-                s += &format!(
-                    "The held-out table below ranks the answer {} of {}: above it {}. The race, on the search worlds, put the answer \
-                     first; the held-out figures of the designs above it are each the best of several on the same worlds, and \
-                     the paired column says whether the worlds separate them.\n\n",
-                    r.rank,
-                    v.held_out_rows.len(),
-                    above
-                        .iter()
-                        .map(|h| format!(
-                            "{} ({} sets of {}: {})",
-                            v.verified[h.design.point].label,
-                            h.design.selection,
-                            h.design.set_size,
-                            f3(h.estimate)
-                        ))
-                        .collect::<Vec<_>>()
-                        .join("; ")
-                );
-            }
-        }
+        s += &answer_words(space, v, r);
         let fitted = fitted_values(space);
         let models = match &v.robust {
             Some(x) => format!("the {} error models of `[robust]` ({})", x.models.len(), x.models.join(", ")),
@@ -254,24 +357,12 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
             "Error model: the figures rest on {models}{}.\n\n",
             if fitted.is_empty() { String::new() } else { format!("; its FITTED values: {}", fitted.join(", ")) }
         );
-        if space.objective.goal == crate::design::sweep::objective::Goal::MaximiseSuccess {
-            s += &format!(
-                "Search score: {}.\n\n",
-                match space.search.score {
-                    super::spec::SearchScore::Quantile => format!(
-                        "the {} quantile over the search worlds of each world's {} error over the threshold (`[search] score = \"quantile\"`), \
-                         plus the constraints' shortfalls; the race and the answer are judged by P(success)",
-                        space.objective.success_at_least.unwrap_or(0.95),
-                        space.objective.statistic.label()
-                    ),
-                    super::spec::SearchScore::Success =>
-                        "minus P(success) over the search worlds (`[search] score = \"success\"`), plus the constraints' shortfalls"
-                            .to_string(),
-                }
-            );
-        }
+        s += &format!("Search score: {}.\n\n", score_words(space));
     } else {
         s += "## No answer\n\nNo design of the search ran in any world.\n\n";
+    }
+    if let Some(sheet) = &o.sheet {
+        s += &sheet.markdown();
     }
     if let Some(r) = &v.robust {
         s += &robust_section(space, v, r);
@@ -553,6 +644,9 @@ pub fn write(
             );
             crate::io::out_dir::write_file(&dir.join("best_design.toml"), design_file(&v.verified[*i], r, &head))?;
         }
+        if let Some(sheet) = &o.sheet {
+            crate::io::out_dir::write_file(&dir.join("spheres.csv"), sheet.csv())?;
+        }
         let mut text = summary(space, o);
         if let Some(w) = winner_world {
             let d = dir.join("winner");
@@ -572,4 +666,118 @@ pub fn write(
         crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_vec_pretty(manifest).map_err(std::io::Error::other)?)?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::design::sweep::designs::{Design, Feasibility};
+
+    fn space(objective: &str) -> (tempfile::TempDir, DesignSpace) {
+        let dir = tempfile::tempdir().unwrap();
+        let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/ci_quick.toml");
+        let f = dir.path().join("q.toml");
+        std::fs::write(
+            &f,
+            format!(
+                "base = {:?}\n[[variable]]\nkey = \"trical.epsilon_mm\"\nrange = [0.01, 0.02]\n[objective]\n{objective}",
+                base.display().to_string()
+            ),
+        )
+        .unwrap();
+        let s = super::super::spec::load(&f).unwrap();
+        (dir, s)
+    }
+
+    const MEET: &str = "maximise = \"success\"\nstatistic = \"max\"\nthreshold_mm = 0.5\nconfidence = 0.9\nsuccess_at_least = 0.9\n";
+
+    /// A judged row: (finalist, set size, P, campaign h, feasibility, rank).
+    fn row(point: usize, set_size: u32, p: f64, h: f64, f: Feasibility, rank: usize) -> DesignRow {
+        DesignRow {
+            design: Design { point, selection: "detmax".into(), set_size },
+            table: false,
+            worlds: 40,
+            failed_worlds: 0,
+            estimate: p,
+            interval: (p - 0.05, p.min(1.0)),
+            success: Some((p, (p - 0.05, p.min(1.0)))),
+            campaign_h: h,
+            feasibility: f,
+            rank,
+            vs_leader: None,
+            tied: false,
+            eliminated: None,
+        }
+    }
+
+    fn race() -> Vec<DesignRow> {
+        use Feasibility::*;
+        vec![
+            row(0, 450, 1.0, 3.0, Feasible, 1),
+            row(0, 300, 0.975, 3.0, Feasible, 2),
+            row(1, 300, 0.96, 2.5, Feasible, 3),
+            row(2, 150, 0.9, 2.0, Undecided, 4),
+        ]
+    }
+
+    #[test]
+    fn the_answer_is_the_smallest_campaign_that_meets_the_objective_then_the_smaller_set() {
+        use super::super::{AnswerBasis, answer_of};
+        let (_d, s) = space(MEET);
+        let rows = race();
+        assert_eq!(answer_of(&s, &rows), Some((2, AnswerBasis::SmallestMeeting)), "the shortest campaign among those meeting it");
+        // Without it: the same campaign at two set sizes, the smaller set (not the higher P).
+        assert_eq!(answer_of(&s, &[rows[0].clone(), rows[1].clone(), rows[3].clone()]), Some((1, AnswerBasis::SmallestMeeting)));
+        // None meets the objective at the confidence: the race's first.
+        let undecided: Vec<DesignRow> = rows.iter().map(|r| DesignRow { feasibility: Feasibility::Undecided, ..r.clone() }).collect();
+        assert_eq!(answer_of(&s, &undecided), Some((0, AnswerBasis::RaceFirst)));
+        // An objective without a least P to meet: the race's first.
+        let (_d, p95) = space("minimise = \"p95\"\nconfidence = 0.9\n");
+        assert_eq!(answer_of(&p95, &rows), Some((0, AnswerBasis::RaceFirst)));
+    }
+
+    #[test]
+    fn the_summary_says_why_the_answer_is_not_first_on_the_held_out_worlds() {
+        use super::super::{Verdict, answer_of};
+        let (_d, s) = space(MEET);
+        let rows = race();
+        let candidate = |k: usize| Candidate {
+            label: format!("{} points, restart {k} #1", 4 + k),
+            count: 4 + k,
+            table: toml::Table::new(),
+            key: format!("key{k}"),
+            points_mm: Vec::new(),
+            search_score: Some(0.0),
+            compared: false,
+        };
+        let finalists = vec![candidate(0), candidate(1), candidate(2)];
+        // Held-out: finalist 0 with sets of 450 first; the answer (finalist 1, sets of 300) second.
+        let verified = vec![finalists[0].clone(), finalists[1].clone()];
+        let held = vec![row(0, 450, 0.97, 3.0, Feasibility::Undecided, 1), row(1, 300, 0.95, 2.5, Feasibility::Undecided, 2)];
+        let v = Verdict {
+            trace: Vec::new(),
+            finalists,
+            race_rows: rows.clone(),
+            race_worlds: 40,
+            verified,
+            held_out_rows: held,
+            robust: None,
+            answer: answer_of(&s, &rows),
+        };
+        let o = Outcome::of(&s, v);
+        let (i, r) = o.winner.clone().expect("the answer's held-out row");
+        assert_eq!((i, r.design.set_size), (1, 300));
+        let text = summary(&s, &o);
+        assert!(text.contains("ranks the answer 2 of 2"), "{text}");
+        assert!(text.contains("with a longer campaign (3.000 h against 2.500 h)"), "{text}");
+        assert!(text.contains("3 of the race's rows meet every constraint"), "{text}");
+        // No row meets it: the race's first, and the summary says the race's worlds cannot show it.
+        let undecided: Vec<DesignRow> = rows.iter().map(|r| DesignRow { feasibility: Feasibility::Undecided, ..r.clone() }).collect();
+        let v = Verdict { race_rows: undecided.clone(), answer: answer_of(&s, &undecided), ..o.verdict.clone() };
+        let o = Outcome::of(&s, v);
+        assert_eq!(o.winner.as_ref().map(|w| (w.0, w.1.design.set_size)), Some((0, 450)));
+        let text = summary(&s, &o);
+        assert!(text.contains("no row of the race meets every constraint at 90 % confidence on its 40 worlds"), "{text}");
+        assert!(text.contains("The held-out table below ranks the answer first"), "{text}");
+    }
 }

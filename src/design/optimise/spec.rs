@@ -662,8 +662,19 @@ fn points(path: &Path, p: &PointsFile) -> Result<Points, DesignError> {
 
 /// The greatest smallest distance of `n` points in the unit square, `n` = 2 to 12 (Schaer, Nurmela
 /// and Ostergard; the proven optima of the packing literature).
-const SQUARE_SPREAD: [f64; 11] =
-    [std::f64::consts::SQRT_2, 1.035276, 1.0, 0.707107, 0.600925, 0.535898, 0.517638, 0.5, 0.421280, 0.398207, 0.388730];
+const SQUARE_SPREAD: [f64; 11] = [
+    std::f64::consts::SQRT_2,
+    1.035276,
+    1.0,
+    std::f64::consts::FRAC_1_SQRT_2,
+    0.600925,
+    0.535898,
+    0.517638,
+    0.5,
+    0.421280,
+    0.398207,
+    0.388730,
+];
 
 /// Whether `n` points at least `s` apart may fit a box of `sides` (mm, a plate's third 0): false
 /// only where a bound proves they cannot: a segment holds `L / s + 1`; a rectangle at most Oler's
