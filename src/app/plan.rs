@@ -46,10 +46,13 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
     let name = format!("{}.plan", crate::io::names::of_file(&spec.file)?);
     crate::io::out_dir::prepare(&spec.out, &name)?;
     let (pool, threads) = super::thread_pool(spec.threads)?;
+    let poses = match &plan.objective {
+        None => format!("{}", plan.poses),
+        Some(o) => format!("{} to {} (by objective)", o.fewest_poses, o.most_poses),
+    };
     observer.started(&format!(
-        "calsim plan: {} ({} poses from a pool of {}, {} validation, {} worlds), {}",
+        "calsim plan: {} ({poses} poses from a pool of {}, {} validation, {} worlds), {}",
         spec.file.display(),
-        plan.poses,
         plan.pool,
         plan.validation,
         plan.worlds,
