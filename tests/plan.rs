@@ -510,3 +510,96 @@ fn the_comparison_has_its_rows_on_the_same_worlds() {
         assert!(md.lines().any(|l| l.starts_with(&format!("| {name} | "))), "{md}");
     }
 }
+
+/// A twin (the robot file with a `[learned]` table) is the robot of the pilot world and of every
+/// world: the plan predicts a larger held-out error than with the same file without the table,
+/// and says so in plan.md.
+#[test]
+fn a_twin_predicts_a_larger_held_out_error_than_its_file_without_the_table() {
+    let dir = scratch("twin");
+    let robot = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap();
+    std::fs::write(dir.join("plain.toml"), &robot).unwrap();
+    std::fs::write(
+        dir.join("twin.toml"),
+        robot
+            + "\n[learned]\nsource = \"a test twin\"\nrepeatability_mm = 0.01\npose_error_mdeg = 3.0\nbacklash_mdeg = [0.0, 6.0, 4.0, 0.0, 0.0, 0.0]\n\n[[learned.harmonic]]\njoint = 2\norder = 1.0\nsin_mdeg = 10.0\ncos_mdeg = -4.0\nstd_mdeg = 2.0\n",
+    )
+    .unwrap();
+    let go = |name: &str| {
+        let file = dir.join(format!("{name}-plan.toml"));
+        let robot_path = dir.join(format!("{name}.toml"));
+        std::fs::write(
+            &file,
+            plan_text(|t| t.replace(&root().join("robots/irb120.toml").display().to_string(), &robot_path.display().to_string())),
+        )
+        .unwrap();
+        plan(&PlanSpec { file, out: dir.join(format!("out-{name}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap()
+    };
+    let plain = go("plain");
+    let twin = go("twin");
+    // The same poses (the table moves no pose), the same worlds' seeds.
+    assert_eq!(plain.outcome.rows, twin.outcome.rows);
+    assert!(!plain.outcome.prediction.twin && twin.outcome.prediction.twin);
+    let [p10, p50, p90] = plain.outcome.prediction.quantiles_mm;
+    let [t10, t50, t90] = twin.outcome.prediction.quantiles_mm;
+    eprintln!("plain {p10:.4} {p50:.4} {p90:.4}; twin {t10:.4} {t50:.4} {t90:.4}");
+    assert!(t50 > p90, "the twin's median {t50} above the plain file's P90 {p90}");
+    assert!(twin.outcome.prediction.pilot_median_mm > plain.outcome.prediction.pilot_median_mm);
+    let md = std::fs::read_to_string(twin.dir.join("plan.md")).unwrap();
+    assert!(md.contains("The robot file is a twin"), "{md}");
+    // --simulate measures the twin too: its file differs from the plain one's.
+    assert_ne!(std::fs::read(plain.dir.join("simulated.csv")).unwrap(), std::fs::read(twin.dir.join("simulated.csv")).unwrap());
+}
+
+/// A shipped plan file's text with shorter settings, in `dir`, its robot file path made absolute.
+fn shipped_short(dir: &Path, name: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("scenarios/plans").join(name)).unwrap();
+    let robot_line = text.lines().find(|l| l.starts_with("robot = ")).unwrap();
+    let robot = robot_line.split('"').nth(1).unwrap();
+    let absolute = root().join("scenarios/plans").join(robot);
+    let file = dir.join(name);
+    std::fs::write(&file, edit(text.replace(robot_line, &format!("robot = \"{}\"", absolute.display())))).unwrap();
+    file
+}
+
+/// The imported arm's shipped plan (the LR Mate 200iC from its URDF) runs, short: its poses are in
+/// the plan's limits, training and validation as asked.
+#[test]
+fn the_shipped_imported_arm_plan_runs() {
+    let dir = scratch("lrmate");
+    let file = shipped_short(&dir, "lrmate200ic_tracker.toml", |t| {
+        t.replace("poses = 50 ", "poses = 40 ")
+            .replace("pool = 2000", "pool = 300")
+            .replace("worlds = 30", "worlds = 8")
+            .replace("validation = 20", "validation = 8")
+    });
+    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
+    assert_eq!(r.plan.robot.nominal.data().name, "fanuc_lrmate200ic");
+    assert_eq!(r.outcome.rows.iter().filter(|x| x.split == "train").count(), 40);
+    assert_eq!(r.outcome.rows.iter().filter(|x| x.split == "holdout").count(), 8);
+    for row in &r.outcome.rows {
+        for (q, l) in row.q.iter().zip(&r.plan.limits) {
+            assert!(*q >= l.min && *q <= l.max, "{row:?}");
+        }
+    }
+    let [p10, p50, p90] = r.outcome.prediction.quantiles_mm;
+    assert!(p10 > 0.0 && p10 <= p50 && p50 <= p90 && p90 < 1.0, "{:?}", r.outcome.prediction);
+    assert!(r.dir.join("simulated.csv").exists());
+}
+
+/// The shipped plan with an objective is accepted as shipped and, short, searches and compares.
+#[test]
+fn the_shipped_objective_plan_runs() {
+    let p = calsim::app::plan::load(&root().join("scenarios/plans/irb120_tracker_objective.toml")).unwrap();
+    let o = p.objective.as_ref().unwrap();
+    assert_eq!((o.threshold_mm, o.success_at_least, o.confidence, o.most_poses, p.worlds, p.compare), (0.045, 0.9, 0.9, 400, 60, true));
+    let dir = scratch("objective-shipped");
+    let file = shipped_short(&dir, "irb120_tracker_objective.toml", |t| {
+        t.replace("pool = 2000", "pool = 300").replace("validation = 20", "validation = 8").replace("most_poses = 400", "most_poses = 80")
+    });
+    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let search = r.outcome.search.as_ref().unwrap();
+    assert_eq!(search.candidates[0].n, 34);
+    assert!(search.candidates.iter().all(|c| c.worlds == 60));
+    assert_eq!(r.outcome.comparison.as_ref().unwrap().rows.len(), 3);
+}
