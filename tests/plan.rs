@@ -107,9 +107,18 @@ fn run() -> &'static Run {
 fn one_and_two_threads_write_the_same_bytes() {
     let r = run();
     let names: Vec<&str> = r.files_1.iter().map(|(n, _)| n.as_str()).collect();
-    assert_eq!(names, ["joints.txt", "manifest.json", "plan.md", "poses.csv", "simulated.csv", "tour.csv"]);
+    assert_eq!(
+        names,
+        ["joints.txt", "manifest.json", "plan.md", "plan_poses.png", "plan_poses.svg", "poses.csv", "simulated.csv", "tour.csv"]
+    );
     assert_eq!(r.files_1, r.files_2);
     assert!(r.dir.exists());
+    // The figure: its key names what it shows, one ring per validation pose in each view.
+    let svg = String::from_utf8(r.files_1.iter().find(|(n, _)| n == "plan_poses.svg").unwrap().1.clone()).unwrap();
+    for label in ["training pose", "validation pose", "tracker", "robot base", "workspace of interest", "top view", "side view"] {
+        assert!(svg.contains(label), "{label}");
+    }
+    assert!(r.files_1.iter().find(|(n, _)| n == "plan_poses.png").unwrap().1.starts_with(b"\x89PNG"));
 }
 
 /// The arm's frames 0..6 from the robot file's modified-DH table (alpha_{i-1}, a_{i-1}, theta_i +

@@ -18,6 +18,7 @@
 //! the plan is the same for any thread count.
 
 pub mod cell;
+pub mod plot;
 pub mod select;
 pub mod spec;
 
@@ -648,7 +649,12 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     );
     let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | pilot world, mm | model chosen in the pilot |\n|---|---|---|---|---|");
     let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {:.4} | {} |\n", p.pilot_median_mm, p.pilot_chosen);
-    if p.pilot_median_mm > c {
+    if p.pilot_median_mm > c && plan.robot.truth.is_empty() && !p.twin {
+        let _ = writeln!(
+            s,
+            "The pilot world lies above P90: the robot file gives no `[truth]`, so the pilot measured its nominal, which the model describes completely; the pilot is one noise draw, and one in ten lies above P90.\n"
+        );
+    } else if p.pilot_median_mm > c {
         let _ = writeln!(
             s,
             "The pilot world lies above P90: the robot file's truth holds what the {} model does not describe (its calibrated robot, the worlds' truth, does not): a richer model would calibrate that robot better.\n",
@@ -673,6 +679,11 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     );
     let _ = writeln!(s, "- `joints.txt`: the same poses as a plain joint list.");
     let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
+    let _ = writeln!(
+        s,
+        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the tracker, the robot's base and the workspace of interest.",
+        plot::STEM
+    );
     s
 }
 
