@@ -809,7 +809,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
     if !p.unidentifiable.is_empty() {
         println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
     }
-    println!("poses.csv, joints.txt, tour.csv and plan.md in {}", r.dir.display());
+    println!("poses.csv, joints.txt, tour.csv, plan.md and plan_poses.png in {}", r.dir.display());
     Ok(ExitCode::SUCCESS)
 }
 

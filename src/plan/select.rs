@@ -211,7 +211,7 @@ pub fn greedy(jac: &PoolJacobian, n: usize) -> Vec<usize> {
         // det(M + J_k^T J_k) / det(M) = det(I_3 + J_k M^-1 J_k^T).
         let gain = |k: usize| -> f64 {
             let jk = jac.j.rows(3 * k, 3);
-            let s = &jk * &inv * jk.transpose();
+            let s = jk * &inv * jk.transpose();
             (Matrix3::identity() + Matrix3::from_fn(|r, c| s[(r, c)])).determinant()
         };
         let best = (0..jac.len)
