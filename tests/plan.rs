@@ -612,3 +612,28 @@ fn the_shipped_objective_plan_runs() {
     assert!(search.candidates.iter().all(|c| c.worlds == 60));
     assert_eq!(r.outcome.comparison.as_ref().unwrap().rows.len(), 3);
 }
+
+/// A plan with an objective and the comparison writes the same bytes for 1 and 2 threads.
+#[test]
+fn an_objective_and_a_comparison_write_the_same_bytes_for_1_and_2_threads() {
+    let dir = scratch("objective-threads");
+    let file = dir.join("objective.toml");
+    std::fs::write(
+        &file,
+        plan_text(|t| {
+            t.replace("poses = 40\n", "").replace("worlds = 20", "worlds = 12\ncompare = true")
+                + "\n[objective]\nstatistic = \"median\"\nthreshold_mm = 0.0175\nsuccess_at_least = 0.6\nmost_poses = 68\n"
+        }),
+    )
+    .unwrap();
+    let go = |threads: u32| {
+        let r = plan(
+            &PlanSpec { file: file.clone(), out: dir.join(format!("out{threads}")), threads: Some(threads), simulate: false },
+            &calsim::app::Quiet,
+        )
+        .unwrap();
+        assert!(r.outcome.search.as_ref().unwrap().candidates.len() >= 2, "{:?}", r.outcome.search);
+        files(&r.dir).into_iter().filter(|(n, _)| n != "manifest.json").collect::<Vec<_>>()
+    };
+    assert_eq!(go(1), go(2));
+}
