@@ -776,7 +776,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
     let [a, b, c] = p.quantiles_mm;
     println!(
         "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
-        r.plan.poses,
+        r.outcome.poses,
         r.plan.validation,
         r.outcome.pool.qs.len(),
         r.outcome.pool.tried,
@@ -785,10 +785,31 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
         p.worlds,
         r.seconds
     );
+    if let (Some(o), Some(search)) = (&r.plan.objective, &r.outcome.search) {
+        match search.chosen {
+            Some(n) => println!(
+                "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
+                o.statistic.name(),
+                o.threshold_mm,
+                o.success_at_least,
+                o.confidence,
+                search.candidates.len()
+            ),
+            None => println!(
+                "objective P(held-out {} <= {} mm) >= {} at {} confidence: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)",
+                o.statistic.name(),
+                o.threshold_mm,
+                o.success_at_least,
+                o.confidence,
+                o.most_poses,
+                search.planned
+            ),
+        }
+    }
     if !p.unidentifiable.is_empty() {
         println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
     }
-    println!("poses.csv, joints.txt, tour.csv and plan.md in {}", r.dir.display());
+    println!("poses.csv, joints.txt, tour.csv, plan.md and plan_poses.png in {}", r.dir.display());
     Ok(ExitCode::SUCCESS)
 }
 

@@ -152,6 +152,9 @@ pub mod plan {
     pub const WORLDS: u64 = 0x504c_414e_0005;
     /// The measurements written by `--simulate`.
     pub const SIMULATE: u64 = 0x504c_414e_0006;
+    /// The twin's robot (its `[learned]` effects drawn once), and under `split_seed` of it the
+    /// noise of its moves per measurement.
+    pub const TWIN: u64 = 0x504c_414e_0007;
 }
 
 /// Fixed streams of quantities that are functions of their inputs alone (no scenario seed).

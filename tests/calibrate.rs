@@ -605,7 +605,7 @@ fn the_plan_explains_a_complete_model_flags_an_unmodelled_effect_and_explains_it
     // anew in each world): the measured median lies among the simulated worlds' again.
     let sim = SimulationSpec { unmodelled: gears.clone(), ..spec(truth.clone(), &robot, 0.012, vec![]) };
     let c = calsim::calibrate::run(&robot, &measured(&sim, &robot), &opts).unwrap();
-    let effects = Effects { source: "the gears".into(), unmodelled: gears, repeatability_mm: 0.0 };
+    let effects = Effects { source: "the gears".into(), unmodelled: gears, repeatability_mm: 0.0, learned: None };
     let plan = simulate(&c, 20, Statistic::Median, 1, Some(0.012), Some(&effects)).unwrap();
     let planned = compare(&c, &plan);
     let worlds = calsim::study::stats::finite_sorted(&plan.per_world_mm);

@@ -107,9 +107,18 @@ fn run() -> &'static Run {
 fn one_and_two_threads_write_the_same_bytes() {
     let r = run();
     let names: Vec<&str> = r.files_1.iter().map(|(n, _)| n.as_str()).collect();
-    assert_eq!(names, ["joints.txt", "manifest.json", "plan.md", "poses.csv", "simulated.csv", "tour.csv"]);
+    assert_eq!(
+        names,
+        ["joints.txt", "manifest.json", "plan.md", "plan_poses.png", "plan_poses.svg", "poses.csv", "simulated.csv", "tour.csv"]
+    );
     assert_eq!(r.files_1, r.files_2);
     assert!(r.dir.exists());
+    // The figure: its key names what it shows, one ring per validation pose in each view.
+    let svg = String::from_utf8(r.files_1.iter().find(|(n, _)| n == "plan_poses.svg").unwrap().1.clone()).unwrap();
+    for label in ["training pose", "validation pose", "tracker", "robot base", "workspace of interest", "top view", "side view"] {
+        assert!(svg.contains(label), "{label}");
+    }
+    assert!(r.files_1.iter().find(|(n, _)| n == "plan_poses.png").unwrap().1.starts_with(b"\x89PNG"));
 }
 
 /// The arm's frames 0..6 from the robot file's modified-DH table (alpha_{i-1}, a_{i-1}, theta_i +
@@ -342,4 +351,289 @@ fn a_plan_runs_again_into_its_own_results_directory() {
     assert!(manifest["git_commit"].is_string());
     let again = plan(&spec, &calsim::app::Quiet).unwrap();
     assert_eq!(std::fs::read(first.dir.join("poses.csv")).unwrap(), std::fs::read(again.dir.join("poses.csv")).unwrap());
+}
+
+/// The rows of the objective's table in `plan.md`: (poses, successes, worlds, lower bound, meets).
+fn objective_table(md: &str) -> Vec<(usize, usize, usize, f64, bool)> {
+    let start = md.find("| poses | successes / worlds |").expect("the objective's table");
+    md[start..]
+        .lines()
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let f: Vec<&str> = l.trim_matches('|').split('|').map(str::trim).collect();
+            let (k, w) = f[1].split_once(" / ").unwrap();
+            (f[0].parse().unwrap(), k.parse().unwrap(), w.parse().unwrap(), f[3].parse().unwrap(), f[4] == "yes")
+        })
+        .collect()
+}
+
+/// A plan with an objective plans the smallest count its own table shows meeting it: the test
+/// recomputes each row's lower bound (Clopper-Pearson, one-sided, 90 %) from its counts, checks
+/// the rule against the target, and that the count below the chosen one was scored and failed.
+#[test]
+fn an_objective_picks_the_smallest_count_meeting_it_on_its_own_table() {
+    let dir = scratch("objective");
+    let file = dir.join("objective.toml");
+    // A held-out median near the tracker's noise floor, which this cell's worlds reach only with
+    // more poses than the fewest.
+    std::fs::write(
+        &file,
+        plan_text(|t| {
+            t.replace("poses = 40\n", "")
+                .replace("worlds = 20", "worlds = 24\ncompare = true")
+                + "\n[objective]\nstatistic = \"median\"\nthreshold_mm = 0.0175\nsuccess_at_least = 0.6\nconfidence = 0.9\nmost_poses = 160\n"
+        }),
+    )
+    .unwrap();
+    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let md = std::fs::read_to_string(r.dir.join("plan.md")).unwrap();
+    let table = objective_table(&md);
+    eprintln!("{table:?}");
+    assert!(table.len() >= 2, "{md}");
+    for (n, k, w, lower, meets) in &table {
+        assert_eq!(*w, 24, "every count on the 24 worlds");
+        let bound = beta_lower(*k, *w, 0.9);
+        assert!((bound - lower).abs() < 1e-4, "n {n}: lower bound {lower} against {bound} recomputed");
+        assert_eq!(*meets, *lower >= 0.6, "n {n}");
+    }
+    let smallest = table.iter().filter(|r| r.4).map(|r| r.0).min().expect("a count meets the objective in this cell");
+    assert_eq!(r.outcome.poses, smallest);
+    assert!(md.contains(&format!("Chosen: {smallest} poses, the smallest count in the table whose lower bound clears 0.6")), "{md}");
+    assert!(table.iter().any(|r| r.0 == smallest - 1 && !r.4) || smallest == 34, "the count below was scored and failed: {table:?}");
+    assert!(table.iter().any(|r| !r.4), "a count that fails: the search is not trivial here: {table:?}");
+    let poses = std::fs::read_to_string(r.dir.join("poses.csv")).unwrap();
+    let training = poses.lines().filter(|l| l.contains(",train,")).count();
+    assert_eq!(training, 2 * smallest, "two targets per pose");
+    // The comparison is made at the chosen count.
+    assert!(md.contains(&format!("The same {smallest} training poses chosen three ways")), "{md}");
+}
+
+/// The one-sided lower Clopper-Pearson bound, computed here by bisection on the binomial tail:
+/// the p with P(X >= k | n, p) = 1 - confidence.
+fn beta_lower(k: usize, n: usize, confidence: f64) -> f64 {
+    if k == 0 {
+        return 0.0;
+    }
+    let tail = |p: f64| -> f64 {
+        // P(X >= k) = 1 - P(X <= k - 1), by the terms of the binomial.
+        let mut below = 0.0;
+        let mut term = (1.0 - p).powi(n as i32);
+        for i in 0..k {
+            below += term;
+            term *= (n - i) as f64 / (i + 1) as f64 * p / (1.0 - p);
+        }
+        1.0 - below
+    };
+    let (mut lo, mut hi) = (0.0, 1.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if tail(mid) < 1.0 - confidence {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+#[test]
+fn bad_objectives_are_refused_naming_the_file_and_the_key() {
+    let with = |o: &'static str| move |t: String| t.replace("poses = 40\n", "") + "\n[objective]\n" + o;
+    let ok = "statistic = \"max\"\nthreshold_mm = 0.5\nsuccess_at_least = 0.95\n";
+    refused(with("statistic = \"maximum\"\nthreshold_mm = 0.5\nsuccess_at_least = 0.95\n"), "objective.statistic");
+    refused(with("statistic = \"max\"\nthreshold_mm = nan\nsuccess_at_least = 0.95\n"), "objective.threshold_mm");
+    refused(with("statistic = \"max\"\nthreshold_mm = -1.0\nsuccess_at_least = 0.95\n"), "objective.threshold_mm");
+    refused(with("statistic = \"max\"\nthreshold_mm = 0.5\nsuccess_at_least = 1.0\n"), "objective.success_at_least");
+    // 20 worlds all succeeding show at most 0.891 at 90 %: 0.95 cannot be shown.
+    let e = refused(with(ok), "objective.success_at_least");
+    assert!(e.contains("cannot be shown by 20 worlds") && e.contains("set worlds to 45 or more"), "{e}");
+    let ok45 = |extra: &'static str| {
+        move |t: String| t.replace("poses = 40\n", "").replace("worlds = 20", "worlds = 45") + "\n[objective]\n" + ok + extra
+    };
+    refused(ok45("confidence = 1.5\n"), "objective.confidence");
+    refused(ok45("most_poses = 20\n"), "objective.most_poses");
+    refused(ok45("most_poses = 300\n"), "objective.most_poses");
+    refused(ok45("thresold = 1.0\n"), "thresold");
+    refused(|t: String| t.replace("worlds = 20", "worlds = 45") + "\n[objective]\n" + ok, "poses");
+    refused(|t: String| t.replace("poses = 40\n", ""), "poses");
+    refused(
+        |t: String| {
+            t.replace("poses = 40\n", "").replace("worlds = 20", "worlds = 45").replace("validation = 8", "validation = 0")
+                + "\n[objective]\n"
+                + ok
+        },
+        "validation",
+    );
+}
+
+#[test]
+fn the_command_exits_2_with_one_line_on_a_bad_objective() {
+    let dir = scratch("cli-objective");
+    let file = dir.join("bad.toml");
+    std::fs::write(
+        &file,
+        plan_text(|t| t.replace("poses = 40\n", "") + "\n[objective]\nstatistic = \"max\"\nthreshold_mm = inf\nsuccess_at_least = 0.5\n"),
+    )
+    .unwrap();
+    let o =
+        std::process::Command::new(env!("CARGO_BIN_EXE_calsim")).arg("plan").arg(&file).arg("--out").arg(dir.join("out")).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8(o.stderr).unwrap();
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].contains("objective.threshold_mm") && lines[0].contains("bad.toml"), "{err}");
+}
+
+/// `compare = true`: DETMAX's, a random and a greedy set of the same size, each simulated on the
+/// same worlds. DETMAX's row, simulated through the comparison's own path (its poses written and
+/// read again), is the prediction's per-world figures to the bit: the same worlds.
+#[test]
+fn the_comparison_has_its_rows_on_the_same_worlds() {
+    let dir = scratch("compare");
+    let file = dir.join("compare.toml");
+    std::fs::write(&file, plan_text(|t| t.replace("worlds = 20", "worlds = 20\ncompare = true"))).unwrap();
+    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let c = r.outcome.comparison.as_ref().expect("a comparison");
+    let names: Vec<&str> = c.rows.iter().map(|r| r.name).collect();
+    assert_eq!(names, ["DETMAX", "random", "greedy D-optimal"]);
+    let same_bits = |a: &[f64], b: &[f64]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+    assert!(
+        same_bits(&c.rows[0].per_world_mm, &r.outcome.prediction.per_world_mm),
+        "{:?} {:?}",
+        c.rows[0].per_world_mm,
+        r.outcome.prediction.per_world_mm
+    );
+    assert_eq!(c.rows[1].o1, r.outcome.o1.1, "the random set is the one whose O1 the plan reports");
+    for row in &c.rows {
+        assert_eq!(row.per_world_mm.len(), 20);
+        assert!(row.per_world_mm.iter().all(|v| v.is_finite() && *v > 0.0), "{row:?}");
+        let (m, lo, hi) = row.median_mm;
+        assert!(lo <= m && m <= hi, "{row:?}");
+        assert!(row.o1 > 0.0);
+    }
+    // Greedy D-optimal maximises the determinant step by step: its O1 is above a random set's.
+    assert!(c.rows[2].o1 > c.rows[1].o1, "{:?}", c.rows.iter().map(|r| r.o1).collect::<Vec<_>>());
+    let md = std::fs::read_to_string(r.dir.join("plan.md")).unwrap();
+    for name in names {
+        assert!(md.lines().any(|l| l.starts_with(&format!("| {name} | "))), "{md}");
+    }
+}
+
+/// A twin (the robot file with a `[learned]` table) is the robot of the pilot world and of every
+/// world: the plan predicts a larger held-out error than with the same file without the table,
+/// and says so in plan.md.
+#[test]
+fn a_twin_predicts_a_larger_held_out_error_than_its_file_without_the_table() {
+    let dir = scratch("twin");
+    let robot = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap();
+    std::fs::write(dir.join("plain.toml"), &robot).unwrap();
+    std::fs::write(
+        dir.join("twin.toml"),
+        robot
+            + "\n[learned]\nsource = \"a test twin\"\nrepeatability_mm = 0.01\npose_error_mdeg = 3.0\nbacklash_mdeg = [0.0, 6.0, 4.0, 0.0, 0.0, 0.0]\n\n[[learned.harmonic]]\njoint = 2\norder = 1.0\nsin_mdeg = 10.0\ncos_mdeg = -4.0\nstd_mdeg = 2.0\n",
+    )
+    .unwrap();
+    let go = |name: &str| {
+        let file = dir.join(format!("{name}-plan.toml"));
+        let robot_path = dir.join(format!("{name}.toml"));
+        std::fs::write(
+            &file,
+            plan_text(|t| t.replace(&root().join("robots/irb120.toml").display().to_string(), &robot_path.display().to_string())),
+        )
+        .unwrap();
+        plan(&PlanSpec { file, out: dir.join(format!("out-{name}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap()
+    };
+    let plain = go("plain");
+    let twin = go("twin");
+    // The same poses (the table moves no pose), the same worlds' seeds.
+    assert_eq!(plain.outcome.rows, twin.outcome.rows);
+    assert!(!plain.outcome.prediction.twin && twin.outcome.prediction.twin);
+    let [p10, p50, p90] = plain.outcome.prediction.quantiles_mm;
+    let [t10, t50, t90] = twin.outcome.prediction.quantiles_mm;
+    eprintln!("plain {p10:.4} {p50:.4} {p90:.4}; twin {t10:.4} {t50:.4} {t90:.4}");
+    assert!(t50 > p90, "the twin's median {t50} above the plain file's P90 {p90}");
+    assert!(twin.outcome.prediction.pilot_median_mm > plain.outcome.prediction.pilot_median_mm);
+    let md = std::fs::read_to_string(twin.dir.join("plan.md")).unwrap();
+    assert!(md.contains("The robot file is a twin"), "{md}");
+    // --simulate measures the twin too: its file differs from the plain one's.
+    assert_ne!(std::fs::read(plain.dir.join("simulated.csv")).unwrap(), std::fs::read(twin.dir.join("simulated.csv")).unwrap());
+}
+
+/// A shipped plan file's text with shorter settings, in `dir`, its robot file path made absolute.
+fn shipped_short(dir: &Path, name: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("scenarios/plans").join(name)).unwrap();
+    let robot_line = text.lines().find(|l| l.starts_with("robot = ")).unwrap();
+    let robot = robot_line.split('"').nth(1).unwrap();
+    let absolute = root().join("scenarios/plans").join(robot);
+    let file = dir.join(name);
+    std::fs::write(&file, edit(text.replace(robot_line, &format!("robot = \"{}\"", absolute.display())))).unwrap();
+    file
+}
+
+/// The imported arm's shipped plan (the LR Mate 200iC from its URDF) runs, short: its poses are in
+/// the plan's limits, training and validation as asked.
+#[test]
+fn the_shipped_imported_arm_plan_runs() {
+    let dir = scratch("lrmate");
+    let file = shipped_short(&dir, "lrmate200ic_tracker.toml", |t| {
+        t.replace("poses = 50 ", "poses = 40 ")
+            .replace("pool = 2000", "pool = 300")
+            .replace("worlds = 30", "worlds = 8")
+            .replace("validation = 20", "validation = 8")
+    });
+    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
+    assert_eq!(r.plan.robot.nominal.data().name, "fanuc_lrmate200ic");
+    assert_eq!(r.outcome.rows.iter().filter(|x| x.split == "train").count(), 40);
+    assert_eq!(r.outcome.rows.iter().filter(|x| x.split == "holdout").count(), 8);
+    for row in &r.outcome.rows {
+        for (q, l) in row.q.iter().zip(&r.plan.limits) {
+            assert!(*q >= l.min && *q <= l.max, "{row:?}");
+        }
+    }
+    let [p10, p50, p90] = r.outcome.prediction.quantiles_mm;
+    assert!(p10 > 0.0 && p10 <= p50 && p50 <= p90 && p90 < 1.0, "{:?}", r.outcome.prediction);
+    assert!(r.dir.join("simulated.csv").exists());
+}
+
+/// The shipped plan with an objective is accepted as shipped and, short, searches and compares.
+#[test]
+fn the_shipped_objective_plan_runs() {
+    let p = calsim::app::plan::load(&root().join("scenarios/plans/irb120_tracker_objective.toml")).unwrap();
+    let o = p.objective.as_ref().unwrap();
+    assert_eq!((o.threshold_mm, o.success_at_least, o.confidence, o.most_poses, p.worlds, p.compare), (0.045, 0.9, 0.9, 400, 60, true));
+    let dir = scratch("objective-shipped");
+    let file = shipped_short(&dir, "irb120_tracker_objective.toml", |t| {
+        t.replace("pool = 2000", "pool = 300").replace("validation = 20", "validation = 8").replace("most_poses = 400", "most_poses = 80")
+    });
+    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let search = r.outcome.search.as_ref().unwrap();
+    assert_eq!(search.candidates[0].n, 34);
+    assert!(search.candidates.iter().all(|c| c.worlds == 60));
+    assert_eq!(r.outcome.comparison.as_ref().unwrap().rows.len(), 3);
+}
+
+/// A plan with an objective and the comparison writes the same bytes for 1 and 2 threads.
+#[test]
+fn an_objective_and_a_comparison_write_the_same_bytes_for_1_and_2_threads() {
+    let dir = scratch("objective-threads");
+    let file = dir.join("objective.toml");
+    std::fs::write(
+        &file,
+        plan_text(|t| {
+            t.replace("poses = 40\n", "").replace("worlds = 20", "worlds = 12\ncompare = true")
+                + "\n[objective]\nstatistic = \"median\"\nthreshold_mm = 0.0175\nsuccess_at_least = 0.6\nmost_poses = 68\n"
+        }),
+    )
+    .unwrap();
+    let go = |threads: u32| {
+        let r = plan(
+            &PlanSpec { file: file.clone(), out: dir.join(format!("out{threads}")), threads: Some(threads), simulate: false },
+            &calsim::app::Quiet,
+        )
+        .unwrap();
+        assert!(r.outcome.search.as_ref().unwrap().candidates.len() >= 2, "{:?}", r.outcome.search);
+        files(&r.dir).into_iter().filter(|(n, _)| n != "manifest.json").collect::<Vec<_>>()
+    };
+    assert_eq!(go(1), go(2));
 }

@@ -55,6 +55,7 @@ from ._results import (
     FkResult,
     ImportResult,
     OptimiseResult,
+    PlanResult,
     Results,
     RunResult,
     SweepResult,
@@ -71,6 +72,7 @@ __all__ = [
     "budget",
     "export",
     "calibrate",
+    "plan",
     "optimise",
     "compensate",
     "table8",
@@ -85,6 +87,7 @@ __all__ = [
     "ExportResult",
     "CalibrationResult",
     "OptimiseResult",
+    "PlanResult",
     "CompensateResult",
     "Table8Result",
     "ImportResult",
@@ -519,6 +522,32 @@ def table8(
         )
     _warn(report)
     return Table8Result(report)
+
+
+def plan(
+    file: PathLike,
+    *,
+    out: PathLike = "results",
+    threads: int | None = None,
+    simulate: bool = False,
+    progress: Progress = True,
+) -> PlanResult:
+    """Plans a calibration (``calsim plan``): the poses to measure on a real robot, feasible in
+    its cell, chosen by DETMAX, with the held-out error predicted over simulated worlds, written
+    to ``out/<plan stem>.plan`` (``poses.csv`` to fill, ``joints.txt``, ``tour.csv``, ``plan.md``,
+    the figure); ``simulate`` also writes ``simulated.csv`` (the poses measured on the robot
+    file's truth). The plan file's keys: docs/plan.md (``[objective]`` for the number of poses by
+    objective, ``compare = true`` for DETMAX against random and greedy selection)."""
+    with observer(progress) as callback:
+        report = _calsim.plan(
+            Path(file),
+            out=Path(out),
+            threads=_optional("threads", threads, _U32),
+            simulate=simulate,
+            progress=callback,
+        )
+    _warn(report)
+    return PlanResult(report)
 
 
 def import_urdf(

@@ -284,6 +284,48 @@ class Table8Result:
         return f"Table8Result(worlds={self.worlds}, instruments={self.table['instrument'].to_list()})"
 
 
+class PlanResult:
+    """A calibration plan (``calsim plan``): ``dest`` (its directory), ``poses`` (the training
+    poses planned: the plan's count or its objective's), ``table`` (``poses.csv`` as a DataFrame:
+    the measurement file to fill), ``prediction`` (the predicted held-out median: ``p10_mm``,
+    ``median_mm``, ``p90_mm``, ``worlds``, ``pilot_mm``, ``twin``), ``unidentifiable``,
+    ``objective`` (``None``, or ``met``, ``poses`` and ``table``: P(success) against the number of
+    poses), ``comparison`` (``None``, or DETMAX, random and greedy selection as a DataFrame),
+    ``figure`` (``plan_poses.png``) and ``seconds``."""
+
+    def __init__(self, report: Report) -> None:
+        self.dest: Path = Path(report["dest"])
+        self.poses: int = report["poses"]
+        self.validation: int = report["validation"]
+        self.o1: float = report["o1"]
+        self.o1_random: float = report["o1_random"]
+        self.prediction: dict[str, Any] = {
+            "p10_mm": report["predicted_p10_mm"],
+            "median_mm": report["predicted_mm"],
+            "p90_mm": report["predicted_p90_mm"],
+            "worlds": report["worlds"],
+            "pilot_mm": report["pilot_mm"],
+            "twin": report["twin"],
+        }
+        self.unidentifiable: list[str] = list(report["unidentifiable"])
+        objective = report["objective"]
+        self.objective: dict[str, Any] | None = (
+            None
+            if objective is None
+            else {"met": objective["met"], "poses": objective["poses"], "table": pl.DataFrame(objective["table"])}
+        )
+        comparison = report["comparison"]
+        self.comparison: pl.DataFrame | None = None if comparison is None else pl.DataFrame(comparison)
+        self.table: pl.DataFrame = pl.read_csv(
+            self.dest / "poses.csv", comment_prefix="#", schema_overrides={"x_mm": pl.Float64, "y_mm": pl.Float64, "z_mm": pl.Float64}
+        )
+        self.figure: Path = self.dest / "plan_poses.png"
+        self.seconds: float = report["seconds"]
+
+    def __repr__(self) -> str:
+        return f"PlanResult(dest={str(self.dest)!r}, poses={self.poses}, predicted_median_mm={self.prediction['median_mm']:.4f})"
+
+
 class ImportResult:
     """An imported URDF: ``robot_file`` (the robot file written) and ``lines`` (what became of
     the geometry, masses, meshes and passive joints)."""

@@ -666,6 +666,80 @@ fn table8<'py>(
     Ok(d)
 }
 
+/// The poses to measure on a real robot and the accuracy they buy: `calsim plan`.
+#[pyfunction]
+#[pyo3(signature = (file, *, out, threads=None, simulate=false, progress=None))]
+fn plan<'py>(
+    py: Python<'py>,
+    file: PathBuf,
+    out: PathBuf,
+    threads: Option<u32>,
+    simulate: bool,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let spec = app::plan::PlanSpec { file, out, threads, simulate };
+    let (r, warnings) = detached(py, progress, |o| app::plan::plan(&spec, o))?;
+    let o = &r.outcome;
+    let p = &o.prediction;
+    let d = PyDict::new(py);
+    d.set_item("dest", &r.dir)?;
+    d.set_item("poses", o.poses)?;
+    d.set_item("validation", r.plan.validation)?;
+    d.set_item("pool", o.pool.qs.len())?;
+    d.set_item("drawn", o.pool.tried)?;
+    d.set_item("o1", o.o1.0)?;
+    d.set_item("o1_random", o.o1.1)?;
+    d.set_item("predicted_p10_mm", p.quantiles_mm[0])?;
+    d.set_item("predicted_mm", p.quantiles_mm[1])?;
+    d.set_item("predicted_p90_mm", p.quantiles_mm[2])?;
+    d.set_item("worlds", p.worlds)?;
+    d.set_item("pilot_mm", p.pilot_median_mm)?;
+    d.set_item("twin", p.twin)?;
+    d.set_item("unidentifiable", p.unidentifiable.iter().map(|u| u.name.clone()).collect::<Vec<_>>())?;
+    match &o.search {
+        None => d.set_item("objective", py.None())?,
+        Some(s) => {
+            let x = PyDict::new(py);
+            x.set_item("met", s.chosen.is_some())?;
+            x.set_item("poses", s.planned)?;
+            let rows = PyList::empty(py);
+            for c in s.by_count() {
+                let row = PyDict::new(py);
+                row.set_item("poses", c.n)?;
+                row.set_item("successes", c.successes)?;
+                row.set_item("worlds", c.worlds)?;
+                row.set_item("lower_bound", c.lower)?;
+                row.set_item("meets", c.meets)?;
+                rows.append(row)?;
+            }
+            x.set_item("table", rows)?;
+            d.set_item("objective", x)?;
+        }
+    }
+    match &o.comparison {
+        None => d.set_item("comparison", py.None())?,
+        Some(c) => {
+            let rows = PyList::empty(py);
+            for r in &c.rows {
+                let row = PyDict::new(py);
+                row.set_item("selection", r.name)?;
+                row.set_item("o1", r.o1)?;
+                row.set_item("median_mm", r.median_mm.0)?;
+                row.set_item("median_low_mm", r.median_mm.1)?;
+                row.set_item("median_high_mm", r.median_mm.2)?;
+                row.set_item("p90_mm", r.p90_mm.0)?;
+                row.set_item("p90_low_mm", r.p90_mm.1)?;
+                row.set_item("p90_high_mm", r.p90_mm.2)?;
+                rows.append(row)?;
+            }
+            d.set_item("comparison", rows)?;
+        }
+    }
+    d.set_item("seconds", r.seconds)?;
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
 /// A URDF arm as a calsim robot file: `calsim import-urdf`.
 #[pyfunction]
 #[pyo3(signature = (urdf, *, out, package_root=None, visual_meshes=false))]
@@ -755,6 +829,7 @@ fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(budget, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(plan, m)?)?;
     m.add_function(wrap_pyfunction!(optimise, m)?)?;
     m.add_function(wrap_pyfunction!(compensate, m)?)?;
     m.add_function(wrap_pyfunction!(table8, m)?)?;

@@ -1,5 +1,5 @@
 """Tests of the real-robot and design commands from Python (calibrate, compensate, fk,
-import_urdf, optimise, table8): each result beside the CLI's output for the same inputs (bit for
+import_urdf, optimise, plan, table8): each result beside the CLI's output for the same inputs (bit for
 bit where the CLI writes a file or a table), frames in and out, and bad arguments as the package's
 exceptions naming the file, the key and the value."""
 
@@ -324,3 +324,47 @@ def test_init_gives_the_cli_scenario_and_never_replaces_a_file(tmp_path: Path) -
     with pytest.raises(calsim.InputError) as e:
         calsim.init("laser", tmp_path / "other.toml")
     assert (e.value.key, e.value.value) == ("kind", "laser") and not (tmp_path / "other.toml").exists()
+
+
+def small_plan(tmp_path: Path, extra: str = "") -> Path:
+    """The shipped IRB 120 plan, short (pool 300, 40 poses, 8 validation poses, 8 worlds)."""
+    text = (REPO / "scenarios" / "plans" / "irb120_tracker.toml").read_text()
+    text = text.replace('robot = "../../robots/irb120.toml"', f'robot = "{ROBOT}"')
+    for old, new in [("poses = 60 ", "poses = 40 "), ("pool = 2000", "pool = 300"), ("validation = 20", "validation = 8"), ("worlds = 30", "worlds = 8")]:
+        assert old in text
+        text = text.replace(old, new)
+    f = tmp_path / "small.toml"
+    f.write_text(text + extra)
+    return f
+
+
+def test_plan_writes_the_cli_files(tmp_path: Path) -> None:
+    f = small_plan(tmp_path)
+    r = calsim.plan(f, out=tmp_path / "py", threads=2, progress=False)
+    assert r.poses == 40 and r.validation == 8
+    assert r.table.height == 2 * 48  # two targets per pose
+    assert r.table["split"].value_counts().sort("split")["count"].to_list() == [16, 80]
+    assert r.table["x_mm"].is_null().all()
+    assert r.prediction["worlds"] == 8
+    assert 0 < r.prediction["p10_mm"] <= r.prediction["median_mm"] <= r.prediction["p90_mm"]
+    assert r.figure.exists() and r.objective is None and r.comparison is None
+    cli("plan", f, "--out", tmp_path / "cli", "--threads", "2")
+    for name in ["poses.csv", "joints.txt", "tour.csv", "plan.md", "plan_poses.png"]:
+        assert (r.dest / name).read_bytes() == (tmp_path / "cli" / "small.plan" / name).read_bytes(), name
+
+
+def test_plan_comparison_as_a_frame(tmp_path: Path) -> None:
+    f = small_plan(tmp_path)
+    text = f.read_text().replace("worlds = 8", "worlds = 8\ncompare = true")
+    f.write_text(text)
+    r = calsim.plan(f, out=tmp_path / "py", threads=2, progress=False)
+    assert r.comparison is not None
+    assert r.comparison["selection"].to_list() == ["DETMAX", "random", "greedy D-optimal"]
+    assert r.comparison["o1"][0] == r.o1 and r.comparison["o1"][1] == r.o1_random
+
+
+def test_bad_plan_files_name_the_file_and_the_key(tmp_path: Path) -> None:
+    f = small_plan(tmp_path)
+    f.write_text(f.read_text().replace("poses = 40 ", "poses = 10 "))
+    with pytest.raises(calsim.InputError, match="poses"):
+        calsim.plan(f, out=tmp_path / "py", progress=False)

@@ -1,5 +1,6 @@
 //! `calsim plan`: reads a plan file, plans on the worker pool, writes `<out>/<plan stem>.plan/`
-//! (`poses.csv`, `joints.txt`, `tour.csv`, `plan.md`, and `simulated.csv` with `--simulate`).
+//! (`poses.csv`, `joints.txt`, `tour.csv`, `plan.md`, the figure `plan_poses.png`/`.svg`, and
+//! `simulated.csv` with `--simulate`).
 
 use std::path::{Path, PathBuf};
 
@@ -46,10 +47,13 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
     let name = format!("{}.plan", crate::io::names::of_file(&spec.file)?);
     crate::io::out_dir::prepare(&spec.out, &name)?;
     let (pool, threads) = super::thread_pool(spec.threads)?;
+    let poses = match &plan.objective {
+        None => format!("{}", plan.poses),
+        Some(o) => format!("{} to {} (by objective)", o.fewest_poses, o.most_poses),
+    };
     observer.started(&format!(
-        "calsim plan: {} ({} poses from a pool of {}, {} validation, {} worlds), {}",
+        "calsim plan: {} ({poses} poses from a pool of {}, {} validation, {} worlds), {}",
         spec.file.display(),
-        plan.poses,
         plan.pool,
         plan.validation,
         plan.worlds,
@@ -57,8 +61,8 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
     ));
     let t0 = std::time::Instant::now();
     let outcome = pool.install(|| crate::plan::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+    let cell = crate::plan::cell::Cell::new(&plan).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
     let simulated = if spec.simulate {
-        let cell = crate::plan::cell::Cell::new(&plan).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
         let (positions, _) = crate::plan::measure(&plan, &cell, &outcome.rows, crate::seeds::plan::SIMULATE)
             .map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
         Some(crate::plan::csv(
@@ -95,6 +99,7 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         if let Some(text) = &simulated {
             write_file(&d.join("simulated.csv"), text)?;
         }
+        crate::plan::plot::write(d, &plan, &cell, &outcome).map_err(std::io::Error::other)?;
         Ok(())
     })
     .map_err(Error::io(&spec.out))?;

@@ -246,7 +246,7 @@ fn plan_effects(path: &Path, worlds: usize) -> Result<plan::Effects, CalibrateEr
     let s = crate::device::load(path).map_err(|e| bad(e.to_string()))?;
     let (unmodelled, repeatability_mm) =
         s.robot_effects().ok_or_else(|| bad(format!("{}: its device has no robot to plan with", path.display())))?;
-    Ok(plan::Effects { source: path.display().to_string(), unmodelled, repeatability_mm })
+    Ok(plan::Effects { source: path.display().to_string(), unmodelled, repeatability_mm, learned: None })
 }
 
 fn check_options(o: &Options) -> Result<(), CalibrateError> {

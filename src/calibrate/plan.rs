@@ -22,7 +22,7 @@ use rand_distr::{Distribution, Normal};
 
 use super::{CalibrateError, Calibration};
 use crate::robot::{KinState, forward};
-use crate::study::stats::{finite_sorted, quantile};
+use crate::study::stats::{ErrorStats, finite_sorted, quantile};
 
 /// Which held-out statistic the comparison is made on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,6 +33,8 @@ pub enum Statistic {
     P95,
     /// Root mean square.
     Rms,
+    /// Largest.
+    Max,
 }
 
 impl Statistic {
@@ -42,17 +44,23 @@ impl Statistic {
             Statistic::Median => "median",
             Statistic::P95 => "p95",
             Statistic::Rms => "RMS",
+            Statistic::Max => "max",
         }
     }
 
     /// This statistic of the measured held-out errors of the chosen model, mm.
     pub fn of(self, c: &Calibration) -> Option<f64> {
-        let h = c.chosen().held_out.as_ref()?;
-        Some(match self {
-            Statistic::Median => h.measured.median,
-            Statistic::P95 => h.measured.p95,
-            Statistic::Rms => h.measured.rms,
-        })
+        Some(self.of_stats(&c.chosen().held_out.as_ref()?.measured))
+    }
+
+    /// This statistic of `s`, mm.
+    pub fn of_stats(self, s: &ErrorStats) -> f64 {
+        match self {
+            Statistic::Median => s.median,
+            Statistic::P95 => s.p95,
+            Statistic::Rms => s.rms,
+            Statistic::Max => s.max,
+        }
     }
 }
 
@@ -146,8 +154,25 @@ pub fn simulate(
     noise_mm: Option<f64>,
     effects: Option<&Effects>,
 ) -> Result<SimulatedOutcome, CalibrateError> {
+    let (scenario, stats) = simulate_at(c, &c.measurements, worlds, seed, noise_mm, effects)?;
+    let per_world_mm = stats.iter().map(|s| s.as_ref().map_or(f64::NAN, |s| statistic.of_stats(s))).collect();
+    Ok(SimulatedOutcome { scenario, statistic, per_world_mm })
+}
+
+/// [`simulate`] at the poses of `m` (the sessions and targets of `c`'s file, other poses or
+/// points): per world, the held-out statistics of the chosen model (`None` when the world's
+/// calibration gave none), and the scenario in words. World `w` draws from the same stream
+/// whatever the poses, so two sets of poses simulated with the same seed meet the same worlds'
+/// robots.
+pub fn simulate_at(
+    c: &Calibration,
+    m: &super::measurements::Measurements,
+    worlds: usize,
+    seed: u64,
+    noise_mm: Option<f64>,
+    effects: Option<&Effects>,
+) -> Result<(String, Vec<Option<ErrorStats>>), CalibrateError> {
     use rayon::prelude::*;
-    let m = &c.measurements;
     let sigma = noise_mm.unwrap_or_else(|| residual_noise_mm(c));
     if !(sigma.is_finite() && (0.0..=100.0).contains(&sigma)) {
         return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{sigma}: within 0 to 100 mm") });
@@ -170,7 +195,7 @@ pub fn simulate(
     let targets = c.tools.len();
     let mut opts = c.options.clone();
     opts.plots = false;
-    let per_world_mm: Vec<f64> = (0..worlds)
+    let per_world: Vec<Option<ErrorStats>> = (0..worlds)
         .into_par_iter()
         .map(|w| {
             let mut rng = crate::seeds::stream(crate::seeds::split_seed(seed, w as u64), crate::seeds::calibrate::PLAN_NOISE);
@@ -183,7 +208,8 @@ pub fn simulate(
                         let l = c.model.limits()[i];
                         0.5 * (l.min + l.max)
                     });
-                    let robot = crate::robot::VirtualRobot::new(c.model.clone(), &e.unmodelled, e.repeatability_mm, &reference, &mut rng);
+                    let robot = crate::robot::VirtualRobot::new(c.model.clone(), &e.unmodelled, e.repeatability_mm, &reference, &mut rng)
+                        .with_learned(e.learned.as_ref(), &mut rng);
                     let mut from = reference;
                     m.poses
                         .iter()
@@ -204,11 +230,11 @@ pub fn simulate(
                 let noise = Normal::new(0.0, s).map_or(Vector3::zeros(), |n| Vector3::from_fn(|_, _| n.sample(&mut rng)));
                 p.measured_mm = t + noise;
             }
-            super::run(&c.robot, &mw, &opts).ok().and_then(|cw| statistic.of(&cw)).unwrap_or(f64::NAN)
+            super::run(&c.robot, &mw, &opts).ok().and_then(|cw| cw.chosen().held_out.as_ref().map(|h| h.measured))
         })
         .collect();
     let with = effects.map_or_else(String::new, |e| format!(" with the effects and repeatability of {}", e.source));
-    Ok(SimulatedOutcome { scenario: format!("the calibrated robot{with}, noise {sigma:.4} mm per coordinate"), statistic, per_world_mm })
+    Ok((format!("the calibrated robot{with}, noise {sigma:.4} mm per coordinate"), per_world))
 }
 
 /// What a planning scenario adds to the calibrated robot in each world of a plan: its effects
@@ -222,4 +248,7 @@ pub struct Effects {
     pub unmodelled: crate::robot::UnmodelledSpec,
     /// ISO 9283 RP, mm.
     pub repeatability_mm: f64,
+    /// A twin's learned effects (its robot file's `[learned]` table), drawn per world after the
+    /// effects above (`None`: none, and no draw).
+    pub learned: Option<crate::robot::learned::LearnedEffects>,
 }

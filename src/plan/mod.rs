@@ -18,6 +18,7 @@
 //! the plan is the same for any thread count.
 
 pub mod cell;
+pub mod plot;
 pub mod select;
 pub mod spec;
 
@@ -108,6 +109,8 @@ pub struct Prediction {
     pub worlds: usize,
     /// The plan's model's parameters calibrate keeps nominal on these poses.
     pub unidentifiable: Vec<Unidentifiable>,
+    /// The worlds and the pilot carry the twin's effects (the robot file's `[learned]` table).
+    pub twin: bool,
 }
 
 /// What `calsim plan` computed.
@@ -127,6 +130,94 @@ pub struct Outcome {
     pub colliding_moves: Vec<(usize, usize)>,
     /// The prediction.
     pub prediction: Prediction,
+    /// Training poses planned (the plan's `poses`, or the count its objective's search chose).
+    pub poses: usize,
+    /// The objective's search (`None`: the count is fixed).
+    pub search: Option<Search>,
+    /// DETMAX against random and greedy selection (`None`: not asked).
+    pub comparison: Option<Comparison>,
+}
+
+/// One count of the objective's search, scored on the search's worlds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// Training poses (DETMAX's set of this size).
+    pub n: usize,
+    /// Worlds whose statistic is at most the threshold.
+    pub successes: usize,
+    /// Worlds simulated (a world whose calibration gives no value counts as a failure).
+    pub worlds: usize,
+    /// One-sided lower Clopper-Pearson bound of P(success) at the objective's confidence.
+    pub lower: f64,
+    /// The lower bound clears the objective's probability.
+    pub meets: bool,
+}
+
+/// The objective's search over the count of training poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Search {
+    /// Every count scored, in the order of the search (doubling, then bisection).
+    pub candidates: Vec<Candidate>,
+    /// The smallest count scored that meets the objective (`None`: none does).
+    pub chosen: Option<usize>,
+    /// The count planned: the chosen one, else the one with the highest lower bound (the smallest
+    /// among equals).
+    pub planned: usize,
+}
+
+impl Search {
+    /// The candidates by count.
+    pub fn by_count(&self) -> Vec<&Candidate> {
+        let mut v: Vec<&Candidate> = self.candidates.iter().collect();
+        v.sort_by_key(|c| c.n);
+        v
+    }
+}
+
+/// One selection's predicted held-out error over the prediction's worlds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SelectionRow {
+    /// `DETMAX`, `random`, `greedy D-optimal`.
+    pub name: &'static str,
+    /// Its O1 on the pool's Jacobian.
+    pub o1: f64,
+    /// The held-out median per world, mm (NaN: the world's calibration gave none).
+    pub per_world_mm: Vec<f64>,
+    /// Median over the worlds and its interval, mm.
+    pub median_mm: (f64, f64, f64),
+    /// P90 over the worlds and its interval, mm.
+    pub p90_mm: (f64, f64, f64),
+}
+
+/// DETMAX's set against a random and a greedy set of the same size from the same pool, each
+/// simulated on the same worlds (the prediction's: the same truth, world w's noise from the same
+/// stream).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    /// Confidence of the intervals.
+    pub confidence: f64,
+    /// DETMAX, random, greedy.
+    pub rows: Vec<SelectionRow>,
+}
+
+/// Confidence of the comparison's intervals when the plan names no objective.
+pub const COMPARISON_CONFIDENCE: f64 = 0.9;
+
+/// The distribution-free interval of the `p` quantile of `sorted` (finite, ascending) at
+/// `confidence` or more: the j-th and k-th smallest values with j and k from Binomial(n, p)
+/// (each tail at most (1 - confidence) / 2); an end no rank reaches is infinite.
+pub fn quantile_interval(sorted: &[f64], p: f64, confidence: f64) -> (f64, f64) {
+    use crate::study::interval::binomial_cdf;
+    let n = sorted.len();
+    let tail = (1.0 - confidence) / 2.0;
+    // Lower: the largest j with P(X <= j - 1) <= tail, X ~ Binomial(n, p) the values below the quantile.
+    let mut j = 0;
+    while j < n && binomial_cdf(j as u64, n as u64, p) <= tail {
+        j += 1;
+    }
+    // Upper: the smallest k with P(X <= k - 1) >= 1 - tail.
+    let k = (1..=n).find(|&k| binomial_cdf(k as u64 - 1, n as u64, p) >= 1.0 - tail);
+    (if j >= 1 { sorted[j - 1] } else { f64::NEG_INFINITY }, k.map_or(f64::INFINITY, |k| sorted[k - 1]))
 }
 
 /// Runs the plan (on the caller's rayon pool).
@@ -151,29 +242,157 @@ pub fn run(plan: &Plan) -> Result<Outcome, PlanError> {
         pool.qs.iter().enumerate().filter(|(i, _)| val.binary_search(i).is_err()).map(|(_, q)| *q).take(plan.pool).collect();
     let set = select::detmax_set(plan, &cell, &training)?;
     let jac = select::pool_jacobian(plan, &cell, &training, &set)?;
-    let (chosen, o1) = select::choose(plan, &jac, plan.poses)?;
-    let random = {
-        let mut rng = crate::seeds::stream(plan.seed, crate::seeds::plan::RANDOM);
-        let mut s = rand::seq::index::sample(&mut rng, training.len(), plan.poses).into_vec();
-        s.sort_unstable();
-        crate::identify::detmax::o1_of(&jac, &s)
-    };
-    let mut rows: Vec<PoseRow> = chosen
+    let validation_rows: Vec<PoseRow> = val
         .iter()
         .enumerate()
-        .map(|(k, &i)| PoseRow { label: format!("p{:03}", k + 1), session: TRAINING, split: TRAIN, q: training[i] })
+        .map(|(k, &i)| PoseRow { label: format!("v{:03}", k + 1), session: TRAINING, split: VALIDATION, q: pool.qs[i] })
         .collect();
-    rows.extend(val.iter().enumerate().map(|(k, &i)| PoseRow {
-        label: format!("v{:03}", k + 1),
-        session: TRAINING,
-        split: VALIDATION,
-        q: pool.qs[i],
-    }));
+    let rows_of = |chosen: &[usize]| -> Vec<PoseRow> {
+        let mut rows: Vec<PoseRow> = chosen
+            .iter()
+            .enumerate()
+            .map(|(k, &i)| PoseRow { label: format!("p{:03}", k + 1), session: TRAINING, split: TRAIN, q: training[i] })
+            .collect();
+        rows.extend(validation_rows.iter().cloned());
+        rows
+    };
+    let search = match &plan.objective {
+        None => None,
+        Some(o) => {
+            let mut every = rows_of(&(0..training.len()).collect::<Vec<_>>());
+            for (k, r) in every.iter_mut().enumerate().take(training.len()) {
+                r.label = format!("q{:04}", k + 1);
+            }
+            let (reference, noise_mm) = pilot(plan, &cell, &every)?;
+            let score = |n: usize| -> Result<Candidate, PlanError> {
+                let (chosen, _) = select::choose(plan, &jac, n)?;
+                let stats = worlds_at(plan, &reference, noise_mm, &rows_of(&chosen))?;
+                let successes = stats.iter().filter(|s| s.is_some_and(|s| o.statistic.of_stats(&s) <= o.threshold_mm)).count();
+                let lower = crate::study::interval::clopper_pearson_lower(successes as f64, stats.len() as f64, o.confidence);
+                Ok(Candidate { n, successes, worlds: stats.len(), lower, meets: lower >= o.success_at_least })
+            };
+            Some(search(o, score)?)
+        }
+    };
+    let poses = search.as_ref().map_or(plan.poses, |s| s.planned);
+    let (chosen, o1) = select::choose(plan, &jac, poses)?;
+    let random_set = {
+        let mut rng = crate::seeds::stream(plan.seed, crate::seeds::plan::RANDOM);
+        let mut s = rand::seq::index::sample(&mut rng, training.len(), poses).into_vec();
+        s.sort_unstable();
+        s
+    };
+    let random = crate::identify::detmax::o1_of(&jac, &random_set);
+    let rows = rows_of(&chosen);
     let qs: Vec<Joints> = rows.iter().map(|r| r.q).collect();
     let tour = select::tour(&cell, &qs);
     let colliding_moves = select::colliding_moves(&cell, &qs, &tour.0);
-    let prediction = predict(plan, &cell, &rows)?;
-    Ok(Outcome { pool, rows, o1: (o1, random), detmax_params: set.names(), tour, colliding_moves, prediction })
+    let (prediction, pilot_c) = predict_with_pilot(plan, &cell, &rows)?;
+    let comparison = if plan.compare {
+        let confidence = plan.objective.as_ref().map_or(COMPARISON_CONFIDENCE, |o| o.confidence);
+        let greedy = select::greedy(&jac, poses);
+        let row = |name: &'static str, o1: f64, per_world_mm: Vec<f64>| {
+            let sorted = crate::study::stats::finite_sorted(&per_world_mm);
+            let (m0, m1) = quantile_interval(&sorted, 0.5, confidence);
+            let (p0, p1) = quantile_interval(&sorted, 0.9, confidence);
+            let q = |p: f64| crate::numeric::quantile(&sorted, p);
+            SelectionRow { name, o1, per_world_mm, median_mm: (q(0.5), m0, m1), p90_mm: (q(0.9), p0, p1) }
+        };
+        let medians = |set: &[usize]| -> Result<Vec<f64>, PlanError> {
+            Ok(worlds_at(plan, &pilot_c, prediction.noise_mm, &rows_of(set))?.iter().map(|s| s.map_or(f64::NAN, |s| s.median)).collect())
+        };
+        Some(Comparison {
+            confidence,
+            rows: vec![
+                row("DETMAX", o1, medians(&chosen)?),
+                row("random", random, medians(&random_set)?),
+                row("greedy D-optimal", crate::identify::detmax::o1_of(&jac, &greedy), medians(&greedy)?),
+            ],
+        })
+    } else {
+        None
+    };
+    Ok(Outcome { pool, rows, o1: (o1, random), detmax_params: set.names(), tour, colliding_moves, prediction, poses, search, comparison })
+}
+
+/// The objective's search: DETMAX's set of each count scored by `score`; counts doubled from the
+/// fewest until one meets the objective (or the most is reached), then bisected between the
+/// largest count that failed and the smallest that met it, down to adjacent counts.
+pub fn search(o: &spec::Objective, mut score: impl FnMut(usize) -> Result<Candidate, PlanError>) -> Result<Search, PlanError> {
+    let mut candidates: Vec<Candidate> = Vec::new();
+    let mut failed: Option<usize> = None;
+    let mut met: Option<usize> = None;
+    let mut n = o.fewest_poses;
+    loop {
+        let c = score(n)?;
+        let ok = c.meets;
+        candidates.push(c);
+        if ok {
+            met = Some(n);
+            break;
+        }
+        failed = Some(n);
+        if n >= o.most_poses {
+            break;
+        }
+        n = (2 * n).min(o.most_poses);
+    }
+    if let (Some(mut lo), Some(mut hi)) = (failed, met) {
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            let c = score(mid)?;
+            if c.meets {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+            candidates.push(c);
+        }
+        met = Some(hi);
+    }
+    let planned = met.unwrap_or_else(|| {
+        candidates.iter().max_by(|a, b| a.lower.total_cmp(&b.lower).then(b.n.cmp(&a.n))).expect("one candidate at least").n
+    });
+    Ok(Search { candidates, chosen: met, planned })
+}
+
+/// The held-out statistics per world of `rows` simulated on `reference`'s calibrated robot (the
+/// plan's worlds, seed and noise; the twin's effects where the robot file has them).
+fn worlds_at(
+    plan: &Plan,
+    reference: &crate::calibrate::Calibration,
+    noise_mm: f64,
+    rows: &[PoseRow],
+) -> Result<Vec<Option<crate::study::stats::ErrorStats>>, PlanError> {
+    let fail = |e: String| PlanError::new(&plan.path, "poses", format!("the plan's poses cannot be calibrated: {e}"));
+    // Positions are placeholders: every world replaces them.
+    let zeros: Vec<Vec<Vector3<f64>>> = rows.iter().map(|_| vec![Vector3::zeros(); plan.targets.len()]).collect();
+    let text = csv(plan, rows, Some(&zeros), &[]);
+    let m = crate::calibrate::measurements::parse(Path::new("(a candidate set of the plan)"), &text, &plan.robot)
+        .map_err(|e| fail(e.to_string()))?;
+    let effects = twin_effects(plan);
+    crate::calibrate::plan::simulate_at(
+        reference,
+        &m,
+        plan.worlds,
+        crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS),
+        Some(noise_mm),
+        effects.as_ref(),
+    )
+    .map(|(_, s)| s)
+    .map_err(|e| fail(e.to_string()))
+}
+
+/// The twin's effects drawn in every world of a prediction: the robot file's `[learned]` table
+/// (`None` when it has none or no effect).
+pub fn twin_effects(plan: &Plan) -> Option<crate::calibrate::plan::Effects> {
+    let l = plan.robot.learned.as_ref().filter(|l| !l.is_none())?;
+    Some(crate::calibrate::plan::Effects {
+        source: format!("the [learned] table of {}", plan.robot_name),
+        unmodelled: crate::robot::UnmodelledSpec::default(),
+        repeatability_mm: l.repeatability_mm,
+        learned: Some(l.clone()),
+    })
 }
 
 /// The measurement file of `rows` at every target: `positions` (per row, per target, mm) or
@@ -224,13 +443,34 @@ pub fn measure(plan: &Plan, cell: &Cell, rows: &[PoseRow], key: u64) -> Result<(
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
     let mut st = KinState::default();
     let mut sigmas = Vec::new();
-    let positions = rows
+    // The twin's effects: one robot drawn from the plan's seed (the same for the pilot and
+    // `--simulate`), its moves' noise from a stream of `key`; the rows visited in order from the
+    // middle of the limits.
+    let links: Vec<Joints> = match twin_effects(plan) {
+        None => rows.iter().map(|r| r.q).collect(),
+        Some(e) => {
+            let mid: Joints = std::array::from_fn(|i| 0.5 * (plan.limits[i].min + plan.limits[i].max));
+            let mut draw = crate::seeds::stream(plan.seed, crate::seeds::plan::TWIN);
+            let robot = crate::robot::VirtualRobot::new(placed[0].clone(), &e.unmodelled, e.repeatability_mm, &mid, &mut draw)
+                .with_learned(e.learned.as_ref(), &mut draw);
+            let mut moves = crate::seeds::stream(crate::seeds::split_seed(plan.seed, crate::seeds::plan::TWIN), key);
+            let mut from = mid;
+            rows.iter()
+                .map(|r| {
+                    let l = robot.link_angles(&r.q, &from, &mut moves);
+                    from = r.q;
+                    l
+                })
+                .collect()
+        }
+    };
+    let positions = links
         .iter()
-        .map(|r| {
+        .map(|l| {
             placed
                 .iter()
                 .map(|m| {
-                    let p = forward(m, &mut st, &r.q);
+                    let p = forward(m, &mut st, l);
                     let s = plan.tracker.sigma_mm((cell.tracker() - p).norm());
                     sigmas.push(s);
                     p + Vector3::from_fn(|_, _| s * unit.sample(&mut rng))
@@ -257,6 +497,13 @@ pub fn calibrate_options(plan: &Plan) -> Options {
 /// calibrated by `calibrate::run`), then `calibrate::plan::simulate` over the plan's worlds with
 /// the tracker's noise (the calibrated pilot robot taken as the truth in each world).
 pub fn predict(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<Prediction, PlanError> {
+    Ok(predict_with_pilot(plan, cell, rows)?.0)
+}
+
+/// The pilot world at `rows`: the robot file's truth (with the twin's effects where it has them)
+/// measured with the tracker's noise and calibrated; with the tracker's noise pooled per
+/// coordinate, mm.
+fn pilot(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<(crate::calibrate::Calibration, f64), PlanError> {
     let (positions, sigmas) = measure(plan, cell, rows, crate::seeds::plan::PILOT)?;
     let text = csv(plan, rows, Some(&positions), &[]);
     let pilot_path = Path::new("(the plan's pilot world)");
@@ -264,27 +511,31 @@ pub fn predict(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<Prediction,
     let m = crate::calibrate::measurements::parse(pilot_path, &text, &plan.robot).map_err(|e| fail(e.to_string()))?;
     let c = crate::calibrate::run(&plan.robot, &m, &calibrate_options(plan)).map_err(|e| fail(e.to_string()))?;
     let noise_mm = (sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len() as f64).sqrt();
-    let sim = crate::calibrate::plan::simulate(
-        &c,
-        plan.worlds,
-        Statistic::Median,
-        crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS),
-        Some(noise_mm),
-        None,
-    )
-    .map_err(|e| fail(e.to_string()))?;
-    let sorted = crate::study::stats::finite_sorted(&sim.per_world_mm);
+    Ok((c, noise_mm))
+}
+
+/// [`predict`], with the pilot world's calibration (the truth of every world).
+pub fn predict_with_pilot(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<(Prediction, crate::calibrate::Calibration), PlanError> {
+    let (c, noise_mm) = pilot(plan, cell, rows)?;
+    let effects = twin_effects(plan);
+    let seed = crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS);
+    let (_, stats) = crate::calibrate::plan::simulate_at(&c, &c.measurements, plan.worlds, seed, Some(noise_mm), effects.as_ref())
+        .map_err(|e| PlanError::new(&plan.path, "poses", format!("the plan's poses cannot be calibrated: {e}")))?;
+    let per_world_mm: Vec<f64> = stats.iter().map(|s| s.map_or(f64::NAN, |s| Statistic::Median.of_stats(&s))).collect();
+    let sorted = crate::study::stats::finite_sorted(&per_world_mm);
     let q = |p: f64| crate::numeric::quantile(&sorted, p);
     let unidentifiable = c.models.iter().rev().find(|r| r.kind.is_some()).map(|r| r.unidentifiable.clone()).unwrap_or_default();
-    Ok(Prediction {
+    let prediction = Prediction {
         pilot_chosen: c.chosen().kind.map_or("before", |k| k.name()),
         pilot_median_mm: Statistic::Median.of(&c).unwrap_or(f64::NAN),
         noise_mm,
         worlds: sorted.len(),
         quantiles_mm: [q(0.1), q(0.5), q(0.9)],
-        per_world_mm: sim.per_world_mm,
+        per_world_mm,
         unidentifiable,
-    })
+        twin: twin_effects(plan).is_some(),
+    };
+    Ok((prediction, c))
 }
 
 /// The plain joint list: one line per pose, label, split and the controller's joint values in
@@ -340,7 +591,7 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
         o.pool.tried,
         select::refusals(&o.pool)
     );
-    let _ = writeln!(s, "- Training: {} poses chosen by DETMAX from {} (session {TRAINING} in `poses.csv`).", plan.poses, plan.pool);
+    let _ = writeln!(s, "- Training: {} poses chosen by DETMAX from {} (session {TRAINING} in `poses.csv`).", o.poses, plan.pool);
     let _ = writeln!(
         s,
         "- Validation: {} poses spread over the workspace of interest (marked `{VALIDATION}` in the `split` column of `poses.csv`: `calsim calibrate` holds them out).",
@@ -369,6 +620,12 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
                 .join(", ")
         }
     );
+    if let (Some(obj), Some(search)) = (&plan.objective, &o.search) {
+        objective_markdown(&mut s, plan, obj, search);
+    }
+    if let Some(c) = &o.comparison {
+        comparison_markdown(&mut s, plan, o, c);
+    }
     let _ = writeln!(s, "## Parameters the plan cannot identify\n");
     if p.unidentifiable.is_empty() {
         let _ = writeln!(s, "None of the {} model's parameters.\n", plan.model.name());
@@ -392,17 +649,29 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     );
     let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | pilot world, mm | model chosen in the pilot |\n|---|---|---|---|---|");
     let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {:.4} | {} |\n", p.pilot_median_mm, p.pilot_chosen);
-    if p.pilot_median_mm > c {
+    if p.pilot_median_mm > c && plan.robot.truth.is_empty() && !p.twin {
+        let _ = writeln!(
+            s,
+            "The pilot world lies above P90: the robot file gives no `[truth]`, so the pilot measured its nominal, which the model describes completely; the pilot is one noise draw, and one in ten lies above P90.\n"
+        );
+    } else if p.pilot_median_mm > c {
         let _ = writeln!(
             s,
             "The pilot world lies above P90: the robot file's truth holds what the {} model does not describe (its calibrated robot, the worlds' truth, does not): a richer model would calibrate that robot better.\n",
             plan.model.name()
         );
     }
-    let _ = writeln!(
-        s,
-        "A robot the model describes completely, measured with this noise, calibrates to this. Effects outside the model (gear harmonics, backlash, temperature) add to it: `calsim calibrate --plan-worlds N` on the measured file says whether the robot does.\n"
-    );
+    if p.twin {
+        let _ = writeln!(
+            s,
+            "The robot file is a twin: its `[learned]` table's effects (drawn once per world from their fitted spread) are in the pilot world and in every world, so the figures carry what its calibration learned beyond the model.\n"
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "A robot the model describes completely, measured with this noise, calibrates to this. Effects outside the model (gear harmonics, backlash, temperature) add to it: `calsim calibrate --plan-worlds N` on the measured file says whether the robot does.\n"
+        );
+    }
     let _ = writeln!(s, "## Files\n");
     let _ = writeln!(
         s,
@@ -410,5 +679,79 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     );
     let _ = writeln!(s, "- `joints.txt`: the same poses as a plain joint list.");
     let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
+    let _ = writeln!(
+        s,
+        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the tracker, the robot's base and the workspace of interest.",
+        plot::STEM
+    );
     s
+}
+
+/// The objective's section of `plan.md`: P(success) against the count of poses, and the rule.
+fn objective_markdown(s: &mut String, plan: &Plan, obj: &spec::Objective, search: &Search) {
+    let pct = |x: f64| format!("{}", (x * 1000.0).round() / 10.0);
+    let _ = writeln!(s, "## Number of poses by objective\n");
+    let _ = writeln!(
+        s,
+        "Objective: P(held-out {} <= {} mm) >= {} at {} % confidence, a world's held-out {} taken over the validation poses (the workspace of interest). P(success) is bounded below by the one-sided Clopper-Pearson bound over {} simulated worlds (a world whose calibration gives no value counts as a failure). Every count is DETMAX's set of that size from the same pool, scored on the same worlds: the robot file's truth measured at the whole pool (training and validation poses) and calibrated is every world's truth, and world w's noise comes from the same stream for every count. Counts doubled from {} (the model's parameters with a base and a tool) up to at most {}, then bisected between the largest that failed and the smallest that met it.\n",
+        obj.statistic.name(),
+        obj.threshold_mm,
+        obj.success_at_least,
+        pct(obj.confidence),
+        obj.statistic.name(),
+        plan.worlds,
+        obj.fewest_poses,
+        obj.most_poses
+    );
+    let _ =
+        writeln!(s, "| poses | successes / worlds | P(success) | lower bound ({} %) | meets |\n|---|---|---|---|---|", pct(obj.confidence));
+    for c in search.by_count() {
+        let _ = writeln!(
+            s,
+            "| {} | {} / {} | {:.3} | {:.4} | {} |",
+            c.n,
+            c.successes,
+            c.worlds,
+            c.successes as f64 / c.worlds.max(1) as f64,
+            c.lower,
+            if c.meets { "yes" } else { "no" }
+        );
+    }
+    s.push('\n');
+    match search.chosen {
+        Some(n) => {
+            let _ = writeln!(s, "Chosen: {n} poses, the smallest count in the table whose lower bound clears {}.\n", obj.success_at_least);
+        }
+        None => {
+            let best = search.candidates.iter().find(|c| c.n == search.planned).expect("the planned count was scored");
+            let _ = writeln!(
+                s,
+                "Not met: no count up to {} clears {}; planned with the best found, {} poses (lower bound {:.4}). More worlds, a lower threshold's demand, a larger `most_poses` or another instrument placement may reach it.\n",
+                obj.most_poses, obj.success_at_least, best.n, best.lower
+            );
+        }
+    }
+}
+
+/// The comparison's section of `plan.md`.
+fn comparison_markdown(s: &mut String, plan: &Plan, o: &Outcome, c: &Comparison) {
+    let pct = format!("{}", (c.confidence * 1000.0).round() / 10.0);
+    let iv = |(v, a, b): (f64, f64, f64)| {
+        let end = |x: f64| if x.is_finite() { format!("{x:.4}") } else { "unbounded".to_string() };
+        format!("{v:.4} ({}-{})", end(a), end(b))
+    };
+    let _ = writeln!(s, "## DETMAX against random and greedy selection\n");
+    let _ = writeln!(
+        s,
+        "The same {} training poses chosen three ways from the same pool of {}, each with the same validation poses and simulated on the same {} worlds (the pilot world's calibrated robot as every world's truth, world w's noise from the same stream): DETMAX, a uniform random set, and a greedy D-optimal set (each step adds the pose that raises the determinant of the information matrix most). The figures are over the worlds of each world's held-out median, with distribution-free {pct} % intervals (order statistics).\n",
+        o.poses, plan.pool, plan.worlds
+    );
+    let _ = writeln!(
+        s,
+        "| selection | O1 | median over worlds, mm ({pct} % interval) | P90 over worlds, mm ({pct} % interval) |\n|---|---|---|---|"
+    );
+    for r in &c.rows {
+        let _ = writeln!(s, "| {} | {:.6} | {} | {} |", r.name, r.o1, iv(r.median_mm), iv(r.p90_mm));
+    }
+    s.push('\n');
 }

@@ -192,3 +192,49 @@ pub fn colliding_moves(cell: &Cell, qs: &[Joints], order: &[usize]) -> Vec<(usiz
         .flatten()
         .collect()
 }
+
+/// Ridge of the greedy selection's information matrix (scaled columns), so its first steps, below
+/// full rank, still rank the poses.
+const GREEDY_RIDGE: f64 = 1e-8;
+
+/// A greedy D-optimal set of `n` of the pool (sequential: each step adds the configuration that
+/// raises `det(ridge I + sum J_k^T J_k)` most, the smallest index among equals). Returns pool
+/// indices, ascending.
+pub fn greedy(jac: &PoolJacobian, n: usize) -> Vec<usize> {
+    use nalgebra::{DMatrix, Matrix3};
+    let m = jac.m;
+    let mut info = DMatrix::<f64>::identity(m, m) * GREEDY_RIDGE;
+    let mut taken = vec![false; jac.len];
+    let mut chosen = Vec::with_capacity(n);
+    for _ in 0..n.min(jac.len) {
+        let inv = info.clone().cholesky().map_or_else(|| DMatrix::identity(m, m), |c| c.inverse());
+        // det(M + J_k^T J_k) / det(M) = det(I_3 + J_k M^-1 J_k^T).
+        let gain = |k: usize| -> f64 {
+            let jk = jac.j.rows(3 * k, 3);
+            let s = jk * &inv * jk.transpose();
+            (Matrix3::identity() + Matrix3::from_fn(|r, c| s[(r, c)])).determinant()
+        };
+        let best = (0..jac.len)
+            .into_par_iter()
+            .filter(|&k| !taken[k])
+            .map(|k| (k, gain(k)))
+            .reduce_with(|a, b| match a.1.total_cmp(&b.1) {
+                std::cmp::Ordering::Less => b,
+                std::cmp::Ordering::Greater => a,
+                std::cmp::Ordering::Equal => {
+                    if a.0 <= b.0 {
+                        a
+                    } else {
+                        b
+                    }
+                }
+            })
+            .expect("a configuration left");
+        taken[best.0] = true;
+        chosen.push(best.0);
+        let jk = jac.j.rows(3 * best.0, 3);
+        info += jk.transpose() * jk;
+    }
+    chosen.sort_unstable();
+    chosen
+}

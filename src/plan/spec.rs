@@ -8,6 +8,7 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 use crate::calibrate::ModelKind;
+use crate::calibrate::plan::Statistic;
 use crate::instrument::laser_tracker::LaserTrackerSpec;
 use crate::robot::file::RobotFile;
 use crate::robot::{JOINTS, JointLimit, ParamSet};
@@ -46,7 +47,7 @@ const MOST_MM: f64 = 100_000.0;
 struct Raw {
     robot: String,
     model: String,
-    poses: usize,
+    poses: Option<usize>,
     pool: usize,
     #[serde(default)]
     validation: usize,
@@ -57,6 +58,24 @@ struct Raw {
     tracker: RawTracker,
     target: Vec<RawTarget>,
     cell: RawCell,
+    objective: Option<RawObjective>,
+    #[serde(default)]
+    compare: bool,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObjective {
+    statistic: String,
+    threshold_mm: f64,
+    success_at_least: f64,
+    #[serde(default = "ninety")]
+    confidence: f64,
+    most_poses: Option<usize>,
+}
+
+fn ninety() -> f64 {
+    0.9
 }
 
 fn one() -> u64 {
@@ -190,6 +209,31 @@ impl BoxMm {
     }
 }
 
+/// The number of poses by objective: the smallest count whose worlds show
+/// `P(statistic <= threshold_mm) >= success_at_least` at `confidence` (the one-sided lower
+/// Clopper-Pearson bound over the worlds).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Objective {
+    /// The held-out statistic of a world.
+    pub statistic: Statistic,
+    /// A world succeeds when its statistic is at most this, mm.
+    pub threshold_mm: f64,
+    /// The probability of success the lower bound must reach.
+    pub success_at_least: f64,
+    /// Confidence of the lower bound.
+    pub confidence: f64,
+    /// The fewest poses tried (the model's parameters with a base and a tool).
+    pub fewest_poses: usize,
+    /// The most poses tried.
+    pub most_poses: usize,
+}
+
+/// The held-out statistics an objective may name.
+pub const OBJECTIVE_STATISTICS: [Statistic; 4] = [Statistic::Max, Statistic::P95, Statistic::Median, Statistic::Rms];
+
+/// Most a threshold may be, mm.
+const MOST_THRESHOLD_MM: f64 = 1000.0;
+
 /// A checked plan.
 #[derive(Clone, Debug)]
 pub struct Plan {
@@ -203,8 +247,12 @@ pub struct Plan {
     pub limits: [JointLimit; JOINTS],
     /// The calibrate model whose parameters the poses are chosen for.
     pub model: ModelKind,
-    /// Training poses.
+    /// Training poses (with an objective: the fewest its search tries).
     pub poses: usize,
+    /// The number of poses by objective (`None`: `poses` fixed).
+    pub objective: Option<Objective>,
+    /// Also compare DETMAX's set with a random and a greedy one on the same worlds.
+    pub compare: bool,
     /// Feasible configurations DETMAX chooses from.
     pub pool: usize,
     /// Validation poses (0: none).
@@ -297,18 +345,34 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
         .ok_or_else(|| err("model", format!("\"{}\" is not a calibrate model (offsets, geometric, compliance)", raw.model)))?;
     // Sizes.
     let m = unknowns(model);
-    if raw.poses < m {
+    if !(1..=MOST_WORLDS).contains(&raw.worlds) {
+        return Err(err("worlds", format!("{}: 1 to {MOST_WORLDS}", raw.worlds)));
+    }
+    let objective = match &raw.objective {
+        None => None,
+        Some(o) => Some(objective(path, o, raw.poses, raw.pool, raw.worlds, m)?),
+    };
+    let poses = match (raw.poses, &objective) {
+        (Some(n), None) => n,
+        (None, Some(o)) => o.fewest_poses,
+        (None, None) => return Err(err("poses", "missing: a count of training poses, or an [objective] that sets it".into())),
+        (Some(_), Some(_)) => {
+            return Err(err("poses", "and [objective] both set the count of training poses: give one of them".into()));
+        }
+    };
+    let raw_poses = poses;
+    if raw_poses < m {
         return Err(err(
             "poses",
             format!(
                 "{} is below the {m} parameters of the {} model with a base and a tool (its robot parameters, 6, 3)",
-                raw.poses,
+                raw_poses,
                 model.name()
             ),
         ));
     }
-    if raw.poses > MOST_POSES {
-        return Err(err("poses", format!("{} is above {MOST_POSES}", raw.poses)));
+    if raw_poses > MOST_POSES {
+        return Err(err("poses", format!("{} is above {MOST_POSES}", raw_poses)));
     }
     if raw.validation != 0 && !(FEWEST_VALIDATION..=MOST_POSES).contains(&raw.validation) {
         return Err(err(
@@ -316,11 +380,14 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
             format!("{}: 0 (none) or {FEWEST_VALIDATION} to {MOST_POSES} (a held-out session fixes its own frame)", raw.validation),
         ));
     }
-    if raw.pool <= raw.poses || raw.pool > MOST_POOL {
-        return Err(err("pool", format!("{}: more than the {} poses, at most {MOST_POOL}", raw.pool, raw.poses)));
+    if objective.is_some() && raw.validation == 0 {
+        return Err(err(
+            "validation",
+            "0: an [objective] is judged on the held-out errors of the validation poses (the workspace of interest); set validation".into(),
+        ));
     }
-    if !(1..=MOST_WORLDS).contains(&raw.worlds) {
-        return Err(err("worlds", format!("{}: 1 to {MOST_WORLDS}", raw.worlds)));
+    if raw.pool <= raw_poses || raw.pool > MOST_POOL {
+        return Err(err("pool", format!("{}: more than the {} poses, at most {MOST_POOL}", raw.pool, raw_poses)));
     }
     // Tracker.
     let t = &raw.tracker;
@@ -457,7 +524,9 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
         robot,
         limits,
         model,
-        poses: raw.poses,
+        poses,
+        objective,
+        compare: raw.compare,
         pool: raw.pool,
         validation: raw.validation,
         seed: raw.seed,
@@ -467,5 +536,55 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
         floor_z_mm: c.floor_z_mm,
         keep_out,
         workspace,
+    })
+}
+
+/// Checks `[objective]`: a statistic by name, a threshold within (0, 1000] mm, a probability
+/// below 1 that `worlds` worlds can show at the confidence, a confidence within [0.5, 0.999], a
+/// most poses between the model's count and the pool's.
+fn objective(path: &Path, o: &RawObjective, poses: Option<usize>, pool: usize, worlds: usize, m: usize) -> Result<Objective, PlanError> {
+    let err = |key: &str, message: String| PlanError::new(path, key, message);
+    let names: Vec<&str> = OBJECTIVE_STATISTICS.iter().map(|s| s.name()).collect();
+    let statistic = OBJECTIVE_STATISTICS.into_iter().find(|s| s.name() == o.statistic).ok_or_else(|| {
+        err("objective.statistic", format!("\"{}\" is not a held-out statistic ({})", o.statistic.escape_default(), names.join(", ")))
+    })?;
+    if !(o.threshold_mm.is_finite() && o.threshold_mm > 0.0 && o.threshold_mm <= MOST_THRESHOLD_MM) {
+        return Err(err("objective.threshold_mm", format!("{}: within (0, {MOST_THRESHOLD_MM}] mm", o.threshold_mm)));
+    }
+    if !(o.confidence.is_finite() && (0.5..=0.999).contains(&o.confidence)) {
+        return Err(err("objective.confidence", format!("{}: within [0.5, 0.999]", o.confidence)));
+    }
+    if !(o.success_at_least.is_finite() && o.success_at_least > 0.0 && o.success_at_least < 1.0) {
+        return Err(err("objective.success_at_least", format!("{}: a probability within (0, 1)", o.success_at_least)));
+    }
+    // Every world a success gives the lower bound (1 - confidence)^(1 / worlds), the most it can show.
+    let most = crate::study::interval::clopper_pearson_lower(worlds as f64, worlds as f64, o.confidence);
+    if o.success_at_least > most {
+        let need = ((1.0 - o.confidence).ln() / o.success_at_least.ln()).ceil();
+        return Err(err(
+            "objective.success_at_least",
+            format!(
+                "{} cannot be shown by {worlds} worlds at {} confidence (all {worlds} succeeding show at most {most:.4}): set worlds to {need} or more",
+                o.success_at_least, o.confidence
+            ),
+        ));
+    }
+    if poses.is_some() {
+        return Err(err("poses", "and [objective] both set the count of training poses: give one of them".into()));
+    }
+    let most_poses = o.most_poses.unwrap_or_else(|| pool.saturating_sub(1).min(MOST_POSES));
+    if most_poses < m || most_poses >= pool || most_poses > MOST_POSES {
+        return Err(err(
+            "objective.most_poses",
+            format!("{most_poses}: at least the model's {m} parameters, below the pool ({pool}), at most {MOST_POSES}"),
+        ));
+    }
+    Ok(Objective {
+        statistic,
+        threshold_mm: o.threshold_mm,
+        success_at_least: o.success_at_least,
+        confidence: o.confidence,
+        fewest_poses: m,
+        most_poses,
     })
 }
