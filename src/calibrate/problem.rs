@@ -248,8 +248,11 @@ impl Problem<'_> {
             let mut local_b = DVector::zeros(used);
             for start in (0..members.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(members.len());
-                let mut jl = DMatrix::zeros(3 * (end - start), used);
-                let mut rl = DVector::zeros(3 * (end - start));
+                let rows = 3 * (end - start);
+                let mut jl = DMatrix::zeros(rows, used);
+                let mut rl = DVector::zeros(rows);
+                // Column-major: column u of the block is contiguous.
+                let block = jl.as_mut_slice();
                 for k in start..end {
                     let o = &self.obs[members[k].1];
                     let e = (o.measured_mm - tcps[k]) / o.sigma;
@@ -257,8 +260,8 @@ impl Problem<'_> {
                         let row = 3 * (k - start) + a;
                         rl[row] = e[a];
                         let jrow = &jt[(3 * k + a) * p..(3 * k + a + 1) * p];
-                        for u in 0..used {
-                            jl[(row, u)] = jrow[slot[u]] / o.sigma;
+                        for (u, &c) in slot[..used].iter().enumerate() {
+                            block[u * rows + row] = jrow[c] / o.sigma;
                         }
                     }
                 }
