@@ -44,7 +44,7 @@ fn every_key_of_every_file_has_a_note_and_every_note_names_a_key() {
 #[test]
 fn the_reference_holds_every_key_the_defaults_and_the_shipped_scenarios_set() {
     let shipped = [
-        ("trical", vec!["irb120_trical.toml", "ci_quick.toml", "kr6r900sixx_trical.toml", "lrmate200ic_trical.toml"]),
+        ("trical", vec!["irb120_trical.toml", "ci_quick.toml", "kr6r900sixx_trical.toml", "lrmate200ic_trical.toml", "irb120_twin.toml"]),
         ("spms", vec!["er20c10_spms.toml", "er20c10_spms_one_station.toml"]),
         ("tracker", vec!["irb120_tracker.toml"]),
     ];
@@ -75,7 +75,7 @@ fn the_reference_holds_every_key_the_defaults_and_the_shipped_scenarios_set() {
     let missing: Vec<_> = set.iter().filter(|k| !known.contains(*k)).collect();
     assert!(missing.is_empty(), "sweep keys not in the reference: {missing:?}");
     let mut set = BTreeSet::new();
-    for f in ["irb120.toml", "er20c10.toml", "kr6r900sixx.toml", "lrmate200ic.toml"] {
+    for f in ["irb120.toml", "er20c10.toml", "kr6r900sixx.toml", "lrmate200ic.toml", "examples/irb120_twin.toml"] {
         let text = std::fs::read_to_string(common::repo().join("robots").join(f)).expect("a robot file");
         let mut t: toml::Table = text.parse().expect("TOML");
         // [truth] and [std] hold parameter names, not keys of the file.

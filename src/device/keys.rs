@@ -209,6 +209,7 @@ fn lookup<'a>(t: &'a toml::Table, dotted: &str) -> Option<&'a toml::Value> {
 /// Units by the ending of a key's name, longest first (the project's rule: the unit in the name).
 const UNITS: &[(&str, &str)] = &[
     ("_mdeg_per_nm", "mdeg/(N m)"),
+    ("_mdeg_per_m", "mdeg/m"),
     ("_pct_fs_per_c", "% of full scale per degC"),
     ("_um_per_m", "um/m"),
     ("_mm_per_m", "mm/m"),
@@ -315,6 +316,7 @@ mod tests {
     fn units_come_from_the_key_names() {
         assert_eq!(unit("robot.unmodelled.transmission_high_mdeg"), "mdeg");
         assert_eq!(unit("robot.spread.compliance_mdeg_per_nm"), "mdeg/(N m)");
+        assert_eq!(unit("learned.sag_mdeg_per_m"), "mdeg/m");
         assert_eq!(unit("expect.after_median_mm.value"), "mm");
         assert_eq!(unit("expect.after_median_mm.tolerance"), "-");
         assert_eq!(unit("study.repetitions"), "-");

@@ -385,6 +385,65 @@ pub fn load_arm(scenario: &Path, file: Option<&Path>) -> Result<Option<crate::ro
     Ok(Some(crate::robot::file::Arm(std::sync::Arc::new(arm))))
 }
 
+/// Whether the scenario table `t`, as written, sets `robot.repeatability_mm`.
+pub fn sets_repeatability(t: &toml::Table) -> bool {
+    t.get("robot").and_then(toml::Value::as_table).is_some_and(|r| r.contains_key("repeatability_mm"))
+}
+
+/// The robot a scenario draws from a twin (a robot file with a `[learned]` table, see
+/// [`crate::robot::learned`]): the learned effects, each amplitude and spread times the scenario's
+/// `robot.learned_scale`, drawn in every world on top of the scenario's own `[robot.unmodelled]`
+/// effects; and the repeatability of its moves: the twin's learned `repeatability_mm` where it is
+/// above zero and the scenario does not set `robot.repeatability_mm` (`sets_repeatability`, see
+/// [`sets_repeatability`]: a scenario that sets it runs a what-if on the measured robot). `most_rp_mm` is the scenario's
+/// bound on a repeatability; a twin's above it is refused, naming the scenario, `robot.file`, the
+/// robot file and `learned.repeatability_mm`. A scale other than 1 without a twin is refused.
+pub fn twin(
+    sets_repeatability: bool,
+    arm: Option<&crate::robot::file::Arm>,
+    scale: f64,
+    most_rp_mm: f64,
+    shown: &str,
+) -> Result<(Option<crate::robot::learned::LearnedEffects>, Option<f64>), ScenarioError> {
+    let learned = arm.and_then(|a| a.0.learned.as_ref().map(|l| (a, l)));
+    let Some((arm, l)) = learned else {
+        if scale != 1.0 {
+            return Err(ScenarioError::Parse {
+                path: shown.into(),
+                key: "robot.learned_scale".into(),
+                message: format!("{scale}: the robot has no learned effects to scale (its robot file has no [learned] table)"),
+            });
+        }
+        return Ok((None, None));
+    };
+    let repeatability = (!sets_repeatability && l.repeatability_mm > 0.0).then_some(l.repeatability_mm);
+    if let Some(rp) = repeatability.filter(|&rp| rp > most_rp_mm) {
+        return Err(ScenarioError::Parse {
+            path: shown.into(),
+            key: "robot.file".into(),
+            message: format!(
+                "{}: learned.repeatability_mm: {rp} mm: above the {most_rp_mm} mm a scenario's robot takes",
+                arm.0.path.display()
+            ),
+        });
+    }
+    let mut effects = l.clone();
+    // The repeatability is the scenario's robot's own (above); the rest scales.
+    effects.repeatability_mm = 0.0;
+    effects.pose_error_mdeg *= scale;
+    for v in [&mut effects.backlash_mdeg, &mut effects.backlash_std_mdeg, &mut effects.sag_mdeg_per_m, &mut effects.sag_std_mdeg_per_m] {
+        for x in v.iter_mut() {
+            *x *= scale;
+        }
+    }
+    for h in &mut effects.harmonic {
+        h.sin_mdeg *= scale;
+        h.cos_mdeg *= scale;
+        h.std_mdeg *= scale;
+    }
+    Ok((Some(effects), repeatability))
+}
+
 /// `file` as named in the scenario at `scenario`: relative paths from the scenario's directory.
 pub fn relative_to(scenario: &Path, file: &Path) -> PathBuf {
     if file.is_absolute() { file.to_path_buf() } else { scenario.parent().unwrap_or(Path::new("")).join(file) }

@@ -33,15 +33,16 @@ pub struct Source {
     pub values: Vec<f64>,
 }
 
-/// The robot's unmodelled effects (and the payload change between the setups), sources of every
-/// device whose scenario sets them.
-const UNMODELLED: [ErrorSource; 6] = [
+/// The robot's unmodelled effects (and the payload change between the setups, and a twin's learned
+/// effects), sources of every device whose scenario sets them.
+const UNMODELLED: [ErrorSource; 7] = [
     ("transmission errors, high orders", &["robot.unmodelled.transmission_high_mdeg"], "mdeg"),
     ("encoder interpolation", &["robot.unmodelled.encoder_mdeg"], "mdeg"),
     ("payload change, setup 1 to setup 2", &["robot.validation_payload_change_kg"], "kg"),
     ("transmission errors, low orders", &["robot.unmodelled.transmission_low_mdeg"], "mdeg"),
     ("backlash", &["robot.unmodelled.backlash_mdeg"], "mdeg"),
     ("thermal drift", &["robot.unmodelled.thermal_drift_ppm"], "ppm"),
+    ("the twin's learned effects", &["robot.learned_scale"], "-"),
 ];
 
 fn number(v: &toml::Value) -> Option<f64> {
@@ -60,6 +61,26 @@ pub fn sources(device: &dyn crate::device::Device, t: &toml::Table) -> Vec<Sourc
             values.iter().any(|v| *v != 0.0).then_some(Source { label, keys, unit, values })
         })
         .collect()
+}
+
+/// Puts the sources of a twin (a robot file with a `[learned]` table) into the scenario table
+/// `t` where the scenario leaves them to the twin, at the values its worlds draw: the scale of the
+/// learned effects (1) and the twin's learned repeatability. Whether the robot file has learned
+/// effects (other than its repeatability).
+fn with_twin(t: &mut toml::Table, path: &Path) -> Result<bool, ScenarioError> {
+    let file = get_dotted(t, "robot.file").and_then(toml::Value::as_str).map(std::path::PathBuf::from);
+    let Some(arm) = scenario::load_arm(path, file.as_deref())? else { return Ok(false) };
+    let Some(learned) = arm.0.learned.as_ref() else { return Ok(false) };
+    let effects = crate::robot::learned::LearnedEffects { repeatability_mm: 0.0, ..learned.clone() };
+    if !effects.is_none() && get_dotted(t, "robot.learned_scale").is_none() {
+        let _ = set_dotted(t, "robot.learned_scale", toml::Value::Float(1.0));
+    }
+    // A repeatability beyond a scenario's range is left to the loader, which names the twin's key.
+    let rp = learned.repeatability_mm;
+    if rp > 0.0 && rp <= 1.0 && !scenario::sets_repeatability(t) {
+        let _ = set_dotted(t, "robot.repeatability_mm", toml::Value::Float(rp));
+    }
+    Ok(!effects.is_none())
 }
 
 /// One configuration of a budget: a label and a factor per source.
@@ -123,8 +144,12 @@ pub fn plan(
     what_if: &[f64],
     repetitions: Option<u32>,
 ) -> Result<(Vec<Source>, Vec<Config>, Sweep), BudgetError> {
-    let (text, base) = scenario::read_table(path)?;
-    let sources = sources(crate::device::device_of(&base, path)?, &base);
+    let (text, mut base) = scenario::read_table(path)?;
+    let device = crate::device::device_of(&base, path)?;
+    let twin = with_twin(&mut base, path)?;
+    let mut sources = sources(device, &base);
+    // A scale on learned effects is a source only where the robot file has them.
+    sources.retain(|s| twin || s.keys != ["robot.learned_scale"]);
     if sources.is_empty() {
         return Err(BudgetError::NoSource(path.display().to_string()));
     }

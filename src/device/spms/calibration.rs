@@ -43,9 +43,16 @@ pub struct ArmSpec {
     pub spread: crate::robot::SpreadSpec,
     /// The arm's robot file, relative to the scenario (absent: the built-in ER20-C10, Tables 4-5).
     pub file: Option<std::path::PathBuf>,
+    /// Factor on every amplitude and spread of the learned effects of a twin (a robot file with a
+    /// `[learned]` table): 0 leaves them out; a robot file without that table takes only 1.
+    pub learned_scale: f64,
     /// The loaded robot file (filled by the scenario loader).
     #[serde(skip)]
     pub arm: Option<crate::robot::file::Arm>,
+    /// The twin's learned effects as the worlds draw them, `learned_scale` applied (filled by the
+    /// scenario loader; `None`: the robot file has no `[learned]` table).
+    #[serde(skip)]
+    pub learned: Option<crate::robot::learned::LearnedEffects>,
 }
 
 impl Default for ArmSpec {
@@ -59,7 +66,9 @@ impl Default for ArmSpec {
             unmodelled: UnmodelledSpec::default(),
             spread: crate::robot::SpreadSpec::default(),
             file: None,
+            learned_scale: 1.0,
             arm: None,
+            learned: None,
         }
     }
 }
@@ -316,7 +325,10 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
         })
         .expect("valid");
     let reference_q: Joints = arm.repeatability_reference_q_deg.map(f64::to_radians);
-    let robot = VirtualRobot::new(truth, &arm.unmodelled, arm.repeatability_mm, &reference_q, &mut stream(seed, streams::ROBOT));
+    // The twin's learned effects are drawn after the scenario's own, from the same stream.
+    let robot_rng = &mut stream(seed, streams::ROBOT);
+    let robot = VirtualRobot::new(truth, &arm.unmodelled, arm.repeatability_mm, &reference_q, robot_rng)
+        .with_learned(arm.learned.as_ref(), robot_rng);
     // The controller plans in {S} of the nominal layout.
     let nominal_s_from_base = nominal_heads[0].inverse();
 

@@ -5,8 +5,11 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::device::scenario::{Checker, Header, ScenarioError, deserialize, load_arm, table, with_defaults};
+use crate::device::scenario::{Checker, Header, ScenarioError, deserialize, load_arm, sets_repeatability, table, twin, with_defaults};
 use crate::study::StudySpec;
+
+/// The largest repeatability a scenario's robot takes, mm (its own key's or a twin's).
+const MOST_REPEATABILITY_MM: f64 = 1.0;
 
 /// An SPMS scenario file as written.
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
@@ -69,6 +72,7 @@ pub fn parse(text: &str, path: &Path) -> Result<SpmsScenario, ScenarioError> {
 /// Loads and checks an SPMS scenario from its TOML table.
 pub fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<SpmsScenario, ScenarioError> {
     let shown = path.display().to_string();
+    let sets_rp = sets_repeatability(&t);
     let mut file: SpmsFile = deserialize(with_defaults(t, "study", super::study::STUDY_DEFAULTS), &shown)?;
     file.robot.arm = load_arm(path, file.robot.file.as_deref())?;
     let spec = super::study::SpmsSpec {
@@ -81,6 +85,12 @@ pub fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<SpmsScenar
     };
     check(&spec, &shown)?;
     expect(&Checker { path: &shown }, &file.expect)?;
+    let (learned, repeatability) = twin(sets_rp, spec.robot.arm.as_ref(), spec.robot.learned_scale, MOST_REPEATABILITY_MM, &shown)?;
+    let mut spec = spec;
+    spec.robot.learned = learned;
+    if let Some(rp) = repeatability {
+        spec.robot.repeatability_mm = rp;
+    }
     Ok(SpmsScenario { header: Header::new(path, text, file.seed), spec, expect: file.expect })
 }
 
@@ -134,7 +144,8 @@ pub fn check(f: &super::study::SpmsSpec, path: &str) -> Result<(), ScenarioError
         c.within("robot", &format!("sphere_flange_mm[{k}]"), *v, -500.0, 500.0, "sphere centre in the flange frame")?;
     }
     c.within("robot", "sphere_flange_error_mm", r.sphere_flange_error_mm, 0.0, 10.0, "tool error")?;
-    c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
+    c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, MOST_REPEATABILITY_MM, "ISO 9283 RP")?;
+    c.within("robot", "learned_scale", r.learned_scale, 0.0, 100.0, "factor on a twin's learned effects")?;
     for (k, v) in r.repeatability_reference_q_deg.iter().enumerate() {
         c.within("robot", &format!("repeatability_reference_q_deg[{k}]"), *v, -400.0, 400.0, "joint angle")?;
     }

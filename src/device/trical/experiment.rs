@@ -41,9 +41,16 @@ pub struct RobotSpec {
     pub validation_payload_change_kg: Option<f64>,
     /// The arm's robot file, relative to the scenario (absent: the built-in IRB 120 with Table 7).
     pub file: Option<std::path::PathBuf>,
+    /// Factor on every amplitude and spread of the learned effects of a twin (a robot file with a
+    /// `[learned]` table): 0 leaves them out; a robot file without that table takes only 1.
+    pub learned_scale: f64,
     /// The loaded robot file (filled by the scenario loader).
     #[serde(skip)]
     pub arm: Option<Arm>,
+    /// The twin's learned effects as the worlds draw them, `learned_scale` applied (filled by the
+    /// scenario loader; `None`: the robot file has no `[learned]` table).
+    #[serde(skip)]
+    pub learned: Option<crate::robot::learned::LearnedEffects>,
 }
 
 impl Default for RobotSpec {
@@ -59,7 +66,9 @@ impl Default for RobotSpec {
             nominal_base_mm_deg: Some(crate::robot::builtin::TRICAL_NOMINAL_BASE),
             validation_payload_change_kg: None,
             file: None,
+            learned_scale: 1.0,
             arm: None,
+            learned: None,
         }
     }
 }
@@ -184,13 +193,10 @@ impl ExperimentSpec {
             &self.robot.spread,
             &mut stream(seed, seeds::experiment::SPREAD),
         );
-        let robot = VirtualRobot::new(
-            truth,
-            &self.robot.unmodelled,
-            self.robot.repeatability_mm,
-            &reference,
-            &mut stream(seed, seeds::experiment::ROBOT),
-        );
+        // The twin's learned effects are drawn after the scenario's own, from the same stream.
+        let robot_rng = &mut stream(seed, seeds::experiment::ROBOT);
+        let robot = VirtualRobot::new(truth, &self.robot.unmodelled, self.robot.repeatability_mm, &reference, robot_rng)
+            .with_learned(self.robot.learned.as_ref(), robot_rng);
         let mut robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
         if let Some(dm) = self.robot.validation_payload_change_kg.filter(|dm| *dm != 0.0) {
             robot_validation.truth = robot_validation.truth.edited(|d| d.payload.mass_kg += dm).expect("a checked mass");
@@ -251,6 +257,7 @@ impl ExperimentSpec {
         let mut s = self.clone();
         s.robot.repeatability_mm = 0.0;
         s.robot.unmodelled = UnmodelledSpec::default();
+        s.robot.learned = None;
         s.robot.validation_payload_change_kg = None;
         s.cell.ball_diameter_tolerance_um = 0.0;
         s.cell.ballbar_sigma_um = 0.0;

@@ -9,10 +9,13 @@ use super::campaign::CampaignSpec;
 use super::experiment::{ExperimentSpec, RobotSpec};
 use super::figures::ExpectSpec;
 use crate::cell::CellSpec;
-use crate::device::scenario::{Checker, Header, ScenarioError, deserialize, load_arm, table};
+use crate::device::scenario::{Checker, Header, ScenarioError, deserialize, load_arm, sets_repeatability, table, twin};
 use crate::instrument::laser_tracker::LaserTrackerSpec;
 use crate::instrument::trical::TriCalSpec;
 use crate::study::StudySpec;
+
+/// The largest repeatability a scenario's robot takes, mm (its own key's or a twin's).
+const MOST_REPEATABILITY_MM: f64 = 1.0;
 
 /// A scenario file as written.
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
@@ -87,6 +90,7 @@ pub fn parse(text: &str, path: &Path) -> Result<TricalScenario, ScenarioError> {
 /// Loads and checks a TriCal scenario from its TOML table.
 pub fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<TricalScenario, ScenarioError> {
     let shown = path.display().to_string();
+    let sets_rp = sets_repeatability(&t);
     let mut file: ScenarioFile = deserialize(t, &shown)?;
     file.robot.arm = load_arm(path, file.robot.file.as_deref())?;
     if let Some(crate::robot::file::Arm(arm)) = &file.robot.arm
@@ -102,6 +106,11 @@ pub fn parse_table(text: &str, t: toml::Table, path: &Path) -> Result<TricalScen
         });
     }
     check(&file, &shown)?;
+    let (learned, repeatability) = twin(sets_rp, file.robot.arm.as_ref(), file.robot.learned_scale, MOST_REPEATABILITY_MM, &shown)?;
+    file.robot.learned = learned;
+    if let Some(rp) = repeatability {
+        file.robot.repeatability_mm = rp;
+    }
     Ok(TricalScenario {
         header: Header::new(path, text, file.seed),
         experiment: ExperimentSpec {
@@ -138,7 +147,8 @@ pub fn check_overrides(s: &TricalScenario, path: &str) -> Result<(), ScenarioErr
 fn check(f: &ScenarioFile, path: &str) -> Result<(), ScenarioError> {
     let c = Checker { path };
     let r = &f.robot;
-    c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, 1.0, "ISO 9283 RP")?;
+    c.within("robot", "repeatability_mm", r.repeatability_mm, 0.0, MOST_REPEATABILITY_MM, "ISO 9283 RP")?;
+    c.within("robot", "learned_scale", r.learned_scale, 0.0, 100.0, "factor on a twin's learned effects")?;
     c.within("robot", "payload_kg", r.payload_kg, 0.0, 3.0, "device mass; the IRB 120 carries 3 kg")?;
     c.within_optional(
         "robot",
