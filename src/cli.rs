@@ -94,6 +94,11 @@ struct CalibrateArgs {
     /// Cross-validation folds.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
     folds: u32,
+    /// How the k-fold cross-validation over every pose (the figure comparable with the
+    /// literature's) groups the poses: `pose` (--folds folds of each session's poses) or `session`
+    /// (a fold per session).
+    #[arg(long, default_value = "pose", value_parser = ["pose", "session"])]
+    kfold_by: String,
     /// Fraction of each session's poses held out, drawn at random (default: the file's `split`
     /// column when it has one, else 0.2).
     #[arg(long, conflicts_with_all = ["hold_out_session", "hold_out_file"])]
@@ -795,6 +800,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
 fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
     let spec = app::calibrate::CalibrateArgs {
         folds: args.folds,
+        kfold_by: Some(args.kfold_by.clone()),
         hold_out: args.hold_out,
         hold_out_session: args.hold_out_session.clone(),
         hold_out_file: args.hold_out_file.clone(),

@@ -804,3 +804,101 @@ fn outliers_are_reported_loudly_and_the_held_out_figures_come_with_and_without_t
     }
     assert!(seen[0] > seen[1], "the fit keeps the outlier under `report`: RMS {} against {}", seen[0], seen[1]);
 }
+
+/// A small known data set: 3 sessions x 9 poses x 2 targets of the coupled IRB 120 with its true
+/// joint offsets and 12 um of noise, calibrated with the joint offsets alone.
+fn small_known(robot: &RobotFile) -> measurements::Measurements {
+    let spec = SimulationSpec { poses_per_session: 9, ..spec(truth_on(robot, &offsets_only()), robot, 0.012, vec![]) };
+    measured(&spec, robot)
+}
+
+/// The k-fold cross-validation over every pose: on a small known data set with 20 % of the poses
+/// held out, the folds (by pose) cover every pose exactly once, held-out ones included (each pose
+/// in one fold, every fold used, every point with its k-fold error, in `points.parquet` as in the
+/// calibration), and each fold's errors are those of an independent calibration that holds out
+/// exactly that fold's poses (its held-out errors: a fit on every other pose). By session, a fold
+/// per session, each session's base registered on its own points: every point again has its
+/// error, and the terminal and summary.md say which figure is which.
+#[test]
+fn the_k_fold_over_every_pose_predicts_each_pose_once_by_a_fit_without_it() {
+    let robot = robot_from(&coupled_irb120_text());
+    let m = small_known(&robot);
+    let folds = 4;
+    let opts =
+        Options { params: Some(offsets_only()), folds, outliers: calsim::calibrate::OutlierMode::Off, plots: false, ..Options::default() };
+    let c = run(&robot, &m, &opts).unwrap();
+    let a = &c.assignment;
+    assert!(a.held_out.iter().any(|h| *h), "some poses are held out");
+    assert_eq!(a.fold_all.len(), m.poses.len(), "a fold per pose, held-out ones included");
+    assert_eq!(a.folds_all, folds);
+    for f in 0..folds {
+        assert!(a.fold_all.iter().any(|&g| g == f), "fold {f} holds poses");
+    }
+    let cv = &c.chosen().cv_all;
+    assert!(cv.failed.is_empty(), "{:?}", cv.failed);
+    assert_eq!(cv.points, m.points.len(), "every point predicted");
+    assert!(cv.errors_mm.iter().all(|e| e.is_finite()));
+    // Each fold against a calibration holding out exactly its poses.
+    for f in 0..folds {
+        let poses: Vec<(String, String)> = (0..m.poses.len())
+            .filter(|&p| a.fold_all[p] == f)
+            .map(|p| (m.sessions[m.poses[p].session].clone(), m.poses[p].label.clone()))
+            .collect();
+        let split = Split::Listed { source: format!("fold {f}"), poses };
+        let other = run(&robot, &m, &Options { split, ..opts.clone() }).unwrap();
+        let h = other.chosen().held_out.as_ref().unwrap();
+        let test: Vec<usize> = (0..m.points.len()).filter(|&i| a.fold_all[m.points[i].pose] == f).collect();
+        assert_eq!(h.errors_mm.len(), test.len());
+        for (k, &i) in test.iter().enumerate() {
+            assert!((h.errors_mm[k] - cv.errors_mm[i]).abs() < 1e-9, "fold {f}, point {i}: {} against {}", h.errors_mm[k], cv.errors_mm[i]);
+        }
+    }
+    // The table of points carries the fold and the error of every point.
+    let dir = common::scratch("calibrate-kfold");
+    let csv = write_csv(
+        dir.path(),
+        "small.csv",
+        &to_csv(&SimulationSpec { poses_per_session: 9, ..spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]) }),
+    );
+    let robot_path = write_csv(dir.path(), "irb120_coupled.toml", &coupled_irb120_text());
+    for by in ["pose", "session"] {
+        let o = common::calsim()
+            .args(["calibrate", "--no-plots", "--folds", "4", "--outliers", "off", "--params"])
+            .arg("theta_offs2,theta_offs3,theta_offs4,theta_offs5,theta_offs6")
+            .args(["--kfold-by", by])
+            .arg(&robot_path)
+            .arg(&csv)
+            .arg("--out")
+            .arg(dir.path().join(by))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(stdout.contains("k-fold all poses"), "{stdout}");
+        let report = dir.path().join(by).join("small.calibration");
+        let points = read_parquet(&report.join("points.parquet"));
+        let folds_col = points.column("kfold_all_fold").unwrap().u32().unwrap();
+        let errors = points.column("kfold_all_error_mm").unwrap().f64().unwrap();
+        let sessions = points.column("session").unwrap().str().unwrap();
+        let poses = points.column("pose").unwrap().str().unwrap();
+        let mut fold_of: std::collections::HashMap<(String, String), u32> = Default::default();
+        for i in 0..points.height() {
+            let key = (sessions.get(i).unwrap().to_string(), poses.get(i).unwrap().to_string());
+            let f = folds_col.get(i).unwrap();
+            assert_eq!(*fold_of.entry(key).or_insert(f), f, "a pose in one fold");
+            assert!(errors.get(i).unwrap().is_finite(), "{by}: row {i} has its k-fold error");
+        }
+        assert_eq!(fold_of.len(), m.poses.len(), "every pose in a fold");
+        let used: std::collections::BTreeSet<u32> = fold_of.values().copied().collect();
+        let expected = if by == "pose" { 4 } else { 3 };
+        assert_eq!(used, (0..expected).collect(), "{by}: folds");
+        if by == "session" {
+            for ((s, _), f) in &fold_of {
+                assert_eq!(m.sessions[*f as usize], *s, "a fold per session");
+            }
+        }
+        let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+        assert!(summary.contains("k-fold cross-validation over every pose"), "{summary}");
+        assert!(summary.contains("chooses the model"), "{summary}");
+    }
+}

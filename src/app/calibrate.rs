@@ -18,6 +18,9 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
     /// Cross-validation folds.
     pub folds: u32,
+    /// How the k-fold cross-validation over every pose groups the poses: `pose` or `session`
+    /// (`None`: the default, by pose).
+    pub kfold_by: Option<String>,
     /// Fraction of each session's poses held out (`None`: the default, unless a session is held out).
     pub hold_out: Option<f64>,
     /// Hold out every pose of this session instead.
@@ -51,6 +54,7 @@ impl CalibrateArgs {
             measurements,
             out,
             folds: d.folds as u32,
+            kfold_by: None,
             hold_out: None,
             hold_out_session: None,
             hold_out_file: None,
@@ -94,9 +98,15 @@ impl CalibrateArgs {
             Some(name) => crate::calibrate::OutlierMode::parse(name)
                 .ok_or_else(|| option("outliers", format!("{name:?}: one of \"off\", \"report\", \"reject\"")))?,
         };
+        let kfold_by = match &self.kfold_by {
+            None => defaults.kfold_by,
+            Some(name) => crate::calibrate::KFoldBy::parse(name)
+                .ok_or_else(|| option("kfold-by", format!("{name:?}: one of \"pose\", \"session\"")))?,
+        };
         let options = Options {
             params,
             folds: self.folds as usize,
+            kfold_by,
             split,
             seed: self.seed,
             outlier_threshold: self.outlier_threshold.unwrap_or(defaults.outlier_threshold),

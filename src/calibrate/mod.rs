@@ -41,6 +41,7 @@ use problem::{Layout, Obs, Problem, SolveOptions};
 use registration::{Raw, Unidentifiable, Unplaced};
 pub use robust::OutlierMode;
 use robust::{RobustFit, fit_without, robust_fit};
+pub use validation::KFoldBy;
 use validation::{HeldOutSpec, Split, SplitError, free_columns};
 
 pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ToolEstimate};
@@ -88,8 +89,11 @@ pub struct Options {
     /// The robot parameters of the most complete model (`None`: the TriCal paper's 31 less the
     /// base: alpha1..5, a1..5, d3..6, theta_offs2..6, c2..6, beta2).
     pub params: Option<ParamSet>,
-    /// Cross-validation folds, 2..=20.
+    /// Cross-validation folds, 2..=20 (of the training poses, and of every pose when grouped by pose).
     pub folds: usize,
+    /// How the k-fold cross-validation over every pose groups the poses (by pose: `folds` folds;
+    /// by session: a fold per session).
+    pub kfold_by: KFoldBy,
     /// The held-out split.
     pub split: Split,
     /// Seed of the split, the folds and the prediction's draws.
@@ -109,6 +113,7 @@ impl Default for Options {
         Self {
             params: None,
             folds: 5,
+            kfold_by: KFoldBy::Pose,
             split: Split::Default,
             seed: 1,
             outlier_threshold: robust::DEFAULT_THRESHOLD,
@@ -404,7 +409,9 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     let full = opts.params.clone().unwrap_or_else(default_params);
     let split_error = |e: SplitError| CalibrateError::Option { key: opts.split.option().into(), message: e.message(&m.path) };
     let opts = &Options { split: validation::resolve(m, &opts.split).map_err(split_error)?, ..opts.clone() };
-    let assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
+    let mut assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
+    (assignment.fold_all, assignment.folds_all) = validation::assign_every_pose(m, opts.kfold_by, opts.folds, opts.seed)
+        .map_err(|message| CalibrateError::Option { key: "kfold-by".into(), message })?;
     let s = setup(robot, m)?;
     let cands = candidates(robot, m, &s, &full)?;
     let sopts = SolveOptions::default();
@@ -430,6 +437,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         OutlierMode::Off | OutlierMode::Report => vec![false; s.obs.len()],
     };
     let point_fold: Vec<Option<usize>> = m.points.iter().map(|p| assignment.fold[p.pose]).collect();
+    let point_fold_all: Vec<Option<usize>> = m.points.iter().map(|p| Some(assignment.fold_all[p.pose])).collect();
     let held: Vec<usize> = (0..m.points.len()).filter(|&i| assignment.held_out[m.points[i].pose]).collect();
     let train: Vec<usize> = (0..m.points.len()).filter(|&i| !assignment.held_out[m.points[i].pose]).collect();
     // A session held out whole has no base from the training fit: its base is registered on its
@@ -469,6 +477,10 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
+        let cv_all = match kind {
+            Some(_) => validation::cross_validate(&problem, &x0, &point_fold_all, assignment.folds_all, &outliers, &sopts),
+            None => validation::CrossValidation::empty(s.obs.len()),
+        };
         let free = free_columns(&problem, &train, with_robot);
         let mask = |idx: &[usize]| idx.iter().map(|&i| outliers[i]).collect::<Vec<bool>>();
         let fit = fit_without(&problem, &x0, &free, &train, &mask(&train), &sopts);
@@ -489,6 +501,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             unidentifiable: fixed,
             undetermined: undetermined_params,
             cv,
+            cv_all,
             held_out,
             fit,
             against_chosen: (f64::NAN, f64::NAN, 0),

@@ -165,6 +165,8 @@ fn point_columns(c: &Calibration) -> Vec<Column> {
         Column::new("held_out".into(), (0..n).map(|i| c.assignment.held_out[p[i].pose]).collect::<Vec<_>>()),
         Column::new("fold".into(), (0..n).map(|i| c.assignment.fold[p[i].pose].map(|f| f as u32)).collect::<Vec<_>>()),
         Column::new("held_out_error_mm".into(), held_error),
+        Column::new("kfold_all_fold".into(), p.iter().map(|x| c.assignment.fold_all[x.pose] as u32).collect::<Vec<_>>()),
+        Column::new("kfold_all_error_mm".into(), c.chosen().cv_all.errors_mm.clone()),
     ]);
     cols
 }
@@ -195,6 +197,13 @@ fn model_columns(c: &Calibration) -> Vec<Column> {
         cols.push(Column::new(
             format!("cv_{s}_mm").into(),
             rows.iter().map(|r| if r.cv.points > 0 { stat(&r.cv.stats, k) } else { f64::NAN }).collect::<Vec<_>>(),
+        ));
+    }
+    cols.push(Column::new("kfold_all_points".into(), rows.iter().map(|r| r.cv_all.points as u32).collect::<Vec<_>>()));
+    for (k, s) in STATS.iter().enumerate() {
+        cols.push(Column::new(
+            format!("kfold_all_{s}_mm").into(),
+            rows.iter().map(|r| if r.cv_all.points > 0 { stat(&r.cv_all.stats, k) } else { f64::NAN }).collect::<Vec<_>>(),
         ));
     }
     cols.push(Column::new("cv_paired_mse_difference_mm2".into(), rows.iter().map(|r| r.against_chosen.0).collect::<Vec<_>>()));
@@ -230,6 +239,7 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
         "options": {
             "params": o.params.as_ref().map_or_else(|| super::default_params().names(), |p| p.names()),
             "folds": o.folds,
+            "kfold_by": o.kfold_by.name(),
             "split": o.split.describe(),
             "seed": o.seed,
             "outlier_threshold": o.outlier_threshold,
@@ -258,15 +268,32 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     );
     let _ = writeln!(
         s,
-        "{:<18} {:>6} {:>24} {:>34} {:>12}",
-        "model", "params", "CV held-out RMS / p95 mm", "held-out RMS measured / predicted", "fit RMS mm"
+        "{:<18} {:>6} {:>24} {:>34} {:>12} {:>26}",
+        "model", "params", "CV held-out RMS / p95 mm", "held-out RMS measured / predicted", "fit RMS mm", "k-fold all poses RMS / p95"
     );
+    let cv_cell = |cv: &super::validation::CrossValidation| {
+        if cv.points > 0 { format!("{:.4} / {:.4}", cv.stats.rms, cv.stats.p95) } else { "-".into() }
+    };
     for r in std::iter::once(&c.before).chain(&c.models) {
-        let cv = if r.cv.points > 0 { format!("{:.4} / {:.4}", r.cv.stats.rms, r.cv.stats.p95) } else { "-".into() };
         let held = r.held_out.as_ref().map_or_else(|| "no model".into(), |h| format!("{:.4} / {:.4}", h.measured.rms, h.predicted.rms));
         let mark = if r.kind.is_some() && r.kind == c.chosen().kind { "  <- chosen" } else { "" };
-        let _ = writeln!(s, "{:<18} {:>6} {:>24} {:>34} {:>12.4}{mark}", r.name(), r.layout.robot.len(), cv, held, r.fit.stats.rms);
+        let _ = writeln!(
+            s,
+            "{:<18} {:>6} {:>24} {:>34} {:>12.4} {:>26}{mark}",
+            r.name(),
+            r.layout.robot.len(),
+            cv_cell(&r.cv),
+            held,
+            r.fit.stats.rms,
+            cv_cell(&r.cv_all)
+        );
     }
+    let _ = writeln!(
+        s,
+        "CV: {} folds of the training poses (chooses the model); k-fold all poses: {} (comparable with a k-fold CV of the literature)",
+        c.options.folds,
+        kfold_words(c)
+    );
     let unid: Vec<String> = c.chosen().unidentifiable.iter().map(|u| u.name.clone()).collect();
     if !unid.is_empty() {
         let _ = writeln!(s, "kept nominal (the poses cannot separate them): {}", unid.join(", "));
@@ -371,6 +398,7 @@ pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
         if m.coupled { "the controller's values, through the robot file's [[coupling]]" } else { "as given (no coupling)" }
     );
     models_section(&mut s, c);
+    kfold_section(&mut s, c);
     held_out_section(&mut s, c);
     outliers_section(&mut s, c);
     parameters_section(&mut s, c);
@@ -413,6 +441,35 @@ fn models_section(s: &mut String, c: &Calibration) {
         );
         for (f, why) in &r.cv.failed {
             let _ = writeln!(s, "|  | fold {f} gave no model ({why}) | | | | | | | | | |");
+        }
+    }
+    let _ = writeln!(s);
+}
+
+/// The k-fold cross-validation over every pose in words.
+fn kfold_words(c: &Calibration) -> String {
+    match c.options.kfold_by {
+        super::KFoldBy::Pose => format!("{} folds of every pose, held-out ones included (`--kfold-by pose`)", c.assignment.folds_all),
+        super::KFoldBy::Session => format!(
+            "a fold per session, {} folds (`--kfold-by session`: each session's base registered on its own points)",
+            c.assignment.folds_all
+        ),
+    }
+}
+
+fn kfold_section(s: &mut String, c: &Calibration) {
+    let _ = writeln!(
+        s,
+        "### k-fold cross-validation over every pose (mm)\n\n{}: every pose predicted once, by a fit without its fold. This is \
+         the figure to compare with a k-fold cross-validation of the literature; the CV above (training poses only) chooses the \
+         model, so that the held-out poses below stay out of the choice.\n",
+        kfold_words(c)
+    );
+    let _ = writeln!(s, "| model | points | mean | median | p95 | max | RMS |\n|---|---|---|---|---|---|---|");
+    for r in &c.models {
+        let _ = writeln!(s, "| {} | {} | {} |", r.name(), r.cv_all.points, stats_cells(&r.cv_all.stats));
+        for (f, why) in &r.cv_all.failed {
+            let _ = writeln!(s, "|  | fold {f} gave no model ({why}) | | | | | |");
         }
     }
     let _ = writeln!(s);

@@ -98,8 +98,12 @@ pub struct ModelResult {
     /// Robot parameters whose fit on every point broke [`super::DETERMINED`]'s rule, kept nominal
     /// and the model refitted without them: name and reason.
     pub undetermined: Vec<(String, String)>,
-    /// Cross-validation on the training poses.
+    /// Cross-validation on the training poses (the figure the model is chosen by: the held-out
+    /// poses stay out of the choice).
     pub cv: CrossValidation,
+    /// k-fold cross-validation over every pose, held-out ones included (the figure comparable
+    /// with a k-fold cross-validation of the literature; not used for the choice).
+    pub cv_all: CrossValidation,
     /// Errors at the held-out points of a fit on the training points (`None`: that fit failed).
     pub held_out: Option<HeldOut>,
     /// The fit on every point.

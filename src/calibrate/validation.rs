@@ -113,6 +113,31 @@ impl SplitError {
     }
 }
 
+/// How the k-fold cross-validation over every pose groups the poses into folds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KFoldBy {
+    /// The poses of each session shuffled and dealt into the folds (every session in every fold's
+    /// training part).
+    Pose,
+    /// A fold per session (leave one session out: its base registered on its own points).
+    Session,
+}
+
+impl KFoldBy {
+    /// The option's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            KFoldBy::Pose => "pose",
+            KFoldBy::Session => "session",
+        }
+    }
+
+    /// The grouping named `s` (`pose`, `session`).
+    pub fn parse(s: &str) -> Option<Self> {
+        [KFoldBy::Pose, KFoldBy::Session].into_iter().find(|m| m.name() == s)
+    }
+}
+
 /// The split and folds of the poses.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Assignment {
@@ -122,6 +147,10 @@ pub struct Assignment {
     pub fold: Vec<Option<usize>>,
     /// Folds.
     pub folds: usize,
+    /// Per pose: its fold in the k-fold cross-validation over every pose ([`assign_every_pose`]).
+    pub fold_all: Vec<usize>,
+    /// Folds of the k-fold cross-validation over every pose.
+    pub folds_all: usize,
 }
 
 /// Fewest training poses a session keeps when a fraction of its poses is held out.
@@ -214,7 +243,46 @@ pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Resul
         }
         offset += poses.len();
     }
-    Ok(Assignment { held_out, fold, folds })
+    Ok(Assignment { held_out, fold, folds, fold_all: Vec::new(), folds_all: 0 })
+}
+
+/// The folds of the k-fold cross-validation over every pose of `m`, held-out ones included: by
+/// pose, each session's poses shuffled (its own stream of `seed`, so that the split and the folds
+/// of [`assign`] do not move) and dealt into `folds` folds, balanced across sessions; by session,
+/// a fold per session. Returns the fold of every pose and the number of folds.
+pub fn assign_every_pose(m: &Measurements, by: KFoldBy, folds: usize, seed: u64) -> Result<(Vec<usize>, usize), String> {
+    match by {
+        KFoldBy::Session => {
+            if m.sessions.len() < 2 {
+                return Err(format!("session: {} has one session: none can be left out", m.path.display()));
+            }
+            for (t, target) in m.targets.iter().enumerate() {
+                let mut sessions = m.points.iter().filter(|p| p.target == t).map(|p| m.poses[p.pose].session);
+                let first = sessions.next().unwrap_or(0);
+                if sessions.all(|s| s == first) {
+                    return Err(format!(
+                        "session: target {target} is measured in session {} only: a fit without that session cannot place it",
+                        m.sessions[first]
+                    ));
+                }
+            }
+            Ok((m.poses.iter().map(|p| p.session).collect(), m.sessions.len()))
+        }
+        KFoldBy::Pose => {
+            let mut rng = crate::seeds::stream(seed, crate::seeds::calibrate::FOLDS_EVERY_POSE);
+            let mut fold = vec![0; m.poses.len()];
+            let mut offset = 0;
+            for s in 0..m.sessions.len() {
+                let mut poses: Vec<usize> = (0..m.poses.len()).filter(|&p| m.poses[p].session == s).collect();
+                poses.shuffle(&mut rng);
+                for (k, &p) in poses.iter().enumerate() {
+                    fold[p] = (offset + k) % folds;
+                }
+                offset += poses.len();
+            }
+            Ok((fold, folds))
+        }
+    }
 }
 
 /// The columns free in a fit over the points `idx`: the robot's (unless `robot` is false), and the
@@ -360,7 +428,7 @@ fn predict(
     Some(stats)
 }
 
-/// A model's k-fold cross-validation over the training points.
+/// A model's k-fold cross-validation (over the training points, or over every point).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CrossValidation {
     /// Per problem point: its error when its fold was held out, mm (NaN outside the folds or when
@@ -397,6 +465,7 @@ pub fn cross_validate(
     let mut errors_mm = vec![f64::NAN; n];
     let mut outlier = vec![false; n];
     let mut failed = Vec::new();
+    let l = &problem.layout;
     for f in 0..folds {
         let train: Vec<usize> = (0..n).filter(|&i| point_fold[i].is_some_and(|g| g != f)).collect();
         let test: Vec<usize> = (0..n).filter(|&i| point_fold[i] == Some(f)).collect();
@@ -409,6 +478,23 @@ pub fn cross_validate(
         if !fit.solved.outcome.is_converged() {
             failed.push((f, fit.solved.outcome.label().to_string()));
             continue;
+        }
+        if let Some(t) =
+            (0..l.targets).find(|&t| test.iter().any(|&i| problem.obs[i].target == t) && !train.iter().any(|&i| problem.obs[i].target == t))
+        {
+            failed.push((f, format!("target #{} has no point outside the fold", t + 1)));
+            continue;
+        }
+        // A session with no point outside the fold (a fold per session) has no base from the fit:
+        // it is registered on its own points, as a held-out session is.
+        let register: Vec<usize> = (0..l.sessions)
+            .filter(|&s| test.iter().any(|&i| problem.obs[i].session == s) && !train.iter().any(|&i| problem.obs[i].session == s))
+            .flat_map(|s| l.base(s)..l.base(s) + 6)
+            .collect();
+        let mut fit = fit;
+        if !register.is_empty() {
+            let mask: Vec<bool> = test.iter().map(|&i| outliers[i]).collect();
+            fit.solved.x = fit_without(problem, &fit.solved.x, &register, &test, &mask, opts).solved.x;
         }
         let Some(e) = problem.errors(&fit.solved.x, &test) else {
             failed.push((f, "not_finite".into()));
