@@ -135,6 +135,14 @@ struct CalibrateArgs {
     /// ([robot.unmodelled]) and repeatability are drawn in each world of the plan.
     #[arg(long)]
     plan_scenario: Option<PathBuf>,
+    /// A lumped payload at the flange, kg (the SMR nest or probe), in place of the robot file's
+    /// [payload]: the mass the joint compliances act through (a robot file without masses has no
+    /// gravity torque).
+    #[arg(long, allow_negative_numbers = true)]
+    payload_kg: Option<f64>,
+    /// The payload's centre of mass in the flange frame, mm: x,y,z (default 0,0,0; needs --payload-kg).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, requires = "payload_kg")]
+    payload_com_mm: Option<Vec<f64>>,
     /// Skip the figures.
     #[arg(long)]
     no_plots: bool,
@@ -812,6 +820,8 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         plan_noise_mm: args.plan_noise_mm,
         plan_scenario: args.plan_scenario.clone(),
         plots: !args.no_plots,
+        payload_kg: args.payload_kg,
+        payload_com_mm: args.payload_com_mm.clone(),
         ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())
     };
     let report = app::calibrate::run(&spec).map_err(|e| e.to_string())?;

@@ -902,3 +902,85 @@ fn the_k_fold_over_every_pose_predicts_each_pose_once_by_a_fit_without_it() {
         assert!(summary.contains("chooses the model"), "{summary}");
     }
 }
+
+/// The IRB 120's robot file without masses (an imported URDF's arm: no link carries a mass).
+fn massless_irb120_text() -> String {
+    let text = std::fs::read_to_string(common::repo().join("robots/irb120.toml")).unwrap();
+    text.lines().map(|l| if l.starts_with("mass_kg") { "mass_kg = 0.0".to_string() } else { l.to_string() }).collect::<Vec<_>>().join("\n")
+}
+
+/// A massless arm (no link mass, no payload) measured holding a lumped 8 kg payload at the flange,
+/// its joints 2 and 3 compliant (Table 7's c2 and c3 against that payload's gravity torque alone:
+/// a lumped J2/J3 compliance model), true joint offsets, 12 um of noise. Calibrated from the
+/// massless robot file, the compliances are kept nominal with the right reason (no masses, no
+/// gravity torque; not "the poses cannot separate them") and no compliance model is compared;
+/// with `--payload-kg 8 --payload-com-mm 0,0,60` the compliance model is chosen and recovers the
+/// lumped c2 and c3 within 4 of its standard deviations, and robot.toml carries the payload. Bad
+/// payloads are one line naming the flag, exit 2.
+#[test]
+fn compliance_on_a_massless_arm_says_why_and_fits_a_lumped_payload_given_at_the_flange() {
+    let dir = common::scratch("calibrate-massless");
+    let robot_path = write_csv(dir.path(), "massless.toml", &massless_irb120_text());
+    let robot = RobotFile::load(&robot_path).unwrap();
+    assert!(robot.nominal.data().links_inertial.iter().all(|b| b.mass_kg == 0.0));
+    let mut names: Vec<String> = offsets_only().names();
+    names.extend(["c2".to_string(), "c3".to_string()]);
+    let set = ParamSet::from_names(&names).unwrap();
+    let com = [0.0, 0.0, 60.0];
+    let truth =
+        truth_on(&robot, &set).edited(|d| d.payload = calsim::robot::Inertial { mass_kg: 8.0, com_mm: Vector3::from(com) }).unwrap();
+    let sim = SimulationSpec { coupling: None, comments: vec![], ..spec(truth.clone(), &robot, 0.012, vec![]) };
+    let m = measured(&sim, &robot);
+    let opts = Options { params: Some(set.clone()), outliers: calsim::calibrate::OutlierMode::Off, plots: false, ..Options::default() };
+
+    let c = run(&robot, &m, &opts).unwrap();
+    assert!(c.models.iter().all(|r| r.kind != Some(ModelKind::Compliance)), "no compliance model without a gravity torque");
+    for name in ["c2", "c3"] {
+        let e = c.estimates.iter().find(|e| e.id.name() == name).unwrap();
+        match &e.status {
+            ParamStatus::NoTorque(why) => assert!(why.contains("gives no masses") && why.contains("--payload-kg"), "{why}"),
+            other => panic!("{name}: {other:?}"),
+        }
+    }
+    let text = calsim::calibrate::report::terminal(&c, Path::new("out"));
+    assert!(text.contains("c2, c3: kept nominal, in no model: the robot file"), "{text}");
+    assert!(!text.lines().any(|l| l.contains("cannot separate") && l.contains("c2")), "{text}");
+
+    let payload = calsim::calibrate::Payload { mass_kg: 8.0, com_mm: com };
+    let c = run(&robot, &m, &Options { payload: Some(payload), ..opts.clone() }).unwrap();
+    assert_eq!(c.chosen().kind, Some(ModelKind::Compliance));
+    for name in ["c2", "c3"] {
+        let e = c.estimates.iter().find(|e| e.id.name() == name).unwrap();
+        assert_eq!(e.status, ParamStatus::Identified, "{name}");
+        let t = (e.value - e.id.get(truth.data())) / e.std;
+        eprintln!("{name}: {} against {} (std {}): {t:+.2} std", e.value, e.id.get(truth.data()), e.std);
+        assert!(t.abs() < 4.0, "{name}: {t} std from the lumped truth");
+    }
+
+    let csv = write_csv(dir.path(), "massless.csv", &to_csv(&sim));
+    let cli = |extra: &[&str]| {
+        let mut cmd = common::calsim();
+        cmd.args(["calibrate", "--no-plots", "--params", &names.join(","), "--out"]).arg(dir.path().join("out"));
+        cmd.arg(&robot_path).arg(&csv).args(extra);
+        cmd.output().unwrap()
+    };
+    let o = cli(&["--payload-kg", "8", "--payload-com-mm", "0,0,60"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let exported = RobotFile::load(&dir.path().join("out/massless.calibration/robot.toml")).unwrap();
+    assert_eq!(exported.nominal.data().payload.mass_kg, 8.0, "robot.toml carries the payload its compliances act through");
+    for (args, flag) in [
+        (&["--payload-kg", "NaN"][..], "--payload-kg"),
+        (&["--payload-kg", "-1"][..], "--payload-kg"),
+        (&["--payload-kg", "1e9"][..], "--payload-kg"),
+        (&["--payload-kg", "inf"][..], "--payload-kg"),
+        (&["--payload-kg", "8", "--payload-com-mm", "0,0"][..], "--payload-com-mm"),
+        (&["--payload-kg", "8", "--payload-com-mm", "0,0,1e12"][..], "--payload-com-mm"),
+        (&["--payload-com-mm", "0,0,60"][..], "--payload"),
+    ] {
+        let o = cli(args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(flag), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+    }
+}

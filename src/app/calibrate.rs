@@ -43,6 +43,10 @@ pub struct CalibrateArgs {
     pub plan_scenario: Option<PathBuf>,
     /// Draw the figures.
     pub plots: bool,
+    /// A lumped payload at the flange, kg (`None`: the robot file's).
+    pub payload_kg: Option<f64>,
+    /// The payload's centre of mass in the flange frame, mm (three numbers; `None`: 0, 0, 0).
+    pub payload_com_mm: Option<Vec<f64>>,
 }
 
 impl CalibrateArgs {
@@ -66,6 +70,8 @@ impl CalibrateArgs {
             plan_noise_mm: None,
             plan_scenario: None,
             plots: true,
+            payload_kg: None,
+            payload_com_mm: None,
         }
     }
 
@@ -103,8 +109,19 @@ impl CalibrateArgs {
             Some(name) => crate::calibrate::KFoldBy::parse(name)
                 .ok_or_else(|| option("kfold-by", format!("{name:?}: one of \"pose\", \"session\"")))?,
         };
+        let payload = match (self.payload_kg, &self.payload_com_mm) {
+            (None, None) => None,
+            (None, Some(_)) => return Err(option("payload-com-mm", "a centre of mass needs --payload-kg".into())),
+            (Some(mass_kg), None) => Some(crate::calibrate::Payload { mass_kg, com_mm: [0.0; 3] }),
+            (Some(mass_kg), Some(v)) => {
+                let com_mm: [f64; 3] =
+                    v.as_slice().try_into().map_err(|_| option("payload-com-mm", format!("{} numbers: give three, x,y,z mm", v.len())))?;
+                Some(crate::calibrate::Payload { mass_kg, com_mm })
+            }
+        };
         let options = Options {
             params,
+            payload,
             folds: self.folds as usize,
             kfold_by,
             split,

@@ -106,7 +106,27 @@ pub struct Options {
     pub prediction_draws: usize,
     /// Draw the figures.
     pub plots: bool,
+    /// A lumped payload at the flange in place of the robot file's `[payload]` (`--payload-kg`):
+    /// the mass the joint compliances act through when the robot file gives no masses.
+    pub payload: Option<Payload>,
 }
+
+/// A lumped payload at the flange: the SMR nest, probe or tool the arm holds while measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Payload {
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Centre of mass in the flange frame, mm.
+    pub com_mm: [f64; 3],
+}
+
+/// Largest payload `--payload-kg` takes, kg (well above any arm's rated payload).
+pub const MOST_PAYLOAD_KG: f64 = 2000.0;
+/// Largest coordinate of `--payload-com-mm`, mm.
+pub const MOST_PAYLOAD_COM_MM: f64 = 5000.0;
+/// A holding torque at or below this at every measured pose is none, N m: a compliance of that
+/// joint cannot act.
+const NO_TORQUE_NM: f64 = 1e-9;
 
 impl Default for Options {
     fn default() -> Self {
@@ -120,6 +140,7 @@ impl Default for Options {
             outliers: OutlierMode::Report,
             prediction_draws: 200,
             plots: true,
+            payload: None,
         }
     }
 }
@@ -275,6 +296,14 @@ fn check_options(o: &Options) -> Result<(), CalibrateError> {
     if !(10..=100_000).contains(&o.prediction_draws) {
         return bad("prediction-draws", format!("{}: within 10 to 100000", o.prediction_draws));
     }
+    if let Some(p) = &o.payload {
+        if !(p.mass_kg.is_finite() && (0.0..=MOST_PAYLOAD_KG).contains(&p.mass_kg)) {
+            return bad("payload-kg", format!("{}: within 0 to {MOST_PAYLOAD_KG} kg", p.mass_kg));
+        }
+        if let Some(v) = p.com_mm.iter().find(|v| !(v.is_finite() && v.abs() <= MOST_PAYLOAD_COM_MM)) {
+            return bad("payload-com-mm", format!("{v}: each coordinate within +-{MOST_PAYLOAD_COM_MM} mm of the flange"));
+        }
+    }
     if let Some(p) = &o.params {
         if let Some(id) = p.ids().iter().find(|id| matches!(id, ParamId::Base(_) | ParamId::Tool(_))) {
             return bad("params", format!("{}: the bases and tools are fitted per session and target, not as robot parameters", id.name()));
@@ -406,7 +435,30 @@ fn candidates(
 /// every point, nothing written.
 pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibration, CalibrateError> {
     check_options(opts)?;
-    let full = opts.params.clone().unwrap_or_else(default_params);
+    let with_payload;
+    let robot = match &opts.payload {
+        None => robot,
+        Some(p) => {
+            let com6 = robot.flange.map_or(nalgebra::Vector3::from(p.com_mm), |r| r * nalgebra::Vector3::from(p.com_mm));
+            let nominal = robot
+                .nominal
+                .edited(|d| d.payload = crate::robot::Inertial { mass_kg: p.mass_kg, com_mm: com6 })
+                .map_err(|e| CalibrateError::Option { key: "payload-kg".into(), message: e.to_string() })?;
+            with_payload = RobotFile { nominal, ..robot.clone() };
+            &with_payload
+        }
+    };
+    let listed = opts.params.clone().unwrap_or_else(default_params);
+    let inert = inert_compliances(robot, m, &listed);
+    let full = ParamSet::new(listed.ids().iter().copied().filter(|id| inert.iter().all(|(n, _)| *n != id.name())).collect())
+        .expect("a subset of a set");
+    if full.is_empty() {
+        let why = inert.first().map_or_else(String::new, |(_, w)| w.clone());
+        return Err(CalibrateError::Option {
+            key: "params".into(),
+            message: format!("every parameter is a joint compliance that cannot act: {why}"),
+        });
+    }
     let split_error = |e: SplitError| CalibrateError::Option { key: opts.split.option().into(), message: e.message(&m.path) };
     let opts = &Options { split: validation::resolve(m, &opts.split).map_err(split_error)?, ..opts.clone() };
     let mut assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
@@ -517,7 +569,46 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         models[k].against_chosen = validation::paired_difference(&models[k].cv, &models[chosen].cv);
     }
     let fit = fits.into_iter().nth(chosen).expect("a fit per model");
-    finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by, flagged: flagged.clone() }, fit)
+    finish(
+        Parts { robot, m, opts, s, assignment, before, models, chosen, full: &listed, inert, outliers_by, flagged: flagged.clone() },
+        fit,
+    )
+}
+
+/// The joint compliances of `set` that cannot act on the poses of `m`: the gravity torque of their
+/// joint is none at every pose (no mass in the robot file at all, or none beyond the joint), with
+/// the reason. They are kept nominal and left out of every model.
+fn inert_compliances(robot: &RobotFile, m: &Measurements, set: &ParamSet) -> Vec<(String, String)> {
+    let d = robot.nominal.data();
+    let massless = d.payload.mass_kg == 0.0 && d.links_inertial.iter().all(|b| b.mass_kg == 0.0);
+    let mut most = [0.0_f64; crate::robot::JOINTS];
+    if !massless {
+        for p in &m.poses {
+            let tau = crate::robot::gravity_torques(&robot.nominal, &p.q);
+            for (j, t) in tau.iter().enumerate() {
+                most[j] = most[j].max(t.abs());
+            }
+        }
+    }
+    set.ids()
+        .iter()
+        .filter_map(|id| match id {
+            ParamId::Link { joint, kind: LinkParam::Compliance } if massless || most[*joint - 1] <= NO_TORQUE_NM => {
+                let why = if massless {
+                    format!(
+                        "the robot file {} gives no masses (no joint mass_kg, no [payload]): no gravity torque, so a joint compliance \
+                         cannot act; give the payload at the flange (--payload-kg M, --payload-com-mm x,y,z, or [payload] in the robot \
+                         file) or the links' masses",
+                        robot.path.display()
+                    )
+                } else {
+                    format!("no gravity torque at joint {joint} at any measured pose (at most {:.1e} N m)", most[*joint - 1])
+                };
+                Some((id.name(), why))
+            }
+            _ => None,
+        })
+        .collect()
 }
 
 /// The rule a freed joint compliance's fit on every point must meet to be exported as identified:

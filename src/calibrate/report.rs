@@ -123,6 +123,7 @@ fn status(s: &ParamStatus) -> String {
         ParamStatus::NotInModel => "not in the model".into(),
         ParamStatus::Unidentifiable(with) => format!("unidentifiable (with {})", with.join(" ")),
         ParamStatus::NotDetermined(why) => format!("not determined (kept nominal): {why}"),
+        ParamStatus::NoTorque(why) => format!("kept nominal, in no model: {why}"),
     }
 }
 
@@ -240,6 +241,7 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
             "params": o.params.as_ref().map_or_else(|| super::default_params().names(), |p| p.names()),
             "folds": o.folds,
             "kfold_by": o.kfold_by.name(),
+            "payload": o.payload.map(|p| serde_json::json!({ "mass_kg": p.mass_kg, "com_mm": p.com_mm })),
             "split": o.split.describe(),
             "seed": o.seed,
             "outlier_threshold": o.outlier_threshold,
@@ -296,7 +298,12 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     );
     let unid: Vec<String> = c.chosen().unidentifiable.iter().map(|u| u.name.clone()).collect();
     if !unid.is_empty() {
-        let _ = writeln!(s, "kept nominal (the poses cannot separate them): {}", unid.join(", "));
+        let _ =
+            writeln!(s, "kept nominal by the chosen model ({}; the poses cannot separate them): {}", c.chosen().name(), unid.join(", "));
+    }
+    if let Some((_, why)) = c.inert.first() {
+        let names: Vec<&str> = c.inert.iter().map(|(n, _)| n.as_str()).collect();
+        let _ = writeln!(s, "{}: kept nominal, in no model: {why}", names.join(", "));
     }
     for (name, why) in &c.chosen().undetermined {
         let _ = writeln!(s, "{name}: not determined (kept nominal): {why}");
@@ -397,6 +404,21 @@ pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
         if m.rows_left_out > 0 { format!(", {} rows of other targets left out (`# targets`)", m.rows_left_out) } else { String::new() },
         if m.coupled { "the controller's values, through the robot file's [[coupling]]" } else { "as given (no coupling)" }
     );
+    let payload = &c.robot.nominal.data().payload;
+    let _ = writeln!(
+        s,
+        "Payload at the flange: {} (the mass the joint compliances act through with the links' masses).\n",
+        match (&c.options.payload, payload.mass_kg > 0.0) {
+            (Some(p), _) =>
+                format!("{} kg at [{}, {}, {}] mm in the flange frame (--payload-kg)", p.mass_kg, p.com_mm[0], p.com_mm[1], p.com_mm[2]),
+            (None, true) => format!("{} kg (the robot file's [payload])", payload.mass_kg),
+            (None, false) => "none".into(),
+        }
+    );
+    if let Some((_, why)) = c.inert.first() {
+        let names: Vec<&str> = c.inert.iter().map(|(n, _)| n.as_str()).collect();
+        let _ = writeln!(s, "**{} kept nominal, in no model**: {why}.\n", names.join(", "));
+    }
     models_section(&mut s, c);
     kfold_section(&mut s, c);
     held_out_section(&mut s, c);

@@ -27,6 +27,9 @@ pub enum ParamStatus {
     /// Freed, but its fit broke [`super::DETERMINED`]'s rule (kept nominal, the model refitted
     /// without it): the reason.
     NotDetermined(String),
+    /// A joint compliance with no gravity torque to act through (kept nominal, in no model): the
+    /// reason.
+    NoTorque(String),
 }
 
 /// A robot parameter's estimate, internal units.
@@ -146,6 +149,9 @@ pub struct Calibration {
     pub outliers_by: &'static str,
     /// Per point: flagged by the outlier rule (left out only under `--outliers reject`).
     pub flagged: Vec<bool>,
+    /// Joint compliances with no gravity torque to act through (kept nominal, in no model): name
+    /// and reason.
+    pub inert: Vec<(String, String)>,
 }
 
 impl ModelResult {
@@ -195,13 +201,14 @@ pub(super) struct Parts<'a> {
     pub(super) models: Vec<ModelResult>,
     pub(super) chosen: usize,
     pub(super) full: &'a ParamSet,
+    pub(super) inert: Vec<(String, String)>,
     pub(super) outliers_by: &'static str,
     pub(super) flagged: Vec<bool>,
 }
 
 /// The chosen model's estimates and covariance from its fit on every point.
 pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, CalibrateError> {
-    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, outliers_by, flagged } = parts;
+    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, inert, outliers_by, flagged } = parts;
     let r = &models[chosen];
     let layout = &r.layout;
     let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
@@ -216,7 +223,12 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     let x = &fit.solved.x;
     let pr = layout.robot.len();
     let model = layout.robot.unpack(&robot.nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
-    let estimates = estimates(full, r, &robot.nominal, x, &cov);
+    let mut estimates = estimates(full, r, &robot.nominal, x, &cov);
+    for e in &mut estimates {
+        if let Some((_, why)) = inert.iter().find(|(n, _)| *n == e.id.name()) {
+            e.status = ParamStatus::NoTorque(why.clone());
+        }
+    }
     let correlation = DMatrix::from_fn(pr, pr, |a, b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt());
     let std_of = |c: usize| cov[(c, c)].max(0.0).sqrt();
     let bases = (0..m.sessions.len())
@@ -245,6 +257,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         points_base_mm,
         outliers_by,
         flagged,
+        inert,
     })
 }
 
