@@ -984,3 +984,40 @@ fn compliance_on_a_massless_arm_says_why_and_fits_a_lumped_payload_given_at_the_
         assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
     }
 }
+
+/// A fit that gives no model names what the data leave undetermined. A third target, T3, is read
+/// at five poses of session A with millimetres of scatter (a probe knocked between readings):
+/// under `--outliers reject` all five are flagged and left out, so no point of the final fit
+/// places T3; the error names the model, the unknowns with no effect (T3's tool), the target, its
+/// points in the fit and the lines left out as outliers, in one line.
+#[test]
+fn a_fit_failure_names_the_sessions_points_and_parameters_involved() {
+    let robot = robot_from(&coupled_irb120_text());
+    let text = to_csv(&spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]));
+    let scatter = [[3.0, -2.0, 4.0], [-4.0, 1.0, 2.0], [2.0, 4.0, -3.0], [-1.0, -3.0, -4.0], [4.0, 2.0, 1.0]];
+    let mut out = String::new();
+    let mut added = 0;
+    for l in text.lines() {
+        out.push_str(&format!("{l}\n"));
+        let f: Vec<&str> = l.split(',').collect();
+        if added < scatter.len() && f.len() == 12 && f[1] == "A" && f[2] == "SMR1" {
+            let d = scatter[added];
+            let v = |k: usize| f[k].parse::<f64>().unwrap();
+            out.push_str(&format!("{},T3,{},{},{},{}\n", f[..2].join(","), f[3..9].join(","), v(9) + d[0], v(10) + d[1], v(11) + d[2]));
+            added += 1;
+        }
+    }
+    let m = measurements::parse(Path::new("knocked.csv"), &out, &robot).unwrap();
+    let t3: Vec<u64> = m.points.iter().filter(|p| m.targets[p.target] == "T3").map(|p| p.line).collect();
+    assert_eq!(t3.len(), 5);
+    let opts =
+        Options { params: Some(offsets_only()), outliers: calsim::calibrate::OutlierMode::Reject, plots: false, ..Options::default() };
+    let e = run(&robot, &m, &opts).unwrap_err().to_string();
+    eprintln!("{e}");
+    assert!(e.contains("knocked.csv: the offsets model could not be fitted"), "{e}");
+    assert!(e.contains("tool[T3].x, tool[T3].y, tool[T3].z"), "the unknowns involved: {e}");
+    assert!(e.contains("target T3: 0 of its 5 points in the fit"), "the target and its points: {e}");
+    let lines: Vec<String> = t3.iter().map(u64::to_string).collect();
+    assert!(e.contains(&format!("5 left out as outliers (--outliers reject; lines {})", lines.join(", "))), "the lines: {e}");
+    assert!(!e.contains('\n'), "one line: {e}");
+}

@@ -19,6 +19,7 @@
 //! only, the full geometric set, and geometric with joint compliance. The comparison with the
 //! plan that a scenario simulated is [`plan`]'s seam.
 
+pub mod diagnose;
 pub mod measurements;
 pub mod plan;
 mod plots;
@@ -501,6 +502,8 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         })
         .collect();
     let all: Vec<usize> = (0..s.obs.len()).collect();
+    let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
+    let labels = diagnose::Labels { sessions: &m.sessions, targets: &m.targets, lines: &lines, outliers: &outliers };
     let evaluate = |kind: Option<ModelKind>, mut layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
         // The fit on every point first: the parameters it leaves undetermined are kept nominal and
         // the model refitted without them, until every freed parameter meets the rule; the
@@ -526,11 +529,11 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let with_robot = !layout.robot.is_empty();
         let cv = match kind {
-            Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts),
+            Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let cv_all = match kind {
-            Some(_) => validation::cross_validate(&problem, &x0, &point_fold_all, assignment.folds_all, &outliers, &sopts),
+            Some(_) => validation::cross_validate(&problem, &x0, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let free = free_columns(&problem, &train, with_robot);
@@ -546,6 +549,10 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             seed: opts.seed,
         };
         let held_out = fit.solved.outcome.is_converged().then(|| validation::held_out(&problem, &fit, &free, &spec, &sopts));
+        let held_out_why = held_out.is_none().then(|| {
+            let why = diagnose::why(&problem, &fit.solved.x, &free, &fit.inliers(), &labels);
+            format!("{}: {why}", fit.solved.outcome.label())
+        });
         let fit = point_fit(&problem, &all_fit, &flagged);
         let r = ModelResult {
             kind,
@@ -555,6 +562,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             cv,
             cv_all,
             held_out,
+            held_out_why,
             fit,
             against_chosen: (f64::NAN, f64::NAN, 0),
         };

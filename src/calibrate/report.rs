@@ -519,7 +519,8 @@ fn held_out_section(s: &mut String, c: &Calibration) {
                 let _ = writeln!(s, "| {} | {} | {} | {} |", r.name(), h.points, stats_cells(&h.measured), stats_cells(&h.predicted));
             }
             None => {
-                let _ = writeln!(s, "| {} | - | the training fit gave no model | | | | | | | | | |", r.name());
+                let why = r.held_out_why.as_deref().unwrap_or("-");
+                let _ = writeln!(s, "| {} | - | the training fit gave no model ({why}) | | | | | | | | | |", r.name());
             }
         }
     }

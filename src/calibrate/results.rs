@@ -109,6 +109,8 @@ pub struct ModelResult {
     pub cv_all: CrossValidation,
     /// Errors at the held-out points of a fit on the training points (`None`: that fit failed).
     pub held_out: Option<HeldOut>,
+    /// Why the fit on the training points gave no model (`None` when it gave one).
+    pub held_out_why: Option<String>,
     /// The fit on every point.
     pub fit: PointFit,
     /// Paired difference of cross-validated squared errors against the chosen model: mean (mm^2),
@@ -214,15 +216,25 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let free = free_columns(&problem, &all, true);
-    let no_model = |outcome: String| CalibrateError::NoModel { path: m.path.clone(), model: r.name(), outcome };
+    let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
+    let rejected: Vec<bool> = match opts.outliers {
+        super::OutlierMode::Reject => flagged.clone(),
+        super::OutlierMode::Off | super::OutlierMode::Report => vec![false; flagged.len()],
+    };
+    let labels = super::diagnose::Labels { sessions: &m.sessions, targets: &m.targets, lines: &lines, outliers: &rejected };
+    let no_model = |outcome: &str| CalibrateError::NoModel {
+        path: m.path.clone(),
+        model: r.name(),
+        outcome: format!("{outcome}: {}", super::diagnose::why(&problem, &fit.solved.x, &free, &fit.inliers(), &labels)),
+    };
     if !fit.solved.outcome.is_converged() {
-        return Err(no_model(fit.solved.outcome.label().into()));
+        return Err(no_model(fit.solved.outcome.label()));
     }
     // `free` holds every column (every session and target has points): cov is in layout order.
-    let cov = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix".into()))?;
+    let cov = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix"))?;
     let x = &fit.solved.x;
     let pr = layout.robot.len();
-    let model = layout.robot.unpack(&robot.nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
+    let model = layout.robot.unpack(&robot.nominal, &x[..pr]).map_err(|e| no_model(&e.to_string()))?;
     let mut estimates = estimates(full, r, &robot.nominal, x, &cov);
     for e in &mut estimates {
         if let Some((_, why)) = inert.iter().find(|(n, _)| *n == e.id.name()) {

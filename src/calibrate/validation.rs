@@ -460,6 +460,7 @@ pub fn cross_validate(
     folds: usize,
     outliers: &[bool],
     opts: &SolveOptions,
+    labels: &super::diagnose::Labels<'_>,
 ) -> CrossValidation {
     let n = problem.obs.len();
     let mut errors_mm = vec![f64::NAN; n];
@@ -476,13 +477,14 @@ pub fn cross_validate(
         let mask: Vec<bool> = train.iter().map(|&i| outliers[i]).collect();
         let fit = fit_without(problem, x0, &free, &train, &mask, opts);
         if !fit.solved.outcome.is_converged() {
-            failed.push((f, fit.solved.outcome.label().to_string()));
+            let why = super::diagnose::why(problem, &fit.solved.x, &free, &fit.inliers(), labels);
+            failed.push((f, format!("{}: {why}", fit.solved.outcome.label())));
             continue;
         }
         if let Some(t) =
             (0..l.targets).find(|&t| test.iter().any(|&i| problem.obs[i].target == t) && !train.iter().any(|&i| problem.obs[i].target == t))
         {
-            failed.push((f, format!("target #{} has no point outside the fold", t + 1)));
+            failed.push((f, format!("target {} has no point outside the fold", labels.targets[t])));
             continue;
         }
         // A session with no point outside the fold (a fold per session) has no base from the fit:
