@@ -825,6 +825,9 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())
     };
     let report = app::calibrate::run(&spec).map_err(|e| e.to_string())?;
+    if let Some(line) = crate::calibrate::report::orientation_warning(&report.calibration) {
+        eprintln!("{line}");
+    }
     if let Some(line) = crate::calibrate::report::outlier_warning(&report.calibration) {
         eprintln!("{line}");
     }

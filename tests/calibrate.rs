@@ -1021,3 +1021,39 @@ fn a_fit_failure_names_the_sessions_points_and_parameters_involved() {
     assert!(e.contains(&format!("5 left out as outliers (--outliers reject; lines {})", lines.join(", "))), "the lines: {e}");
     assert!(!e.contains('\n'), "one line: {e}");
 }
+
+/// Orientation readings (a six-degree-of-freedom probe's `quat_*` columns) are checked and not
+/// used, and calibrate says so: a WARNING line on standard error naming the file and the columns,
+/// and a sentence in summary.md; the positions' figures are those of the file without the columns.
+#[test]
+fn orientation_columns_are_not_read_and_ignored_silently() {
+    let dir = common::scratch("calibrate-quat");
+    let text = std::fs::read_to_string(common::repo().join("docs/calibrate/example_measurements.csv")).unwrap();
+    let with: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                format!("{l}\n")
+            } else if l.starts_with("pose,") {
+                format!("{l},quat_w,quat_x,quat_y,quat_z\n")
+            } else {
+                format!("{l},1,0,0,0\n")
+            }
+        })
+        .collect();
+    let csv = write_csv(dir.path(), "probe.csv", &with);
+    let o = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "--no-plots", "--params", "theta_offs2,theta_offs3,theta_offs4,theta_offs5", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.lines().any(|l| l.contains("WARNING") && l.contains("probe.csv") && l.contains("quat_w") && l.contains("NOT used")),
+        "{stderr}"
+    );
+    let summary = std::fs::read_to_string(dir.path().join("out/probe.calibration/summary.md")).unwrap();
+    assert!(summary.contains("**Orientation readings not used**"), "{summary}");
+}

@@ -339,6 +339,18 @@ fn count(n: usize, noun: &str) -> String {
     if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
 }
 
+/// The line `calsim calibrate` writes to standard error when the file gives orientation readings:
+/// they are checked and not used (the fit is of positions only).
+pub fn orientation_warning(c: &Calibration) -> Option<String> {
+    c.measurements.orientation_columns.then(|| {
+        format!(
+            "calsim calibrate: WARNING: {}: the orientation columns quat_w, quat_x, quat_y, quat_z are checked and NOT used: the fit \
+             is of positions only (the probe's rotation constrains nothing here)",
+            c.measurements.path.display()
+        )
+    })
+}
+
 /// The loud line `calsim calibrate` writes to standard error when the outlier rule flags points:
 /// how many, what was done with them, and the chosen model's held-out RMS with and without them.
 pub fn outlier_warning(c: &Calibration) -> Option<String> {
@@ -418,6 +430,13 @@ pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
     if let Some((_, why)) = c.inert.first() {
         let names: Vec<&str> = c.inert.iter().map(|(n, _)| n.as_str()).collect();
         let _ = writeln!(s, "**{} kept nominal, in no model**: {why}.\n", names.join(", "));
+    }
+    if m.orientation_columns {
+        let _ = writeln!(
+            s,
+            "**Orientation readings not used**: the file's columns quat_w, quat_x, quat_y, quat_z are checked (numbers, unit norm) \
+             and not used; every figure here is of positions only.\n"
+        );
     }
     models_section(&mut s, c);
     kfold_section(&mut s, c);
