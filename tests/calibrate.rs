@@ -1057,3 +1057,38 @@ fn orientation_columns_are_not_read_and_ignored_silently() {
     let summary = std::fs::read_to_string(dir.path().join("out/probe.calibration/summary.md")).unwrap();
     assert!(summary.contains("**Orientation readings not used**"), "{summary}");
 }
+
+/// The report's figures: the residuals per joint are signed components (x, y, z in the base
+/// frame, both signs on the axis: a sag's pattern shows), the error map has a colour bar, and
+/// `summary.md`'s caption says so.
+#[test]
+fn the_per_joint_figure_is_signed_and_the_error_map_has_a_colour_bar() {
+    let out = common::scratch("calibrate-figures");
+    let o = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dir = out.path().join("example_measurements.calibration");
+    let per_joint = std::fs::read_to_string(dir.join("residuals_per_joint.svg")).unwrap();
+    for key in ["x (base frame)", "y (base frame)", "z (base frame)", "signed"] {
+        assert!(per_joint.contains(key), "residuals_per_joint.svg: {key}");
+    }
+    let c = calsim::calibrate::run(
+        &RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap(),
+        &measurements::read(
+            &common::repo().join("docs/calibrate/example_measurements.csv"),
+            &RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap(),
+        )
+        .unwrap(),
+        &Options { plots: false, ..Options::default() },
+    )
+    .unwrap();
+    let r = &c.chosen().fit.residual_base_mm;
+    assert!(r.iter().any(|v| v.z < 0.0) && r.iter().any(|v| v.z > 0.0), "the plotted components take both signs");
+    let map = std::fs::read_to_string(dir.join("error_map.svg")).unwrap();
+    assert!(map.contains("error after calibration (mm)"), "error_map.svg has no colour bar");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    assert!(summary.contains("signed) against each joint"), "{summary}");
+}
