@@ -832,7 +832,7 @@ fn the_k_fold_over_every_pose_predicts_each_pose_once_by_a_fit_without_it() {
     assert_eq!(a.fold_all.len(), m.poses.len(), "a fold per pose, held-out ones included");
     assert_eq!(a.folds_all, folds);
     for f in 0..folds {
-        assert!(a.fold_all.iter().any(|&g| g == f), "fold {f} holds poses");
+        assert!(a.fold_all.contains(&f), "fold {f} holds poses");
     }
     let cv = &c.chosen().cv_all;
     assert!(cv.failed.is_empty(), "{:?}", cv.failed);
