@@ -143,6 +143,11 @@ struct CalibrateArgs {
     /// The payload's centre of mass in the flange frame, mm: x,y,z (default 0,0,0; needs --payload-kg).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, requires = "payload_kg")]
     payload_com_mm: Option<Vec<f64>>,
+    /// A tool per session: each session's targets get their own position on the flange (a probe
+    /// or SMR nest re-mounted between sessions); a session held out whole has its tools registered
+    /// with its base on its own points.
+    #[arg(long)]
+    tool_per_session: bool,
     /// Skip the figures.
     #[arg(long)]
     no_plots: bool,
@@ -820,6 +825,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         plan_noise_mm: args.plan_noise_mm,
         plan_scenario: args.plan_scenario.clone(),
         plots: !args.no_plots,
+        tool_per_session: args.tool_per_session,
         payload_kg: args.payload_kg,
         payload_com_mm: args.payload_com_mm.clone(),
         ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())

@@ -1092,3 +1092,39 @@ fn the_per_joint_figure_is_signed_and_the_error_map_has_a_colour_bar() {
     let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
     assert!(summary.contains("signed) against each joint"), "{summary}");
 }
+
+/// `--tool-per-session`: sessions A and B measure the SMRs where the simulation puts them, session
+/// C after the nest was re-mounted (every SMR 0.8 mm away along the flange's x). Held out whole,
+/// session C's errors carry the move when its targets share A and B's tools; with a tool per
+/// session its tools are registered with its base on its own points, and its held-out errors are
+/// those of the robot.
+#[test]
+fn a_tool_per_session_registers_a_remounted_probe() {
+    let robot = robot_from(&coupled_irb120_text());
+    let truth = truth_on(&robot, &offsets_only());
+    let base = spec(truth, &robot, 0.012, vec![]);
+    let ab = SimulationSpec { sessions: base.sessions[..2].to_vec(), ..base.clone() };
+    let moved: Vec<(String, Vector3<f64>)> = base.targets.iter().map(|(l, t)| (l.clone(), t + Vector3::new(0.8, 0.0, 0.0))).collect();
+    let c_only = SimulationSpec { sessions: base.sessions[2..].to_vec(), targets: moved, seed: 8, ..base.clone() };
+    let mut text = to_csv(&ab);
+    for l in to_csv(&c_only).lines().filter(|l| l.starts_with('p') && !l.starts_with("pose,")) {
+        text.push_str(&format!("q{}\n", &l[1..]));
+    }
+    let m = measurements::parse(Path::new("remounted.csv"), &text, &robot).unwrap();
+    let c_label = base.sessions[2].0.clone();
+    let opts = Options {
+        params: Some(offsets_only()),
+        split: Split::Session(c_label),
+        outliers: calsim::calibrate::OutlierMode::Off,
+        plots: false,
+        ..Options::default()
+    };
+    let shared = run(&robot, &m, &opts).unwrap();
+    let own = run(&robot, &m, &Options { tool_per_session: true, ..opts.clone() }).unwrap();
+    let rms = |c: &Calibration| c.chosen().held_out.as_ref().unwrap().measured.rms;
+    eprintln!("held-out RMS of the re-mounted session: shared tools {:.4} mm, a tool per session {:.4} mm", rms(&shared), rms(&own));
+    assert!(rms(&shared) > 0.2, "the move shows with shared tools: {}", rms(&shared));
+    assert!(rms(&own) < 0.05, "a tool per session registers it: {}", rms(&own));
+    assert_eq!(own.tools.len(), 6, "two targets in three sessions");
+    assert!(own.tools.iter().any(|t| t.target == "SMR1@C"));
+}

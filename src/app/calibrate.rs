@@ -43,6 +43,8 @@ pub struct CalibrateArgs {
     pub plan_scenario: Option<PathBuf>,
     /// Draw the figures.
     pub plots: bool,
+    /// A tool per session and target.
+    pub tool_per_session: bool,
     /// A lumped payload at the flange, kg (`None`: the robot file's).
     pub payload_kg: Option<f64>,
     /// The payload's centre of mass in the flange frame, mm (three numbers; `None`: 0, 0, 0).
@@ -70,6 +72,7 @@ impl CalibrateArgs {
             plan_noise_mm: None,
             plan_scenario: None,
             plots: true,
+            tool_per_session: false,
             payload_kg: None,
             payload_com_mm: None,
         }
@@ -122,6 +125,7 @@ impl CalibrateArgs {
         let options = Options {
             params,
             payload,
+            tool_per_session: self.tool_per_session,
             folds: self.folds as usize,
             kfold_by,
             split,

@@ -107,6 +107,9 @@ pub struct Options {
     pub prediction_draws: usize,
     /// Draw the figures.
     pub plots: bool,
+    /// A tool per session and target (`--tool-per-session`): each session's targets placed on the
+    /// flange anew (a probe re-mounted between sessions).
+    pub tool_per_session: bool,
     /// A lumped payload at the flange in place of the robot file's `[payload]` (`--payload-kg`):
     /// the mass the joint compliances act through when the robot file gives no masses.
     pub payload: Option<Payload>,
@@ -141,6 +144,7 @@ impl Default for Options {
             outliers: OutlierMode::Report,
             prediction_draws: 200,
             plots: true,
+            tool_per_session: false,
             payload: None,
         }
     }
@@ -449,6 +453,13 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             &with_payload
         }
     };
+    let per_session;
+    let m = if opts.tool_per_session {
+        per_session = tool_per_session(m);
+        &per_session
+    } else {
+        m
+    };
     let listed = opts.params.clone().unwrap_or_else(default_params);
     let inert = inert_compliances(robot, m, &listed);
     let full = ParamSet::new(listed.ids().iter().copied().filter(|id| inert.iter().all(|(n, _)| *n != id.name())).collect())
@@ -501,6 +512,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             poses.all(|(p, _)| assignment.held_out[p])
         })
         .collect();
+    let register_tools: Vec<usize> = (0..m.targets.len()).filter(|&t| !train.iter().any(|&i| m.points[i].target == t)).collect();
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
     let labels = diagnose::Labels { sessions: &m.sessions, targets: &m.targets, lines: &lines, outliers: &outliers };
@@ -542,6 +554,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let spec = HeldOutSpec {
             test: &held,
             register: &register,
+            register_tools: &register_tools,
             outliers: &outliers,
             flagged: &flagged,
             draws: opts.prediction_draws,
@@ -581,6 +594,24 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         Parts { robot, m, opts, s, assignment, before, models, chosen, full: &listed, inert, outliers_by, flagged: flagged.clone() },
         fit,
     )
+}
+
+/// `m` with a target per session and target (`SMR1@A`): each session's targets get their own
+/// position on the flange.
+fn tool_per_session(m: &Measurements) -> Measurements {
+    let mut out = m.clone();
+    out.targets.clear();
+    for p in &mut out.points {
+        let label = format!("{}@{}", m.targets[p.target], m.sessions[m.poses[p.pose].session]);
+        p.target = match out.targets.iter().position(|t| *t == label) {
+            Some(k) => k,
+            None => {
+                out.targets.push(label);
+                out.targets.len() - 1
+            }
+        };
+    }
+    out
 }
 
 /// The joint compliances of `set` that cannot act on the poses of `m`: the gravity torque of their

@@ -241,6 +241,7 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
             "params": o.params.as_ref().map_or_else(|| super::default_params().names(), |p| p.names()),
             "folds": o.folds,
             "kfold_by": o.kfold_by.name(),
+            "tool_per_session": o.tool_per_session,
             "payload": o.payload.map(|p| serde_json::json!({ "mass_kg": p.mass_kg, "com_mm": p.com_mm })),
             "split": o.split.describe(),
             "seed": o.seed,

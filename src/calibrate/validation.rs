@@ -228,7 +228,10 @@ pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Resul
             }
         }
         for (t, target) in m.targets.iter().enumerate() {
-            if !m.points.iter().any(|pt| pt.target == t && !held_out[pt.pose]) {
+            // A target measured only in sessions held out whole is registered with their bases.
+            let whole = |s: usize| m.poses.iter().enumerate().filter(|(_, p)| p.session == s).all(|(p, _)| held_out[p]);
+            let points = || m.points.iter().filter(|pt| pt.target == t);
+            if !points().any(|pt| !held_out[pt.pose]) && !points().all(|pt| whole(m.poses[pt.pose].session)) {
                 return Err(SplitError::TargetOnlyThere(target.clone()));
             }
         }
@@ -332,6 +335,9 @@ pub struct HeldOutSpec<'a> {
     pub test: &'a [usize],
     /// Sessions whose bases are registered on the held-out points (a held-out session).
     pub register: &'a [usize],
+    /// Targets whose tools are registered on the held-out points with those bases (a target
+    /// measured in held-out sessions only: `--tool-per-session`).
+    pub register_tools: &'a [usize],
     /// Per problem point: left out of every fit and statistic.
     pub outliers: &'a [bool],
     /// Per problem point: flagged by the outlier rule.
@@ -348,7 +354,8 @@ pub struct HeldOutSpec<'a> {
 pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: &HeldOutSpec<'_>, opts: &SolveOptions) -> HeldOut {
     let l = &problem.layout;
     let mut x = train.solved.x.clone();
-    let reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base(s)..l.base(s) + 6).collect();
+    let mut reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base(s)..l.base(s) + 6).collect();
+    reg_cols.extend(spec.register_tools.iter().flat_map(|&t| l.tool(t)..l.tool(t) + 3));
     if !reg_cols.is_empty() {
         let mask: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
         x = fit_without(problem, &x, &reg_cols, spec.test, &mask, opts).solved.x;
