@@ -94,6 +94,11 @@ struct CalibrateArgs {
     /// Cross-validation folds.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
     folds: u32,
+    /// How the k-fold cross-validation over every pose (the figure comparable with the
+    /// literature's) groups the poses: `pose` (--folds folds of each session's poses) or `session`
+    /// (a fold per session).
+    #[arg(long, default_value = "pose", value_parser = ["pose", "session"])]
+    kfold_by: String,
     /// Fraction of each session's poses held out, drawn at random (default: the file's `split`
     /// column when it has one, else 0.2).
     #[arg(long, conflicts_with_all = ["hold_out_session", "hold_out_file"])]
@@ -130,6 +135,19 @@ struct CalibrateArgs {
     /// ([robot.unmodelled]) and repeatability are drawn in each world of the plan.
     #[arg(long)]
     plan_scenario: Option<PathBuf>,
+    /// A lumped payload at the flange, kg (the SMR nest or probe), in place of the robot file's
+    /// [payload]: the mass the joint compliances act through (a robot file without masses has no
+    /// gravity torque).
+    #[arg(long, allow_negative_numbers = true)]
+    payload_kg: Option<f64>,
+    /// The payload's centre of mass in the flange frame, mm: x,y,z (default 0,0,0; needs --payload-kg).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, requires = "payload_kg")]
+    payload_com_mm: Option<Vec<f64>>,
+    /// A tool per session: each session's targets get their own position on the flange (a probe
+    /// or SMR nest re-mounted between sessions); a session held out whole has its tools registered
+    /// with its base on its own points.
+    #[arg(long)]
+    tool_per_session: bool,
     /// Skip the figures.
     #[arg(long)]
     no_plots: bool,
@@ -816,6 +834,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
 fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
     let spec = app::calibrate::CalibrateArgs {
         folds: args.folds,
+        kfold_by: Some(args.kfold_by.clone()),
         hold_out: args.hold_out,
         hold_out_session: args.hold_out_session.clone(),
         hold_out_file: args.hold_out_file.clone(),
@@ -827,9 +846,15 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         plan_noise_mm: args.plan_noise_mm,
         plan_scenario: args.plan_scenario.clone(),
         plots: !args.no_plots,
+        tool_per_session: args.tool_per_session,
+        payload_kg: args.payload_kg,
+        payload_com_mm: args.payload_com_mm.clone(),
         ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())
     };
     let report = app::calibrate::run(&spec).map_err(|e| e.to_string())?;
+    if let Some(line) = crate::calibrate::report::orientation_warning(&report.calibration) {
+        eprintln!("{line}");
+    }
     if let Some(line) = crate::calibrate::report::outlier_warning(&report.calibration) {
         eprintln!("{line}");
     }

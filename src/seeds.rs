@@ -136,6 +136,8 @@ pub mod calibrate {
     pub const SIMULATED_NOISE: u64 = 0x4341_4c49_0004;
     /// The noise of a plan's simulated worlds (`calibrate::plan::simulate`), per world.
     pub const PLAN_NOISE: u64 = 0x4341_4c49_0005;
+    /// The folds of the k-fold cross-validation over every pose (`calibrate::validation::assign_every_pose`).
+    pub const FOLDS_EVERY_POSE: u64 = 0x4341_4c49_0006;
 }
 
 /// The streams of `calsim plan`, keyed under the plan file's `seed`.

@@ -804,3 +804,327 @@ fn outliers_are_reported_loudly_and_the_held_out_figures_come_with_and_without_t
     }
     assert!(seen[0] > seen[1], "the fit keeps the outlier under `report`: RMS {} against {}", seen[0], seen[1]);
 }
+
+/// A small known data set: 3 sessions x 9 poses x 2 targets of the coupled IRB 120 with its true
+/// joint offsets and 12 um of noise, calibrated with the joint offsets alone.
+fn small_known(robot: &RobotFile) -> measurements::Measurements {
+    let spec = SimulationSpec { poses_per_session: 9, ..spec(truth_on(robot, &offsets_only()), robot, 0.012, vec![]) };
+    measured(&spec, robot)
+}
+
+/// The k-fold cross-validation over every pose: on a small known data set with 20 % of the poses
+/// held out, the folds (by pose) cover every pose exactly once, held-out ones included (each pose
+/// in one fold, every fold used, every point with its k-fold error, in `points.parquet` as in the
+/// calibration), and each fold's errors are those of an independent calibration that holds out
+/// exactly that fold's poses (its held-out errors: a fit on every other pose). By session, a fold
+/// per session, each session's base registered on its own points: every point again has its
+/// error, and the terminal and summary.md say which figure is which.
+#[test]
+fn the_k_fold_over_every_pose_predicts_each_pose_once_by_a_fit_without_it() {
+    let robot = robot_from(&coupled_irb120_text());
+    let m = small_known(&robot);
+    let folds = 4;
+    let opts =
+        Options { params: Some(offsets_only()), folds, outliers: calsim::calibrate::OutlierMode::Off, plots: false, ..Options::default() };
+    let c = run(&robot, &m, &opts).unwrap();
+    let a = &c.assignment;
+    assert!(a.held_out.iter().any(|h| *h), "some poses are held out");
+    assert_eq!(a.fold_all.len(), m.poses.len(), "a fold per pose, held-out ones included");
+    assert_eq!(a.folds_all, folds);
+    for f in 0..folds {
+        assert!(a.fold_all.contains(&f), "fold {f} holds poses");
+    }
+    let cv = &c.chosen().cv_all;
+    assert!(cv.failed.is_empty(), "{:?}", cv.failed);
+    assert_eq!(cv.points, m.points.len(), "every point predicted");
+    assert!(cv.errors_mm.iter().all(|e| e.is_finite()));
+    // Each fold against a calibration holding out exactly its poses.
+    for f in 0..folds {
+        let poses: Vec<(String, String)> = (0..m.poses.len())
+            .filter(|&p| a.fold_all[p] == f)
+            .map(|p| (m.sessions[m.poses[p].session].clone(), m.poses[p].label.clone()))
+            .collect();
+        let split = Split::Listed { source: format!("fold {f}"), poses };
+        let other = run(&robot, &m, &Options { split, ..opts.clone() }).unwrap();
+        let h = other.chosen().held_out.as_ref().unwrap();
+        let test: Vec<usize> = (0..m.points.len()).filter(|&i| a.fold_all[m.points[i].pose] == f).collect();
+        assert_eq!(h.errors_mm.len(), test.len());
+        for (k, &i) in test.iter().enumerate() {
+            assert!((h.errors_mm[k] - cv.errors_mm[i]).abs() < 1e-9, "fold {f}, point {i}: {} against {}", h.errors_mm[k], cv.errors_mm[i]);
+        }
+    }
+    // The table of points carries the fold and the error of every point.
+    let dir = common::scratch("calibrate-kfold");
+    let csv = write_csv(
+        dir.path(),
+        "small.csv",
+        &to_csv(&SimulationSpec { poses_per_session: 9, ..spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]) }),
+    );
+    let robot_path = write_csv(dir.path(), "irb120_coupled.toml", &coupled_irb120_text());
+    for by in ["pose", "session"] {
+        let o = common::calsim()
+            .args(["calibrate", "--no-plots", "--folds", "4", "--outliers", "off", "--params"])
+            .arg("theta_offs2,theta_offs3,theta_offs4,theta_offs5,theta_offs6")
+            .args(["--kfold-by", by])
+            .arg(&robot_path)
+            .arg(&csv)
+            .arg("--out")
+            .arg(dir.path().join(by))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(stdout.contains("k-fold all poses"), "{stdout}");
+        let report = dir.path().join(by).join("small.calibration");
+        let points = read_parquet(&report.join("points.parquet"));
+        let folds_col = points.column("kfold_all_fold").unwrap().u32().unwrap();
+        let errors = points.column("kfold_all_error_mm").unwrap().f64().unwrap();
+        let sessions = points.column("session").unwrap().str().unwrap();
+        let poses = points.column("pose").unwrap().str().unwrap();
+        let mut fold_of: std::collections::HashMap<(String, String), u32> = Default::default();
+        for i in 0..points.height() {
+            let key = (sessions.get(i).unwrap().to_string(), poses.get(i).unwrap().to_string());
+            let f = folds_col.get(i).unwrap();
+            assert_eq!(*fold_of.entry(key).or_insert(f), f, "a pose in one fold");
+            assert!(errors.get(i).unwrap().is_finite(), "{by}: row {i} has its k-fold error");
+        }
+        assert_eq!(fold_of.len(), m.poses.len(), "every pose in a fold");
+        let used: std::collections::BTreeSet<u32> = fold_of.values().copied().collect();
+        let expected = if by == "pose" { 4 } else { 3 };
+        assert_eq!(used, (0..expected).collect(), "{by}: folds");
+        if by == "session" {
+            for ((s, _), f) in &fold_of {
+                assert_eq!(m.sessions[*f as usize], *s, "a fold per session");
+            }
+        }
+        let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+        assert!(summary.contains("k-fold cross-validation over every pose"), "{summary}");
+        assert!(summary.contains("chooses the model"), "{summary}");
+    }
+}
+
+/// The IRB 120's robot file without masses (an imported URDF's arm: no link carries a mass).
+fn massless_irb120_text() -> String {
+    let text = std::fs::read_to_string(common::repo().join("robots/irb120.toml")).unwrap();
+    text.lines().map(|l| if l.starts_with("mass_kg") { "mass_kg = 0.0".to_string() } else { l.to_string() }).collect::<Vec<_>>().join("\n")
+}
+
+/// A massless arm (no link mass, no payload) measured holding a lumped 8 kg payload at the flange,
+/// its joints 2 and 3 compliant (Table 7's c2 and c3 against that payload's gravity torque alone:
+/// a lumped J2/J3 compliance model), true joint offsets, 12 um of noise. Calibrated from the
+/// massless robot file, the compliances are kept nominal with the right reason (no masses, no
+/// gravity torque; not "the poses cannot separate them") and no compliance model is compared;
+/// with `--payload-kg 8 --payload-com-mm 0,0,60` the compliance model is chosen and recovers the
+/// lumped c2 and c3 within 4 of its standard deviations, and robot.toml carries the payload. Bad
+/// payloads are one line naming the flag, exit 2.
+#[test]
+fn compliance_on_a_massless_arm_says_why_and_fits_a_lumped_payload_given_at_the_flange() {
+    let dir = common::scratch("calibrate-massless");
+    let robot_path = write_csv(dir.path(), "massless.toml", &massless_irb120_text());
+    let robot = RobotFile::load(&robot_path).unwrap();
+    assert!(robot.nominal.data().links_inertial.iter().all(|b| b.mass_kg == 0.0));
+    let mut names: Vec<String> = offsets_only().names();
+    names.extend(["c2".to_string(), "c3".to_string()]);
+    let set = ParamSet::from_names(&names).unwrap();
+    let com = [0.0, 0.0, 60.0];
+    let truth =
+        truth_on(&robot, &set).edited(|d| d.payload = calsim::robot::Inertial { mass_kg: 8.0, com_mm: Vector3::from(com) }).unwrap();
+    let sim = SimulationSpec { coupling: None, comments: vec![], ..spec(truth.clone(), &robot, 0.012, vec![]) };
+    let m = measured(&sim, &robot);
+    let opts = Options { params: Some(set.clone()), outliers: calsim::calibrate::OutlierMode::Off, plots: false, ..Options::default() };
+
+    let c = run(&robot, &m, &opts).unwrap();
+    assert!(c.models.iter().all(|r| r.kind != Some(ModelKind::Compliance)), "no compliance model without a gravity torque");
+    for name in ["c2", "c3"] {
+        let e = c.estimates.iter().find(|e| e.id.name() == name).unwrap();
+        match &e.status {
+            ParamStatus::NoTorque(why) => assert!(why.contains("gives no masses") && why.contains("--payload-kg"), "{why}"),
+            other => panic!("{name}: {other:?}"),
+        }
+    }
+    let text = calsim::calibrate::report::terminal(&c, Path::new("out"));
+    assert!(text.contains("c2, c3: kept nominal, in no model: the robot file"), "{text}");
+    assert!(!text.lines().any(|l| l.contains("cannot separate") && l.contains("c2")), "{text}");
+
+    let payload = calsim::calibrate::Payload { mass_kg: 8.0, com_mm: com };
+    let c = run(&robot, &m, &Options { payload: Some(payload), ..opts.clone() }).unwrap();
+    assert_eq!(c.chosen().kind, Some(ModelKind::Compliance));
+    for name in ["c2", "c3"] {
+        let e = c.estimates.iter().find(|e| e.id.name() == name).unwrap();
+        assert_eq!(e.status, ParamStatus::Identified, "{name}");
+        let t = (e.value - e.id.get(truth.data())) / e.std;
+        eprintln!("{name}: {} against {} (std {}): {t:+.2} std", e.value, e.id.get(truth.data()), e.std);
+        assert!(t.abs() < 4.0, "{name}: {t} std from the lumped truth");
+    }
+
+    let csv = write_csv(dir.path(), "massless.csv", &to_csv(&sim));
+    let cli = |extra: &[&str]| {
+        let mut cmd = common::calsim();
+        cmd.args(["calibrate", "--no-plots", "--params", &names.join(","), "--out"]).arg(dir.path().join("out"));
+        cmd.arg(&robot_path).arg(&csv).args(extra);
+        cmd.output().unwrap()
+    };
+    let o = cli(&["--payload-kg", "8", "--payload-com-mm", "0,0,60"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let exported = RobotFile::load(&dir.path().join("out/massless.calibration/robot.toml")).unwrap();
+    assert_eq!(exported.nominal.data().payload.mass_kg, 8.0, "robot.toml carries the payload its compliances act through");
+    for (args, flag) in [
+        (&["--payload-kg", "NaN"][..], "--payload-kg"),
+        (&["--payload-kg", "-1"][..], "--payload-kg"),
+        (&["--payload-kg", "1e9"][..], "--payload-kg"),
+        (&["--payload-kg", "inf"][..], "--payload-kg"),
+        (&["--payload-kg", "8", "--payload-com-mm", "0,0"][..], "--payload-com-mm"),
+        (&["--payload-kg", "8", "--payload-com-mm", "0,0,1e12"][..], "--payload-com-mm"),
+        (&["--payload-com-mm", "0,0,60"][..], "--payload"),
+    ] {
+        let o = cli(args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(flag), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+    }
+}
+
+/// A fit that gives no model names what the data leave undetermined. A third target, T3, is read
+/// at five poses of session A with millimetres of scatter (a probe knocked between readings):
+/// under `--outliers reject` all five are flagged and left out, so no point of the final fit
+/// places T3; the error names the model, the unknowns with no effect (T3's tool), the target, its
+/// points in the fit and the lines left out as outliers, in one line.
+#[test]
+fn a_fit_failure_names_the_sessions_points_and_parameters_involved() {
+    let robot = robot_from(&coupled_irb120_text());
+    let text = to_csv(&spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]));
+    let scatter = [[3.0, -2.0, 4.0], [-4.0, 1.0, 2.0], [2.0, 4.0, -3.0], [-1.0, -3.0, -4.0], [4.0, 2.0, 1.0]];
+    let mut out = String::new();
+    let mut added = 0;
+    for l in text.lines() {
+        out.push_str(&format!("{l}\n"));
+        let f: Vec<&str> = l.split(',').collect();
+        if added < scatter.len() && f.len() == 12 && f[1] == "A" && f[2] == "SMR1" {
+            let d = scatter[added];
+            let v = |k: usize| f[k].parse::<f64>().unwrap();
+            out.push_str(&format!("{},T3,{},{},{},{}\n", f[..2].join(","), f[3..9].join(","), v(9) + d[0], v(10) + d[1], v(11) + d[2]));
+            added += 1;
+        }
+    }
+    let m = measurements::parse(Path::new("knocked.csv"), &out, &robot).unwrap();
+    let t3: Vec<u64> = m.points.iter().filter(|p| m.targets[p.target] == "T3").map(|p| p.line).collect();
+    assert_eq!(t3.len(), 5);
+    let opts =
+        Options { params: Some(offsets_only()), outliers: calsim::calibrate::OutlierMode::Reject, plots: false, ..Options::default() };
+    let e = run(&robot, &m, &opts).unwrap_err().to_string();
+    eprintln!("{e}");
+    assert!(e.contains("knocked.csv: the offsets model could not be fitted"), "{e}");
+    assert!(e.contains("tool[T3].x, tool[T3].y, tool[T3].z"), "the unknowns involved: {e}");
+    assert!(e.contains("target T3: 0 of its 5 points in the fit"), "the target and its points: {e}");
+    let lines: Vec<String> = t3.iter().map(u64::to_string).collect();
+    assert!(e.contains(&format!("5 left out as outliers (--outliers reject; lines {})", lines.join(", "))), "the lines: {e}");
+    assert!(!e.contains('\n'), "one line: {e}");
+}
+
+/// Orientation readings (a six-degree-of-freedom probe's `quat_*` columns) are checked and not
+/// used, and calibrate says so: a WARNING line on standard error naming the file and the columns,
+/// and a sentence in summary.md; the positions' figures are those of the file without the columns.
+#[test]
+fn orientation_columns_are_not_read_and_ignored_silently() {
+    let dir = common::scratch("calibrate-quat");
+    let text = std::fs::read_to_string(common::repo().join("docs/calibrate/example_measurements.csv")).unwrap();
+    let with: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                format!("{l}\n")
+            } else if l.starts_with("pose,") {
+                format!("{l},quat_w,quat_x,quat_y,quat_z\n")
+            } else {
+                format!("{l},1,0,0,0\n")
+            }
+        })
+        .collect();
+    let csv = write_csv(dir.path(), "probe.csv", &with);
+    let o = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "--no-plots", "--params", "theta_offs2,theta_offs3,theta_offs4,theta_offs5", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.lines().any(|l| l.contains("WARNING") && l.contains("probe.csv") && l.contains("quat_w") && l.contains("NOT used")),
+        "{stderr}"
+    );
+    let summary = std::fs::read_to_string(dir.path().join("out/probe.calibration/summary.md")).unwrap();
+    assert!(summary.contains("**Orientation readings not used**"), "{summary}");
+}
+
+/// The report's figures: the residuals per joint are signed components (x, y, z in the base
+/// frame, both signs on the axis: a sag's pattern shows), the error map has a colour bar, and
+/// `summary.md`'s caption says so.
+#[test]
+fn the_per_joint_figure_is_signed_and_the_error_map_has_a_colour_bar() {
+    let out = common::scratch("calibrate-figures");
+    let o = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dir = out.path().join("example_measurements.calibration");
+    let per_joint = std::fs::read_to_string(dir.join("residuals_per_joint.svg")).unwrap();
+    for key in ["x (base frame)", "y (base frame)", "z (base frame)", "signed"] {
+        assert!(per_joint.contains(key), "residuals_per_joint.svg: {key}");
+    }
+    let c = calsim::calibrate::run(
+        &RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap(),
+        &measurements::read(
+            &common::repo().join("docs/calibrate/example_measurements.csv"),
+            &RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap(),
+        )
+        .unwrap(),
+        &Options { plots: false, ..Options::default() },
+    )
+    .unwrap();
+    let r = &c.chosen().fit.residual_base_mm;
+    assert!(r.iter().any(|v| v.z < 0.0) && r.iter().any(|v| v.z > 0.0), "the plotted components take both signs");
+    let map = std::fs::read_to_string(dir.join("error_map.svg")).unwrap();
+    assert!(map.contains("error after calibration (mm)"), "error_map.svg has no colour bar");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    assert!(summary.contains("signed) against each joint"), "{summary}");
+}
+
+/// `--tool-per-session`: sessions A and B measure the SMRs where the simulation puts them, session
+/// C after the nest was re-mounted (every SMR 0.8 mm away along the flange's x). Held out whole,
+/// session C's errors carry the move when its targets share A and B's tools; with a tool per
+/// session its tools are registered with its base on its own points, and its held-out errors are
+/// those of the robot.
+#[test]
+fn a_tool_per_session_registers_a_remounted_probe() {
+    let robot = robot_from(&coupled_irb120_text());
+    let truth = truth_on(&robot, &offsets_only());
+    let base = spec(truth, &robot, 0.012, vec![]);
+    let ab = SimulationSpec { sessions: base.sessions[..2].to_vec(), ..base.clone() };
+    let moved: Vec<(String, Vector3<f64>)> = base.targets.iter().map(|(l, t)| (l.clone(), t + Vector3::new(0.8, 0.0, 0.0))).collect();
+    let c_only = SimulationSpec { sessions: base.sessions[2..].to_vec(), targets: moved, seed: 8, ..base.clone() };
+    let mut text = to_csv(&ab);
+    for l in to_csv(&c_only).lines().filter(|l| l.starts_with('p') && !l.starts_with("pose,")) {
+        text.push_str(&format!("q{}\n", &l[1..]));
+    }
+    let m = measurements::parse(Path::new("remounted.csv"), &text, &robot).unwrap();
+    let c_label = base.sessions[2].0.clone();
+    let opts = Options {
+        params: Some(offsets_only()),
+        split: Split::Session(c_label),
+        outliers: calsim::calibrate::OutlierMode::Off,
+        plots: false,
+        ..Options::default()
+    };
+    let shared = run(&robot, &m, &opts).unwrap();
+    let own = run(&robot, &m, &Options { tool_per_session: true, ..opts.clone() }).unwrap();
+    let rms = |c: &Calibration| c.chosen().held_out.as_ref().unwrap().measured.rms;
+    eprintln!("held-out RMS of the re-mounted session: shared tools {:.4} mm, a tool per session {:.4} mm", rms(&shared), rms(&own));
+    assert!(rms(&shared) > 0.2, "the move shows with shared tools: {}", rms(&shared));
+    assert!(rms(&own) < 0.05, "a tool per session registers it: {}", rms(&own));
+    assert_eq!(own.tools.len(), 6, "two targets in three sessions");
+    assert!(own.tools.iter().any(|t| t.target == "SMR1@C"));
+}

@@ -286,3 +286,20 @@ fn the_shipped_lrmate_runs_the_trical_study() {
     let beside: Vec<&str> = f.table7.iter().filter(|p| p.published.is_some()).map(|p| p.name.as_str()).collect();
     assert!(beside.is_empty(), "Table 7 beside the LR Mate's {beside:?}");
 }
+
+/// An imported arm's capsules are written tidily, to the micrometre (no `-144.99999582767487`
+/// from the single-precision vertices of its meshes).
+#[test]
+fn imported_capsules_are_written_to_the_micrometre() {
+    let shipped = std::fs::read_to_string(common::repo().join("robots/lrmate200ic.toml")).unwrap();
+    let caps: Vec<&str> =
+        shipped.lines().filter(|l| l.starts_with("a_mm = [") || l.starts_with("b_mm = [") || l.starts_with("radius_mm")).collect();
+    assert!(caps.len() >= 21, "{caps:?}");
+    for l in caps {
+        let numbers = l.split(['=', '[', ']', ',']).skip(1).map(str::trim).filter(|s| !s.is_empty());
+        for n in numbers {
+            let decimals = n.split('.').nth(1).map_or(0, str::len);
+            assert!(decimals <= 3, "{l}: {n} has {decimals} decimals");
+        }
+    }
+}

@@ -384,6 +384,10 @@ def calibrate(
     plan_noise_mm: float | None = None,
     plan_scenario: PathLike | None = None,
     plots: bool = True,
+    kfold_by: str | None = None,
+    tool_per_session: bool = False,
+    payload_kg: float | None = None,
+    payload_com_mm: Sequence[float] | None = None,
 ) -> CalibrationResult:
     """Calibrates a real robot from measured data (``calsim calibrate``): the report, the
     calibrated ``robot.toml``, URDF and YAML in ``out/<measurements stem>.calibration``.
@@ -410,6 +414,10 @@ def calibrate(
         plan_noise_mm=_real("plan_noise_mm", plan_noise_mm),
         plan_scenario=None if plan_scenario is None else Path(plan_scenario),
         plots=plots,
+        kfold_by=kfold_by,
+        tool_per_session=tool_per_session,
+        payload_kg=_real("payload_kg", payload_kg),
+        payload_com_mm=None if payload_com_mm is None else [_real("payload_com_mm", v) for v in payload_com_mm],
     )
     if not isinstance(measurements, pl.DataFrame):
         if header is not None:

@@ -85,6 +85,10 @@ def calibrate(
     plan_noise_mm: float | None = None,
     plan_scenario: Path | None = None,
     plots: bool = True,
+    kfold_by: str | None = None,
+    tool_per_session: bool = False,
+    payload_kg: float | None = None,
+    payload_com_mm: Sequence[float] | None = None,
 ) -> Report: ...
 def optimise(
     file: Path,

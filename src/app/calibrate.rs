@@ -18,6 +18,9 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
     /// Cross-validation folds.
     pub folds: u32,
+    /// How the k-fold cross-validation over every pose groups the poses: `pose` or `session`
+    /// (`None`: the default, by pose).
+    pub kfold_by: Option<String>,
     /// Fraction of each session's poses held out (`None`: the default, unless a session is held out).
     pub hold_out: Option<f64>,
     /// Hold out every pose of this session instead.
@@ -40,6 +43,12 @@ pub struct CalibrateArgs {
     pub plan_scenario: Option<PathBuf>,
     /// Draw the figures.
     pub plots: bool,
+    /// A tool per session and target.
+    pub tool_per_session: bool,
+    /// A lumped payload at the flange, kg (`None`: the robot file's).
+    pub payload_kg: Option<f64>,
+    /// The payload's centre of mass in the flange frame, mm (three numbers; `None`: 0, 0, 0).
+    pub payload_com_mm: Option<Vec<f64>>,
 }
 
 impl CalibrateArgs {
@@ -51,6 +60,7 @@ impl CalibrateArgs {
             measurements,
             out,
             folds: d.folds as u32,
+            kfold_by: None,
             hold_out: None,
             hold_out_session: None,
             hold_out_file: None,
@@ -62,6 +72,9 @@ impl CalibrateArgs {
             plan_noise_mm: None,
             plan_scenario: None,
             plots: true,
+            tool_per_session: false,
+            payload_kg: None,
+            payload_com_mm: None,
         }
     }
 
@@ -94,9 +107,27 @@ impl CalibrateArgs {
             Some(name) => crate::calibrate::OutlierMode::parse(name)
                 .ok_or_else(|| option("outliers", format!("{name:?}: one of \"off\", \"report\", \"reject\"")))?,
         };
+        let kfold_by = match &self.kfold_by {
+            None => defaults.kfold_by,
+            Some(name) => crate::calibrate::KFoldBy::parse(name)
+                .ok_or_else(|| option("kfold-by", format!("{name:?}: one of \"pose\", \"session\"")))?,
+        };
+        let payload = match (self.payload_kg, &self.payload_com_mm) {
+            (None, None) => None,
+            (None, Some(_)) => return Err(option("payload-com-mm", "a centre of mass needs --payload-kg".into())),
+            (Some(mass_kg), None) => Some(crate::calibrate::Payload { mass_kg, com_mm: [0.0; 3] }),
+            (Some(mass_kg), Some(v)) => {
+                let com_mm: [f64; 3] =
+                    v.as_slice().try_into().map_err(|_| option("payload-com-mm", format!("{} numbers: give three, x,y,z mm", v.len())))?;
+                Some(crate::calibrate::Payload { mass_kg, com_mm })
+            }
+        };
         let options = Options {
             params,
+            payload,
+            tool_per_session: self.tool_per_session,
             folds: self.folds as usize,
+            kfold_by,
             split,
             seed: self.seed,
             outlier_threshold: self.outlier_threshold.unwrap_or(defaults.outlier_threshold),

@@ -19,6 +19,7 @@
 //! only, the full geometric set, and geometric with joint compliance. The comparison with the
 //! plan that a scenario simulated is [`plan`]'s seam.
 
+pub mod diagnose;
 pub mod measurements;
 pub mod plan;
 mod plots;
@@ -41,6 +42,7 @@ use problem::{Layout, Obs, Problem, SolveOptions};
 use registration::{Raw, Unidentifiable, Unplaced};
 pub use robust::OutlierMode;
 use robust::{RobustFit, fit_without, robust_fit};
+pub use validation::KFoldBy;
 use validation::{HeldOutSpec, Split, SplitError, free_columns};
 
 pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ToolEstimate};
@@ -88,8 +90,11 @@ pub struct Options {
     /// The robot parameters of the most complete model (`None`: the TriCal paper's 31 less the
     /// base: alpha1..5, a1..5, d3..6, theta_offs2..6, c2..6, beta2).
     pub params: Option<ParamSet>,
-    /// Cross-validation folds, 2..=20.
+    /// Cross-validation folds, 2..=20 (of the training poses, and of every pose when grouped by pose).
     pub folds: usize,
+    /// How the k-fold cross-validation over every pose groups the poses (by pose: `folds` folds;
+    /// by session: a fold per session).
+    pub kfold_by: KFoldBy,
     /// The held-out split.
     pub split: Split,
     /// Seed of the split, the folds and the prediction's draws.
@@ -102,19 +107,45 @@ pub struct Options {
     pub prediction_draws: usize,
     /// Draw the figures.
     pub plots: bool,
+    /// A tool per session and target (`--tool-per-session`): each session's targets placed on the
+    /// flange anew (a probe re-mounted between sessions).
+    pub tool_per_session: bool,
+    /// A lumped payload at the flange in place of the robot file's `[payload]` (`--payload-kg`):
+    /// the mass the joint compliances act through when the robot file gives no masses.
+    pub payload: Option<Payload>,
 }
+
+/// A lumped payload at the flange: the SMR nest, probe or tool the arm holds while measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Payload {
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Centre of mass in the flange frame, mm.
+    pub com_mm: [f64; 3],
+}
+
+/// Largest payload `--payload-kg` takes, kg (well above any arm's rated payload).
+pub const MOST_PAYLOAD_KG: f64 = 2000.0;
+/// Largest coordinate of `--payload-com-mm`, mm.
+pub const MOST_PAYLOAD_COM_MM: f64 = 5000.0;
+/// A holding torque at or below this at every measured pose is none, N m: a compliance of that
+/// joint cannot act.
+const NO_TORQUE_NM: f64 = 1e-9;
 
 impl Default for Options {
     fn default() -> Self {
         Self {
             params: None,
             folds: 5,
+            kfold_by: KFoldBy::Pose,
             split: Split::Default,
             seed: 1,
             outlier_threshold: robust::DEFAULT_THRESHOLD,
             outliers: OutlierMode::Report,
             prediction_draws: 200,
             plots: true,
+            tool_per_session: false,
+            payload: None,
         }
     }
 }
@@ -270,6 +301,14 @@ fn check_options(o: &Options) -> Result<(), CalibrateError> {
     if !(10..=100_000).contains(&o.prediction_draws) {
         return bad("prediction-draws", format!("{}: within 10 to 100000", o.prediction_draws));
     }
+    if let Some(p) = &o.payload {
+        if !(p.mass_kg.is_finite() && (0.0..=MOST_PAYLOAD_KG).contains(&p.mass_kg)) {
+            return bad("payload-kg", format!("{}: within 0 to {MOST_PAYLOAD_KG} kg", p.mass_kg));
+        }
+        if let Some(v) = p.com_mm.iter().find(|v| !(v.is_finite() && v.abs() <= MOST_PAYLOAD_COM_MM)) {
+            return bad("payload-com-mm", format!("{v}: each coordinate within +-{MOST_PAYLOAD_COM_MM} mm of the flange"));
+        }
+    }
     if let Some(p) = &o.params {
         if let Some(id) = p.ids().iter().find(|id| matches!(id, ParamId::Base(_) | ParamId::Tool(_))) {
             return bad("params", format!("{}: the bases and tools are fitted per session and target, not as robot parameters", id.name()));
@@ -401,10 +440,42 @@ fn candidates(
 /// every point, nothing written.
 pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibration, CalibrateError> {
     check_options(opts)?;
-    let full = opts.params.clone().unwrap_or_else(default_params);
+    let with_payload;
+    let robot = match &opts.payload {
+        None => robot,
+        Some(p) => {
+            let com6 = robot.flange.map_or(nalgebra::Vector3::from(p.com_mm), |r| r * nalgebra::Vector3::from(p.com_mm));
+            let nominal = robot
+                .nominal
+                .edited(|d| d.payload = crate::robot::Inertial { mass_kg: p.mass_kg, com_mm: com6 })
+                .map_err(|e| CalibrateError::Option { key: "payload-kg".into(), message: e.to_string() })?;
+            with_payload = RobotFile { nominal, ..robot.clone() };
+            &with_payload
+        }
+    };
+    let per_session;
+    let m = if opts.tool_per_session {
+        per_session = tool_per_session(m);
+        &per_session
+    } else {
+        m
+    };
+    let listed = opts.params.clone().unwrap_or_else(default_params);
+    let inert = inert_compliances(robot, m, &listed);
+    let full = ParamSet::new(listed.ids().iter().copied().filter(|id| inert.iter().all(|(n, _)| *n != id.name())).collect())
+        .expect("a subset of a set");
+    if full.is_empty() {
+        let why = inert.first().map_or_else(String::new, |(_, w)| w.clone());
+        return Err(CalibrateError::Option {
+            key: "params".into(),
+            message: format!("every parameter is a joint compliance that cannot act: {why}"),
+        });
+    }
     let split_error = |e: SplitError| CalibrateError::Option { key: opts.split.option().into(), message: e.message(&m.path) };
     let opts = &Options { split: validation::resolve(m, &opts.split).map_err(split_error)?, ..opts.clone() };
-    let assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
+    let mut assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
+    (assignment.fold_all, assignment.folds_all) = validation::assign_every_pose(m, opts.kfold_by, opts.folds, opts.seed)
+        .map_err(|message| CalibrateError::Option { key: "kfold-by".into(), message })?;
     let s = setup(robot, m)?;
     let cands = candidates(robot, m, &s, &full)?;
     let sopts = SolveOptions::default();
@@ -430,6 +501,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         OutlierMode::Off | OutlierMode::Report => vec![false; s.obs.len()],
     };
     let point_fold: Vec<Option<usize>> = m.points.iter().map(|p| assignment.fold[p.pose]).collect();
+    let point_fold_all: Vec<Option<usize>> = m.points.iter().map(|p| Some(assignment.fold_all[p.pose])).collect();
     let held: Vec<usize> = (0..m.points.len()).filter(|&i| assignment.held_out[m.points[i].pose]).collect();
     let train: Vec<usize> = (0..m.points.len()).filter(|&i| !assignment.held_out[m.points[i].pose]).collect();
     // A session held out whole has no base from the training fit: its base is registered on its
@@ -440,7 +512,10 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             poses.all(|(p, _)| assignment.held_out[p])
         })
         .collect();
+    let register_tools: Vec<usize> = (0..m.targets.len()).filter(|&t| !train.iter().any(|&i| m.points[i].target == t)).collect();
     let all: Vec<usize> = (0..s.obs.len()).collect();
+    let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
+    let labels = diagnose::Labels { sessions: &m.sessions, targets: &m.targets, lines: &lines, outliers: &outliers };
     let evaluate = |kind: Option<ModelKind>, mut layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
         // The fit on every point first: the parameters it leaves undetermined are kept nominal and
         // the model refitted without them, until every freed parameter meets the rule; the
@@ -466,7 +541,11 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let with_robot = !layout.robot.is_empty();
         let cv = match kind {
-            Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts),
+            Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts, &labels),
+            None => validation::CrossValidation::empty(s.obs.len()),
+        };
+        let cv_all = match kind {
+            Some(_) => validation::cross_validate(&problem, &x0, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let free = free_columns(&problem, &train, with_robot);
@@ -475,6 +554,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let spec = HeldOutSpec {
             test: &held,
             register: &register,
+            register_tools: &register_tools,
             outliers: &outliers,
             flagged: &flagged,
             draws: opts.prediction_draws,
@@ -482,6 +562,10 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             seed: opts.seed,
         };
         let held_out = fit.solved.outcome.is_converged().then(|| validation::held_out(&problem, &fit, &free, &spec, &sopts));
+        let held_out_why = held_out.is_none().then(|| {
+            let why = diagnose::why(&problem, &fit.solved.x, &free, &fit.inliers(), &labels);
+            format!("{}: {why}", fit.solved.outcome.label())
+        });
         let fit = point_fit(&problem, &all_fit, &flagged);
         let r = ModelResult {
             kind,
@@ -489,7 +573,9 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             unidentifiable: fixed,
             undetermined: undetermined_params,
             cv,
+            cv_all,
             held_out,
+            held_out_why,
             fit,
             against_chosen: (f64::NAN, f64::NAN, 0),
         };
@@ -504,7 +590,64 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         models[k].against_chosen = validation::paired_difference(&models[k].cv, &models[chosen].cv);
     }
     let fit = fits.into_iter().nth(chosen).expect("a fit per model");
-    finish(Parts { robot, m, opts, s, assignment, before, models, chosen, full: &full, outliers_by, flagged: flagged.clone() }, fit)
+    finish(
+        Parts { robot, m, opts, s, assignment, before, models, chosen, full: &listed, inert, outliers_by, flagged: flagged.clone() },
+        fit,
+    )
+}
+
+/// `m` with a target per session and target (`SMR1@A`): each session's targets get their own
+/// position on the flange.
+fn tool_per_session(m: &Measurements) -> Measurements {
+    let mut out = m.clone();
+    out.targets.clear();
+    for p in &mut out.points {
+        let label = format!("{}@{}", m.targets[p.target], m.sessions[m.poses[p.pose].session]);
+        p.target = match out.targets.iter().position(|t| *t == label) {
+            Some(k) => k,
+            None => {
+                out.targets.push(label);
+                out.targets.len() - 1
+            }
+        };
+    }
+    out
+}
+
+/// The joint compliances of `set` that cannot act on the poses of `m`: the gravity torque of their
+/// joint is none at every pose (no mass in the robot file at all, or none beyond the joint), with
+/// the reason. They are kept nominal and left out of every model.
+fn inert_compliances(robot: &RobotFile, m: &Measurements, set: &ParamSet) -> Vec<(String, String)> {
+    let d = robot.nominal.data();
+    let massless = d.payload.mass_kg == 0.0 && d.links_inertial.iter().all(|b| b.mass_kg == 0.0);
+    let mut most = [0.0_f64; crate::robot::JOINTS];
+    if !massless {
+        for p in &m.poses {
+            let tau = crate::robot::gravity_torques(&robot.nominal, &p.q);
+            for (j, t) in tau.iter().enumerate() {
+                most[j] = most[j].max(t.abs());
+            }
+        }
+    }
+    set.ids()
+        .iter()
+        .filter_map(|id| match id {
+            ParamId::Link { joint, kind: LinkParam::Compliance } if massless || most[*joint - 1] <= NO_TORQUE_NM => {
+                let why = if massless {
+                    format!(
+                        "the robot file {} gives no masses (no joint mass_kg, no [payload]): no gravity torque, so a joint compliance \
+                         cannot act; give the payload at the flange (--payload-kg M, --payload-com-mm x,y,z, or [payload] in the robot \
+                         file) or the links' masses",
+                        robot.path.display()
+                    )
+                } else {
+                    format!("no gravity torque at joint {joint} at any measured pose (at most {:.1e} N m)", most[*joint - 1])
+                };
+                Some((id.name(), why))
+            }
+            _ => None,
+        })
+        .collect()
 }
 
 /// The rule a freed joint compliance's fit on every point must meet to be exported as identified:

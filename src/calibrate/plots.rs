@@ -8,7 +8,9 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::Calibration;
-use crate::io::plot::{DrawResult, FAMILY, Mark, PlotError, Side, Written, both, e2s, heat, keyed, range_of, register_font, whole};
+use crate::io::plot::{
+    DrawResult, FAMILY, Mark, PlotError, Side, Written, both, colour_bar, e2s, heat, keyed, range_of, register_font, whole,
+};
 
 /// Writes the figures of `c` into `dir`.
 pub fn write(dir: &Path, c: &Calibration) -> Result<Vec<Written>, PlotError> {
@@ -24,7 +26,9 @@ pub fn write(dir: &Path, c: &Calibration) -> Result<Vec<Written>, PlotError> {
     both!(dir, "residuals_per_joint", |root| per_joint(root, c));
     out.push(Written {
         stem: "residuals_per_joint".into(),
-        caption: "Error after calibration against each joint's angle: a pattern along a joint is an error the model does not hold".into(),
+        caption: "Residual after calibration (x, y, z in the robot's base frame, signed) against each joint's angle: a pattern along a \
+                  joint (a sag growing with the arm's reach) is an error the model does not hold"
+            .into(),
     });
     both!(dir, "error_map", |root| error_map(root, c));
     out.push(Written {
@@ -90,11 +94,17 @@ fn per_point<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
 
 fn per_joint<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
-    let root = root.titled(&format!("Error after calibration ({}) against each joint", c.chosen().name()), (FAMILY, 20)).map_err(e2s)?;
+    let title = format!("Residual after calibration ({}) against each joint, signed, in the base frame", c.chosen().name());
+    let root = root.titled(&title, (FAMILY, 20)).map_err(e2s)?;
     let fit = &c.chosen().fit;
     let m = &c.measurements;
-    let keep: Vec<usize> = (0..fit.errors_mm.len()).filter(|&i| !fit.outlier[i] && fit.errors_mm[i].is_finite()).collect();
-    let ymax = keep.iter().map(|&i| fit.errors_mm[i]).fold(1e-9, f64::max) * 1.05;
+    let r = &fit.residual_base_mm;
+    let keep: Vec<usize> = (0..r.len()).filter(|&i| !fit.outlier[i] && r[i].iter().all(|v| v.is_finite())).collect();
+    let ymax = keep.iter().map(|&i| r[i].amax()).fold(1e-9, f64::max) * 1.05;
+    let colours = [RED, GREEN, BLUE];
+    let key: Vec<(String, Mark)> =
+        ["x", "y", "z"].iter().zip(colours).map(|(a, colour)| (format!("{a} (base frame)"), Mark::Dot(colour))).collect();
+    let root = &keyed(&root, &key, Side::Bottom)?;
     for (j, area) in root.split_evenly((2, 3)).iter().enumerate() {
         let angle = |i: usize| m.poses[m.points[i].pose].q[j].to_degrees();
         let xr = range_of(keep.iter().map(|&i| angle(i)), 0.03);
@@ -102,11 +112,13 @@ fn per_joint<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
             .caption(format!("joint {}", j + 1), (FAMILY, 14))
             .margin(8)
             .x_label_area_size(30)
-            .y_label_area_size(45)
-            .build_cartesian_2d(xr, 0.0..ymax)
+            .y_label_area_size(50)
+            .build_cartesian_2d(xr, -ymax..ymax)
             .map_err(e2s)?;
         chart.configure_mesh().x_labels(5).x_desc("angle (deg)").y_desc("mm").label_style((FAMILY, 11)).draw().map_err(e2s)?;
-        chart.draw_series(keep.iter().map(|&i| Circle::new((angle(i), fit.errors_mm[i]), 2, BLUE.mix(0.6).filled()))).map_err(e2s)?;
+        for (a, colour) in colours.iter().enumerate() {
+            chart.draw_series(keep.iter().map(|&i| Circle::new((angle(i), r[i][a]), 2, colour.mix(0.5).filled()))).map_err(e2s)?;
+        }
     }
     Ok(())
 }
@@ -116,8 +128,9 @@ fn error_map<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration)
     let fit = &c.chosen().fit;
     let keep: Vec<usize> = (0..fit.errors_mm.len()).filter(|&i| !fit.outlier[i] && fit.errors_mm[i].is_finite()).collect();
     let emax = keep.iter().map(|&i| fit.errors_mm[i]).fold(1e-9, f64::max);
-    let title = format!("Error after calibration ({}) in the base frame: blue 0 mm, red {emax:.3} mm", c.chosen().name());
+    let title = format!("Error after calibration ({}) in the base frame", c.chosen().name());
     let root = root.titled(&title, (FAMILY, 20)).map_err(e2s)?;
+    let root = colour_bar(&root, emax, "error after calibration (mm)")?;
     let p = &c.points_base_mm;
     for (area, (name, a, b)) in root.split_evenly((1, 2)).iter().zip([("top view", 0, 1), ("side view", 0, 2)]) {
         let axis = ["x", "y", "z"];

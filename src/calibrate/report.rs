@@ -123,6 +123,7 @@ fn status(s: &ParamStatus) -> String {
         ParamStatus::NotInModel => "not in the model".into(),
         ParamStatus::Unidentifiable(with) => format!("unidentifiable (with {})", with.join(" ")),
         ParamStatus::NotDetermined(why) => format!("not determined (kept nominal): {why}"),
+        ParamStatus::NoTorque(why) => format!("kept nominal, in no model: {why}"),
     }
 }
 
@@ -165,6 +166,8 @@ fn point_columns(c: &Calibration) -> Vec<Column> {
         Column::new("held_out".into(), (0..n).map(|i| c.assignment.held_out[p[i].pose]).collect::<Vec<_>>()),
         Column::new("fold".into(), (0..n).map(|i| c.assignment.fold[p[i].pose].map(|f| f as u32)).collect::<Vec<_>>()),
         Column::new("held_out_error_mm".into(), held_error),
+        Column::new("kfold_all_fold".into(), p.iter().map(|x| c.assignment.fold_all[x.pose] as u32).collect::<Vec<_>>()),
+        Column::new("kfold_all_error_mm".into(), c.chosen().cv_all.errors_mm.clone()),
     ]);
     cols
 }
@@ -195,6 +198,13 @@ fn model_columns(c: &Calibration) -> Vec<Column> {
         cols.push(Column::new(
             format!("cv_{s}_mm").into(),
             rows.iter().map(|r| if r.cv.points > 0 { stat(&r.cv.stats, k) } else { f64::NAN }).collect::<Vec<_>>(),
+        ));
+    }
+    cols.push(Column::new("kfold_all_points".into(), rows.iter().map(|r| r.cv_all.points as u32).collect::<Vec<_>>()));
+    for (k, s) in STATS.iter().enumerate() {
+        cols.push(Column::new(
+            format!("kfold_all_{s}_mm").into(),
+            rows.iter().map(|r| if r.cv_all.points > 0 { stat(&r.cv_all.stats, k) } else { f64::NAN }).collect::<Vec<_>>(),
         ));
     }
     cols.push(Column::new("cv_paired_mse_difference_mm2".into(), rows.iter().map(|r| r.against_chosen.0).collect::<Vec<_>>()));
@@ -230,6 +240,9 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
         "options": {
             "params": o.params.as_ref().map_or_else(|| super::default_params().names(), |p| p.names()),
             "folds": o.folds,
+            "kfold_by": o.kfold_by.name(),
+            "tool_per_session": o.tool_per_session,
+            "payload": o.payload.map(|p| serde_json::json!({ "mass_kg": p.mass_kg, "com_mm": p.com_mm })),
             "split": o.split.describe(),
             "seed": o.seed,
             "outlier_threshold": o.outlier_threshold,
@@ -258,18 +271,40 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     );
     let _ = writeln!(
         s,
-        "{:<18} {:>6} {:>24} {:>34} {:>12}",
-        "model", "params", "CV held-out RMS / p95 mm", "held-out RMS measured / predicted", "fit RMS mm"
+        "{:<18} {:>6} {:>24} {:>34} {:>12} {:>26}",
+        "model", "params", "CV held-out RMS / p95 mm", "held-out RMS measured / predicted", "fit RMS mm", "k-fold all poses RMS / p95"
     );
+    let cv_cell = |cv: &super::validation::CrossValidation| {
+        if cv.points > 0 { format!("{:.4} / {:.4}", cv.stats.rms, cv.stats.p95) } else { "-".into() }
+    };
     for r in std::iter::once(&c.before).chain(&c.models) {
-        let cv = if r.cv.points > 0 { format!("{:.4} / {:.4}", r.cv.stats.rms, r.cv.stats.p95) } else { "-".into() };
         let held = r.held_out.as_ref().map_or_else(|| "no model".into(), |h| format!("{:.4} / {:.4}", h.measured.rms, h.predicted.rms));
         let mark = if r.kind.is_some() && r.kind == c.chosen().kind { "  <- chosen" } else { "" };
-        let _ = writeln!(s, "{:<18} {:>6} {:>24} {:>34} {:>12.4}{mark}", r.name(), r.layout.robot.len(), cv, held, r.fit.stats.rms);
+        let _ = writeln!(
+            s,
+            "{:<18} {:>6} {:>24} {:>34} {:>12.4} {:>26}{mark}",
+            r.name(),
+            r.layout.robot.len(),
+            cv_cell(&r.cv),
+            held,
+            r.fit.stats.rms,
+            cv_cell(&r.cv_all)
+        );
     }
+    let _ = writeln!(
+        s,
+        "CV: {} folds of the training poses (chooses the model); k-fold all poses: {} (comparable with a k-fold CV of the literature)",
+        c.options.folds,
+        kfold_words(c)
+    );
     let unid: Vec<String> = c.chosen().unidentifiable.iter().map(|u| u.name.clone()).collect();
     if !unid.is_empty() {
-        let _ = writeln!(s, "kept nominal (the poses cannot separate them): {}", unid.join(", "));
+        let _ =
+            writeln!(s, "kept nominal by the chosen model ({}; the poses cannot separate them): {}", c.chosen().name(), unid.join(", "));
+    }
+    if let Some((_, why)) = c.inert.first() {
+        let names: Vec<&str> = c.inert.iter().map(|(n, _)| n.as_str()).collect();
+        let _ = writeln!(s, "{}: kept nominal, in no model: {why}", names.join(", "));
     }
     for (name, why) in &c.chosen().undetermined {
         let _ = writeln!(s, "{name}: not determined (kept nominal): {why}");
@@ -303,6 +338,18 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
 /// `n` and the noun, plural unless `n` is 1 ("1 session", "3 sessions").
 fn count(n: usize, noun: &str) -> String {
     if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
+}
+
+/// The line `calsim calibrate` writes to standard error when the file gives orientation readings:
+/// they are checked and not used (the fit is of positions only).
+pub fn orientation_warning(c: &Calibration) -> Option<String> {
+    c.measurements.orientation_columns.then(|| {
+        format!(
+            "calsim calibrate: WARNING: {}: the orientation columns quat_w, quat_x, quat_y, quat_z are checked and NOT used: the fit \
+             is of positions only (the probe's rotation constrains nothing here)",
+            c.measurements.path.display()
+        )
+    })
 }
 
 /// The loud line `calsim calibrate` writes to standard error when the outlier rule flags points:
@@ -370,7 +417,30 @@ pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
         if m.rows_left_out > 0 { format!(", {} rows of other targets left out (`# targets`)", m.rows_left_out) } else { String::new() },
         if m.coupled { "the controller's values, through the robot file's [[coupling]]" } else { "as given (no coupling)" }
     );
+    let payload = &c.robot.nominal.data().payload;
+    let _ = writeln!(
+        s,
+        "Payload at the flange: {} (the mass the joint compliances act through with the links' masses).\n",
+        match (&c.options.payload, payload.mass_kg > 0.0) {
+            (Some(p), _) =>
+                format!("{} kg at [{}, {}, {}] mm in the flange frame (--payload-kg)", p.mass_kg, p.com_mm[0], p.com_mm[1], p.com_mm[2]),
+            (None, true) => format!("{} kg (the robot file's [payload])", payload.mass_kg),
+            (None, false) => "none".into(),
+        }
+    );
+    if let Some((_, why)) = c.inert.first() {
+        let names: Vec<&str> = c.inert.iter().map(|(n, _)| n.as_str()).collect();
+        let _ = writeln!(s, "**{} kept nominal, in no model**: {why}.\n", names.join(", "));
+    }
+    if m.orientation_columns {
+        let _ = writeln!(
+            s,
+            "**Orientation readings not used**: the file's columns quat_w, quat_x, quat_y, quat_z are checked (numbers, unit norm) \
+             and not used; every figure here is of positions only.\n"
+        );
+    }
     models_section(&mut s, c);
+    kfold_section(&mut s, c);
     held_out_section(&mut s, c);
     outliers_section(&mut s, c);
     parameters_section(&mut s, c);
@@ -418,6 +488,35 @@ fn models_section(s: &mut String, c: &Calibration) {
     let _ = writeln!(s);
 }
 
+/// The k-fold cross-validation over every pose in words.
+fn kfold_words(c: &Calibration) -> String {
+    match c.options.kfold_by {
+        super::KFoldBy::Pose => format!("{} folds of every pose, held-out ones included (`--kfold-by pose`)", c.assignment.folds_all),
+        super::KFoldBy::Session => format!(
+            "a fold per session, {} folds (`--kfold-by session`: each session's base registered on its own points)",
+            c.assignment.folds_all
+        ),
+    }
+}
+
+fn kfold_section(s: &mut String, c: &Calibration) {
+    let _ = writeln!(
+        s,
+        "### k-fold cross-validation over every pose (mm)\n\n{}: every pose predicted once, by a fit without its fold. This is \
+         the figure to compare with a k-fold cross-validation of the literature; the CV above (training poses only) chooses the \
+         model, so that the held-out poses below stay out of the choice.\n",
+        kfold_words(c)
+    );
+    let _ = writeln!(s, "| model | points | mean | median | p95 | max | RMS |\n|---|---|---|---|---|---|---|");
+    for r in &c.models {
+        let _ = writeln!(s, "| {} | {} | {} |", r.name(), r.cv_all.points, stats_cells(&r.cv_all.stats));
+        for (f, why) in &r.cv_all.failed {
+            let _ = writeln!(s, "|  | fold {f} gave no model ({why}) | | | | | |");
+        }
+    }
+    let _ = writeln!(s);
+}
+
 fn held_out_section(s: &mut String, c: &Calibration) {
     let train = c.assignment.held_out.iter().filter(|h| !**h).count();
     let _ = writeln!(
@@ -440,7 +539,8 @@ fn held_out_section(s: &mut String, c: &Calibration) {
                 let _ = writeln!(s, "| {} | {} | {} | {} |", r.name(), h.points, stats_cells(&h.measured), stats_cells(&h.predicted));
             }
             None => {
-                let _ = writeln!(s, "| {} | - | the training fit gave no model | | | | | | | | | |", r.name());
+                let why = r.held_out_why.as_deref().unwrap_or("-");
+                let _ = writeln!(s, "| {} | - | the training fit gave no model ({why}) | | | | | | | | | |", r.name());
             }
         }
     }

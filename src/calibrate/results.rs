@@ -27,6 +27,9 @@ pub enum ParamStatus {
     /// Freed, but its fit broke [`super::DETERMINED`]'s rule (kept nominal, the model refitted
     /// without it): the reason.
     NotDetermined(String),
+    /// A joint compliance with no gravity torque to act through (kept nominal, in no model): the
+    /// reason.
+    NoTorque(String),
 }
 
 /// A robot parameter's estimate, internal units.
@@ -98,10 +101,16 @@ pub struct ModelResult {
     /// Robot parameters whose fit on every point broke [`super::DETERMINED`]'s rule, kept nominal
     /// and the model refitted without them: name and reason.
     pub undetermined: Vec<(String, String)>,
-    /// Cross-validation on the training poses.
+    /// Cross-validation on the training poses (the figure the model is chosen by: the held-out
+    /// poses stay out of the choice).
     pub cv: CrossValidation,
+    /// k-fold cross-validation over every pose, held-out ones included (the figure comparable
+    /// with a k-fold cross-validation of the literature; not used for the choice).
+    pub cv_all: CrossValidation,
     /// Errors at the held-out points of a fit on the training points (`None`: that fit failed).
     pub held_out: Option<HeldOut>,
+    /// Why the fit on the training points gave no model (`None` when it gave one).
+    pub held_out_why: Option<String>,
     /// The fit on every point.
     pub fit: PointFit,
     /// Paired difference of cross-validated squared errors against the chosen model: mean (mm^2),
@@ -142,6 +151,9 @@ pub struct Calibration {
     pub outliers_by: &'static str,
     /// Per point: flagged by the outlier rule (left out only under `--outliers reject`).
     pub flagged: Vec<bool>,
+    /// Joint compliances with no gravity torque to act through (kept nominal, in no model): name
+    /// and reason.
+    pub inert: Vec<(String, String)>,
 }
 
 impl ModelResult {
@@ -191,28 +203,44 @@ pub(super) struct Parts<'a> {
     pub(super) models: Vec<ModelResult>,
     pub(super) chosen: usize,
     pub(super) full: &'a ParamSet,
+    pub(super) inert: Vec<(String, String)>,
     pub(super) outliers_by: &'static str,
     pub(super) flagged: Vec<bool>,
 }
 
 /// The chosen model's estimates and covariance from its fit on every point.
 pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, CalibrateError> {
-    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, outliers_by, flagged } = parts;
+    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, inert, outliers_by, flagged } = parts;
     let r = &models[chosen];
     let layout = &r.layout;
     let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let free = free_columns(&problem, &all, true);
-    let no_model = |outcome: String| CalibrateError::NoModel { path: m.path.clone(), model: r.name(), outcome };
+    let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
+    let rejected: Vec<bool> = match opts.outliers {
+        super::OutlierMode::Reject => flagged.clone(),
+        super::OutlierMode::Off | super::OutlierMode::Report => vec![false; flagged.len()],
+    };
+    let labels = super::diagnose::Labels { sessions: &m.sessions, targets: &m.targets, lines: &lines, outliers: &rejected };
+    let no_model = |outcome: &str| CalibrateError::NoModel {
+        path: m.path.clone(),
+        model: r.name(),
+        outcome: format!("{outcome}: {}", super::diagnose::why(&problem, &fit.solved.x, &free, &fit.inliers(), &labels)),
+    };
     if !fit.solved.outcome.is_converged() {
-        return Err(no_model(fit.solved.outcome.label().into()));
+        return Err(no_model(fit.solved.outcome.label()));
     }
     // `free` holds every column (every session and target has points): cov is in layout order.
-    let cov = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix".into()))?;
+    let cov = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix"))?;
     let x = &fit.solved.x;
     let pr = layout.robot.len();
-    let model = layout.robot.unpack(&robot.nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
-    let estimates = estimates(full, r, &robot.nominal, x, &cov);
+    let model = layout.robot.unpack(&robot.nominal, &x[..pr]).map_err(|e| no_model(&e.to_string()))?;
+    let mut estimates = estimates(full, r, &robot.nominal, x, &cov);
+    for e in &mut estimates {
+        if let Some((_, why)) = inert.iter().find(|(n, _)| *n == e.id.name()) {
+            e.status = ParamStatus::NoTorque(why.clone());
+        }
+    }
     let correlation = DMatrix::from_fn(pr, pr, |a, b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt());
     let std_of = |c: usize| cov[(c, c)].max(0.0).sqrt();
     let bases = (0..m.sessions.len())
@@ -241,6 +269,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         points_base_mm,
         outliers_by,
         flagged,
+        inert,
     })
 }
 

@@ -113,6 +113,31 @@ impl SplitError {
     }
 }
 
+/// How the k-fold cross-validation over every pose groups the poses into folds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KFoldBy {
+    /// The poses of each session shuffled and dealt into the folds (every session in every fold's
+    /// training part).
+    Pose,
+    /// A fold per session (leave one session out: its base registered on its own points).
+    Session,
+}
+
+impl KFoldBy {
+    /// The option's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            KFoldBy::Pose => "pose",
+            KFoldBy::Session => "session",
+        }
+    }
+
+    /// The grouping named `s` (`pose`, `session`).
+    pub fn parse(s: &str) -> Option<Self> {
+        [KFoldBy::Pose, KFoldBy::Session].into_iter().find(|m| m.name() == s)
+    }
+}
+
 /// The split and folds of the poses.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Assignment {
@@ -122,6 +147,10 @@ pub struct Assignment {
     pub fold: Vec<Option<usize>>,
     /// Folds.
     pub folds: usize,
+    /// Per pose: its fold in the k-fold cross-validation over every pose ([`assign_every_pose`]).
+    pub fold_all: Vec<usize>,
+    /// Folds of the k-fold cross-validation over every pose.
+    pub folds_all: usize,
 }
 
 /// Fewest training poses a session keeps when a fraction of its poses is held out.
@@ -199,7 +228,10 @@ pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Resul
             }
         }
         for (t, target) in m.targets.iter().enumerate() {
-            if !m.points.iter().any(|pt| pt.target == t && !held_out[pt.pose]) {
+            // A target measured only in sessions held out whole is registered with their bases.
+            let whole = |s: usize| m.poses.iter().enumerate().filter(|(_, p)| p.session == s).all(|(p, _)| held_out[p]);
+            let points = || m.points.iter().filter(|pt| pt.target == t);
+            if !points().any(|pt| !held_out[pt.pose]) && !points().all(|pt| whole(m.poses[pt.pose].session)) {
                 return Err(SplitError::TargetOnlyThere(target.clone()));
             }
         }
@@ -214,7 +246,46 @@ pub fn assign(m: &Measurements, split: &Split, folds: usize, seed: u64) -> Resul
         }
         offset += poses.len();
     }
-    Ok(Assignment { held_out, fold, folds })
+    Ok(Assignment { held_out, fold, folds, fold_all: Vec::new(), folds_all: 0 })
+}
+
+/// The folds of the k-fold cross-validation over every pose of `m`, held-out ones included: by
+/// pose, each session's poses shuffled (its own stream of `seed`, so that the split and the folds
+/// of [`assign`] do not move) and dealt into `folds` folds, balanced across sessions; by session,
+/// a fold per session. Returns the fold of every pose and the number of folds.
+pub fn assign_every_pose(m: &Measurements, by: KFoldBy, folds: usize, seed: u64) -> Result<(Vec<usize>, usize), String> {
+    match by {
+        KFoldBy::Session => {
+            if m.sessions.len() < 2 {
+                return Err(format!("session: {} has one session: none can be left out", m.path.display()));
+            }
+            for (t, target) in m.targets.iter().enumerate() {
+                let mut sessions = m.points.iter().filter(|p| p.target == t).map(|p| m.poses[p.pose].session);
+                let first = sessions.next().unwrap_or(0);
+                if sessions.all(|s| s == first) {
+                    return Err(format!(
+                        "session: target {target} is measured in session {} only: a fit without that session cannot place it",
+                        m.sessions[first]
+                    ));
+                }
+            }
+            Ok((m.poses.iter().map(|p| p.session).collect(), m.sessions.len()))
+        }
+        KFoldBy::Pose => {
+            let mut rng = crate::seeds::stream(seed, crate::seeds::calibrate::FOLDS_EVERY_POSE);
+            let mut fold = vec![0; m.poses.len()];
+            let mut offset = 0;
+            for s in 0..m.sessions.len() {
+                let mut poses: Vec<usize> = (0..m.poses.len()).filter(|&p| m.poses[p].session == s).collect();
+                poses.shuffle(&mut rng);
+                for (k, &p) in poses.iter().enumerate() {
+                    fold[p] = (offset + k) % folds;
+                }
+                offset += poses.len();
+            }
+            Ok((fold, folds))
+        }
+    }
 }
 
 /// The columns free in a fit over the points `idx`: the robot's (unless `robot` is false), and the
@@ -264,6 +335,9 @@ pub struct HeldOutSpec<'a> {
     pub test: &'a [usize],
     /// Sessions whose bases are registered on the held-out points (a held-out session).
     pub register: &'a [usize],
+    /// Targets whose tools are registered on the held-out points with those bases (a target
+    /// measured in held-out sessions only: `--tool-per-session`).
+    pub register_tools: &'a [usize],
     /// Per problem point: left out of every fit and statistic.
     pub outliers: &'a [bool],
     /// Per problem point: flagged by the outlier rule.
@@ -280,7 +354,8 @@ pub struct HeldOutSpec<'a> {
 pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: &HeldOutSpec<'_>, opts: &SolveOptions) -> HeldOut {
     let l = &problem.layout;
     let mut x = train.solved.x.clone();
-    let reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base(s)..l.base(s) + 6).collect();
+    let mut reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base(s)..l.base(s) + 6).collect();
+    reg_cols.extend(spec.register_tools.iter().flat_map(|&t| l.tool(t)..l.tool(t) + 3));
     if !reg_cols.is_empty() {
         let mask: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
         x = fit_without(problem, &x, &reg_cols, spec.test, &mask, opts).solved.x;
@@ -360,7 +435,7 @@ fn predict(
     Some(stats)
 }
 
-/// A model's k-fold cross-validation over the training points.
+/// A model's k-fold cross-validation (over the training points, or over every point).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CrossValidation {
     /// Per problem point: its error when its fold was held out, mm (NaN outside the folds or when
@@ -392,11 +467,13 @@ pub fn cross_validate(
     folds: usize,
     outliers: &[bool],
     opts: &SolveOptions,
+    labels: &super::diagnose::Labels<'_>,
 ) -> CrossValidation {
     let n = problem.obs.len();
     let mut errors_mm = vec![f64::NAN; n];
     let mut outlier = vec![false; n];
     let mut failed = Vec::new();
+    let l = &problem.layout;
     for f in 0..folds {
         let train: Vec<usize> = (0..n).filter(|&i| point_fold[i].is_some_and(|g| g != f)).collect();
         let test: Vec<usize> = (0..n).filter(|&i| point_fold[i] == Some(f)).collect();
@@ -407,8 +484,26 @@ pub fn cross_validate(
         let mask: Vec<bool> = train.iter().map(|&i| outliers[i]).collect();
         let fit = fit_without(problem, x0, &free, &train, &mask, opts);
         if !fit.solved.outcome.is_converged() {
-            failed.push((f, fit.solved.outcome.label().to_string()));
+            let why = super::diagnose::why(problem, &fit.solved.x, &free, &fit.inliers(), labels);
+            failed.push((f, format!("{}: {why}", fit.solved.outcome.label())));
             continue;
+        }
+        if let Some(t) =
+            (0..l.targets).find(|&t| test.iter().any(|&i| problem.obs[i].target == t) && !train.iter().any(|&i| problem.obs[i].target == t))
+        {
+            failed.push((f, format!("target {} has no point outside the fold", labels.targets[t])));
+            continue;
+        }
+        // A session with no point outside the fold (a fold per session) has no base from the fit:
+        // it is registered on its own points, as a held-out session is.
+        let register: Vec<usize> = (0..l.sessions)
+            .filter(|&s| test.iter().any(|&i| problem.obs[i].session == s) && !train.iter().any(|&i| problem.obs[i].session == s))
+            .flat_map(|s| l.base(s)..l.base(s) + 6)
+            .collect();
+        let mut fit = fit;
+        if !register.is_empty() {
+            let mask: Vec<bool> = test.iter().map(|&i| outliers[i]).collect();
+            fit.solved.x = fit_without(problem, &fit.solved.x, &register, &test, &mask, opts).solved.x;
         }
         let Some(e) = problem.errors(&fit.solved.x, &test) else {
             failed.push((f, "not_finite".into()));

@@ -207,8 +207,10 @@ const HEADER: &str = "# A calsim robot file (format: src/robot/file.rs); units m
 
 /// [`to_text`] of an imported arm, written tidily: a number within 1e-9 of a multiple of 1e-6
 /// (in its unit: mm, deg, kg) is written as that multiple, so rounding residues of the conversion
-/// (`25.000000000000004`, `2.5e-14`, `-0.0`) do not read as data; `preamble` (provenance, one
-/// comment line each) heads the file. A value moves by less than 1e-9 of its unit.
+/// (`25.000000000000004`, `2.5e-14`, `-0.0`) do not read as data; capsules are written to the
+/// micrometre (their radius grown to hold what the fitted capsule held); `preamble` (provenance,
+/// one comment line each) heads the file. A joint, mass or frame value moves by less than 1e-9 of
+/// its unit.
 pub fn imported_text(
     model: &RobotModel,
     source: &str,
@@ -253,9 +255,12 @@ fn tidy(f: &mut File) {
         }
         j.limits_deg.iter_mut().chain(j.com_mm.iter_mut()).for_each(t);
     }
+    // Capsules (bounding shapes fitted to meshes of single-precision vertices) to the micrometre:
+    // the ends rounded (each moves by at most 0.87 um), the radius rounded up after growing by
+    // 1 um, so that a rounded capsule still holds what the fitted one held.
     for c in &mut f.collision {
-        t(&mut c.radius_mm);
-        c.a_mm.iter_mut().chain(c.b_mm.iter_mut()).for_each(t);
+        c.a_mm.iter_mut().chain(c.b_mm.iter_mut()).for_each(|x| *x = (*x * 1e3).round() / 1e3 + 0.0);
+        c.radius_mm = ((c.radius_mm + 1e-3) * 1e3).ceil() / 1e3;
     }
 }
 

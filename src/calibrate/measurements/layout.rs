@@ -153,6 +153,11 @@ impl Layout {
         Ok(Self { names, columns, slots })
     }
 
+    /// The file has the orientation columns (`quat_w` .. `quat_z`).
+    pub(super) fn has_orientation(&self) -> bool {
+        self.slots[13].is_some()
+    }
+
     /// The file has a split column.
     pub(super) fn has_split(&self) -> bool {
         self.slots[17].is_some()

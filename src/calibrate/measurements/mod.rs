@@ -119,6 +119,8 @@ pub struct Measurements {
     pub coupled: bool,
     /// The file has a split column (`train` or `holdout` per pose).
     pub split_column: bool,
+    /// The file has orientation columns (`quat_w` .. `quat_z`): checked, not used by the fit.
+    pub orientation_columns: bool,
 }
 
 /// Reads and checks the measurement file `path` for the arm of `robot` (its joint limits, and its
@@ -160,6 +162,7 @@ pub fn parse(path: &Path, text: &str, robot: &RobotFile) -> Result<Measurements,
         rows_left_out: 0,
         coupled: coupling.is_some(),
         split_column: layout.has_split(),
+        orientation_columns: layout.has_orientation(),
     };
     let mut index = Index::default();
     for record in reader.records() {
