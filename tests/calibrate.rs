@@ -302,6 +302,8 @@ fn the_calibrated_robot_file_loads_back_with_its_coupling() {
         plan_worlds: 0,
         plan_noise_mm: None,
         plan_scenario: None,
+        plan_with: Default::default(),
+        instrument_noise_mm: None,
     };
     let report = calsim::calibrate::calibrate(&spec).unwrap();
     assert_eq!(report.dir, dir.path().join("out/run.calibration"));
@@ -699,6 +701,8 @@ fn a_split_column_holds_out_its_poses_and_their_errors_are_the_training_fits() {
         plan_worlds: 0,
         plan_noise_mm: None,
         plan_scenario: None,
+        plan_with: Default::default(),
+        instrument_noise_mm: None,
     };
     let report = calsim::calibrate::calibrate(&spec).unwrap();
     assert_eq!(report.calibration.options.split, Split::Column, "the file's column is the default split");

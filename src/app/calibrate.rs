@@ -38,6 +38,10 @@ pub struct CalibrateArgs {
     pub plan_noise_mm: Option<f64>,
     /// The scenario that planned the calibration.
     pub plan_scenario: Option<PathBuf>,
+    /// What the plan's worlds draw: `twin`, `noise`, `residual` or `all` (`None`: the default, twin).
+    pub plan_with: Option<String>,
+    /// The instrument's noise per coordinate, mm, as the user states it.
+    pub instrument_noise_mm: Option<f64>,
     /// Draw the figures.
     pub plots: bool,
 }
@@ -61,6 +65,8 @@ impl CalibrateArgs {
             plan_worlds: 0,
             plan_noise_mm: None,
             plan_scenario: None,
+            plan_with: None,
+            instrument_noise_mm: None,
             plots: true,
         }
     }
@@ -94,6 +100,11 @@ impl CalibrateArgs {
             Some(name) => crate::calibrate::OutlierMode::parse(name)
                 .ok_or_else(|| option("outliers", format!("{name:?}: one of \"off\", \"report\", \"reject\"")))?,
         };
+        let plan_with = match &self.plan_with {
+            None => crate::calibrate::plan::PlanWith::default(),
+            Some(name) => crate::calibrate::plan::PlanWith::parse(name)
+                .ok_or_else(|| option("plan-with", format!("{name:?}: one of \"twin\", \"noise\", \"residual\", \"all\"")))?,
+        };
         let options = Options {
             params,
             folds: self.folds as usize,
@@ -112,6 +123,8 @@ impl CalibrateArgs {
             plan_worlds: self.plan_worlds as usize,
             plan_noise_mm: self.plan_noise_mm,
             plan_scenario: self.plan_scenario.clone(),
+            plan_with,
+            instrument_noise_mm: self.instrument_noise_mm,
         })
     }
 }
