@@ -100,6 +100,9 @@ impl CalibrateArgs {
             Some(name) => crate::calibrate::OutlierMode::parse(name)
                 .ok_or_else(|| option("outliers", format!("{name:?}: one of \"off\", \"report\", \"reject\"")))?,
         };
+        if self.plan_with.is_some() && self.plan_worlds == 0 {
+            return Err(option("plan-with", "a plan needs --plan-worlds N (N >= 1)".into()));
+        }
         let plan_with = match &self.plan_with {
             None => crate::calibrate::plan::PlanWith::default(),
             Some(name) => crate::calibrate::plan::PlanWith::parse(name)
