@@ -83,8 +83,7 @@ fn injected_repeatability(spec: &SimulationSpec) -> f64 {
     let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec), &robot()).unwrap();
     let per_session = spec.poses_per_session + spec.repeats_per_session;
     let (mut sum, mut n) = (0.0, 0.0);
-    for (k, pose) in m.poses.iter().enumerate().filter(|(k, _)| k % per_session < spec.repeats_per_session) {
-        let _ = k;
+    for (_, pose) in m.poses.iter().enumerate().filter(|(k, _)| k % per_session < spec.repeats_per_session) {
         for (_, tool) in &spec.targets {
             let model = spec.truth.edited(|d| d.flange_tcp_mm = *tool).unwrap();
             let h = 1e-6;
@@ -139,7 +138,9 @@ fn a_twin_recovers_injected_effects_repeatability_and_noise_within_their_interva
     for f in &t.families {
         assert_eq!(f.kept, injected_families.contains(&f.family), "{f:?}");
     }
-    let mut checks: Vec<(String, f64, Option<(f64, f64)>)> = Vec::new();
+    // (name, injected value, kept value and standard deviation)
+    type Check = (String, f64, Option<(f64, f64)>);
+    let mut checks: Vec<Check> = Vec::new();
     for h in &injected().harmonic {
         for (sine, v) in [(true, h.sin_mdeg), (false, h.cos_mdeg)] {
             let k = kept(&t, Family::Harmonics(h.joint - 1), Some(h.joint - 1), Some((h.order as usize, sine)), None);

@@ -10,6 +10,8 @@
 //! backlash_std_mdeg = [0, 1, 1, 0, 0, 0]
 //! sag_mdeg_per_m = [0, 9, 5, 0, 0, 0]     # joint error per metre of a TCP mass's lever arm
 //! sag_std_mdeg_per_m = [0, 2, 2, 0, 0, 0]
+//! drift_mm_per_pose = [0.002, 0, -0.001]  # the base's translation per pose of a session (calibrate's plan)
+//! drift_std_mm_per_pose = [0.0001, 0, 0.0001]
 //!
 //! [[learned.harmonic]]              # delta theta_j = sin_mdeg sin(order q_j) + cos_mdeg cos(order q_j)
 //! joint = 2
@@ -290,6 +292,23 @@ mod tests {
         let mut bad = l;
         bad.backlash_mdeg[1] = f64::NAN;
         assert_eq!(bad.check().unwrap_err().0, "backlash_mdeg[1]");
+    }
+
+    #[test]
+    fn a_drift_is_checked_drawn_last_and_leaves_tables_without_one_drawing_as_before() {
+        let truth = irb120();
+        let base = LearnedEffects { pose_error_mdeg: 1.5, backlash_std_mdeg: [0.0, 1.0, 0.0, 0.0, 0.0, 0.0], ..Default::default() };
+        let drifting = LearnedEffects { drift_mm_per_pose: [0.002, 0.0, -0.001], ..base.clone() };
+        let draw = |l: &LearnedEffects| l.draw(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(4));
+        let (a, b) = (draw(&base), draw(&drifting));
+        assert_eq!(a.harmonics, b.harmonics, "the drift is drawn after everything else");
+        assert_eq!(a.half_backlash, b.half_backlash);
+        assert_eq!((a.drift_mm_per_pose, b.drift_mm_per_pose), ([0.0; 3], [0.002, 0.0, -0.001]));
+        assert!(!LearnedEffects { drift_mm_per_pose: [0.0, 0.001, 0.0], ..Default::default() }.is_none());
+        let bad = LearnedEffects { drift_mm_per_pose: [0.0, f64::INFINITY, 0.0], ..Default::default() };
+        assert_eq!(bad.check().unwrap_err().0, "drift_mm_per_pose[1]");
+        let bad = LearnedEffects { drift_std_mm_per_pose: [0.0, 0.0, -1e-3], ..Default::default() };
+        assert_eq!(bad.check().unwrap_err().0, "drift_std_mm_per_pose[2]");
     }
 
     #[test]
