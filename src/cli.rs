@@ -122,13 +122,13 @@ struct CalibrateArgs {
     /// and figure) or `reject` (flagged, listed, left out of every fit and figure).
     #[arg(long, default_value = "report", value_parser = ["off", "report", "reject"])]
     outliers: String,
-    /// Also simulate the calibration's plan over this many worlds (the calibrated robot taken as
-    /// the truth, the fit's residual as noise, calibrated again each time) and set the measured
-    /// held-out median beside it (plan.md); 0: none.
+    /// Also simulate the calibration's plan over this many worlds (by default the twin: the
+    /// calibrated robot with its learned effects and repeatability, the instrument's noise;
+    /// calibrated again each time) and set the measured held-out median beside it (plan.md); 0: none.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=crate::calibrate::MOST_PLAN_WORLDS as i64))]
     plan_worlds: u32,
-    /// The plan's noise per coordinate, mm: the instrument's, when known (default: the points'
-    /// uncertainty column, else the fit's residual level, which takes the model's misses for noise).
+    /// The plan's instrument noise per coordinate, mm, for the twin and noise-only plans (default:
+    /// the twin's instrument noise: --instrument-noise-mm, the points' sigma column, or estimated).
     #[arg(long)]
     plan_noise_mm: Option<f64>,
     /// The scenario that planned the calibration: its robot's effects outside the model
@@ -148,6 +148,15 @@ struct CalibrateArgs {
     /// with its base on its own points.
     #[arg(long)]
     tool_per_session: bool,
+    /// What each plan world draws: `twin` (the twin's robot, learned effects, repeatability and
+    /// the instrument's noise), `noise` (the instrument's noise alone), `residual` (the fit's
+    /// residual as white noise) or `all` (one row each in plan.md).
+    #[arg(long, value_parser = crate::calibrate::plan::PlanWith::NAMES)]
+    plan_with: Option<String>,
+    /// The instrument's noise per coordinate, mm, as stated (default: the points' sigma column,
+    /// else estimated from distances between targets measured at one pose).
+    #[arg(long)]
+    instrument_noise_mm: Option<f64>,
     /// Skip the figures.
     #[arg(long)]
     no_plots: bool,
@@ -845,6 +854,8 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         plan_worlds: args.plan_worlds,
         plan_noise_mm: args.plan_noise_mm,
         plan_scenario: args.plan_scenario.clone(),
+        plan_with: args.plan_with.clone(),
+        instrument_noise_mm: args.instrument_noise_mm,
         plots: !args.no_plots,
         tool_per_session: args.tool_per_session,
         payload_kg: args.payload_kg,
@@ -859,15 +870,16 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         eprintln!("{line}");
     }
     println!("{}", crate::calibrate::report::terminal(&report.calibration, &report.dir));
-    if let Some(p) = &report.plan {
+    for (kind, p) in &report.plans {
         let [a, b, c] = p.simulated_mm;
         println!(
-            "plan: held-out {} {:.4} mm measured; simulated from {} over {} worlds: {b:.4} mm (P10-P90 {a:.4}-{c:.4}), {} (plan.md)",
+            "plan ({}): held-out {} {:.4} mm measured; simulated from {} over {} worlds: {b:.4} mm (P10-P90 {a:.4}-{c:.4}), {} (plan.md)",
+            kind.name(),
             p.statistic.name(),
             p.measured_mm,
             p.scenario,
             p.worlds,
-            if p.inside { "inside" } else { "OUTSIDE: the robot does something the model does not, or the noise is not independent" }
+            if p.inside { "inside" } else { "OUTSIDE: the robot does something this plan does not draw" }
         );
     }
     Ok(ExitCode::SUCCESS)

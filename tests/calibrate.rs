@@ -226,7 +226,16 @@ fn the_shipped_example_and_its_report_are_reproduced() {
     assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
     let fresh = out.path().join("example_measurements.calibration");
     let report = root.join("docs/calibrate/example_report");
-    for file in ["summary.md", "models.parquet", "parameters.parquet", "points.parquet", "bases.parquet", "tools.parquet", "robot.toml"] {
+    for file in [
+        "summary.md",
+        "models.parquet",
+        "parameters.parquet",
+        "points.parquet",
+        "bases.parquet",
+        "tools.parquet",
+        "robot.toml",
+        "twin.toml",
+    ] {
         let (a, b) = (std::fs::read(fresh.join(file)).unwrap(), std::fs::read(report.join(file)).unwrap());
         if a != b {
             // Text files show the difference; parquet tables are only named.
@@ -302,6 +311,8 @@ fn the_calibrated_robot_file_loads_back_with_its_coupling() {
         plan_worlds: 0,
         plan_noise_mm: None,
         plan_scenario: None,
+        plan_with: Default::default(),
+        instrument_noise_mm: None,
     };
     let report = calsim::calibrate::calibrate(&spec).unwrap();
     assert_eq!(report.dir, dir.path().join("out/run.calibration"));
@@ -614,8 +625,8 @@ fn the_plan_explains_a_complete_model_flags_an_unmodelled_effect_and_explains_it
 }
 
 /// A plan asked for wrongly is one line naming the option and exit 2, before any work: a planning
-/// scenario without plan worlds, one that is not a scenario (a robot file), a plan of 1,001 worlds
-/// and a NaN noise.
+/// scenario without plan worlds, one that is not a scenario (a robot file), a plan of 1,001 worlds,
+/// a NaN noise, `--plan-with` without plan worlds, and an instrument noise below zero or infinite.
 #[test]
 fn a_plan_asked_for_wrongly_is_one_line_naming_the_option() {
     let dir = common::scratch("calibrate-plan-args");
@@ -625,6 +636,9 @@ fn a_plan_asked_for_wrongly_is_one_line_naming_the_option() {
         (vec!["--plan-worlds", "3", "--plan-scenario", "robots/irb120.toml"], "robots/irb120.toml"),
         (vec!["--plan-worlds", "1001"], "--plan-worlds"),
         (vec!["--plan-worlds", "3", "--plan-noise-mm", "NaN"], "--plan-noise-mm"),
+        (vec!["--plan-with", "noise"], "--plan-with"),
+        (vec!["--instrument-noise-mm=-0.5"], "--instrument-noise-mm"),
+        (vec!["--instrument-noise-mm", "inf"], "--instrument-noise-mm"),
     ] {
         let out = common::calsim().args(base).arg(dir.path()).args(&extra).env("RUST_LIB_BACKTRACE", "0").output().unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);
@@ -699,6 +713,8 @@ fn a_split_column_holds_out_its_poses_and_their_errors_are_the_training_fits() {
         plan_worlds: 0,
         plan_noise_mm: None,
         plan_scenario: None,
+        plan_with: Default::default(),
+        instrument_noise_mm: None,
     };
     let report = calsim::calibrate::calibrate(&spec).unwrap();
     assert_eq!(report.calibration.options.split, Split::Column, "the file's column is the default split");

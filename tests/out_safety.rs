@@ -214,6 +214,17 @@ fn calibrate_export_and_the_file_writers_refuse_their_inputs() {
         "not a calsim results directory",
     );
 
+    // calibrate's twin.toml goes inside its results directory, which a second run replaces (a
+    // calsim results directory holding no input); nothing is written beside it.
+    let m3 = write(&t.join("twin/m.csv"), &csv);
+    for _ in 0..2 {
+        let o = calsim().args(["calibrate", "robots/irb120.toml", s(&m3), "--no-plots", "--out", s(&t.join("tw"))]).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert!(t.join("tw/m.calibration/twin.toml").is_file());
+    let beside: Vec<_> = std::fs::read_dir(t.join("tw")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(beside, ["m.calibration"], "nothing beside the results directory");
+
     // export: into a user's directory of the export's name (results of a real run).
     let scenario = write(&t.join("s/ci_quick.toml"), quick_text(None));
     let res = t.join("res");

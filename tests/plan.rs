@@ -273,6 +273,8 @@ fn plan_simulate_calibrate_lands_inside_the_plans_p10_p90() {
             plan_worlds: 0,
             plan_noise_mm: None,
             plan_scenario: None,
+            plan_with: Default::default(),
+            instrument_noise_mm: None,
         };
         let c = calsim::calibrate::calibrate(&spec).unwrap();
         let measured = calsim::calibrate::plan::Statistic::Median.of(&c.calibration).unwrap();

@@ -41,6 +41,10 @@ pub struct CalibrateArgs {
     pub plan_noise_mm: Option<f64>,
     /// The scenario that planned the calibration.
     pub plan_scenario: Option<PathBuf>,
+    /// What the plan's worlds draw: `twin`, `noise`, `residual` or `all` (`None`: the default, twin).
+    pub plan_with: Option<String>,
+    /// The instrument's noise per coordinate, mm, as the user states it.
+    pub instrument_noise_mm: Option<f64>,
     /// Draw the figures.
     pub plots: bool,
     /// A tool per session and target.
@@ -71,6 +75,8 @@ impl CalibrateArgs {
             plan_worlds: 0,
             plan_noise_mm: None,
             plan_scenario: None,
+            plan_with: None,
+            instrument_noise_mm: None,
             plots: true,
             tool_per_session: false,
             payload_kg: None,
@@ -122,6 +128,14 @@ impl CalibrateArgs {
                 Some(crate::calibrate::Payload { mass_kg, com_mm })
             }
         };
+        if self.plan_with.is_some() && self.plan_worlds == 0 {
+            return Err(option("plan-with", "a plan needs --plan-worlds N (N >= 1)".into()));
+        }
+        let plan_with = match &self.plan_with {
+            None => crate::calibrate::plan::PlanWith::default(),
+            Some(name) => crate::calibrate::plan::PlanWith::parse(name)
+                .ok_or_else(|| option("plan-with", format!("{name:?}: one of \"twin\", \"noise\", \"residual\", \"all\"")))?,
+        };
         let options = Options {
             params,
             payload,
@@ -143,6 +157,8 @@ impl CalibrateArgs {
             plan_worlds: self.plan_worlds as usize,
             plan_noise_mm: self.plan_noise_mm,
             plan_scenario: self.plan_scenario.clone(),
+            plan_with,
+            instrument_noise_mm: self.instrument_noise_mm,
         })
     }
 }

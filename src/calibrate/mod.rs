@@ -29,6 +29,7 @@ pub mod report;
 pub mod results;
 pub mod robust;
 pub mod simulate;
+pub mod twin;
 pub mod validation;
 
 use std::path::{Path, PathBuf};
@@ -200,8 +201,13 @@ pub struct CalibrationReport {
     pub calibration: Calibration,
     /// The report directory.
     pub dir: PathBuf,
-    /// The measured held-out median beside the plan's simulation of it (`--plan-worlds`).
+    /// The measured held-out median beside the plan's simulation of it (`--plan-worlds`): the
+    /// first of `plans`.
     pub plan: Option<plan::PlanComparison>,
+    /// Every plan asked for (`--plan-with`), in the order of `plan.md`'s table.
+    pub plans: Vec<(plan::PlanWith, plan::PlanComparison)>,
+    /// The twin ([`twin::analyse`]), or why it could not be fitted.
+    pub twin: Result<twin::Twin, String>,
 }
 
 /// Where `calsim calibrate` reads and writes.
@@ -220,8 +226,14 @@ pub struct CalibrateSpec {
     /// The plan's noise per coordinate, mm (`None`: the points' own, else the fit's residual).
     pub plan_noise_mm: Option<f64>,
     /// The scenario that planned the calibration: its robot's effects outside the model and its
-    /// repeatability are drawn in each world of the plan (`None`: none).
+    /// repeatability are drawn in each world of every plan (`None`: none).
     pub plan_scenario: Option<PathBuf>,
+    /// What the plan's worlds draw: the twin (default), the instrument's noise only, the residual
+    /// as white noise, or all three.
+    pub plan_with: plan::PlanWith,
+    /// The instrument's noise per coordinate as the user states it, mm (`None`: the file's sigma
+    /// column, else estimated from the data where they allow): the twin's decomposition.
+    pub instrument_noise_mm: Option<f64>,
 }
 
 /// Most worlds of a plan's simulation (each a whole calibration).
@@ -240,6 +252,14 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     if spec.plan_noise_mm.is_some() && spec.plan_worlds == 0 {
         return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: "a plan needs --plan-worlds N (N >= 1)".into() });
     }
+    if let Some(s) = spec.instrument_noise_mm
+        && !(s.is_finite() && (0.0..=100.0).contains(&s))
+    {
+        return Err(CalibrateError::Option { key: "instrument-noise-mm".into(), message: format!("{s}: within 0 to 100 mm") });
+    }
+    if spec.plan_with != plan::PlanWith::default() && spec.plan_worlds == 0 {
+        return Err(CalibrateError::Option { key: "plan-with".into(), message: "a plan needs --plan-worlds N (N >= 1)".into() });
+    }
     if spec.plan_worlds > MOST_PLAN_WORLDS {
         return Err(CalibrateError::Option {
             key: "plan-worlds".into(),
@@ -255,16 +275,75 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     let name = report::directory_name(&spec.measurements);
     crate::io::out_dir::prepare(&spec.out, &name)?;
     let calibration = run(&robot, &m, &spec.options)?;
-    let plan = match spec.plan_worlds {
-        0 => None,
-        n => Some(plan::compare(
-            &calibration,
-            &plan::simulate(&calibration, n, plan::Statistic::Median, spec.options.seed, spec.plan_noise_mm, plan_effects.as_ref())?,
-        )),
-    };
-    let dir = report::write(&spec.out, &name, &calibration, plan.as_ref())
+    let twin = twin::analyse(&calibration, spec.instrument_noise_mm).map_err(|e| e.to_string());
+    let (plans, missing) = plans(spec, &calibration, twin.as_ref().ok(), plan_effects.as_ref())?;
+    let dir = report::write_with(&spec.out, &name, &calibration, (&plans, &missing), &twin)
         .map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
-    Ok(CalibrationReport { calibration, dir, plan })
+    Ok(CalibrationReport { calibration, dir, plan: plans.first().map(|(_, p)| p.clone()), plans, twin })
+}
+
+/// Plans asked for that were made, and those that could not be, with why.
+type Plans = (Vec<(plan::PlanWith, plan::PlanComparison)>, Vec<(plan::PlanWith, String)>);
+
+/// The plans of `spec.plan_with` over `spec.plan_worlds` worlds (none when 0). The noise of the
+/// noise-only and twin plans: `--plan-noise-mm`, else the twin's instrument noise (stated, the
+/// file's column point by point, or estimated). A plan asked for alone that cannot be made is an
+/// error of `--plan-with`; in `all`, a line of plan.md.
+fn plans(
+    spec: &CalibrateSpec,
+    c: &Calibration,
+    twin: Option<&twin::Twin>,
+    effects: Option<&plan::Effects>,
+) -> Result<Plans, CalibrateError> {
+    use plan::{Basis, Noise, PlanWith};
+    let (mut made, mut missing) = (Vec::new(), Vec::new());
+    if spec.plan_worlds == 0 {
+        return Ok((made, missing));
+    }
+    let sigma_column = c.measurements.points.iter().all(|p| p.sigma_mm.is_some());
+    let instrument: Option<(Noise, String)> = match (spec.plan_noise_mm, twin.and_then(|t| t.noise_mm)) {
+        (Some(s), _) => Some((Noise::Fixed(s), format!("noise {s:.4} mm per coordinate (--plan-noise-mm)"))),
+        (None, Some(s)) if sigma_column && spec.instrument_noise_mm.is_none() => {
+            Some((Noise::PointsElse(s), "each point's own sigma (the file's column)".into()))
+        }
+        (None, Some(s)) => Some((Noise::Fixed(s), format!("instrument noise {s:.4} mm per coordinate (the twin's decomposition)"))),
+        (None, None) => None,
+    };
+    let with = effects.map_or_else(String::new, |e| format!("; the effects and repeatability of {}", e.source));
+    let twin_effects = twin.map(|t| (&t.model, t.plan_effects()));
+    let alone = spec.plan_with != PlanWith::All;
+    for kind in spec.plan_with.plans() {
+        let basis = match kind {
+            PlanWith::Noise => match &instrument {
+                Some((noise, said)) => Ok(Basis { noise: *noise, effects, twin: None, label: Some(format!("the calibrated robot, {said}{with}")) }),
+                None => Err("the instrument's noise is not known (no sigma column, no pose with two targets or more): give --plan-noise-mm or --instrument-noise-mm".to_string()),
+            },
+            PlanWith::Twin => match (twin, &twin_effects) {
+                (Some(t), Some((model, learned))) => {
+                    let (noise, said) = instrument.clone().unwrap_or((Noise::Fixed(0.0), "no instrument noise known: the residual left is drawn as the twin's repeatability and per-pose error".into()));
+                    let label = format!("the twin (its robot, [learned] effects, repeatability {:.4} mm RP, per-pose error {:.3} mdeg), {said}{with}", t.learned.repeatability_mm, t.learned.pose_error_mdeg);
+                    Ok(Basis { noise, effects, twin: Some((*model, learned)), label: Some(label) })
+                }
+                _ => Err("the twin could not be fitted (see summary.md)".to_string()),
+            },
+            PlanWith::Residual | PlanWith::All => {
+                let s = plan::residual_noise_mm(c);
+                let label = format!("the calibrated robot, the fit's residual {s:.4} mm per coordinate as white noise{with}");
+                Ok(Basis { noise: Noise::PointsElse(s), effects, twin: None, label: Some(label) })
+            }
+        };
+        match basis {
+            Ok(b) => {
+                let sim = plan::simulate_basis(c, spec.plan_worlds, plan::Statistic::Median, spec.options.seed, &b)?;
+                made.push((kind, plan::compare(c, &sim)));
+            }
+            Err(why) if alone => {
+                return Err(CalibrateError::Option { key: "plan-with".into(), message: format!("{}: {why}", kind.name()) });
+            }
+            Err(why) => missing.push((kind, why)),
+        }
+    }
+    Ok((made, missing))
 }
 
 /// The robot effects of the planning scenario at `path` (any device with a robot), for a plan of

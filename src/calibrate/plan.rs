@@ -108,6 +108,101 @@ pub fn compare(c: &Calibration, sim: &SimulatedOutcome) -> PlanComparison {
     }
 }
 
+/// What a plan against the outcome draws in each world (`--plan-with`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PlanWith {
+    /// The twin: its robot and learned effects (repeatability, per-pose error, drift) and the
+    /// instrument's noise.
+    #[default]
+    Twin,
+    /// The instrument's noise alone (the calibrated robot as the model describes it).
+    Noise,
+    /// The fit's residual level as white noise.
+    Residual,
+    /// The three, one row each.
+    All,
+}
+
+impl PlanWith {
+    /// The option's values.
+    pub const NAMES: [&'static str; 4] = ["twin", "noise", "residual", "all"];
+
+    /// Parses an option value.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "twin" => Some(Self::Twin),
+            "noise" => Some(Self::Noise),
+            "residual" => Some(Self::Residual),
+            "all" => Some(Self::All),
+            _ => None,
+        }
+    }
+
+    /// The plans it asks for, in the order of the table.
+    pub fn plans(self) -> Vec<PlanWith> {
+        match self {
+            Self::All => vec![Self::Noise, Self::Twin, Self::Residual],
+            k => vec![k],
+        }
+    }
+
+    /// Short name of a plan.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Twin => "twin",
+            Self::Noise => "noise only",
+            Self::Residual => "residual as noise",
+            Self::All => "all",
+        }
+    }
+}
+
+/// Several plans beside the measured figure, as markdown: one row per plan, and lines for the
+/// plans that could not be made (`missing`).
+pub fn markdown_all(plans: &[(PlanWith, PlanComparison)], missing: &[(PlanWith, String)]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Plan against outcome\n");
+    let Some((_, first)) = plans.first() else {
+        for (k, why) in missing {
+            let _ = writeln!(s, "- {}: {why}", k.name());
+        }
+        return s;
+    };
+    let _ = writeln!(
+        s,
+        "The held-out {} error after calibration, measured ({:.4} mm), beside simulations of the same poses: in each world the \
+         robot below is measured at the file's joint values with the noise below and calibrated again the same way.\n",
+        first.statistic.name(),
+        first.measured_mm
+    );
+    let _ = writeln!(
+        s,
+        "| plan | each world draws | worlds | simulated P10 | median | P90 | measured inside P10-P90 |\n|---|---|---|---|---|---|---|"
+    );
+    let _ = writeln!(s, "| measured | the measurement file | - | - | {:.4} | - | - |", first.measured_mm);
+    for (k, p) in plans {
+        let [a, b, c] = p.simulated_mm;
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {a:.4} | {b:.4} | {c:.4} | {} |",
+            k.name(),
+            p.scenario,
+            p.worlds,
+            if p.inside { "yes" } else { "no" }
+        );
+    }
+    for (k, why) in missing {
+        let _ = writeln!(s, "\n- {}: not simulated: {why}", k.name());
+    }
+    let _ = writeln!(
+        s,
+        "\nInside with noise only: the chosen model and the instrument explain the outcome. Inside with the twin only: what the \
+         model misses (the twin's effects, repeatability and per-pose error, learned on the calibration split) explains it. \
+         The residual-as-noise plan takes whatever the model misses for white noise: it tests the fit and the poses, not the model."
+    );
+    s
+}
+
 /// The comparison as markdown.
 pub fn markdown(p: &PlanComparison) -> String {
     let mut s = String::new();
@@ -154,35 +249,78 @@ pub fn simulate(
     noise_mm: Option<f64>,
     effects: Option<&Effects>,
 ) -> Result<SimulatedOutcome, CalibrateError> {
-    let (scenario, stats) = simulate_at(c, &c.measurements, worlds, seed, noise_mm, effects)?;
+    let sigma = noise_mm.unwrap_or_else(|| residual_noise_mm(c));
+    let noise = match noise_mm {
+        Some(s) => Noise::Fixed(s),
+        None => Noise::PointsElse(sigma),
+    };
+    let basis = Basis { noise, effects, twin: None, label: None };
+    simulate_basis(c, worlds, statistic, seed, &basis)
+}
+
+/// The noise of a plan's worlds per coordinate, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Noise {
+    /// The same for every point.
+    Fixed(f64),
+    /// Each point's own uncertainty, else this.
+    PointsElse(f64),
+}
+
+/// What each world of a plan draws besides the calibrated robot's positions.
+#[derive(Clone, Debug)]
+pub struct Basis<'a> {
+    /// The noise per coordinate.
+    pub noise: Noise,
+    /// A planning scenario's robot effects and repeatability.
+    pub effects: Option<&'a Effects>,
+    /// A twin: its robot (the truth of each world instead of the calibrated one) and its learned
+    /// effects (drawn per world: coefficients, repeatability, per-pose error, drift over each
+    /// session's poses).
+    pub twin: Option<(&'a crate::robot::RobotModel, &'a crate::robot::learned::LearnedEffects)>,
+    /// The plan's name in the report (`None`: the calibrated robot and its noise).
+    pub label: Option<String>,
+}
+
+/// The calibration's plan by simulation over `worlds` worlds with what `basis` draws (see
+/// [`simulate`]).
+pub fn simulate_basis(
+    c: &Calibration,
+    worlds: usize,
+    statistic: Statistic,
+    seed: u64,
+    basis: &Basis<'_>,
+) -> Result<SimulatedOutcome, CalibrateError> {
+    let (scenario, stats) = simulate_at(c, &c.measurements, worlds, seed, basis)?;
     let per_world_mm = stats.iter().map(|s| s.as_ref().map_or(f64::NAN, |s| statistic.of_stats(s))).collect();
     Ok(SimulatedOutcome { scenario, statistic, per_world_mm })
 }
 
-/// [`simulate`] at the poses of `m` (the sessions and targets of `c`'s file, other poses or
+/// [`simulate_basis`] at the poses of `m` (the sessions and targets of `c`'s file, other poses or
 /// points): per world, the held-out statistics of the chosen model (`None` when the world's
-/// calibration gave none), and the scenario in words. World `w` draws from the same stream
-/// whatever the poses, so two sets of poses simulated with the same seed meet the same worlds'
-/// robots.
+/// calibration gave none), and the plan in words. World `w` draws from the same stream whatever
+/// the poses, so two sets of poses simulated with the same seed meet the same worlds' robots.
 pub fn simulate_at(
     c: &Calibration,
     m: &super::measurements::Measurements,
     worlds: usize,
     seed: u64,
-    noise_mm: Option<f64>,
-    effects: Option<&Effects>,
+    basis: &Basis<'_>,
 ) -> Result<(String, Vec<Option<ErrorStats>>), CalibrateError> {
     use rayon::prelude::*;
-    let sigma = noise_mm.unwrap_or_else(|| residual_noise_mm(c));
+    let sigma = match basis.noise {
+        Noise::Fixed(s) | Noise::PointsElse(s) => s,
+    };
     if !(sigma.is_finite() && (0.0..=100.0).contains(&sigma)) {
         return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{sigma}: within 0 to 100 mm") });
     }
+    let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
     // Per session and target, the calibrated robot placed in the session's frame with the target
     // as its tool: its forward kinematics is the position the session's instrument reads.
     let mut placed = Vec::with_capacity(c.bases.len() * c.tools.len());
     for b in &c.bases {
         for t in &c.tools {
-            placed.push(c.model.edited(|d| {
+            placed.push(truth_model.edited(|d| {
                 d.world_from_base = b.session_from_base;
                 d.flange_tcp_mm = t.flange_mm;
             }));
@@ -195,21 +333,41 @@ pub fn simulate_at(
     let targets = c.tools.len();
     let mut opts = c.options.clone();
     opts.plots = false;
+    // Each pose's index within its session (the drift's clock).
+    let mut counts = vec![0usize; c.bases.len()];
+    let pose_index: Vec<f64> = m
+        .poses
+        .iter()
+        .map(|p| {
+            counts[p.session] += 1;
+            (counts[p.session] - 1) as f64
+        })
+        .collect();
     let per_world: Vec<Option<ErrorStats>> = (0..worlds)
         .into_par_iter()
         .map(|w| {
             let mut rng = crate::seeds::stream(crate::seeds::split_seed(seed, w as u64), crate::seeds::calibrate::PLAN_NOISE);
             // The link angles of every pose, in the file's order of poses: the joint values
-            // themselves, or the robot of the planning scenario with its effects drawn in this world.
-            let links: Vec<crate::robot::Joints> = match effects {
-                None => m.poses.iter().map(|p| p.q).collect(),
-                Some(e) => {
+            // themselves, or the robot of the planning scenario or the twin with its effects drawn in this world.
+            let mut drift = [0.0; 3];
+            let links: Vec<crate::robot::Joints> = match (basis.effects, basis.twin) {
+                (None, None) => m.poses.iter().map(|p| p.q).collect(),
+                (effects, twin) => {
                     let reference: crate::robot::Joints = std::array::from_fn(|i| {
                         let l = c.model.limits()[i];
                         0.5 * (l.min + l.max)
                     });
-                    let robot = crate::robot::VirtualRobot::new(c.model.clone(), &e.unmodelled, e.repeatability_mm, &reference, &mut rng)
-                        .with_learned(e.learned.as_ref(), &mut rng);
+                    let unmodelled = effects.map_or_else(crate::robot::UnmodelledSpec::default, |e| e.unmodelled.clone());
+                    // Both present: their joint noises add in quadrature.
+                    let repeatability = match (effects, twin) {
+                        (Some(e), Some((_, l))) => e.repeatability_mm.hypot(l.repeatability_mm),
+                        (Some(e), None) => e.repeatability_mm,
+                        (None, Some((_, l))) => l.repeatability_mm,
+                        (None, None) => 0.0,
+                    };
+                    let robot = crate::robot::VirtualRobot::new(truth_model.clone(), &unmodelled, repeatability, &reference, &mut rng)
+                        .with_learned(twin.map(|(_, l)| l).or(effects.and_then(|e| e.learned.as_ref())), &mut rng);
+                    drift = robot.learned.as_ref().map_or([0.0; 3], |l| l.drift_mm_per_pose);
                     let mut from = reference;
                     m.poses
                         .iter()
@@ -221,20 +379,39 @@ pub fn simulate_at(
                         .collect()
                 }
             };
+            let drifts = drift.iter().any(|&d| d != 0.0);
             let mut st = KinState::default();
-            let truth: Vec<Vector3<f64>> =
-                m.points.iter().map(|p| forward(&placed[m.poses[p.pose].session * targets + p.target], &mut st, &links[p.pose])).collect();
+            let truth: Vec<Vector3<f64>> = m
+                .points
+                .iter()
+                .map(|p| {
+                    let session = m.poses[p.pose].session;
+                    let at = forward(&placed[session * targets + p.target], &mut st, &links[p.pose]);
+                    if drifts {
+                        let shift = Vector3::from(drift) * pose_index[p.pose];
+                        at + c.bases[session].session_from_base.isometry().rotation * shift
+                    } else {
+                        at
+                    }
+                })
+                .collect();
             let mut mw = m.clone();
             for (p, t) in mw.points.iter_mut().zip(&truth) {
-                let s = if noise_mm.is_some() { sigma } else { p.sigma_mm.unwrap_or(sigma) };
+                let s = match basis.noise {
+                    Noise::Fixed(s) => s,
+                    Noise::PointsElse(s) => p.sigma_mm.unwrap_or(s),
+                };
                 let noise = Normal::new(0.0, s).map_or(Vector3::zeros(), |n| Vector3::from_fn(|_, _| n.sample(&mut rng)));
                 p.measured_mm = t + noise;
             }
             super::run(&c.robot, &mw, &opts).ok().and_then(|cw| cw.chosen().held_out.as_ref().map(|h| h.measured))
         })
         .collect();
-    let with = effects.map_or_else(String::new, |e| format!(" with the effects and repeatability of {}", e.source));
-    Ok((format!("the calibrated robot{with}, noise {sigma:.4} mm per coordinate"), per_world))
+    let scenario = basis.label.clone().unwrap_or_else(|| {
+        let with = basis.effects.map_or_else(String::new, |e| format!(" with the effects and repeatability of {}", e.source));
+        format!("the calibrated robot{with}, noise {sigma:.4} mm per coordinate")
+    });
+    Ok((scenario, per_world))
 }
 
 /// What a planning scenario adds to the calibrated robot in each world of a plan: its effects

@@ -33,6 +33,58 @@ pub fn write(out: &Path, name: &str, c: &Calibration, plan: Option<&super::plan:
     })
 }
 
+/// Plans made, and those that could not be with why (`plan.md`, when either is not empty).
+pub type PlanRows<'a> = (&'a [(super::plan::PlanWith, super::plan::PlanComparison)], &'a [(super::plan::PlanWith, String)]);
+
+/// Writes the report of `c` as [`write`] does, with the twin (`twin.toml` and its section of the
+/// summary, or why it could not be fitted) and the plans' table (`plan.md`).
+pub fn write_with(
+    out: &Path,
+    name: &str,
+    c: &Calibration,
+    plans: PlanRows<'_>,
+    twin: &Result<super::twin::Twin, String>,
+) -> std::io::Result<PathBuf> {
+    crate::io::out_dir::write_atomically(out, name, |dir| {
+        if !plans.0.is_empty() || !plans.1.is_empty() {
+            crate::io::out_dir::write_file(&dir.join("plan.md"), super::plan::markdown_all(plans.0, plans.1))?;
+        }
+        write_robot(dir, c)?;
+        if let Ok(t) = twin {
+            crate::io::out_dir::write_file(&dir.join("twin.toml"), twin_text(c, t).map_err(std::io::Error::other)?)?;
+        }
+        tables(dir, c)?;
+        let drawn = if c.options.plots { super::plots::write(dir, c).map_err(std::io::Error::other)? } else { Vec::new() };
+        let section = match twin {
+            Ok(t) => super::twin::markdown(t),
+            Err(why) => format!("## The twin: what the model misses\n\nNot fitted: {why}\n"),
+        };
+        crate::io::out_dir::write_file(&dir.join("summary.md"), summary(c, &drawn) + "\n" + &section)?;
+        manifest(dir, c)
+    })
+}
+
+/// `twin.toml`: the calibrated robot file (as `robot.toml`, with the twin's robot: the chosen
+/// model's parameters moved by the joint fit of the kept effects) and its `[learned]` table.
+pub fn twin_text(c: &Calibration, t: &super::twin::Twin) -> Result<String, String> {
+    #[derive(serde::Serialize)]
+    struct Table<'a> {
+        learned: &'a crate::robot::learned::LearnedEffects,
+    }
+    let std: Vec<_> = c.estimates.iter().filter(|e| e.status == ParamStatus::Identified).map(|e| (e.id, e.std)).collect();
+    let coupling = c.robot.coupling.as_ref().map_or_else(String::new, |k| format!("\n{}", k.to_text()));
+    let source = format!(
+        "calsim {} calibrate: the twin of the {} model from {} ({} points)",
+        env!("CARGO_PKG_VERSION"),
+        c.chosen().name(),
+        c.measurements.path.display(),
+        c.measurements.points.len()
+    );
+    let robot = crate::robot::file::to_text(&t.model, &source, &std, c.robot.capsules.as_ref(), c.robot.flange.as_ref()) + &coupling;
+    let learned = toml::to_string(&Table { learned: &t.learned }).map_err(|e| e.to_string())?;
+    Ok(format!("{robot}\n{learned}"))
+}
+
 /// `robot.toml` (the calibrated arm: the robot file's base, tool, capsules and coupling, the
 /// chosen model's parameters with their standard deviations), `before.toml`, `robot.urdf` and
 /// `calibration.yaml`.

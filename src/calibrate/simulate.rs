@@ -20,6 +20,12 @@ pub struct SimulationSpec {
     pub unmodelled: UnmodelledSpec,
     /// ISO 9283 repeatability of the moves, mm (0: none).
     pub repeatability_mm: f64,
+    /// Effects a twin carries (`[learned]`: harmonics, backlash, sag, per-pose error, a drift of
+    /// the base over each session's poses), drawn once with their standard deviations (`None`: none).
+    pub learned: Option<crate::robot::learned::LearnedEffects>,
+    /// Poses each session visits again after its `poses_per_session`: its first ones, in order,
+    /// at the same joint values (0: none).
+    pub repeats_per_session: usize,
     /// The controller's coupling (`None`: it reports the model's joint angles).
     pub coupling: Option<JointCoupling>,
     /// Sessions: label and `session_from_base` (eq. 7, mm and rad).
@@ -64,25 +70,40 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
         let l = spec.truth.limits()[i];
         0.5 * (l.min + l.max)
     });
-    let robot = VirtualRobot::new(spec.truth.clone(), &spec.unmodelled, spec.repeatability_mm, &reference, &mut noise_rng);
+    let robot = VirtualRobot::new(spec.truth.clone(), &spec.unmodelled, spec.repeatability_mm, &reference, &mut noise_rng)
+        .with_learned(spec.learned.as_ref(), &mut noise_rng);
+    let drift = robot.learned.as_ref().map_or([0.0; 3], |l| l.drift_mm_per_pose);
     let noise = Normal::new(0.0, spec.noise_mm).expect("a finite noise");
     let mut st = KinState::default();
     let mut out = Vec::new();
     let mut from = reference;
+    let per_session = spec.poses_per_session + spec.repeats_per_session;
     for (s, (session, frame)) in spec.sessions.iter().enumerate() {
-        for k in 0..spec.poses_per_session {
-            let q = crate::robot::uniform_configuration(&spec.truth, spec.margin, &mut poses);
+        let mut visited: Vec<Joints> = Vec::with_capacity(spec.poses_per_session);
+        for k in 0..per_session {
+            let q = if k < spec.poses_per_session {
+                let q = crate::robot::uniform_configuration(&spec.truth, spec.margin, &mut poses);
+                visited.push(q);
+                q
+            } else {
+                visited[(k - spec.poses_per_session) % visited.len().max(1)]
+            };
             let links = robot.link_angles(&q, &from, &mut noise_rng);
             from = q;
+            // The base's drift over the session, in the session's frame.
+            let shifted = drift.iter().any(|&d| d != 0.0).then(|| frame.isometry().rotation * (Vector3::from(drift) * k as f64));
             for (target, tool) in &spec.targets {
                 let model = spec.truth.edited(|d| {
                     d.world_from_base = *frame;
                     d.flange_tcp_mm = *tool;
                 });
-                let p = forward(&model.expect("the truth with a session's frame and a target"), &mut st, &links);
+                let mut p = forward(&model.expect("the truth with a session's frame and a target"), &mut st, &links);
+                if let Some(d) = shifted {
+                    p += d;
+                }
                 let e = Vector3::from_fn(|_, _| noise.sample(&mut noise_rng));
                 out.push(SimulatedRow {
-                    pose: format!("p{:03}", s * spec.poses_per_session + k + 1),
+                    pose: format!("p{:03}", s * per_session + k + 1),
                     session: session.clone(),
                     target: target.clone(),
                     q_controller: spec.coupling.as_ref().map_or(q, |c| c.controller_from_model(&q)),
@@ -135,6 +156,8 @@ pub fn example_spec(irb120: &crate::robot::file::RobotFile) -> Result<Simulation
         // Table 8's median) and ISO 9283 repeatability (0.010 mm, SOURCED: the IRB 120 data sheet).
         unmodelled: UnmodelledSpec { transmission_high_mdeg: 2.82, ..UnmodelledSpec::default() },
         repeatability_mm: 0.010,
+        learned: None,
+        repeats_per_session: 0,
         coupling: None,
         // ASSUMED: three tracker placements about 2 m around the robot, levelled to 0.5 deg.
         sessions: vec![

@@ -371,16 +371,15 @@ fn worlds_at(
     let m = crate::calibrate::measurements::parse(Path::new("(a candidate set of the plan)"), &text, &plan.robot)
         .map_err(|e| fail(e.to_string()))?;
     let effects = twin_effects(plan);
-    crate::calibrate::plan::simulate_at(
-        reference,
-        &m,
-        plan.worlds,
-        crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS),
-        Some(noise_mm),
-        effects.as_ref(),
-    )
-    .map(|(_, s)| s)
-    .map_err(|e| fail(e.to_string()))
+    let basis = fixed_noise(noise_mm, effects.as_ref());
+    crate::calibrate::plan::simulate_at(reference, &m, plan.worlds, crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS), &basis)
+        .map(|(_, s)| s)
+        .map_err(|e| fail(e.to_string()))
+}
+
+/// A plan's worlds: the instrument's noise `noise_mm` at every point and the twin's `effects`.
+fn fixed_noise(noise_mm: f64, effects: Option<&crate::calibrate::plan::Effects>) -> crate::calibrate::plan::Basis<'_> {
+    crate::calibrate::plan::Basis { noise: crate::calibrate::plan::Noise::Fixed(noise_mm), effects, twin: None, label: None }
 }
 
 /// The twin's effects drawn in every world of a prediction: the robot file's `[learned]` table
@@ -519,7 +518,7 @@ pub fn predict_with_pilot(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<
     let (c, noise_mm) = pilot(plan, cell, rows)?;
     let effects = twin_effects(plan);
     let seed = crate::seeds::split_seed(plan.seed, crate::seeds::plan::WORLDS);
-    let (_, stats) = crate::calibrate::plan::simulate_at(&c, &c.measurements, plan.worlds, seed, Some(noise_mm), effects.as_ref())
+    let (_, stats) = crate::calibrate::plan::simulate_at(&c, &c.measurements, plan.worlds, seed, &fixed_noise(noise_mm, effects.as_ref()))
         .map_err(|e| PlanError::new(&plan.path, "poses", format!("the plan's poses cannot be calibrated: {e}")))?;
     let per_world_mm: Vec<f64> = stats.iter().map(|s| s.map_or(f64::NAN, |s| Statistic::Median.of_stats(&s))).collect();
     let sorted = crate::study::stats::finite_sorted(&per_world_mm);

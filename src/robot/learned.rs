@@ -10,6 +10,8 @@
 //! backlash_std_mdeg = [0, 1, 1, 0, 0, 0]
 //! sag_mdeg_per_m = [0, 9, 5, 0, 0, 0]     # joint error per metre of a TCP mass's lever arm
 //! sag_std_mdeg_per_m = [0, 2, 2, 0, 0, 0]
+//! drift_mm_per_pose = [0.002, 0, -0.001]  # the base's translation per pose of a session (calibrate's plan)
+//! drift_std_mm_per_pose = [0.0001, 0, 0.0001]
 //!
 //! [[learned.harmonic]]              # delta theta_j = sin_mdeg sin(order q_j) + cos_mdeg cos(order q_j)
 //! joint = 2
@@ -83,6 +85,14 @@ pub struct LearnedEffects {
     /// Standard deviation of each sag coefficient, mdeg/m.
     #[serde(default)]
     pub sag_std_mdeg_per_m: [f64; JOINTS],
+    /// Drift of the base over a session: its translation per pose of the session, in the base
+    /// frame, mm per pose (the pose order of a measurement file). A robot file has no pose order:
+    /// the scenarios leave it out; `calsim calibrate`'s plan draws it.
+    #[serde(default)]
+    pub drift_mm_per_pose: [f64; 3],
+    /// Standard deviation of each drift component, mm per pose.
+    #[serde(default)]
+    pub drift_std_mm_per_pose: [f64; 3],
     /// Transmission harmonics.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub harmonic: Vec<LearnedHarmonic>,
@@ -97,6 +107,8 @@ pub struct DrawnEffects {
     pub half_backlash: [f64; JOINTS],
     /// Sag per joint, rad per metre of lever arm.
     pub sag_per_m: [f64; JOINTS],
+    /// The base's translation per pose of a session, base frame, mm.
+    pub drift_mm_per_pose: [f64; 3],
     /// The arm that gives the lever arms: the truth without link masses, 1 kg at the TCP
     /// (`None`: no sag).
     sag_arm: Option<RobotModel>,
@@ -124,6 +136,12 @@ impl LearnedEffects {
         }
         if let Some(j) = self.sag_mdeg_per_m.iter().position(|x| !(x.is_finite() && x.abs() <= 1.0e6)) {
             return bad(format!("sag_mdeg_per_m[{j}]"), "within -1000000 to 1000000 mdeg/m");
+        }
+        for (name, v) in [("drift_mm_per_pose", &self.drift_mm_per_pose), ("drift_std_mm_per_pose", &self.drift_std_mm_per_pose)] {
+            let std = name.contains("std");
+            if let Some(k) = v.iter().position(|&x| !(x.is_finite() && x.abs() <= 10.0 && (!std || x >= 0.0))) {
+                return bad(format!("{name}[{k}]"), if std { "within 0 to 10 mm per pose" } else { "within -10 to 10 mm per pose" });
+            }
         }
         if self.harmonic.len() > MOST_HARMONICS {
             return bad("harmonic".into(), "at most 600 harmonics");
@@ -153,6 +171,7 @@ impl LearnedEffects {
             && self.pose_error_mdeg == 0.0
             && self.backlash_mdeg.iter().all(|&x| x == 0.0)
             && self.sag_mdeg_per_m.iter().all(|&x| x == 0.0)
+            && self.drift_mm_per_pose.iter().all(|&x| x == 0.0)
             && self.harmonic.iter().all(|h| h.sin_mdeg == 0.0 && h.cos_mdeg == 0.0)
     }
 
@@ -193,7 +212,13 @@ impl LearnedEffects {
                 })
                 .expect("the truth with a unit mass at its TCP")
         });
-        DrawnEffects { harmonics, half_backlash, sag_per_m, sag_arm }
+        // Drawn last, and only when the table has a drift: tables without one draw as before.
+        let drift_mm_per_pose = if self.drift_mm_per_pose.iter().chain(&self.drift_std_mm_per_pose).any(|&x| x != 0.0) {
+            std::array::from_fn(|k| self.drift_mm_per_pose[k] + self.drift_std_mm_per_pose[k] * unit.sample(rng))
+        } else {
+            [0.0; 3]
+        };
+        DrawnEffects { harmonics, half_backlash, sag_per_m, drift_mm_per_pose, sag_arm }
     }
 }
 
@@ -267,6 +292,23 @@ mod tests {
         let mut bad = l;
         bad.backlash_mdeg[1] = f64::NAN;
         assert_eq!(bad.check().unwrap_err().0, "backlash_mdeg[1]");
+    }
+
+    #[test]
+    fn a_drift_is_checked_drawn_last_and_leaves_tables_without_one_drawing_as_before() {
+        let truth = irb120();
+        let base = LearnedEffects { pose_error_mdeg: 1.5, backlash_std_mdeg: [0.0, 1.0, 0.0, 0.0, 0.0, 0.0], ..Default::default() };
+        let drifting = LearnedEffects { drift_mm_per_pose: [0.002, 0.0, -0.001], ..base.clone() };
+        let draw = |l: &LearnedEffects| l.draw(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(4));
+        let (a, b) = (draw(&base), draw(&drifting));
+        assert_eq!(a.harmonics, b.harmonics, "the drift is drawn after everything else");
+        assert_eq!(a.half_backlash, b.half_backlash);
+        assert_eq!((a.drift_mm_per_pose, b.drift_mm_per_pose), ([0.0; 3], [0.002, 0.0, -0.001]));
+        assert!(!LearnedEffects { drift_mm_per_pose: [0.0, 0.001, 0.0], ..Default::default() }.is_none());
+        let bad = LearnedEffects { drift_mm_per_pose: [0.0, f64::INFINITY, 0.0], ..Default::default() };
+        assert_eq!(bad.check().unwrap_err().0, "drift_mm_per_pose[1]");
+        let bad = LearnedEffects { drift_std_mm_per_pose: [0.0, 0.0, -1e-3], ..Default::default() };
+        assert_eq!(bad.check().unwrap_err().0, "drift_std_mm_per_pose[2]");
     }
 
     #[test]

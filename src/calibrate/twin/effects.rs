@@ -1,0 +1,160 @@
+//! The candidate effect families of a twin as columns of the calibration's least squares: each
+//! family's columns are the position change (weighted as the residuals are) that a unit of each of
+//! its coefficients makes at every point.
+//!
+//! A joint-angle effect `delta theta_j = a f(q)` moves a point by `a f(q) dp/dtheta_j`, with
+//! `dp/dtheta_j` the position Jacobian w.r.t. link angle `j` (the Jacobian of the joint offset
+//! `theta_offs_j`); the drift is a base translation `a_k * (pose index within the session)`.
+
+use nalgebra::DMatrix;
+
+use crate::robot::JOINTS;
+
+/// A family of candidate effects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// Transmission harmonics of joint `j` (0-based), orders 1..=[`ORDERS`], sin and cos.
+    Harmonics(usize),
+    /// Backlash of every joint by the approach direction (full width).
+    Backlash,
+    /// Gravity sag per joint by the lever arm of a mass at the TCP.
+    Sag,
+    /// A base translation linear in the pose index within each session (the same rate in every session).
+    Drift,
+}
+
+/// Orders of the harmonics fitted per joint.
+pub const ORDERS: usize = 3;
+
+impl Family {
+    /// Every family, in the order they are tried.
+    pub fn all() -> Vec<Family> {
+        let mut v: Vec<Family> = (0..JOINTS).map(Family::Harmonics).collect();
+        v.extend([Family::Backlash, Family::Sag, Family::Drift]);
+        v
+    }
+
+    /// Name for tables.
+    pub fn name(self) -> String {
+        match self {
+            Family::Harmonics(j) => format!("harmonics of joint {} (orders 1-{ORDERS})", j + 1),
+            Family::Backlash => "backlash by approach direction".into(),
+            Family::Sag => "gravity sag by lever arm".into(),
+            Family::Drift => "drift of the base over pose order".into(),
+        }
+    }
+}
+
+/// What every point contributes to the columns (indexed by point of the problem).
+pub struct PointData {
+    /// Link angles, rad.
+    pub q: Vec<crate::robot::Joints>,
+    /// Approach direction per joint: +1 coming from below, -1 from above, 0 unknown or not moved.
+    pub direction: Vec<[f64; JOINTS]>,
+    /// Lever arm of a unit TCP mass per joint, m (zeros without gravity).
+    pub lever_m: Vec<[f64; JOINTS]>,
+    /// Index of the point's pose within its session (0-based).
+    pub pose_index: Vec<f64>,
+    /// The point's uncertainty per coordinate (1 without the file's column).
+    pub sigma: Vec<f64>,
+}
+
+/// One effect coefficient: its family, name, and how its internal value shows (unit, scale).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Coefficient {
+    /// The family.
+    pub family: Family,
+    /// Joint (0-based) for joint effects.
+    pub joint: Option<usize>,
+    /// Harmonic order and whether it is the sine (true) or cosine coefficient.
+    pub harmonic: Option<(usize, bool)>,
+    /// Axis (0-2) of a drift.
+    pub axis: Option<usize>,
+    /// Name for tables.
+    pub name: String,
+}
+
+fn mdeg(rad: f64) -> f64 {
+    rad.to_degrees() * 1e3
+}
+
+impl Coefficient {
+    /// The value in the table's unit from the internal one (rad, rad/m, mm per pose).
+    pub fn shown(&self, v: f64) -> f64 {
+        match self.family {
+            Family::Drift => v,
+            _ => mdeg(v),
+        }
+    }
+
+    /// The table's unit.
+    pub fn unit(&self) -> &'static str {
+        match self.family {
+            Family::Harmonics(_) | Family::Backlash => "mdeg",
+            Family::Sag => "mdeg/m",
+            Family::Drift => "mm/pose",
+        }
+    }
+}
+
+/// The columns of `family` over the points `idx` (3 rows per point, weighted as the residuals),
+/// from the weighted link-angle Jacobian `jl` (3 |idx| x 6, rows in the order of `idx`); columns
+/// that are zero at every point (a joint that never moves, the sag of a vertical axis) are left out.
+pub fn columns(family: Family, idx: &[usize], jl: &DMatrix<f64>, d: &PointData) -> (DMatrix<f64>, Vec<Coefficient>) {
+    let n = idx.len();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut coefs: Vec<Coefficient> = Vec::new();
+    let mut joint_column = |j: usize, f: &dyn Fn(usize) -> f64, coef: Coefficient| {
+        let mut c = vec![0.0; 3 * n];
+        for (row, &i) in idx.iter().enumerate() {
+            let w = f(i);
+            for a in 0..3 {
+                c[3 * row + a] = w * jl[(3 * row + a, j)];
+            }
+        }
+        if c.iter().any(|v| *v != 0.0) {
+            cols.push(c);
+            coefs.push(coef);
+        }
+    };
+    let base = |joint: Option<usize>, name: String| Coefficient { family, joint, harmonic: None, axis: None, name };
+    match family {
+        Family::Harmonics(j) => {
+            for order in 1..=ORDERS {
+                for sine in [true, false] {
+                    let k = order as f64;
+                    let f = move |i: usize| if sine { (k * d.q[i][j]).sin() } else { (k * d.q[i][j]).cos() };
+                    let name = format!("joint {} order {order} {}", j + 1, if sine { "sin" } else { "cos" });
+                    joint_column(j, &f, Coefficient { harmonic: Some((order, sine)), ..base(Some(j), name) });
+                }
+            }
+        }
+        Family::Backlash => {
+            for j in 0..JOINTS {
+                // The link lags half the width behind the motion: -w/2 coming from below.
+                let f = move |i: usize| -0.5 * d.direction[i][j];
+                joint_column(j, &f, base(Some(j), format!("joint {} width", j + 1)));
+            }
+        }
+        Family::Sag => {
+            for j in 0..JOINTS {
+                let f = move |i: usize| d.lever_m[i][j];
+                joint_column(j, &f, base(Some(j), format!("joint {} per metre of lever arm", j + 1)));
+            }
+        }
+        Family::Drift => {
+            for axis in 0..3 {
+                let mut c = vec![0.0; 3 * n];
+                for (row, &i) in idx.iter().enumerate() {
+                    c[3 * row + axis] = d.pose_index[i] / d.sigma[i];
+                }
+                if c.iter().any(|v| *v != 0.0) {
+                    cols.push(c);
+                    coefs.push(Coefficient { axis: Some(axis), ..base(None, format!("base {} per pose", ["x", "y", "z"][axis])) });
+                }
+            }
+        }
+    }
+    let m = DMatrix::from_fn(3 * n, cols.len(), |r, c| cols[c][r]);
+    (m, coefs)
+}

@@ -1,0 +1,895 @@
+//! The robot's twin: what a calibration's chosen model misses, learned from its fit on the
+//! calibration (training) split.
+//!
+//! ```text
+//! the chosen model refitted on the training points (outliers left out)
+//!  ─► residual decomposition: instrument noise (the file's sigma column, --instrument-noise-mm,
+//!     or the scatter of distances between targets measured at one pose), repeatability (the
+//!     scatter of poses visited more than once, less the instrument's), the systematic rest
+//!  ─► effect families (effects.rs: harmonics per joint, backlash, sag, drift) fitted jointly
+//!     with the model (their columns projected off the model's Jacobian: Frisch-Waugh-Lovell),
+//!     kept one at a time while each lowers the error cross-validated over the calibration
+//!     split's folds by more than [`KEEP_SE`] paired standard errors (poses as the pairs); the
+//!     held-out split is left to judge the result (and the plan)
+//!  ─► the twin: the calibrated robot moved by the joint fit, its [learned] table (the kept
+//!     effects with their standard deviations, the repeatability, the per-pose joint error left)
+//! ```
+//!
+//! Variances are per coordinate (mm^2); an interval is 95 %: chi-square on a variance with its
+//! degrees of freedom (Wilson-Hilferty), a normal approximation on a difference of variances,
+//! and for an effect coefficient its least-squares standard deviation with the residuals
+//! clustered by pose (a sandwich), times 1.96.
+
+pub mod effects;
+mod report;
+
+use std::collections::HashMap;
+
+use nalgebra::{DMatrix, DVector};
+
+pub use effects::{Coefficient, Family};
+use effects::{PointData, columns};
+pub use report::markdown;
+
+use super::problem::{Layout, Problem, SolveOptions};
+use super::robust::fit_without;
+use super::validation::{free_columns, start_values};
+use super::{CalibrateError, Calibration};
+use crate::robot::learned::{LearnedEffects, LearnedHarmonic, lever_arms_m};
+use crate::robot::{JOINTS, LinkParam, ParamId, ParamSet, RobotModel};
+
+/// Two poses whose joint values agree to this (rad, every joint) are one pose visited twice.
+pub const SAME_POSE_RAD: f64 = 1e-4;
+/// The two-sided 95 % normal quantile.
+const Z95: f64 = 1.959_963_984_540_054;
+/// A family is kept when its held-out gain exceeds this many paired standard errors: the
+/// one-sided normal quantile of 5 % shared by the nine families tried (Bonferroni, 0.05 / 9).
+pub const KEEP_SE: f64 = 2.54;
+/// Families whose projected column spaces have a principal angle with cosine above this are named
+/// as not told apart.
+pub const CONFOUNDED_COS: f64 = 0.95;
+/// A column that keeps less than this fraction of its norm once projected off the model's
+/// Jacobian is absorbed by the model.
+pub const ABSORBED: f64 = 0.05;
+/// ISO 9283 RP of an isotropic 3-D Gaussian scatter per unit of its standard deviation per
+/// coordinate: mean plus 3 standard deviations of a Maxwell distance (`2 sqrt(2/pi) + 3 sqrt(3 - 8/pi)`).
+pub const RP_PER_SIGMA: f64 = 3.6163;
+
+/// A level per coordinate (mm), with its 95 % interval and what estimated it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Level {
+    /// Standard deviation per coordinate, mm.
+    pub sigma_mm: f64,
+    /// Its 95 % interval, mm (equal to the value when stated).
+    pub interval_mm: [f64; 2],
+    /// What estimated it (or who stated it).
+    pub by: String,
+}
+
+impl Level {
+    /// A variance `var` (mm^2) with `dof` degrees of freedom: chi-square interval.
+    fn chi2(var: f64, dof: f64, by: String) -> Self {
+        let (lo, hi) = (var * dof / chi2_quantile(0.975, dof), var * dof / chi2_quantile(0.025, dof));
+        Level { sigma_mm: var.max(0.0).sqrt(), interval_mm: [lo.max(0.0).sqrt(), hi.max(0.0).sqrt()], by }
+    }
+
+    /// A variance stated, not estimated.
+    fn stated(sigma: f64, by: String) -> Self {
+        Level { sigma_mm: sigma, interval_mm: [sigma, sigma], by }
+    }
+
+    /// A difference of variances `var` with the variance of its estimate `var_var`: normal
+    /// approximation, clipped at zero.
+    fn difference(var: f64, var_var: f64, by: String) -> Self {
+        let h = Z95 * var_var.max(0.0).sqrt();
+        Level { sigma_mm: var.max(0.0).sqrt(), interval_mm: [(var - h).max(0.0).sqrt(), (var + h).max(0.0).sqrt()], by }
+    }
+
+    fn var(&self) -> f64 {
+        self.sigma_mm * self.sigma_mm
+    }
+
+    /// Variance of the variance estimate (from the interval's half width).
+    fn var_var(&self) -> f64 {
+        let h = (self.interval_mm[1].powi(2) - self.interval_mm[0].powi(2)) / (2.0 * Z95);
+        h * h
+    }
+}
+
+/// The quantile `p` of a chi-square distribution with `nu` degrees of freedom (Wilson-Hilferty).
+pub fn chi2_quantile(p: f64, nu: f64) -> f64 {
+    let z = if p > 0.5 { Z95 } else { -Z95 };
+    debug_assert!((p - 0.975).abs() < 1e-12 || (p - 0.025).abs() < 1e-12, "95 % intervals only");
+    let c = 2.0 / (9.0 * nu);
+    (nu * (1.0 - c + z * c.sqrt()).powi(3)).max(1e-300)
+}
+
+/// The residual's parts on the training split.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decomposition {
+    /// Training points used (outliers left out).
+    pub points: usize,
+    /// Poses of those points.
+    pub poses: usize,
+    /// The chosen model's residual per coordinate on them (degrees of freedom: 3 points less the
+    /// free unknowns).
+    pub total: Level,
+    /// The instrument's noise (`None`: not estimated, with why in `notes`).
+    pub instrument: Option<Level>,
+    /// Every other estimate of the instrument's noise the data hold (a check on the one used).
+    pub instrument_checks: Vec<Level>,
+    /// The robot's repeatability per coordinate (`None`: not estimated).
+    pub repeatability: Option<Level>,
+    /// Instrument and repeatability together, where they cannot be separated.
+    pub together: Option<Level>,
+    /// The systematic part the model misses (total less instrument and repeatability).
+    pub systematic: Option<Level>,
+    /// The residual after the kept effects.
+    pub after: Level,
+    /// The part of the residual the kept effects explain.
+    pub explained: Level,
+    /// The systematic part left after the kept effects.
+    pub left: Option<Level>,
+    /// What cannot be separated or was not estimated, and why.
+    pub notes: Vec<String>,
+}
+
+/// One family tried, with its held-out evidence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FamilyTrial {
+    /// The family.
+    pub family: Family,
+    /// Its columns (coefficients) on these data.
+    pub columns: usize,
+    /// Columns the model's parameters absorb (kept less than [`ABSORBED`] of their norm).
+    pub absorbed: Vec<String>,
+    /// Mean cross-validated gain in squared error per training pose (mm^2 when the points carry
+    /// no uncertainty) when the family was last tried, and its paired standard error.
+    pub gain: (f64, f64),
+    /// Kept.
+    pub kept: bool,
+}
+
+/// A kept effect's coefficient.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Effect {
+    /// The coefficient.
+    pub coefficient: Coefficient,
+    /// Value, in [`Coefficient::unit`].
+    pub value: f64,
+    /// Standard deviation, same unit.
+    pub std: f64,
+}
+
+/// What the twin analysis gives.
+#[derive(Clone, Debug)]
+pub struct Twin {
+    /// The residual's parts.
+    pub decomposition: Decomposition,
+    /// Held-out poses (the split the plan compares with; not used to choose).
+    pub held_out_poses: usize,
+    /// Training poses the families were judged on (cross-validation over the calibration split's folds).
+    pub cv_poses: usize,
+    /// The kept families' gain in squared error per held-out pose and its paired standard error
+    /// (`None`: no held-out pose).
+    pub held_out_gain: Option<(f64, f64)>,
+    /// Every family tried.
+    pub families: Vec<FamilyTrial>,
+    /// The kept families' coefficients.
+    pub effects: Vec<Effect>,
+    /// Pairs of families the data cannot tell apart: names and the cosine of their smallest
+    /// principal angle (after projection off the model).
+    pub confounded: Vec<(String, String, f64)>,
+    /// The `[learned]` table.
+    pub learned: LearnedEffects,
+    /// The calibrated robot moved by the joint fit of the kept effects.
+    pub model: RobotModel,
+    /// The instrument's noise per coordinate for a plan, mm (`None`: not known).
+    pub noise_mm: Option<f64>,
+}
+
+impl Twin {
+    /// The learned effects a plan draws: the fitted values, without their standard deviations.
+    /// The coefficients are correlated with each other and with the model's parameters (a
+    /// harmonic of a joint with its geometry), and `[learned]` keeps one standard deviation each:
+    /// drawn independently, they would put a world's robot far from the data the twin was fitted
+    /// on. Per world, the randomness is the repeatability, the per-pose error and the noise.
+    pub fn plan_effects(&self) -> LearnedEffects {
+        let mut l = self.learned.clone();
+        l.backlash_std_mdeg = [0.0; JOINTS];
+        l.sag_std_mdeg_per_m = [0.0; JOINTS];
+        l.drift_std_mm_per_pose = [0.0; 3];
+        for h in &mut l.harmonic {
+            h.std_mdeg = 0.0;
+        }
+        l
+    }
+}
+
+/// Least squares on columns `a` with column scaling and a pseudo-inverse of the normal matrix.
+struct Lsq {
+    a: DMatrix<f64>,
+    scale: Vec<f64>,
+    pinv: DMatrix<f64>,
+}
+
+impl Lsq {
+    fn new(a: DMatrix<f64>) -> Self {
+        let scale: Vec<f64> = a.column_iter().map(|c| c.norm()).map(|v| if v > 0.0 { 1.0 / v } else { 0.0 }).collect();
+        let k = a.ncols();
+        let mut n = a.tr_mul(&a);
+        for r in 0..k {
+            for c in 0..k {
+                n[(r, c)] *= scale[r] * scale[c];
+            }
+        }
+        let pinv = if k == 0 {
+            DMatrix::zeros(0, 0)
+        } else {
+            let e = n.symmetric_eigen();
+            let top = e.eigenvalues.iter().fold(0.0f64, |m, v| m.max(*v));
+            let inv = DVector::from_iterator(k, e.eigenvalues.iter().map(|v| if *v > 1e-12 * top { 1.0 / v } else { 0.0 }));
+            &e.eigenvectors * DMatrix::from_diagonal(&inv) * e.eigenvectors.transpose()
+        };
+        Self { a, scale, pinv }
+    }
+
+    /// Coefficients of `b`'s columns on `a` (internal units).
+    fn coef(&self, b: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut atb = self.a.tr_mul(b);
+        for (r, s) in self.scale.iter().enumerate() {
+            atb.row_mut(r).scale_mut(*s);
+        }
+        let mut x = &self.pinv * atb;
+        for (r, s) in self.scale.iter().enumerate() {
+            x.row_mut(r).scale_mut(*s);
+        }
+        x
+    }
+
+    /// `b` less its projection on `a`'s columns.
+    fn resid(&self, b: &DMatrix<f64>) -> DMatrix<f64> {
+        if self.a.ncols() == 0 {
+            return b.clone();
+        }
+        b - &self.a * self.coef(b)
+    }
+
+    /// Covariance of the coefficients (internal units) with the residuals `u` clustered by `groups`
+    /// (a group per row triple).
+    fn sandwich(&self, u: &DVector<f64>, groups: &[usize]) -> DMatrix<f64> {
+        let k = self.a.ncols();
+        let g = groups.iter().copied().max().map_or(0, |m| m + 1);
+        let mut score = DMatrix::zeros(g, k);
+        for (row, &gr) in groups.iter().enumerate() {
+            for a in 0..3 {
+                let r = 3 * row + a;
+                for c in 0..k {
+                    score[(gr, c)] += self.a[(r, c)] * self.scale[c] * u[r];
+                }
+            }
+        }
+        let used = groups.iter().collect::<std::collections::BTreeSet<_>>().len() as f64;
+        let meat = score.tr_mul(&score) * if used > 1.0 { used / (used - 1.0) } else { 1.0 };
+        let mut cov = &self.pinv * meat * &self.pinv;
+        for r in 0..k {
+            for c in 0..k {
+                cov[(r, c)] *= self.scale[r] * self.scale[c];
+            }
+        }
+        cov
+    }
+}
+
+/// The largest cosine of the principal angles between the column spaces of `a` and `b`.
+fn principal_cos(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    let basis = |m: &DMatrix<f64>| {
+        let svd = m.clone().svd(true, false);
+        let u = svd.u.expect("u asked");
+        let top = svd.singular_values.iter().fold(0.0f64, |x, v| x.max(*v));
+        let keep: Vec<usize> = (0..svd.singular_values.len()).filter(|&k| svd.singular_values[k] > 1e-9 * top).collect();
+        u.select_columns(&keep)
+    };
+    let (ua, ub) = (basis(a), basis(b));
+    if ua.ncols() == 0 || ub.ncols() == 0 {
+        return 0.0;
+    }
+    (ua.transpose() * ub).singular_values().iter().fold(0.0f64, |m, v| m.max(*v)).min(1.0)
+}
+
+/// The twin of calibration `c`: the chosen model refitted on the training split, its residual
+/// decomposed, effect families fitted and chosen by held-out error. `stated_noise_mm`: the
+/// instrument's noise per coordinate as the user states it.
+pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, CalibrateError> {
+    let m = &c.measurements;
+    let s = super::setup(&c.robot, m)?;
+    let chosen = c.chosen();
+    let layout = chosen.layout.clone();
+    let nominal = &c.robot.nominal;
+    let problem = Problem { start: nominal, layout: layout.clone(), obs: &s.obs };
+    let held_pose = |i: usize| c.assignment.held_out[m.points[i].pose];
+    let train: Vec<usize> = (0..m.points.len()).filter(|&i| !held_pose(i) && !c.flagged[i]).collect();
+    let held: Vec<usize> = (0..m.points.len()).filter(|&i| held_pose(i) && !c.flagged[i]).collect();
+    let no_model = |outcome: String| CalibrateError::NoModel { path: m.path.clone(), model: chosen.name(), outcome };
+    let x0 = start_values(&layout, nominal, &s.frames_x);
+    let with_robot = !layout.robot.is_empty();
+    let free = free_columns(&problem, &train, with_robot);
+    let fit = fit_without(&problem, &x0, &free, &train, &vec![false; train.len()], &SolveOptions::default());
+    if !fit.solved.outcome.is_converged() {
+        return Err(no_model(format!("the twin's training fit: {}", fit.solved.outcome.label())));
+    }
+    let x = fit.solved.x;
+    let pr = layout.robot.len();
+    let fitted = layout.robot.unpack(nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
+    let (rw, jw) = problem.linearise(&x, &train).ok_or_else(|| no_model("the twin's training fit has no model".into()))?;
+    let jf = jw.select_columns(&free);
+    // The link-angle Jacobian: the fitted robot with the six joint offsets as its only parameters.
+    let offsets = ParamSet::new((1..=JOINTS).map(|joint| ParamId::Link { joint, kind: LinkParam::ThetaOffset }).collect())
+        .expect("six joint offsets");
+    let lay6 = Layout { robot: offsets.clone(), sessions: layout.sessions, targets: layout.targets };
+    let mut x6: Vec<f64> = offsets.pack(&fitted).iter().copied().collect();
+    x6.extend_from_slice(&x[layout.frames()]);
+    let p6 = Problem { start: &fitted, layout: lay6, obs: &s.obs };
+    let link_jacobian = |idx: &[usize]| p6.linearise(&x6, idx).map(|(_, j)| j.columns(0, JOINTS).into_owned());
+    let jl = link_jacobian(&train).ok_or_else(|| no_model("the twin's link Jacobian".into()))?;
+    let data = point_data(c, &s.obs, &fitted);
+    // Pose of each training row, and the per-pose groups.
+    let pose_of = |idx: &[usize]| -> Vec<usize> {
+        let mut ids: HashMap<usize, usize> = HashMap::new();
+        idx.iter()
+            .map(|&i| {
+                let n = ids.len();
+                *ids.entry(m.points[i].pose).or_insert(n)
+            })
+            .collect()
+    };
+    let train_pose = pose_of(&train);
+    let model_lsq = Lsq::new(jf.clone());
+
+    // Held-out rows: residuals of the training fit, the model's Jacobian, the columns the held-out
+    // points need that the training fit did not free (a session or target held out whole: its
+    // frame registered on the held-out points, to first order).
+    let held_parts = if held.is_empty() {
+        None
+    } else {
+        let (rh, jh) = problem.linearise(&x, &held).ok_or_else(|| no_model("the twin's held-out points".into()))?;
+        let jlh = link_jacobian(&held).ok_or_else(|| no_model("the twin's link Jacobian".into()))?;
+        let own: Vec<usize> = (0..layout.len()).filter(|k| !free.contains(k) && jh.column(*k).iter().any(|v| *v != 0.0)).collect();
+        let own = Lsq::new(jh.select_columns(&own));
+        Some((rh, jh.select_columns(&free), jlh, own, pose_of(&held)))
+    };
+
+    // Every family's columns (those the model absorbs left out: the calibrated robot carries them).
+    let mut families: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> = Vec::new();
+    let mut absorbed: Vec<Vec<String>> = Vec::new();
+    for f in Family::all() {
+        let (e, coefs) = columns(f, &train, &jl, &data);
+        if e.ncols() == 0 {
+            continue;
+        }
+        let p = model_lsq.resid(&e);
+        let keep: Vec<usize> = (0..e.ncols()).filter(|&k| p.column(k).norm() >= ABSORBED * e.column(k).norm()).collect();
+        absorbed.push((0..e.ncols()).filter(|k| !keep.contains(k)).map(|k| coefs[k].name.clone()).collect());
+        families.push((f, e.select_columns(&keep), keep.iter().map(|&k| coefs[k].clone()).collect()));
+    }
+    // Column ranges of each family in the stacked matrix of every family.
+    let mut ranges = Vec::new();
+    let mut at = 0;
+    for (_, e, _) in &families {
+        ranges.push(at..at + e.ncols());
+        at += e.ncols();
+    }
+    let all_e = hstack(families.iter().map(|(_, e, _)| e));
+    let projected_all = model_lsq.resid(&all_e);
+    let projected: Vec<DMatrix<f64>> = ranges.iter().map(|r| projected_all.columns(r.start, r.len()).into_owned()).collect();
+    let rw_m = DMatrix::from_column_slice(rw.len(), 1, rw.as_slice());
+
+    // Cross-validation on the calibration split's folds (poses as units): per fold, the model and
+    // the families fitted on the other folds (Frisch-Waugh-Lovell through Gram matrices), the
+    // error at the fold's poses.
+    let fold_of: Vec<usize> = train.iter().map(|&i| c.assignment.fold[m.points[i].pose].unwrap_or(0)).collect();
+    let folds: Vec<CvFold> = (0..c.assignment.folds)
+        .filter_map(|f| {
+            let inside: Vec<usize> = (0..train.len()).filter(|&r| fold_of[r] != f).collect();
+            let out: Vec<usize> = (0..train.len()).filter(|&r| fold_of[r] == f).collect();
+            if inside.is_empty() || out.is_empty() {
+                return None;
+            }
+            let rows = |pts: &[usize]| pts.iter().flat_map(|&r| [3 * r, 3 * r + 1, 3 * r + 2]).collect::<Vec<usize>>();
+            let (ri, ro) = (rows(&inside), rows(&out));
+            let model = Lsq::new(jf.select_rows(&ri));
+            let (e_in, r_in) = (all_e.select_rows(&ri), rw_m.select_rows(&ri));
+            let (g, beta) = (model.coef(&e_in), model.coef(&r_in));
+            let e_perp = &e_in - &model.a * &g;
+            let r_perp = &r_in - &model.a * &beta;
+            let j_out = jf.select_rows(&ro);
+            Some(CvFold {
+                gram: e_perp.tr_mul(&e_perp),
+                rhs: e_perp.tr_mul(&r_perp),
+                r_out: rw_m.select_rows(&ro) - &j_out * beta,
+                e_out: all_e.select_rows(&ro) - &j_out * g,
+                pose: out.iter().map(|&r| train_pose[r]).collect(),
+            })
+        })
+        .collect();
+    let poses_train = train_pose.iter().copied().max().map_or(0, |v| v + 1);
+    let cv_sse = |set: &[usize]| -> Vec<f64> {
+        let cols: Vec<usize> = set.iter().flat_map(|&k| ranges[k].clone()).collect();
+        let mut sse = vec![0.0; poses_train];
+        for f in &folds {
+            let pred = if cols.is_empty() {
+                f.r_out.clone()
+            } else {
+                let a = gram_solve(&f.gram.select_rows(&cols).select_columns(&cols), &f.rhs.select_rows(&cols));
+                &f.r_out - f.e_out.select_columns(&cols) * a
+            };
+            for (row, p) in f.pose.iter().enumerate() {
+                sse[*p] += (0..3).map(|a| pred[3 * row + a].powi(2)).sum::<f64>();
+            }
+        }
+        sse
+    };
+
+    // Forward selection by cross-validated error.
+    let mut kept: Vec<usize> = Vec::new();
+    let mut gains: Vec<(f64, f64)> = vec![(f64::NAN, f64::NAN); families.len()];
+    if !folds.is_empty() {
+        let mut current = cv_sse(&[]);
+        loop {
+            let mut best: Option<(usize, f64, Vec<f64>)> = None;
+            for k in (0..families.len()).filter(|k| !kept.contains(k)) {
+                let mut set = kept.clone();
+                set.push(k);
+                let sse = cv_sse(&set);
+                let d: Vec<f64> = current.iter().zip(&sse).map(|(a, b)| a - b).collect();
+                let (mean, se) = mean_se(&d);
+                gains[k] = (mean, se);
+                let qualifies = mean > KEEP_SE * se && mean > 0.0;
+                if qualifies && best.as_ref().is_none_or(|b| mean > b.1) {
+                    best = Some((k, mean, sse));
+                }
+            }
+            let Some((k, _, sse)) = best else { break };
+            kept.push(k);
+            current = sse;
+        }
+    }
+    kept.sort_unstable();
+
+    // The joint fit of the kept families on the training points.
+    let (coef, cov, fitted_w) = if kept.is_empty() {
+        (DVector::zeros(0), DMatrix::zeros(0, 0), DVector::zeros(rw.len()))
+    } else {
+        let a = hstack(kept.iter().map(|&k| &projected[k]));
+        let lsq = Lsq::new(a);
+        let coef = lsq.coef(&rw_m).column(0).into_owned();
+        let fitted_w = &lsq.a * &coef;
+        let u = &rw - &fitted_w;
+        let cov = lsq.sandwich(&u, &train_pose);
+        (coef, cov, fitted_w)
+    };
+    // The held-out split: the error of the joint fit at its poses, without and with the kept
+    // families (evidence beside the choice, which saw none of it).
+    let held_evidence = held_parts.as_ref().map(|(rh, jhf, jlh, own, hpose)| {
+        let rh = own.resid(&DMatrix::from_column_slice(rh.len(), 1, rh.as_slice()));
+        let mut after = rh.clone();
+        if !kept.is_empty() {
+            let eh: Vec<DMatrix<f64>> = kept
+                .iter()
+                .map(|&k| {
+                    let (e, coefs) = columns(families[k].0, &held, jlh, &data);
+                    let keep: Vec<usize> = (0..coefs.len()).filter(|&c| families[k].2.iter().any(|x| x.name == coefs[c].name)).collect();
+                    let g = model_lsq.coef(&families[k].1);
+                    own.resid(&(e.select_columns(&keep) - jhf * g))
+                })
+                .collect();
+            after = rh.clone() - hstack(eh.iter()) * DMatrix::from_column_slice(coef.len(), 1, coef.as_slice());
+        }
+        let poses = hpose.iter().copied().max().map_or(0, |v| v + 1);
+        let mut d = vec![0.0; poses];
+        for (row, p) in hpose.iter().enumerate() {
+            d[*p] += (0..3).map(|a| rh[3 * row + a].powi(2) - after[3 * row + a].powi(2)).sum::<f64>();
+        }
+        mean_se(&d)
+    });
+    let kept_coefs: Vec<Coefficient> = kept.iter().flat_map(|&k| families[k].2.iter().cloned()).collect();
+    let effects: Vec<Effect> = kept_coefs
+        .iter()
+        .enumerate()
+        .map(|(k, co)| Effect { coefficient: co.clone(), value: co.shown(coef[k]), std: co.shown(cov[(k, k)].max(0.0).sqrt()).abs() })
+        .collect();
+    // The model's shift in the joint fit: -G a, its robot part onto the calibrated robot.
+    let model = if kept.is_empty() || !with_robot {
+        c.model.clone()
+    } else {
+        let e = hstack(kept.iter().map(|&k| &families[k].1));
+        let shift = model_lsq.coef(&e) * &coef;
+        let mut values: Vec<f64> = layout.robot.pack(&c.model).iter().copied().collect();
+        for (a, &col) in free.iter().enumerate() {
+            if col < pr {
+                values[col] -= shift[a];
+            }
+        }
+        layout.robot.unpack(&c.model, &values).map_err(|e| no_model(format!("the twin's robot: {e}")))?
+    };
+
+    let confounded = confounded_pairs(&families, &projected);
+    let trials: Vec<FamilyTrial> = families
+        .iter()
+        .enumerate()
+        .map(|(k, (f, e, _))| FamilyTrial {
+            family: *f,
+            columns: e.ncols(),
+            absorbed: absorbed[k].clone(),
+            gain: gains[k],
+            kept: kept.contains(&k),
+        })
+        .collect();
+
+    // The decomposition, in mm per coordinate.
+    let sig: Vec<f64> = train.iter().map(|&i| s.obs[i].sigma).collect();
+    let unweigh = |v: &DVector<f64>| DVector::from_fn(v.len(), |r, _| v[r] * sig[r / 3]);
+    let resid_mm = unweigh(&rw);
+    let after_mm = unweigh(&(&rw - &fitted_w));
+    let dof_total = (3 * train.len()).saturating_sub(free.len()) as f64;
+    let dof_after = dof_total - kept_coefs.len() as f64;
+    let decomposition = decompose(DecomposeInput {
+        c,
+        train: &train,
+        resid_mm: &resid_mm,
+        after_mm: &after_mm,
+        dof: (dof_total, dof_after),
+        stated_noise_mm,
+    });
+    let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
+    let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len());
+    let noise_mm = decomposition.instrument.as_ref().map(|l| l.sigma_mm);
+    Ok(Twin {
+        decomposition,
+        held_out_poses: held_parts.as_ref().map_or(0, |h| h.4.iter().copied().max().map_or(0, |v| v + 1)),
+        cv_poses: poses_train,
+        held_out_gain: held_evidence,
+        families: trials,
+        effects,
+        confounded,
+        learned,
+        model,
+        noise_mm,
+    })
+}
+
+/// One fold of the cross-validation: the Gram matrix and right-hand side of every family's
+/// columns projected off the model on the other folds, and at the fold's rows the model's
+/// prediction error and the families' columns less the model's share of them.
+struct CvFold {
+    gram: DMatrix<f64>,
+    rhs: DMatrix<f64>,
+    r_out: DMatrix<f64>,
+    e_out: DMatrix<f64>,
+    pose: Vec<usize>,
+}
+
+/// Least squares from a Gram matrix: column-scaled, pseudo-inverse of its eigenvalues above 1e-12
+/// of the largest.
+fn gram_solve(n: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let k = n.nrows();
+    let s: Vec<f64> = (0..k).map(|i| if n[(i, i)] > 0.0 { 1.0 / n[(i, i)].sqrt() } else { 0.0 }).collect();
+    let ns = DMatrix::from_fn(k, k, |a, c| n[(a, c)] * s[a] * s[c]);
+    let e = ns.symmetric_eigen();
+    let top = e.eigenvalues.iter().fold(0.0f64, |m, v| m.max(*v));
+    let inv = DVector::from_iterator(k, e.eigenvalues.iter().map(|v| if *v > 1e-12 * top { 1.0 / v } else { 0.0 }));
+    let bs = DMatrix::from_fn(k, b.ncols(), |a, c| b[(a, c)] * s[a]);
+    let x = &e.eigenvectors * DMatrix::from_diagonal(&inv) * e.eigenvectors.transpose() * bs;
+    DMatrix::from_fn(k, b.ncols(), |a, c| x[(a, c)] * s[a])
+}
+
+fn hstack<'a>(parts: impl Iterator<Item = &'a DMatrix<f64>>) -> DMatrix<f64> {
+    let parts: Vec<&DMatrix<f64>> = parts.collect();
+    let rows = parts.first().map_or(0, |p| p.nrows());
+    let cols: usize = parts.iter().map(|p| p.ncols()).sum();
+    let mut out = DMatrix::zeros(rows, cols);
+    let mut at = 0;
+    for p in parts {
+        out.columns_mut(at, p.ncols()).copy_from(p);
+        at += p.ncols();
+    }
+    out
+}
+
+fn mean_se(d: &[f64]) -> (f64, f64) {
+    let n = d.len() as f64;
+    if d.len() < 2 {
+        return (f64::NAN, f64::NAN);
+    }
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+fn confounded_pairs(families: &[(Family, DMatrix<f64>, Vec<Coefficient>)], projected: &[DMatrix<f64>]) -> Vec<(String, String, f64)> {
+    let mut out = Vec::new();
+    for a in 0..families.len() {
+        for b in a + 1..families.len() {
+            let cos = principal_cos(&projected[a], &projected[b]);
+            if cos > CONFOUNDED_COS {
+                out.push((families[a].0.name(), families[b].0.name(), cos));
+            }
+        }
+    }
+    out
+}
+
+/// Per point of the problem: link angles, approach directions (from the pose before in the
+/// session; the first pose of a session has none), lever arms, pose index, uncertainty.
+fn point_data(c: &Calibration, obs: &[super::problem::Obs], fitted: &RobotModel) -> PointData {
+    let m = &c.measurements;
+    let mut direction_of_pose = vec![[0.0; JOINTS]; m.poses.len()];
+    let mut index_of_pose = vec![0.0; m.poses.len()];
+    let mut last: HashMap<usize, (usize, crate::robot::Joints)> = HashMap::new();
+    for (p, pose) in m.poses.iter().enumerate() {
+        if let Some((k, prev)) = last.get(&pose.session) {
+            direction_of_pose[p] = std::array::from_fn(|j| {
+                let d = pose.q[j] - prev[j];
+                if d > 0.0 {
+                    1.0
+                } else if d < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                }
+            });
+            index_of_pose[p] = (*k + 1) as f64;
+        }
+        let k = index_of_pose[p] as usize;
+        last.insert(pose.session, (k, pose.q));
+    }
+    let lever_of_pose: Vec<[f64; JOINTS]> = m.poses.iter().map(|p| lever_arms_m(fitted, &p.q)).collect();
+    let pose = |i: usize| m.points[i].pose;
+    PointData {
+        q: obs.iter().map(|o| o.q).collect(),
+        direction: (0..obs.len()).map(|i| direction_of_pose[pose(i)]).collect(),
+        lever_m: (0..obs.len()).map(|i| lever_of_pose[pose(i)]).collect(),
+        pose_index: (0..obs.len()).map(|i| index_of_pose[pose(i)]).collect(),
+        sigma: obs.iter().map(|o| o.sigma).collect(),
+    }
+}
+
+struct DecomposeInput<'a> {
+    c: &'a Calibration,
+    train: &'a [usize],
+    /// Residuals (measured less model) of the training fit, mm, 3 per training point.
+    resid_mm: &'a DVector<f64>,
+    /// The same after the kept effects.
+    after_mm: &'a DVector<f64>,
+    /// Degrees of freedom of the residual, before and after the effects.
+    dof: (f64, f64),
+    stated_noise_mm: Option<f64>,
+}
+
+fn decompose(d: DecomposeInput<'_>) -> Decomposition {
+    let m = &d.c.measurements;
+    let (dof_total, dof_after) = d.dof;
+    let n = d.train.len();
+    let poses = d.train.iter().map(|&i| m.points[i].pose).collect::<std::collections::BTreeSet<_>>().len();
+    let mut notes = Vec::new();
+    let total_var = d.resid_mm.norm_squared() / dof_total;
+    let after_var = d.after_mm.norm_squared() / dof_after.max(1.0);
+    let total =
+        Level::chi2(total_var, dof_total, format!("the chosen model's residual on {n} training points ({dof_total} degrees of freedom)"));
+    let after = Level::chi2(after_var, dof_after, "the residual after the kept effects".into());
+    let explained_var = (total_var - after_var).max(0.0);
+    let explained =
+        Level::difference(explained_var, total.var_var() + after.var_var(), "the residual less the residual after the kept effects".into());
+
+    // The instrument: stated, the file's sigma column, the distances between targets at one pose.
+    let distances = target_distances(m, d.train);
+    let sigma_column = d.train.iter().all(|&i| m.points[i].sigma_mm.is_some()).then(|| {
+        let v = d.train.iter().map(|&i| m.points[i].sigma_mm.unwrap_or(0.0).powi(2)).sum::<f64>() / n as f64;
+        Level::stated(v.sqrt(), "the file's sigma column (RMS over the training points)".into())
+    });
+    let stated = d.stated_noise_mm.map(|s| Level::stated(s, "--instrument-noise-mm".into()));
+    let mut candidates: Vec<Level> = [stated, sigma_column, distances].into_iter().flatten().collect();
+    let instrument = (!candidates.is_empty()).then(|| candidates.remove(0));
+    if instrument.is_none() {
+        notes.push("instrument noise not estimated: no sigma column, no --instrument-noise-mm, no pose with two targets or more".into());
+    }
+
+    // Repeated poses: the scatter of the residuals after the kept effects about each group's mean.
+    let (repeat_var, repeat_dof, groups) = repeated_scatter(m, d.train, d.after_mm);
+    let (repeatability, together) = match (repeat_dof, &instrument) {
+        (0, _) => {
+            notes.push("repeatability not estimated: no pose visited more than once in the training split".into());
+            (None, None)
+        }
+        (dof, Some(inst)) => {
+            let within = Level::chi2(repeat_var, dof as f64, String::new());
+            let by = format!("{groups} poses visited more than once ({dof} degrees of freedom), less the instrument's noise");
+            (Some(Level::difference(repeat_var - inst.var(), within.var_var() + inst.var_var(), by)), None)
+        }
+        (dof, None) => {
+            let by = format!("{groups} poses visited more than once ({dof} degrees of freedom)");
+            notes.push(
+                "instrument noise and repeatability cannot be separated (repeated poses but no instrument estimate): their sum is reported"
+                    .into(),
+            );
+            (None, Some(Level::chi2(repeat_var, dof as f64, by)))
+        }
+    };
+    let random: Option<(f64, f64)> = match (&instrument, &repeatability, &together) {
+        (_, _, Some(t)) => Some((t.var(), t.var_var())),
+        (Some(i), Some(r), None) => Some((i.var() + r.var(), i.var_var() + r.var_var())),
+        (Some(i), None, None) => Some((i.var(), i.var_var())),
+        _ => None,
+    };
+    if instrument.is_some() && repeatability.is_none() && together.is_none() {
+        notes.push("the systematic part includes the robot's repeatability (not estimated)".into());
+    }
+    let (systematic, left) = match random {
+        Some((v, vv)) => (
+            Some(Level::difference(total_var - v, total.var_var() + vv, "the residual less the instrument and repeatability".into())),
+            Some(Level::difference(
+                after_var - v,
+                after.var_var() + vv,
+                "the residual after the kept effects less the instrument and repeatability".into(),
+            )),
+        ),
+        None => {
+            notes
+                .push("the systematic part is not separated from the random (neither instrument noise nor repeatability estimated)".into());
+            (None, None)
+        }
+    };
+    Decomposition {
+        points: n,
+        poses,
+        total,
+        instrument,
+        instrument_checks: candidates,
+        repeatability,
+        together,
+        systematic,
+        after,
+        explained,
+        left,
+        notes,
+    }
+}
+
+/// The instrument's noise per coordinate from the distances between targets measured at one
+/// pose: a rigid flange keeps them, whatever the robot's errors; their scatter about each pair's
+/// mean has variance twice the noise per coordinate (along the line between the targets).
+fn target_distances(m: &super::Measurements, train: &[usize]) -> Option<Level> {
+    let mut by_pose: std::collections::BTreeMap<usize, Vec<usize>> = std::collections::BTreeMap::new();
+    for &i in train {
+        by_pose.entry(m.points[i].pose).or_default().push(i);
+    }
+    let mut pairs: std::collections::BTreeMap<(usize, usize), Vec<f64>> = std::collections::BTreeMap::new();
+    for points in by_pose.values() {
+        for (a, &i) in points.iter().enumerate() {
+            for &k in &points[a + 1..] {
+                let (pi, pk) = (&m.points[i], &m.points[k]);
+                let key = (pi.target.min(pk.target), pi.target.max(pk.target));
+                pairs.entry(key).or_default().push((pi.measured_mm - pk.measured_mm).norm());
+            }
+        }
+    }
+    let (mut ss, mut dof, mut used) = (0.0, 0usize, 0usize);
+    for d in pairs.values().filter(|d| d.len() >= 2) {
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        ss += d.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+        dof += d.len() - 1;
+        used += 1;
+    }
+    (dof >= 2).then(|| {
+        let by = format!("distances between targets at one pose ({used} target pairs, {dof} degrees of freedom)");
+        Level::chi2(ss / (2.0 * dof as f64), dof as f64, by)
+    })
+}
+
+/// Scatter per coordinate of `resid` (3 per training point) about the mean of each group of
+/// visits of one pose (joints within [`SAME_POSE_RAD`], any session) at one target: variance,
+/// degrees of freedom, groups.
+fn repeated_scatter(m: &super::Measurements, train: &[usize], resid: &DVector<f64>) -> (f64, usize, usize) {
+    // Poses of the training points, grouped by their joint values.
+    let mut poses: Vec<usize> = train.iter().map(|&i| m.points[i].pose).collect();
+    poses.sort_unstable();
+    poses.dedup();
+    let mut group_of: HashMap<usize, usize> = HashMap::new();
+    let mut reps: Vec<usize> = Vec::new();
+    for &p in &poses {
+        let q = m.poses[p].q;
+        let found = reps.iter().position(|&r| m.poses[r].q.iter().zip(&q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD));
+        let g = found.unwrap_or_else(|| {
+            reps.push(p);
+            reps.len() - 1
+        });
+        group_of.insert(p, g);
+    }
+    let mut members: std::collections::BTreeMap<(usize, usize), Vec<usize>> = std::collections::BTreeMap::new();
+    for (row, &i) in train.iter().enumerate() {
+        members.entry((group_of[&m.points[i].pose], m.points[i].target)).or_default().push(row);
+    }
+    let (mut ss, mut dof) = (0.0, 0usize);
+    let mut groups = std::collections::BTreeSet::new();
+    for ((g, _), rows) in members.iter().filter(|(_, r)| r.len() >= 2) {
+        groups.insert(*g);
+        for a in 0..3 {
+            let mean = rows.iter().map(|r| resid[3 * r + a]).sum::<f64>() / rows.len() as f64;
+            ss += rows.iter().map(|r| (resid[3 * r + a] - mean).powi(2)).sum::<f64>();
+        }
+        dof += rows.len() - 1;
+    }
+    if dof == 0 {
+        return (f64::NAN, 0, 0);
+    }
+    (ss / (3.0 * dof as f64), 3 * dof, groups.len())
+}
+
+/// The `[learned]` table: the kept effects, the repeatability (RP from its level per coordinate),
+/// the per-pose joint error the systematic part leaves (`jl_mm`: the link-angle Jacobian over
+/// the training points, mm per rad).
+fn learned_table(c: &Calibration, d: &Decomposition, effects: &[Effect], jl_mm: &DMatrix<f64>, points: usize) -> LearnedEffects {
+    let mut l = LearnedEffects {
+        source: Some(format!(
+            "calsim calibrate of {} ({} model, calibration split: {points} points)",
+            c.measurements.path.display(),
+            c.chosen().name()
+        )),
+        ..LearnedEffects::default()
+    };
+    let mut harmonics: std::collections::BTreeMap<(usize, usize), (f64, f64, f64, f64)> = std::collections::BTreeMap::new();
+    for e in effects {
+        let co = &e.coefficient;
+        match (co.family, co.joint, co.harmonic, co.axis) {
+            (Family::Harmonics(_), Some(j), Some((order, sine)), _) => {
+                let h = harmonics.entry((j, order)).or_insert((0.0, 0.0, 0.0, 0.0));
+                if sine {
+                    (h.0, h.2) = (e.value, e.std);
+                } else {
+                    (h.1, h.3) = (e.value, e.std);
+                }
+            }
+            (Family::Backlash, Some(j), _, _) => {
+                // A width below zero is none: the table's widths are physical.
+                l.backlash_mdeg[j] = e.value.max(0.0);
+                l.backlash_std_mdeg[j] = e.std;
+            }
+            (Family::Sag, Some(j), _, _) => {
+                l.sag_mdeg_per_m[j] = e.value;
+                l.sag_std_mdeg_per_m[j] = e.std;
+            }
+            (Family::Drift, _, _, Some(a)) => {
+                l.drift_mm_per_pose[a] = e.value;
+                l.drift_std_mm_per_pose[a] = e.std;
+            }
+            _ => {}
+        }
+    }
+    l.harmonic = harmonics
+        .into_iter()
+        .map(|((j, order), (s, co, ss, cs))| LearnedHarmonic {
+            joint: j + 1,
+            order: order as f64,
+            sin_mdeg: s,
+            cos_mdeg: co,
+            std_mdeg: ((ss * ss + cs * cs) / 2.0).sqrt(),
+        })
+        .collect();
+    // Repeatability: the estimate, else instrument and repeatability together (the plan then
+    // draws no separate instrument noise).
+    let rep = d.repeatability.as_ref().or(d.together.as_ref());
+    l.repeatability_mm = rep.map_or(0.0, |r| RP_PER_SIGMA * r.sigma_mm);
+    // The systematic part left, as a per-pose joint error: per coordinate, an independent error of
+    // RMS s per joint moves a point by s^2 |J|_F^2 / 3 on average.
+    // Nothing random estimated: all the residual left after the effects is taken as per-pose error.
+    let left_var = match (&d.left, &d.instrument, &d.together) {
+        (Some(left), _, _) => left.var(),
+        (None, None, None) => d.after.var(),
+        _ => 0.0,
+    };
+    let mean_jf2 = jl_mm.iter().map(|v| v * v).sum::<f64>() / (jl_mm.nrows() / 3).max(1) as f64;
+    if left_var > 0.0 && mean_jf2 > 0.0 {
+        l.pose_error_mdeg = (3.0 * left_var / mean_jf2).sqrt().to_degrees() * 1e3;
+    }
+    l
+}

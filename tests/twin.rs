@@ -1,0 +1,268 @@
+//! The robot's twin (`calibrate::twin`): round trips from a simulated arm with injected effects
+//! (harmonics, backlash, repeatability, a drift of the base) measured in the CSV layout at
+//! repeated poses and two targets, back to the decomposition, the kept effects and `twin.toml`;
+//! the same arm without effects; and the plan with the twin against the plan with noise only.
+
+mod common;
+
+use std::path::Path;
+
+use calsim::calibrate::plan::{Basis, Noise, Statistic, compare, simulate_basis};
+use calsim::calibrate::simulate::{SimulationSpec, example_spec, to_csv};
+use calsim::calibrate::twin::{Family, Twin, analyse};
+use calsim::calibrate::{Calibration, Options, default_params, measurements, run};
+use calsim::robot::file::RobotFile;
+use calsim::robot::{JOINTS, LearnedEffects, LearnedHarmonic, ParamSet, RobotModel, UnmodelledSpec, VirtualRobot};
+
+/// Instrument noise per coordinate of every simulated file, mm.
+const NOISE_MM: f64 = 0.012;
+/// ISO 9283 repeatability injected, mm.
+const RP_MM: f64 = 0.05;
+
+fn robot() -> RobotFile {
+    RobotFile::load(&common::repo().join("robots/irb120.toml")).unwrap()
+}
+
+/// The IRB 120 with Table 7's values of the default parameters (within the model).
+fn truth(robot: &RobotFile) -> RobotModel {
+    let set = default_params();
+    let deviated: Vec<(calsim::robot::ParamId, f64)> = robot.truth.iter().filter(|(id, _)| set.position(*id).is_some()).copied().collect();
+    let values: Vec<f64> = deviated.iter().map(|(_, v)| *v).collect();
+    ParamSet::new(deviated.iter().map(|(id, _)| *id).collect()).unwrap().unpack(&robot.nominal, &values).unwrap()
+}
+
+/// The effects injected: harmonics of joints 2 and 5, backlash of joints 2 and 3, a drift of the
+/// base (every coefficient exact: no spread).
+fn injected() -> LearnedEffects {
+    LearnedEffects {
+        backlash_mdeg: [0.0, 8.0, 6.0, 0.0, 0.0, 0.0],
+        drift_mm_per_pose: [0.002, 0.0, -0.001],
+        harmonic: vec![
+            LearnedHarmonic { joint: 2, order: 1.0, sin_mdeg: 20.0, cos_mdeg: -10.0, std_mdeg: 0.0 },
+            LearnedHarmonic { joint: 5, order: 2.0, sin_mdeg: 15.0, cos_mdeg: 8.0, std_mdeg: 0.0 },
+        ],
+        ..LearnedEffects::default()
+    }
+}
+
+/// The shipped example's 3 sessions and 2 targets, 60 poses per session and 20 of them visited
+/// again (480 points), 12 um noise per coordinate, no outlier.
+fn arm(robot: &RobotFile, learned: Option<LearnedEffects>, repeatability_mm: f64) -> SimulationSpec {
+    SimulationSpec {
+        truth: truth(robot),
+        unmodelled: UnmodelledSpec::default(),
+        repeatability_mm,
+        learned,
+        repeats_per_session: 20,
+        poses_per_session: 60,
+        noise_mm: NOISE_MM,
+        outliers: vec![],
+        seed: 11,
+        ..example_spec(robot).unwrap()
+    }
+}
+
+fn calibrated(spec: &SimulationSpec, robot: &RobotFile) -> Calibration {
+    let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec), robot).unwrap();
+    run(robot, &m, &Options { plots: false, prediction_draws: 10, ..Options::default() }).unwrap()
+}
+
+fn within(value: f64, [lo, hi]: [f64; 2]) -> bool {
+    lo <= value && value <= hi
+}
+
+/// The repeatability per coordinate the simulation injects at its repeated poses: the joint noise
+/// of the virtual robot (scaled to `RP_MM` at mid-range) through each repeated pose's position
+/// Jacobian w.r.t. the link angles, `sigma_q^2 |J|_F^2 / 3` averaged over poses and targets.
+fn injected_repeatability(spec: &SimulationSpec) -> f64 {
+    let reference: calsim::robot::Joints = std::array::from_fn(|i| {
+        let l = spec.truth.limits()[i];
+        0.5 * (l.min + l.max)
+    });
+    let sigma_q = VirtualRobot::new(spec.truth.clone(), &UnmodelledSpec::default(), RP_MM, &reference, &mut common::rng(1)).sigma_q;
+    let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec), &robot()).unwrap();
+    let per_session = spec.poses_per_session + spec.repeats_per_session;
+    let (mut sum, mut n) = (0.0, 0.0);
+    for (_, pose) in m.poses.iter().enumerate().filter(|(k, _)| k % per_session < spec.repeats_per_session) {
+        for (_, tool) in &spec.targets {
+            let model = spec.truth.edited(|d| d.flange_tcp_mm = *tool).unwrap();
+            let h = 1e-6;
+            for j in 0..JOINTS {
+                let (mut a, mut b) = (pose.q, pose.q);
+                a[j] += h;
+                b[j] -= h;
+                let col = (calsim::robot::tcp_world(&model, &a) - calsim::robot::tcp_world(&model, &b)) / (2.0 * h);
+                sum += col.norm_squared();
+            }
+            n += 1.0;
+        }
+    }
+    (sigma_q * sigma_q * sum / n / 3.0).sqrt()
+}
+
+/// The value and standard deviation of a kept coefficient (`None`: not kept).
+fn kept(t: &Twin, family: Family, joint: Option<usize>, harmonic: Option<(usize, bool)>, axis: Option<usize>) -> Option<(f64, f64)> {
+    t.effects
+        .iter()
+        .find(|e| {
+            e.coefficient.family == family
+                && e.coefficient.joint == joint
+                && e.coefficient.harmonic == harmonic
+                && e.coefficient.axis == axis
+        })
+        .map(|e| (e.value, e.std))
+}
+
+/// The acceptance round trip: the IRB 120 within the model plus harmonics (joint 2 order 1, 20 and
+/// -10 mdeg; joint 5 order 2, 15 and 8 mdeg), backlash (8 and 6 mdeg on joints 2 and 3), a drift of
+/// the base (2 and -1 um per pose along x and z), repeatability 0.05 mm RP and 12 um instrument
+/// noise, 480 points. The decomposition recovers the instrument noise (from the distance between
+/// the two targets) and the repeatability (from the 60 repeated poses) within their 95 %
+/// intervals; the families injected are kept and every injected coefficient lies within 1.96 of
+/// its standard deviations of the value; the families not injected are not kept.
+#[test]
+fn a_twin_recovers_injected_effects_repeatability_and_noise_within_their_intervals() {
+    let robot = robot();
+    let spec = arm(&robot, Some(injected()), RP_MM);
+    let c = calibrated(&spec, &robot);
+    let t = analyse(&c, None).unwrap();
+    let d = &t.decomposition;
+    eprintln!("{}", calsim::calibrate::twin::markdown(&t));
+    let inst = d.instrument.as_ref().expect("two targets: the instrument's noise is estimated");
+    assert!(inst.by.contains("distances between targets"), "{inst:?}");
+    assert!(within(NOISE_MM, inst.interval_mm), "instrument {inst:?} against {NOISE_MM}");
+    let rep = d.repeatability.as_ref().expect("repeated poses and the instrument known: repeatability estimated");
+    let expected = injected_repeatability(&spec);
+    assert!(within(expected, rep.interval_mm), "repeatability {rep:?} against {expected}");
+    let injected_families = [Family::Harmonics(1), Family::Harmonics(4), Family::Backlash, Family::Drift];
+    for f in &t.families {
+        assert_eq!(f.kept, injected_families.contains(&f.family), "{f:?}");
+    }
+    // (name, injected value, kept value and standard deviation)
+    type Check = (String, f64, Option<(f64, f64)>);
+    let mut checks: Vec<Check> = Vec::new();
+    for h in &injected().harmonic {
+        for (sine, v) in [(true, h.sin_mdeg), (false, h.cos_mdeg)] {
+            let k = kept(&t, Family::Harmonics(h.joint - 1), Some(h.joint - 1), Some((h.order as usize, sine)), None);
+            checks.push((format!("joint {} order {} {}", h.joint, h.order, if sine { "sin" } else { "cos" }), v, k));
+        }
+    }
+    for j in [1, 2] {
+        checks.push((format!("backlash {}", j + 1), injected().backlash_mdeg[j], kept(&t, Family::Backlash, Some(j), None, None)));
+    }
+    for a in [0, 2] {
+        checks.push((format!("drift {a}"), injected().drift_mm_per_pose[a], kept(&t, Family::Drift, None, None, Some(a))));
+    }
+    // Each injected coefficient: within its interval, or named as absorbed by the model's parameters.
+    let absorbed: Vec<String> = t.families.iter().flat_map(|f| f.absorbed.iter().cloned()).collect();
+    for (name, v, k) in &checks {
+        match k {
+            Some((value, std)) => assert!((value - v).abs() <= 1.96 * std, "{name}: {value} +- {std} against {v}"),
+            None => assert!(absorbed.contains(name), "{name}: neither kept nor named as absorbed ({absorbed:?})"),
+        }
+    }
+    assert_eq!(absorbed, ["joint 2 order 1 sin"], "the model absorbs the sine of joint 2's first harmonic");
+    // The twin as a file: the calibrated robot file with its [learned] table, loaded back.
+    let dir = common::scratch("twin-file");
+    let csv = dir.path().join("twin.csv");
+    std::fs::write(&csv, to_csv(&spec)).unwrap();
+    let report = calsim::calibrate::calibrate(&calsim::calibrate::CalibrateSpec {
+        robot_file: common::repo().join("robots/irb120.toml"),
+        measurements: csv,
+        out: dir.path().join("out"),
+        options: Options { plots: false, prediction_draws: 10, ..Options::default() },
+        plan_worlds: 0,
+        plan_noise_mm: None,
+        plan_scenario: None,
+        plan_with: Default::default(),
+        instrument_noise_mm: None,
+    })
+    .unwrap();
+    let loaded = RobotFile::load(&report.dir.join("twin.toml")).unwrap();
+    assert_eq!(loaded.learned.as_ref(), Some(&report.twin.as_ref().unwrap().learned));
+    assert!(!loaded.learned.as_ref().unwrap().is_none());
+    let summary = std::fs::read_to_string(report.dir.join("summary.md")).unwrap();
+    assert!(summary.contains("## The twin: what the model misses"), "{summary}");
+}
+
+/// The same arm with nothing outside the model and no repeatability (480 points, 60 poses visited
+/// twice, 12 um noise): no effect family is kept, the repeatability's interval holds zero, the
+/// systematic part's interval reaches zero, and the instrument's noise is recovered.
+#[test]
+fn a_twin_of_an_arm_without_effects_reports_none() {
+    let robot = robot();
+    let spec = arm(&robot, None, 0.0);
+    let c = calibrated(&spec, &robot);
+    let t = analyse(&c, None).unwrap();
+    eprintln!("{}", calsim::calibrate::twin::markdown(&t));
+    assert!(t.families.iter().all(|f| !f.kept), "{:?}", t.families);
+    assert!(t.effects.is_empty());
+    let d = &t.decomposition;
+    assert!(within(NOISE_MM, d.instrument.as_ref().unwrap().interval_mm), "{:?}", d.instrument);
+    assert_eq!(d.repeatability.as_ref().unwrap().interval_mm[0], 0.0, "{:?}", d.repeatability);
+    assert_eq!(d.systematic.as_ref().unwrap().interval_mm[0], 0.0, "{:?}", d.systematic);
+}
+
+/// With one target and no stated noise, the instrument and the repeatability cannot be separated:
+/// the decomposition reports their sum and says so; stated with `--instrument-noise-mm`, they are.
+#[test]
+fn one_target_leaves_instrument_and_repeatability_together_unless_the_noise_is_stated() {
+    let robot = robot();
+    let spec = SimulationSpec { targets: example_spec(&robot).unwrap().targets[..1].to_vec(), ..arm(&robot, None, RP_MM) };
+    let c = calibrated(&spec, &robot);
+    let t = analyse(&c, None).unwrap();
+    let d = &t.decomposition;
+    assert!(d.instrument.is_none() && d.repeatability.is_none());
+    let together = d.together.as_ref().expect("their sum");
+    assert!(d.notes.iter().any(|n| n.contains("cannot be separated")), "{:?}", d.notes);
+    let expected = (NOISE_MM * NOISE_MM + injected_repeatability(&spec).powi(2)).sqrt();
+    assert!(within(expected, together.interval_mm), "{together:?} against {expected}");
+    let stated = analyse(&c, Some(NOISE_MM)).unwrap();
+    assert!(stated.decomposition.repeatability.is_some() && stated.decomposition.together.is_none());
+}
+
+/// The plan against the outcome on the arm with injected effects (20 worlds each): the measured
+/// held-out median lies within the P10-P90 of the plan with the twin, and above the P90 of the
+/// plan with the instrument's noise alone.
+#[test]
+fn the_plan_with_the_twin_explains_the_outcome_the_noise_alone_does_not() {
+    let robot = robot();
+    let spec = arm(&robot, Some(injected()), RP_MM);
+    let c = calibrated(&spec, &robot);
+    let t = analyse(&c, None).unwrap();
+    let noise = Noise::Fixed(t.noise_mm.unwrap());
+    let learned = t.plan_effects();
+    let twin = simulate_basis(&c, 20, Statistic::Median, 1, &Basis { noise, effects: None, twin: Some((&t.model, &learned)), label: None })
+        .unwrap();
+    let alone = simulate_basis(&c, 20, Statistic::Median, 1, &Basis { noise, effects: None, twin: None, label: None }).unwrap();
+    let (twin, alone) = (compare(&c, &twin), compare(&c, &alone));
+    eprintln!("twin: {twin:?}\nnoise only: {alone:?}");
+    assert_eq!((twin.worlds, alone.worlds), (20, 20));
+    assert!(twin.inside, "{twin:?}");
+    assert!(alone.measured_mm > alone.simulated_mm[2], "{alone:?}");
+}
+
+/// Gravity sag (35 mdeg per metre of lever arm on joint 2, 20 on joint 3) on the same arm with
+/// 12 um noise and nothing else: the sag family is kept and each injected coefficient lies within
+/// its 95 % interval, or the summary names the family it cannot be told from.
+#[test]
+fn a_twin_recovers_an_injected_gravity_sag_or_names_what_it_cannot_tell_it_from() {
+    let robot = robot();
+    let sag = LearnedEffects { sag_mdeg_per_m: [0.0, 35.0, 20.0, 0.0, 0.0, 0.0], ..LearnedEffects::default() };
+    let spec = arm(&robot, Some(sag.clone()), 0.0);
+    let c = calibrated(&spec, &robot);
+    let t = analyse(&c, None).unwrap();
+    eprintln!("{}", calsim::calibrate::twin::markdown(&t));
+    let named = t.confounded.iter().any(|(a, b, _)| a.contains("sag") || b.contains("sag"));
+    let absorbed: Vec<String> = t.families.iter().flat_map(|f| f.absorbed.iter().cloned()).collect();
+    for j in [1, 2] {
+        match kept(&t, Family::Sag, Some(j), None, None) {
+            Some((value, std)) => assert!((value - sag.sag_mdeg_per_m[j]).abs() <= 1.96 * std, "joint {}: {value} +- {std}", j + 1),
+            None => assert!(
+                named || absorbed.iter().any(|a| a.contains(&format!("joint {}", j + 1))),
+                "joint {}: neither kept nor named",
+                j + 1
+            ),
+        }
+    }
+}
