@@ -210,6 +210,7 @@ fn lookup<'a>(t: &'a toml::Table, dotted: &str) -> Option<&'a toml::Value> {
 const UNITS: &[(&str, &str)] = &[
     ("_mdeg_per_nm", "mdeg/(N m)"),
     ("_mdeg_per_m", "mdeg/m"),
+    ("_mm_per_pose", "mm per pose"),
     ("_pct_fs_per_c", "% of full scale per degC"),
     ("_um_per_m", "um/m"),
     ("_mm_per_m", "mm/m"),
