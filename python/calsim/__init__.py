@@ -388,6 +388,8 @@ def calibrate(
     tool_per_session: bool = False,
     payload_kg: float | None = None,
     payload_com_mm: Sequence[float] | None = None,
+    plan_with: str | None = None,
+    instrument_noise_mm: float | None = None,
 ) -> CalibrationResult:
     """Calibrates a real robot from measured data (``calsim calibrate``): the report, the
     calibrated ``robot.toml``, URDF and YAML in ``out/<measurements stem>.calibration``.
@@ -418,6 +420,8 @@ def calibrate(
         tool_per_session=tool_per_session,
         payload_kg=_real("payload_kg", payload_kg),
         payload_com_mm=None if payload_com_mm is None else [_real("payload_com_mm", v) for v in payload_com_mm],
+        plan_with=plan_with,
+        instrument_noise_mm=_real("instrument_noise_mm", instrument_noise_mm),
     )
     if not isinstance(measurements, pl.DataFrame):
         if header is not None:

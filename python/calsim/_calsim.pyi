@@ -89,6 +89,8 @@ def calibrate(
     tool_per_session: bool = False,
     payload_kg: float | None = None,
     payload_com_mm: Sequence[float] | None = None,
+    plan_with: str | None = None,
+    instrument_noise_mm: float | None = None,
 ) -> Report: ...
 def optimise(
     file: Path,

@@ -517,7 +517,7 @@ fn export<'py>(
 
 /// Calibrates a real robot from a measurement file: `calsim calibrate`.
 #[pyfunction]
-#[pyo3(signature = (robot, measurements, *, out, folds=5, hold_out=None, hold_out_session=None, hold_out_file=None, seed=1, params=None, outlier_threshold=None, outliers=None, plan_worlds=0, plan_noise_mm=None, plan_scenario=None, plots=true, kfold_by=None, tool_per_session=false, payload_kg=None, payload_com_mm=None))]
+#[pyo3(signature = (robot, measurements, *, out, folds=5, hold_out=None, hold_out_session=None, hold_out_file=None, seed=1, params=None, outlier_threshold=None, outliers=None, plan_worlds=0, plan_noise_mm=None, plan_scenario=None, plots=true, kfold_by=None, tool_per_session=false, payload_kg=None, payload_com_mm=None, plan_with=None, instrument_noise_mm=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate<'py>(
     py: Python<'py>,
@@ -540,8 +540,12 @@ fn calibrate<'py>(
     tool_per_session: bool,
     payload_kg: Option<f64>,
     payload_com_mm: Option<Vec<f64>>,
+    plan_with: Option<String>,
+    instrument_noise_mm: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let args = app::calibrate::CalibrateArgs {
+        plan_with,
+        instrument_noise_mm,
         kfold_by,
         tool_per_session,
         payload_kg,

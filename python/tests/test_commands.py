@@ -114,6 +114,9 @@ def test_calibrate_with_a_plan_sets_the_measured_median_beside_the_simulated(tmp
         (dict(plan_worlds=5000), "plan_worlds", "5000: at most"),
         (dict(plan_noise_mm=-1), "plan_noise_mm", "-1: within 0 to 100 mm"),
         (dict(seed=-1), "seed", "-1 is not within"),
+        (dict(plan_worlds=2, plan_with="bogus"), "plan_with", "bogus"),
+        (dict(plan_with="twin"), "plan_with", "a plan needs"),
+        (dict(instrument_noise_mm=-0.5), "instrument_noise_mm", "-0.5"),
     ],
 )
 def test_a_bad_calibrate_keyword_is_an_input_error_naming_it(tmp_path: Path, keywords: dict[str, object], key: str, value: str) -> None:
