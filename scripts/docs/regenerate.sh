@@ -25,6 +25,7 @@ runs=(
     "optimise-irb120-spheres-robust|optimise scenarios/designs/irb120_spheres_robust.toml"
     "table8|table8 scenarios/irb120_trical.toml --realisations 20"
     "budget-spms|budget scenarios/er20c10_spms.toml --realisations 20"
+    "sweep-twin-scale|sweep scenarios/sweeps/twin_scale.toml"
 )
 for run in "${runs[@]}"; do
     IFS='|' read -r name command <<<"$run"
