@@ -87,6 +87,20 @@ impl Layout {
         out
     }
 
+    /// The column of `x` that column `c` of a point's set ([`Self::point_set`]) is, for a point of
+    /// session `s` and target `t`: the robot block, session `s`'s base block or target `t`'s tool
+    /// block.
+    fn column_of(&self, c: usize, s: usize, t: usize) -> usize {
+        let pr = self.robot.len();
+        if c < pr {
+            c
+        } else if c < pr + 6 {
+            self.base(s) + c - pr
+        } else {
+            self.tool(t) + c - pr - 6
+        }
+    }
+
     /// The parameters of the model one point sees: the robot's, the base's, the tool's.
     fn point_set(&self) -> ParamSet {
         let mut ids = self.robot.ids().to_vec();
@@ -167,7 +181,7 @@ impl Problem<'_> {
     pub fn linearise(&self, x: &[f64], idx: &[usize]) -> Option<(DVector<f64>, DMatrix<f64>)> {
         let l = &self.layout;
         let set = l.point_set();
-        let (pr, p) = (l.robot.len(), set.len());
+        let p = set.len();
         let mut r = DVector::zeros(3 * idx.len());
         let mut j = DMatrix::zeros(3 * idx.len(), l.len());
         for ((s, t), members) in groups(self.obs, idx) {
@@ -178,15 +192,7 @@ impl Problem<'_> {
             tcp_jacobians_transposed(&model, &set, &qs, &mut jt, &mut tcps);
             // Column c of the point's set goes to: the robot block, session s's base block or
             // target t's tool block.
-            let target_col = |c: usize| {
-                if c < pr {
-                    c
-                } else if c < pr + 6 {
-                    l.base(s) + c - pr
-                } else {
-                    l.tool(t) + c - pr - 6
-                }
-            };
+            let target_col = |c: usize| l.column_of(c, s, t);
             for (k, ((row, i), tcp)) in members.iter().zip(&tcps).enumerate() {
                 let o = &self.obs[*i];
                 let e = (o.measured_mm - tcp) / o.sigma;
@@ -209,7 +215,7 @@ impl Problem<'_> {
     pub fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         let l = &self.layout;
         let set = l.point_set();
-        let (pr, p) = (l.robot.len(), set.len());
+        let p = set.len();
         let mut at = vec![usize::MAX; l.len()];
         for (k, &c) in cols.iter().enumerate() {
             at[c] = k;
@@ -228,13 +234,7 @@ impl Problem<'_> {
             // The free columns of the point's set and where they sit in `cols`.
             let mut used = 0;
             for c in 0..p {
-                let col = if c < pr {
-                    c
-                } else if c < pr + 6 {
-                    l.base(s) + c - pr
-                } else {
-                    l.tool(t) + c - pr - 6
-                };
+                let col = l.column_of(c, s, t);
                 if at[col] != usize::MAX {
                     slot[used] = c;
                     targets[used] = at[col];
