@@ -315,7 +315,7 @@ fn a_pipe_given_as_an_input_is_refused_not_waited_on() {
     }
 }
 
-/// Issue 34, class 8: a study run with `--set-sizes` and `--repetitions` from one directory is
+/// a study run with `--set-sizes` and `--repetitions` from one directory is
 /// exported from another; the manifest's absolute scenario path and overrides redo the same
 /// identification, and the exported model is the one recomputed here from the scenario with those
 /// overrides (TCP to 1e-9 mm at 1,000 configurations); both exports are byte for byte the same.
@@ -383,7 +383,7 @@ fn one_shard(dir: &Path) -> PathBuf {
     dir.join("out/m.shard-0-of-1")
 }
 
-/// Issue 34, class 2: `merge` holds a shard's record (`sweep.json`) against itself, against the
+/// `merge` holds a shard's record (`sweep.json`) against itself, against the
 /// bounds the sweep loader allows and against its units before it allocates or sums anything: each
 /// edit below is one line naming the file and the key, exit 2, nothing merged; the record put back,
 /// the shard merges.
@@ -481,7 +481,7 @@ fn shard_records_are_checked_whole_against_themselves_and_their_units_before_a_m
     );
 }
 
-/// Issue 34, class 2: two shards of one sweep whose records differ beyond their shard index, or a
+/// two shards of one sweep whose records differ beyond their shard index, or a
 /// shard given twice, are refused naming the record and its key.
 #[test]
 fn shards_whose_records_disagree_are_refused_naming_the_key() {
@@ -508,7 +508,7 @@ fn shards_whose_records_disagree_are_refused_naming_the_key() {
     assert!(!dir.join("merged").exists());
 }
 
-/// Issue 34, class 2: a legal sweep of 9,001 grid points keeps a record that `merge` reads (the
+/// a legal sweep of 9,001 grid points keeps a record that `merge` reads (the
 /// scenario once and each point's changes: about 1 MB, under calsim's 16 MiB input cap; the
 /// whole scenario per point took 21 MB). The units are made here with plausible values, not run
 /// (running 9,001 studies is a cluster's work): this is the merge's capacity, not a study's
