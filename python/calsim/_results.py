@@ -14,6 +14,10 @@ import polars as pl
 
 Report = Mapping[str, Any]
 
+# The Rerun version of the recordings calsim writes (the `rerun` crate of Cargo.toml); a viewer of
+# another version may not read them.
+RERUN_VERSION = "0.36.3"
+
 
 class Results:
     """A results directory: ``tables`` (every ``*.parquet`` by its stem, as DataFrames, read once),
@@ -55,6 +59,33 @@ class Results:
             return {}
         manifest: dict[str, Any] = json.loads(path.read_text())
         return manifest
+
+    @property
+    def recording(self) -> Path | None:
+        """The Rerun recording of the run (``study.rrd``), or None when it wrote none."""
+        path = None if self.dest is None else self.dest / "study.rrd"
+        return path if path is not None and path.is_file() else None
+
+    def show_recording(self, width: int = 900, height: int = 520) -> Any:
+        """Shows the Rerun recording inline in a notebook and returns the viewer widget. Needs the
+        viewer of the Rerun version calsim writes with: ``pip install "calsim[notebook]"``."""
+        if self.recording is None:
+            raise FileNotFoundError(f"{self.dest}: no study.rrd (the run was made with recording=False, or wrote none)")
+        try:
+            import rerun as rr
+            from rerun.notebook import Viewer
+        except ImportError:
+            raise ImportError('showing a recording needs rerun-sdk with its notebook viewer: pip install "calsim[notebook]"') from None
+        if rr.__version__ != RERUN_VERSION:
+            raise ImportError(
+                f"{self.recording} was written by Rerun {RERUN_VERSION}; rerun-sdk {rr.__version__} is installed: "
+                f'pip install "rerun-sdk[notebook]=={RERUN_VERSION}"'
+            )
+        stream = rr.RecordingStream(f"calsim {self.dest.name if self.dest else ''}".strip())
+        stream.log_file_from_path(self.recording)
+        viewer = Viewer(recording=stream, width=width, height=height)
+        viewer.display()
+        return viewer
 
     def __repr__(self) -> str:
         names = ", ".join(self.tables) if self.dest is not None else "none"

@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -65,6 +66,34 @@ def test_run_lists_its_figures_and_summary(small_run: calsim.RunResult) -> None:
     assert "fig08_mean_error_by_set_size.png" in names and "fig13_error_histograms.png" in names
     assert all(p.is_file() and p.with_suffix(".svg").is_file() for p in small_run.figures)
     assert "Table 7" in small_run.summary
+
+
+@pytest.fixture(scope="module")
+def recorded_run(tmp_path_factory: pytest.TempPathFactory) -> calsim.RunResult:
+    return calsim.run(QUICK, out=tmp_path_factory.mktemp("recorded"), **{**SMALL, "recording": True})
+
+
+def test_a_run_with_its_recording_shows_it_in_a_notebook_viewer(recorded_run: calsim.RunResult) -> None:
+    # CI installs the notebook extra; a plain install has no viewer (the next test).
+    rerun = pytest.importorskip("rerun")
+    from rerun.notebook import Viewer
+
+    r = recorded_run
+    assert r.recording == r.dest / "study.rrd" and r.recording.stat().st_size > 0
+    assert rerun.__version__ == calsim._results.RERUN_VERSION
+    assert isinstance(r.show_recording(width=400, height=300), Viewer)
+
+
+def test_without_the_viewer_showing_a_recording_names_the_install(recorded_run: calsim.RunResult, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "rerun", None)  # `import rerun` raises ImportError
+    with pytest.raises(ImportError, match=r"pip install \"calsim\[notebook\]\""):
+        recorded_run.show_recording()
+
+
+def test_a_run_without_its_recording_has_none_to_show(small_run: calsim.RunResult) -> None:
+    assert small_run.recording is None
+    with pytest.raises(FileNotFoundError, match="recording=False"):
+        small_run.show_recording()
 
 
 def test_check_with_realisations_judges_every_figure_over_the_worlds(tmp_path: Path) -> None:
