@@ -87,7 +87,8 @@ def md_table(text: str, head: str) -> list[str]:
 
 def check_table(out: str) -> str:
     """The figures of a check over worlds, as the terminal prints them."""
-    return fenced(terminal_table(out, "figure ") + [""] + [row(out, "check: ")])
+    verdict = row(out, "check: ").split("; verdict in ")[0]
+    return fenced(terminal_table(out, "figure ") + ["", verdict])
 
 
 def readme_check(out: str) -> str:
@@ -200,8 +201,11 @@ def summary_errors(out: Output) -> str:
 
 
 def spms_beams(out: Output) -> str:
-    """summary.md's beam identification (Table 2) and its PSO line."""
-    return "\n".join(md_table(out.summary, "| solver | unknowns |") + ["", row(out.summary, "PSO alone")]) + "\n"
+    """summary.md's beam identification (Table 2) and its PSO line, without the wall times."""
+    table = [cells(l) for l in md_table(out.summary, "| solver | unknowns |")]
+    t = table[0].index("time, s")
+    lines = ["|" + "|".join(f" {x} " if x != "---" else x for x in c[:t] + c[t + 1:]) + "|" for c in table]
+    return "\n".join(lines + ["", re.sub(r" in [\d.]+ s\.", ".", row(out.summary, "PSO alone"))]) + "\n"
 
 
 def spms_sets(out: Output) -> str:
@@ -210,8 +214,8 @@ def spms_sets(out: Output) -> str:
 
 
 def printed(out: str) -> str:
-    """The whole terminal output."""
-    return fenced(out.rstrip("\n").split("\n"))
+    """The whole terminal output, its wall times written as `timing: ...`."""
+    return fenced(["timing: ..." if l.startswith("timing: ") else l for l in out.rstrip("\n").split("\n")])
 
 
 def worlds_table(out: str) -> str:
