@@ -13,9 +13,10 @@ from the command's output. In a page an excerpt sits between two markers,
 and is the text made from the command, byte for byte. Without --write, each command is run (in a
 scratch directory holding the repository's inputs) and every excerpt compared with its page: a
 page whose excerpt differs fails the step, with both texts shown (CI runs it: .ci/run). With
---write, the excerpts are written into their pages. The commands take about a minute in all with
-the release binary on 2 cores; the expensive figures of the docs are made by
-scripts/docs/regenerate.sh instead.
+--write, the excerpts are written into their pages. An excerpt is made from the command's standard
+output or from the summary.md it writes (`Output.summary`), wall times and scratch paths left out.
+The commands take about two minutes of CPU time in all with the release binary; the expensive
+figures of the docs are made by scripts/docs/regenerate.sh instead.
 """
 
 import os
