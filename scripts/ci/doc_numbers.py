@@ -13,9 +13,10 @@ from the command's output. In a page an excerpt sits between two markers,
 and is the text made from the command, byte for byte. Without --write, each command is run (in a
 scratch directory holding the repository's inputs) and every excerpt compared with its page: a
 page whose excerpt differs fails the step, with both texts shown (CI runs it: .ci/run). With
---write, the excerpts are written into their pages. The commands take about a minute in all with
-the release binary on 2 cores; the expensive figures of the docs are made by
-scripts/docs/regenerate.sh instead.
+--write, the excerpts are written into their pages. An excerpt is made from the command's standard
+output or from the summary.md it writes (`Output.summary`), wall times and scratch paths left out.
+The commands take about two minutes of CPU time in all with the release binary; the expensive
+figures of the docs are made by scripts/docs/regenerate.sh instead.
 """
 
 import os
@@ -31,6 +32,18 @@ INPUTS = ["scenarios", "robots", "docs", "reference", "python"]
 CHECK_30 = "calsim check scenarios/irb120_trical.toml --realisations 30 --no-plots --no-recording"
 BUDGET = "calsim budget scenarios/irb120_trical.toml --realisations 20"
 SWEEP = "calsim sweep scenarios/sweeps/sphere_layout.toml"
+RUN_TRICAL = "calsim run scenarios/irb120_trical.toml --no-plots --no-recording"
+RUN_SPMS = "calsim run scenarios/er20c10_spms.toml --no-plots --no-recording"
+CHECK_SPMS = "calsim check scenarios/er20c10_spms.toml --realisations 20 --no-plots --no-recording"
+TABLE8 = "calsim table8 scenarios/irb120_trical.toml --realisations 20"
+# Commands that print only (no results directory, no --out).
+PRINT_ONLY = ("calsim table8 ",)
+
+
+class Output(str):
+    """A command's standard output; `summary` is the summary.md it wrote ("" when none)."""
+
+    summary = ""
 
 
 def row(output: str, starts: str) -> str:
@@ -44,6 +57,39 @@ def row(output: str, starts: str) -> str:
 def cells(line: str) -> list[str]:
     """The cells of a markdown table row."""
     return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
+def fenced(lines: list[str]) -> str:
+    return "```text\n" + "\n".join(lines) + "\n```\n"
+
+
+def terminal_table(out: str, starts: str) -> list[str]:
+    """The first terminal table of `out` whose header starts with `starts`, to the next blank line."""
+    lines = out.splitlines()
+    heads = [i for i, l in enumerate(lines) if l.startswith(starts)]
+    if not heads:
+        raise SystemExit(f"doc_numbers: no line of the output starts with {starts!r}")
+    i = heads[0]
+    j = i
+    while j < len(lines) and lines[j].strip():
+        j += 1
+    return lines[i:j]
+
+
+def md_table(text: str, head: str) -> list[str]:
+    """The markdown table of `text` whose header row starts with `head` (one, or the step fails)."""
+    lines = text.splitlines()
+    i = lines.index(row(text, head))
+    j = i
+    while j < len(lines) and lines[j].startswith("|"):
+        j += 1
+    return lines[i:j]
+
+
+def check_table(out: str) -> str:
+    """The figures of a check over worlds, as the terminal prints them."""
+    verdict = row(out, "check: ").split("; verdict in ")[0]
+    return fenced(terminal_table(out, "figure ") + ["", verdict])
 
 
 def readme_check(out: str) -> str:
@@ -121,6 +167,104 @@ def sweep_table(out: str) -> str:
     )
 
 
+def sweep_points(out: str) -> list[dict]:
+    """The rows of a sweep's table of errors after calibration, in the order it prints them."""
+    rows = []
+    for line in md_table(out, "| point | design | selection | n | after median")[2:]:
+        c = cells(line)
+        span = lambda s: re.sub(r"^(\S+) \(.*P10-P90 (\S+)\)$", r"\1 (\2)", s)
+        rows.append({"design": c[1], "selection": c[2], "n": c[3], "median": span(c[4]), "p95": span(c[5]),
+                     "max": span(c[6]), "p05": c[8], "p1": c[9], "campaign_s": c[10]})
+    return rows
+
+
+def layout_keys(design: str) -> dict:
+    return dict(re.findall(r"(\w+) = (-?[\d.]+)", design))
+
+
+def sweep_height(out: str) -> str:
+    body = []
+    for r in sweep_points(out):
+        k = layout_keys(r["design"])
+        h = int(k.get("height_mm", "0"))
+        words = ([f"{abs(h)} mm {'higher' if h > 0 else 'lower'}"] if h else []) + ([f"tilted {k['tilt_deg']} deg"] if "tilt_deg" in k else [])
+        name = ", ".join(words) or "the paper's"
+        body.append(f"| {name} | {r['p95']} | {r['max']} | {r['p05']} | {r['p1']} |")
+    return (
+        "| plate (relative to the paper's) | p95, mm | max, mm | P(max <= 0.5 mm) | P(max <= 1 mm) |\n"
+        "|---|---|---|---|---|\n" + "\n".join(body) + "\n"
+    )
+
+
+def summary_errors(out: Output) -> str:
+    """summary.md's table of the errors before and after calibration."""
+    return "\n".join(md_table(out.summary, "| | mean | median |")) + "\n"
+
+
+def spms_beams(out: Output) -> str:
+    """summary.md's beam identification (Table 2) and its PSO line, without the wall times."""
+    table = [cells(l) for l in md_table(out.summary, "| solver | unknowns |")]
+    t = table[0].index("time, s")
+    lines = ["|" + "|".join(f" {x} " if x != "---" else x for x in c[:t] + c[t + 1:]) + "|" for c in table]
+    return "\n".join(lines + ["", re.sub(r" in [\d.]+ s\.", ".", row(out.summary, "PSO alone"))]) + "\n"
+
+
+def spms_sets(out: Output) -> str:
+    """summary.md's random and DETMAX sets per set size."""
+    return "\n".join(md_table(out.summary, "| selection | n | identified |")) + "\n"
+
+
+def printed(out: str) -> str:
+    """The whole terminal output, its wall times written as `timing: ...`."""
+    return fenced(["timing: ..." if l.startswith("timing: ") else l for l in out.rstrip("\n").split("\n")])
+
+
+def worlds_table(out: str) -> str:
+    """The figures over worlds of `run --realisations N`, as the terminal prints them."""
+    return fenced(terminal_table(out, "figure "))
+
+
+def sweep_set_sizes(out: str) -> str:
+    """P(max <= t) per set size, one row per threshold."""
+    rows = []
+    for t in ("0.5", "1"):
+        section = out.split(f"## P(max error <= {t} mm) by set size")[1].split("\n## ")[0]
+        table = md_table(section, "| point | selection | n = ")
+        head = [c.removeprefix("n = ") for c in cells(table[0])[2:]]
+        rows.append(f"| P(max <= {t} mm) | " + " | ".join(cells(table[2])[2:]) + " |")
+    return "| n | " + " | ".join(head) + " |\n" + "|---" * (len(head) + 1) + "|\n" + "\n".join(rows) + "\n"
+
+
+def sweep_epsilon(out: str) -> str:
+    """The errors and campaign time per epsilon, in the order of epsilon."""
+    points = sorted(sweep_points(out), key=lambda r: float(layout_keys(r["design"])["epsilon_mm"]))
+    eps = [f"{float(layout_keys(r['design'])['epsilon_mm']) * 1000:g}" for r in points]
+    line = lambda name, key: f"| {name} | " + " | ".join(r[key] for r in points) + " |"
+    return (
+        "| epsilon, um | " + " | ".join(eps) + " |\n" + "|---" * (len(eps) + 1) + "|\n"
+        + line("p95 after, mm (median over realisations, P10-P90)", "p95") + "\n"
+        + line("P(max <= 0.5 mm)", "p05") + "\n"
+        + line("P(max <= 1 mm)", "p1") + "\n"
+        + "| modelled campaign time (centring the pool), h | " + " | ".join(f"{float(r['campaign_s']) / 3600:.1f}" for r in points) + " |\n"
+    )
+
+
+def sweep_spms_stations(out: str) -> str:
+    body = []
+    for r in sweep_points(out):
+        stations = r["design"].count("[") - 1
+        body.append(f"| {stations} | {'DETMAX' if r['selection'] == 'detmax' else r['selection']} | {r['median']} | {r['p05']} |")
+    return (
+        "| stations | selection | median AP over P1-P5 after, n = 50, mm (median, P10-P90) | P(max AP <= 0.5 mm), n = 50 |\n"
+        "|---|---|---|---|\n" + "\n".join(body) + "\n"
+    )
+
+
+def budget_prediction(out: Output) -> str:
+    """summary.md's linear prediction against the Monte Carlo."""
+    return "\n".join(md_table(out.summary, "| configuration | identifications |")) + "\n"
+
+
 def run_block(out: str) -> str:
     """The terminal output of a run, its last line (the wall times) written as `timing: ...`."""
     lines = out.rstrip("\n").split("\n")
@@ -135,8 +279,23 @@ EXCERPTS = {
     "readme-budget": ("README.md", BUDGET, readme_budget),
     "guide-budget": ("docs/guide-budget.md", BUDGET, guide_budget),
     "guide-sweeps-layout": ("docs/guide-sweeps.md", SWEEP, sweep_table),
-    "guide-reproduce-trical": ("docs/guide-reproduce.md", "calsim run scenarios/irb120_trical.toml --no-plots --no-recording", run_block),
-    "guide-reproduce-spms": ("docs/guide-reproduce.md", "calsim run scenarios/er20c10_spms.toml --no-plots --no-recording", run_block),
+    "guide-reproduce-trical": ("docs/guide-reproduce.md", RUN_TRICAL, run_block),
+    "guide-reproduce-spms": ("docs/guide-reproduce.md", RUN_SPMS, run_block),
+    "guide-reproduce-spms-beams": ("docs/guide-reproduce.md", RUN_SPMS, spms_beams),
+    "guide-reproduce-spms-sets": ("docs/guide-reproduce.md", RUN_SPMS, spms_sets),
+    "guide-reproduce-spms-one-station": ("docs/guide-reproduce.md", "calsim run scenarios/er20c10_spms_one_station.toml --no-plots --no-recording", spms_sets),
+    "guide-sweeps-height": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/sphere_height.toml", sweep_height),
+    "guide-sweeps-set-size": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/set_size_success.toml", sweep_set_sizes),
+    "guide-sweeps-epsilon": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/epsilon_time.toml", sweep_epsilon),
+    "guide-sweeps-spms-stations": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/spms_stations.toml", sweep_spms_stations),
+    "guide-budget-prediction": ("docs/guide-budget.md", BUDGET, budget_prediction),
+    "guide-model-out-kr6": ("docs/guide-model-out.md", "calsim run scenarios/kr6r900sixx_trical.toml --no-plots --no-recording", summary_errors),
+    "guide-model-out-trical": ("docs/guide-model-out.md", RUN_TRICAL, summary_errors),
+    "findings-trical": ("docs/findings.md", CHECK_30, check_table),
+    "findings-spms": ("docs/findings.md", CHECK_SPMS, check_table),
+    "findings-table8": ("docs/findings.md", TABLE8, printed),
+    "robots-lrmate": ("docs/robots.md", "calsim run scenarios/lrmate200ic_trical.toml --no-plots --no-recording", summary_errors),
+    "tracker-worlds": ("docs/tracker.md", "calsim run scenarios/irb120_tracker.toml --realisations 10 --no-plots --no-recording", worlds_table),
 }
 
 
@@ -164,12 +323,16 @@ def main() -> int:
                 # Each command its own results directory: a run beside an earlier check of its world
                 # would print that check's spread.
                 out = work / f"results-{len(outputs)}"
-                r = subprocess.run([str(calsim), *argv[1:], "--out", str(out)], cwd=work, capture_output=True, text=True,
+                where = [] if command.startswith(PRINT_ONLY) else ["--out", str(out)]
+                r = subprocess.run([str(calsim), *argv[1:], *where], cwd=work, capture_output=True, text=True,
                                    env=dict(os.environ, RUST_LIB_BACKTRACE="0"))
                 if r.returncode not in (0, 1):
                     print(f"doc_numbers: {command}: exit {r.returncode}\n{r.stderr[-2000:]}", file=sys.stderr)
                     return 1
-                outputs[command] = r.stdout
+                outputs[command] = Output(r.stdout)
+                summaries = sorted(out.glob("*/summary.md")) if out.is_dir() else []
+                if summaries:
+                    outputs[command].summary = summaries[0].read_text()
             text = make(outputs[command])
             path = REPO / page
             doc = path.read_text()

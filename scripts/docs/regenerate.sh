@@ -54,4 +54,42 @@ for run in "${runs[@]}"; do
     echo "regenerate: $name: docs/generated/$name.md"
 done
 
+# The findings' candidate error models, the CI gate's figures over 400 worlds and the sizing
+# sweep's ranking (docs/findings.md, docs/guide-reproduce.md, docs/guide-sweeps.md).
+more=(
+    "sweep-cell-sizing|sweep scenarios/sweeps/cell_sizing.toml"
+    "check-ci-quick-400|check scenarios/ci_quick.toml --realisations 400 --no-plots --no-recording"
+    "candidates|python3 scripts/fidelity/candidates.py --realisations 20"
+)
+for run in "${more[@]}"; do
+    IFS='|' read -r name command <<<"$run"
+    if [ $# -gt 0 ] && [[ " $* " != *" $name "* ]]; then
+        continue
+    fi
+    echo "regenerate: $name: $command"
+    start=$SECONDS
+    if [[ $command == python3* ]]; then
+        # shellcheck disable=SC2086
+        CALSIM="$calsim" $command >"$scratch/$name.stdout"
+        made="\`$command\`"
+        body="$(cat "$scratch/$name.stdout")"
+    else
+        # shellcheck disable=SC2086
+        "$calsim" $command --out "$scratch/$name" >"$scratch/$name.stdout" || [ $? -eq 1 ]
+        made="\`calsim $command\`"
+        if [[ $command == sweep* ]]; then
+            body="$(cat "$scratch/$name"/*/summary.md)"
+        else
+            body="$(printf '%s\n' '```text'; cat "$scratch/$name.stdout"; printf '%s' '```')"
+        fi
+    fi
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by $made at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        echo "$body"
+    } >"docs/generated/$name.md"
+    echo "regenerate: $name: docs/generated/$name.md"
+done
+
 python3 scripts/ci/doc_numbers.py "$calsim" --write

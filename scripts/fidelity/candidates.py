@@ -102,23 +102,23 @@ def run(keys, realisations):
             capture_output=True, text=True)
     if out.returncode not in (0, 1):
         sys.exit(f"calsim check failed: {out.stderr.strip()}")
-    medians, passed = {}, 0
+    # The table over the worlds: figure, published, run 0, median, interval, P10-P90, band, result.
+    medians, passed, judged = {}, 0, 0
     for line in out.stdout.splitlines():
         for prefix, label in FIGURES:
             if line.startswith(prefix):
-                tokens = line.split()
-                k = next((i for i, t in enumerate(tokens) if re.fullmatch(r"[-+]?[\d.]+-[-+]?[\d.]+", t)), None)
-                if k is None:  # the single run's table, printed first
-                    continue
-                medians[label] = float(tokens[k - 1])
-                passed += tokens[-1] == "pass"
-    return medians, passed
+                cols = re.split(r"\s{2,}", line.strip())
+                number = re.match(r"[-+]?[\d.]+", cols[3])
+                medians[label] = float(number.group()) / (100 if cols[3].endswith("%") else 1)
+                passed += cols[7] == "pass"
+                judged += cols[7] not in ("-",) and not cols[7].startswith("- ")
+    return medians, passed, judged
 
 
 def row(name, keys, realisations):
-    m, passed = run(keys, realisations)
+    m, passed, judged = run(keys, realisations)
     cells = " | ".join(f"{m.get(label, float('nan')):.3f}" if "T7" not in label else f"{m.get(label, 0):.1f}" for _, label in FIGURES)
-    return f"| {name} | {cells} | {passed} of 12 |"
+    return f"| {name} | {cells} | {passed} of {judged} |"
 
 
 def fit(name, key, lo, hi, target, realisations):
