@@ -128,7 +128,9 @@ fn centring_reached(model: &RobotModel, flange: Option<&nalgebra::Matrix3<f64>>,
         let pose = tcp_pose(p_w, &down, std::f64::consts::TAU * k as f64 / SPINS as f64);
         let pose = match flange {
             None => pose,
-            Some(r) => nalgebra::Isometry3::from_parts(pose.translation, pose.rotation * crate::robot::rotation::quaternion(&r.transpose())),
+            Some(r) => {
+                nalgebra::Isometry3::from_parts(pose.translation, pose.rotation * crate::robot::rotation::quaternion(&r.transpose()))
+            }
         };
         inverse(model, &pose, &[0.0; JOINTS]).is_ok()
     })
