@@ -175,3 +175,97 @@ fn range_values_are_tidy_at_the_resolution_of_their_range() {
     let epsilon = get_dotted(&d.table, "trical.epsilon_mm").and_then(|v| v.as_float()).unwrap();
     assert_eq!(epsilon.to_string(), "0.02");
 }
+
+/// A world in which every campaign fails (a design out of the arm's reach).
+struct Unreachable;
+
+impl WorldSource for Unreachable {
+    fn run(&self, sweep: &Sweep, point: usize, realisation: u32) -> Unit {
+        Unit {
+            unit: point * sweep.realisations as usize + realisation as usize,
+            point,
+            realisation,
+            error: Some("campaign: sphere 4: the device cannot be centred on it".into()),
+            before_mm: [f64::NAN; 3],
+            campaign_s: f64::NAN,
+            rows: Vec::new(),
+            prediction: None,
+            design: None,
+            digest: None,
+        }
+    }
+}
+
+/// The per-sphere distances from the arm's reach of the design at `x` (`count` spheres).
+fn margins(space: &spec::DesignSpace, count: usize, x: &[f64]) -> Vec<f64> {
+    let d = space.decode(count, x);
+    assert!(d.violation.is_none(), "{:?}", d.violation);
+    let text = toml::to_string(&d.table).unwrap();
+    let s = calsim::device::from_table(&text, d.table.clone(), &space.path).unwrap();
+    optimise::reach::sphere_margins_mm(s.as_ref()).expect("a TriCal design")
+}
+
+/// The paper's cell with five spheres (the shipped file's start from the paper) puts sphere 4
+/// out of the arm's reach, and sphere 5 at the box's far corner is out too: a design whose every world fails scores [`optimise::FAILED`] plus
+/// the sum of its spheres' distances from the reach / 100, so that moving either sphere towards
+/// the arm lowers it; and the start brought into reach (`optimise::into_reach`, no world run)
+/// has every sphere's centring pose reached.
+#[test]
+fn a_design_out_of_reach_scores_by_every_spheres_distance_and_its_start_is_brought_into_reach() {
+    let tmp = scratch("optimise-reach");
+    let space = spec::load(&repo().join("scenarios/designs/irb120_spheres_from_paper.toml")).unwrap();
+    let paper = space.start(5);
+    let m = margins(&space, 5, &paper);
+    assert_eq!(m[..3], [0.0, 0.0, 0.0], "the paper's three spheres are within reach: {m:?}");
+    assert!(m[3] > 20.0, "sphere 4 out of reach: {m:?}");
+    // Sphere 5 moved to the box's far corner (x = y = 450 mm), out of reach too.
+    let v = space.variables.len() + 2;
+    let mut start = paper.clone();
+    start[v + 8] = 1.0;
+    start[v + 9] = 1.0;
+    let m = margins(&space, 5, &start);
+    assert!(m[3] > 20.0 && m[4] > m[3], "spheres 4 and 5 out of reach, 5 the farther: {m:?}");
+    let ctx = Context { space: &space, cache: tmp.path().join("w"), worlds: &Unreachable };
+    let score = |x: &[f64]| {
+        let e = ctx.evaluate(optimise::Asked { restart: 0, index: 0, count: 5, x: x.to_vec() }).unwrap();
+        assert_eq!(e.failed, e.worlds);
+        e.score
+    };
+    let at_start = score(&start);
+    assert!((at_start - (optimise::FAILED + m.iter().sum::<f64>() / 100.0)).abs() < 1e-9, "{at_start} from {m:?}");
+    // Each of spheres 4 and 5 moved a tenth of the way towards sphere 1 (which the arm reaches):
+    // nearer the reach, a lower score (not only the farthest sphere counts).
+    for k in [3, 4] {
+        let mut x = start.clone();
+        for j in 0..2 {
+            x[v + 2 * k + j] += 0.1 * (start[v + j] - start[v + 2 * k + j]);
+        }
+        let moved = margins(&space, 5, &x);
+        assert!(moved[k] < m[k], "sphere {} nearer: {moved:?} against {m:?}", k + 1);
+        let s = score(&x);
+        assert!(s < at_start && s >= optimise::FAILED, "sphere {} moved: {s} against {at_start}", k + 1);
+    }
+    let repaired = optimise::into_reach(&ctx, 5, start.clone());
+    assert_ne!(repaired, start);
+    assert_eq!(margins(&space, 5, &repaired), vec![0.0; 5], "brought into reach");
+    // A start in reach is kept as it is.
+    assert_eq!(optimise::into_reach(&ctx, 5, repaired.clone()), repaired);
+}
+
+/// The order of the search scores: a design that ran in some world (any score, [`optimise::ran`])
+/// below one whose every world failed ([`optimise::FAILED`] and its reach), below one the geometry
+/// rules out (10 x 10 and more); within each, the order kept.
+#[test]
+fn a_design_that_ran_beats_one_that_failed_everywhere_which_beats_one_ruled_out() {
+    let scores = [-1.0, 0.0, 5.0, 19.9, 20.0, 25.0, 40.0, 1e3, 1e9, f64::INFINITY];
+    let ran: Vec<f64> = scores.iter().map(|s| optimise::ran(*s)).collect();
+    assert_eq!(ran[..5], scores[..5], "the score itself up to 20");
+    assert!(ran.windows(2).all(|w| w[0] < w[1]), "increasing: {ran:?}");
+    assert!(ran.iter().all(|s| *s < optimise::FAILED), "under the failures': {ran:?}");
+    assert!(optimise::ran(f64::NAN) < optimise::FAILED);
+    let reach = [0.0, 10.0, 250.0, 1e4, f64::INFINITY];
+    let failed: Vec<f64> = reach.iter().map(|d| optimise::FAILED + optimise::reach_score(&[*d, 30.0])).collect();
+    assert!(failed.windows(2).all(|w| w[0] <= w[1]), "{failed:?}");
+    assert!(failed[0] > optimise::FAILED && failed[2] > failed[1], "{failed:?}");
+    assert!(failed.iter().all(|s| *s < 100.0), "under a geometric violation's 100: {failed:?}");
+}

@@ -250,12 +250,12 @@ pub fn search_score(space: &DesignSpace, r: &DesignRow, per_world: &[f64]) -> f6
     let o = &space.objective;
     let Some(threshold) = o.threshold_mm.filter(|_| o.goal == Goal::MaximiseSuccess && space.search.score == spec::SearchScore::Quantile)
     else {
-        return score_of(space, r);
+        return ran(score_of(space, r));
     };
     let value = quantile_score(per_world, o.success_at_least.unwrap_or(0.95), threshold);
     let penalty = with_constraint_shortfalls(o, r, 0.0);
     let value = if value.is_finite() { value } else { PENALTY };
-    value + PENALTY * penalty
+    ran(value + PENALTY * penalty)
 }
 
 /// The empirical quantile at `level` (linear between order statistics: at `(n - 1) level`) of
@@ -270,6 +270,34 @@ pub fn quantile_score(per_world: &[f64], level: f64, threshold: f64) -> f64 {
     let h = (v.len() - 1) as f64 * level.clamp(0.0, 1.0);
     let (lo, hi) = (v[h.floor() as usize], v[h.ceil() as usize]);
     lo + (h - h.floor()) * (hi - lo)
+}
+
+/// The reach part of the score of a design whose every world failed: the sum over its points of
+/// their distances from the arm's reach ([`reach::sphere_margins_mm`], mm) / 100, at most
+/// 6 [`PENALTY`]. Continuous in every point's position, so that a search moves each point that
+/// is out of reach towards the arm; the scores keep their order: a design that ran in some world
+/// (under [`FAILED`], [`ran`]) beats one that failed in every world ([`FAILED`] and this, under 9
+/// [`PENALTY`]), which beats one its geometry rules out (10 [`PENALTY`] and more); among those
+/// that failed in every world, the nearer to the arm's reach the better.
+pub fn reach_score(reach_mm: &[f64]) -> f64 {
+    let sum: f64 = reach_mm.iter().map(|d| if d.is_finite() { d.max(0.0) } else { 1e4 }).sum();
+    (sum / 100.0).min(6.0 * PENALTY)
+}
+
+/// The least score of a design whose every world failed (its reach, [`reach_score`], added).
+pub const FAILED: f64 = 3.0 * PENALTY;
+
+/// The score of a design that ran in some world, kept under [`FAILED`]: `s` itself up to 2
+/// [`PENALTY`], above that rising towards [`FAILED`] - 1 (continuous and increasing, so that the
+/// order among such designs is kept; +inf and NaN at [`FAILED`] - 1).
+pub fn ran(s: f64) -> f64 {
+    let knee = 2.0 * PENALTY;
+    let width = FAILED - 1.0 - knee;
+    if s <= knee {
+        return s;
+    }
+    let t = (s - knee) / width;
+    if t.is_finite() { knee + width * t / (1.0 + t) } else { FAILED - 1.0 }
 }
 
 /// Where a design's worlds come from: the device's own work unit ([`Devices`]), or another
@@ -425,8 +453,8 @@ impl<'a> Context<'a> {
             e.reach_mm = reach::sphere_margins_mm(points[0].1.scenario.as_ref()).unwrap_or_default();
         }
         // Every world failed: a violation measured by the worlds (all of them) and by how far
-        // the farthest point is from the arm's reach.
-        let all_failed = 2.0 * PENALTY + e.reach_mm.iter().copied().fold(0.0, f64::max) / 100.0;
+        // the points are from the arm's reach ([`reach_score`]).
+        let all_failed = FAILED + reach_score(&e.reach_mm);
         let info = self.info(&self.sweep_of(points.iter().map(|p| p.1.clone()).collect(), stride));
         let rows = designs::judge(&info, &units, &[]);
         // Each design's per-world values of the error statistic (for the quantile score).
@@ -578,7 +606,7 @@ fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
     use sha2::Digest;
     let s = &space.search;
     let settings = format!(
-        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}",
+        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}start into reach",
         space.identity,
         s.method.label(),
         s.evaluations,
@@ -607,6 +635,49 @@ fn read_record(ctx: &Context<'_>, r: usize) -> Result<Option<Vec<Asked>>, Optimi
     Ok(Some(asked))
 }
 
+/// Designs the search to bring a start into reach may try ([`into_reach`]).
+pub const INTO_REACH_BUDGET: u32 = 600;
+
+/// The start `start` of a restart of `count` points brought into the arm's reach: where the
+/// design there has points out of reach ([`reach::sphere_margins_mm`], a TriCal design), the
+/// first design of the least sum of the points' distances from the reach that Nelder-Mead finds
+/// from the start within [`INTO_REACH_BUDGET`] designs, minimising that sum (designs the geometry
+/// rules out or the scenario refuses counting as farther than any); elsewhere `start` itself. No
+/// world runs: the reach is the arm's kinematics, the same in every world, so the search then
+/// starts from designs that run rather than spending its evaluations on campaigns that fail.
+pub fn into_reach(ctx: &Context<'_>, count: usize, start: Vec<f64>) -> Vec<f64> {
+    let space = ctx.space;
+    let distance = |x: &[f64]| -> f64 {
+        let d = space.decode(count, x);
+        if let Some((_, m)) = d.violation {
+            return 1e6 + m;
+        }
+        match ctx.point(String::new(), &d.table) {
+            Ok(p) => reach::sphere_margins_mm(p.scenario.as_ref()).map_or(0.0, |v| v.iter().map(|m| m.min(1e5)).sum()),
+            Err(_) => 1e7,
+        }
+    };
+    let at_start = distance(&start);
+    if at_start <= 0.0 {
+        return start;
+    }
+    let mut best = (at_start, start.clone());
+    let mut f = |x: &[f64]| -> f64 {
+        if best.0 <= 0.0 {
+            // In reach: the search winds down.
+            return 0.0;
+        }
+        let v = distance(x);
+        if v < best.0 {
+            best = (v, x.to_vec());
+        }
+        v
+    };
+    // A search that stops early (argmin's error) keeps the best design it found.
+    let _ = search::minimise(spec::Method::NelderMead, &start, INTO_REACH_BUDGET, 0, &mut f);
+    best.1
+}
+
 /// Runs restart `r`: the search's designs in the order asked, each evaluated (its worlds read from
 /// the per-world files where a run left them), calling `progress(done)` after each. The search is
 /// deterministic and evaluating a design whose worlds are kept costs their reading: a restart
@@ -626,6 +697,7 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(crate::seeds::split_seed(space.search.seed, r as u64));
         start = start.iter().map(|_| rng.random_range(0.05..0.95)).collect();
     }
+    let start = into_reach(ctx, count, start);
     let mut out: Vec<Evaluated> = Vec::new();
     let mut failure: Option<OptimiseError> = None;
     let seed = crate::seeds::split_seed(space.search.seed, 1000 + r as u64);
@@ -793,7 +865,7 @@ pub fn combined(space: &DesignSpace, rows: &[Vec<DesignRow>]) -> Vec<Combined> {
     for (m, rs) in rows.iter().enumerate() {
         for r in rs {
             let k = (r.design.point, r.design.selection.clone(), r.design.set_size);
-            keys.entry(k).or_insert_with(|| vec![2.0 * PENALTY; rows.len()])[m] = score_of(space, r);
+            keys.entry(k).or_insert_with(|| vec![FAILED; rows.len()])[m] = score_of(space, r);
         }
     }
     keys.into_iter()

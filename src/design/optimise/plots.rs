@@ -40,7 +40,7 @@ pub fn write(dir: &Path, p: &OptimisePlotInputs) -> Result<Vec<Written>, PlotErr
         stem: "optimise_convergence".into(),
         caption: format!(
             "Best search score so far per restart against the designs evaluated (lower is better: {}; designs the geometry \
-             rules out score 100 and more, designs whose every world fails 20 and more)",
+             rules out score 100 and more, designs whose every world fails 30 and more)",
             p.score
         ),
     });

@@ -410,9 +410,10 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
         let margins: Vec<f64> =
             failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
         s += &format!(
-            "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by how far their farthest \
-             point is from the arm's reach with the device in its approach cone: {} mm at most, {} mm at least; `trace.parquet` \
-             columns failed_worlds, first_error, reach_margin_mm).\n",
+            "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by the sum over their \
+             points of each one's distance from the arm's reach, the centre with the device axis along {{W}}'s -z; their farthest \
+             point {} mm from it at most, {} mm at least; `trace.parquet` columns failed_worlds, first_error, reach_margin_mm, \
+             the farthest point's).\n",
             failing.len(),
             all,
             f3(margins.iter().copied().fold(f64::NAN, f64::max)),
