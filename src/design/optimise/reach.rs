@@ -9,10 +9,9 @@
 //! mm says by how much the design is out of reach.
 
 use nalgebra::Vector3;
-use rand::{RngExt, SeedableRng};
+use rand::RngExt;
 
 use crate::device::Scenario;
-use crate::device::trical::spec::TricalScenario;
 use crate::robot::{JOINTS, KinState, forward};
 
 /// Configurations sampled.
@@ -22,11 +21,11 @@ const SAMPLES: usize = 20_000;
 /// axis lies within the campaign's approach cone around the vertical, in the scenario's {W}, mm
 /// (`None`: not a TriCal scenario).
 pub fn tool_points_w(s: &dyn Scenario) -> Option<Vec<Vector3<f64>>> {
-    let t = s.as_any().downcast_ref::<TricalScenario>()?;
-    let model = t.experiment.truth();
-    let cone = t.experiment.campaign.approach_cone_deg.to_radians().cos();
+    let arm = s.carried_reach()?;
+    let model = arm.truth;
+    let cone = arm.approach_cone_deg.to_radians().cos();
     let limits = *model.limits();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5245_4143_4800_0000);
+    let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::REACH);
     let mut st = KinState::default();
     let mut points: Vec<Vector3<f64>> = Vec::new();
     for _ in 0..SAMPLES {
@@ -46,8 +45,7 @@ pub fn tool_points_w(s: &dyn Scenario) -> Option<Vec<Vector3<f64>>> {
 /// (`None`: not a TriCal scenario).
 pub fn sphere_margins_mm(s: &dyn Scenario) -> Option<Vec<f64>> {
     let points = tool_points_w(s)?;
-    let t = s.as_any().downcast_ref::<TricalScenario>()?;
-    let spheres = &t.experiment.cell.spheres_w_mm;
+    let spheres = &s.datum_cell()?.spheres_w_mm;
     Some(
         spheres
             .iter()
