@@ -104,8 +104,13 @@ pub mod spms_cell {
     pub const TOOL: u64 = 0x4552_3230_0005;
     /// Station k's placement error and the tracker's measurement of its frame: `STATION + k`.
     pub const STATION: u64 = 0x5354_4154_0000_0000;
-    /// Pool candidate `index` at station k: `POOL + k * 2^32 + index`.
+    /// Pool candidate `index` at station k: `POOL + k * 2^32 + index` ([`pool`]).
     pub const POOL: u64 = 0x4552_3230_0100;
+
+    /// The key of pool candidate `index` at station `k`.
+    pub fn pool(k: usize, index: u64) -> u64 {
+        POOL + ((k as u64) << 32) + index
+    }
     /// ISO 9283 cycles.
     pub const ISO: u64 = 0x4552_3230_0002;
     /// The robot's parameters around the truth table (`[robot.spread]`), when they spread.
@@ -159,6 +164,25 @@ pub mod plan {
     pub const TWIN: u64 = 0x504c_414e_0007;
 }
 
+/// The streams of `calsim optimise`, keyed under the design file's `search.seed`.
+pub mod optimise {
+    /// The start of a later repetition of restart r: `stream(seed, r)` (the restart's index is
+    /// its key).
+    pub const RESTART_START: u64 = 0;
+    /// The swarm's draws of restart r: `split_seed(seed, SWARM + r)`.
+    pub const SWARM: u64 = 1000;
+
+    /// The stream of restart `r`'s start point (a later repetition of a restart).
+    pub fn restart_start(seed: u64, r: usize) -> rand_chacha::ChaCha8Rng {
+        super::stream(seed, RESTART_START + r as u64)
+    }
+
+    /// The seed of restart `r`'s swarm.
+    pub fn swarm(seed: u64, r: usize) -> u64 {
+        super::split_seed(seed, SWARM + r as u64)
+    }
+}
+
 /// Fixed streams of quantities that are functions of their inputs alone (no scenario seed).
 pub mod fixed {
     /// The draws that estimate a robot's ISO 9283 repeatability per radian of joint noise
@@ -166,6 +190,9 @@ pub mod fixed {
     pub const REPEATABILITY: u64 = 9283;
     /// The bootstrap of a budget's share of source `s`: `BUDGET_SHARE + s`.
     pub const BUDGET_SHARE: u64 = 0xB0D6_E7;
+    /// The joint configurations an optimiser samples for the tool points an arm reaches
+    /// (`design::optimise::reach`; "REACH" in ASCII).
+    pub const REACH: u64 = 0x5245_4143_4800_0000;
 }
 
 /// A generator seeded with `seed` itself (for the [`fixed`] streams).
@@ -181,6 +208,12 @@ pub fn task_stream(seed: u64, salt: u64, index: usize) -> ChaCha8Rng {
 /// The configurations of the load-time identifiability check (keyed under seed 0: the same for
 /// every scenario).
 pub const STRUCTURAL_CHECK: u64 = 0x4f42_5345_5256;
+
+/// The stream of the load-time identifiability check's configurations ([`STRUCTURAL_CHECK`]
+/// under seed 0).
+pub fn structural_check() -> ChaCha8Rng {
+    stream(0, STRUCTURAL_CHECK)
+}
 
 /// Realisation r > 0 of a scenario seeded s is the world seeded `split_seed(s, REALISATION + r)`
 /// (realisation 0 is the scenario's own seed): the same world whatever a sweep varies.

@@ -128,3 +128,101 @@ fn only_io_renames_files_into_place() {
     }
     assert!(wrong.is_empty(), "writers beside io::out_dir:\n{}", wrong.join("\n"));
 }
+
+/// No escape hatch around the device interface: no module reaches a device's own types through
+/// `Any` (a command that needs something of a device asks the [`calsim::device::Scenario`] trait's
+/// hooks). The CLI's panic hook reads a panic's payload, the one downcast there is.
+#[test]
+fn no_module_downcasts_a_scenario() {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut wrong = Vec::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        let text = code(f);
+        for forbidden in ["as_any", "std::any", "dyn Any"] {
+            if text.contains(forbidden) {
+                wrong.push(format!("{}: names {forbidden}", rel.display()));
+            }
+        }
+        let joined: String = text.split_whitespace().collect();
+        let downcasts = joined.matches("downcast").count();
+        let payloads = joined.matches("payload().downcast_ref").count();
+        if downcasts > payloads {
+            wrong.push(format!("{}: downcasts something other than a panic's payload", rel.display()));
+        }
+    }
+    assert!(wrong.is_empty(), "downcasts:\n{}", wrong.join("\n"));
+}
+
+/// Every seed is derived in `seeds`: elsewhere a generator's seed, a split or a stream is keyed
+/// by a constant or function of `seeds`, never by a number written in place (which would collide
+/// with another stream unseen).
+#[test]
+fn every_seed_is_keyed_in_seeds() {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut wrong = Vec::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        if rel == Path::new("seeds.rs") {
+            continue;
+        }
+        let text = code(f);
+        for call in ["seed_from_u64(", "split_seed(", "stream(", "fixed_stream(", "from_seed("] {
+            let mut rest = text.as_str();
+            while let Some(i) = rest.find(call) {
+                rest = &rest[i + call.len()..];
+                // The arguments, to the parenthesis that closes the call.
+                let mut depth = 1;
+                let end = rest
+                    .char_indices()
+                    .find(|&(_, c)| {
+                        depth += match c {
+                            '(' => 1,
+                            ')' => -1,
+                            _ => 0,
+                        };
+                        depth == 0
+                    })
+                    .map_or(rest.len(), |(k, _)| k);
+                let args = &rest[..end];
+                // A number among the arguments themselves (grouping parentheses included); one
+                // passed to a function of `seeds` inside them is that function's.
+                let mut calls: Vec<bool> = Vec::new();
+                let mut token = String::new();
+                let mut literal = false;
+                let mut last = ' ';
+                // The character before the token: a tuple's field (`keys.0`) is no number.
+                let mut before = ' ';
+                for c in args.chars().chain([' ']) {
+                    if c.is_ascii_alphanumeric() || c == '_' {
+                        if token.is_empty() {
+                            before = last;
+                        }
+                        token.push(c);
+                    } else {
+                        literal |= token.starts_with(|d: char| d.is_ascii_digit()) && before != '.' && !calls.contains(&true);
+                        token.clear();
+                        match c {
+                            '(' => calls.push(last.is_ascii_alphanumeric() || last == '_'),
+                            ')' => {
+                                calls.pop();
+                            }
+                            _ => {}
+                        }
+                    }
+                    if !c.is_whitespace() {
+                        last = c;
+                    }
+                }
+                if literal {
+                    wrong.push(format!("{}: {call}{args})", rel.display()));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "seeds written in place:\n{}", wrong.join("\n"));
+}

@@ -137,7 +137,10 @@ fn a_point_equal_to_the_base_is_the_plain_run_at_realisation_0_and_worlds_are_sh
     assert_eq!(units[1].before_mm, units[3].before_mm, "realisation 1 of both points: one world");
     assert_ne!(units[0].before_mm, units[1].before_mm, "two realisations: two worlds");
 
-    let s = sweep.points[0].scenario.as_any().downcast_ref::<calsim::device::trical::TricalScenario>().expect("a TriCal sweep");
+    // The base scenario loaded by itself, with the sweep's fixed keys and point 0's repetitions.
+    let mut s = calsim::device::trical::spec::load(&repo().join("scenarios/ci_quick.toml")).unwrap();
+    (s.study.set_sizes, s.study.table_set_size, s.study.repetitions) = (vec![20, 30], 30, 2);
+    assert_eq!(s.header.seed, sweep.points[0].scenario.header().seed);
     let experiment = s.experiment.build(s.header.seed).unwrap();
     let before = s.experiment.before_model(&experiment.campaign);
     let plain = calsim::device::trical::study::run(&experiment, &before, &s.study, s.header.seed, &|_, _| {}).unwrap();

@@ -63,7 +63,8 @@ struct Fault {
 /// The exception of an application error: its class, its one-line message, and the file, key and
 /// value it names.
 fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
-    let message = e.to_string();
+    // The CLI's line: the same shortening of long words and numbers, controls escaped.
+    let message = app::message::one_line(&e.to_string());
     let (err, fault) = match e {
         app::Error::Scenario(s) | app::Error::Budget(CoreBudgetError::Scenario(s)) => {
             (PyErr::new::<ScenarioError, _>(message), scenario_fault(&s))
@@ -87,7 +88,10 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
         }
         app::Error::Calibrate(CalibrateError::Option { key, message: why }) => {
             let keyword = key.replace('-', "_");
-            (PyErr::new::<InputError, _>(format!("{keyword}: {why}")), Fault { key: Some(keyword), ..Fault::default() })
+            (
+                PyErr::new::<InputError, _>(app::message::one_line(&format!("{keyword}: {why}"))),
+                Fault { key: Some(keyword), ..Fault::default() },
+            )
         }
         app::Error::Calibrate(CalibrateError::NoModel { path, model, .. }) => (
             PyErr::new::<StudyError, _>(message),
@@ -136,7 +140,10 @@ fn to_py(py: Python<'_>, e: app::Error) -> PyErr {
 fn input_fault(what: String, why: String, message: String) -> (PyErr, Fault) {
     if let Some(option) = what.strip_prefix("--") {
         let keyword = option.replace('-', "_");
-        return (PyErr::new::<InputError, _>(format!("{keyword}: {why}")), Fault { key: Some(keyword), ..Fault::default() });
+        return (
+            PyErr::new::<InputError, _>(app::message::one_line(&format!("{keyword}: {why}"))),
+            Fault { key: Some(keyword), ..Fault::default() },
+        );
     }
     let fault = match what.split_once(": ") {
         Some((file, key)) if std::path::Path::new(file).exists() => {

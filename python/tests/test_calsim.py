@@ -121,6 +121,23 @@ def test_an_out_of_range_override_is_a_scenario_error_naming_file_key_and_value(
     assert "[study] repetitions = 0" in str(e.value) and "\n" not in str(e.value)
 
 
+def test_an_exception_says_what_the_cli_says(tmp_path: Path) -> None:
+    """An exception's message is the CLI's error line: a path longer than 200 characters without
+    a space shortened in its middle, the TOML parser's line breaks escaped, whoever calls."""
+    deep = tmp_path / ("d" * 120) / ("e" * 120)
+    deep.mkdir(parents=True)
+    bad = deep / "bad.toml"
+    bad.write_text("seed = \n")
+    with pytest.raises(calsim.ScenarioError) as e:
+        calsim.run(bad, out=tmp_path / "out", progress=False)
+    message = str(e.value)
+    assert "characters]..." in message and "\n" not in message and str(bad) not in message
+    cli = os.environ.get("CALSIM_BIN") or shutil.which("calsim")
+    if cli is not None:
+        p = subprocess.run([cli, "run", str(bad), "--out", str(tmp_path / "out")], capture_output=True, text=True)
+        assert p.returncode == 2 and p.stderr == f"error: {message}\n"
+
+
 def test_a_bad_scenario_file_is_a_scenario_error_naming_its_key(tmp_path: Path) -> None:
     text = QUICK.read_text().replace("../robots/irb120.toml", str(REPO / "robots" / "irb120.toml"))
     bad = tmp_path / "bad.toml"

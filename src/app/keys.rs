@@ -160,6 +160,19 @@ pub fn markdown() -> Result<String, Error> {
     Ok(s)
 }
 
+/// `calsim init`: the starting scenario of `kind` ([`init`]), also written to `file` when given;
+/// an existing file (or a link, even a dangling one) is never replaced.
+pub fn init_file(kind: &str, file: Option<&std::path::Path>) -> Result<String, Error> {
+    let text = init(kind)?;
+    if let Some(f) = file {
+        if std::fs::symlink_metadata(f).is_ok() {
+            return Err(Error::input(f.display().to_string(), "exists; calsim init does not replace a file (nor a link)"));
+        }
+        crate::io::out_dir::write_file_atomically(f, &text).map_err(Error::io(f))?;
+    }
+    Ok(text)
+}
+
 /// A commented starting scenario of the device `kind`: every key at its default with its unit,
 /// rules and note as comments, keys without a default commented out. It loads as it is (a test).
 pub fn init(kind: &str) -> Result<String, Error> {
@@ -244,4 +257,27 @@ pub fn stray_shared_notes() -> Vec<String> {
         .into_keys()
         .filter(|n| !all.iter().any(|r| r.key == *n || r.key.starts_with(&format!("{n}."))))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn init_writes_a_new_file_and_never_replaces_a_file_or_a_link() {
+        let tmp = tempfile::Builder::new().prefix("calsim-init-").tempdir().unwrap();
+        let file = tmp.path().join("s.toml");
+        let text = init_file("trical", Some(&file)).unwrap();
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), text);
+        assert_eq!(init_file("trical", None).unwrap(), text);
+        std::fs::write(&file, "mine").unwrap();
+        let dangling = tmp.path().join("link.toml");
+        std::os::unix::fs::symlink(tmp.path().join("nowhere.toml"), &dangling).unwrap();
+        for f in [&file, &dangling] {
+            let e = init_file("trical", Some(f)).unwrap_err().to_string();
+            assert_eq!(e, format!("{}: exists; calsim init does not replace a file (nor a link)", f.display()));
+        }
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine");
+        assert!(std::fs::symlink_metadata(tmp.path().join("nowhere.toml")).is_err());
+    }
 }

@@ -12,6 +12,7 @@ pub mod export;
 pub mod fk;
 pub mod import_urdf;
 pub mod keys;
+pub mod message;
 pub mod optimise;
 pub mod plan;
 pub mod run;

@@ -155,7 +155,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     let plots = spec.plots.then(|| plot_inputs(&space, &outcome));
     let overrides: Vec<(String, String)> =
         spec.method.iter().map(|m| ("search.method".to_string(), format!("\"{}\"", m.label()))).collect();
-    let mut manifest = serde_json::json!({
+    let manifest = serde_json::json!({
         "design_file": std::path::absolute(&spec.file).unwrap_or_else(|_| spec.file.clone()).display().to_string(),
         "identity": space.identity,
         "search_s": search_s,
@@ -163,12 +163,8 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         "evaluations": outcome.verdict.trace.len(),
         "winner_timing": report.cost,
     });
-    if let (Some(m), serde_json::Value::Object(block)) = (
-        manifest.as_object_mut(),
-        serde_json::to_value(crate::io::manifest::Provenance::of_run(&overrides)).map_err(|e| Error::input("manifest", e.to_string()))?,
-    ) {
-        m.extend(block);
-    }
+    let manifest =
+        crate::io::manifest::Provenance::of_run(&overrides).joined(manifest).map_err(|e| Error::input("manifest", e.to_string()))?;
     let options = crate::device::WriteOptions { threads, plots: spec.plots, recording: spec.plots, overrides: Vec::new() };
     let write_world = |dir: &std::path::Path| -> std::io::Result<()> {
         match &world {

@@ -273,7 +273,7 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     })
     .map_err(Error::io(&spec.out))?;
     if let (Some(j), Some(c)) = (&spec.junit, &check_report) {
-        crate::io::out_dir::write_file_atomically(j, &c.junit()).map_err(Error::io(j))?;
+        crate::io::out_dir::write_file_atomically(j, c.junit()).map_err(Error::io(j))?;
     }
     let cached_spread = match earlier {
         Some((tables, text, spread)) if tables_of(&dest).as_ref() == Some(&tables) => {
@@ -331,10 +331,9 @@ fn earlier_check(dir: &Path) -> Option<(serde_json::Value, String, (usize, std::
     for f in v.get("figures")?.as_array()? {
         if let (Some(name), Some([a, b])) =
             (f.get("figure").and_then(|x| x.as_str()), f.get("p10_p90").and_then(|x| x.as_array()).map(|a| a.as_slice()))
+            && let (Some(a), Some(b)) = (a.as_f64(), b.as_f64())
         {
-            if let (Some(a), Some(b)) = (a.as_f64(), b.as_f64()) {
-                spread.insert(name.to_string(), [a, b]);
-            }
+            spread.insert(name.to_string(), [a, b]);
         }
     }
     Some((tables, text, (worlds, spread)))

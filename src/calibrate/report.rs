@@ -288,7 +288,6 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
         "measurements_sha256": sha(&c.measurements.path),
         "robot_path": c.robot.path.display().to_string(),
         "robot_sha256": sha(&c.robot.path),
-        "crate_version": env!("CARGO_PKG_VERSION"),
         "options": {
             "params": o.params.as_ref().map_or_else(|| super::default_params().names(), |p| p.names()),
             "folds": o.folds,
@@ -302,6 +301,7 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
         },
         "tables_sha256": crate::io::table::table_hashes(dir)?,
     });
+    let value = crate::io::manifest::Provenance::of_run(&[]).joined(value).map_err(std::io::Error::other)?;
     crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&value).map_err(std::io::Error::other)?)
 }
 

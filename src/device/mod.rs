@@ -17,7 +17,6 @@ pub mod spms;
 pub mod tracker;
 pub mod trical;
 
-use std::any::Any;
 use std::path::Path;
 
 use crate::robot::RobotModel;
@@ -116,9 +115,48 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
         )))
     }
 
-    /// The scenario as `Any`, for a command that belongs to one device (Table 8 of the TriCal
-    /// paper).
-    fn as_any(&self) -> &dyn Any;
+    /// The arm that carries the device as this scenario's world draws it, and the cone around the
+    /// vertical its campaign approaches in: what the optimiser samples to tell how far a design's
+    /// cell is from reach. `None` where the device is not carried by the arm into a cell.
+    fn carried_reach(&self) -> Option<CarriedReach> {
+        None
+    }
+
+    /// The cell of datum spheres on a plate the scenario measures, as a machinist builds it (the
+    /// optimiser's build sheet); `None` where the device has none.
+    fn datum_cell(&self) -> Option<DatumCell> {
+        None
+    }
+}
+
+/// The arm that carries a device, for [`Scenario::carried_reach`].
+#[derive(Clone, Debug)]
+pub struct CarriedReach {
+    /// The true arm, placed in the cell's world frame {W}.
+    pub truth: RobotModel,
+    /// Half-angle of the cone around the vertical the device's axis (flange to TCP) stays in, deg.
+    pub approach_cone_deg: f64,
+    /// The device's flange in frame 6, the rotation the inverse kinematics of a device pose takes
+    /// (`None`: the device's frame is frame 6).
+    pub flange: Option<nalgebra::Matrix3<f64>>,
+}
+
+/// A cell of datum spheres on a plate, for [`Scenario::datum_cell`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DatumCell {
+    /// The sphere centres in {W}, mm.
+    pub spheres_w_mm: Vec<[f64; 3]>,
+    /// Where the robot base stands in {W}: the scenario's nominal base (the true arm's where it
+    /// gives none), as the study places it.
+    pub world_from_base: crate::robot::XyzZyx,
+    /// The plate's pose relative to the base scenario's cell (mm, deg).
+    pub plate_offset_mm_deg: [f64; 6],
+    /// How far the plate extends beyond the outermost sphere centres, mm.
+    pub plate_margin_mm: f64,
+    /// Height of a sphere's riser above the plate, mm.
+    pub riser_height_mm: f64,
+    /// Diameter of a datum ball, mm.
+    pub ball_diameter_mm: f64,
 }
 
 impl Clone for Box<dyn Scenario> {

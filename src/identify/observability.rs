@@ -91,7 +91,7 @@ pub fn structurally_unidentifiable(model: &RobotModel, set: &crate::robot::Param
         return Vec::new();
     }
     use rand::RngExt;
-    let mut rng = crate::seeds::stream(0, crate::seeds::STRUCTURAL_CHECK);
+    let mut rng = crate::seeds::structural_check();
     let qs: Vec<crate::robot::Joints> = (0..200)
         .map(|_| {
             std::array::from_fn(|i| {

@@ -1,7 +1,8 @@
 //! The provenance block every `manifest.json` carries, the same for every producer (a run of any
 //! device, a sweep, a budget, an optimisation, an export): the calsim version and the git commit
-//! the binary was built from (embedded at build time by `build.rs`, `unknown` for a build outside
-//! a git checkout), the command line, every input file with its sha256 ([`crate::io::inputs`]) and
+//! the binary was built from (embedded at build time by `build.rs`: `-dirty` after it when a file
+//! the crate is compiled from differed from that commit, `unknown` for a build outside a git
+//! checkout of calsim), the command line, every input file with its sha256 ([`crate::io::inputs`]) and
 //! the overrides. Threads are not recorded: no result depends on them.
 //!
 //! A run of a scenario adds its head ([`ScenarioHead`]): the scenario's name, absolute path,
@@ -14,7 +15,9 @@ use sha2::{Digest, Sha256};
 
 use crate::io::inputs::Input;
 
-/// The git commit calsim was built from (`unknown` when built outside a git checkout).
+/// The git commit calsim was built from: 40 hex digits, followed by `-dirty` when a file the crate
+/// is compiled from differed from it; `unknown` when built outside a git checkout of calsim
+/// (`build.rs`).
 pub const GIT_COMMIT: &str = env!("CALSIM_GIT_COMMIT");
 
 /// The block every manifest carries (flattened into it: `crate_version`, `git_commit`,
@@ -40,6 +43,19 @@ impl Provenance {
             inputs: crate::io::inputs::of_run(),
             overrides: overrides.to_vec(),
         }
+    }
+
+    /// `manifest`, a JSON object of a producer's own fields, with the block's fields added (the
+    /// same fields and serialisation as a manifest struct that flattens the block).
+    pub fn joined(self, manifest: serde_json::Value) -> Result<serde_json::Value, serde_json::Error> {
+        let serde_json::Value::Object(mut fields) = manifest else {
+            return Err(serde::ser::Error::custom("a manifest is a JSON object"));
+        };
+        let serde_json::Value::Object(block) = serde_json::to_value(self)? else {
+            return Err(serde::ser::Error::custom("the provenance block is a JSON object"));
+        };
+        fields.extend(block);
+        Ok(serde_json::Value::Object(fields))
     }
 }
 
@@ -85,7 +101,8 @@ mod tests {
         let v = serde_json::to_value(ScenarioHead::new("s", &input, "seed = 1\n", 1, &[("seed".into(), "1".into())])).unwrap();
         assert_eq!(v["crate_version"], env!("CARGO_PKG_VERSION"));
         let commit = v["git_commit"].as_str().unwrap();
-        assert!(commit == "unknown" || (commit.len() == 40 && commit.bytes().all(|b| b.is_ascii_hexdigit())), "{commit}");
+        let hex = commit.strip_suffix("-dirty").unwrap_or(commit);
+        assert!(commit == "unknown" || (hex.len() == 40 && hex.bytes().all(|b| b.is_ascii_hexdigit())), "{commit}");
         assert!(v["command_line"].as_array().is_some_and(|a| !a.is_empty()));
         let real = std::fs::canonicalize(&input).unwrap().display().to_string();
         let listed = v["inputs"].as_array().unwrap().iter().find(|i| i["path"] == real.as_str()).expect("the input listed");

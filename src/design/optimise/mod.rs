@@ -693,14 +693,14 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
     let mut start = space.start(count);
     if rep > 0 {
         // Later repetitions start elsewhere: a point drawn from the restart's own stream.
-        use rand::{RngExt, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(crate::seeds::split_seed(space.search.seed, r as u64));
+        use rand::RngExt;
+        let mut rng = crate::seeds::optimise::restart_start(space.search.seed, r);
         start = start.iter().map(|_| rng.random_range(0.05..0.95)).collect();
     }
     let start = into_reach(ctx, count, start);
     let mut out: Vec<Evaluated> = Vec::new();
     let mut failure: Option<OptimiseError> = None;
-    let seed = crate::seeds::split_seed(space.search.seed, 1000 + r as u64);
+    let seed = crate::seeds::optimise::swarm(space.search.seed, r);
     let mut f = |x: &[f64]| -> f64 {
         if failure.is_some() {
             return f64::INFINITY;

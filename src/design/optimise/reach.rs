@@ -14,11 +14,10 @@
 //! that; a margin of hundreds of mm says by how much the design is out of reach.
 
 use nalgebra::Vector3;
-use rand::{RngExt, SeedableRng};
+use rand::RngExt;
 
-use crate::device::Scenario;
 use crate::device::trical::campaign::tcp_pose;
-use crate::device::trical::spec::TricalScenario;
+use crate::device::{CarriedReach, Scenario};
 use crate::robot::{JOINTS, KinState, RobotData, RobotModel, forward, inverse};
 
 /// Configurations sampled.
@@ -35,9 +34,9 @@ const TRIED: usize = 400;
 /// axis lies within the campaign's approach cone around the vertical, in the scenario's {W}, mm
 /// (`None`: not a TriCal scenario).
 pub fn tool_points_w(s: &dyn Scenario) -> Option<Vec<Vector3<f64>>> {
-    let t = s.as_any().downcast_ref::<TricalScenario>()?;
-    let model = t.experiment.truth();
-    let cone = t.experiment.campaign.approach_cone_deg.to_radians().cos();
+    let arm = s.carried_reach()?;
+    let model = arm.truth;
+    let cone = arm.approach_cone_deg.to_radians().cos();
     let world_from_base = crate::robot::world_from_base(&model);
     let samples = samples_in_base(&model);
     Some(
@@ -64,7 +63,7 @@ fn samples_in_base(model: &RobotModel) -> std::sync::Arc<Vec<(Vector3<f64>, Vect
         return samples.clone();
     }
     let limits = *arm.limits();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5245_4143_4800_0000);
+    let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::REACH);
     let mut st = KinState::default();
     let samples: Vec<(Vector3<f64>, Vector3<f64>)> = (0..SAMPLES)
         .map(|_| {
@@ -83,18 +82,17 @@ fn samples_in_base(model: &RobotModel) -> std::sync::Arc<Vec<(Vector3<f64>, Vect
 /// (the module's margin: 0 where the true arm reaches it; `None`: not a TriCal scenario).
 pub fn sphere_margins_mm(s: &dyn Scenario) -> Option<Vec<f64>> {
     let points = tool_points_w(s)?;
-    let t = s.as_any().downcast_ref::<TricalScenario>()?;
-    Some(centring_margins_mm(t, &points))
+    let arm = s.carried_reach()?;
+    let spheres = s.datum_cell()?.spheres_w_mm;
+    Some(centring_margins_mm(&arm, &spheres, &points))
 }
 
-/// [`sphere_margins_mm`] of `t` with its sampled tool points `points` ({W}, mm).
-fn centring_margins_mm(t: &TricalScenario, points: &[Vector3<f64>]) -> Vec<f64> {
-    let model = t.experiment.truth();
-    let flange = t.experiment.flange();
-    let reaches = |p: &Vector3<f64>| centring_reached(&model, flange.as_ref(), p);
-    t.experiment
-        .cell
-        .spheres_w_mm
+/// [`sphere_margins_mm`] of the spheres `spheres` ({W}, mm) for the arm `arm` with its sampled tool
+/// points `points` ({W}, mm).
+fn centring_margins_mm(arm: &CarriedReach, spheres: &[[f64; 3]], points: &[Vector3<f64>]) -> Vec<f64> {
+    let model = &arm.truth;
+    let reaches = |p: &Vector3<f64>| centring_reached(model, arm.flange.as_ref(), p);
+    spheres
         .iter()
         .map(|c| {
             let c = Vector3::from(*c);

@@ -6,7 +6,6 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::device::Scenario;
-use crate::device::trical::spec::TricalScenario;
 use crate::robot::XyzZyx;
 
 /// A TriCal design's cell as a machinist builds it.
@@ -34,13 +33,8 @@ pub struct CellSheet {
 impl CellSheet {
     /// The sheet of a TriCal scenario (`None`: another device).
     pub fn of(s: &dyn Scenario) -> Option<Self> {
-        let t = s.as_any().downcast_ref::<TricalScenario>()?;
-        let e = &t.experiment;
-        let world_from_base = match e.robot.nominal_base_mm_deg {
-            Some(b) => e.cell.base_in_moved_world(XyzZyx::from_mm_deg(b)),
-            None => e.truth().data().world_from_base,
-        };
-        let c = &e.cell;
+        let c = s.datum_cell()?;
+        let world_from_base = c.world_from_base;
         let spheres_w_mm = c.spheres_w_mm.clone();
         let below = c.riser_height_mm + c.ball_diameter_mm / 2.0;
         let lo = |k: usize| spheres_w_mm.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min) - c.plate_margin_mm;

@@ -379,7 +379,7 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
         let mut got = 0;
         let mut index = 0u64;
         while got < per_station && pool.len() < station.pool && index < 50 * per_station.max(1) as u64 {
-            let mut r = stream(seed, streams::POOL + ((k as u64) << 32) + index);
+            let mut r = stream(seed, streams::pool(k, index));
             index += 1;
             // Uniform over the spherical cap of the cone.
             let cos_t = 1.0 - r.random::<f64>() * (1.0 - cone.cos());

@@ -14,7 +14,6 @@ pub mod results;
 pub mod spec;
 pub mod study;
 
-use std::any::Any;
 use std::cell::Cell;
 use std::path::Path;
 use std::time::Instant;
@@ -115,10 +114,6 @@ impl Scenario for SpmsScenario {
 
     fn layout_mm(&self) -> Vec<[f64; 3]> {
         Vec::new()
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 

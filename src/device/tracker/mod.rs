@@ -11,7 +11,6 @@
 
 pub mod spec;
 
-use std::any::Any;
 use std::path::Path;
 use std::time::Instant;
 
@@ -120,10 +119,6 @@ impl Scenario for TrackerScenario {
 
     fn robot_in_cell(&self) -> Option<crate::device::RobotInCell> {
         self.cell.robot_in_cell()
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 

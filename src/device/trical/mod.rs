@@ -13,7 +13,6 @@ pub mod spec;
 pub mod study;
 pub mod table8;
 
-use std::any::Any;
 use std::cell::Cell;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -144,8 +143,29 @@ impl Scenario for TricalScenario {
         }))
     }
 
-    fn as_any(&self) -> &dyn Any {
-        self
+    fn carried_reach(&self) -> Option<super::CarriedReach> {
+        Some(super::CarriedReach {
+            truth: self.experiment.truth(),
+            approach_cone_deg: self.experiment.campaign.approach_cone_deg,
+            flange: self.experiment.flange(),
+        })
+    }
+
+    fn datum_cell(&self) -> Option<super::DatumCell> {
+        let e = &self.experiment;
+        let c = &e.cell;
+        let world_from_base = match e.robot.nominal_base_mm_deg {
+            Some(b) => c.base_in_moved_world(crate::robot::XyzZyx::from_mm_deg(b)),
+            None => e.truth().data().world_from_base,
+        };
+        Some(super::DatumCell {
+            spheres_w_mm: c.spheres_w_mm.clone(),
+            world_from_base,
+            plate_offset_mm_deg: c.plate_offset_mm_deg,
+            plate_margin_mm: c.plate_margin_mm,
+            riser_height_mm: c.riser_height_mm,
+            ball_diameter_mm: c.ball_diameter_mm,
+        })
     }
 }
 
