@@ -246,27 +246,29 @@ impl Problem<'_> {
             // scattered into N and b.
             const CHUNK: usize = 1024;
             let mut local = vec![0.0; (used + 1) * (used + 1)];
-            let mut block = vec![0.0; 3 * CHUNK.min(members.len()) * (used + 1)];
-            let mut products = Vec::new();
+            let mut block = vec![0.0; (3 * CHUNK.min(members.len())).div_ceil(8) * 8 * (used + 1)];
+            let (mut products, mut acc) = (Vec::new(), Vec::new());
             for start in (0..members.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(members.len());
                 let rows = 3 * (end - start);
-                // Column-major: column u of the block is contiguous; the residuals are column `used`.
-                let block = &mut block[..rows * (used + 1)];
+                // In groups of eight rows ([`gram`]'s layout); the residuals are column `used`.
+                let block = &mut block[..rows.div_ceil(8) * 8 * (used + 1)];
                 for k in start..end {
                     let o = &self.obs[members[k].1];
                     let e = (o.measured_mm - tcps[k]) / o.sigma;
                     for a in 0..3 {
                         let row = 3 * (k - start) + a;
-                        block[used * rows + row] = e[a];
+                        let (group, lane) = (row / 8, row % 8);
+                        let at = group * (used + 1) * 8 + lane;
+                        block[at + used * 8] = e[a];
                         let jrow = &jt[(3 * k + a) * p..(3 * k + a + 1) * p];
                         if o.sigma == 1.0 {
                             for (u, &c) in slot[..used].iter().enumerate() {
-                                block[u * rows + row] = jrow[c];
+                                block[at + u * 8] = jrow[c];
                             }
                         } else {
                             for (u, &c) in slot[..used].iter().enumerate() {
-                                block[u * rows + row] = jrow[c] / o.sigma;
+                                block[at + u * 8] = jrow[c] / o.sigma;
                             }
                         }
                     }
@@ -274,7 +276,7 @@ impl Problem<'_> {
                 if !block.iter().all(|v| v.is_finite()) {
                     return None;
                 }
-                gram(block, rows, used + 1, &mut products);
+                gram(block, rows, used + 1, &mut acc, &mut products);
                 for (l, v) in local.iter_mut().zip(&products) {
                     *l += v;
                 }
@@ -296,30 +298,28 @@ impl Problem<'_> {
     }
 }
 
-/// The Gram matrix `G = B^T B` of the column-major block `b` (`rows` x `cols`) into `out`
-/// (row-major, `cols` x `cols`), each entry summed as nalgebra's `tr_mul` sums it (eight running
-/// sums over the rows in steps of eight, combined pairwise, then the rows left over), so that
-/// `G` is bit for bit `B^T B` of nalgebra; each pair of columns is summed once (the products
-/// are symmetric) and the rows are taken in segments that stay in the cache.
-fn gram(b: &[f64], rows: usize, cols: usize, out: &mut Vec<f64>) {
-    const SEGMENT: usize = 256;
+/// The Gram matrix `G = B^T B` of the block `b` (`rows` x `cols`) into `out` (row-major, `cols` x
+/// `cols`), each entry summed as nalgebra's `tr_mul` sums it (eight running sums over the rows in
+/// steps of eight, combined pairwise, then the rows left over), so that `G` is bit for bit `B^T B`
+/// of nalgebra; each pair of columns is summed once (the products are symmetric). The block is
+/// stored in groups of eight rows: `b[(g * cols + c) * 8 + l]` is row `8 g + l` of column `c`
+/// (a group's rows of every column sit together, in the cache), zero past the last row. `acc`:
+/// scratch.
+fn gram(b: &[f64], rows: usize, cols: usize, acc: &mut Vec<[f64; 8]>, out: &mut Vec<f64>) {
     let pairs = cols * (cols + 1) / 2;
-    let mut acc = vec![[0.0f64; 8]; pairs];
-    let full = rows - rows % 8;
-    for seg in (0..full).step_by(SEGMENT) {
-        let end = (seg + SEGMENT).min(full);
-        let mut k = 0;
+    acc.clear();
+    acc.resize(pairs, [0.0; 8]);
+    let full = rows / 8;
+    for group in b.chunks_exact(8 * cols).take(full) {
+        let mut rest = &mut acc[..];
         for u in 0..cols {
-            let cu = &b[u * rows + seg..u * rows + end];
-            for w in u..cols {
-                let cw = &b[w * rows + seg..w * rows + end];
-                let a = &mut acc[k];
-                for (x, y) in cu.chunks_exact(8).zip(cw.chunks_exact(8)) {
-                    for l in 0..8 {
-                        a[l] += x[l] * y[l];
-                    }
+            let (mine, after) = rest.split_at_mut(cols - u);
+            rest = after;
+            let x: &[f64; 8] = group[8 * u..8 * u + 8].try_into().expect("eight rows");
+            for (a, y) in mine.iter_mut().zip(group[8 * u..].chunks_exact(8)) {
+                for l in 0..8 {
+                    a[l] += x[l] * y[l];
                 }
-                k += 1;
             }
         }
     }
@@ -334,8 +334,9 @@ fn gram(b: &[f64], rows: usize, cols: usize, out: &mut Vec<f64>) {
             res += a[1] + a[5];
             res += a[2] + a[6];
             res += a[3] + a[7];
-            for r in full..rows {
-                res += b[u * rows + r] * b[w * rows + r];
+            for r in 8 * full..rows {
+                let at = full * cols * 8 + r - 8 * full;
+                res += b[at + u * 8] * b[at + w * 8];
             }
             out[u * cols + w] = res;
             out[w * cols + u] = res;
@@ -481,15 +482,21 @@ mod tests {
     }
 
     /// The Gram matrix of a block equals nalgebra's `B^T B` bit for bit (the normal equations of
-    /// every fit are summed by it): blocks of 1 to 600 rows (segments of the cache and rows left
-    /// over past a multiple of eight), 1 to 9 columns, entries of mixed sign and magnitude.
+    /// every fit are summed by it): blocks of 1 to 600 rows (rows left over past a multiple of eight
+    /// among them), 1 to 9 columns, entries of mixed sign and magnitude.
     #[test]
     fn gram_equals_nalgebra_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let mut out = Vec::new();
+        let (mut out, mut acc) = (Vec::new(), Vec::new());
         for (rows, cols) in [(1, 1), (7, 3), (8, 2), (13, 9), (256, 4), (263, 5), (600, 9)] {
             let b = DMatrix::<f64>::from_fn(rows, cols, |_, _| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-6..6)));
-            gram(b.as_slice(), rows, cols, &mut out);
+            let mut grouped = vec![0.0; rows.div_ceil(8) * 8 * cols];
+            for r in 0..rows {
+                for c in 0..cols {
+                    grouped[(r / 8 * cols + c) * 8 + r % 8] = b[(r, c)];
+                }
+            }
+            gram(&grouped, rows, cols, &mut acc, &mut out);
             let want = b.tr_mul(&b);
             for u in 0..cols {
                 for w in 0..cols {

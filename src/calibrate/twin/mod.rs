@@ -281,16 +281,19 @@ impl Lsq {
     }
 }
 
-/// The largest cosine of the principal angles between the column spaces of `a` and `b`.
-fn principal_cos(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
-    let basis = |m: &DMatrix<f64>| {
-        let svd = m.clone().svd(true, false);
-        let u = svd.u.expect("u asked");
-        let top = svd.singular_values.iter().fold(0.0f64, |x, v| x.max(*v));
-        let keep: Vec<usize> = (0..svd.singular_values.len()).filter(|&k| svd.singular_values[k] > 1e-9 * top).collect();
-        u.select_columns(&keep)
-    };
-    let (ua, ub) = (basis(a), basis(b));
+/// An orthonormal basis of the column space of `m` (its left singular vectors of singular values
+/// above 1e-9 of the largest).
+fn column_basis(m: &DMatrix<f64>) -> DMatrix<f64> {
+    let svd = m.clone().svd(true, false);
+    let u = svd.u.expect("u asked");
+    let top = svd.singular_values.iter().fold(0.0f64, |x, v| x.max(*v));
+    let keep: Vec<usize> = (0..svd.singular_values.len()).filter(|&k| svd.singular_values[k] > 1e-9 * top).collect();
+    u.select_columns(&keep)
+}
+
+/// The largest cosine of the principal angles between two column spaces, given by orthonormal
+/// bases ([`column_basis`]).
+fn principal_cos(ua: &DMatrix<f64>, ub: &DMatrix<f64>) -> f64 {
     if ua.ncols() == 0 || ub.ncols() == 0 {
         return 0.0;
     }
@@ -608,9 +611,10 @@ fn mean_se(d: &[f64]) -> (f64, f64) {
 
 fn confounded_pairs(families: &[(Family, DMatrix<f64>, Vec<Coefficient>)], projected: &[DMatrix<f64>]) -> Vec<(String, String, f64)> {
     let mut out = Vec::new();
+    let bases: Vec<DMatrix<f64>> = projected.iter().map(column_basis).collect();
     for a in 0..families.len() {
         for b in a + 1..families.len() {
-            let cos = principal_cos(&projected[a], &projected[b]);
+            let cos = principal_cos(&bases[a], &bases[b]);
             if cos > CONFOUNDED_COS {
                 out.push((families[a].0.name(), families[b].0.name(), cos));
             }
