@@ -326,6 +326,7 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let fitted = layout.robot.unpack(nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
     let (rw, jw) = problem.linearise(&x, &train).ok_or_else(|| no_model("the twin's training fit has no model".into()))?;
     let jf = jw.select_columns(&free);
+    drop(jw);
     // The link-angle Jacobian: the fitted robot with the six joint offsets as its only parameters.
     let offsets = ParamSet::new((1..=JOINTS).map(|joint| ParamId::Link { joint, kind: LinkParam::ThetaOffset }).collect())
         .expect("six joint offsets");
@@ -347,7 +348,8 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
             .collect()
     };
     let train_pose = pose_of(&train);
-    let model_lsq = Lsq::new(jf.clone());
+    let model_lsq = Lsq::new(jf);
+    let jf = &model_lsq.a;
 
     // Held-out rows: residuals of the training fit, the model's Jacobian, the columns the held-out
     // points need that the training fit did not free (a session or target held out whole: its
@@ -385,6 +387,7 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let all_e = hstack(families.iter().map(|(_, e, _)| e));
     let projected_all = model_lsq.resid(&all_e);
     let projected: Vec<DMatrix<f64>> = ranges.iter().map(|r| projected_all.columns(r.start, r.len()).into_owned()).collect();
+    drop(projected_all);
     let rw_m = DMatrix::from_column_slice(rw.len(), 1, rw.as_slice());
 
     // Cross-validation on the calibration split's folds (poses as units): per fold, the model and
