@@ -458,6 +458,10 @@ impl CrossValidation {
     }
 }
 
+/// One fold of a cross-validation: none (no point in it), why its fit failed, or its points and
+/// their errors, mm.
+type FoldResult = Option<Result<(Vec<usize>, Vec<f64>), String>>;
+
 /// Cross-validates the model of `problem` (its layout) from `x0`: for each fold, a fit on the
 /// other training points (the data's `outliers` left out) and the errors at the fold's.
 pub fn cross_validate(
@@ -474,7 +478,7 @@ pub fn cross_validate(
     let l = &problem.layout;
     // Each fold on its own (in parallel: a fold's fit depends on nothing but its points, so the
     // result is the same for any thread count), then gathered in the order of the folds.
-    let fold = |f: usize| -> Option<Result<(Vec<usize>, Vec<f64>), String>> {
+    let fold = |f: usize| -> FoldResult {
         let train: Vec<usize> = (0..n).filter(|&i| point_fold[i].is_some_and(|g| g != f)).collect();
         let test: Vec<usize> = (0..n).filter(|&i| point_fold[i] == Some(f)).collect();
         if test.is_empty() {
@@ -509,7 +513,7 @@ pub fn cross_validate(
         let norms = e.iter().map(|e| e.norm()).collect();
         Some(Ok((test, norms)))
     };
-    let results: Vec<Option<Result<(Vec<usize>, Vec<f64>), String>>> = (0..folds).into_par_iter().map(fold).collect();
+    let results: Vec<FoldResult> = (0..folds).into_par_iter().map(fold).collect();
     let mut errors_mm = vec![f64::NAN; n];
     let mut outlier = vec![false; n];
     let mut failed = Vec::new();
