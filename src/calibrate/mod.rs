@@ -518,6 +518,7 @@ fn candidates(
 /// Calibrates the arm of `robot` from `m`: every model cross-validated, the chosen one fitted on
 /// every point, nothing written.
 pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibration, CalibrateError> {
+    use rayon::prelude::*;
     check_options(opts)?;
     let with_payload;
     let robot = match &opts.payload {
@@ -619,17 +620,19 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let with_robot = !layout.robot.is_empty();
-        let cv = match kind {
+        // The two cross-validations and the training fit are independent (run side by side).
+        let cv = || match kind {
             Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
-        let cv_all = match kind {
+        let cv_all = || match kind {
             Some(_) => validation::cross_validate(&problem, &x0, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let free = free_columns(&problem, &train, with_robot);
         let mask = |idx: &[usize]| idx.iter().map(|&i| outliers[i]).collect::<Vec<bool>>();
-        let fit = fit_without(&problem, &x0, &free, &train, &mask(&train), &sopts);
+        let train_fit = || fit_without(&problem, &x0, &free, &train, &mask(&train), &sopts);
+        let (cv, (cv_all, fit)) = rayon::join(cv, || rayon::join(cv_all, train_fit));
         let spec = HeldOutSpec {
             test: &held,
             register: &register,
@@ -661,9 +664,12 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         (r, all_fit)
     };
     let empty = ParamSet::new(vec![]).expect("no parameter");
-    let before = evaluate(None, registration::with_robot(&cands[0].1, empty), vec![], 0).0;
-    let (mut models, fits): (Vec<ModelResult>, Vec<RobustFit>) =
-        cands.into_iter().enumerate().map(|(k, (kind, layout, fixed))| evaluate(Some(kind), layout, fixed, k as u64 + 1)).unzip();
+    // The models are independent of each other (evaluated side by side, gathered in order).
+    let before_layout = registration::with_robot(&cands[0].1, empty);
+    let (before, (mut models, fits)): (_, (Vec<ModelResult>, Vec<RobustFit>)) = rayon::join(
+        || evaluate(None, before_layout, vec![], 0).0,
+        || cands.into_par_iter().enumerate().map(|(k, (kind, layout, fixed))| evaluate(Some(kind), layout, fixed, k as u64 + 1)).unzip(),
+    );
     let chosen = validation::select(&models.iter().map(|r| Some(&r.cv)).collect::<Vec<_>>()).unwrap_or(models.len() - 1);
     for k in 0..models.len() {
         models[k].against_chosen = validation::paired_difference(&models[k].cv, &models[chosen].cv);

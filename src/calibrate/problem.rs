@@ -242,39 +242,50 @@ impl Problem<'_> {
                 }
             }
             // The group's rows in chunks: each chunk's dense block (rows x free columns of the
-            // point's set) multiplied out, its products scattered into N and b.
+            // point's set, then the residuals as one more column) multiplied out, its products
+            // scattered into N and b.
             const CHUNK: usize = 1024;
-            let mut local_n = DMatrix::zeros(used, used);
-            let mut local_b = DVector::zeros(used);
+            let mut local = vec![0.0; (used + 1) * (used + 1)];
+            let mut block = vec![0.0; (3 * CHUNK.min(members.len())).div_ceil(8) * 8 * (used + 1)];
+            let (mut products, mut acc) = (Vec::new(), Vec::new());
             for start in (0..members.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(members.len());
                 let rows = 3 * (end - start);
-                let mut jl = DMatrix::zeros(rows, used);
-                let mut rl = DVector::zeros(rows);
-                // Column-major: column u of the block is contiguous.
-                let block = jl.as_mut_slice();
+                // In groups of eight rows ([`gram`]'s layout); the residuals are column `used`.
+                let block = &mut block[..rows.div_ceil(8) * 8 * (used + 1)];
                 for k in start..end {
                     let o = &self.obs[members[k].1];
                     let e = (o.measured_mm - tcps[k]) / o.sigma;
                     for a in 0..3 {
                         let row = 3 * (k - start) + a;
-                        rl[row] = e[a];
+                        let (group, lane) = (row / 8, row % 8);
+                        let at = group * (used + 1) * 8 + lane;
+                        block[at + used * 8] = e[a];
                         let jrow = &jt[(3 * k + a) * p..(3 * k + a + 1) * p];
-                        for (u, &c) in slot[..used].iter().enumerate() {
-                            block[u * rows + row] = jrow[c] / o.sigma;
+                        if o.sigma == 1.0 {
+                            for (u, &c) in slot[..used].iter().enumerate() {
+                                block[at + u * 8] = jrow[c];
+                            }
+                        } else {
+                            for (u, &c) in slot[..used].iter().enumerate() {
+                                block[at + u * 8] = jrow[c] / o.sigma;
+                            }
                         }
                     }
                 }
-                if !(rl.iter().all(|v| v.is_finite()) && jl.iter().all(|v| v.is_finite())) {
+                if !block.iter().all(|v| v.is_finite()) {
                     return None;
                 }
-                local_n += jl.tr_mul(&jl);
-                local_b += jl.tr_mul(&rl);
+                gram(block, rows, used + 1, &mut acc, &mut products);
+                for (l, v) in local.iter_mut().zip(&products) {
+                    *l += v;
+                }
             }
+            let (local_n, local_b) = (|u: usize, w: usize| local[u * (used + 1) + w], |u: usize| local[u * (used + 1) + used]);
             for u in 0..used {
-                b[targets[u]] += local_b[u];
+                b[targets[u]] += local_b(u);
                 for w in 0..used {
-                    n[(targets[u], targets[w])] += local_n[(u, w)];
+                    n[(targets[u], targets[w])] += local_n(u, w);
                 }
             }
         }
@@ -284,6 +295,53 @@ impl Problem<'_> {
     /// Weighted sum of squared residuals of `idx` at `x`; infinite when `x` makes no model.
     pub fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
         self.errors(x, idx).map_or(f64::INFINITY, |e| e.iter().zip(idx).map(|(e, &i)| (e / self.obs[i].sigma).norm_squared()).sum())
+    }
+}
+
+/// The Gram matrix `G = B^T B` of the block `b` (`rows` x `cols`) into `out` (row-major, `cols` x
+/// `cols`), each entry summed as nalgebra's `tr_mul` sums it (eight running sums over the rows in
+/// steps of eight, combined pairwise, then the rows left over), so that `G` is bit for bit `B^T B`
+/// of nalgebra; each pair of columns is summed once (the products are symmetric). The block is
+/// stored in groups of eight rows: `b[(g * cols + c) * 8 + l]` is row `8 g + l` of column `c`
+/// (a group's rows of every column sit together, in the cache), zero past the last row. `acc`:
+/// scratch.
+fn gram(b: &[f64], rows: usize, cols: usize, acc: &mut Vec<[f64; 8]>, out: &mut Vec<f64>) {
+    let pairs = cols * (cols + 1) / 2;
+    acc.clear();
+    acc.resize(pairs, [0.0; 8]);
+    let full = rows / 8;
+    for group in b.chunks_exact(8 * cols).take(full) {
+        let mut rest = &mut acc[..];
+        for u in 0..cols {
+            let (mine, after) = rest.split_at_mut(cols - u);
+            rest = after;
+            let x: &[f64; 8] = group[8 * u..8 * u + 8].try_into().expect("eight rows");
+            for (a, y) in mine.iter_mut().zip(group[8 * u..].chunks_exact(8)) {
+                for l in 0..8 {
+                    a[l] += x[l] * y[l];
+                }
+            }
+        }
+    }
+    out.clear();
+    out.resize(cols * cols, 0.0);
+    let mut k = 0;
+    for u in 0..cols {
+        for w in u..cols {
+            let a = &acc[k];
+            let mut res = 0.0;
+            res += a[0] + a[4];
+            res += a[1] + a[5];
+            res += a[2] + a[6];
+            res += a[3] + a[7];
+            for r in 8 * full..rows {
+                let at = full * cols * 8 + r - 8 * full;
+                res += b[at + u * 8] * b[at + w * 8];
+            }
+            out[u * cols + w] = res;
+            out[w * cols + u] = res;
+            k += 1;
+        }
     }
 }
 
@@ -421,6 +479,31 @@ mod tests {
         assert!((&n - &n_dense).amax() <= 1e-12 * scale, "N differs by {}", (&n - &n_dense).amax());
         assert!((&b - &b_dense).amax() <= 1e-12 * scale, "b differs by {}", (&b - &b_dense).amax());
         assert_eq!(n, n.transpose(), "symmetric");
+    }
+
+    /// The Gram matrix of a block equals nalgebra's `B^T B` bit for bit (the normal equations of
+    /// every fit are summed by it): blocks of 1 to 600 rows (rows left over past a multiple of eight
+    /// among them), 1 to 9 columns, entries of mixed sign and magnitude.
+    #[test]
+    fn gram_equals_nalgebra_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let (mut out, mut acc) = (Vec::new(), Vec::new());
+        for (rows, cols) in [(1, 1), (7, 3), (8, 2), (13, 9), (256, 4), (263, 5), (600, 9)] {
+            let b = DMatrix::<f64>::from_fn(rows, cols, |_, _| rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-6..6)));
+            let mut grouped = vec![0.0; rows.div_ceil(8) * 8 * cols];
+            for r in 0..rows {
+                for c in 0..cols {
+                    grouped[(r / 8 * cols + c) * 8 + r % 8] = b[(r, c)];
+                }
+            }
+            gram(&grouped, rows, cols, &mut acc, &mut out);
+            let want = b.tr_mul(&b);
+            for u in 0..cols {
+                for w in 0..cols {
+                    assert_eq!(out[u * cols + w].to_bits(), want[(u, w)].to_bits(), "{rows} x {cols}: ({u}, {w})");
+                }
+            }
+        }
     }
 
     /// Every column of the calibration Jacobian (robot parameters with compliance, each session's

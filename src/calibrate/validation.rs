@@ -458,6 +458,10 @@ impl CrossValidation {
     }
 }
 
+/// One fold of a cross-validation: none (no point in it), why its fit failed, or its points and
+/// their errors, mm.
+type FoldResult = Option<Result<(Vec<usize>, Vec<f64>), String>>;
+
 /// Cross-validates the model of `problem` (its layout) from `x0`: for each fold, a fit on the
 /// other training points (the data's `outliers` left out) and the errors at the fold's.
 pub fn cross_validate(
@@ -469,30 +473,28 @@ pub fn cross_validate(
     opts: &SolveOptions,
     labels: &super::diagnose::Labels<'_>,
 ) -> CrossValidation {
+    use rayon::prelude::*;
     let n = problem.obs.len();
-    let mut errors_mm = vec![f64::NAN; n];
-    let mut outlier = vec![false; n];
-    let mut failed = Vec::new();
     let l = &problem.layout;
-    for f in 0..folds {
+    // Each fold on its own (in parallel: a fold's fit depends on nothing but its points, so the
+    // result is the same for any thread count), then gathered in the order of the folds.
+    let fold = |f: usize| -> FoldResult {
         let train: Vec<usize> = (0..n).filter(|&i| point_fold[i].is_some_and(|g| g != f)).collect();
         let test: Vec<usize> = (0..n).filter(|&i| point_fold[i] == Some(f)).collect();
         if test.is_empty() {
-            continue;
+            return None;
         }
         let free = free_columns(problem, &train, true);
         let mask: Vec<bool> = train.iter().map(|&i| outliers[i]).collect();
         let fit = fit_without(problem, x0, &free, &train, &mask, opts);
         if !fit.solved.outcome.is_converged() {
             let why = super::diagnose::why(problem, &fit.solved.x, &free, &fit.inliers(), labels);
-            failed.push((f, format!("{}: {why}", fit.solved.outcome.label())));
-            continue;
+            return Some(Err(format!("{}: {why}", fit.solved.outcome.label())));
         }
         if let Some(t) =
             (0..l.targets).find(|&t| test.iter().any(|&i| problem.obs[i].target == t) && !train.iter().any(|&i| problem.obs[i].target == t))
         {
-            failed.push((f, format!("target {} has no point outside the fold", labels.targets[t])));
-            continue;
+            return Some(Err(format!("target {} has no point outside the fold", labels.targets[t])));
         }
         // A session with no point outside the fold (a fold per session) has no base from the fit:
         // it is registered on its own points, as a held-out session is.
@@ -506,12 +508,25 @@ pub fn cross_validate(
             fit.solved.x = fit_without(problem, &fit.solved.x, &register, &test, &mask, opts).solved.x;
         }
         let Some(e) = problem.errors(&fit.solved.x, &test) else {
-            failed.push((f, "not_finite".into()));
-            continue;
+            return Some(Err("not_finite".into()));
         };
-        for (i, e) in test.iter().zip(e) {
-            errors_mm[*i] = e.norm();
-            outlier[*i] = outliers[*i];
+        let norms = e.iter().map(|e| e.norm()).collect();
+        Some(Ok((test, norms)))
+    };
+    let results: Vec<FoldResult> = (0..folds).into_par_iter().map(fold).collect();
+    let mut errors_mm = vec![f64::NAN; n];
+    let mut outlier = vec![false; n];
+    let mut failed = Vec::new();
+    for (f, r) in results.into_iter().enumerate() {
+        match r {
+            None => {}
+            Some(Err(why)) => failed.push((f, why)),
+            Some(Ok((test, norms))) => {
+                for (i, e) in test.iter().zip(norms) {
+                    errors_mm[*i] = e;
+                    outlier[*i] = outliers[*i];
+                }
+            }
         }
     }
     let kept: Vec<f64> = (0..n).filter(|&i| errors_mm[i].is_finite() && !outlier[i]).map(|i| errors_mm[i]).collect();

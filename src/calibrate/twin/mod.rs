@@ -281,16 +281,19 @@ impl Lsq {
     }
 }
 
-/// The largest cosine of the principal angles between the column spaces of `a` and `b`.
-fn principal_cos(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
-    let basis = |m: &DMatrix<f64>| {
-        let svd = m.clone().svd(true, false);
-        let u = svd.u.expect("u asked");
-        let top = svd.singular_values.iter().fold(0.0f64, |x, v| x.max(*v));
-        let keep: Vec<usize> = (0..svd.singular_values.len()).filter(|&k| svd.singular_values[k] > 1e-9 * top).collect();
-        u.select_columns(&keep)
-    };
-    let (ua, ub) = (basis(a), basis(b));
+/// An orthonormal basis of the column space of `m` (its left singular vectors of singular values
+/// above 1e-9 of the largest).
+fn column_basis(m: &DMatrix<f64>) -> DMatrix<f64> {
+    let svd = m.clone().svd(true, false);
+    let u = svd.u.expect("u asked");
+    let top = svd.singular_values.iter().fold(0.0f64, |x, v| x.max(*v));
+    let keep: Vec<usize> = (0..svd.singular_values.len()).filter(|&k| svd.singular_values[k] > 1e-9 * top).collect();
+    u.select_columns(&keep)
+}
+
+/// The largest cosine of the principal angles between two column spaces, given by orthonormal
+/// bases ([`column_basis`]).
+fn principal_cos(ua: &DMatrix<f64>, ub: &DMatrix<f64>) -> f64 {
     if ua.ncols() == 0 || ub.ncols() == 0 {
         return 0.0;
     }
@@ -323,6 +326,7 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let fitted = layout.robot.unpack(nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
     let (rw, jw) = problem.linearise(&x, &train).ok_or_else(|| no_model("the twin's training fit has no model".into()))?;
     let jf = jw.select_columns(&free);
+    drop(jw);
     // The link-angle Jacobian: the fitted robot with the six joint offsets as its only parameters.
     let offsets = ParamSet::new((1..=JOINTS).map(|joint| ParamId::Link { joint, kind: LinkParam::ThetaOffset }).collect())
         .expect("six joint offsets");
@@ -344,7 +348,8 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
             .collect()
     };
     let train_pose = pose_of(&train);
-    let model_lsq = Lsq::new(jf.clone());
+    let model_lsq = Lsq::new(jf);
+    let jf = &model_lsq.a;
 
     // Held-out rows: residuals of the training fit, the model's Jacobian, the columns the held-out
     // points need that the training fit did not free (a session or target held out whole: its
@@ -382,6 +387,7 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let all_e = hstack(families.iter().map(|(_, e, _)| e));
     let projected_all = model_lsq.resid(&all_e);
     let projected: Vec<DMatrix<f64>> = ranges.iter().map(|r| projected_all.columns(r.start, r.len()).into_owned()).collect();
+    drop(projected_all);
     let rw_m = DMatrix::from_column_slice(rw.len(), 1, rw.as_slice());
 
     // Cross-validation on the calibration split's folds (poses as units): per fold, the model and
@@ -608,9 +614,10 @@ fn mean_se(d: &[f64]) -> (f64, f64) {
 
 fn confounded_pairs(families: &[(Family, DMatrix<f64>, Vec<Coefficient>)], projected: &[DMatrix<f64>]) -> Vec<(String, String, f64)> {
     let mut out = Vec::new();
+    let bases: Vec<DMatrix<f64>> = projected.iter().map(column_basis).collect();
     for a in 0..families.len() {
         for b in a + 1..families.len() {
-            let cos = principal_cos(&projected[a], &projected[b]);
+            let cos = principal_cos(&bases[a], &bases[b]);
             if cos > CONFOUNDED_COS {
                 out.push((families[a].0.name(), families[b].0.name(), cos));
             }
