@@ -67,6 +67,12 @@ pub struct LineSession {
     pub start: Joints,
     /// The move from one pose to the next, in the base frame, mm.
     pub step_mm: Vector3<f64>,
+    /// The flange's turn per pose, rad: pose k's flange orientation is the first pose's turned by
+    /// `k` times these angles about the base's x, y and z axes (roll, pitch, yaw: about two axes
+    /// or more, the axis of the turn varies along the line). Zero: a fixed orientation, under
+    /// which the target's position on the flange and the session's translation move the points
+    /// alike; about one axis, the target's component along that axis does.
+    pub turn_rad: Vector3<f64>,
     /// Poses.
     pub poses: usize,
 }
@@ -154,7 +160,9 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
         let origin = first.transform_point(&(*tool).into()).coords;
         let mut seed = line.start;
         for k in 0..line.poses {
-            let at = nalgebra::Isometry3::from_parts((origin + line.step_mm * k as f64).into(), first.rotation);
+            let t = line.turn_rad * k as f64;
+            let turn = nalgebra::UnitQuaternion::from_euler_angles(t.x, t.y, t.z);
+            let at = nalgebra::Isometry3::from_parts((origin + line.step_mm * k as f64).into(), turn * first.rotation);
             // A pose beyond the arm's reach or limits ends the line.
             let Ok(q) = crate::robot::inverse(&placed, &at, &seed) else { break };
             if q.iter().zip(spec.truth.limits()).any(|(v, l)| *v < l.min || *v > l.max) {
@@ -303,6 +311,8 @@ struct RawLine {
     target: String,
     start_deg: [f64; 6],
     step_mm: [f64; 3],
+    #[serde(default)]
+    turn_deg: [f64; 3],
     poses: usize,
 }
 
@@ -408,6 +418,7 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
             .ok_or_else(|| err(&key("target"), format!("{}: not a [[target]] label", s.target)))?;
         finite(&key("start_deg"), &s.start_deg, 1080.0)?;
         finite(&key("step_mm"), &s.step_mm, 1000.0)?;
+        finite(&key("turn_deg"), &s.turn_deg, 30.0)?;
         if !(super::measurements::MIN_POSES_PER_SESSION..=100_000).contains(&s.poses) {
             return Err(err(&key("poses"), format!("{}: within {} to 100000", s.poses, super::measurements::MIN_POSES_PER_SESSION)));
         }
@@ -417,6 +428,7 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
             target,
             start: s.start_deg.map(f64::to_radians),
             step_mm: Vector3::from(s.step_mm),
+            turn_rad: Vector3::from(s.turn_deg.map(f64::to_radians)),
             poses: s.poses,
         });
     }
