@@ -45,6 +45,9 @@ enum Command {
     ImportUrdf(ImportUrdfArgs),
     /// Calibrate a real robot from measured data (docs/calibrate.md): robot file, URDF, YAML and a report.
     Calibrate(CalibrateArgs),
+    /// Write a simulated measurement file for `calsim calibrate` from a simulation file (a robot
+    /// file's [truth] measured in sessions, lines and at targets: docs/calibrate.md).
+    SimulateMeasurements(SimulateMeasurementsArgs),
     /// The poses to measure on a real robot with a laser tracker, and the accuracy they will buy
     /// (docs/plan.md): a calibrate measurement file to fill, a joint list, a tour, plan.md.
     Plan(PlanArgs),
@@ -187,6 +190,16 @@ struct FkArgs {
     /// Output CSV (default: standard output).
     #[arg(long)]
     out: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+struct SimulateMeasurementsArgs {
+    /// The simulation file (TOML: robot, seed, poses_per_session, noise_mm, [[session]],
+    /// [[target]], [[line]]; docs/calibrate.md).
+    spec: PathBuf,
+    /// The directory to write `<spec stem>.csv` in (created; an existing file is not replaced).
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -511,6 +524,7 @@ pub fn main() -> ExitCode {
         Command::Compensate(args) => compensate(args),
         Command::ImportUrdf(args) => import_urdf(args),
         Command::Calibrate(args) => calibrate(args),
+        Command::SimulateMeasurements(args) => simulate_measurements(args),
         Command::Plan(args) => plan(args),
         Command::Fk(args) => fk(args),
         Command::Keys(args) => keys(args),
@@ -699,6 +713,12 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
     for line in &r.lines {
         println!("{line}");
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn simulate_measurements(args: &SimulateMeasurementsArgs) -> Result<ExitCode, String> {
+    let path = crate::calibrate::simulate::write_spec_file(&args.spec, &args.out)?;
+    println!("simulate-measurements: {}", path.display());
     Ok(ExitCode::SUCCESS)
 }
 

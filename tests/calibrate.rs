@@ -490,8 +490,10 @@ fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
             with(HEADER, &|r| {
                 r.iter_mut().for_each(|x| *x = format!("{},{}", x.split(',').take(9).collect::<Vec<_>>().join(","), "400,0,500"))
             }),
-            "line 2: session: session A: its points do not fix its frame",
-            "",
+            // Every point at one place, both targets: the sessions are kept (a point fixes a
+            // translation), and the fit that cannot separate anything names them and why.
+            "could not be fitted",
+            "session A: 10 of its 10 points in the fit, at 1 distinct positions",
         ),
         ("metres_as_mm", metres_as_mm(), "", "mm off them (median; a robot before calibration is millimetres off)"),
         ("empty", String::new(), "no column names", ""),

@@ -92,4 +92,8 @@ for run in "${more[@]}"; do
     echo "regenerate: $name: docs/generated/$name.md"
 done
 
+if [ $# -eq 0 ] || [[ " $* " == *" imported-example "* ]]; then
+    bash scripts/docs/imported_example.sh
+fi
+
 python3 scripts/ci/doc_numbers.py "$calsim" --write

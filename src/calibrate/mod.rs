@@ -411,6 +411,8 @@ struct Setup {
     frames: Vec<Isometry3<f64>>,
     /// Start values of the base and tool blocks.
     frames_x: Vec<f64>,
+    /// Per session, the base columns its points do not fix ([`Layout::still`]).
+    still: Vec<[bool; 6]>,
 }
 
 fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
@@ -423,8 +425,8 @@ fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
         })
         .collect();
     let nominal = &robot.nominal;
-    let (frames, tools) =
-        registration::register(nominal, &raw, m.sessions.len(), m.targets.len(), nominal.data().flange_tcp_mm).map_err(|u| {
+    let (frames, tools, spans) = registration::register(nominal, &raw, m.sessions.len(), m.targets.len(), nominal.data().flange_tcp_mm)
+        .map_err(|u| {
             let (column, label, first) = match u {
                 Unplaced::Session(k) => ("session", &m.sessions[k], m.points.iter().find(|p| m.poses[p.pose].session == k)),
                 Unplaced::Target(t) => ("target", &m.targets[t], m.points.iter().find(|p| p.target == t)),
@@ -451,7 +453,8 @@ fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
     for t in &tools {
         frames_x.extend(t.iter());
     }
-    let s = Setup { obs, frames, frames_x };
+    let still = spans.iter().zip(&frames).map(|(span, f)| span.still(f)).collect();
+    let s = Setup { obs, frames, frames_x, still };
     check_start(robot, m, &s)?;
     Ok(s)
 }
@@ -465,7 +468,12 @@ const MOST_START_MEDIAN_MM: f64 = 50.0;
 /// The nominal robot, registered, within [`MOST_START_MEDIAN_MM`] of the points (the median,
 /// so that outliers do not decide).
 fn check_start(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), CalibrateError> {
-    let layout = Layout { robot: ParamSet::new(vec![]).expect("no parameter"), sessions: m.sessions.len(), targets: m.targets.len() };
+    let layout = Layout {
+        robot: ParamSet::new(vec![]).expect("no parameter"),
+        sessions: m.sessions.len(),
+        targets: m.targets.len(),
+        still: s.still.clone(),
+    };
     let problem = Problem { start: &robot.nominal, layout, obs: &s.obs };
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let errors: Vec<f64> = problem.errors(&s.frames_x, &all).map_or_else(|| vec![f64::NAN], |e| e.iter().map(|v| v.norm()).collect());
@@ -501,7 +509,7 @@ fn candidates(
         if set.is_empty() || out.iter().any(|(k, _, _)| kind.subset(full) == k.subset(full)) {
             continue;
         }
-        let layout = Layout { robot: set, sessions: m.sessions.len(), targets: m.targets.len() };
+        let layout = Layout { robot: set, sessions: m.sessions.len(), targets: m.targets.len(), still: s.still.clone() };
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let (kept, fixed) = registration::prune(&problem, &x0, &all, (&m.sessions, &m.targets)).map_err(|e| MeasurementError {

@@ -31,9 +31,19 @@ pub struct Layout {
     pub sessions: usize,
     /// Targets (a tool each).
     pub targets: usize,
+    /// Per session, the columns of its base block its points do not fix (a line or a point of
+    /// measured positions, `registration::Span::still`): kept at the registration, in no fit.
+    /// Empty: every column of every base is free.
+    pub still: Vec<[bool; 6]>,
 }
 
 impl Layout {
+    /// The columns of session `s`'s base block a fit frees (those not [`Self::still`]).
+    pub fn base_columns(&self, s: usize) -> impl Iterator<Item = usize> + '_ {
+        let b = self.base(s);
+        (0..6).filter(move |&k| !self.still.get(s).is_some_and(|st| st[k])).map(move |k| b + k)
+    }
+
     /// Number of unknowns.
     pub fn len(&self) -> usize {
         self.robot.len() + 6 * self.sessions + 3 * self.targets
@@ -454,7 +464,7 @@ mod tests {
         let model = crate::robot::builtin::trical_2018_table7();
         let set = ParamSet::trical_31();
         let robot = ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).unwrap();
-        let layout = Layout { robot, sessions: 3, targets: 2 };
+        let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(36);
         let obs: Vec<Obs> = (0..30)
             .map(|k| Obs {
@@ -515,7 +525,7 @@ mod tests {
         let model = crate::robot::builtin::trical_2018_table7();
         let set = ParamSet::trical_31();
         let robot = ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).unwrap();
-        let layout = Layout { robot, sessions: 3, targets: 2 };
+        let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(35);
         let obs: Vec<Obs> = (0..24)
             .map(|k| Obs {

@@ -35,23 +35,102 @@ pub struct Raw {
 /// A session or target the registration cannot place.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Unplaced {
-    /// The session's points do not fix a rigid transform (fewer than 3 distinct, or collinear).
+    /// The session's points do not fix a rigid transform (fewer than 3 points).
     Session(usize),
     /// The target has no point.
     Target(usize),
 }
 
-/// Each session's `session_from_base` and each target's position in MDH frame 6 (mm).
-pub type Frames = (Vec<Isometry3<f64>>, Vec<Vector3<f64>>);
+/// Each session's `session_from_base`, each target's position in MDH frame 6 (mm) and what each
+/// session's points fix of its frame.
+pub type Frames = (Vec<Isometry3<f64>>, Vec<Vector3<f64>>, Vec<Span>);
+
+/// A direction counts as spanned by a session's points when their RMS spread along it is at least
+/// this share of the arm's length (`robot::plausible::arm_length_mm`): 1 %, about 5 to 20 mm on
+/// arms of 0.5 to 2 m, far above a tracker's noise and a robot's errors before calibration (a
+/// line measured on an uncalibrated arm wanders by those) and far below any volume or plane a
+/// calibration measures.
+pub const SPAN_SHARE: f64 = 0.01;
+
+/// What a session's measured points fix of its frame (the rotation of the measuring frame from
+/// the robot's base): the points' spread, by [`SPAN_SHARE`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Span {
+    /// Spread in two directions or more: the whole frame.
+    Full,
+    /// On a line (its unit direction in the session's measuring frame): no rotation about it
+    /// (turning the frame about the line moves none of its points).
+    Line(Vector3<f64>),
+    /// At one position: no rotation at all (turning the frame about the position moves nothing).
+    Point,
+}
+
+impl Span {
+    /// The columns of a session's base block (eq. 7's order: `x, y, z, alpha` about z, `beta`
+    /// about y, `gamma` about x) its points do not fix, kept at the registration: none for
+    /// [`Span::Full`]; for a line, the rotation about the base axis nearest the line's direction
+    /// (with it fixed, no turn about the line is left, and no other turn is lost); for a point,
+    /// the three rotations. `session_from_base` is the session's registration.
+    pub fn still(self, session_from_base: &Isometry3<f64>) -> [bool; 6] {
+        match self {
+            Span::Full => [false; 6],
+            Span::Point => [false, false, false, true, true, true],
+            Span::Line(d) => {
+                let d = session_from_base.rotation.inverse_transform_vector(&d);
+                // Base axis x, y, z: the rotations gamma (column 5), beta (4), alpha (3).
+                let axis = (0..3).max_by(|&a, &b| d[a].abs().total_cmp(&d[b].abs())).unwrap_or(2);
+                let mut still = [false; 6];
+                still[5 - axis] = true;
+                still
+            }
+        }
+    }
+
+    /// What the points fix, in words (for reports and errors).
+    pub fn describe(self) -> &'static str {
+        match self {
+            Span::Full => "its points fix its frame",
+            Span::Line(_) => "its points lie on a line: the rotation about the line is not fixed",
+            Span::Point => "its points are at one position: no rotation is fixed",
+        }
+    }
+}
+
+/// What the points `b` (measured, in one session's frame) fix of a frame: their RMS spreads along
+/// their principal directions against `least_mm`.
+pub fn span(b: &[Vector3<f64>], least_mm: f64) -> Span {
+    if b.is_empty() {
+        return Span::Point;
+    }
+    let n = b.len() as f64;
+    let c = b.iter().sum::<Vector3<f64>>() / n;
+    let scatter: Matrix3<f64> = b.iter().map(|p| (p - c) * (p - c).transpose()).sum::<Matrix3<f64>>() / n;
+    let eig = scatter.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let spread = |k: usize| eig.eigenvalues[order[k]].max(0.0).sqrt();
+    if spread(0) < least_mm {
+        Span::Point
+    } else if spread(1) < least_mm {
+        Span::Line(eig.eigenvectors.column(order[0]).into_owned().normalize())
+    } else {
+        Span::Full
+    }
+}
 
 /// The start values of the frames: `session_from_base` per session (the measuring frame from the
 /// robot's base) and each target's position in MDH frame 6 (mm), by alternating a rigid
-/// registration of every session (Kabsch, SVD of the cross-covariance) and the tools' linear
-/// least squares, from `tool0` for every target, on the model `nominal` (its base ignored).
+/// registration of every session (Kabsch, SVD of the cross-covariance; [`place`] for a session
+/// whose points fix no whole frame) and the tools' linear least squares, from `tool0` for every
+/// target, on the model `nominal` (its base ignored); with each session's [`Span`].
 pub fn register(nominal: &RobotModel, points: &[Raw], sessions: usize, targets: usize, tool0: Vector3<f64>) -> Result<Frames, Unplaced> {
     let at_origin = nominal.edited(|d| d.world_from_base = Default::default()).expect("the nominal model with its base at the origin");
     let mut st = KinState::default();
     let flanges: Vec<Isometry3<f64>> = points.iter().map(|p| world_from_flange(&at_origin, &mut st, &p.q)).collect();
+    let least_mm = SPAN_SHARE * crate::robot::plausible::arm_length_mm(nominal);
+    let spans: Vec<Span> = (0..sessions)
+        .map(|s| span(&points.iter().filter(|p| p.session == s).map(|p| p.measured_mm).collect::<Vec<_>>(), least_mm))
+        .collect();
     let mut tools = vec![tool0; targets];
     let mut frames = vec![Isometry3::identity(); sessions];
     for _ in 0..MOST_ALTERNATIONS {
@@ -62,7 +141,7 @@ pub fn register(nominal: &RobotModel, points: &[Raw], sessions: usize, targets: 
                 .filter(|(p, _)| p.session == s)
                 .map(|(p, f)| ((f * nalgebra::Point3::from(tools[p.target])).coords, p.measured_mm))
                 .collect();
-            *frame = kabsch(&pairs).ok_or(Unplaced::Session(s))?;
+            *frame = place(&pairs, spans[s]).ok_or(Unplaced::Session(s))?;
         }
         let mut moved: f64 = 0.0;
         for (t, tool) in tools.iter_mut().enumerate() {
@@ -86,7 +165,40 @@ pub fn register(nominal: &RobotModel, points: &[Raw], sessions: usize, targets: 
             break;
         }
     }
-    Ok((frames, tools))
+    Ok((frames, tools, spans))
+}
+
+/// The rigid transform `T` minimising `sum |T a - b|^2` over the pairs `(a, b)` as far as the
+/// points `b` fix it (`span`): Kabsch for a whole frame; for a line, the smallest rotation that
+/// turns the principal direction of the `a` onto that of the `b`, then the translation; for a
+/// point, no rotation, the translation of the centroids. `None` for no pair, or a Kabsch of
+/// fewer than 3 or collinear `a`.
+pub fn place(pairs: &[(Vector3<f64>, Vector3<f64>)], span: Span) -> Option<Isometry3<f64>> {
+    if pairs.is_empty() {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let ca = pairs.iter().map(|p| p.0).sum::<Vector3<f64>>() / n;
+    let cb = pairs.iter().map(|p| p.1).sum::<Vector3<f64>>() / n;
+    let rotation = match span {
+        Span::Full => return kabsch(pairs),
+        Span::Point => UnitQuaternion::identity(),
+        Span::Line(db) => {
+            let scatter: Matrix3<f64> = pairs.iter().map(|(a, _)| (a - ca) * (a - ca).transpose()).sum();
+            let eig = scatter.symmetric_eigen();
+            let k = (0..3).max_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b])).unwrap_or(0);
+            let da = eig.eigenvectors.column(k).into_owned();
+            // The sign of the measured direction that goes with the predicted one.
+            let along: f64 = pairs.iter().map(|(a, b)| (a - ca).dot(&da) * (b - cb).dot(&db)).sum();
+            let db = if along < 0.0 { -db } else { db };
+            UnitQuaternion::rotation_between(&da, &db).unwrap_or_else(|| {
+                // Opposite directions: half a turn about any axis across them.
+                let across = da.cross(&Vector3::x()).try_normalize(1e-6).unwrap_or_else(|| da.cross(&Vector3::y()).normalize());
+                UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(across), std::f64::consts::PI)
+            })
+        }
+    };
+    Some(Isometry3::from_parts(Translation3::from(cb - rotation * ca), rotation))
 }
 
 /// The rigid transform `T` minimising `sum |T a - b|^2` over the pairs `(a, b)` (Kabsch); `None`
@@ -147,7 +259,10 @@ pub fn prune(
     let Some((_, j)) = problem.linearise(x, idx) else {
         return Err(FramesUnidentifiable { names: vec!["(the start model gives no finite prediction)".into()] });
     };
-    let mut kept: Vec<usize> = (0..layout.len()).collect();
+    let still: Vec<usize> = (0..layout.sessions)
+        .flat_map(|s| (layout.base(s)..layout.base(s) + 6).filter(move |c| !layout.base_columns(s).any(|f| f == *c)))
+        .collect();
+    let mut kept: Vec<usize> = (0..layout.len()).filter(|c| !still.contains(c)).collect();
     let mut fixed = Vec::new();
     loop {
         let mut js = j.select_columns(&kept);
@@ -179,4 +294,42 @@ pub fn prune(
 /// The layout with the robot set `robot` (same sessions and targets).
 pub fn with_robot(layout: &Layout, robot: crate::robot::ParamSet) -> Layout {
     Layout { robot, ..layout.clone() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame and points measured in it: `pairs` of (position in the base frame, measured).
+    fn measured(frame: &Isometry3<f64>, base: &[Vector3<f64>]) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+        base.iter().map(|a| (*a, (frame * nalgebra::Point3::from(*a)).coords)).collect()
+    }
+
+    /// Spread in a plane fixes the frame; along a line, the line's direction; within 1 mm, a point.
+    /// Placed by their span, the points of a line and of a point are met exactly (the rotation
+    /// they do not fix is the smallest turn, or none), and the line's direction is the frame's.
+    #[test]
+    fn a_session_is_placed_as_far_as_its_points_fix_its_frame() {
+        let frame = Isometry3::from_parts(Translation3::new(1500.0, -200.0, 300.0), UnitQuaternion::from_euler_angles(0.1, -0.2, 2.0));
+        let plane: Vec<Vector3<f64>> = (0..12).map(|k| Vector3::new(300.0 + 20.0 * (k % 4) as f64, 50.0 * (k / 4) as f64, 400.0)).collect();
+        let line: Vec<Vector3<f64>> = (0..12).map(|k| Vector3::new(300.0, 10.0 * k as f64, 400.0)).collect();
+        let point: Vec<Vector3<f64>> = vec![Vector3::new(300.0, 20.0, 400.0); 6];
+        let spans: Vec<Span> =
+            [&plane, &line, &point].iter().map(|b| span(&measured(&frame, b).iter().map(|p| p.1).collect::<Vec<_>>(), 1.0)).collect();
+        assert_eq!(spans[0], Span::Full);
+        let Span::Line(d) = spans[1] else { panic!("{:?}", spans[1]) };
+        assert!((d.dot(&(frame.rotation * Vector3::y())).abs() - 1.0).abs() < 1e-12, "the line's direction: {d}");
+        assert_eq!(spans[2], Span::Point);
+        for (b, s) in [(&plane, spans[0]), (&line, spans[1]), (&point, spans[2])] {
+            let pairs = measured(&frame, b);
+            let t = place(&pairs, s).unwrap();
+            let worst = pairs.iter().map(|(a, m)| ((t * nalgebra::Point3::from(*a)).coords - m).norm()).fold(0.0, f64::max);
+            assert!(worst < 1e-9, "{s:?}: {worst} mm");
+        }
+        assert!(place(&measured(&frame, &point), Span::Point).unwrap().rotation.angle() == 0.0, "a point turns nothing");
+        // The line's base keeps the rotation about y (beta, column 4); a point all three.
+        assert_eq!(spans[1].still(&frame), [false, false, false, false, true, false]);
+        assert_eq!(spans[2].still(&frame), [false, false, false, true, true, true]);
+        assert_eq!(spans[0].still(&frame), [false; 6]);
+    }
 }

@@ -230,8 +230,15 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     if !fit.solved.outcome.is_converged() {
         return Err(no_model(fit.solved.outcome.label()));
     }
-    // `free` holds every column (every session and target has points): cov is in layout order.
-    let cov = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix"))?;
+    // `free` holds every column (every session and target has points) but the bases' columns kept
+    // at their registration (`Layout::still`): cov in layout order, none for those.
+    let cov_free = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix"))?;
+    let mut cov = DMatrix::zeros(layout.len(), layout.len());
+    for (a, &ca) in free.iter().enumerate() {
+        for (b, &cb) in free.iter().enumerate() {
+            cov[(ca, cb)] = cov_free[(a, b)];
+        }
+    }
     let x = &fit.solved.x;
     let pr = layout.robot.len();
     let model = layout.robot.unpack(&robot.nominal, &x[..pr]).map_err(|e| no_model(&e.to_string()))?;

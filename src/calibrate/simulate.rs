@@ -32,6 +32,11 @@ pub struct SimulationSpec {
     pub sessions: Vec<(String, XyzZyx)>,
     /// Targets: label and position in MDH frame 6, mm.
     pub targets: Vec<(String, Vector3<f64>)>,
+    /// Sessions measured along a straight line, after `sessions` (default: none).
+    pub lines: Vec<LineSession>,
+    /// Targets moved on the flange in a session (a probe re-mounted): session label and the move
+    /// in MDH frame 6, mm (default: none).
+    pub moved: Vec<(String, Vector3<f64>)>,
     /// Poses per session.
     pub poses_per_session: usize,
     /// Fraction of each joint range kept clear at both ends.
@@ -44,6 +49,32 @@ pub struct SimulationSpec {
     pub seed: u64,
     /// Comment lines of the header (without `#`), after `# simulated = true`.
     pub comments: Vec<String>,
+}
+
+/// A session whose one target is carried along a straight line at a fixed flange orientation
+/// (a linear path, say): its poses from the inverse kinematics of the true robot, so its measured
+/// positions lie on a line up to the noise and the effects outside the model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineSession {
+    /// Session label.
+    pub label: String,
+    /// `session_from_base` (eq. 7, mm and rad).
+    pub frame: XyzZyx,
+    /// The target carried (an index into `targets`).
+    pub target: usize,
+    /// The model's joint angles of the first pose, rad: the line starts at its target's position
+    /// and keeps its flange orientation.
+    pub start: Joints,
+    /// The move from one pose to the next, in the base frame, mm.
+    pub step_mm: Vector3<f64>,
+    /// The flange's turn per pose, rad: pose k's flange orientation is the first pose's turned by
+    /// `k` times these angles about the base's x, y and z axes (roll, pitch, yaw: about two axes
+    /// or more, the axis of the turn varies along the line). Zero: a fixed orientation, under
+    /// which the target's position on the flange and the session's translation move the points
+    /// alike; about one axis, the target's component along that axis does.
+    pub turn_rad: Vector3<f64>,
+    /// Poses.
+    pub poses: usize,
 }
 
 /// One simulated row.
@@ -92,10 +123,11 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
             from = q;
             // The base's drift over the session, in the session's frame.
             let shifted = drift.iter().any(|&d| d != 0.0).then(|| frame.isometry().rotation * (Vector3::from(drift) * k as f64));
+            let moved = spec.moved.iter().find(|(l, _)| l == session).map_or_else(Vector3::zeros, |(_, v)| *v);
             for (target, tool) in &spec.targets {
                 let model = spec.truth.edited(|d| {
                     d.world_from_base = *frame;
-                    d.flange_tcp_mm = *tool;
+                    d.flange_tcp_mm = tool + moved;
                 });
                 let mut p = forward(&model.expect("the truth with a session's frame and a target"), &mut st, &links);
                 if let Some(d) = shifted {
@@ -110,6 +142,45 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
                     measured_mm: p + e,
                 });
             }
+        }
+    }
+    let mut pose = spec.sessions.len() * per_session;
+    for line in &spec.lines {
+        let (target, tool) = &spec.targets[line.target];
+        let placed = spec.truth.edited(|d| {
+            d.world_from_base = XyzZyx::default();
+            d.flange_tcp_mm = *tool;
+        });
+        let in_session = spec.truth.edited(|d| {
+            d.world_from_base = line.frame;
+            d.flange_tcp_mm = *tool;
+        });
+        let (Ok(placed), Ok(in_session)) = (placed, in_session) else { continue };
+        let first = crate::robot::world_from_flange(&placed, &mut st, &line.start);
+        let origin = first.transform_point(&(*tool).into()).coords;
+        let mut seed = line.start;
+        for k in 0..line.poses {
+            let t = line.turn_rad * k as f64;
+            let turn = nalgebra::UnitQuaternion::from_euler_angles(t.x, t.y, t.z);
+            let at = nalgebra::Isometry3::from_parts((origin + line.step_mm * k as f64).into(), turn * first.rotation);
+            // A pose beyond the arm's reach or limits ends the line.
+            let Ok(q) = crate::robot::inverse(&placed, &at, &seed) else { break };
+            if q.iter().zip(spec.truth.limits()).any(|(v, l)| *v < l.min || *v > l.max) {
+                break;
+            }
+            seed = q;
+            let links = robot.link_angles(&q, &from, &mut noise_rng);
+            from = q;
+            let p = forward(&in_session, &mut st, &links);
+            let e = Vector3::from_fn(|_, _| noise.sample(&mut noise_rng));
+            pose += 1;
+            out.push(SimulatedRow {
+                pose: format!("p{pose:03}"),
+                session: line.label.clone(),
+                target: target.clone(),
+                q_controller: spec.coupling.as_ref().map_or(q, |c| c.controller_from_model(&q)),
+                measured_mm: p + e,
+            });
         }
     }
     for (row, error) in &spec.outliers {
@@ -167,6 +238,8 @@ pub fn example_spec(irb120: &crate::robot::file::RobotFile) -> Result<Simulation
         ],
         // ASSUMED: two SMR nests on a plate on the flange.
         targets: vec![("SMR1".into(), Vector3::new(30.0, 0.0, 40.0)), ("SMR2".into(), Vector3::new(-25.0, 35.0, 45.0))],
+        lines: vec![],
+        moved: vec![],
         poses_per_session: 40,
         margin: 0.15,
         // ASSUMED: the TriCal scenario's tracker at 2 m (range 8.8 um, transverse 12 um), as 12 um per coordinate.
@@ -182,4 +255,241 @@ pub fn example_spec(irb120: &crate::robot::file::RobotFile) -> Result<Simulation
             "repeatability 0.010 mm, tracker noise 0.012 mm per coordinate, one outlier of 0.88 mm on the 58th row.".into(),
         ],
     })
+}
+
+/// A simulation file (`calsim simulate-measurements`, docs/calibrate.md): TOML, every key checked.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSpec {
+    robot: String,
+    seed: u64,
+    poses_per_session: usize,
+    #[serde(default = "default_margin")]
+    margin: f64,
+    noise_mm: f64,
+    #[serde(default)]
+    repeatability_mm: f64,
+    #[serde(default)]
+    payload_kg: f64,
+    #[serde(default)]
+    payload_com_mm: [f64; 3],
+    #[serde(default)]
+    comments: Vec<String>,
+    #[serde(default)]
+    session: Vec<RawSession>,
+    #[serde(default)]
+    target: Vec<RawTarget>,
+    #[serde(default)]
+    line: Vec<RawLine>,
+}
+
+fn default_margin() -> f64 {
+    0.15
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSession {
+    label: String,
+    frame_mm_deg: [f64; 6],
+    #[serde(default)]
+    tool_moved_mm: [f64; 3],
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTarget {
+    label: String,
+    flange_mm: [f64; 3],
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLine {
+    label: String,
+    frame_mm_deg: [f64; 6],
+    target: String,
+    start_deg: [f64; 6],
+    step_mm: [f64; 3],
+    #[serde(default)]
+    turn_deg: [f64; 3],
+    poses: usize,
+}
+
+/// Largest coordinate of a simulation file, mm (the measurement layout's own cap).
+const MOST_SPEC_MM: f64 = 1e5;
+
+/// A simulation file read: what to simulate and the robot file it measures.
+#[derive(Clone, Debug)]
+pub struct SpecFile {
+    /// The simulation.
+    pub spec: SimulationSpec,
+    /// The robot file (its `[truth]`, with the file's payload, is the robot measured).
+    pub robot: crate::robot::file::RobotFile,
+}
+
+/// Reads the simulation file `path`; an error is one line naming the file, the key and what is
+/// wrong.
+pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
+    let err = |key: &str, message: String| format!("{}: {key}: {message}", path.display());
+    let bytes = crate::io::read_bytes(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let text = String::from_utf8(bytes).map_err(|_| format!("{}: not UTF-8 text", path.display()))?;
+    let raw: RawSpec = toml::from_str(&text).map_err(|e| {
+        let line = e.span().map(|s| text[..s.start.min(text.len())].lines().count().max(1));
+        err(&line.map_or_else(|| "(file)".to_string(), |l| format!("line {l}")), e.message().replace('\n', " "))
+    })?;
+    let finite = |key: &str, v: &[f64], most: f64| -> Result<(), String> {
+        match v.iter().find(|x| !(x.is_finite() && x.abs() <= most)) {
+            Some(x) => Err(err(key, format!("{x}: a finite number within +-{most}"))),
+            None => Ok(()),
+        }
+    };
+    let label = |key: &str, l: &str| -> Result<String, String> {
+        if l.is_empty() || l.chars().count() > 64 || l.chars().any(|c| c.is_control() || c == ',') {
+            return Err(err(key, format!("{l:?}: a label of 1 to 64 printable characters, no comma")));
+        }
+        Ok(l.to_string())
+    };
+    let file = crate::device::scenario::relative_to(path, std::path::Path::new(&raw.robot));
+    let robot = crate::robot::file::RobotFile::load(&file).map_err(|e| err("robot", e.to_string().replace('\n', " ")))?;
+    finite("noise_mm", &[raw.noise_mm], 100.0)?;
+    finite("repeatability_mm", &[raw.repeatability_mm], 100.0)?;
+    if raw.noise_mm < 0.0 || raw.repeatability_mm < 0.0 {
+        return Err(err("noise_mm", "noise and repeatability are at least 0".into()));
+    }
+    if !(raw.margin.is_finite() && (0.0..0.5).contains(&raw.margin)) {
+        return Err(err("margin", format!("{}: a share of each joint range within [0, 0.5)", raw.margin)));
+    }
+    if !(raw.payload_kg.is_finite() && (0.0..=super::MOST_PAYLOAD_KG).contains(&raw.payload_kg)) {
+        return Err(err("payload_kg", format!("{}: within 0 to {} kg", raw.payload_kg, super::MOST_PAYLOAD_KG)));
+    }
+    finite("payload_com_mm", &raw.payload_com_mm, super::MOST_PAYLOAD_COM_MM)?;
+    if raw.comments.iter().any(|c| c.contains('\n') || c.contains('=') || c.chars().count() > 200) {
+        return Err(err("comments", "a comment is one line of at most 200 characters without `=`".into()));
+    }
+    if raw.target.is_empty() {
+        return Err(err("target", "no [[target]] (a label and its flange_mm per target on the flange)".into()));
+    }
+    if raw.session.is_empty() && raw.line.is_empty() {
+        return Err(err("session", "no [[session]] and no [[line]]".into()));
+    }
+    let flange = |v: [f64; 3]| robot.flange.map_or(Vector3::from(v), |r| r * Vector3::from(v));
+    let mut labels: Vec<String> = Vec::new();
+    let mut targets = Vec::new();
+    for (k, t) in raw.target.iter().enumerate() {
+        let l = label(&format!("target[{}].label", k + 1), &t.label)?;
+        finite(&format!("target[{}].flange_mm", k + 1), &t.flange_mm, MOST_SPEC_MM)?;
+        if targets.iter().any(|(o, _)| *o == l) {
+            return Err(err(&format!("target[{}].label", k + 1), format!("{l}: given twice")));
+        }
+        targets.push((l, flange(t.flange_mm)));
+    }
+    let frame = |key: &str, v: [f64; 6]| -> Result<XyzZyx, String> {
+        finite(key, &v[..3], MOST_SPEC_MM)?;
+        finite(key, &v[3..], 360.0)?;
+        Ok(XyzZyx::from_mm_deg(v))
+    };
+    let mut sessions = Vec::new();
+    let mut moved = Vec::new();
+    for (k, s) in raw.session.iter().enumerate() {
+        let key = |f: &str| format!("session[{}].{f}", k + 1);
+        let l = label(&key("label"), &s.label)?;
+        finite(&key("tool_moved_mm"), &s.tool_moved_mm, 1000.0)?;
+        if labels.contains(&l) {
+            return Err(err(&key("label"), format!("{l}: given twice")));
+        }
+        labels.push(l.clone());
+        sessions.push((l.clone(), frame(&key("frame_mm_deg"), s.frame_mm_deg)?));
+        if s.tool_moved_mm != [0.0; 3] {
+            moved.push((l, flange(s.tool_moved_mm)));
+        }
+    }
+    let mut lines = Vec::new();
+    for (k, s) in raw.line.iter().enumerate() {
+        let key = |f: &str| format!("line[{}].{f}", k + 1);
+        let l = label(&key("label"), &s.label)?;
+        if labels.contains(&l) {
+            return Err(err(&key("label"), format!("{l}: given twice (sessions and lines)")));
+        }
+        labels.push(l.clone());
+        let target = targets
+            .iter()
+            .position(|(t, _)| *t == s.target)
+            .ok_or_else(|| err(&key("target"), format!("{}: not a [[target]] label", s.target)))?;
+        finite(&key("start_deg"), &s.start_deg, 1080.0)?;
+        finite(&key("step_mm"), &s.step_mm, 1000.0)?;
+        finite(&key("turn_deg"), &s.turn_deg, 30.0)?;
+        if !(super::measurements::MIN_POSES_PER_SESSION..=100_000).contains(&s.poses) {
+            return Err(err(&key("poses"), format!("{}: within {} to 100000", s.poses, super::measurements::MIN_POSES_PER_SESSION)));
+        }
+        lines.push(LineSession {
+            label: l,
+            frame: frame(&key("frame_mm_deg"), s.frame_mm_deg)?,
+            target,
+            start: s.start_deg.map(f64::to_radians),
+            step_mm: Vector3::from(s.step_mm),
+            turn_rad: Vector3::from(s.turn_deg.map(f64::to_radians)),
+            poses: s.poses,
+        });
+    }
+    let rows =
+        raw.poses_per_session.saturating_mul(sessions.len()).saturating_mul(targets.len()) + lines.iter().map(|l| l.poses).sum::<usize>();
+    if (!sessions.is_empty() && raw.poses_per_session < super::measurements::MIN_POSES_PER_SESSION) || rows > super::measurements::MAX_ROWS
+    {
+        return Err(err(
+            "poses_per_session",
+            format!(
+                "{}: at least {} per session and at most {} rows in all",
+                raw.poses_per_session,
+                super::measurements::MIN_POSES_PER_SESSION,
+                super::measurements::MAX_ROWS
+            ),
+        ));
+    }
+    let truth = robot.truth_on(&robot.nominal).map_err(|e| err("robot", format!("its [truth]: {e}")))?;
+    let com6 = flange(raw.payload_com_mm);
+    let truth = truth
+        .edited(|d| d.payload = crate::robot::Inertial { mass_kg: raw.payload_kg, com_mm: com6 })
+        .map_err(|e| err("payload_kg", e.to_string()))?;
+    let mut comments = vec![format!("joints = {}", if robot.coupling.is_some() { "controller" } else { "model" })];
+    comments.extend(raw.comments.iter().map(|c| format!("SIMULATED: {c}")));
+    let spec = SimulationSpec {
+        truth,
+        unmodelled: crate::robot::UnmodelledSpec::default(),
+        repeatability_mm: raw.repeatability_mm,
+        learned: None,
+        repeats_per_session: 0,
+        coupling: robot.coupling.clone(),
+        sessions,
+        targets,
+        lines,
+        moved,
+        poses_per_session: raw.poses_per_session,
+        margin: raw.margin,
+        noise_mm: raw.noise_mm,
+        outliers: vec![],
+        seed: raw.seed,
+        comments,
+    };
+    Ok(SpecFile { spec, robot })
+}
+
+/// `calsim simulate-measurements`: the measurement file of the simulation file `spec`, written to
+/// `<out>/<spec stem>.csv` (the directory created; an existing file is refused, not replaced).
+/// Returns the file written.
+pub fn write_spec_file(spec: &std::path::Path, out: &std::path::Path) -> Result<std::path::PathBuf, String> {
+    let s = read_spec(spec)?;
+    let stem = crate::io::names::of_file(spec).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: --out: {e}", out.display()))?;
+    let path = out.join(format!("{stem}.csv"));
+    let text = to_csv(&s.spec);
+    let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::AlreadyExists {
+            format!("{}: --out: the file exists (calsim does not replace a file: remove it or choose another --out)", path.display())
+        } else {
+            format!("{}: --out: {e}", path.display())
+        }
+    })?;
+    std::io::Write::write_all(&mut f, text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(path)
 }

@@ -295,7 +295,7 @@ pub fn free_columns(problem: &Problem<'_>, idx: &[usize], robot: bool) -> Vec<us
     let mut free: Vec<usize> = if robot { (0..l.robot.len()).collect() } else { Vec::new() };
     for s in 0..l.sessions {
         if idx.iter().any(|&i| problem.obs[i].session == s) {
-            free.extend(l.base(s)..l.base(s) + 6);
+            free.extend(l.base_columns(s));
         }
     }
     for t in 0..l.targets {
@@ -354,7 +354,7 @@ pub struct HeldOutSpec<'a> {
 pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: &HeldOutSpec<'_>, opts: &SolveOptions) -> HeldOut {
     let l = &problem.layout;
     let mut x = train.solved.x.clone();
-    let mut reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base(s)..l.base(s) + 6).collect();
+    let mut reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base_columns(s)).collect();
     reg_cols.extend(spec.register_tools.iter().flat_map(|&t| l.tool(t)..l.tool(t) + 3));
     if !reg_cols.is_empty() {
         let mask: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
@@ -500,7 +500,7 @@ pub fn cross_validate(
         // it is registered on its own points, as a held-out session is.
         let register: Vec<usize> = (0..l.sessions)
             .filter(|&s| test.iter().any(|&i| problem.obs[i].session == s) && !train.iter().any(|&i| problem.obs[i].session == s))
-            .flat_map(|s| l.base(s)..l.base(s) + 6)
+            .flat_map(|s| l.base_columns(s))
             .collect();
         let mut fit = fit;
         if !register.is_empty() {

@@ -61,7 +61,7 @@ pub fn identifiable(
             obs.push(Obs { q: *q, measured_mm: cell.target(&st, k).0, session: 0, target: k, sigma: 1.0 });
         }
     }
-    let layout = Layout { robot: set.clone(), sessions: 1, targets };
+    let layout = Layout { robot: set.clone(), sessions: 1, targets, still: vec![] };
     let mut frames_x = vec![0.0; 6];
     for t in &plan.targets[..targets] {
         frames_x.extend(t.frame6_mm.iter());

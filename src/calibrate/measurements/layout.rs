@@ -24,8 +24,10 @@ pub(super) enum Column {
     Coordinate(usize, f64),
     /// Per-point uncertainty, and the factor to mm.
     Sigma(f64),
-    /// Quaternion component (w, x, y, z), ignored.
+    /// Quaternion component (w, x, y, z) of an orientation reading.
     Quaternion(usize),
+    /// The orientation reading's uncertainty (a rotation about any axis), and the factor to rad.
+    SigmaAngle(f64),
     /// The pose's part in a fixed split: `train` or `holdout`.
     Split,
 }
@@ -42,17 +44,35 @@ impl Column {
             Column::Sigma(_) => 12,
             Column::Quaternion(k) => 13 + k,
             Column::Split => 17,
+            Column::SigmaAngle(_) => 18,
         }
     }
 }
 
 /// The names a missing slot is asked for by.
 const SLOT_NAMES: [&str; SLOTS] = [
-    "pose", "session", "target", "q1_deg", "q2_deg", "q3_deg", "q4_deg", "q5_deg", "q6_deg", "x_mm", "y_mm", "z_mm", "sigma_mm", "quat_w",
-    "quat_x", "quat_y", "quat_z", "split",
+    "pose",
+    "session",
+    "target",
+    "q1_deg",
+    "q2_deg",
+    "q3_deg",
+    "q4_deg",
+    "q5_deg",
+    "q6_deg",
+    "x_mm",
+    "y_mm",
+    "z_mm",
+    "sigma_mm",
+    "quat_w",
+    "quat_x",
+    "quat_y",
+    "quat_z",
+    "split",
+    "sigma_deg",
 ];
 /// Number of quantities a file's columns can hold.
-const SLOTS: usize = 18;
+const SLOTS: usize = 19;
 /// The split column's value of a pose the fit uses.
 pub const TRAIN: &str = "train";
 /// The split column's value of a held-out pose.
@@ -113,10 +133,13 @@ fn column(name: &str) -> Result<Column, String> {
         return length(&|f| Column::Coordinate(k, f));
     }
     if quantity == "sigma" {
-        return length(&|f| Column::Sigma(f));
+        if let Some(f) = angle_unit(unit) {
+            return Ok(Column::SigmaAngle(f));
+        }
+        return length(&|f| Column::Sigma(f)).map_err(|m| format!("{m}; an orientation's uncertainty: sigma_deg or sigma_rad"));
     }
     Err("unknown column (the layout's columns: pose, session, target, q1_deg..q6_deg, x_mm, y_mm, z_mm; optional sigma_mm, \
-         quat_w, quat_x, quat_y, quat_z and split)"
+         quat_w, quat_x, quat_y, quat_z, sigma_deg and split)"
         .into())
 }
 
@@ -150,6 +173,12 @@ impl Layout {
             let missing = (13..17).find(|&s| slots[s].is_none()).map_or("quat_w", |s| SLOT_NAMES[s]);
             return Err((missing.to_string(), "missing column: the quaternion takes quat_w, quat_x, quat_y and quat_z".into()));
         }
+        if slots[18].is_some() && quaternion == 0 {
+            return Err((
+                names[slots[18].unwrap_or(0)].clone(),
+                "an orientation's uncertainty without the quat_w .. quat_z columns".into(),
+            ));
+        }
         Ok(Self { names, columns, slots })
     }
 
@@ -182,6 +211,10 @@ pub(super) struct Row {
     pub(super) sigma: Option<f64>,
     /// The split column's value: held out (`None`: no such column).
     pub(super) held_out: Option<bool>,
+    /// The orientation reading, normalised (`None`: no quaternion columns).
+    pub(super) orientation: Option<nalgebra::UnitQuaternion<f64>>,
+    /// The orientation's uncertainty, rad (`None`: no such column).
+    pub(super) sigma_rad: Option<f64>,
 }
 
 impl Row {
@@ -196,6 +229,8 @@ impl Row {
             xyz: Vector3::zeros(),
             sigma: None,
             held_out: None,
+            orientation: None,
+            sigma_rad: None,
         };
         let mut quaternion = [0.0; 4];
         for ((field, c), name) in record.iter().zip(columns).zip(names) {
@@ -226,6 +261,13 @@ impl Row {
                     row.sigma = Some(v);
                 }
                 Column::Quaternion(k) => quaternion[k] = number(field).map_err(err)?,
+                Column::SigmaAngle(to_rad) => {
+                    let v = number(field).map_err(err)? * to_rad;
+                    if !(v > 0.0 && v <= std::f64::consts::PI) {
+                        return Err(err(format!("{field}: an orientation's uncertainty must be above 0 and at most 180 deg")));
+                    }
+                    row.sigma_rad = Some(v);
+                }
                 Column::Split => {
                     row.held_out = Some(match field {
                         TRAIN => false,
@@ -241,6 +283,8 @@ impl Row {
                 let at = columns.iter().position(|c| matches!(c, Column::Quaternion(0))).unwrap_or(0);
                 return Err((names[at].clone(), format!("the quaternion's norm is {norm}, not 1")));
             }
+            let [w, x, y, z] = quaternion;
+            row.orientation = Some(nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)));
         }
         Ok(row)
     }

@@ -6,7 +6,8 @@
 //! values and the target's position in the session's frame. Units are in the column names
 //! (`q1_deg` or `q1_rad`, `x_mm`, `x_m` or `x_um`); an optional `sigma_<unit>` column gives each
 //! point's standard uncertainty per coordinate; optional `quat_w,quat_x,quat_y,quat_z` columns
-//! (an instrument's orientation reading) are checked and ignored; an optional `split` column
+//! (an instrument's orientation reading, with an optional `sigma_deg` or `sigma_rad` column of its
+//! uncertainty) are checked and carried on each point (the fit uses positions only); an optional `split` column
 //! (`train` or `holdout`, the same for every row of a pose) fixes the held-out poses. Comment lines before the
 //! column names may carry header keys (`# joints = controller`, `# targets = A, B`, `# frame =
 //! ...`, `# simulated = true`, `# robot = ...`, `# format = calsim-measurements-1`).
@@ -96,6 +97,11 @@ pub struct Point {
     pub measured_mm: Vector3<f64>,
     /// Standard uncertainty per coordinate, mm (`None`: the file gives none; all points alike).
     pub sigma_mm: Option<f64>,
+    /// The orientation reading of a six-degree-of-freedom probe: the probe's frame in the
+    /// session's frame (`None`: the file has no `quat_*` columns).
+    pub orientation: Option<nalgebra::UnitQuaternion<f64>>,
+    /// The orientation's standard uncertainty, rad (`None`: the file gives none).
+    pub sigma_rad: Option<f64>,
 }
 
 /// A checked measurement file.
@@ -241,7 +247,15 @@ impl Measurements {
                 format!("target {} of pose {} (session {}) is measured on line {first} already", row.target, row.pose, row.session);
             return Err(("target".into(), message));
         }
-        self.points.push(Point { line, pose, target, measured_mm: row.xyz, sigma_mm: row.sigma });
+        self.points.push(Point {
+            line,
+            pose,
+            target,
+            measured_mm: row.xyz,
+            sigma_mm: row.sigma,
+            orientation: row.orientation,
+            sigma_rad: row.sigma_rad,
+        });
         Ok(())
     }
 }

@@ -330,7 +330,7 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     // The link-angle Jacobian: the fitted robot with the six joint offsets as its only parameters.
     let offsets = ParamSet::new((1..=JOINTS).map(|joint| ParamId::Link { joint, kind: LinkParam::ThetaOffset }).collect())
         .expect("six joint offsets");
-    let lay6 = Layout { robot: offsets.clone(), sessions: layout.sessions, targets: layout.targets };
+    let lay6 = Layout { robot: offsets.clone(), ..layout.clone() };
     let mut x6: Vec<f64> = offsets.pack(&fitted).iter().copied().collect();
     x6.extend_from_slice(&x[layout.frames()]);
     let p6 = Problem { start: &fitted, layout: lay6, obs: &s.obs };
