@@ -79,6 +79,7 @@ def test_a_run_with_its_recording_shows_it_in_a_notebook_viewer(recorded_run: ca
     from rerun.notebook import Viewer
 
     r = recorded_run
+    assert r.dest is not None and r.recording is not None
     assert r.recording == r.dest / "study.rrd" and r.recording.stat().st_size > 0
     assert rerun.__version__ == calsim._results.RERUN_VERSION
     assert isinstance(r.show_recording(width=400, height=300), Viewer)
