@@ -138,7 +138,7 @@ pub fn run(spec: &BudgetSpec, observer: &dyn Observer) -> Result<BudgetRun, Erro
         warnings: &warnings,
         overrides: &overrides,
     };
-    let dest = budget::results::write(&spec.out, &report).map_err(Error::io(&spec.out))?;
+    let (dest, summary) = budget::results::write(&spec.out, &report).map_err(Error::io(&spec.out))?;
     std::fs::remove_dir_all(&dir).map_err(Error::io(&dir))?;
-    Ok(BudgetRun { dest, units: units.len(), run_s: t0.elapsed().as_secs_f64(), summary: budget::results::summary(&report) })
+    Ok(BudgetRun { dest, units: units.len(), run_s: t0.elapsed().as_secs_f64(), summary })
 }

@@ -128,10 +128,9 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> Result<MergeReport, Error> {
     let plan = sweep::complete(&info, &units)?;
     crate::io::out_dir::prepare(out, &info.name)?;
     let merged = sweep::results::Merged::of(info, units, plan);
-    let dest = sweep::results::write(out, &merged).map_err(Error::io(out))?;
+    let (dest, summary) = sweep::results::write(out, &merged).map_err(Error::io(out))?;
     let (info, units) = (&merged.info, &merged.units);
     let failed = units.iter().filter(|u| u.error.is_some()).count();
-    let summary = sweep::results::summary(&merged);
     if failed == units.len() {
         return Err(Error::input(info.name.clone(), format!("every work unit failed (see {}/summary.md)", dest.display())));
     }

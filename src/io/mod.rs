@@ -14,6 +14,7 @@ pub mod names;
 pub mod out_dir;
 pub mod plot;
 pub mod record;
+pub mod results;
 pub mod table;
 pub mod xml;
 

@@ -15,16 +15,26 @@ pub fn err(e: impl std::fmt::Display) -> std::io::Error {
 /// Writes `columns` as the parquet table `dir/name`; an error names the table (and the column,
 /// for two columns of one name).
 pub fn parquet(dir: &Path, name: &str, columns: Vec<Column>) -> std::io::Result<()> {
+    write_frame(dir, name, frame(name, columns)?)
+}
+
+/// The frame of the table `name` from its columns; an error names the table (and the column, for
+/// two columns of one name, or columns of different lengths).
+pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
     let in_table = |e: &dyn std::fmt::Display| std::io::Error::other(format!("{name}: {e}"));
     let mut seen = std::collections::HashSet::new();
     if let Some(twice) = columns.iter().map(|c| c.name().as_str()).find(|n| !seen.insert(*n)) {
         return Err(in_table(&format!("two columns named `{twice}`")));
     }
-    let mut df = DataFrame::new_infer_height(columns).map_err(|e| in_table(&e))?;
+    DataFrame::new_infer_height(columns).map_err(|e| in_table(&e))
+}
+
+/// Writes `frame` as the parquet table `dir/name`.
+pub fn write_frame(dir: &Path, name: &str, mut frame: DataFrame) -> std::io::Result<()> {
     // Encoded in memory and written in one go, so that a write error is the file system's own
     // (`No space left on device`), naming the table.
     let mut bytes = Vec::new();
-    ParquetWriter::new(&mut bytes).finish(&mut df).map_err(|e| in_table(&e))?;
+    ParquetWriter::new(&mut bytes).finish(&mut frame).map_err(|e| std::io::Error::other(format!("{name}: {e}")))?;
     crate::io::out_dir::write_file(&dir.join(name), bytes)
 }
 

@@ -10,8 +10,7 @@ use polars::prelude::*;
 
 use super::{Config, Line, Source};
 use crate::design::sweep::PointRow;
-use crate::io::out_dir::write_atomically;
-use crate::io::table::{err, parquet, table_hashes};
+use crate::io::results::{Cell, Head, Results, Row, Summary};
 use crate::study::interval::Paired;
 use crate::study::prediction::Prediction;
 
@@ -46,19 +45,40 @@ pub struct BudgetReport<'a> {
     pub overrides: &'a [(String, String)],
 }
 
-/// Writes the budget into `out/<name>`, replacing what was there.
-pub fn write(out: &Path, b: &BudgetReport<'_>) -> std::io::Result<PathBuf> {
-    write_atomically(out, b.name, |dir| write_into(dir, b))
+/// Writes the budget into `out/<name>`, replacing what was there; the directory and the summary
+/// as written.
+pub fn write(out: &Path, b: &BudgetReport<'_>) -> std::io::Result<(PathBuf, String)> {
+    crate::io::results::write(out, results(b)?).map(|w| (w.dest, w.summary))
 }
 
-/// The budget's files in `dir`. Long by design: the tables' columns listed one after the other
-/// (each a line naming its column), then the manifest, figures and summary.
-fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
+/// The budget's results: its tables, the tornado and prediction figures, the summary.
+pub fn results<'a>(b: &'a BudgetReport<'a>) -> std::io::Result<Results<'a>> {
+    let mut r = Results::new(b.name, Head::Run(crate::io::manifest::Provenance::of_run(b.overrides)));
+    tables(b, &mut r)?;
+    r.field("budget", b.name)?.field("realisations", b.realisations)?.field("configurations", b.configs.len())?;
+    r.draw(Box::new(move |dir| {
+        let mut drawn = super::plots::write_tornado(dir, &tornado(b), b.all_mm)?;
+        let spreads = |mode: &str| {
+            b.configs.iter().zip(b.predictions).find(|(c, _)| c.mode == mode).and_then(|(_, p)| p.as_ref()).map(|p| p.parameter_spreads())
+        };
+        if let Some(all) = spreads("all") {
+            let none = spreads("none").unwrap_or_default();
+            drawn.extend(super::plots::write_prediction(dir, &all, &none)?);
+        }
+        Ok(drawn)
+    }));
+    summary(b, &mut r.summary);
+    r.summary.figures("");
+    Ok(r)
+}
+
+/// `budget.parquet`, `shares.parquet` and (where a configuration has a prediction)
+/// `prediction.parquet`. Long by design: the tables' columns listed one after the other.
+fn tables(b: &BudgetReport<'_>, r: &mut Results<'_>) -> std::io::Result<()> {
     let q = |i: usize, m: usize, k: usize| b.rows[i].map_or(f64::NAN, |r| r.after[m][k]);
     let n = b.configs.len();
     let f = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
-    parquet(
-        dir,
+    r.table(
         "budget.parquet",
         vec![
             Column::new("configuration".into(), b.configs.iter().map(|c| c.label.clone()).collect::<Vec<_>>()),
@@ -83,8 +103,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
             f("vs_all_on_p_value", b.against.iter().map(|p| p.map_or(f64::NAN, |p| p.test.p_value)).collect()),
         ],
     )?;
-    parquet(
-        dir,
+    r.table(
         "shares.parquet",
         vec![
             Column::new("source".into(), b.shares.iter().map(|x| b.sources[x.source].label.to_string()).collect::<Vec<_>>()),
@@ -100,8 +119,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
         ],
     )?;
     if let Some(rows) = prediction_rows(b) {
-        parquet(
-            dir,
+        r.table(
             "prediction.parquet",
             vec![
                 Column::new("configuration".into(), rows.iter().map(|r| r.0.clone()).collect::<Vec<_>>()),
@@ -113,31 +131,18 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
             ],
         )?;
     }
-    #[derive(serde::Serialize)]
-    struct Manifest<'a> {
-        budget: &'a str,
-        tables_sha256: std::collections::BTreeMap<String, String>,
-        realisations: u32,
-        configurations: usize,
-        #[serde(flatten)]
-        provenance: crate::io::manifest::Provenance,
-    }
-    let m = Manifest {
-        budget: b.name,
-        tables_sha256: table_hashes(dir)?,
-        realisations: b.realisations,
-        configurations: n,
-        provenance: crate::io::manifest::Provenance::of_run(b.overrides),
-    };
-    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&m).map_err(err)?)?;
-    // The tornado in the order of the shares table, every bar and dot a change from every source
-    // on read per world: at the all-on p95 plus the median of the paired differences, with their
-    // interval (the medians over worlds of two configurations' p95 differ by more than the
-    // paired change where the worlds spread).
+    Ok(())
+}
+
+/// The tornado's lines in the order of the shares table, every bar and dot a change from every
+/// source on read per world: at the all-on p95 plus the median of the paired differences, with
+/// their interval (the medians over worlds of two configurations' p95 differ by more than the
+/// paired change where the worlds spread).
+fn tornado(b: &BudgetReport<'_>) -> Vec<super::plots::TornadoLine> {
     let order: Vec<usize> = b.shares.iter().map(|s| s.source).chain(b.lines.iter().map(|l| l.source)).collect();
     let mut lines: Vec<&super::Line> = b.lines.iter().collect();
     lines.sort_by_key(|l| order.iter().position(|&s| s == l.source).unwrap_or(usize::MAX));
-    let tornado: Vec<super::plots::TornadoLine> = lines
+    lines
         .iter()
         .map(|l| {
             let change = |mode: &str, factor: Option<f64>, fallback: f64| {
@@ -169,21 +174,7 @@ fn write_into(dir: &Path, b: &BudgetReport<'_>) -> std::io::Result<()> {
                 scaled_interval_mm: scaled.iter().map(|x| x.1).collect(),
             }
         })
-        .collect();
-    let mut drawn = super::plots::write_tornado(dir, &tornado, b.all_mm).map_err(std::io::Error::other)?;
-    let spreads = |mode: &str| {
-        b.configs.iter().zip(b.predictions).find(|(c, _)| c.mode == mode).and_then(|(_, p)| p.as_ref()).map(|p| p.parameter_spreads())
-    };
-    if let Some(all) = spreads("all") {
-        let none = spreads("none").unwrap_or_default();
-        drawn.extend(super::plots::write_prediction(dir, &all, &none).map_err(std::io::Error::other)?);
-    }
-    let mut text = summary(b);
-    for w in drawn {
-        let _ = writeln!(text, "\n![{}]({}.png)\n\n{} ([SVG]({}.svg))", w.caption, w.stem, w.caption, w.stem);
-    }
-    crate::io::out_dir::write_file(&dir.join("summary.md"), text)?;
-    Ok(())
+        .collect()
 }
 
 fn f3(x: f64) -> String {
@@ -306,11 +297,9 @@ fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
 /// more than 0.01 mm), the prediction misses error that is not in the parameters.
 const VALIDATION_MISSED: f64 = 1.25;
 
-/// The budget table, sorted by share, and every configuration.
-///
-/// Long by design: the summary top to bottom (the definitions, the warnings, the budget table with
-/// its intervals, the prediction section, every configuration).
-pub fn summary(b: &BudgetReport<'_>) -> String {
+/// The budget table, sorted by share, and every configuration: the shares' and configurations'
+/// figures read from `shares.parquet` and `budget.parquet`.
+pub fn summary<'a>(b: &'a BudgetReport<'a>, parts: &mut Summary<'a>) {
     let mut s = String::new();
     let _ = writeln!(s, "# {}: uncertainty budget over {} realisations\n", b.name, b.realisations);
     let _ = writeln!(
@@ -333,12 +322,95 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
     for w in b.warnings {
         let _ = writeln!(s, "**Warning:** {w}.\n");
     }
-    let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
-    let _ = write!(s, "| source | value | share ({conf:.0} % interval) | effect alone, mm | resolved | ranked above next |");
-    for f in &factors {
-        let _ = write!(s, " at x{f}, mm |");
+    parts.text(s);
+    shares_table(b, parts);
+    let mut s = String::new();
+    detail(b, &mut s);
+    prediction_section(b, &mut s);
+    s.push_str("\n## Every configuration\n\n");
+    parts.text(s);
+    parts.table(
+        "budget.parquet",
+        Summary::all_rows(),
+        vec![
+            cell("configuration", |r| r.str("configuration")),
+            cell("realisations", |r| r.u64("realisations").to_string()),
+            cell("after median, mm (P10-P90)", |r| after(r, "median")),
+            cell("after p95, mm (P10-P90)", |r| if r.u64("realisations") == 0 { "-".to_string() } else { after(r, "p95") }),
+        ],
+    );
+}
+
+/// A configuration's error after calibration with its P10-P90 from its row of `budget.parquet`
+/// (`could not run` where no realisation ran).
+fn after(r: &Row<'_>, stat: &str) -> String {
+    if r.u64("realisations") == 0 {
+        return "could not run".to_string();
     }
-    let _ = writeln!(s, "\n|{}", "---|".repeat(6 + factors.len()));
+    let c = |q: &str| f3(r.f64(&format!("after_{stat}_mm_{q}")));
+    format!("{} ({}-{})", c("median"), c("p10"), c("p90"))
+}
+
+/// A cell of a summary table.
+fn cell<'a>(header: impl Into<String>, show: impl Fn(&Row<'_>) -> String + 'a) -> Cell<'a> {
+    (header.into(), Box::new(show))
+}
+
+/// The paired change from every source on of a configuration's row of `budget.parquet`:
+/// `+0.012 (+0.004 to +0.020)`, `, noise` when the worlds do not tell it from none.
+fn change(r: &Row<'_>) -> String {
+    let (m, lo, hi, p) =
+        (r.f64("vs_all_on_p95_mm"), r.f64("vs_all_on_p95_mm_lo"), r.f64("vs_all_on_p95_mm_hi"), r.f64("vs_all_on_p_value"));
+    if p.is_nan() && m.is_nan() {
+        return "-".to_string();
+    }
+    format!("{m:+.3} ({lo:+.3} to {hi:+.3}){}", if p < 1.0 - super::CONFIDENCE { "" } else { ", noise" })
+}
+
+/// The budget table from `shares.parquet`, sorted by share, with the scaled sources' changes from
+/// `budget.parquet`.
+fn shares_table<'a>(b: &'a BudgetReport<'a>, parts: &mut Summary<'a>) {
+    let conf = 100.0 * super::CONFIDENCE;
+    let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
+    // The shares' rows whose source has a line, in the table's (share) order.
+    let rows: Vec<usize> = (0..b.shares.len()).filter(|&i| b.lines.iter().any(|l| l.source == b.shares[i].source)).collect();
+    let source = move |r: &Row<'_>| &b.sources[b.shares[r.index()].source];
+    let mut cells = vec![
+        cell("source", |r| r.str("source")),
+        cell("value", move |r| value(source(r))),
+        cell(format!("share ({conf:.0} % interval)"), |r| {
+            format!("{:.2} ({:.2}-{:.2})", r.f64("share"), r.f64("share_lo"), r.f64("share_hi"))
+        }),
+        cell("effect alone, mm", |r| {
+            format!("{} ({}-{})", f3(r.f64("effect_p95_mm")), f3(r.f64("effect_p95_mm_lo")), f3(r.f64("effect_p95_mm_hi")))
+        }),
+        cell("resolved", |r| if r.bool("effect_resolved") { "yes" } else { "no: within the noise" }.to_string()),
+        cell("ranked above next", |r| r.opt_bool("ranked_above_next").map_or("-", |x| if x { "yes" } else { "no" }).to_string()),
+    ];
+    for f in factors {
+        cells.push(cell(format!("at x{f}, mm"), move |r| {
+            let k = b.shares[r.index()].source;
+            b.configs
+                .iter()
+                .position(|c| c.mode == "scaled" && c.source == Some(k) && c.factor == f)
+                .map_or("-".to_string(), |i| change(&r.of("budget.parquet", i)))
+        }));
+    }
+    parts.table("shares.parquet", Box::new(move |_| rows.clone()), cells);
+}
+
+/// A source's terms, each with its own unit read from its key (`_um_per_m` is um/m), the source's
+/// otherwise.
+fn value(src: &Source) -> String {
+    const UNITS: [(&str, &str); 7] =
+        [("_um_per_m", "um/m"), ("_um", "um"), ("_mm", "mm"), ("_deg", "deg"), ("_pct_fs", "% FS"), ("_c", "C"), ("_kg", "kg")];
+    let unit = |key: &str| UNITS.iter().find(|(suffix, _)| key.ends_with(suffix)).map_or(src.unit, |u| u.1);
+    src.keys.iter().zip(&src.values).map(|(k, v)| format!("{v} {}", unit(k))).collect::<Vec<_>>().join(", ")
+}
+
+/// The detail: medians of separate configurations, each on its own.
+fn detail(b: &BudgetReport<'_>, s: &mut String) {
+    let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
     // The paired change of configuration (`mode`, factor) of `source` from every source on.
     let paired = |source: usize, mode: &str, factor: Option<f64>| {
         b.configs
@@ -355,33 +427,6 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
                 )
             })
     };
-    for sh in b.shares {
-        let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
-        let src = &b.sources[l.source];
-        // Each term with its own unit, read from its key (`_um_per_m` is um/m), the source's otherwise.
-        const UNITS: [(&str, &str); 7] =
-            [("_um_per_m", "um/m"), ("_um", "um"), ("_mm", "mm"), ("_deg", "deg"), ("_pct_fs", "% FS"), ("_c", "C"), ("_kg", "kg")];
-        let unit = |key: &str| UNITS.iter().find(|(suffix, _)| key.ends_with(suffix)).map_or(src.unit, |u| u.1);
-        let value = src.keys.iter().zip(&src.values).map(|(k, v)| format!("{v} {}", unit(k))).collect::<Vec<_>>().join(", ");
-        let e = &sh.effect;
-        let _ = write!(
-            s,
-            "| {} | {value} | {:.2} ({:.2}-{:.2}) | {} ({}-{}) | {} | {} |",
-            src.label,
-            sh.share,
-            sh.interval.0,
-            sh.interval.1,
-            f3(e.median),
-            f3(e.interval.0),
-            f3(e.interval.1),
-            if sh.resolved { "yes" } else { "no: within the noise" },
-            sh.above_next.map_or("-", |(_, r)| if r { "yes" } else { "no" }),
-        );
-        for (factor, _) in &l.scaled_mm {
-            let _ = write!(s, " {} |", paired(l.source, "scaled", Some(*factor)));
-        }
-        let _ = writeln!(s);
-    }
     let _ = writeln!(
         s,
         "\n### Detail: medians of separate configurations\n\n\
@@ -417,31 +462,4 @@ pub fn summary(b: &BudgetReport<'_>) -> String {
         let interacts = (sh.share - l.share_removed).abs() > 0.15;
         let _ = writeln!(s, " {} |", if interacts { "yes" } else { "" });
     }
-    prediction_section(b, &mut s);
-    let _ = writeln!(
-        s,
-        "\n## Every configuration\n\n| configuration | realisations | after median, mm (P10-P90) | after p95, mm (P10-P90) |\n|---|---|---|---|"
-    );
-    for (c, r) in b.configs.iter().zip(&b.rows) {
-        match r {
-            Some(r) => {
-                let _ = writeln!(
-                    s,
-                    "| {} | {} | {} ({}-{}) | {} ({}-{}) |",
-                    c.label,
-                    r.realisations,
-                    f3(r.after[0][0]),
-                    f3(r.after[0][1]),
-                    f3(r.after[0][2]),
-                    f3(r.after[1][0]),
-                    f3(r.after[1][1]),
-                    f3(r.after[1][2])
-                );
-            }
-            None => {
-                let _ = writeln!(s, "| {} | 0 | could not run | - |", c.label);
-            }
-        }
-    }
-    s
 }

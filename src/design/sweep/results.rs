@@ -7,7 +7,6 @@
 //! `worst_design.toml`, and `manifest.json` (the sha256 of every table). Written into a temporary
 //! directory exchanged with the old results atomically.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use polars::prelude::*;
@@ -16,8 +15,7 @@ use serde::Serialize;
 use super::designs::{DesignRow, Feasibility};
 use super::race::Plan;
 use super::{PointRow, ShardInfo, Unit, UnitRow};
-use crate::io::out_dir::write_atomically;
-use crate::io::table::{err, parquet, table_hashes};
+use crate::io::results::{Cell, Head, Results, Row, Rows, Summary};
 
 /// A merged sweep: its record, its units, the aggregates per point and the designs judged.
 pub struct Merged {
@@ -50,30 +48,28 @@ impl Merged {
 }
 
 #[derive(Serialize)]
-struct Manifest<'a> {
+struct Fields<'a> {
     sweep: &'a str,
     identity: &'a str,
     objective: String,
     stages: usize,
-    tables_sha256: std::collections::BTreeMap<String, String>,
     points: usize,
     realisations: u32,
     units: usize,
     failed_units: usize,
-    #[serde(flatten)]
-    provenance: crate::io::manifest::Provenance,
 }
 
 /// The best and the worst design by the objective as scenario files of their own,
 /// `best_design.toml` and `worst_design.toml`, with the design's selection and set size as the
 /// study's table: `calsim run` on one (from any directory) redoes its realisation 0 with the
 /// figures and the Rerun recording.
-fn write_extremes(dir: &Path, m: &Merged) -> std::io::Result<()> {
+fn extremes(m: &Merged) -> std::io::Result<Vec<(&'static str, String)>> {
     let ranked: Vec<&DesignRow> = m.ranked().into_iter().filter(|d| d.estimate.is_finite()).collect();
     let info = &m.info;
     if ranked.len() < 2 {
-        return Ok(());
+        return Ok(Vec::new());
     }
+    let mut out = Vec::new();
     for (file, d) in [("best_design.toml", ranked[0]), ("worst_design.toml", ranked[ranked.len() - 1])] {
         // The record was checked whole before the merge: every point's scenario loads.
         let mut table = info.point_table(d.design.point).map_err(std::io::Error::other)?;
@@ -99,9 +95,9 @@ fn write_extremes(dir: &Path, m: &Merged) -> std::io::Result<()> {
             d.feasibility.label(),
             d.worlds
         );
-        crate::io::out_dir::write_file(&dir.join(file), head + &toml::to_string(&table).map_err(std::io::Error::other)?)?;
+        out.push((file, head + &toml::to_string(&table).map_err(std::io::Error::other)?));
     }
-    Ok(())
+    Ok(out)
 }
 
 /// The column of axis `key` from its values as written (TOML): integers where every value is an
@@ -122,17 +118,44 @@ pub fn point_label(info: &ShardInfo, p: usize) -> String {
     info.keys.iter().zip(&info.points[p]).map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
 }
 
-/// Writes the merged results of a sweep into `out/<name>`, replacing what was there.
-pub fn write(out: &Path, m: &Merged) -> std::io::Result<PathBuf> {
-    write_atomically(out, &m.info.name, |dir| write_into(dir, m))
+/// Writes the merged results of a sweep into `out/<name>`, replacing what was there; the
+/// directory and the summary as written.
+pub fn write(out: &Path, m: &Merged) -> std::io::Result<(PathBuf, String)> {
+    crate::io::results::write(out, results(m)?).map(|w| (w.dest, w.summary))
 }
 
-/// Long by design: one block per result file, in the order of the module doc.
-fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
-    let (info, units, points) = (&m.info, &m.units[..], &m.points[..]);
+/// The results of a merged sweep (the files of the module doc).
+pub fn results(m: &Merged) -> std::io::Result<Results<'_>> {
+    let (info, units) = (&m.info, &m.units[..]);
+    let mut r = Results::new(info.name.clone(), Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+    r.table("sweep.parquet", unit_columns(m))?;
+    r.table("points.parquet", point_columns(m))?;
+    r.table("designs.parquet", design_columns(m))?;
+    r.fields(Fields {
+        sweep: &info.name,
+        identity: &info.identity,
+        objective: info.objective.describe(),
+        stages: m.plan.stages_run,
+        points: info.points.len(),
+        realisations: info.realisations,
+        units: units.len(),
+        failed_units: units.iter().filter(|x| x.error.is_some()).count(),
+    })?;
+    for (file, text) in extremes(m)? {
+        r.file(file, text);
+    }
+    r.draw(Box::new(move |dir| super::plots::write(dir, info, &m.points, &m.designs)));
+    summary(m, &mut r.summary);
+    r.summary.figures("\n## Figures\n\n");
+    Ok(r)
+}
+
+/// `sweep.parquet`, long form: one row per unit and (selection, set size); a failed unit has one
+/// row with its error.
+fn unit_columns(m: &Merged) -> Vec<Column> {
+    let (info, units) = (&m.info, &m.units[..]);
     let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
-    // Long form: one row per unit and (selection, set size); a failed unit has one row with its error.
     let rows: Vec<(&Unit, Option<&UnitRow>)> = units
         .iter()
         .flat_map(|x| if x.rows.is_empty() { vec![(x, None)] } else { x.rows.iter().map(|r| (x, Some(r))).collect() })
@@ -172,8 +195,14 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
         cols.push(u(&format!("p95_within_{th}mm"), rows.iter().map(|(_, r)| r.map_or(0, |r| count(&r.p95_within))).collect()));
         cols.push(u(&format!("median_within_{th}mm"), rows.iter().map(|(_, r)| r.map_or(0, |r| count(&r.median_within))).collect()));
     }
-    parquet(dir, "sweep.parquet", cols)?;
+    cols
+}
 
+/// `points.parquet`: the aggregates per point, selection and set size, then their intervals.
+fn point_columns(m: &Merged) -> Vec<Column> {
+    let (info, points) = (&m.info, &m.points[..]);
+    let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
+    let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
     let mut cols = vec![u("point", points.iter().map(|p| p.point as u32).collect())];
     for (a, key) in info.keys.iter().enumerate() {
         cols.push(axis_column(key, points.iter().map(|p| info.points[p.point][a].as_str())));
@@ -215,35 +244,11 @@ fn write_into(dir: &Path, m: &Merged) -> std::io::Result<()> {
             cols.push(f(&format!("{qn}_{th}mm_{side}"), points.iter().map(|p| p.success_ci[t][q]).collect()));
         }
     }
-    parquet(dir, "points.parquet", cols)?;
-    write_designs(dir, m)?;
-
-    let manifest = Manifest {
-        sweep: &info.name,
-        identity: &info.identity,
-        objective: info.objective.describe(),
-        stages: m.plan.stages_run,
-        tables_sha256: table_hashes(dir)?,
-        points: info.points.len(),
-        realisations: info.realisations,
-        units: units.len(),
-        failed_units: units.iter().filter(|x| x.error.is_some()).count(),
-        provenance: crate::io::manifest::Provenance::of_run(&[]),
-    };
-    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
-    write_extremes(dir, m)?;
-    let drawn = super::plots::write(dir, info, points, &m.designs).map_err(std::io::Error::other)?;
-    let mut text = summary(m);
-    let _ = writeln!(text, "\n## Figures\n");
-    for w in drawn {
-        let _ = writeln!(text, "![{}]({}.png)\n\n{} ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
-    }
-    crate::io::out_dir::write_file(&dir.join("summary.md"), text)?;
-    Ok(())
+    cols
 }
 
 /// `designs.parquet`: one row per design judged by the objective.
-fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {
+fn design_columns(m: &Merged) -> Vec<Column> {
     let d = &m.designs;
     let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let u = |n: &str, v: Vec<u32>| Column::new(n.into(), v);
@@ -269,6 +274,9 @@ fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {
         f("vs_leader_sign_test_p", vs(&|p| p.test.p_value)),
         f("vs_leader_correlation", vs(&|p| p.correlation)),
         f("vs_leader_variance_saving", vs(&|p| p.variance_saving)),
+        f("vs_leader_mean_difference", vs(&|p| p.mean)),
+        u("vs_leader_better", d.iter().map(|r| r.vs_leader.as_ref().map_or(0, |p| better_worse(m, p).0 as u32)).collect()),
+        u("vs_leader_worse", d.iter().map(|r| r.vs_leader.as_ref().map_or(0, |p| better_worse(m, p).1 as u32)).collect()),
         f("success", d.iter().map(|r| r.success.map_or(f64::NAN, |s| s.0)).collect()),
         f("success_lo", d.iter().map(|r| r.success.map_or(f64::NAN, |s| s.1.0)).collect()),
         f("success_hi", d.iter().map(|r| r.success.map_or(f64::NAN, |s| s.1.1)).collect()),
@@ -280,7 +288,12 @@ fn write_designs(dir: &Path, m: &Merged) -> std::io::Result<()> {
             d.iter().map(|r| r.eliminated.as_ref().map(|e| e.1.clone()).unwrap_or_default()).collect::<Vec<_>>(),
         ),
     ]);
-    parquet(dir, "designs.parquet", cols)
+    cols
+}
+
+/// The worlds in which a design did better and worse than the leader, by the objective's sense.
+fn better_worse(m: &Merged, p: &crate::study::interval::Paired) -> (usize, usize) {
+    if m.info.objective.maximises() { (p.test.positive, p.test.negative) } else { (p.test.negative, p.test.positive) }
 }
 
 fn f3(x: f64) -> String {
@@ -302,37 +315,45 @@ fn with_interval(x: f64, (lo, hi): (f64, f64)) -> String {
     }
 }
 
-/// The design of a row in words: `point 3 (cell.layout = ...), detmax sets of 75`.
-fn design_label(info: &ShardInfo, r: &DesignRow) -> String {
-    format!("{} {}, {} sets of {}", r.design.point, point_label(info, r.design.point), r.design.selection, r.design.set_size)
+/// The design of a row of `designs.parquet` or `points.parquet` in words: `point 3 (cell.layout =
+/// ...), detmax sets of 75`.
+fn design_label(info: &ShardInfo, row: &Row<'_>) -> String {
+    let point = row.u64("point") as usize;
+    format!("{point} {}, {} sets of {}", point_label(info, point), row.str("selection"), row.u64("set_size"))
+}
+
+/// A cell of a summary table.
+fn cell<'a>(header: impl Into<String>, show: impl Fn(&Row<'_>) -> String + 'a) -> Cell<'a> {
+    (header.into(), Box::new(show))
+}
+
+/// `x (lo-hi)` of three columns of a row.
+fn shown_interval(row: &Row<'_>, x: &str, lo: &str, hi: &str) -> String {
+    with_interval(row.f64(x), (row.f64(lo), row.f64(hi)))
 }
 
 /// The summary: the designs ranked by the objective with their intervals, the leader and the
 /// designs tied with it, eliminations, then the errors after calibration and the success
-/// probabilities with their intervals, and the designs whose campaign failed.
-///
-/// Long by design: the summary document top to bottom, one block per section.
-pub fn summary(m: &Merged) -> String {
-    let (info, units, points) = (&m.info, &m.units[..], &m.points[..]);
+/// probabilities with their intervals, and the designs whose campaign failed. Every figure of its
+/// tables is read from the result tables.
+pub fn summary<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let (info, units) = (&m.info, &m.units[..]);
     let o = &info.objective;
-    let mut s = String::new();
     let failed = units.iter().filter(|u| u.error.is_some()).count();
-    let _ = writeln!(
-        s,
-        "# {}: {} grid points x {} realisations{} ({} work units, {failed} failed)\n",
+    s.text(format!(
+        "# {}: {} grid points x {} realisations{} ({} work units, {failed} failed)\n\n",
         info.name,
         info.points.len(),
         info.realisations,
         if info.race.is_some() { " at most" } else { "" },
         units.len()
-    );
+    ));
     let conf = o.confidence * 100.0;
     let constraints = o.constraints();
-    let _ = writeln!(
-        s,
+    s.text(format!(
         "**Objective**: {}{}. Intervals at {conf} % confidence over realisations (the unit of independence: one robot, cell and \
          set of draws each); a design is tied with the leader when the sign test of their paired values on common \
-         realisations does not separate them at that confidence.{}\n",
+         realisations does not separate them at that confidence.{}\n\n",
         o.describe(),
         if constraints.is_empty() { String::new() } else { format!(", subject to {}", constraints.join(", ")) },
         match &info.race {
@@ -347,59 +368,78 @@ pub fn summary(m: &Merged) -> String {
             ),
             None => String::new(),
         }
+    ));
+    ranked(m, s);
+    leader(m, s);
+    left_the_race(m, s);
+    errors(m, s);
+    success(m, s);
+    failed_campaigns(m, s);
+}
+
+/// The designs ranked by the objective, from `designs.parquet`.
+fn ranked<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let (info, o) = (&m.info, &m.info.objective);
+    let conf = o.confidence * 100.0;
+    s.text("## Designs ranked by the objective\n\n");
+    let maximises = o.maximises();
+    let by_rank: Rows<'a> = Box::new(|f: &DataFrame| {
+        let ranks: Vec<u32> = f.column("rank").ok().and_then(|c| c.u32().ok()).map(|c| c.into_no_null_iter().collect()).unwrap_or_default();
+        let mut order: Vec<usize> = (0..ranks.len()).collect();
+        order.sort_by_key(|&i| ranks[i]);
+        order
+    });
+    s.table(
+        "designs.parquet",
+        by_rank,
+        vec![
+            cell("rank", |r| r.u64("rank").to_string()),
+            cell("design", move |r| design_label(info, r)),
+            cell(format!("objective ({conf} % interval)"), |r| shown_interval(r, "estimate", "estimate_lo", "estimate_hi")),
+            cell("feasibility", |r| r.str("feasibility")),
+            cell("vs leader (paired on common worlds)", move |r| vs_leader(r, maximises)),
+            cell("pairing: r, variance saved", |r| {
+                if r.u64("rank") == 1 {
+                    "-".to_string()
+                } else {
+                    format!("{:.2}, {:.0} %", r.f64("vs_leader_correlation"), 100.0 * r.f64("vs_leader_variance_saving"))
+                }
+            }),
+            cell("tied", |r| {
+                if r.u64("rank") == 1 {
+                    "-"
+                } else if r.bool("tied_with_leader") {
+                    "**tied**"
+                } else if !r.str("eliminated").is_empty() {
+                    "left the race"
+                } else {
+                    "no"
+                }
+                .to_string()
+            }),
+            cell("P(success)", |r| {
+                if r.f64("success").is_nan() { "-".to_string() } else { shown_interval(r, "success", "success_lo", "success_hi") }
+            }),
+            cell("campaign, h", |r| f3(r.f64("campaign_h_median"))),
+            cell("realisations", |r| {
+                let failed = r.u64("failed_worlds");
+                format!("{}{}", r.u64("worlds"), if failed > 0 { format!(" ({failed} failed)") } else { String::new() })
+            }),
+        ],
     );
+}
+/// The leader and the designs tied with it.
+fn leader<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let info = &m.info;
     let ranked = m.ranked();
-    let _ = writeln!(s, "## Designs ranked by the objective\n");
-    let _ = writeln!(
-        s,
-        "| rank | design | objective ({conf} % interval) | feasibility | vs leader (paired on common worlds) | pairing: r, variance saved | tied | P(success) | campaign, h | realisations |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
-    for r in &ranked {
-        let vs = r.vs_leader.as_ref().map_or("leader".to_string(), |p| {
-            let (better, worse) = if o.maximises() { (p.test.positive, p.test.negative) } else { (p.test.negative, p.test.positive) };
-            if o.maximises() {
-                // Fractions of successes tie in most worlds: the mean difference and the counts say more.
-                format!("mean {:+.3}; better in {better}, worse in {worse} worlds, p = {:.3}", p.mean, p.test.p_value)
-            } else {
-                format!(
-                    "{} ({}-{}); better in {better}, worse in {worse}, p = {:.3}",
-                    f3(p.median),
-                    f3(p.interval.0),
-                    f3(p.interval.1),
-                    p.test.p_value
-                )
-            }
-        });
-        let pairing = r.vs_leader.as_ref().map_or("-".to_string(), |p| format!("{:.2}, {:.0} %", p.correlation, 100.0 * p.variance_saving));
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {vs} | {pairing} | {} | {} | {} | {}{} |",
-            r.rank,
-            design_label(info, r),
-            with_interval(r.estimate, r.interval),
-            r.feasibility.label(),
-            if r.rank == 1 {
-                "-"
-            } else if r.tied {
-                "**tied**"
-            } else if r.eliminated.is_some() {
-                "left the race"
-            } else {
-                "no"
-            },
-            r.success.map_or("-".to_string(), |(p, ci)| with_interval(p, ci)),
-            f3(r.campaign_h),
-            r.worlds,
-            if r.failed_worlds > 0 { format!(" ({} failed)", r.failed_worlds) } else { String::new() }
-        );
-    }
     if let Some(leader) = ranked.first() {
-        let tied: Vec<String> = ranked.iter().filter(|r| r.tied).map(|r| design_label(info, r)).collect();
-        let _ = writeln!(
-            s,
-            "\n**Leader**: {} ({}){}. {}\n",
-            design_label(info, leader),
+        let label = |d: &DesignRow| {
+            format!("{} {}, {} sets of {}", d.design.point, point_label(info, d.design.point), d.design.selection, d.design.set_size)
+        };
+        let tied: Vec<String> = ranked.iter().filter(|r| r.tied).map(|r| label(r)).collect();
+        s.text(format!(
+            "**Leader**: {} ({}){}. {}\n\n",
+            label(leader),
             leader.feasibility.label(),
             if leader.feasibility == Feasibility::Undecided {
                 ": its constraints are not confirmed at this confidence; more realisations would decide"
@@ -411,94 +451,139 @@ pub fn summary(m: &Merged) -> String {
             } else {
                 format!("Statistically tied with it: {}.", tied.join("; "))
             }
+        ));
+    }
+}
+/// The designs an adaptive sweep eliminated, from `designs.parquet`.
+fn left_the_race<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let info = &m.info;
+    let out: Vec<usize> = (0..m.designs.len()).filter(|&i| m.designs[i].eliminated.is_some()).collect();
+    if !out.is_empty() {
+        let mut order = out;
+        order.sort_by_key(|&i| m.designs[i].rank);
+        s.text("### Designs that left the race\n\n");
+        s.table(
+            "designs.parquet",
+            Box::new(move |_| order.clone()),
+            vec![
+                cell("design", move |r| design_label(info, r)),
+                cell("realisations", |r| m.designs[r.index()].eliminated.as_ref().map_or(0, |e| e.0).to_string()),
+                cell("why", |r| r.str("eliminated")),
+            ],
         );
     }
-    let out: Vec<&&DesignRow> = ranked.iter().filter(|r| r.eliminated.is_some()).collect();
-    if !out.is_empty() {
-        let _ = writeln!(s, "### Designs that left the race\n\n| design | realisations | why |\n|---|---|---|");
-        for r in out {
-            let (n, why) = r.eliminated.as_ref().expect("filtered");
-            let _ = writeln!(s, "| {} | {n} | {why} |", design_label(info, r));
-        }
-        s.push('\n');
-    }
-    let _ = writeln!(
-        s,
+}
+/// The errors after calibration at each point's table set size, from `points.parquet`.
+fn errors<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let (info, points) = (&m.info, &m.points[..]);
+    let conf = info.objective.confidence * 100.0;
+    s.text(format!(
         "## Errors after calibration at each point's table set size\n\nMedian over realisations with its {conf} % interval \
          (order statistics) and the P10-P90 range of the worlds, of each realisation's median (over repetitions) of the \
-         validation errors' median, p95 and max (SPMS: ISO 9283 AP over P1-P5).\n"
-    );
-    let mut table: Vec<&PointRow> = points.iter().filter(|p| p.table).collect();
-    table.sort_by(|a, b| a.after[1][0].total_cmp(&b.after[1][0]).then(a.point.cmp(&b.point)));
+         validation errors' median, p95 and max (SPMS: ISO 9283 AP over P1-P5).\n\n"
+    ));
     let th = &info.thresholds_mm;
-    let _ = write!(s, "| point | design | selection | n | after median, mm | after p95, mm | after max, mm | before median, mm |");
-    for t in th {
-        let _ = write!(s, " P(max <= {t} mm) |");
-    }
-    let _ = writeln!(s, " campaign, s | realisations |");
-    let _ = writeln!(s, "|{}", "---|".repeat(10 + th.len()));
-    for p in &table {
-        let cell = |k: usize| {
-            format!(
-                "{} ({}-{}; P10-P90 {}-{})",
-                f3(p.after[k][0]),
-                f3(p.after_ci[k][0]),
-                f3(p.after_ci[k][1]),
-                f3(p.after[k][1]),
-                f3(p.after[k][2])
-            )
-        };
-        let _ = write!(
-            s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} |",
-            p.point,
-            point_label(info, p.point),
-            p.selection,
-            p.set_size,
-            cell(0),
-            cell(1),
-            cell(2),
-            f3(p.before[0])
-        );
-        for (k, (m, _)) in p.success.iter().enumerate() {
-            let _ = write!(s, " {:.2} ({:.2}-{:.2}) |", m, p.success_ci[k][0], p.success_ci[k][1]);
+    let by_p95: Rows<'a> = Box::new(|_| {
+        let mut table: Vec<usize> = (0..points.len()).filter(|&i| points[i].table).collect();
+        table.sort_by(|&a, &b| points[a].after[1][0].total_cmp(&points[b].after[1][0]).then(points[a].point.cmp(&points[b].point)));
+        table
+    });
+    let after = |name: &'static str| {
+        move |r: &Row<'_>| {
+            let c = |q: &str| r.f64(&format!("after_{name}_mm_{q}"));
+            format!("{} ({}-{}; P10-P90 {}-{})", f3(c("median")), f3(c("median_lo")), f3(c("median_hi")), f3(c("p10")), f3(c("p90")))
         }
-        let _ = writeln!(s, " {:.0} | {} |", p.campaign_s, p.realisations);
+    };
+    let mut cells = vec![
+        cell("point", |r| r.u64("point").to_string()),
+        cell("design", move |r| point_label(info, r.u64("point") as usize)),
+        cell("selection", |r| r.str("selection")),
+        cell("n", |r| r.u64("set_size").to_string()),
+        cell("after median, mm", after("median")),
+        cell("after p95, mm", after("p95")),
+        cell("after max, mm", after("max")),
+        cell("before median, mm", |r| f3(r.f64("before_median_mm"))),
+    ];
+    for t in th {
+        let t = *t;
+        cells.push(cell(format!("P(max <= {t} mm)"), move |r| probability(r, t)));
     }
+    cells.push(cell("campaign, s", |r| format!("{:.0}", r.f64("campaign_s_median"))));
+    cells.push(cell("realisations", |r| r.u64("realisations").to_string()));
+    s.table("points.parquet", by_p95, cells);
+}
+/// P(max error <= t) by set size for each threshold, from `points.parquet`.
+fn success<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let (points, th) = (&m.points[..], &m.info.thresholds_mm);
+    let conf = m.info.objective.confidence * 100.0;
     let mut sizes: Vec<u32> = points.iter().map(|p| p.set_size).collect();
     sizes.sort_unstable();
     sizes.dedup();
     let mut keys: Vec<(usize, &str)> = points.iter().map(|p| (p.point, p.selection.as_str())).collect();
     keys.dedup();
-    for (t, limit) in th.iter().enumerate() {
-        let _ = writeln!(s, "\n## P(max error <= {limit} mm) by set size, with its {conf} % interval over realisations\n");
-        let _ = writeln!(s, "| point | selection | {} |", sizes.iter().map(|n| format!("n = {n}")).collect::<Vec<_>>().join(" | "));
-        let _ = writeln!(s, "|---|---|{}", "---|".repeat(sizes.len()));
-        for &(pt, sel) in &keys {
-            let cells: Vec<String> = sizes
-                .iter()
-                .map(|n| {
-                    points
-                        .iter()
-                        .find(|p| p.point == pt && p.selection == sel && p.set_size == *n)
-                        .map_or("-".into(), |p| format!("{:.2} ({:.2}-{:.2})", p.success[t].0, p.success_ci[t][0], p.success_ci[t][1]))
-                })
-                .collect();
-            let _ = writeln!(s, "| {pt} | {sel} | {} |", cells.join(" | "));
+    // One row per (point, selection): the first of its rows in points.parquet.
+    let firsts: Vec<usize> = keys.iter().filter_map(|k| points.iter().position(|p| (p.point, p.selection.as_str()) == *k)).collect();
+    for limit in th {
+        let limit = *limit;
+        s.text(format!("## P(max error <= {limit} mm) by set size, with its {conf} % interval over realisations\n\n"));
+        let mut cells = vec![cell("point", |r| r.u64("point").to_string()), cell("selection", |r| r.str("selection"))];
+        for n in sizes.clone() {
+            cells.push(cell(format!("n = {n}"), move |r| {
+                let first = &points[r.index()];
+                points
+                    .iter()
+                    .position(|p| p.point == first.point && p.selection == first.selection && p.set_size == n)
+                    .map_or("-".into(), |j| probability(&r.at(j), limit))
+            }));
         }
+        let firsts = firsts.clone();
+        s.table("points.parquet", Box::new(move |_| firsts.clone()), cells);
     }
+}
+/// The designs whose campaign failed in some realisations.
+fn failed_campaigns<'a>(m: &'a Merged, s: &mut Summary<'a>) {
+    let (info, units) = (&m.info, &m.units[..]);
     let failing: Vec<usize> = (0..info.points.len()).filter(|p| units.iter().any(|u| u.point == *p && u.error.is_some())).collect();
     if !failing.is_empty() {
-        let _ = writeln!(
-            s,
-            "\n## Designs whose campaign failed in some realisations\n\n| point | design | failed | first reason |\n|---|---|---|---|"
-        );
+        let mut t =
+            "## Designs whose campaign failed in some realisations\n\n| point | design | failed | first reason |\n|---|---|---|---|\n"
+                .to_string();
         for p in failing {
             let fails: Vec<&Unit> = units.iter().filter(|u| u.point == p && u.error.is_some()).collect();
             let of = units.iter().filter(|u| u.point == p).count();
-            let _ =
-                writeln!(s, "| {p} | {} | {} of {of} | {} |", point_label(info, p), fails.len(), fails[0].error.as_deref().unwrap_or(""));
+            t.push_str(&format!(
+                "| {p} | {} | {} of {of} | {} |\n",
+                point_label(info, p),
+                fails.len(),
+                fails[0].error.as_deref().unwrap_or("")
+            ));
         }
+        s.text(t);
     }
-    s
+}
+
+/// A design's paired comparison with the leader, from its row of `designs.parquet`.
+fn vs_leader(r: &Row<'_>, maximises: bool) -> String {
+    if r.u64("rank") == 1 {
+        return "leader".to_string();
+    }
+    let (better, worse, p) = (r.u64("vs_leader_better"), r.u64("vs_leader_worse"), r.f64("vs_leader_sign_test_p"));
+    if maximises {
+        // Fractions of successes tie in most worlds: the mean difference and the counts say more.
+        format!("mean {:+.3}; better in {better}, worse in {worse} worlds, p = {p:.3}", r.f64("vs_leader_mean_difference"))
+    } else {
+        let c = |name: &str| f3(r.f64(name));
+        format!(
+            "{} ({}-{}); better in {better}, worse in {worse}, p = {p:.3}",
+            c("vs_leader_median_difference"),
+            c("vs_leader_difference_lo"),
+            c("vs_leader_difference_hi")
+        )
+    }
+}
+
+/// `P (lo-hi)` of the success probability at `limit` mm of a row of `points.parquet`.
+fn probability(r: &Row<'_>, limit: f64) -> String {
+    let c = |side: &str| r.f64(&format!("p_max_within_{limit}mm{side}"));
+    format!("{:.2} ({:.2}-{:.2})", c(""), c("_lo"), c("_hi"))
 }

@@ -1,0 +1,426 @@
+//! A producer's results as a value ([`Results`]) and the one writer that turns any such value into
+//! a results directory ([`write`]).
+//!
+//! A producer (a device's run, a sweep, a budget, an optimisation, an export, a plan, a
+//! calibration) computes its figures and returns them: its tables as polars frames, the other
+//! files it hands the user (a robot file, a design file, a CSV), its drawings and recording as
+//! work to do into a path the writer gives, its summary as [`Summary`] parts (text, tables
+//! rendered from the result tables themselves, the figures), the fields of its manifest and the
+//! provenance head. It writes nothing. [`write`] then, inside the atomic swap of
+//! [`crate::io::out_dir::write_atomically`] (whose rule alone decides what may be replaced):
+//!
+//! 1. writes every table (parquet, through [`crate::io::table`]) and every file;
+//! 2. hashes the tables and writes `manifest.json`: the producer's fields, `tables_sha256` and the
+//!    provenance block ([`crate::io::manifest`]), the same for every producer;
+//! 3. records the Rerun recording (`study.rrd`) and draws the figures;
+//! 4. renders `summary.md` from its parts: a table part reads the frame written in step 1, so a
+//!    figure printed and a figure stored cannot differ.
+
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::{AnyValue, Column, DataFrame};
+
+use crate::io::plot::{PlotError, Written};
+use crate::io::record::RecordError;
+
+/// Draws figures into the directory it is given and names them (stem and caption).
+pub type Draw<'a> = Box<dyn FnOnce(&Path) -> Result<Vec<Written>, PlotError> + 'a>;
+
+/// Writes a recording to the path it is given.
+pub type Record<'a> = Box<dyn FnOnce(&Path) -> Result<(), RecordError> + 'a>;
+
+/// One row of a result table, read by column name ([`Summary::table`]). A column the table does
+/// not have, or of another type, reads as NaN, 0 or "" and makes the rendering fail naming it.
+pub struct Row<'f> {
+    tables: &'f [(String, DataFrame)],
+    frame: &'f DataFrame,
+    index: usize,
+    missing: &'f RefCell<Option<String>>,
+}
+
+impl Row<'_> {
+    fn value(&self, name: &str) -> Option<AnyValue<'_>> {
+        let v = self.frame.column(name).ok().and_then(|c| c.get(self.index).ok());
+        if v.is_none() {
+            self.missing.borrow_mut().get_or_insert_with(|| name.to_string());
+        }
+        v
+    }
+
+    /// Row `index` of the same table.
+    pub fn at(&self, index: usize) -> Row<'_> {
+        Row { tables: self.tables, frame: self.frame, index, missing: self.missing }
+    }
+
+    /// Row `index` of the result table `table` (a table the results do not hold reads as an empty
+    /// one and makes the rendering fail naming it).
+    pub fn of(&self, table: &str, index: usize) -> Row<'_> {
+        static EMPTY: std::sync::LazyLock<DataFrame> = std::sync::LazyLock::new(DataFrame::empty);
+        let frame = self.tables.iter().find(|(n, _)| n == table).map(|(_, f)| f).unwrap_or_else(|| {
+            self.missing.borrow_mut().get_or_insert_with(|| format!("(the table {table} is not among the results)"));
+            &EMPTY
+        });
+        Row { tables: self.tables, frame, index, missing: self.missing }
+    }
+
+    /// The row's index in its table.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// A number (floating or integer column; a null is NaN).
+    pub fn f64(&self, name: &str) -> f64 {
+        match self.value(name) {
+            Some(AnyValue::Null) => f64::NAN,
+            Some(v) => v.extract::<f64>().unwrap_or_else(|| self.wrong(name, f64::NAN)),
+            None => f64::NAN,
+        }
+    }
+
+    /// A count or index (an unsigned or integer column).
+    pub fn u64(&self, name: &str) -> u64 {
+        match self.value(name) {
+            Some(v) => v.extract::<u64>().unwrap_or_else(|| self.wrong(name, 0)),
+            None => 0,
+        }
+    }
+
+    /// A flag.
+    pub fn bool(&self, name: &str) -> bool {
+        match self.value(name) {
+            Some(AnyValue::Boolean(b)) => b,
+            Some(_) => self.wrong(name, false),
+            None => false,
+        }
+    }
+
+    /// A flag that may be absent (null).
+    pub fn opt_bool(&self, name: &str) -> Option<bool> {
+        match self.value(name) {
+            Some(AnyValue::Boolean(b)) => Some(b),
+            Some(AnyValue::Null) => None,
+            Some(_) => self.wrong(name, None),
+            None => None,
+        }
+    }
+
+    /// A text (a null is "").
+    pub fn str(&self, name: &str) -> String {
+        match self.value(name) {
+            Some(AnyValue::String(s)) => s.to_string(),
+            Some(AnyValue::StringOwned(s)) => s.to_string(),
+            Some(AnyValue::Null) => String::new(),
+            Some(_) => self.wrong(name, String::new()),
+            None => String::new(),
+        }
+    }
+
+    fn wrong<T>(&self, name: &str, fallback: T) -> T {
+        self.missing.borrow_mut().get_or_insert_with(|| format!("{name} (of another type)"));
+        fallback
+    }
+}
+
+/// A column of a summary table: its header and how a row shows in it.
+pub type Cell<'a> = (String, Box<dyn Fn(&Row<'_>) -> String + 'a>);
+
+/// Which rows of a table a summary shows, in which order (the frame is the written table).
+pub type Rows<'a> = Box<dyn Fn(&DataFrame) -> Vec<usize> + 'a>;
+
+enum Part<'a> {
+    Text(String),
+    Table { table: String, rows: Rows<'a>, cells: Vec<Cell<'a>> },
+    Figures(String),
+}
+
+/// The summary of a results directory as parts, rendered by [`write`] into `summary.md`.
+#[derive(Default)]
+pub struct Summary<'a> {
+    parts: Vec<Part<'a>>,
+}
+
+impl<'a> Summary<'a> {
+    /// Text, as Markdown.
+    pub fn text(&mut self, text: impl Into<String>) -> &mut Self {
+        self.parts.push(Part::Text(text.into()));
+        self
+    }
+
+    /// A Markdown table rendered from the result table `table` (a name of [`Results::table`]):
+    /// the rows `rows` picks, in its order, and one column per cell (followed by an empty line).
+    pub fn table(&mut self, table: &str, rows: Rows<'a>, cells: Vec<Cell<'a>>) -> &mut Self {
+        self.parts.push(Part::Table { table: table.to_string(), rows, cells });
+        self
+    }
+
+    /// Every row of `table`, in its order ([`Summary::table`]).
+    pub fn all_rows() -> Rows<'a> {
+        Box::new(|f: &DataFrame| (0..f.height()).collect())
+    }
+
+    /// The figures drawn, after `heading` (when any was drawn), each as its PNG with the caption
+    /// and a link to its SVG. The summary a command prints leaves them out.
+    pub fn figures(&mut self, heading: impl Into<String>) -> &mut Self {
+        self.parts.push(Part::Figures(heading.into()));
+        self
+    }
+
+    /// The summary as written (`summary.md`) and as printed (without the figures).
+    fn render(self, tables: &[(String, DataFrame)], drawn: &[Written]) -> std::io::Result<(String, String)> {
+        let (mut file, mut shown) = (String::new(), String::new());
+        for part in self.parts {
+            match part {
+                Part::Text(t) => {
+                    file.push_str(&t);
+                    shown.push_str(&t);
+                }
+                Part::Figures(heading) => {
+                    if !drawn.is_empty() {
+                        file.push_str(&heading);
+                    }
+                    for w in drawn {
+                        file.push_str(&format!("![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n\n", w.caption, w.stem, w.caption, w.stem));
+                    }
+                }
+                Part::Table { table, rows, cells } => {
+                    let frame = tables.iter().find(|(n, _)| *n == table).map(|(_, f)| f).ok_or_else(|| {
+                        std::io::Error::other(format!("summary.md: the summary shows the table {table}, which the results do not hold"))
+                    })?;
+                    let t = markdown_table(tables, &table, frame, &rows(frame), &cells)?;
+                    file.push_str(&t);
+                    shown.push_str(&t);
+                }
+            }
+        }
+        Ok((file, shown))
+    }
+}
+
+/// The Markdown table of rows `rows` of `frame` (the table `name` of `tables`) with the columns
+/// `cells`.
+fn markdown_table(
+    tables: &[(String, DataFrame)],
+    name: &str,
+    frame: &DataFrame,
+    rows: &[usize],
+    cells: &[Cell<'_>],
+) -> std::io::Result<String> {
+    let missing = RefCell::new(None);
+    let mut s = format!("| {} |\n|{}\n", cells.iter().map(|c| c.0.as_str()).collect::<Vec<_>>().join(" | "), "---|".repeat(cells.len()));
+    for &index in rows {
+        let row = Row { tables, frame, index, missing: &missing };
+        let shown: Vec<String> = cells.iter().map(|(_, show)| show(&row)).collect();
+        s.push_str(&format!("| {} |\n", shown.join(" | ")));
+    }
+    s.push('\n');
+    match missing.into_inner() {
+        Some(column) => Err(std::io::Error::other(format!("summary.md: the table {name} has no column {column}"))),
+        None => Ok(s),
+    }
+}
+
+/// Where the manifest's provenance comes from: the head of a scenario's run (name, path, sha256,
+/// seed, then the block) or the block alone.
+pub enum Head<'a> {
+    /// A run of one scenario.
+    Scenario(crate::io::manifest::ScenarioHead<'a>),
+    /// Any other command (its inputs are in the block).
+    Run(crate::io::manifest::Provenance),
+}
+
+/// A producer's results: everything [`write`] puts in a results directory.
+pub struct Results<'a> {
+    /// The directory's name under `--out` (one plain path component).
+    pub name: String,
+    head: Head<'a>,
+    fields: serde_json::Map<String, serde_json::Value>,
+    tables: Vec<(String, DataFrame)>,
+    files: Vec<(String, Vec<u8>)>,
+    draw: Vec<Draw<'a>>,
+    record: Option<Record<'a>>,
+    /// The summary (`summary.md`); none when it has no part.
+    pub summary: Summary<'a>,
+}
+
+impl<'a> Results<'a> {
+    /// Empty results named `name` with their provenance head.
+    pub fn new(name: impl Into<String>, head: Head<'a>) -> Self {
+        Self {
+            name: name.into(),
+            head,
+            fields: serde_json::Map::new(),
+            tables: Vec::new(),
+            files: Vec::new(),
+            draw: Vec::new(),
+            record: None,
+            summary: Summary::default(),
+        }
+    }
+
+    /// A result table `name` (`tasks.parquet`) from its columns; an error names the table (and
+    /// the column, for two columns of one name, or columns of different lengths).
+    pub fn table(&mut self, name: &str, columns: Vec<Column>) -> std::io::Result<&DataFrame> {
+        let frame = crate::io::table::frame(name, columns)?;
+        if self.tables.iter().any(|(n, _)| n == name) {
+            return Err(std::io::Error::other(format!("{name}: two tables of one name")));
+        }
+        self.tables.push((name.to_string(), frame));
+        Ok(&self.tables.last().expect("just pushed").1)
+    }
+
+    /// A table already made, by name.
+    pub fn frame(&self, name: &str) -> Option<&DataFrame> {
+        self.tables.iter().find(|(n, _)| n == name).map(|(_, f)| f)
+    }
+
+    /// The tables, in the order they were added.
+    pub fn frames(&self) -> &[(String, DataFrame)] {
+        &self.tables
+    }
+
+    /// Another file handed to the user (`robot.toml`, `best_design.toml`, `spheres.csv`).
+    pub fn file(&mut self, name: &str, contents: impl Into<Vec<u8>>) -> &mut Self {
+        self.files.push((name.to_string(), contents.into()));
+        self
+    }
+
+    /// A field of the manifest (beside `tables_sha256` and the provenance block).
+    pub fn field(&mut self, key: &str, value: impl serde::Serialize) -> std::io::Result<&mut Self> {
+        self.fields.insert(key.to_string(), serde_json::to_value(value).map_err(crate::io::table::err)?);
+        Ok(self)
+    }
+
+    /// Every field of `fields` (a struct that serialises to a JSON object) in the manifest.
+    pub fn fields(&mut self, fields: impl serde::Serialize) -> std::io::Result<&mut Self> {
+        match serde_json::to_value(fields).map_err(crate::io::table::err)? {
+            serde_json::Value::Object(m) => self.fields.extend(m),
+            _ => return Err(std::io::Error::other("manifest.json: a producer's fields are a JSON object")),
+        }
+        Ok(self)
+    }
+
+    /// Figures to draw (run by [`write`] inside the results directory).
+    pub fn draw(&mut self, draw: Draw<'a>) -> &mut Self {
+        self.draw.push(draw);
+        self
+    }
+
+    /// The Rerun recording, written as `study.rrd`.
+    pub fn record(&mut self, record: Record<'a>) -> &mut Self {
+        self.record = Some(record);
+        self
+    }
+
+    /// Writes everything into `dir`, an empty directory (the order of the module doc); the
+    /// summary as printed and the time the recording took, s.
+    pub fn write_into(self, dir: &Path) -> std::io::Result<(String, f64)> {
+        use crate::io::out_dir::write_file;
+        for (name, frame) in &self.tables {
+            crate::io::table::write_frame(dir, name, frame.clone())?;
+        }
+        for (name, bytes) in &self.files {
+            write_file(&dir.join(name), bytes)?;
+        }
+        let mut manifest = self.fields;
+        manifest.insert("tables_sha256".into(), serde_json::to_value(crate::io::table::table_hashes(dir)?).map_err(crate::io::table::err)?);
+        let head = match self.head {
+            Head::Scenario(h) => serde_json::to_value(h),
+            Head::Run(p) => serde_json::to_value(p),
+        }
+        .map_err(crate::io::table::err)?;
+        if let serde_json::Value::Object(h) = head {
+            manifest.extend(h);
+        }
+        write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(crate::io::table::err)?)?;
+        let t = std::time::Instant::now();
+        if let Some(record) = self.record {
+            record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
+        }
+        let recording_s = t.elapsed().as_secs_f64();
+        let mut drawn = Vec::new();
+        for draw in self.draw {
+            drawn.extend(draw(dir).map_err(std::io::Error::other)?);
+        }
+        let mut shown = String::new();
+        if !self.summary.parts.is_empty() {
+            let (text, printed) = self.summary.render(&self.tables, &drawn)?;
+            write_file(&dir.join("summary.md"), text)?;
+            shown = printed;
+        }
+        Ok((shown, recording_s))
+    }
+}
+
+/// What [`write`] did.
+#[derive(Debug)]
+pub struct Wrote {
+    /// The results directory.
+    pub dest: PathBuf,
+    /// The summary as a command prints it (`summary.md` without its figures).
+    pub summary: String,
+    /// Wall time of the recording, s.
+    pub recording_s: f64,
+}
+
+/// Writes `results` as the results directory `out/<name>`, atomically, by the rule of
+/// [`crate::io::out_dir`].
+pub fn write(out: &Path, results: Results<'_>) -> std::io::Result<Wrote> {
+    let name = results.name.clone();
+    let (mut summary, mut recording_s) = (String::new(), 0.0);
+    let dest = crate::io::out_dir::write_atomically(out, &name, |dir| {
+        (summary, recording_s) = results.write_into(dir)?;
+        Ok(())
+    })?;
+    Ok(Wrote { dest, summary, recording_s })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn results() -> Results<'static> {
+        let mut r = Results::new("r", Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+        r.table("t.parquet", vec![Column::new("x".into(), vec![1.5f64, f64::NAN]), Column::new("n".into(), vec![3u32, 4])]).unwrap();
+        r.field("answer", 42).unwrap();
+        r
+    }
+
+    #[test]
+    fn a_summary_table_shows_the_values_the_written_table_holds() {
+        let tmp = tempfile::Builder::new().prefix("calsim-results-").tempdir().unwrap();
+        let mut r = results();
+        r.summary.text("# t\n\n").table(
+            "t.parquet",
+            Summary::all_rows(),
+            vec![("x".into(), Box::new(|row| format!("{:.2}", row.f64("x")))), ("n".into(), Box::new(|row| row.u64("n").to_string()))],
+        );
+        let dest = write(tmp.path(), r).unwrap().dest;
+        let text = std::fs::read_to_string(dest.join("summary.md")).unwrap();
+        assert_eq!(text, "# t\n\n| x | n |\n|---|---|\n| 1.50 | 3 |\n| NaN | 4 |\n\n");
+        use polars::prelude::SerReader as _;
+        let frame = polars::prelude::ParquetReader::new(std::fs::File::open(dest.join("t.parquet")).unwrap()).finish().unwrap();
+        assert_eq!(frame.column("x").unwrap().f64().unwrap().get(0), Some(1.5));
+        let manifest: serde_json::Value = serde_json::from_slice(&std::fs::read(dest.join("manifest.json")).unwrap()).unwrap();
+        assert_eq!(manifest["answer"], 42);
+        assert!(manifest["tables_sha256"]["t.parquet"].as_str().is_some_and(|h| h.len() == 64));
+        assert!(manifest["crate_version"].is_string() && manifest["git_commit"].is_string());
+    }
+
+    #[test]
+    fn a_summary_naming_a_column_the_table_lacks_fails_and_leaves_nothing() {
+        let tmp = tempfile::Builder::new().prefix("calsim-results-").tempdir().unwrap();
+        let mut r = results();
+        r.summary.table("t.parquet", Summary::all_rows(), vec![("y".into(), Box::new(|row| row.f64("y").to_string()))]);
+        let e = write(tmp.path(), r).unwrap_err().to_string();
+        assert!(e.contains("the table t.parquet has no column y"), "{e}");
+        assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "nothing left behind");
+    }
+
+    #[test]
+    fn two_tables_of_one_name_are_refused() {
+        let mut r = results();
+        let e = r.table("t.parquet", vec![Column::new("x".into(), vec![1.0f64])]).unwrap_err().to_string();
+        assert!(e.contains("two tables of one name"), "{e}");
+    }
+}
