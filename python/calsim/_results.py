@@ -92,32 +92,10 @@ class Results:
         return f"{type(self).__name__}(dest={str(self.dest)!r}, tables=[{names}], figures={len(self.figures)})"
 
 
-_CHECK_SCHEMA = {
-    "figure": pl.String,
-    "published": pl.String,
-    "published_value": pl.Float64,
-    "calsim": pl.String,
-    "value": pl.Float64,
-    "band": pl.String,
-    "result": pl.String,
-}
-
-_DISTRIBUTION_SCHEMA = {
-    "figure": pl.String,
-    "published": pl.String,
-    "published_value": pl.Float64,
-    "run0": pl.Float64,
-    "median": pl.Float64,
-    "p10": pl.Float64,
-    "p90": pl.Float64,
-    "interval_lo": pl.Float64,
-    "interval_hi": pl.Float64,
-    "confidence": pl.Float64,
-    "count": pl.Int64,
-    "missing": pl.Int64,
-    "band": pl.String,
-    "result": pl.String,
-}
+def _frames(report: Report) -> dict[str, pl.DataFrame]:
+    """The report's result frames by name, each sent as the bytes of its parquet encoding (its
+    schema travels with it: no column is named between calsim and here)."""
+    return {name: pl.read_parquet(io.BytesIO(data)) for name, data in report["frames"].items()}
 
 
 class RunResult(Results):
@@ -138,9 +116,9 @@ class RunResult(Results):
         self.checked: int = report["checked"]
         self.missed: int = report["missed"]
         self.warnings: list[str] = list(report["warnings"])
-        self.checks: pl.DataFrame = pl.DataFrame(report["checks"], schema=_CHECK_SCHEMA)
-        dist = report["distribution"]
-        self.distribution: pl.DataFrame | None = None if dist is None else pl.DataFrame(dist, schema=_DISTRIBUTION_SCHEMA)
+        frames = _frames(report)
+        self.checks: pl.DataFrame = frames["checks"]
+        self.distribution: pl.DataFrame | None = frames.get("distribution")
 
     @property
     def passed(self) -> bool:

@@ -362,56 +362,20 @@ fn run<'py>(
     let (checked, missed) = r.tally();
     d.set_item("checked", checked)?;
     d.set_item("missed", missed)?;
-    let rows = PyList::empty(py);
-    for c in &r.checks {
-        let row = PyDict::new(py);
-        row.set_item("figure", &c.figure)?;
-        row.set_item("published", &c.published)?;
-        row.set_item("published_value", c.published_value)?;
-        row.set_item("calsim", &c.reproduced)?;
-        row.set_item("value", c.value)?;
-        row.set_item("band", &c.band)?;
-        row.set_item("result", verdict(c.pass))?;
-        rows.append(row)?;
-    }
-    d.set_item("checks", rows)?;
-    match &r.distribution {
-        None => d.set_item("distribution", py.None())?,
-        Some(dist) => {
-            let rows = PyList::empty(py);
-            for c in dist {
-                let row = PyDict::new(py);
-                row.set_item("figure", &c.row.figure)?;
-                row.set_item("published", &c.row.published)?;
-                row.set_item("published_value", c.row.published_value)?;
-                row.set_item("run0", c.row.value)?;
-                row.set_item("median", c.median)?;
-                row.set_item("p10", c.p10)?;
-                row.set_item("p90", c.p90)?;
-                row.set_item("interval_lo", c.interval.0)?;
-                row.set_item("interval_hi", c.interval.1)?;
-                row.set_item("confidence", c.confidence)?;
-                row.set_item("count", c.count)?;
-                row.set_item("missing", c.missing)?;
-                row.set_item("band", &c.row.band)?;
-                // pass, open, miss, unresolved (a failure: too few worlds to judge), or `-`.
-                row.set_item("result", c.verdict.map_or_else(|| "-".to_string(), |v| v.word().to_lowercase()))?;
-                rows.append(row)?;
-            }
-            d.set_item("distribution", rows)?;
-        }
-    }
+    d.set_item("frames", frames(py, &r.frames)?)?;
     d.set_item("warnings", warnings)?;
     Ok(d)
 }
 
-/// A check's verdict as the terminal prints it: `pass`, `miss` or `-` (no band).
-fn verdict(pass: Option<bool>) -> &'static str {
-    match pass {
-        Some(true) => "pass",
-        Some(false) => "miss",
-        None => "-",
+/// Result frames by name, each as the bytes of its parquet encoding (read on the Python side
+/// with `polars.read_parquet`: the schema travels with the values, no column is named here).
+fn frames<'py>(py: Python<'py>, frames: &[(String, calsim::io::table::Frame)]) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let encoded = calsim::io::table::parquet_frames(frames).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+    for (name, bytes) in encoded {
+        d.set_item(name, pyo3::types::PyBytes::new(py, &bytes))?;
     }
+    Ok(d)
 }
 
 /// The merge report as a dict.

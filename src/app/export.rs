@@ -195,30 +195,13 @@ pub fn write(out: &Path, name: &str, e: &Export) -> std::io::Result<PathBuf> {
         Some(&e.links),
         e.flange.as_ref(),
     );
-    #[derive(serde::Serialize)]
-    struct Manifest<'a> {
-        export: &'a str,
-        task: usize,
-        set_size: usize,
-        validation_median_mm: f64,
-        #[serde(flatten)]
-        provenance: crate::io::manifest::Provenance,
-    }
-    let manifest = Manifest {
-        export: &e.scenario,
-        task: e.task,
-        set_size: e.set_size,
-        validation_median_mm: e.validation_median_mm,
-        provenance: crate::io::manifest::Provenance::of_run(&[]),
-    };
-    let manifest = serde_json::to_string_pretty(&manifest).map_err(std::io::Error::other)? + "\n";
-    crate::io::out_dir::write_atomically(out, name, |dir| {
-        crate::io::out_dir::write_file(&dir.join("manifest.json"), &manifest)?;
-        crate::io::out_dir::write_file(&dir.join("robot.toml"), &robot)?;
-        crate::io::out_dir::write_file(&dir.join("before.toml"), &before)?;
-        crate::io::out_dir::write_file(&dir.join("robot.urdf"), &urdf)?;
-        crate::io::out_dir::write_file(&dir.join("calibration.yaml"), &yaml)
-    })
+    let mut r = crate::io::results::Results::new(name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+    r.field("export", &e.scenario)?
+        .field("task", e.task)?
+        .field("set_size", e.set_size)?
+        .field("validation_median_mm", e.validation_median_mm)?;
+    r.file("robot.toml", robot).file("before.toml", before).file("robot.urdf", urdf).file("calibration.yaml", yaml);
+    crate::io::results::write(out, r).map(|w| w.dest)
 }
 
 /// The URDF of `e`'s identified model ([`crate::robot::export::urdf`]).

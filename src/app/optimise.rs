@@ -155,7 +155,7 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
     let plots = spec.plots.then(|| plot_inputs(&space, &outcome));
     let overrides: Vec<(String, String)> =
         spec.method.iter().map(|m| ("search.method".to_string(), format!("\"{}\"", m.label()))).collect();
-    let manifest = serde_json::json!({
+    let fields = serde_json::json!({
         "design_file": std::path::absolute(&spec.file).unwrap_or_else(|_| spec.file.clone()).display().to_string(),
         "identity": space.identity,
         "search_s": search_s,
@@ -163,18 +163,15 @@ pub fn run(spec: &OptimiseSpec, observer: &dyn Observer) -> Result<OptimiseRepor
         "evaluations": outcome.verdict.trace.len(),
         "winner_timing": report.cost,
     });
-    let manifest =
-        crate::io::manifest::Provenance::of_run(&overrides).joined(manifest).map_err(|e| Error::input("manifest", e.to_string()))?;
     let options = crate::device::WriteOptions { threads, plots: spec.plots, recording: spec.plots, overrides: Vec::new() };
-    let write_world = |dir: &std::path::Path| -> std::io::Result<()> {
-        match &world {
-            Some(o) => o.write(dir, &[], &options).map(|_| ()).map_err(std::io::Error::other),
-            None => Ok(()),
-        }
+    let winner = match &world {
+        Some(o) => Some(o.results(&[], &options).map_err(|e| Error::io(&spec.out)(std::io::Error::other(e)))?),
+        None => None,
     };
-    let winner_world: Option<results::WorldWriter<'_>> = if world.is_some() { Some(&write_world) } else { None };
-    let dest = results::write(&spec.out, &space, &outcome, plots.as_ref(), &manifest, winner_world).map_err(Error::io(&spec.out))?;
-    report.summary = Some(results::summary(&space, &outcome));
+    let results = results::results(&space, &outcome, plots, fields, &overrides, winner).map_err(Error::io(&spec.out))?;
+    let written = crate::io::results::write(&spec.out, results).map_err(Error::io(&spec.out))?;
+    let dest = written.dest;
+    report.summary = Some(written.summary);
     report.dest = Some(dest);
     Ok(report)
 }

@@ -130,6 +130,9 @@ pub struct RunReport {
     pub threads: usize,
     /// The published figures of realisation 0 beside calsim's.
     pub checks: Vec<Check>,
+    /// The run's tables for a caller that takes frames (Python): `checks` (`checks.parquet`) and,
+    /// over realisations, `distribution` (`checks_over_worlds.parquet`).
+    pub frames: Vec<(String, polars::prelude::DataFrame)>,
     /// The study's timing line.
     pub timing: String,
     /// Wall time of writing the results, and of the recording within it, s.
@@ -262,16 +265,22 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     let earlier = (!spec.check && count == 1).then(|| earlier_check(&spec.out.join(&h.name))).flatten();
     let t_write = Instant::now();
     let options = WriteOptions { threads, plots: spec.plots, recording: spec.recording, overrides: spec.overrides.pairs() };
-    let mut written = Default::default();
-    let dest = crate::io::out_dir::write_atomically(&spec.out, &h.name, |dir| {
-        written = outcome.write(dir, &checks, &options).map_err(std::io::Error::other)?;
-        if let Some(c) = &check_report {
-            let json = serde_json::to_string_pretty(c).map_err(std::io::Error::other)?;
-            crate::io::out_dir::write_file(&dir.join("check.json"), json + "\n")?;
-        }
-        Ok(())
-    })
-    .map_err(Error::io(&spec.out))?;
+    let mut results = outcome.results(&checks, &options).map_err(device_err)?;
+    let table_err = |e: std::io::Error| Error::io(&spec.out)(e);
+    let mut frames = vec![(
+        "checks".to_string(),
+        results.table("checks.parquet", crate::study::check::check_columns(&checks)).map_err(table_err)?.clone(),
+    )];
+    if let Some(d) = &distribution {
+        let frame = results.table("checks_over_worlds.parquet", crate::study::check::distribution_columns(d)).map_err(table_err)?;
+        frames.push(("distribution".to_string(), frame.clone()));
+    }
+    if let Some(c) = &check_report {
+        let json = serde_json::to_string_pretty(c).map_err(|e| Error::input("check.json", e.to_string()))?;
+        results.file("check.json", json + "\n");
+    }
+    let written = crate::io::results::write(&spec.out, results).map_err(Error::io(&spec.out))?;
+    let dest = written.dest.clone();
     if let (Some(j), Some(c)) = (&spec.junit, &check_report) {
         crate::io::out_dir::write_file_atomically(j, c.junit()).map_err(Error::io(j))?;
     }
@@ -293,6 +302,7 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         seed: h.seed,
         threads,
         checks,
+        frames,
         timing: outcome.timing(),
         write_s,
         recording_s: written.recording_s,

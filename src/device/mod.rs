@@ -180,9 +180,9 @@ pub trait Outcome: Send + Sync {
     /// The linear prediction beside the Monte Carlo at the table set size (`seed` keys its draws).
     fn prediction(&self, seed: u64) -> Option<Prediction>;
 
-    /// Writes the results (tables, `manifest.json`, `summary.md`, figures, recording) into `dir`,
-    /// an empty directory; `checks` are this world's rows.
-    fn write(&self, dir: &Path, checks: &[Check], options: &WriteOptions) -> Result<WriteReport, DeviceError>;
+    /// The results of this world (tables, manifest fields, summary, figures, recording) as a value
+    /// for [`crate::io::results::write`]; `checks` are this world's rows.
+    fn results<'a>(&'a self, checks: &'a [Check], options: &'a WriteOptions) -> Result<crate::io::results::Results<'a>, DeviceError>;
 
     /// The timing line of the study (what took how long), without the writing.
     fn timing(&self) -> String;
@@ -199,13 +199,6 @@ pub struct WriteOptions {
     pub recording: bool,
     /// Command-line overrides applied to the scenario, as `key = value` (recorded in the manifest).
     pub overrides: Vec<(String, String)>,
-}
-
-/// What writing the results took.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct WriteReport {
-    /// Wall time of the recording, s.
-    pub recording_s: f64,
 }
 
 /// What a sweep keeps of a world: the error before calibration, the modelled campaign time, and

@@ -239,6 +239,7 @@ pub struct Results<'a> {
     files: Vec<(String, Vec<u8>)>,
     draw: Vec<Draw<'a>>,
     record: Option<Record<'a>>,
+    nested: Vec<(String, Results<'a>)>,
     /// The summary (`summary.md`); none when it has no part.
     pub summary: Summary<'a>,
 }
@@ -254,6 +255,7 @@ impl<'a> Results<'a> {
             files: Vec::new(),
             draw: Vec::new(),
             record: None,
+            nested: Vec::new(),
             summary: Summary::default(),
         }
     }
@@ -312,6 +314,13 @@ impl<'a> Results<'a> {
         self
     }
 
+    /// Results of their own in the subdirectory `name` (an optimisation's winning world), written
+    /// the same way, with their own manifest.
+    pub fn nested(&mut self, name: &str, results: Results<'a>) -> &mut Self {
+        self.nested.push((name.to_string(), results));
+        self
+    }
+
     /// Writes everything into `dir`, an empty directory (the order of the module doc); the
     /// summary as printed and the time the recording took, s.
     pub fn write_into(self, dir: &Path) -> std::io::Result<(String, f64)> {
@@ -321,6 +330,11 @@ impl<'a> Results<'a> {
         }
         for (name, bytes) in &self.files {
             write_file(&dir.join(name), bytes)?;
+        }
+        for (name, results) in self.nested {
+            let sub = dir.join(&name);
+            std::fs::create_dir(&sub).map_err(crate::io::out_dir::named(&sub))?;
+            results.write_into(&sub)?;
         }
         let mut manifest = self.fields;
         manifest.insert("tables_sha256".into(), serde_json::to_value(crate::io::table::table_hashes(dir)?).map_err(crate::io::table::err)?);

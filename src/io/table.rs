@@ -7,6 +7,9 @@ use std::path::Path;
 use polars::prelude::{Column, DataFrame, ParquetWriter};
 use sha2::{Digest, Sha256};
 
+/// A result table in memory.
+pub type Frame = DataFrame;
+
 /// An error of the table library as an I/O error.
 pub fn err(e: impl std::fmt::Display) -> std::io::Error {
     std::io::Error::other(e.to_string())
@@ -30,12 +33,23 @@ pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
 }
 
 /// Writes `frame` as the parquet table `dir/name`.
-pub fn write_frame(dir: &Path, name: &str, mut frame: DataFrame) -> std::io::Result<()> {
+pub fn write_frame(dir: &Path, name: &str, frame: DataFrame) -> std::io::Result<()> {
     // Encoded in memory and written in one go, so that a write error is the file system's own
     // (`No space left on device`), naming the table.
+    crate::io::out_dir::write_file(&dir.join(name), parquet_bytes(name, frame)?)
+}
+
+/// The parquet encoding of the table `name` (the bytes of its file; what the Python package reads
+/// a frame from: the schema travels with the values, no column is named in between).
+pub fn parquet_bytes(name: &str, mut frame: DataFrame) -> std::io::Result<Vec<u8>> {
     let mut bytes = Vec::new();
     ParquetWriter::new(&mut bytes).finish(&mut frame).map_err(|e| std::io::Error::other(format!("{name}: {e}")))?;
-    crate::io::out_dir::write_file(&dir.join(name), bytes)
+    Ok(bytes)
+}
+
+/// Frames by name as the bytes of their parquet encodings ([`parquet_bytes`]), in order.
+pub fn parquet_frames(frames: &[(String, DataFrame)]) -> std::io::Result<Vec<(String, Vec<u8>)>> {
+    frames.iter().map(|(name, frame)| Ok((name.clone(), parquet_bytes(name, frame.clone())?))).collect()
 }
 
 /// The sha256 of every result table (`*.parquet`) in `dir`, by file name: two runs gave the same

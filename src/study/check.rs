@@ -630,3 +630,52 @@ mod form_tests {
         assert_eq!(in_the_form_of("fails", 0.5), "0.500");
     }
 }
+
+/// A check's verdict as the terminal prints it: `pass`, `miss` or `-` (no band).
+pub fn verdict_word(pass: Option<bool>) -> &'static str {
+    match pass {
+        Some(true) => "pass",
+        Some(false) => "miss",
+        None => "-",
+    }
+}
+
+/// `checks.parquet`: the published figures of one world beside calsim's, with band and verdict.
+pub fn check_columns(checks: &[Check]) -> Vec<polars::prelude::Column> {
+    use polars::prelude::Column;
+    let s = |n: &str, v: Vec<String>| Column::new(n.into(), v);
+    vec![
+        s("figure", checks.iter().map(|c| c.figure.clone()).collect()),
+        s("published", checks.iter().map(|c| c.published.clone()).collect()),
+        Column::new("published_value".into(), checks.iter().map(|c| c.published_value).collect::<Vec<_>>()),
+        s("calsim", checks.iter().map(|c| c.reproduced.clone()).collect()),
+        Column::new("value".into(), checks.iter().map(|c| c.value).collect::<Vec<_>>()),
+        s("band", checks.iter().map(|c| c.band.clone()).collect()),
+        s("result", checks.iter().map(|c| verdict_word(c.pass).to_string()).collect()),
+    ]
+}
+
+/// `checks_over_worlds.parquet`: each figure over the realisations, its median with its interval
+/// and confidence, the worlds without a value, and the verdict (`pass`, `open`, `miss`,
+/// `unresolved` or `-`).
+pub fn distribution_columns(d: &[DistributionCheck]) -> Vec<polars::prelude::Column> {
+    use polars::prelude::Column;
+    let s = |n: &str, v: Vec<String>| Column::new(n.into(), v);
+    let f = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
+    vec![
+        s("figure", d.iter().map(|c| c.row.figure.clone()).collect()),
+        s("published", d.iter().map(|c| c.row.published.clone()).collect()),
+        Column::new("published_value".into(), d.iter().map(|c| c.row.published_value).collect::<Vec<_>>()),
+        f("run0", d.iter().map(|c| c.row.value).collect()),
+        f("median", d.iter().map(|c| c.median).collect()),
+        f("p10", d.iter().map(|c| c.p10).collect()),
+        f("p90", d.iter().map(|c| c.p90).collect()),
+        f("interval_lo", d.iter().map(|c| c.interval.0).collect()),
+        f("interval_hi", d.iter().map(|c| c.interval.1).collect()),
+        f("confidence", d.iter().map(|c| c.confidence).collect()),
+        Column::new("count".into(), d.iter().map(|c| c.count as i64).collect::<Vec<_>>()),
+        Column::new("missing".into(), d.iter().map(|c| c.missing as i64).collect::<Vec<_>>()),
+        s("band", d.iter().map(|c| c.row.band.clone()).collect()),
+        s("result", d.iter().map(|c| c.verdict.map_or_else(|| "-".to_string(), |v| v.word().to_lowercase())).collect()),
+    ]
+}

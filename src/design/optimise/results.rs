@@ -9,10 +9,9 @@ use polars::prelude::Column;
 
 use super::{Candidate, DesignSpace, Verdict};
 use crate::design::sweep::designs::DesignRow;
-use crate::io::table::parquet;
+use crate::io::results::{Head, Results};
 
 /// Writes one world of the winner into a directory (as `calsim run` writes its results).
-pub type WorldWriter<'a> = &'a dyn Fn(&Path) -> std::io::Result<()>;
 
 /// The optimiser's outcome as the report shows it.
 #[derive(Clone, Debug)]
@@ -508,165 +507,165 @@ struct RobustRow {
     score: f64,
 }
 
-/// Writes the results into `out/<name>` atomically; `plots` are the figures' inputs.
-pub fn write(
-    out: &Path,
-    space: &DesignSpace,
-    o: &Outcome,
-    plots: Option<&super::plots::OptimisePlotInputs>,
-    manifest: &serde_json::Value,
-    winner_world: Option<WorldWriter<'_>>,
-) -> std::io::Result<PathBuf> {
-    crate::io::out_dir::write_atomically(out, &space.name, |dir| {
-        let v = &o.verdict;
-        let f = |n: &str, x: Vec<f64>| Column::new(n.into(), x);
-        let u = |n: &str, x: Vec<u32>| Column::new(n.into(), x);
-        let s = |n: &str, x: Vec<String>| Column::new(n.into(), x);
-        let best: Vec<Option<&super::SizeScore>> = v.trace.iter().map(|e| e.best()).collect();
-        let bf = |g: &dyn Fn(&DesignRow) -> f64| best.iter().map(|b| b.map_or(f64::NAN, |b| g(&b.row))).collect::<Vec<_>>();
-        parquet(
-            dir,
-            "trace.parquet",
-            vec![
-                u("restart", v.trace.iter().map(|e| e.asked.restart).collect()),
-                u("evaluation", v.trace.iter().map(|e| e.asked.index).collect()),
-                u("count", v.trace.iter().map(|e| e.asked.count as u32).collect()),
-                s("design", v.trace.iter().map(|e| e.key.clone()).collect()),
-                s(
-                    "values",
-                    v.trace.iter().map(|e| e.values.iter().map(|(k, x)| format!("{k} = {x}")).collect::<Vec<_>>().join("; ")).collect(),
-                ),
-                s("x", v.trace.iter().map(|e| format!("{:?}", e.asked.x)).collect()),
-                s("violation", v.trace.iter().map(|e| e.violation.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect()),
-                f("violation_margin", v.trace.iter().map(|e| e.violation.as_ref().map_or(0.0, |x| x.1)).collect()),
-                u("worlds", v.trace.iter().map(|e| e.worlds).collect()),
-                u("failed_worlds", v.trace.iter().map(|e| e.failed).collect()),
-                s("first_error", v.trace.iter().map(|e| e.first_error.clone().unwrap_or_default()).collect()),
-                f("reach_margin_mm", v.trace.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).collect()),
-                u("set_size", best.iter().map(|b| b.map_or(0, |b| b.row.design.set_size)).collect()),
-                f("estimate", bf(&|r| r.estimate)),
-                f("lower", bf(&|r| r.interval.0)),
-                f("upper", bf(&|r| r.interval.1)),
-                f("campaign_h", bf(&|r| r.campaign_h)),
-                f("score", v.trace.iter().map(|e| e.score).collect()),
-                s(
-                    "model_scores",
-                    v.trace
-                        .iter()
-                        .map(|e| {
-                            let names = space.model_names();
-                            e.models.iter().zip(&names).map(|(m, n)| format!("{n} = {}", m.score)).collect::<Vec<_>>().join("; ")
-                        })
-                        .collect(),
-                ),
-            ],
-        )?;
-        let rows_table = |name: &str, rows: &[DesignRow], label: &dyn Fn(usize) -> String| {
-            parquet(
-                dir,
-                name,
-                vec![
-                    s("design", rows.iter().map(|r| label(r.design.point)).collect()),
-                    s("selection", rows.iter().map(|r| r.design.selection.clone()).collect()),
-                    u("set_size", rows.iter().map(|r| r.design.set_size).collect()),
-                    u("worlds", rows.iter().map(|r| r.worlds).collect()),
-                    u("failed_worlds", rows.iter().map(|r| r.failed_worlds).collect()),
-                    f("estimate", rows.iter().map(|r| r.estimate).collect()),
-                    f("lower", rows.iter().map(|r| r.interval.0).collect()),
-                    f("upper", rows.iter().map(|r| r.interval.1).collect()),
-                    f("success", rows.iter().map(|r| r.success.map_or(f64::NAN, |x| x.0)).collect()),
-                    f("campaign_h", rows.iter().map(|r| r.campaign_h).collect()),
-                    s("feasibility", rows.iter().map(|r| r.feasibility.label().to_string()).collect()),
-                    u("rank", rows.iter().map(|r| r.rank as u32).collect()),
-                    Column::new("tied".into(), rows.iter().map(|r| r.tied).collect::<Vec<_>>()),
-                    s("eliminated", rows.iter().map(|r| r.eliminated.as_ref().map(|e| e.1.clone()).unwrap_or_default()).collect()),
-                ],
-            )
-        };
-        rows_table("race.parquet", &v.race_rows, &|p| v.finalists[p].label.clone())?;
-        rows_table("verified.parquet", &v.held_out_rows, &|p| v.verified[p].label.clone())?;
-        if let Some(r) = &v.robust {
-            // Every model's rows, race then held-out, and the combined scores.
-            let mut rows: Vec<RobustRow> = Vec::new();
-            let mut add = |stage: &str, by_model: &[Vec<DesignRow>], label: &dyn Fn(usize) -> String| {
-                for (m, rs) in by_model.iter().enumerate() {
-                    rows.extend(rs.iter().map(|x| RobustRow {
-                        stage: stage.into(),
-                        model: r.models[m].clone(),
-                        design: label(x.design.point),
-                        row: Some(x.clone()),
-                        key: (x.design.point, x.design.selection.clone(), x.design.set_size),
-                        score: super::score_of(space, x),
-                    }));
-                }
-                for c in super::combined(space, by_model) {
-                    rows.push(RobustRow {
-                        stage: stage.into(),
-                        model: format!("robust ({})", r.combine.label()),
-                        design: label(c.key.0),
-                        row: None,
-                        key: c.key,
-                        score: c.score,
-                    });
-                }
-            };
-            add("race", &r.race, &|p| v.finalists[p].label.clone());
-            add("held_out", &r.held_out, &|p| v.verified[p].label.clone());
-            let num = |g: &dyn Fn(&DesignRow) -> f64| rows.iter().map(|x| x.row.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
-            let whole = |g: &dyn Fn(&DesignRow) -> u32| rows.iter().map(|x| x.row.as_ref().map_or(0, g)).collect::<Vec<_>>();
-            parquet(
-                dir,
-                "robust.parquet",
-                vec![
-                    s("stage", rows.iter().map(|x| x.stage.clone()).collect()),
-                    s("model", rows.iter().map(|x| x.model.clone()).collect()),
-                    s("design", rows.iter().map(|x| x.design.clone()).collect()),
-                    s("selection", rows.iter().map(|x| x.key.1.clone()).collect()),
-                    u("set_size", rows.iter().map(|x| x.key.2).collect()),
-                    u("worlds", whole(&|x| x.worlds)),
-                    u("failed_worlds", whole(&|x| x.failed_worlds)),
-                    f("estimate", num(&|x| x.estimate)),
-                    f("lower", num(&|x| x.interval.0)),
-                    f("upper", num(&|x| x.interval.1)),
-                    f("success", num(&|x| x.success.map_or(f64::NAN, |y| y.0))),
-                    f("campaign_h", num(&|x| x.campaign_h)),
-                    f("score", rows.iter().map(|x| x.score).collect()),
-                ],
-            )?;
+/// The results of an optimisation: the trace, the race, the verified designs and (for several
+/// error models) the robust table; the answer as a design file and the spheres' sheet; the
+/// manifest's `fields` (a JSON object) with the provenance of `overrides`; the summary and
+/// figures (`plots` are their inputs); the winner's realisation 0 as `winner/`.
+pub fn results<'a>(
+    space: &'a DesignSpace,
+    o: &'a Outcome,
+    plots: Option<super::plots::OptimisePlotInputs>,
+    fields: serde_json::Value,
+    overrides: &[(String, String)],
+    winner: Option<Results<'a>>,
+) -> std::io::Result<Results<'a>> {
+    let v = &o.verdict;
+    let mut out = Results::new(space.name.clone(), Head::Run(crate::io::manifest::Provenance::of_run(overrides)));
+    out.table("trace.parquet", trace_columns(space, v))?;
+    out.table("race.parquet", row_columns(&v.race_rows, &|p| v.finalists[p].label.clone()))?;
+    out.table("verified.parquet", row_columns(&v.held_out_rows, &|p| v.verified[p].label.clone()))?;
+    if let Some(r) = &v.robust {
+        out.table("robust.parquet", robust_columns(space, v, r))?;
+    }
+    if let Some((i, r)) = &o.winner {
+        let head = format!(
+            "# {}: the optimiser's answer, {} ({} sets of {}): held-out {}.\n# `calsim run best_design.toml` redoes its realisation 0 with the figures and the Rerun recording (from any directory).\n",
+            space.name,
+            v.verified[*i].label,
+            r.design.selection,
+            r.design.set_size,
+            row_words(r)
+        );
+        out.file("best_design.toml", design_file(&v.verified[*i], r, &head));
+    }
+    if let Some(sheet) = &o.sheet {
+        out.file("spheres.csv", sheet.csv());
+    }
+    out.fields(fields)?;
+    out.summary.text(summary(space, o));
+    if let Some(w) = winner {
+        out.nested("winner", w);
+        out.summary.text(
+            "\n`winner/`: the winner's realisation 0 as `calsim run` writes it (tables, figures, the Rerun recording `study.rrd`).\n",
+        );
+    }
+    if let Some(p) = plots {
+        out.draw(Box::new(move |dir| super::plots::write(dir, &p)));
+        out.summary.figures("\n## Figures\n\n");
+    }
+    Ok(out)
+}
+
+/// `trace.parquet`: one row per evaluation.
+fn trace_columns(space: &DesignSpace, v: &Verdict) -> Vec<Column> {
+    let f = |n: &str, x: Vec<f64>| Column::new(n.into(), x);
+    let u = |n: &str, x: Vec<u32>| Column::new(n.into(), x);
+    let s = |n: &str, x: Vec<String>| Column::new(n.into(), x);
+    let best: Vec<Option<&super::SizeScore>> = v.trace.iter().map(|e| e.best()).collect();
+    let bf = |g: &dyn Fn(&DesignRow) -> f64| best.iter().map(|b| b.map_or(f64::NAN, |b| g(&b.row))).collect::<Vec<_>>();
+    vec![
+        u("restart", v.trace.iter().map(|e| e.asked.restart).collect()),
+        u("evaluation", v.trace.iter().map(|e| e.asked.index).collect()),
+        u("count", v.trace.iter().map(|e| e.asked.count as u32).collect()),
+        s("design", v.trace.iter().map(|e| e.key.clone()).collect()),
+        s("values", v.trace.iter().map(|e| e.values.iter().map(|(k, x)| format!("{k} = {x}")).collect::<Vec<_>>().join("; ")).collect()),
+        s("x", v.trace.iter().map(|e| format!("{:?}", e.asked.x)).collect()),
+        s("violation", v.trace.iter().map(|e| e.violation.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect()),
+        f("violation_margin", v.trace.iter().map(|e| e.violation.as_ref().map_or(0.0, |x| x.1)).collect()),
+        u("worlds", v.trace.iter().map(|e| e.worlds).collect()),
+        u("failed_worlds", v.trace.iter().map(|e| e.failed).collect()),
+        s("first_error", v.trace.iter().map(|e| e.first_error.clone().unwrap_or_default()).collect()),
+        f("reach_margin_mm", v.trace.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).collect()),
+        u("set_size", best.iter().map(|b| b.map_or(0, |b| b.row.design.set_size)).collect()),
+        f("estimate", bf(&|r| r.estimate)),
+        f("lower", bf(&|r| r.interval.0)),
+        f("upper", bf(&|r| r.interval.1)),
+        f("campaign_h", bf(&|r| r.campaign_h)),
+        f("score", v.trace.iter().map(|e| e.score).collect()),
+        s(
+            "model_scores",
+            v.trace
+                .iter()
+                .map(|e| {
+                    let names = space.model_names();
+                    e.models.iter().zip(&names).map(|(m, n)| format!("{n} = {}", m.score)).collect::<Vec<_>>().join("; ")
+                })
+                .collect(),
+        ),
+    ]
+}
+
+/// `race.parquet` and `verified.parquet`: one row per judged design, `label` naming its point.
+fn row_columns(rows: &[DesignRow], label: &dyn Fn(usize) -> String) -> Vec<Column> {
+    let f = |n: &str, x: Vec<f64>| Column::new(n.into(), x);
+    let u = |n: &str, x: Vec<u32>| Column::new(n.into(), x);
+    let s = |n: &str, x: Vec<String>| Column::new(n.into(), x);
+    vec![
+        s("design", rows.iter().map(|r| label(r.design.point)).collect()),
+        s("selection", rows.iter().map(|r| r.design.selection.clone()).collect()),
+        u("set_size", rows.iter().map(|r| r.design.set_size).collect()),
+        u("worlds", rows.iter().map(|r| r.worlds).collect()),
+        u("failed_worlds", rows.iter().map(|r| r.failed_worlds).collect()),
+        f("estimate", rows.iter().map(|r| r.estimate).collect()),
+        f("lower", rows.iter().map(|r| r.interval.0).collect()),
+        f("upper", rows.iter().map(|r| r.interval.1).collect()),
+        f("success", rows.iter().map(|r| r.success.map_or(f64::NAN, |x| x.0)).collect()),
+        f("campaign_h", rows.iter().map(|r| r.campaign_h).collect()),
+        s("feasibility", rows.iter().map(|r| r.feasibility.label().to_string()).collect()),
+        u("rank", rows.iter().map(|r| r.rank as u32).collect()),
+        Column::new("tied".into(), rows.iter().map(|r| r.tied).collect::<Vec<_>>()),
+        s("eliminated", rows.iter().map(|r| r.eliminated.as_ref().map(|e| e.1.clone()).unwrap_or_default()).collect()),
+    ]
+}
+
+/// `robust.parquet`: every model's rows, race then held-out, and the combined scores.
+fn robust_columns(space: &DesignSpace, v: &Verdict, r: &super::RobustVerdict) -> Vec<Column> {
+    let f = |n: &str, x: Vec<f64>| Column::new(n.into(), x);
+    let u = |n: &str, x: Vec<u32>| Column::new(n.into(), x);
+    let s = |n: &str, x: Vec<String>| Column::new(n.into(), x);
+    // Every model's rows, race then held-out, and the combined scores.
+    let mut rows: Vec<RobustRow> = Vec::new();
+    let mut add = |stage: &str, by_model: &[Vec<DesignRow>], label: &dyn Fn(usize) -> String| {
+        for (m, rs) in by_model.iter().enumerate() {
+            rows.extend(rs.iter().map(|x| RobustRow {
+                stage: stage.into(),
+                model: r.models[m].clone(),
+                design: label(x.design.point),
+                row: Some(x.clone()),
+                key: (x.design.point, x.design.selection.clone(), x.design.set_size),
+                score: super::score_of(space, x),
+            }));
         }
-        if let Some((i, r)) = &o.winner {
-            let head = format!(
-                "# {}: the optimiser's answer, {} ({} sets of {}): held-out {}.\n# `calsim run best_design.toml` redoes its realisation 0 with the figures and the Rerun recording (from any directory).\n",
-                space.name,
-                v.verified[*i].label,
-                r.design.selection,
-                r.design.set_size,
-                row_words(r)
-            );
-            crate::io::out_dir::write_file(&dir.join("best_design.toml"), design_file(&v.verified[*i], r, &head))?;
+        for c in super::combined(space, by_model) {
+            rows.push(RobustRow {
+                stage: stage.into(),
+                model: format!("robust ({})", r.combine.label()),
+                design: label(c.key.0),
+                row: None,
+                key: c.key,
+                score: c.score,
+            });
         }
-        if let Some(sheet) = &o.sheet {
-            crate::io::out_dir::write_file(&dir.join("spheres.csv"), sheet.csv())?;
-        }
-        let mut text = summary(space, o);
-        if let Some(w) = winner_world {
-            let d = dir.join("winner");
-            std::fs::create_dir(&d)?;
-            w(&d)?;
-            text +=
-                "\n`winner/`: the winner's realisation 0 as `calsim run` writes it (tables, figures, the Rerun recording `study.rrd`).\n";
-        }
-        if let Some(p) = plots {
-            let written = super::plots::write(dir, p).map_err(std::io::Error::other)?;
-            text += "\n## Figures\n\n";
-            for w in written {
-                text += &format!("- `{}.png`: {}\n", w.stem, w.caption);
-            }
-        }
-        crate::io::out_dir::write_file(&dir.join("summary.md"), text)?;
-        crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_vec_pretty(manifest).map_err(std::io::Error::other)?)?;
-        Ok(())
-    })
+    };
+    add("race", &r.race, &|p| v.finalists[p].label.clone());
+    add("held_out", &r.held_out, &|p| v.verified[p].label.clone());
+    let num = |g: &dyn Fn(&DesignRow) -> f64| rows.iter().map(|x| x.row.as_ref().map_or(f64::NAN, g)).collect::<Vec<_>>();
+    let whole = |g: &dyn Fn(&DesignRow) -> u32| rows.iter().map(|x| x.row.as_ref().map_or(0, g)).collect::<Vec<_>>();
+    vec![
+        s("stage", rows.iter().map(|x| x.stage.clone()).collect()),
+        s("model", rows.iter().map(|x| x.model.clone()).collect()),
+        s("design", rows.iter().map(|x| x.design.clone()).collect()),
+        s("selection", rows.iter().map(|x| x.key.1.clone()).collect()),
+        u("set_size", rows.iter().map(|x| x.key.2).collect()),
+        u("worlds", whole(&|x| x.worlds)),
+        u("failed_worlds", whole(&|x| x.failed_worlds)),
+        f("estimate", num(&|x| x.estimate)),
+        f("lower", num(&|x| x.interval.0)),
+        f("upper", num(&|x| x.interval.1)),
+        f("success", num(&|x| x.success.map_or(f64::NAN, |y| y.0))),
+        f("campaign_h", num(&|x| x.campaign_h)),
+        f("score", rows.iter().map(|x| x.score).collect()),
+    ]
 }
 
 #[cfg(test)]

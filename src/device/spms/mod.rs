@@ -14,15 +14,11 @@ pub mod results;
 pub mod spec;
 pub mod study;
 
-use std::cell::Cell;
 use std::path::Path;
-use std::time::Instant;
 
 pub use self::spec::SpmsScenario;
 use self::study::{SpmsFigures, SpmsResults};
-use super::{
-    Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
-};
+use super::{Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions};
 pub use crate::instrument::spms::*;
 use crate::study::check::Check;
 use crate::study::engine::Identified;
@@ -183,23 +179,17 @@ impl Outcome for SpmsOutcome {
         predict_tasks(&r.set, &r.cell.robot.truth, tasks, &pool, &[], seed)
     }
 
-    fn write(&self, dir: &Path, checks: &[Check], options: &WriteOptions) -> Result<WriteReport, DeviceError> {
+    fn results<'a>(&'a self, checks: &'a [Check], options: &'a WriteOptions) -> Result<crate::io::results::Results<'a>, DeviceError> {
         let s = &self.scenario;
-        let recording_s = Cell::new(0.0);
-        let record = |path: &Path| {
-            let t = Instant::now();
-            let r = recording::write(path, &s.header.name, &s.spec, &self.results);
-            recording_s.set(t.elapsed().as_secs_f64());
-            r
-        };
+        let record: crate::io::results::Record<'a> =
+            Box::new(move |path: &Path| recording::write(path, &s.header.name, &s.spec, &self.results));
         let extras = results::SpmsExtras {
             plots: options.plots,
-            recording: options.recording.then_some(&record as _),
+            recording: options.recording.then_some(record),
             threads: options.threads,
             overrides: &options.overrides,
         };
-        results::write(dir, s, &self.results, &self.figures, checks, &extras).map_err(DeviceError::of)?;
-        Ok(WriteReport { recording_s: recording_s.get() })
+        results::results(s, &self.results, &self.figures, checks, extras).map_err(DeviceError::of)
     }
 
     fn timing(&self) -> String {

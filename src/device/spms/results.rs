@@ -3,7 +3,6 @@
 //! figures and, when asked, the recording. Written into a temporary directory renamed into place.
 
 use std::fmt::Write as _;
-use std::path::Path;
 
 use polars::prelude::*;
 use serde::Serialize;
@@ -12,9 +11,7 @@ use super::plots::SpmsPlotInputs;
 use super::spec::SpmsScenario;
 use super::study::{SpmsFigures, SpmsResults, SpmsTimings};
 use crate::io::manifest::ScenarioHead;
-use crate::io::plot::Written;
-use crate::io::record::Recorder;
-use crate::io::table::{err, parquet, table_hashes};
+use crate::io::results::{Head, Record, Results, Summary};
 use crate::robot::params::display_name;
 use crate::study::Selection;
 use crate::study::check::Check;
@@ -24,10 +21,7 @@ use crate::study::stats::median;
 use crate::study::tables::{parameter_columns, task_columns};
 
 #[derive(Serialize)]
-struct Manifest<'a> {
-    #[serde(flatten)]
-    provenance: ScenarioHead<'a>,
-    tables_sha256: std::collections::BTreeMap<String, String>,
+struct Fields<'a> {
     kind: &'static str,
     tasks: usize,
     set_sizes: Vec<u32>,
@@ -41,24 +35,47 @@ pub struct SpmsExtras<'a> {
     /// Draw the figures.
     pub plots: bool,
     /// Writes the Rerun recording to the path it is given; `None` records nothing.
-    pub recording: Option<Recorder<'a>>,
+    pub recording: Option<Record<'a>>,
     /// Worker threads (recorded in the manifest).
     pub threads: usize,
     /// Command-line overrides of the scenario (`key`, `value`).
     pub overrides: &'a [(String, String)],
 }
 
-/// Writes every result file of `r` into `dir` (an empty directory).
-///
-/// Long by design: one block per result table, in the order of the README's list of result files.
-pub fn write(
-    dir: &Path,
-    s: &SpmsScenario,
-    r: &SpmsResults,
-    f: &SpmsFigures,
-    checks: &[Check],
-    extras: &SpmsExtras<'_>,
-) -> std::io::Result<()> {
+/// The results of an SPMS study: the tables (README's list of result files), the manifest's
+/// fields, the figures, the recording and the summary.
+pub fn results<'a>(
+    s: &'a SpmsScenario,
+    r: &'a SpmsResults,
+    f: &'a SpmsFigures,
+    checks: &'a [Check],
+    extras: SpmsExtras<'a>,
+) -> std::io::Result<Results<'a>> {
+    let head = ScenarioHead::new(&s.header.name, &s.header.path, &s.header.text, s.header.seed, extras.overrides);
+    let mut out = Results::new(s.header.name.clone(), Head::Scenario(head));
+    beam_tables(r, &mut out)?;
+    task_tables(r, &mut out)?;
+    out.fields(Fields {
+        kind: "spms",
+        tasks: r.tasks.len(),
+        set_sizes: s.spec.study.set_sizes.clone(),
+        repetitions: s.spec.study.repetitions,
+        selections: s.spec.study.selections.iter().map(|s| s.label().to_string()).collect(),
+        timings: &r.timings,
+    })?;
+    if let Some(record) = extras.recording {
+        out.record(record);
+    }
+    if extras.plots {
+        out.draw(Box::new(move |dir| super::plots::write(dir, &plot_inputs(r, f))));
+    }
+    summary(s, r, f, checks, &mut out.summary);
+    out.summary.figures("## Figures\n\n");
+    Ok(out)
+}
+
+/// `beams.parquet` (the truth and every identification of the head) and `measurements.parquet`.
+fn beam_tables(r: &SpmsResults, r_: &mut Results<'_>) -> std::io::Result<()> {
     let h = &r.head;
     // Beams: truth and both identifications.
     let (mut which, mut beam, mut px, mut py, mut pz, mut dx, mut dy, mut dz, mut gain, mut perr, mut aerr) =
@@ -86,8 +103,7 @@ pub fn write(
         push(label, &id.beams, &id.gains, &id.point_error_mm, &id.angle_error_deg);
     }
     let c = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
-    parquet(
-        dir,
+    r_.table(
         "beams.parquet",
         vec![
             Column::new("head".into(), which),
@@ -112,8 +128,7 @@ pub fn write(
             resid.push(*res);
         }
     }
-    parquet(
-        dir,
+    r_.table(
         "measurements.parquet",
         vec![
             Column::new("head".into(), which),
@@ -123,6 +138,12 @@ pub fn write(
         ],
     )?;
 
+    Ok(())
+}
+
+/// `tasks.parquet`, `parameters.parquet` and `iso9283_before.parquet`.
+fn task_tables(r: &SpmsResults, r_: &mut Results<'_>) -> std::io::Result<()> {
+    let c = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let t = &r.tasks;
     let opt = |n: &str, v: Vec<Option<f64>>| Column::new(n.into(), v);
     let mut cols = task_columns(t.iter().map(|x| (&x.task, &x.id)));
@@ -135,12 +156,8 @@ pub fn write(
     cols.push(opt("ap_max_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().0)).collect()));
     cols.push(opt("ap_mean_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().1)).collect()));
     cols.push(opt("ap_rms_mm", t.iter().map(|x| x.iso.as_ref().map(|i| i.ap_summary().2)).collect()));
-    parquet(dir, "tasks.parquet", cols)?;
-    parquet(
-        dir,
-        "parameters.parquet",
-        parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.cell.robot.truth, &r.cell.nominal),
-    )?;
+    r_.table("tasks.parquet", cols)?;
+    r_.table("parameters.parquet", parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.cell.robot.truth, &r.cell.nominal))?;
     let (mut which, mut point, mut ap, mut rp) = (vec![], vec![], vec![], vec![]);
     for k in 0..5 {
         which.push("before".to_string());
@@ -148,71 +165,58 @@ pub fn write(
         ap.push(r.before.ap_mm[k]);
         rp.push(r.before.rp_mm[k]);
     }
-    parquet(
-        dir,
+    r_.table(
         "iso9283_before.parquet",
         vec![Column::new("calibration".into(), which), Column::new("point".into(), point), c("ap_mm", ap), c("rp_mm", rp)],
     )?;
 
-    let manifest = Manifest {
-        provenance: ScenarioHead::new(&s.header.name, &s.header.path, &s.header.text, s.header.seed, extras.overrides),
-        tables_sha256: table_hashes(dir)?,
-        kind: "spms",
-        tasks: t.len(),
-        set_sizes: s.spec.study.set_sizes.clone(),
-        repetitions: s.spec.study.repetitions,
-        selections: s.spec.study.selections.iter().map(|s| s.label().to_string()).collect(),
-        timings: &r.timings,
-    };
-    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
-    if let Some(record) = extras.recording {
-        record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
-    }
-    let drawn = if extras.plots {
-        let mut sizes: Vec<usize> = t.iter().map(|x| x.task.set_size).collect();
-        sizes.sort_unstable();
-        sizes.dedup();
-        let by_size = |sel: Selection| -> Vec<(usize, Vec<f64>)> {
-            sizes
-                .iter()
-                .map(|&n| {
-                    (
-                        n,
-                        t.iter()
-                            .filter(|x| x.task.selection == sel && x.task.set_size == n)
-                            .filter_map(|x| x.iso.as_ref().map(|i| i.ap_summary().1))
-                            .collect(),
-                    )
-                })
-                .collect()
-        };
-        let inputs = SpmsPlotInputs {
-            residuals: [&h.paper.fit_residual_max_mm, &h.minimal.fit_residual_max_mm],
-            measuring: [&h.paper.measuring_error_mm, &h.minimal.measuring_error_mm],
-            ap_published: [published().spms_2023.iso9283.ap_before_mm, published().spms_2023.iso9283.ap_after_mm],
-            ap_before: r.before.ap_mm,
-            ap_after: f.after.iter().map(|a| (a.selection.label().to_string(), a.ap_mm)).collect(),
-            ap_mean_by_size: f.after.iter().map(|a| (a.selection.label().to_string(), by_size(a.selection))).collect(),
-            table_n: f.table_n,
-        };
-        super::plots::write(dir, &inputs).map_err(std::io::Error::other)?
-    } else {
-        Vec::new()
-    };
-    crate::io::out_dir::write_file(&dir.join("summary.md"), summary(s, r, f, checks, &drawn))?;
     Ok(())
+}
+
+/// What the figures show.
+fn plot_inputs<'a>(r: &'a SpmsResults, f: &'a SpmsFigures) -> SpmsPlotInputs<'a> {
+    let (h, t) = (&r.head, &r.tasks);
+    let mut sizes: Vec<usize> = t.iter().map(|x| x.task.set_size).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let by_size = |sel: Selection| -> Vec<(usize, Vec<f64>)> {
+        sizes
+            .iter()
+            .map(|&n| {
+                (
+                    n,
+                    t.iter()
+                        .filter(|x| x.task.selection == sel && x.task.set_size == n)
+                        .filter_map(|x| x.iso.as_ref().map(|i| i.ap_summary().1))
+                        .collect(),
+                )
+            })
+            .collect()
+    };
+    SpmsPlotInputs {
+        residuals: [&h.paper.fit_residual_max_mm, &h.minimal.fit_residual_max_mm],
+        measuring: [&h.paper.measuring_error_mm, &h.minimal.measuring_error_mm],
+        ap_published: [published().spms_2023.iso9283.ap_before_mm, published().spms_2023.iso9283.ap_after_mm],
+        ap_before: r.before.ap_mm,
+        ap_after: f.after.iter().map(|a| (a.selection.label().to_string(), a.ap_mm)).collect(),
+        ap_mean_by_size: f.after.iter().map(|a| (a.selection.label().to_string(), by_size(a.selection))).collect(),
+        table_n: f.table_n,
+    }
 }
 
 fn f3(x: f64) -> String {
     if x.is_finite() { format!("{x:.3}") } else { "-".into() }
 }
 
-/// The summary: Tables 3 and 6 next to calsim's, the two beam solvers, random vs DETMAX sets.
-///
-/// Long by design: the summary document top to bottom, one block per section.
-pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], drawn: &[Written]) -> String {
+/// The summary: Tables 3 and 6 next to calsim's, the two beam solvers, random vs DETMAX sets, the
+/// identified parameters and the timing, one section each.
+pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Check], parts: &mut Summary<'_>) {
+    parts.text(head(s, r, checks)).text(beams(s, r)).text(iso9283(r, f)).text(sets(r, f)).text(parameters(r, f)).text(timing(r));
+}
+
+/// The title, the study in one line, the checks and the note on Table 6.
+fn head(s: &SpmsScenario, r: &SpmsResults, checks: &[Check]) -> String {
     let mut o = String::new();
-    let h = &r.head;
     let _ = writeln!(o, "# {}: SPMS and ER20-C10 (Gao et al. 2023), seed {}\n", s.header.name, s.header.seed);
     let _ = writeln!(
         o,
@@ -238,6 +242,13 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         t6.rms_before_mm, t6.rms_after_mm
     );
 
+    o
+}
+
+/// Beam identification (Table 2) and measuring accuracy (Table 3).
+fn beams(s: &SpmsScenario, r: &SpmsResults) -> String {
+    let mut o = String::new();
+    let h = &r.head;
     let _ = writeln!(o, "## Beam identification (Table 2) and measuring accuracy (Table 3)\n");
     let _ = writeln!(
         o,
@@ -282,6 +293,13 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         s.spec.beams.calibration_form.label()
     );
 
+    o
+}
+
+/// ISO 9283 absolute positioning (Table 6).
+fn iso9283(r: &SpmsResults, f: &SpmsFigures) -> String {
+    let mut o = String::new();
+    let t6 = &published().spms_2023.iso9283;
     let _ = writeln!(o, "## ISO 9283 absolute positioning (Table 6)\n");
     let _ = write!(o, "| point | published before | calsim before | published after |");
     for a in &f.after {
@@ -306,6 +324,12 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         r.before.rp_mm.iter().map(|v| format!("{v:.3}")).collect::<Vec<_>>().join(", ")
     );
 
+    o
+}
+
+/// Random sets against DETMAX sets.
+fn sets(r: &SpmsResults, f: &SpmsFigures) -> String {
+    let mut o = String::new();
     let _ = writeln!(
         o,
         "## Random sets and DETMAX sets\n\n| selection | n | identified | median O1 | median condition | \
@@ -336,6 +360,12 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
             );
         }
     }
+    o
+}
+
+/// The identified parameters at the table set size.
+fn parameters(r: &SpmsResults, f: &SpmsFigures) -> String {
+    let mut o = String::new();
     let tn = f.table_n;
     let ids = r.set.ids();
     let _ = writeln!(
@@ -366,6 +396,12 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
             med - truth
         );
     }
+    o
+}
+
+/// What took how long.
+fn timing(r: &SpmsResults) -> String {
+    let mut o = String::new();
     let t = &r.timings;
     let _ = writeln!(
         o,
@@ -378,11 +414,5 @@ pub fn summary(s: &SpmsScenario, r: &SpmsResults, f: &SpmsFigures, checks: &[Che
         t.tasks_s,
         t.study_s
     );
-    if !drawn.is_empty() {
-        let _ = writeln!(o, "## Figures\n");
-        for w in drawn {
-            let _ = writeln!(o, "![{}]({}.png)\n\n{} ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
-        }
-    }
     o
 }

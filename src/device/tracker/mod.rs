@@ -21,13 +21,11 @@ use super::trical::experiment::Experiment;
 use super::trical::figures::Figures;
 use super::trical::study::StudyResults;
 use super::trical::{plots, results, table8};
-use super::{
-    Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
-};
+use super::{Device, DeviceError, ErrorSource, Header, Outcome, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions};
 use crate::identify::Observation;
 use crate::io::manifest::ScenarioHead;
 use crate::io::record::{RecordError, Rr, heat, p3};
-use crate::io::table::{err, table_hashes};
+
 use crate::robot::Joints;
 use crate::study::check::{Check, checks_markdown};
 use crate::study::engine::Identified;
@@ -206,33 +204,28 @@ impl Outcome for TrackerOutcome {
         super::trical::study::predict(&self.results, &pool, &validation, self.scenario.cell.study.table_set_size as usize, seed)
     }
 
-    fn write(&self, dir: &Path, checks: &[Check], options: &WriteOptions) -> Result<WriteReport, DeviceError> {
-        let io = |e: std::io::Error| DeviceError::of(e);
-        results::write_tables(dir, &self.results).map_err(io)?;
+    fn results<'a>(&'a self, checks: &'a [Check], options: &'a WriteOptions) -> Result<crate::io::results::Results<'a>, DeviceError> {
         let h = &self.scenario.cell.header;
+        let head = ScenarioHead::new(&h.name, &h.path, &h.text, h.seed, &options.overrides);
+        let mut out = crate::io::results::Results::new(h.name.clone(), crate::io::results::Head::Scenario(head));
+        results::tables(&self.results, &mut out).map_err(DeviceError::of)?;
         #[derive(serde::Serialize)]
-        struct Manifest<'a> {
-            #[serde(flatten)]
-            provenance: ScenarioHead<'a>,
+        struct Fields {
             kind: &'static str,
             instrument: &'static str,
             pool: usize,
-            tables_sha256: std::collections::BTreeMap<String, String>,
             tasks: usize,
             timings_s: [f64; 3],
         }
-        let manifest = Manifest {
-            provenance: ScenarioHead::new(&h.name, &h.path, &h.text, h.seed, &options.overrides),
+        out.fields(Fields {
             kind: "tracker",
             instrument: self.scenario.external().label(),
             pool: self.pool.len(),
-            tables_sha256: table_hashes(dir).map_err(io)?,
             tasks: self.results.tasks.len(),
             timings_s: self.timings,
-        };
-        crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err).map_err(io)?)
-            .map_err(io)?;
-        let drawn = if options.plots {
+        })
+        .map_err(DeviceError::of)?;
+        if options.plots {
             let e = &self.experiment;
             let inputs = plots::PlotInputs {
                 validation_w: e.campaign.validation.iter().map(|v| v.measured_w).collect(),
@@ -240,23 +233,13 @@ impl Outcome for TrackerOutcome {
                 base_w: crate::robot::world_from_base(&e.robot.truth).translation.vector,
                 table_n: self.figures.table_n,
             };
-            plots::write_all(dir, &self.results, &inputs).map_err(DeviceError::of)?
-        } else {
-            Vec::new()
-        };
-        let mut text = self.summary(checks);
-        if !drawn.is_empty() {
-            text.push_str("\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n\n");
-            for w in drawn {
-                text.push_str(&format!("![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n\n", w.caption, w.stem, w.caption, w.stem));
-            }
+            out.draw(Box::new(move |dir| plots::write_all(dir, &self.results, &inputs)));
         }
-        crate::io::out_dir::write_file(&dir.join("summary.md"), text).map_err(io)?;
-        let t = Instant::now();
+        out.summary.text(self.summary(checks)).figures("\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n\n");
         if options.recording {
-            self.record(&dir.join("study.rrd")).map_err(DeviceError::of)?;
+            out.record(Box::new(move |path: &Path| self.record(path)));
         }
-        Ok(WriteReport { recording_s: if options.recording { t.elapsed().as_secs_f64() } else { 0.0 } })
+        Ok(out)
     }
 
     fn timing(&self) -> String {

@@ -13,7 +13,7 @@ pub mod spec;
 pub mod study;
 pub mod table8;
 
-use std::cell::Cell;
+use crate::io::results::Results;
 use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -23,9 +23,7 @@ use self::figures::Figures;
 use self::results::Timings;
 pub use self::spec::TricalScenario;
 use self::study::StudyResults;
-use super::{
-    Device, DeviceError, ErrorSource, Header, Outcome, Refit, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions, WriteReport,
-};
+use super::{Device, DeviceError, ErrorSource, Header, Outcome, Refit, Scenario, ScenarioError, TaskFigure, WorldSummary, WriteOptions};
 use crate::robot::RobotModel;
 use crate::study::check::Check;
 use crate::study::engine::Identified;
@@ -270,25 +268,20 @@ impl Outcome for TricalOutcome {
         study::predict(&self.results, &pool, &validation, self.scenario.study.table_set_size as usize, seed)
     }
 
-    fn write(&self, dir: &Path, checks: &[Check], options: &WriteOptions) -> Result<WriteReport, DeviceError> {
+    fn results<'a>(&'a self, checks: &'a [Check], options: &'a WriteOptions) -> Result<Results<'a>, DeviceError> {
         let s = &self.scenario;
         let e = &self.experiment;
         let table_n = s.study.table_set_size as usize;
-        let plot_inputs = options.plots.then(|| plots::PlotInputs {
+        let plots = options.plots.then(|| plots::PlotInputs {
             validation_w: e.campaign.validation.iter().map(|v| v.measured_w).collect(),
             spheres_w: e.cell.spheres_w.clone(),
             base_w: crate::robot::world_from_base(&e.robot.truth).translation.vector,
             table_n,
         });
         let representative = figures::representative(&self.results, table_n).map(|(task, _)| task);
-        let recording_s = Cell::new(0.0);
-        let record = |path: &Path| {
-            let t = Instant::now();
-            let r = recording::write(path, &s.header.name, e, &self.before, &self.results, representative);
-            recording_s.set(t.elapsed().as_secs_f64());
-            r
-        };
-        let extras = results::Extras { plots: plot_inputs.as_ref(), recording: options.recording.then_some(&record as _) };
+        let record: crate::io::results::Record<'a> =
+            Box::new(move |path: &Path| recording::write(path, &s.header.name, e, &self.before, &self.results, representative));
+        let extras = results::Extras { plots, recording: options.recording.then_some(record) };
         let report = results::Report {
             figures: &self.figures,
             checks,
@@ -297,8 +290,7 @@ impl Outcome for TricalOutcome {
             overrides: &options.overrides,
             extras,
         };
-        results::write(dir, s, &self.results, &report).map_err(DeviceError::of)?;
-        Ok(WriteReport { recording_s: recording_s.get() })
+        results::results(s, &self.results, report).map_err(DeviceError::of)
     }
 
     fn timing(&self) -> String {

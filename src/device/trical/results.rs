@@ -4,7 +4,6 @@
 //! interrupted run leaves no half-written result.
 
 use std::fmt::Write as _;
-use std::path::Path;
 
 use polars::prelude::*;
 use serde::Serialize;
@@ -14,9 +13,7 @@ use super::plots::PlotInputs;
 use super::spec::TricalScenario;
 use super::study::StudyResults;
 use crate::io::manifest::ScenarioHead;
-use crate::io::plot::Written;
-use crate::io::record::Recorder;
-use crate::io::table::{err, parquet, table_hashes};
+use crate::io::results::{Head, Record, Results};
 use crate::study::check::{Check, checks_markdown};
 use crate::study::published::published;
 use crate::study::tables::{parameter_columns, task_columns};
@@ -37,10 +34,7 @@ pub struct Timings {
 }
 
 #[derive(Serialize)]
-struct Manifest<'a> {
-    #[serde(flatten)]
-    provenance: ScenarioHead<'a>,
-    tables_sha256: std::collections::BTreeMap<String, String>,
+struct Fields<'a> {
     tasks: usize,
     set_sizes: Vec<u32>,
     repetitions: u32,
@@ -51,9 +45,9 @@ struct Manifest<'a> {
 #[derive(Default)]
 pub struct Extras<'a> {
     /// Inputs of the figures; `None` draws none.
-    pub plots: Option<&'a PlotInputs>,
+    pub plots: Option<PlotInputs>,
     /// Writes the Rerun recording to the path it is given; `None` records nothing.
-    pub recording: Option<Recorder<'a>>,
+    pub recording: Option<Record<'a>>,
 }
 
 /// What a run adds to its results: the figures and their checks, how it ran, optional outputs.
@@ -72,37 +66,36 @@ pub struct Report<'a> {
     pub extras: Extras<'a>,
 }
 
-/// Writes every result file of `r` into `dir` (an empty directory): the tables, the manifest, the
-/// recording, the figures and the summary.
-pub fn write(dir: &Path, scenario: &TricalScenario, r: &StudyResults, report: &Report<'_>) -> std::io::Result<()> {
-    let Report { figures: f, checks, threads: _, timings, overrides, ref extras } = *report;
-    write_tables(dir, r)?;
-    let manifest = Manifest {
-        provenance: ScenarioHead::new(&scenario.header.name, &scenario.header.path, &scenario.header.text, scenario.header.seed, overrides),
-        tables_sha256: table_hashes(dir)?,
+/// The results of a study: the tables, the manifest's fields, the recording, the figures and the
+/// summary.
+pub fn results<'a>(scenario: &'a TricalScenario, r: &'a StudyResults, report: Report<'a>) -> std::io::Result<Results<'a>> {
+    let Report { figures: f, checks, threads: _, timings, overrides, extras } = report;
+    let h = &scenario.header;
+    let mut out = Results::new(h.name.clone(), Head::Scenario(ScenarioHead::new(&h.name, &h.path, &h.text, h.seed, overrides)));
+    tables(r, &mut out)?;
+    out.fields(Fields {
         tasks: r.tasks.len(),
         set_sizes: scenario.study.set_sizes.clone(),
         repetitions: scenario.study.repetitions,
         timings,
-    };
-    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(err)?)?;
+    })?;
     if let Some(record) = extras.recording {
-        record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
+        out.record(record);
     }
-    let drawn = match extras.plots {
-        Some(p) => super::plots::write_all(dir, r, p).map_err(std::io::Error::other)?,
-        None => Vec::new(),
-    };
-    crate::io::out_dir::write_file(&dir.join("summary.md"), summary(scenario, r, f, checks, &drawn))?;
-    Ok(())
+    if let Some(p) = extras.plots {
+        out.draw(Box::new(move |dir| super::plots::write_all(dir, r, &p)));
+    }
+    out.summary.text(summary(scenario, r, f, checks));
+    out.summary.figures("\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n\n");
+    Ok(out)
 }
 
-/// Writes the tables of a study validated on the tracker poses into `dir`: `tasks.parquet`,
+/// The tables of a study validated on the tracker poses: `tasks.parquet`,
 /// `compensated.parquet` (when the study ran the compensated validation), `parameters.parquet`
 /// and `validation_errors.parquet`.
 ///
 /// Long by design: one block per table, in the order of the README's list of result files.
-pub fn write_tables(dir: &Path, r: &StudyResults) -> std::io::Result<()> {
+pub fn tables(r: &StudyResults, out: &mut Results<'_>) -> std::io::Result<()> {
     let t = &r.tasks;
     let f64c = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
     let mut cols = task_columns(t.iter().map(|x| (&x.task, &x.id)));
@@ -114,13 +107,12 @@ pub fn write_tables(dir: &Path, r: &StudyResults) -> std::io::Result<()> {
         f64c("validation_max_mm", t.iter().map(|x| x.validation.max).collect()),
         f64c("validation_rms_mm", t.iter().map(|x| x.validation.rms).collect()),
     ]);
-    parquet(dir, "tasks.parquet", cols)?;
+    out.table("tasks.parquet", cols)?;
     let comp: Vec<(&crate::device::trical::study::TaskResult, &crate::device::trical::study::Compensated)> =
         t.iter().filter_map(|x| x.compensated.as_ref().map(|c| (x, c))).collect();
     if !comp.is_empty() {
         let stat = |name: &str, g: fn(&crate::study::ErrorStats) -> f64| f64c(name, comp.iter().map(|(_, c)| g(&c.stats)).collect());
-        parquet(
-            dir,
+        out.table(
             "compensated.parquet",
             vec![
                 Column::new("task".into(), comp.iter().map(|(x, _)| x.task.index as u32).collect::<Vec<_>>()),
@@ -134,7 +126,7 @@ pub fn write_tables(dir: &Path, r: &StudyResults) -> std::io::Result<()> {
             ],
         )?;
     }
-    parquet(dir, "parameters.parquet", parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.truth, &r.start))?;
+    out.table("parameters.parquet", parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.truth, &r.start))?;
 
     let (mut which, mut task, mut pose, mut error, mut dbase, mut dccz) = (vec![], vec![], vec![], vec![], vec![], vec![]);
     let mut push = |label: &str, tk: Option<u32>, errs: &[f64]| {
@@ -153,8 +145,7 @@ pub fn write_tables(dir: &Path, r: &StudyResults) -> std::io::Result<()> {
             push("after", Some(x.task.index as u32), errs);
         }
     }
-    parquet(
-        dir,
+    out.table(
         "validation_errors.parquet",
         vec![
             Column::new("calibration".into(), which),
@@ -186,7 +177,7 @@ fn fit_std(scenario: &TricalScenario, r: &StudyResults, n: usize) -> Option<Vec<
 }
 
 /// Long by design: the summary document top to bottom, one block per section.
-pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks: &[Check], drawn: &[Written]) -> String {
+pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks: &[Check]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# {}: calsim against the published figures\n", scenario.header.name);
     let _ = writeln!(
@@ -308,11 +299,5 @@ pub fn summary(scenario: &TricalScenario, r: &StudyResults, f: &Figures, checks:
         f.r_ccz_pooled,
         n = f.table_n
     );
-    if !drawn.is_empty() {
-        let _ = writeln!(s, "\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n");
-        for w in drawn {
-            let _ = writeln!(s, "![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n", w.caption, w.stem, w.caption, w.stem);
-        }
-    }
     s
 }
