@@ -19,6 +19,7 @@
 
 pub mod cell;
 pub mod plot;
+pub mod record;
 pub mod select;
 pub mod spec;
 
@@ -680,8 +681,14 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
     let _ = writeln!(
         s,
-        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the tracker, the robot's base and the workspace of interest.",
-        plot::STEM
+        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the arm at {1} of the poses with the lines of sight from the tracker to their targets, the tracker, the robot's base and the workspace of interest.",
+        plot::STEM,
+        plot::SHOWN
+    );
+    let _ = writeln!(
+        s,
+        "- `{}` (unless `--no-recording`): the Rerun recording, the arm at every pose in the order of the tour with its lines of sight, the cell, and the predicted held-out median per world.",
+        record::FILE
     );
     s
 }
