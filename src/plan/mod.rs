@@ -422,11 +422,14 @@ pub fn csv(plan: &Plan, rows: &[PoseRow], positions: Option<&[Vec<Vector3<f64>>]
     s
 }
 
+/// What [`measure`] gives: the positions per row and target, mm, and the noise per point, mm.
+pub type Measured = (Vec<Vec<Vector3<f64>>>, Vec<f64>);
+
 /// The robot file's truth (its nominal where it gives none) measured at `rows` at every target,
 /// in the base frame, with the tracker's noise at each point's distance (pooled per coordinate,
 /// [`spec::Tracker::sigma_mm`]) drawn from the stream `key` of the plan's seed. Returns the
 /// positions and the noise per point.
-pub fn measure(plan: &Plan, cell: &Cell, rows: &[PoseRow], key: u64) -> Result<(Vec<Vec<Vector3<f64>>>, Vec<f64>), PlanError> {
+pub fn measure(plan: &Plan, cell: &Cell, rows: &[PoseRow], key: u64) -> Result<Measured, PlanError> {
     let truth = plan.robot.truth_on(&plan.robot.nominal).map_err(|e| PlanError::new(&plan.path, "robot", format!("its [truth]: {e}")))?;
     let placed: Vec<_> = plan
         .targets
