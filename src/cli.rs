@@ -179,6 +179,9 @@ struct PlanArgs {
     /// Also write simulated.csv: the poses measured on the robot file's truth with the tracker's noise.
     #[arg(long)]
     simulate: bool,
+    /// Skip the Rerun recording (plan.rrd).
+    #[arg(long)]
+    no_recording: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -755,7 +758,13 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
 }
 
 fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
-    let spec = app::plan::PlanSpec { file: args.plan.clone(), out: args.out.clone(), threads: args.threads, simulate: args.simulate };
+    let spec = app::plan::PlanSpec {
+        file: args.plan.clone(),
+        out: args.out.clone(),
+        threads: args.threads,
+        simulate: args.simulate,
+        recording: !args.no_recording,
+    };
     let r = app::plan::plan(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
     let p = &r.outcome.prediction;
     let [a, b, c] = p.quantiles_mm;
@@ -794,7 +803,12 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
     if !p.unidentifiable.is_empty() {
         println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
     }
-    println!("poses.csv, joints.txt, tour.csv, plan.md and plan_poses.png in {}", r.dir.display());
+    println!(
+        "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{}{} in {}",
+        if args.simulate { ", simulated.csv" } else { "" },
+        if args.no_recording { "" } else { " and the recording plan.rrd" },
+        r.dir.display()
+    );
     Ok(ExitCode::SUCCESS)
 }
 

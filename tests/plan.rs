@@ -84,7 +84,7 @@ fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     v
 }
 
-/// The small plan run with 1 and with 2 threads (with `--simulate`).
+/// The small plan run with 1 and with 2 threads (with `--simulate` and the recording).
 fn run() -> &'static Run {
     static RUN: OnceLock<Run> = OnceLock::new();
     RUN.get_or_init(|| {
@@ -93,8 +93,12 @@ fn run() -> &'static Run {
         std::fs::write(&file, plan_text(|t| t)).unwrap();
         let go = |threads: u32| {
             let out = dir.join(format!("out{threads}"));
-            let r = plan(&PlanSpec { file: file.clone(), out, threads: Some(threads), simulate: true }, &calsim::app::Quiet).unwrap();
-            let f = files(&r.dir);
+            let r =
+                plan(&PlanSpec { file: file.clone(), out, threads: Some(threads), simulate: true, recording: true }, &calsim::app::Quiet)
+                    .unwrap();
+            // The recording is compared by its contents (`the_recording_holds_...`): Rerun stamps
+            // each file with its own recording id and time.
+            let f = files(&r.dir).into_iter().filter(|(n, _)| n != "plan.rrd").collect();
             (r, f)
         };
         let (_, files_1) = go(1);
@@ -115,7 +119,17 @@ fn one_and_two_threads_write_the_same_bytes() {
     assert!(r.dir.exists());
     // The figure: its key names what it shows, one ring per validation pose in each view.
     let svg = String::from_utf8(r.files_1.iter().find(|(n, _)| n == "plan_poses.svg").unwrap().1.clone()).unwrap();
-    for label in ["training pose", "validation pose", "tracker", "robot base", "workspace of interest", "top view", "side view"] {
+    for label in [
+        "training pose",
+        "validation pose",
+        "tracker",
+        "robot base",
+        "workspace of interest",
+        "top view",
+        "side view",
+        "line of sight",
+        "arm at ",
+    ] {
         assert!(svg.contains(label), "{label}");
     }
     assert!(r.files_1.iter().find(|(n, _)| n == "plan_poses.png").unwrap().1.starts_with(b"\x89PNG"));
@@ -253,6 +267,87 @@ fn every_planned_pose_is_feasible_by_an_independent_computation() {
     assert_eq!(poses, 48, "40 training and 8 validation poses");
 }
 
+/// Rows and timelines per entity path of a Rerun recording, read with Rerun's own decoder.
+fn recording_entities(path: &Path) -> std::collections::BTreeMap<String, (usize, Vec<String>)> {
+    use re_log_types::{LogMsg, StoreKind};
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut out: std::collections::BTreeMap<String, (usize, Vec<String>)> = Default::default();
+    for msg in re_log_encoding::DecoderApp::decode_eager(file).unwrap() {
+        if let LogMsg::ArrowMsg(store, arrow) = &msg.unwrap()
+            && store.kind() == StoreKind::Recording
+        {
+            let chunk = re_chunk::Chunk::from_arrow_msg(arrow).unwrap();
+            let e = out.entry(chunk.entity_path().to_string()).or_default();
+            e.0 += chunk.num_rows();
+            for t in chunk.timelines().keys() {
+                if !e.1.contains(&t.to_string()) {
+                    e.1.push(t.to_string());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The recording holds the cell, the arm and its lines of sight at every pose of the tour, and
+/// the predicted held-out median of every world; the arm the figure and the recording draw is
+/// the robot file's capsules, the frames' origins and the targets where the modified-DH frames
+/// computed here put them.
+#[test]
+fn the_recording_and_the_figure_draw_the_arm_and_its_lines_of_sight_at_the_planned_poses() {
+    let r = run();
+    let e = recording_entities(&r.report.dir.join("plan.rrd"));
+    let rows = |p: &str| e.get(p).map(|x| x.0).unwrap_or_else(|| panic!("{p} missing from {:?}", e.keys().collect::<Vec<_>>()));
+    let on = |p: &str, t: &str| e.get(p).is_some_and(|x| x.1.iter().any(|n| n == t));
+    for p in
+        ["/cell/tracker", "/cell/workspace", "/cell/keep_out", "/cell/floor", "/cell/frames/base", "/plan/targets", "/plan/shown/robot"]
+    {
+        assert!(rows(p) >= 1, "{p}");
+    }
+    let poses = r.report.outcome.rows.len();
+    assert_eq!(poses, 48);
+    for p in ["/plan/robot", "/plan/sight"] {
+        assert_eq!(rows(p), poses, "{p}: one row per stop of the tour");
+        assert!(on(p, "tour_step"), "{p}");
+    }
+    assert_eq!(rows("/tour/largest_move_deg"), poses + 1, "one value per stop and the series' style");
+    let worlds = r.report.outcome.prediction.per_world_mm.iter().filter(|m| m.is_finite()).count();
+    assert!(worlds >= 15, "{worlds} worlds with a value");
+    assert_eq!(rows("/study/heldout_median_mm"), worlds + 1);
+    assert!(on("/study/heldout_median_mm", "world"));
+
+    let robot: toml::Table = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap().parse().unwrap();
+    let joints = robot["joint"].as_array().unwrap();
+    let collision = robot["collision"].as_array().unwrap();
+    let plan = &r.report.plan;
+    let cell = calsim::plan::cell::Cell::new(plan).unwrap();
+    let shown = calsim::plan::plot::shown(&r.report.outcome);
+    assert_eq!(shown.len(), calsim::plan::plot::SHOWN);
+    let mut st = calsim::robot::KinState::default();
+    for i in shown {
+        let q = r.report.outcome.rows[i].q;
+        let v = calsim::plan::plot::arm_at(plan, &cell, &q, &mut st);
+        let f = frames(joints, &q);
+        assert_eq!(v.capsules.len(), collision.len() + 2, "every link capsule and an SMR per target");
+        for (c, (a, b, rad)) in collision.iter().zip(&v.capsules) {
+            let l = c["link"].as_integer().unwrap() as usize;
+            let x = |k: &str| {
+                let p = c[k].as_array().unwrap();
+                f[l].1 + f[l].0 * Vector3::new(p[0].as_float().unwrap(), p[1].as_float().unwrap(), p[2].as_float().unwrap())
+            };
+            assert!((x("a_mm") - a).norm() < 1e-9 && (x("b_mm") - b).norm() < 1e-9, "link {l}");
+            assert_eq!(*rad, c["radius_mm"].as_float().unwrap());
+        }
+        assert_eq!(v.skeleton.len(), 7);
+        for (k, o) in v.skeleton.iter().enumerate() {
+            assert!((f[k].1 - o).norm() < 1e-9, "frame {k}'s origin");
+        }
+        for (t, p) in [Vector3::new(0.0, 0.0, 40.0), Vector3::new(40.0, 30.0, 30.0)].iter().zip(&v.targets) {
+            assert!((f[6].1 + f[6].0 * t - p).norm() < 1e-9, "target {t:?}");
+        }
+    }
+}
+
 /// The round trip plan -> simulated measurements -> calibrate over 10 seeds of the small plan: the
 /// calibrated held-out median lands inside the plan's P10-P90 (an 80 % band) in at least 5 of the
 /// 10 (for a band that holds 80 %, fewer than 5 happen with probability 0.0064, Binomial(10, 0.8)).
@@ -263,8 +358,11 @@ fn plan_simulate_calibrate_lands_inside_the_plans_p10_p90() {
     for seed in 1..=10u64 {
         let file = dir.join(format!("seed{seed}.toml"));
         std::fs::write(&file, plan_text(|t| t.replace("seed = 3", &format!("seed = {seed}")))).unwrap();
-        let r =
-            plan(&PlanSpec { file, out: dir.join(format!("out{seed}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
+        let r = plan(
+            &PlanSpec { file, out: dir.join(format!("out{seed}")), threads: Some(2), simulate: true, recording: false },
+            &calsim::app::Quiet,
+        )
+        .unwrap();
         let spec = calsim::calibrate::CalibrateSpec {
             robot_file: root().join("robots/irb120.toml"),
             measurements: r.dir.join("simulated.csv"),
@@ -291,9 +389,12 @@ fn refused(edit: impl Fn(String) -> String, key: &str) -> String {
     let dir = scratch(&format!("bad-{}", key.replace(['.', '[', ']'], "_")));
     let file = dir.join("bad.toml");
     std::fs::write(&file, plan_text(edit)).unwrap();
-    let e = plan(&PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet)
-        .expect_err("a bad plan is refused")
-        .to_string();
+    let e = plan(
+        &PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false, recording: false },
+        &calsim::app::Quiet,
+    )
+    .expect_err("a bad plan is refused")
+    .to_string();
     assert!(e.starts_with(&file.display().to_string()), "{e}: names the file");
     assert!(e.contains(key), "{e}: names {key}");
     assert!(!e.contains('\n'), "{e}: one line");
@@ -345,7 +446,7 @@ fn a_plan_runs_again_into_its_own_results_directory() {
     let dir = scratch("again");
     let file = dir.join("small.toml");
     std::fs::write(&file, plan_text(|t| t)).unwrap();
-    let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false };
+    let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false, recording: false };
     let first = plan(&spec, &calsim::app::Quiet).unwrap();
     let manifest: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(first.dir.join("manifest.json")).unwrap()).unwrap();
     let inputs = manifest["inputs"].as_array().unwrap();
@@ -388,7 +489,8 @@ fn an_objective_picks_the_smallest_count_meeting_it_on_its_own_table() {
         }),
     )
     .unwrap();
-    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let r =
+        plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false, recording: false }, &calsim::app::Quiet).unwrap();
     let md = std::fs::read_to_string(r.dir.join("plan.md")).unwrap();
     let table = objective_table(&md);
     eprintln!("{table:?}");
@@ -495,7 +597,8 @@ fn the_comparison_has_its_rows_on_the_same_worlds() {
     let dir = scratch("compare");
     let file = dir.join("compare.toml");
     std::fs::write(&file, plan_text(|t| t.replace("worlds = 20", "worlds = 20\ncompare = true"))).unwrap();
-    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let r =
+        plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false, recording: false }, &calsim::app::Quiet).unwrap();
     let c = r.outcome.comparison.as_ref().expect("a comparison");
     let names: Vec<&str> = c.rows.iter().map(|r| r.name).collect();
     assert_eq!(names, ["DETMAX", "random", "greedy D-optimal"]);
@@ -544,7 +647,11 @@ fn a_twin_predicts_a_larger_held_out_error_than_its_file_without_the_table() {
             plan_text(|t| t.replace(&root().join("robots/irb120.toml").display().to_string(), &robot_path.display().to_string())),
         )
         .unwrap();
-        plan(&PlanSpec { file, out: dir.join(format!("out-{name}")), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap()
+        plan(
+            &PlanSpec { file, out: dir.join(format!("out-{name}")), threads: Some(2), simulate: true, recording: false },
+            &calsim::app::Quiet,
+        )
+        .unwrap()
     };
     let plain = go("plain");
     let twin = go("twin");
@@ -584,7 +691,8 @@ fn the_shipped_imported_arm_plan_runs() {
             .replace("worlds = 30", "worlds = 8")
             .replace("validation = 20", "validation = 8")
     });
-    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: true }, &calsim::app::Quiet).unwrap();
+    let r =
+        plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: true, recording: false }, &calsim::app::Quiet).unwrap();
     assert_eq!(r.plan.robot.nominal.data().name, "fanuc_lrmate200ic");
     assert_eq!(r.outcome.rows.iter().filter(|x| x.split == "train").count(), 40);
     assert_eq!(r.outcome.rows.iter().filter(|x| x.split == "holdout").count(), 8);
@@ -608,7 +716,8 @@ fn the_shipped_objective_plan_runs() {
     let file = shipped_short(&dir, "irb120_tracker_objective.toml", |t| {
         t.replace("pool = 2000", "pool = 300").replace("validation = 20", "validation = 8").replace("most_poses = 400", "most_poses = 80")
     });
-    let r = plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false }, &calsim::app::Quiet).unwrap();
+    let r =
+        plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false, recording: false }, &calsim::app::Quiet).unwrap();
     let search = r.outcome.search.as_ref().unwrap();
     assert_eq!(search.candidates[0].n, 34);
     assert!(search.candidates.iter().all(|c| c.worlds == 60));
@@ -630,7 +739,13 @@ fn an_objective_and_a_comparison_write_the_same_bytes_for_1_and_2_threads() {
     .unwrap();
     let go = |threads: u32| {
         let r = plan(
-            &PlanSpec { file: file.clone(), out: dir.join(format!("out{threads}")), threads: Some(threads), simulate: false },
+            &PlanSpec {
+                file: file.clone(),
+                out: dir.join(format!("out{threads}")),
+                threads: Some(threads),
+                simulate: false,
+                recording: false,
+            },
             &calsim::app::Quiet,
         )
         .unwrap();

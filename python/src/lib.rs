@@ -660,7 +660,7 @@ fn plan<'py>(
     simulate: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let spec = app::plan::PlanSpec { file, out, threads, simulate };
+    let spec = app::plan::PlanSpec { file, out, threads, simulate, recording: true };
     let (r, warnings) = detached(py, progress, |o| app::plan::plan(&spec, o))?;
     let o = &r.outcome;
     let p = &o.prediction;

@@ -41,9 +41,11 @@ PRINT_ONLY = ("calsim table8 ",)
 
 
 class Output(str):
-    """A command's standard output; `summary` is the summary.md it wrote ("" when none)."""
+    """A command's standard output; `summary` is the summary.md it wrote ("" when none), `plan`
+    the plan.md of a `calsim plan` ("" when none)."""
 
     summary = ""
+    plan = ""
 
 
 def row(output: str, starts: str) -> str:
@@ -273,6 +275,84 @@ def run_block(out: str) -> str:
     return "```text\n" + "\n".join(lines[:-1]) + "\ntiming: ...\n```\n"
 
 
+PLAN_IRB120 = "calsim plan scenarios/plans/irb120_tracker.toml"
+PLAN_LRMATE = "calsim plan scenarios/plans/lrmate200ic_tracker.toml"
+PLAN_OBJECTIVE = "calsim plan scenarios/plans/irb120_tracker_objective.toml"
+
+
+def plan_printed(out: str) -> str:
+    """What `calsim plan` prints, its wall time written as `... s` (docs/generated/plan-speed-*.md
+    keeps it) and its scratch directory as the guide's `results/`."""
+    lines = [re.sub(r" in \S*/results-\d+/", " in results/", re.sub(r"; [\d.]+ s$", "; ... s", l)) for l in out.rstrip("\n").split("\n")]
+    return fenced(lines)
+
+
+def plan_figures(md: str) -> dict:
+    """The figures of a plan.md."""
+    pool = re.search(r"- Pool: (\d+) feasible configurations of (\d+) drawn within the limits \(refused: (.*)\)\.", md)
+    o1 = re.search(r"- O1 of the chosen set: (\S+) \(a random set of the same size from the same pool: (\S+)\)", md)
+    tour = re.search(r"(\S+) deg of joint-space path; moves through a collision \(checked every (\S+) deg\): (.*)\.", md)
+    noise = re.search(r"measured again with (\S+) mm per coordinate", md)
+    worlds = re.search(r"The held-out median error after calibration over (\d+) simulated worlds", md)
+    training = re.search(r"- Training: (\d+) poses", md)
+    validation = re.search(r"- Validation: (\d+) poses", md)
+    pred = cells(md_table(md, "| P10, mm | median, mm")[2])
+    colliding = [] if tour.group(3) == "none" else tour.group(3).split(", ")
+    refused = re.sub(r"(\d+)", lambda m: f"{int(m.group(1)):,}", pool.group(3))
+    return {"feasible": int(pool.group(1)), "drawn": int(pool.group(2)), "refused": refused, "o1": o1.group(1),
+            "o1_random": o1.group(2), "tour_deg": float(tour.group(1)), "step_deg": tour.group(2), "colliding": colliding,
+            "noise": noise.group(1), "worlds": int(worlds.group(1)), "p10": pred[0], "median": pred[1], "p90": pred[2],
+            "pilot": pred[3], "poses": int(training.group(1)), "validation": int(validation.group(1))}
+
+
+def plan_table(out: Output) -> str:
+    """The table of a plan's figures, from its plan.md, and where its pilot world lies."""
+    f = plan_figures(out.plan)
+    moves = f["poses"] + f["validation"] - 1
+    where = ("below the worlds' P10" if float(f["pilot"]) < float(f["p10"]) else
+             "above the worlds' P90" if float(f["pilot"]) > float(f["p90"]) else "inside the worlds' P10-P90")
+    return (
+        "| figure | value |\n|---|---|\n"
+        f"| candidates drawn for {f['feasible']:,} feasible poses | {f['drawn']:,} (refused: {f['refused']}) |\n"
+        f"| O1 of DETMAX's {f['poses']} poses / of a random {f['poses']} from the same pool | {f['o1']} / {f['o1_random']} |\n"
+        f"| predicted held-out median, P10 / median / P90 ({f['worlds']} worlds, {f['noise']} mm per coordinate) | {f['p10']} / {f['median']} / {f['p90']} mm |\n"
+        f"| the pilot world's held-out median (the file's truth) | {f['pilot']} mm |\n"
+        f"| tour | {f['tour_deg']:,.1f} deg of joint-space path; {len(f['colliding'])} of its {moves} moves pass through a collision (checked every {f['step_deg']} deg, named in plan.md) |\n"
+        f"\nThe pilot world lies {where} here (see Limits for how often a simulated outcome falls in the band).\n"
+    )
+
+
+def plan_objective(out: Output) -> str:
+    """A plan's objective: what it prints, the table of P(success) against the count, the rule."""
+    md = out.plan
+    table = md_table(md, "| poses | successes / worlds |")
+    chosen = row(md, "Chosen: ") if "\nChosen: " in md else row(md, "Not met: ")
+    rows = [cells(l) for l in table[2:]]
+    ok = [int(r[1].split(" / ")[0]) for r in rows]
+    worlds = rows[0][1].split(" / ")[1]
+    return (
+        plan_printed(out) + "\nand its `plan.md` gives:\n\n" + "\n".join(table) + "\n\n" + chosen + "\n\n"
+        f"Over {rows[0][0]} to {rows[-1][0]} poses the successes lie between {min(ok)} and {max(ok)} of {worlds} worlds.\n"
+    )
+
+
+def plan_comparison(out: Output) -> str:
+    """The comparison's table of a plan.md and what it shows."""
+    table = md_table(out.plan, "| selection | O1 |")
+    rows = [cells(l) for l in table[2:]]
+    best = max(rows, key=lambda r: float(r[1]))[0]
+
+    def median(r):
+        m = re.match(r"(\S+) \((\S+)-(\S+)\)", r[2])
+        return float(m.group(1)), float(m.group(2)) if m.group(2) != "unbounded" else float("-inf"), float(m.group(3)) if m.group(3) != "unbounded" else float("inf")
+
+    meds = [median(r) for r in rows]
+    inside = all(b[1] <= a[0] <= b[2] for a in meds for b in meds)
+    said = ("the three sets' medians over worlds each lie inside every other set's interval" if inside
+            else "the three sets' medians over worlds do not all lie inside each other's intervals")
+    return "\n".join(table) + f"\n\n{best}'s set has the highest O1; {said}.\n"
+
+
 # name: (page, command, how the excerpt is made from the command's stdout)
 EXCERPTS = {
     "readme-check": ("README.md", CHECK_30, readme_check),
@@ -295,6 +375,11 @@ EXCERPTS = {
     "findings-spms": ("docs/findings.md", CHECK_SPMS, check_table),
     "findings-table8": ("docs/findings.md", TABLE8, printed),
     "robots-lrmate": ("docs/robots.md", "calsim run scenarios/lrmate200ic_trical.toml --no-plots --no-recording", summary_errors),
+    "plan-irb120-printed": ("docs/plan.md", PLAN_IRB120, plan_printed),
+    "plan-irb120-table": ("docs/plan.md", PLAN_IRB120, plan_table),
+    "plan-lrmate-printed": ("docs/plan.md", PLAN_LRMATE, plan_printed),
+    "plan-objective": ("docs/plan.md", PLAN_OBJECTIVE, plan_objective),
+    "plan-comparison": ("docs/plan.md", PLAN_OBJECTIVE, plan_comparison),
     "tracker-worlds": ("docs/tracker.md", "calsim run scenarios/irb120_tracker.toml --realisations 10 --no-plots --no-recording", worlds_table),
 }
 
@@ -333,6 +418,9 @@ def main() -> int:
                 summaries = sorted(out.glob("*/summary.md")) if out.is_dir() else []
                 if summaries:
                     outputs[command].summary = summaries[0].read_text()
+                plans = sorted(out.glob("*.plan/plan.md")) if out.is_dir() else []
+                if plans:
+                    outputs[command].plan = plans[0].read_text()
             text = make(outputs[command])
             path = REPO / page
             doc = path.read_text()

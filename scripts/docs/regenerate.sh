@@ -54,12 +54,15 @@ for run in "${runs[@]}"; do
     echo "regenerate: $name: docs/generated/$name.md"
 done
 
-# The findings' candidate error models, the CI gate's figures over 400 worlds and the sizing
-# sweep's ranking (docs/findings.md, docs/guide-reproduce.md, docs/guide-sweeps.md).
+# The findings' candidate error models, the CI gate's figures over 400 worlds, the sizing
+# sweep's ranking and the plans' wall clock on 2 threads (docs/findings.md,
+# docs/guide-reproduce.md, docs/guide-sweeps.md, docs/plan.md).
 more=(
     "sweep-cell-sizing|sweep scenarios/sweeps/cell_sizing.toml"
     "check-ci-quick-400|check scenarios/ci_quick.toml --realisations 400 --no-plots --no-recording"
     "candidates|python3 scripts/fidelity/candidates.py --realisations 20"
+    "plan-speed-irb120|plan scenarios/plans/irb120_tracker.toml --threads 2"
+    "plan-speed-objective|plan scenarios/plans/irb120_tracker_objective.toml --threads 2"
 )
 for run in "${more[@]}"; do
     IFS='|' read -r name command <<<"$run"

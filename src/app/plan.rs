@@ -1,6 +1,6 @@
 //! `calsim plan`: reads a plan file, plans on the worker pool, writes `<out>/<plan stem>.plan/`
-//! (`poses.csv`, `joints.txt`, `tour.csv`, `plan.md`, the figure `plan_poses.png`/`.svg`, and
-//! `simulated.csv` with `--simulate`).
+//! (`poses.csv`, `joints.txt`, `tour.csv`, `plan.md`, the figure `plan_poses.png`/`.svg`, the
+//! Rerun recording `plan.rrd`, and `simulated.csv` with `--simulate`).
 
 use std::path::{Path, PathBuf};
 
@@ -19,6 +19,8 @@ pub struct PlanSpec {
     pub threads: Option<u32>,
     /// Also write `simulated.csv`: the poses measured on the robot file's truth with the tracker's noise.
     pub simulate: bool,
+    /// Also write the Rerun recording `plan.rrd`.
+    pub recording: bool,
 }
 
 /// What `calsim plan` returns.
@@ -86,10 +88,16 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
     struct Manifest<'a> {
         plan: &'a str,
         simulate: bool,
+        recording: bool,
         #[serde(flatten)]
         provenance: crate::io::manifest::Provenance,
     }
-    let manifest = Manifest { plan: &name, simulate: spec.simulate, provenance: crate::io::manifest::Provenance::of_run(&[]) };
+    let manifest = Manifest {
+        plan: &name,
+        simulate: spec.simulate,
+        recording: spec.recording,
+        provenance: crate::io::manifest::Provenance::of_run(&[]),
+    };
     let manifest = serde_json::to_string_pretty(&manifest).map_err(|e| Error::io(&spec.out)(std::io::Error::other(e)))? + "\n";
     let dir = write_atomically(&spec.out, &name, |d| {
         write_file(&d.join("manifest.json"), &manifest)?;
@@ -100,6 +108,9 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
             write_file(&d.join("simulated.csv"), text)?;
         }
         crate::plan::plot::write(d, &plan, &cell, &outcome).map_err(std::io::Error::other)?;
+        if spec.recording {
+            crate::plan::record::write(&d.join(crate::plan::record::FILE), &plan, &cell, &outcome).map_err(std::io::Error::other)?;
+        }
         Ok(())
     })
     .map_err(Error::io(&spec.out))?;

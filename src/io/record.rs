@@ -44,10 +44,23 @@ pub fn save(
     first_series: (&str, &str),
     study_title: &str,
 ) -> Result<(), RecordError> {
+    save_on(path, name, log, cell_contents, first_series, study_title, "pool_configuration")
+}
+
+/// [`save`], the file opening on the timeline `timeline` (the first series' own).
+pub fn save_on(
+    path: &Path,
+    name: &str,
+    log: impl FnOnce(&RecordingStream) -> Rr,
+    cell_contents: &[&str],
+    first_series: (&str, &str),
+    study_title: &str,
+    timeline: &str,
+) -> Result<(), RecordError> {
     let (rec, storage) =
         rerun::RecordingStreamBuilder::new("calsim").recording_name(name).memory().map_err(|e| RecordError(e.to_string()))?;
     log(&rec)?;
-    blueprint(cell_contents, first_series, study_title)
+    blueprint(cell_contents, first_series, study_title, timeline)
         .send(&rec, BlueprintActivation { make_active: true, make_default: true })
         .map_err(|e| RecordError(e.to_string()))?;
     rec.flush_blocking().map_err(|e| RecordError(e.to_string()))?;
@@ -88,10 +101,10 @@ pub fn capsules(ends: &[(Vector3<f64>, Vector3<f64>, f64)]) -> Capsules3D {
     Capsules3D::from_lengths_and_radii(lengths, radii).with_translations(translations).with_quaternions(rotations)
 }
 
-/// The layout both kinds of recording open on: the 3D cell (`cell_contents`) next to two time
-/// series in tabs, the first on the `pool_configuration` timeline the file opens on, the second the
-/// study's per-task series (on `task`).
-fn blueprint(cell_contents: &[&str], first_series: (&str, &str), study_title: &str) -> Blueprint {
+/// The layout every recording opens on: the 3D cell (`cell_contents`) next to two time series in
+/// tabs, the first on the timeline the file opens on (`timeline`), the second the study's series
+/// (under `/study`).
+fn blueprint(cell_contents: &[&str], first_series: (&str, &str), study_title: &str, timeline: &str) -> Blueprint {
     Blueprint::new(
         Horizontal::new([
             Spatial3DView::new("cell").with_origin("/").with_contents(cell_contents.iter().copied()).into(),
@@ -103,7 +116,7 @@ fn blueprint(cell_contents: &[&str], first_series: (&str, &str), study_title: &s
         ])
         .with_column_shares([3.0, 2.0]),
     )
-    .with_time_panel(TimePanel::new().with_timeline("pool_configuration"))
+    .with_time_panel(TimePanel::new().with_timeline(timeline))
 }
 
 /// Static x, y, z arrows (red, green, blue) of `frame`, `len` mm long.

@@ -19,6 +19,7 @@
 
 pub mod cell;
 pub mod plot;
+pub mod record;
 pub mod select;
 pub mod spec;
 
@@ -421,11 +422,14 @@ pub fn csv(plan: &Plan, rows: &[PoseRow], positions: Option<&[Vec<Vector3<f64>>]
     s
 }
 
+/// What [`measure`] gives: the positions per row and target, mm, and the noise per point, mm.
+pub type Measured = (Vec<Vec<Vector3<f64>>>, Vec<f64>);
+
 /// The robot file's truth (its nominal where it gives none) measured at `rows` at every target,
 /// in the base frame, with the tracker's noise at each point's distance (pooled per coordinate,
 /// [`spec::Tracker::sigma_mm`]) drawn from the stream `key` of the plan's seed. Returns the
 /// positions and the noise per point.
-pub fn measure(plan: &Plan, cell: &Cell, rows: &[PoseRow], key: u64) -> Result<(Vec<Vec<Vector3<f64>>>, Vec<f64>), PlanError> {
+pub fn measure(plan: &Plan, cell: &Cell, rows: &[PoseRow], key: u64) -> Result<Measured, PlanError> {
     let truth = plan.robot.truth_on(&plan.robot.nominal).map_err(|e| PlanError::new(&plan.path, "robot", format!("its [truth]: {e}")))?;
     let placed: Vec<_> = plan
         .targets
@@ -680,8 +684,14 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
     let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
     let _ = writeln!(
         s,
-        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the tracker, the robot's base and the workspace of interest.",
-        plot::STEM
+        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the arm at {1} of the poses with the lines of sight from the tracker to their targets, the tracker, the robot's base and the workspace of interest.",
+        plot::STEM,
+        plot::SHOWN
+    );
+    let _ = writeln!(
+        s,
+        "- `{}` (unless `--no-recording`): the Rerun recording, the arm at every pose in the order of the tour with its lines of sight, the cell, and the predicted held-out median per world.",
+        record::FILE
     );
     s
 }

@@ -1,0 +1,140 @@
+//! The plan's Rerun recording (`plan.rrd`, mm in the robot's base frame): the cell, the arm at
+//! every planned pose in the order of the tour with the lines of sight from the tracker to its
+//! targets, and the predicted held-out error per world, with a blueprint that opens on the 3D
+//! cell next to the tour's moves.
+//!
+//! Entity paths:
+//! - `cell/tracker`, `cell/workspace`, `cell/keep_out`, `cell/floor`, `cell/frames/base`: static;
+//! - `plan/targets`: static, every target at every pose (training blue, validation green,
+//!   labelled with the pose);
+//! - `plan/shown/robot`: static, the arm at the figure's poses ([`super::plot::shown`]);
+//! - `plan/robot` and `plan/sight` on the `tour_step` timeline: the arm at each stop of the tour
+//!   and the lines from the tracker to its targets;
+//! - `tour/largest_move_deg` on `tour_step`: the largest joint move to each stop;
+//! - `study/heldout_median_mm` on the `world` timeline: each world's predicted held-out median.
+//!
+//! The recording is an observer: it is written from the finished plan, after the numerical work.
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+use rerun::{Boxes3D, Color, LineStrips3D, Points3D, RecordingStream, Scalars, SeriesLines};
+
+use super::cell::Cell;
+use super::plot::{arm_at, shown};
+use super::{Outcome, Plan, VALIDATION};
+use crate::io::record::{RecordError, Rr, capsules, log_axes, p3};
+use crate::robot::KinState;
+
+/// The recording's file name in the plan's directory.
+pub const FILE: &str = "plan.rrd";
+
+/// Half extent of the floor drawn, mm.
+const FLOOR_HALF_MM: f64 = 1500.0;
+
+const TRAINING_RGB: [u8; 3] = [60, 90, 220];
+const VALIDATION_RGB: [u8; 3] = [40, 170, 70];
+const SIGHT_RGB: [u8; 3] = [235, 90, 90];
+
+fn rgb(c: [u8; 3]) -> Color {
+    Color::from_rgb(c[0], c[1], c[2])
+}
+
+/// Writes the recording of `o` to `path`.
+pub fn write(path: &Path, plan: &Plan, cell: &Cell, o: &Outcome) -> Result<(), RecordError> {
+    let name = plan.path.file_stem().map_or_else(|| "plan".to_string(), |s| s.to_string_lossy().into_owned());
+    crate::io::record::save_on(
+        path,
+        &format!("calsim plan {name}"),
+        |rec| log_all(rec, plan, cell, o),
+        &["/cell/**", "/plan/**"],
+        ("tour: largest joint move to each stop, deg", "/tour"),
+        "predicted held-out median per world, mm (timeline `world`)",
+        "tour_step",
+    )
+}
+
+fn log_all(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome) -> Rr {
+    rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+    let t = cell.tracker();
+    rec.log_static(
+        "cell/tracker",
+        &Points3D::new([p3(&t)])
+            .with_radii([plan.tracker.head_radius_mm as f32])
+            .with_labels(["laser tracker"])
+            .with_colors([Color::from_rgb(240, 200, 0)]),
+    )?;
+    let boxed = |lo: &Vector3<f64>, hi: &Vector3<f64>| (p3(&((lo + hi) / 2.0)), p3(&((hi - lo) / 2.0)));
+    let (c, h) = boxed(&plan.workspace.min, &plan.workspace.max);
+    rec.log_static(
+        "cell/workspace",
+        &Boxes3D::from_centers_and_half_sizes([c], [h])
+            .with_labels(["workspace of interest"])
+            .with_colors([Color::from_unmultiplied_rgba(40, 40, 40, 40)]),
+    )?;
+    if !plan.keep_out.is_empty() {
+        let b: Vec<_> = plan.keep_out.iter().map(|b| boxed(&b.min, &b.max)).collect();
+        rec.log_static(
+            "cell/keep_out",
+            &Boxes3D::from_centers_and_half_sizes(b.iter().map(|x| x.0), b.iter().map(|x| x.1))
+                .with_labels(plan.keep_out.iter().map(|b| b.name.clone()))
+                .with_colors([Color::from_unmultiplied_rgba(200, 60, 60, 60)]),
+        )?;
+    }
+    if let Some(z) = plan.floor_z_mm {
+        rec.log_static(
+            "cell/floor",
+            &Boxes3D::from_centers_and_half_sizes([[0.0, 0.0, z as f32]], [[FLOOR_HALF_MM as f32, FLOOR_HALF_MM as f32, 0.0]])
+                .with_colors([Color::from_unmultiplied_rgba(150, 130, 100, 50)]),
+        )?;
+    }
+    log_axes(rec, "cell/frames/base", &nalgebra::Isometry3::identity(), 150.0)?;
+
+    let mut st = KinState::default();
+    let views: Vec<_> = o.rows.iter().map(|r| arm_at(plan, cell, &r.q, &mut st)).collect();
+    let colour = |i: usize| if o.rows[i].split == VALIDATION { VALIDATION_RGB } else { TRAINING_RGB };
+    rec.log_static(
+        "plan/targets",
+        &Points3D::new(views.iter().flat_map(|v| v.targets.iter().map(p3)))
+            .with_radii([(plan.tracker.smr_diameter_mm / 2.0) as f32])
+            .with_colors(views.iter().enumerate().flat_map(|(i, v)| v.targets.iter().map(move |_| rgb(colour(i)))))
+            .with_labels(
+                views
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(i, v)| plan.targets.iter().take(v.targets.len()).map(move |tg| format!("{} {}", o.rows[i].label, tg.name))),
+            ),
+    )?;
+    let shown_caps: Vec<_> = shown(o).into_iter().flat_map(|i| views[i].capsules.clone()).collect();
+    rec.log_static("plan/shown/robot", &capsules(&shown_caps).with_colors([Color::from_unmultiplied_rgba(110, 110, 110, 160)]))?;
+
+    rec.log_static("tour/largest_move_deg", &SeriesLines::new().with_names(["largest joint move, deg"]))?;
+    let mut prev: Option<&crate::robot::Joints> = None;
+    for (step, &i) in o.tour.0.iter().enumerate() {
+        rec.set_time_sequence("tour_step", step as i64);
+        let v = &views[i];
+        rec.log("plan/robot", &capsules(&v.capsules).with_colors([rgb(colour(i))]))?;
+        rec.log(
+            "plan/sight",
+            &LineStrips3D::new(v.targets.iter().map(|p| vec![p3(&t), p3(p)]))
+                .with_radii([1.5f32])
+                .with_colors([rgb(SIGHT_RGB)])
+                .with_labels(plan.targets.iter().map(|tg| format!("{} {}", o.rows[i].label, tg.name))),
+        )?;
+        let q = &o.rows[i].q;
+        let step_deg = prev.map_or(0.0, |p| p.iter().zip(q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
+        rec.log("tour/largest_move_deg", &Scalars::new([step_deg]))?;
+        prev = Some(q);
+    }
+    rec.reset_time();
+
+    rec.log_static("study/heldout_median_mm", &SeriesLines::new().with_names(["held-out median, mm"]))?;
+    for (w, m) in o.prediction.per_world_mm.iter().enumerate() {
+        if m.is_finite() {
+            rec.set_time_sequence("world", w as i64);
+            rec.log("study/heldout_median_mm", &Scalars::new([*m]))?;
+        }
+    }
+    rec.reset_time();
+    Ok(())
+}
