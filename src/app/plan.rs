@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 
 use super::{Error, Observer};
-use crate::io::out_dir::{write_atomically, write_file};
 use crate::plan::{Outcome, Plan};
 
 /// What `calsim plan` is asked.
@@ -84,35 +83,27 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         ("tour.csv", crate::plan::tour_csv(&plan, &outcome)),
         ("plan.md", crate::plan::markdown(&plan, &outcome)),
     ];
-    #[derive(serde::Serialize)]
-    struct Manifest<'a> {
-        plan: &'a str,
-        simulate: bool,
-        recording: bool,
-        #[serde(flatten)]
-        provenance: crate::io::manifest::Provenance,
-    }
-    let manifest = Manifest {
-        plan: &name,
-        simulate: spec.simulate,
-        recording: spec.recording,
-        provenance: crate::io::manifest::Provenance::of_run(&[]),
-    };
-    let manifest = serde_json::to_string_pretty(&manifest).map_err(|e| Error::io(&spec.out)(std::io::Error::other(e)))? + "\n";
-    let dir = write_atomically(&spec.out, &name, |d| {
-        write_file(&d.join("manifest.json"), &manifest)?;
-        for (f, text) in &files {
-            write_file(&d.join(f), text)?;
+    let dir = {
+        let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+        let io = |e: std::io::Error| Error::io(&spec.out)(e);
+        r.field("plan", &name).map_err(io)?.field("simulate", spec.simulate).map_err(io)?.field("recording", spec.recording).map_err(io)?;
+        for (f, text) in files {
+            r.file(f, text);
         }
-        if let Some(text) = &simulated {
-            write_file(&d.join("simulated.csv"), text)?;
+        if let Some(text) = simulated {
+            r.file("simulated.csv", text);
         }
-        crate::plan::plot::write(d, &plan, &cell, &outcome).map_err(std::io::Error::other)?;
+        // plan.md shows the figure itself.
+        r.draw(Box::new(|d| crate::plan::plot::write(d, &plan, &cell, &outcome).map(|()| Vec::new())));
         if spec.recording {
-            crate::plan::record::write(&d.join(crate::plan::record::FILE), &plan, &cell, &outcome).map_err(std::io::Error::other)?;
+            r.record_as(
+                crate::plan::record::FILE,
+                Box::new(|path| {
+                    crate::plan::record::write(path, &plan, &cell, &outcome).map_err(|e| crate::io::record::RecordError(e.to_string()))
+                }),
+            );
         }
-        Ok(())
-    })
-    .map_err(Error::io(&spec.out))?;
+        crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
+    };
     Ok(PlanReport { plan, outcome, dir, seconds })
 }

@@ -238,7 +238,7 @@ pub struct Results<'a> {
     tables: Vec<(String, DataFrame)>,
     files: Vec<(String, Vec<u8>)>,
     draw: Vec<Draw<'a>>,
-    record: Option<Record<'a>>,
+    record: Option<(String, Record<'a>)>,
     nested: Vec<(String, Results<'a>)>,
     /// The summary (`summary.md`); none when it has no part.
     pub summary: Summary<'a>,
@@ -310,7 +310,12 @@ impl<'a> Results<'a> {
 
     /// The Rerun recording, written as `study.rrd`.
     pub fn record(&mut self, record: Record<'a>) -> &mut Self {
-        self.record = Some(record);
+        self.record_as("study.rrd", record)
+    }
+
+    /// The Rerun recording, written as `file`.
+    pub fn record_as(&mut self, file: &str, record: Record<'a>) -> &mut Self {
+        self.record = Some((file.to_string(), record));
         self
     }
 
@@ -348,8 +353,8 @@ impl<'a> Results<'a> {
         }
         write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(crate::io::table::err)?)?;
         let t = std::time::Instant::now();
-        if let Some(record) = self.record {
-            record(&dir.join("study.rrd")).map_err(std::io::Error::other)?;
+        if let Some((file, record)) = self.record {
+            record(&dir.join(file)).map_err(std::io::Error::other)?;
         }
         let recording_s = t.elapsed().as_secs_f64();
         let mut drawn = Vec::new();
