@@ -118,6 +118,7 @@ fn tables(b: &BudgetReport<'_>, r: &mut Results<'_>) -> std::io::Result<()> {
             f("pairing_correlation", b.shares.iter().map(|x| x.effect.correlation).collect()),
         ],
     )?;
+    r.table("lines.parquet", line_columns(b))?;
     if let Some(rows) = prediction_rows(b) {
         r.table(
             "prediction.parquet",
@@ -324,8 +325,8 @@ pub fn summary<'a>(b: &'a BudgetReport<'a>, parts: &mut Summary<'a>) {
     }
     parts.text(s);
     shares_table(b, parts);
+    detail(b, parts);
     let mut s = String::new();
-    detail(b, &mut s);
     prediction_section(b, &mut s);
     s.push_str("\n## Every configuration\n\n");
     parts.text(s);
@@ -408,58 +409,62 @@ fn value(src: &Source) -> String {
     src.keys.iter().zip(&src.values).map(|(k, v)| format!("{v} {}", unit(k))).collect::<Vec<_>>().join(", ")
 }
 
-/// The detail: medians of separate configurations, each on its own.
-fn detail(b: &BudgetReport<'_>, s: &mut String) {
+/// `lines.parquet`: per source with a line, in the shares' order: the medians of its separate
+/// configurations (alone, off, at each factor), the share from removing it, and whether the paired
+/// change says the medians' difference is noise (`medians_only`) or the sources interact.
+fn line_columns(b: &BudgetReport<'_>) -> Vec<Column> {
+    let lines: Vec<(&super::Share, &Line)> =
+        b.shares.iter().filter_map(|sh| b.lines.iter().find(|l| l.source == sh.source).map(|l| (sh, l))).collect();
+    let f = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
+    let mut cols = vec![
+        Column::new("source".into(), lines.iter().map(|(_, l)| b.sources[l.source].label.to_string()).collect::<Vec<_>>()),
+        f("share_removed", lines.iter().map(|(_, l)| l.share_removed).collect()),
+        f("p95_alone_mm", lines.iter().map(|(_, l)| l.alone_mm).collect()),
+        f("p95_off_mm", lines.iter().map(|(_, l)| l.off_mm).collect()),
+    ];
     let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
-    // The paired change of configuration (`mode`, factor) of `source` from every source on.
-    let paired = |source: usize, mode: &str, factor: Option<f64>| {
-        b.configs
-            .iter()
-            .position(|c| c.mode == mode && c.source == Some(source) && factor.is_none_or(|f| c.factor == f))
-            .and_then(|i| b.against[i])
-            .map_or("-".to_string(), |p| {
-                format!(
-                    "{:+.3} ({:+.3} to {:+.3}){}",
-                    p.median,
-                    p.interval.0,
-                    p.interval.1,
-                    if p.separated(super::CONFIDENCE) { "" } else { ", noise" }
-                )
-            })
+    for (k, factor) in factors.iter().enumerate() {
+        cols.push(f(&format!("p95_at_x{factor}_mm"), lines.iter().map(|(_, l)| l.scaled_mm.get(k).map_or(f64::NAN, |x| x.1)).collect()));
+    }
+    let medians_only = |l: &Line| {
+        let off = b.configs.iter().position(|c| c.mode == "off" && c.source == Some(l.source)).and_then(|i| b.against[i]);
+        // The medians' difference a reader would take for the saving, beside the paired change.
+        off.is_some_and(|p| !p.separated(super::CONFIDENCE)) && (b.all_mm - l.off_mm).abs() > 0.02
     };
-    let _ = writeln!(
-        s,
+    cols.push(Column::new("medians_only".into(), lines.iter().map(|(_, l)| medians_only(l)).collect::<Vec<_>>()));
+    cols.push(Column::new("interacts".into(), lines.iter().map(|(sh, l)| (sh.share - l.share_removed).abs() > 0.15).collect::<Vec<_>>()));
+    cols
+}
+
+/// The detail from `lines.parquet`: medians of separate configurations, each on its own, with the
+/// paired change of its `off` configuration from `budget.parquet`.
+fn detail<'a>(b: &'a BudgetReport<'a>, parts: &mut Summary<'a>) {
+    parts.text(
         "\n### Detail: medians of separate configurations\n\n\
          The p95 of each configuration as a median over the worlds, each configuration on its own (not paired per world). \
          Share (removed, medians): the square of what removing a source saves from the whole, medians over realisations, over \
          the sum; where it differs from the share above by more than 0.15 the sources interact. Two medians over worlds that \
          spread differ by more than the per-world change: what removing or scaling a source buys is the paired change (the \
-         column `off` here, `at xF` above); where a difference of medians is not, the row says `medians only`.\n"
+         column `off` here, `at xF` above); where a difference of medians is not, the row says `medians only`.\n\n",
     );
-    let _ = write!(s, "| source | share (removed, medians) | p95 alone, mm | p95 without it, mm | off, mm (paired) |");
-    for f in &factors {
-        let _ = write!(s, " p95 at x{f}, mm |");
+    let factors: Vec<f64> = b.lines.first().map(|l| l.scaled_mm.iter().map(|x| x.0).collect()).unwrap_or_default();
+    let mut cells = vec![
+        cell("source", |r| r.str("source")),
+        cell("share (removed, medians)", |r| {
+            let only = if r.bool("medians_only") { " (medians only: the paired change is noise)" } else { "" };
+            format!("{:.2}{only}", r.f64("share_removed"))
+        }),
+        cell("p95 alone, mm", |r| f3(r.f64("p95_alone_mm"))),
+        cell("p95 without it, mm", |r| f3(r.f64("p95_off_mm"))),
+        cell("off, mm (paired)", move |r| {
+            let label = r.str("source");
+            let off = b.configs.iter().position(|c| c.mode == "off" && c.source.is_some_and(|k| b.sources[k].label == label));
+            off.map_or("-".to_string(), |i| change(&r.of("budget.parquet", i)))
+        }),
+    ];
+    for factor in factors {
+        cells.push(cell(format!("p95 at x{factor}, mm"), move |r| f3(r.f64(&format!("p95_at_x{factor}_mm")))));
     }
-    let _ = writeln!(s, " interaction |\n|{}", "---|".repeat(6 + factors.len()));
-    for sh in b.shares {
-        let Some(l) = b.lines.iter().find(|l| l.source == sh.source) else { continue };
-        let off = b.configs.iter().position(|c| c.mode == "off" && c.source == Some(l.source)).and_then(|i| b.against[i]);
-        // The medians' difference a reader would take for the saving, beside the paired change.
-        let medians_only = off.is_some_and(|p| !p.separated(super::CONFIDENCE)) && (b.all_mm - l.off_mm).abs() > 0.02;
-        let _ = write!(
-            s,
-            "| {} | {:.2}{} | {} | {} | {} |",
-            b.sources[l.source].label,
-            l.share_removed,
-            if medians_only { " (medians only: the paired change is noise)" } else { "" },
-            f3(l.alone_mm),
-            f3(l.off_mm),
-            paired(l.source, "off", None)
-        );
-        for (_, v) in &l.scaled_mm {
-            let _ = write!(s, " {} |", f3(*v));
-        }
-        let interacts = (sh.share - l.share_removed).abs() > 0.15;
-        let _ = writeln!(s, " {} |", if interacts { "yes" } else { "" });
-    }
+    cells.push(cell("interaction", |r| if r.bool("interacts") { "yes" } else { "" }.to_string()));
+    parts.table("lines.parquet", Summary::all_rows(), cells);
 }
