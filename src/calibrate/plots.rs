@@ -226,8 +226,10 @@ pub fn write_plan(dir: &Path, plans: &[(super::plan::PlanWith, super::plan::Plan
 fn plan<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plans: &[(super::plan::PlanWith, super::plan::PlanComparison)]) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
     let measured = plans[0].1.measured_mm;
-    let values = plans.iter().flat_map(|(_, p)| p.simulated_mm).chain(std::iter::once(measured)).filter(|v| v.is_finite());
-    let hi = values.clone().fold(0.0f64, f64::max) * 1.15 + 1e-9;
+    let hi =
+        plans.iter().flat_map(|(_, p)| p.simulated_mm).chain(std::iter::once(measured)).filter(|v| v.is_finite()).fold(0.0f64, f64::max)
+            * 1.15
+            + 1e-9;
     let n = plans.len();
     let key = [
         ("simulated P10-P90, inside".to_string(), Mark::Interval(BLUE)),
@@ -264,7 +266,9 @@ fn plan<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plans: &[(super::plan
         .draw()
         .map_err(e2s)?;
     if measured.is_finite() {
-        chart.draw_series(DashedLineSeries::new([(-0.6, measured), (n as f64 - 0.4, measured)], 8, 6, BLACK.stroke_width(1))).map_err(e2s)?;
+        chart
+            .draw_series(DashedLineSeries::new([(-0.6, measured), (n as f64 - 0.4, measured)], 8, 6, BLACK.stroke_width(1)))
+            .map_err(e2s)?;
     }
     for (x, (_, p)) in plans.iter().enumerate() {
         let x = x as f64;
@@ -277,7 +281,13 @@ fn plan<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plans: &[(super::plan
         if measured.is_finite() {
             chart
                 .draw_series(std::iter::once(PathElement::new(
-                    vec![(x + 0.2, measured), (x + 0.25, measured * 1.02), (x + 0.3, measured), (x + 0.25, measured * 0.98), (x + 0.2, measured)],
+                    vec![
+                        (x + 0.2, measured),
+                        (x + 0.25, measured * 1.02),
+                        (x + 0.3, measured),
+                        (x + 0.25, measured * 0.98),
+                        (x + 0.2, measured),
+                    ],
                     BLACK.stroke_width(2),
                 )))
                 .map_err(e2s)?;

@@ -551,9 +551,28 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     // noise's; a per-pose joint error moves every point of a pose together along the link-angle
     // Jacobian, and the fit (model and kept effects) absorbs more of it where its leverage is.
     let kept_projected = hstack(kept.iter().map(|&k| &projected[k]));
-    let field = field_share(&jl, &train_pose, &model_lsq, &kept_projected, dof_after);
+    // A per-pose error is repeatable at a joint value: the visits of one pose (joints within
+    // SAME_POSE_RAD, any session) share it.
+    let mut visited: Vec<crate::robot::Joints> = Vec::new();
+    let same_q: Vec<usize> = train
+        .iter()
+        .map(|&i| {
+            let q = m.poses[m.points[i].pose].q;
+            visited.iter().position(|v| v.iter().zip(&q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD)).unwrap_or_else(|| {
+                visited.push(q);
+                visited.len() - 1
+            })
+        })
+        .collect();
+    let field = field_share(&jl, &same_q, &model_lsq, &kept_projected, dof_after);
     if let Some(left) = decomposition.left.as_mut() {
-        *left = left.scaled(1.0 / field, format!("{}; divided by {field:.3}, the share of a per-pose joint error the fit leaves in the residual over the white noise's", left.by));
+        *left = left.scaled(
+            1.0 / field,
+            format!(
+                "{}; divided by {field:.3}, the share of a per-pose joint error the fit leaves in the residual over the white noise's",
+                left.by
+            ),
+        );
     }
     let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
     let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
@@ -845,7 +864,7 @@ fn repeated_scatter(m: &super::Measurements, train: &[usize], resid: &DVector<f6
 /// The share of a per-pose joint error's variance that the training fit leaves in its residual,
 /// over the share it leaves of white noise (`dof / rows`): `(tr S - tr H S) / tr S` against
 /// `dof / rows`, with `S` the covariance over the training rows of a unit independent error per
-/// joint and per pose (block `L_p L_p^T` over the rows of pose `p`, `L` the weighted link-angle
+/// joint and per pose (block `L_p L_p^T` over the rows of every visit of pose `p`, `L` the weighted link-angle
 /// Jacobian `jl`) and `H` the hat matrix of the model's columns and the kept effects' (projected
 /// off the model). 1 when the fit absorbs the field as it absorbs white noise.
 fn field_share(jl: &DMatrix<f64>, pose_of_point: &[usize], model: &Lsq, kept_projected: &DMatrix<f64>, dof: f64) -> f64 {
