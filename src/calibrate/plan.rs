@@ -331,6 +331,31 @@ pub fn simulate_at(
         message: format!("the calibrated robot cannot be placed in a session's frame: {e}"),
     })?;
     let targets = c.tools.len();
+    // The flagged points that the calibration kept in its fits (`--outliers report`), at the
+    // file's own points: each world measures them off by what they were measured off the
+    // calibrated robot (noise included), so that the worlds' fits carry them as the measured one did.
+    let carried: Vec<Option<Vector3<f64>>> = if std::ptr::eq(m, &c.measurements) && c.options.outliers == super::OutlierMode::Report {
+        let mut st = KinState::default();
+        m.points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                c.flagged.get(i).copied().unwrap_or(false).then(|| {
+                    let session = m.poses[p.pose].session;
+                    let at = c
+                        .model
+                        .edited(|d| {
+                            d.world_from_base = c.bases[session].session_from_base;
+                            d.flange_tcp_mm = c.tools[p.target].flange_mm;
+                        })
+                        .map_or(p.measured_mm, |placed| forward(&placed, &mut st, &m.poses[p.pose].q));
+                    p.measured_mm - at
+                })
+            })
+            .collect()
+    } else {
+        vec![None; m.points.len()]
+    };
     let mut opts = c.options.clone();
     opts.plots = false;
     // Each pose's index within its session (the drift's clock).
@@ -396,7 +421,11 @@ pub fn simulate_at(
                 })
                 .collect();
             let mut mw = m.clone();
-            for (p, t) in mw.points.iter_mut().zip(&truth) {
+            for ((p, t), carried) in mw.points.iter_mut().zip(&truth).zip(&carried) {
+                if let Some(off) = carried {
+                    p.measured_mm = t + off;
+                    continue;
+                }
                 let s = match basis.noise {
                     Noise::Fixed(s) => s,
                     Noise::PointsElse(s) => p.sigma_mm.unwrap_or(s),
