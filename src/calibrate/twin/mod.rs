@@ -195,11 +195,13 @@ pub struct Twin {
 }
 
 impl Twin {
-    /// The learned effects a plan draws: the fitted values, without their standard deviations.
-    /// The coefficients are correlated with each other and with the model's parameters (a
-    /// harmonic of a joint with its geometry), and `[learned]` keeps one standard deviation each:
-    /// drawn independently, they would put a world's robot far from the data the twin was fitted
-    /// on. Per world, the randomness is the repeatability, the per-pose error and the noise.
+    /// The learned effects a plan draws: the coefficients at their fitted values, without their
+    /// standard deviations. The coefficients are correlated with each other and with the model's
+    /// parameters (a harmonic of a joint with its geometry), and `[learned]` keeps one standard
+    /// deviation each: drawn independently, they would put a world's robot far from the data the
+    /// twin was fitted on. Per world, the randomness is the repeatability, the per-pose error (its
+    /// level drawn from its estimate's standard deviation: a level, not a coefficient the model's
+    /// parameters share) and the noise.
     pub fn plan_effects(&self) -> LearnedEffects {
         let mut l = self.learned.clone();
         l.backlash_std_mdeg = [0.0; JOINTS];
@@ -865,9 +867,6 @@ fn repeated_scatter(m: &super::Measurements, train: &[usize], resid: &DVector<f6
     (ss / (3.0 * dof as f64), 3 * dof, groups.len())
 }
 
-/// The `[learned]` table: the kept effects, the repeatability (RP from its level per coordinate),
-/// the per-pose joint error the systematic part leaves (`jl_mm`: the link-angle Jacobian over
-/// the training points, mm per rad).
 /// The share of a per-pose joint error's variance that the training fit leaves in its residual,
 /// over the share it leaves of white noise (`dof / rows`): `(tr S - tr H S) / tr S` against
 /// `dof / rows`, with `S` the covariance over the training rows of a unit independent error per
@@ -905,6 +904,10 @@ fn field_share(jl: &DMatrix<f64>, pose_of_point: &[usize], model: &Lsq, kept_pro
     if share.is_finite() && share > 0.0 { share } else { 1.0 }
 }
 
+/// The `[learned]` table: the kept effects, the repeatability (RP from its level per coordinate),
+/// the per-pose joint error the systematic part leaves and the standard deviation of its level
+/// (`jl_mm`: the link-angle Jacobian over the training points, mm per rad; `field`: the fit's
+/// share of a per-pose joint error, [`field_share`]).
 fn learned_table(
     c: &Calibration,
     d: &Decomposition,
@@ -966,14 +969,21 @@ fn learned_table(
     // The systematic part left, as a per-pose joint error: per coordinate, an independent error of
     // RMS s per joint moves a point by s^2 |J|_F^2 / 3 on average.
     // Nothing random estimated: all the residual left after the effects is taken as per-pose error.
-    let left_var = match (&d.left, &d.instrument, &d.together) {
-        (Some(left), _, _) => left.var(),
-        (None, None, None) => d.after.var() / field,
-        _ => 0.0,
+    // Its level's standard deviation: the 95 % interval's width over 2 x 1.96 (a plan draws the
+    // level per world from it).
+    let (left_var, left_interval) = match (&d.left, &d.instrument, &d.together) {
+        (Some(left), _, _) => (left.var(), left.interval_mm),
+        (None, None, None) => (d.after.var() / field, d.after.scaled(1.0 / field, String::new()).interval_mm),
+        _ => (0.0, [0.0; 2]),
     };
     let mean_jf2 = jl_mm.iter().map(|v| v * v).sum::<f64>() / (jl_mm.nrows() / 3).max(1) as f64;
-    if left_var > 0.0 && mean_jf2 > 0.0 {
-        l.pose_error_mdeg = (3.0 * left_var / mean_jf2).sqrt().to_degrees() * 1e3;
+    if mean_jf2 > 0.0 {
+        if left_var > 0.0 {
+            l.pose_error_mdeg = (3.0 * left_var / mean_jf2).sqrt().to_degrees() * 1e3;
+        }
+        // mdeg per mm of the level per coordinate.
+        let per_mm = (3.0 / mean_jf2).sqrt().to_degrees() * 1e3;
+        l.pose_error_std_mdeg = per_mm * (left_interval[1] - left_interval[0]).max(0.0) / (2.0 * Z95);
     }
     l
 }
