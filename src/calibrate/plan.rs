@@ -311,99 +311,13 @@ pub fn simulate_at(
     let sigma = match basis.noise {
         Noise::Fixed(s) | Noise::PointsElse(s) => s,
     };
-    if !(sigma.is_finite() && (0.0..=100.0).contains(&sigma)) {
-        return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{sigma}: within 0 to 100 mm") });
-    }
-    let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
-    // Per session and target, the calibrated robot placed in the session's frame with the target
-    // as its tool: its forward kinematics is the position the session's instrument reads.
-    let mut placed = Vec::with_capacity(c.bases.len() * c.tools.len());
-    for b in &c.bases {
-        for t in &c.tools {
-            placed.push(truth_model.edited(|d| {
-                d.world_from_base = b.session_from_base;
-                d.flange_tcp_mm = t.flange_mm;
-            }));
-        }
-    }
-    let placed: Vec<_> = placed.into_iter().collect::<Result<_, _>>().map_err(|e| CalibrateError::Option {
-        key: "plan-worlds".into(),
-        message: format!("the calibrated robot cannot be placed in a session's frame: {e}"),
-    })?;
-    let targets = c.tools.len();
+    let prepared = Prepared::new(c, m, basis)?;
     let mut opts = c.options.clone();
     opts.plots = false;
-    // Each pose's index within its session (the drift's clock).
-    let mut counts = vec![0usize; c.bases.len()];
-    let pose_index: Vec<f64> = m
-        .poses
-        .iter()
-        .map(|p| {
-            counts[p.session] += 1;
-            (counts[p.session] - 1) as f64
-        })
-        .collect();
     let per_world: Vec<Option<ErrorStats>> = (0..worlds)
         .into_par_iter()
         .map(|w| {
-            let mut rng = crate::seeds::stream(crate::seeds::split_seed(seed, w as u64), crate::seeds::calibrate::PLAN_NOISE);
-            // The link angles of every pose, in the file's order of poses: the joint values
-            // themselves, or the robot of the planning scenario or the twin with its effects drawn in this world.
-            let mut drift = [0.0; 3];
-            let links: Vec<crate::robot::Joints> = match (basis.effects, basis.twin) {
-                (None, None) => m.poses.iter().map(|p| p.q).collect(),
-                (effects, twin) => {
-                    let reference: crate::robot::Joints = std::array::from_fn(|i| {
-                        let l = c.model.limits()[i];
-                        0.5 * (l.min + l.max)
-                    });
-                    let unmodelled = effects.map_or_else(crate::robot::UnmodelledSpec::default, |e| e.unmodelled.clone());
-                    // Both present: their joint noises add in quadrature.
-                    let repeatability = match (effects, twin) {
-                        (Some(e), Some((_, l))) => e.repeatability_mm.hypot(l.repeatability_mm),
-                        (Some(e), None) => e.repeatability_mm,
-                        (None, Some((_, l))) => l.repeatability_mm,
-                        (None, None) => 0.0,
-                    };
-                    let robot = crate::robot::VirtualRobot::new(truth_model.clone(), &unmodelled, repeatability, &reference, &mut rng)
-                        .with_learned(twin.map(|(_, l)| l).or(effects.and_then(|e| e.learned.as_ref())), &mut rng);
-                    drift = robot.learned.as_ref().map_or([0.0; 3], |l| l.drift_mm_per_pose);
-                    let mut from = reference;
-                    m.poses
-                        .iter()
-                        .map(|p| {
-                            let l = robot.link_angles(&p.q, &from, &mut rng);
-                            from = p.q;
-                            l
-                        })
-                        .collect()
-                }
-            };
-            let drifts = drift.iter().any(|&d| d != 0.0);
-            let mut st = KinState::default();
-            let truth: Vec<Vector3<f64>> = m
-                .points
-                .iter()
-                .map(|p| {
-                    let session = m.poses[p.pose].session;
-                    let at = forward(&placed[session * targets + p.target], &mut st, &links[p.pose]);
-                    if drifts {
-                        let shift = Vector3::from(drift) * pose_index[p.pose];
-                        at + c.bases[session].session_from_base.isometry().rotation * shift
-                    } else {
-                        at
-                    }
-                })
-                .collect();
-            let mut mw = m.clone();
-            for (p, t) in mw.points.iter_mut().zip(&truth) {
-                let s = match basis.noise {
-                    Noise::Fixed(s) => s,
-                    Noise::PointsElse(s) => p.sigma_mm.unwrap_or(s),
-                };
-                let noise = Normal::new(0.0, s).map_or(Vector3::zeros(), |n| Vector3::from_fn(|_, _| n.sample(&mut rng)));
-                p.measured_mm = t + noise;
-            }
+            let mw = prepared.world(c, m, basis, seed, w);
             super::run(&c.robot, &mw, &opts).ok().and_then(|cw| cw.chosen().held_out.as_ref().map(|h| h.measured))
         })
         .collect();
@@ -412,6 +326,223 @@ pub fn simulate_at(
         format!("the calibrated robot{with}, noise {sigma:.4} mm per coordinate")
     });
     Ok((scenario, per_world))
+}
+
+/// World `w`'s measurement file of a plan with `basis` at seed `seed` (see [`simulate`]): the
+/// calibration's own file with every point replaced by what that world's robot gives there
+/// (before its calibration).
+pub fn world_file(c: &Calibration, basis: &Basis<'_>, seed: u64, w: usize) -> Result<super::measurements::Measurements, CalibrateError> {
+    Ok(Prepared::new(c, &c.measurements, basis)?.world(c, &c.measurements, basis, seed, w))
+}
+
+/// What every world of a plan at the poses of one file shares.
+struct Prepared {
+    /// The truth per session and target ([`placed_of`]).
+    placed: Vec<crate::robot::RobotModel>,
+    /// Per point, the offset carried at a flagged point ([`carried_at`]).
+    carried: Vec<Option<Vector3<f64>>>,
+    /// Each pose's index within its session (the drift's clock).
+    pose_index: Vec<f64>,
+}
+
+impl Prepared {
+    fn new(c: &Calibration, m: &super::measurements::Measurements, basis: &Basis<'_>) -> Result<Self, CalibrateError> {
+        let sigma = match basis.noise {
+            Noise::Fixed(s) | Noise::PointsElse(s) => s,
+        };
+        if !(sigma.is_finite() && (0.0..=100.0).contains(&sigma)) {
+            return Err(CalibrateError::Option { key: "plan-noise-mm".into(), message: format!("{sigma}: within 0 to 100 mm") });
+        }
+        let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
+        let placed = placed_of(c, truth_model)?;
+        let carried = carried_at(c, m, basis, &placed);
+        Ok(Self { placed, carried, pose_index: pose_index_of(c, m) })
+    }
+
+    /// World `w`'s file: the truth at the link angles of this world's robot, plus noise (a
+    /// flagged point: plus its carried offset, no noise).
+    fn world(
+        &self,
+        c: &Calibration,
+        m: &super::measurements::Measurements,
+        basis: &Basis<'_>,
+        seed: u64,
+        w: usize,
+    ) -> super::measurements::Measurements {
+        let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
+        let targets = c.tools.len();
+        let mut rng = crate::seeds::stream(crate::seeds::split_seed(seed, w as u64), crate::seeds::calibrate::PLAN_NOISE);
+        // The link angles of every pose, in the file's order of poses: the joint values
+        // themselves, or the robot of the planning scenario or the twin with its effects drawn in this world.
+        let mut drift = [0.0; 3];
+        let links: Vec<crate::robot::Joints> = match (basis.effects, basis.twin) {
+            (None, None) => m.poses.iter().map(|p| p.q).collect(),
+            (effects, twin) => {
+                let reference = reference_of(c);
+                let unmodelled = effects.map_or_else(crate::robot::UnmodelledSpec::default, |e| e.unmodelled.clone());
+                // Both present: their joint noises add in quadrature.
+                let repeatability = match (effects, twin) {
+                    (Some(e), Some((_, l))) => e.repeatability_mm.hypot(l.repeatability_mm),
+                    (Some(e), None) => e.repeatability_mm,
+                    (None, Some((_, l))) => l.repeatability_mm,
+                    (None, None) => 0.0,
+                };
+                let robot = crate::robot::VirtualRobot::new(truth_model.clone(), &unmodelled, repeatability, &reference, &mut rng)
+                    .with_learned(learned_of(basis), &mut rng);
+                drift = robot.learned.as_ref().map_or([0.0; 3], |l| l.drift_mm_per_pose);
+                let mut from = reference;
+                m.poses
+                    .iter()
+                    .map(|p| {
+                        let l = robot.link_angles(&p.q, &from, &mut rng);
+                        from = p.q;
+                        l
+                    })
+                    .collect()
+            }
+        };
+        let drifts = drift.iter().any(|&d| d != 0.0);
+        let mut st = KinState::default();
+        let truth: Vec<Vector3<f64>> = m
+            .points
+            .iter()
+            .map(|p| {
+                let session = m.poses[p.pose].session;
+                let at = forward(&self.placed[session * targets + p.target], &mut st, &links[p.pose]);
+                if drifts {
+                    let shift = Vector3::from(drift) * self.pose_index[p.pose];
+                    at + c.bases[session].session_from_base.isometry().rotation * shift
+                } else {
+                    at
+                }
+            })
+            .collect();
+        let mut mw = m.clone();
+        for ((p, t), carried) in mw.points.iter_mut().zip(&truth).zip(&self.carried) {
+            if let Some(off) = carried {
+                p.measured_mm = t + off;
+                continue;
+            }
+            let s = match basis.noise {
+                Noise::Fixed(s) => s,
+                Noise::PointsElse(s) => p.sigma_mm.unwrap_or(s),
+            };
+            let noise = Normal::new(0.0, s).map_or(Vector3::zeros(), |n| Vector3::from_fn(|_, _| n.sample(&mut rng)));
+            p.measured_mm = t + noise;
+        }
+        mw
+    }
+}
+
+/// Each pose's index within its session, in the file's order of poses.
+fn pose_index_of(c: &Calibration, m: &super::measurements::Measurements) -> Vec<f64> {
+    let mut counts = vec![0usize; c.bases.len()];
+    m.poses
+        .iter()
+        .map(|p| {
+            counts[p.session] += 1;
+            (counts[p.session] - 1) as f64
+        })
+        .collect()
+}
+
+/// Per session and target, `truth` placed in the session's frame with the target as its tool:
+/// its forward kinematics is the position the session's instrument reads.
+fn placed_of(c: &Calibration, truth: &crate::robot::RobotModel) -> Result<Vec<crate::robot::RobotModel>, CalibrateError> {
+    let mut placed = Vec::with_capacity(c.bases.len() * c.tools.len());
+    for b in &c.bases {
+        for t in &c.tools {
+            placed.push(truth.edited(|d| {
+                d.world_from_base = b.session_from_base;
+                d.flange_tcp_mm = t.flange_mm;
+            }));
+        }
+    }
+    placed.into_iter().collect::<Result<_, _>>().map_err(|e| CalibrateError::Option {
+        key: "plan-worlds".into(),
+        message: format!("the calibrated robot cannot be placed in a session's frame: {e}"),
+    })
+}
+
+/// The commanded joints a plan's first move of every world comes from: mid-range of each joint.
+fn reference_of(c: &Calibration) -> crate::robot::Joints {
+    std::array::from_fn(|i| {
+        let l = c.model.limits()[i];
+        0.5 * (l.min + l.max)
+    })
+}
+
+/// The learned effects a plan's worlds draw (the twin's, else the planning scenario's robot's).
+fn learned_of<'a>(basis: &Basis<'a>) -> Option<&'a crate::robot::learned::LearnedEffects> {
+    basis.twin.map(|(_, l)| l).or(basis.effects.and_then(|e| e.learned.as_ref()))
+}
+
+/// Per point of `m`, what a plan with `basis` carries into every world at a point flagged as an
+/// outlier that the fits keep (`--outliers report`; `None` elsewhere, and everywhere unless `m` is
+/// the calibration's own file): the measured point less the basis's robot at it, so that each
+/// world measures it off its own robot by that much. The basis's robot at a point is its truth
+/// (the twin's robot, else the calibrated one) at the link angles its learned effects give at
+/// their fitted values (harmonics, backlash by the approach direction in the file's order of
+/// poses, sag) and shifted by its drift: what varies from world to world (repeatability, the
+/// per-pose error, the noise) stays in the carried offset, the learned effects do not (each world
+/// adds its own). `placed`: the truth per session and target ([`placed_of`]).
+fn carried_at(
+    c: &Calibration,
+    m: &super::measurements::Measurements,
+    basis: &Basis<'_>,
+    placed: &[crate::robot::RobotModel],
+) -> Vec<Option<Vector3<f64>>> {
+    let flagged = |i: usize| c.flagged.get(i).copied().unwrap_or(false);
+    if !(std::ptr::eq(m, &c.measurements) && c.options.outliers == super::OutlierMode::Report && (0..m.points.len()).any(flagged)) {
+        return vec![None; m.points.len()];
+    }
+    let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
+    // The learned effects at their fitted values: every spread, the repeatability and the
+    // per-pose error set to zero, so that the draw takes nothing from its stream but the fixed
+    // values.
+    let fixed = learned_of(basis).map(|l| {
+        let mut f = crate::robot::learned::LearnedEffects {
+            repeatability_mm: 0.0,
+            pose_error_mdeg: 0.0,
+            pose_error_std_mdeg: 0.0,
+            backlash_std_mdeg: [0.0; crate::robot::JOINTS],
+            sag_std_mdeg_per_m: [0.0; crate::robot::JOINTS],
+            drift_std_mm_per_pose: [0.0; 3],
+            ..l.clone()
+        };
+        for h in &mut f.harmonic {
+            h.std_mdeg = 0.0;
+        }
+        f.draw(truth_model, &mut crate::seeds::stream(0, crate::seeds::calibrate::PLAN_NOISE))
+    });
+    let mut from = reference_of(c);
+    let links: Vec<crate::robot::Joints> = m
+        .poses
+        .iter()
+        .map(|p| {
+            let e = fixed.as_ref().map_or([0.0; crate::robot::JOINTS], |d| d.joint_errors(&p.q, &from));
+            from = p.q;
+            if fixed.is_some() { std::array::from_fn(|i| p.q[i] + e[i]) } else { p.q }
+        })
+        .collect();
+    let drift = fixed.as_ref().map_or([0.0; 3], |d| d.drift_mm_per_pose);
+    let pose_index = pose_index_of(c, m);
+    let targets = c.tools.len();
+    let mut st = KinState::default();
+    m.points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            flagged(i).then(|| {
+                let session = m.poses[p.pose].session;
+                let mut at = forward(&placed[session * targets + p.target], &mut st, &links[p.pose]);
+                if drift.iter().any(|&d| d != 0.0) {
+                    at += c.bases[session].session_from_base.isometry().rotation * (Vector3::from(drift) * pose_index[p.pose]);
+                }
+                p.measured_mm - at
+            })
+        })
+        .collect()
 }
 
 /// What a planning scenario adds to the calibrated robot in each world of a plan: its effects

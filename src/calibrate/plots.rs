@@ -9,7 +9,7 @@ use plotters::prelude::*;
 
 use super::Calibration;
 use crate::io::plot::{
-    DrawResult, FAMILY, Mark, PlotError, Side, Written, both, colour_bar, e2s, heat, keyed, range_of, register_font, whole,
+    DrawResult, FAMILY, Mark, PlotError, Side, Written, both, colour_bar, e2s, heat, interval_bar, keyed, range_of, register_font, whole,
 };
 
 /// Writes the figures of `c` into `dir`.
@@ -200,6 +200,98 @@ fn held_out<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) 
         chart
             .draw_series(marks.iter().filter(|(x, _)| x.is_finite()).map(|&(x, y)| Circle::new((x, y), 7, BLACK.stroke_width(2))))
             .map_err(e2s)?;
+    }
+    Ok(())
+}
+
+/// The plan figure's stem and caption.
+pub const PLAN_FIGURE: (&str, &str) = (
+    "plan",
+    "Held-out median error after calibration: the measured one (black diamond, dashed line) against each plan's simulated \
+     P10-P90 (bar) and median (dot)",
+);
+
+/// Writes the plan figure (`plan.png`, `plan.svg`) of `plans` into `dir`: per plan, the simulated
+/// P10-P90 as a bar, its median as a dot, the measured figure as a mark beside it (nothing when
+/// `plans` is empty).
+pub fn write_plan(dir: &Path, plans: &[(super::plan::PlanWith, super::plan::PlanComparison)]) -> Result<Option<Written>, PlotError> {
+    if plans.is_empty() {
+        return Ok(None);
+    }
+    register_font();
+    both!(dir, PLAN_FIGURE.0, |root| plan(root, plans));
+    Ok(Some(Written { stem: PLAN_FIGURE.0.into(), caption: PLAN_FIGURE.1.into() }))
+}
+
+fn plan<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plans: &[(super::plan::PlanWith, super::plan::PlanComparison)]) -> DrawResult {
+    root.fill(&WHITE).map_err(e2s)?;
+    let measured = plans[0].1.measured_mm;
+    let hi =
+        plans.iter().flat_map(|(_, p)| p.simulated_mm).chain(std::iter::once(measured)).filter(|v| v.is_finite()).fold(0.0f64, f64::max)
+            * 1.15
+            + 1e-9;
+    let n = plans.len();
+    let key = [
+        ("simulated P10-P90, inside".to_string(), Mark::Interval(BLUE)),
+        ("simulated P10-P90, measured outside".to_string(), Mark::Interval(RED)),
+        ("simulated median".to_string(), Mark::Dot(BLACK)),
+        ("measured".to_string(), Mark::Dashed(BLACK)),
+    ];
+    let root = &keyed(root, &key, Side::Bottom)?;
+    let names: Vec<String> = plans.iter().map(|(k, _)| k.name().to_string()).collect();
+    let label = |x: &f64| {
+        let k = x.round();
+        if (x - k).abs() < 1e-6 && k >= 0.0 && (k as usize) < names.len() { names[k as usize].clone() } else { String::new() }
+    };
+    let title = if measured.is_finite() {
+        format!("Held-out median: measured {measured:.4} mm against each plan")
+    } else {
+        "Held-out median: no measured figure (the held-out fit gave no model)".to_string()
+    };
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(-0.6..(n as f64 - 0.4), 0.0..hi)
+        .map_err(e2s)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(n + 1)
+        .x_label_formatter(&label)
+        .x_desc("plan (what each simulated world draws)")
+        .y_desc("held-out median error (mm)")
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(e2s)?;
+    if measured.is_finite() {
+        chart
+            .draw_series(DashedLineSeries::new([(-0.6, measured), (n as f64 - 0.4, measured)], 8, 6, BLACK.stroke_width(1)))
+            .map_err(e2s)?;
+    }
+    for (x, (_, p)) in plans.iter().enumerate() {
+        let x = x as f64;
+        let [p10, p50, p90] = p.simulated_mm;
+        let colour = if p.inside { BLUE } else { RED };
+        chart.draw_series(interval_bar(x, (p10, p90), 0.12, colour.stroke_width(3))).map_err(e2s)?;
+        if p50.is_finite() {
+            chart.draw_series(std::iter::once(Circle::new((x, p50), 4, BLACK.filled()))).map_err(e2s)?;
+        }
+        if measured.is_finite() {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![
+                        (x + 0.2, measured),
+                        (x + 0.25, measured * 1.02),
+                        (x + 0.3, measured),
+                        (x + 0.25, measured * 0.98),
+                        (x + 0.2, measured),
+                    ],
+                    BLACK.stroke_width(2),
+                )))
+                .map_err(e2s)?;
+        }
     }
     Ok(())
 }

@@ -47,7 +47,12 @@ pub fn write_with(
 ) -> std::io::Result<PathBuf> {
     crate::io::out_dir::write_atomically(out, name, |dir| {
         if !plans.0.is_empty() || !plans.1.is_empty() {
-            crate::io::out_dir::write_file(&dir.join("plan.md"), super::plan::markdown_all(plans.0, plans.1))?;
+            let mut text = super::plan::markdown_all(plans.0, plans.1);
+            let figure = if c.options.plots { super::plots::write_plan(dir, plans.0).map_err(std::io::Error::other)? } else { None };
+            if let Some(w) = figure {
+                text += &format!("\n![{}]({}.png)\n\n*{}*\n", w.caption, w.stem, w.caption);
+            }
+            crate::io::out_dir::write_file(&dir.join("plan.md"), text)?;
         }
         write_robot(dir, c)?;
         if let Ok(t) = twin {

@@ -431,6 +431,7 @@ pub fn twin(
     // The repeatability is the scenario's robot's own (above); the rest scales.
     effects.repeatability_mm = 0.0;
     effects.pose_error_mdeg *= scale;
+    effects.pose_error_std_mdeg *= scale;
     for v in [&mut effects.backlash_mdeg, &mut effects.backlash_std_mdeg, &mut effects.sag_mdeg_per_m, &mut effects.sag_std_mdeg_per_m] {
         for x in v.iter_mut() {
             *x *= scale;

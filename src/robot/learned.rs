@@ -6,6 +6,7 @@
 //! source = "calsim calibrate of m.csv (geometric model, calibration split)"
 //! repeatability_mm = 0.012          # ISO 9283 RP of a move (joint noise scaled as the scenarios')
 //! pose_error_mdeg = 1.5             # per-joint error the effects below leave, repeatable per pose
+//! pose_error_std_mdeg = 0.4         # standard deviation of that level's estimate
 //! backlash_mdeg = [0, 6, 4, 0, 0, 0]      # full width per joint: the link lags half of it
 //! backlash_std_mdeg = [0, 1, 1, 0, 0, 0]
 //! sag_mdeg_per_m = [0, 9, 5, 0, 0, 0]     # joint error per metre of a TCP mass's lever arm
@@ -25,7 +26,7 @@
 //! ([`LearnedEffects::draw`]): a plan with the twin carries what the calibration could not pin
 //! down. The per-pose error is drawn as encoder-like harmonics of orders in the thousands (each
 //! joint's error repeatable at a joint value, unrelated from one pose to the next), of RMS
-//! `pose_error_mdeg`.
+//! `pose_error_mdeg`, its level itself drawn per world where `pose_error_std_mdeg` is given.
 
 use std::f64::consts::PI;
 
@@ -72,6 +73,10 @@ pub struct LearnedEffects {
     /// RMS of the per-pose joint error the effects leave, mdeg (repeatable at a pose).
     #[serde(default)]
     pub pose_error_mdeg: f64,
+    /// Standard deviation of the estimate of `pose_error_mdeg`, mdeg: each world draws the level
+    /// from a normal distribution about it (kept non-negative).
+    #[serde(default)]
+    pub pose_error_std_mdeg: f64,
     /// Backlash per joint, full width, mdeg.
     #[serde(default)]
     pub backlash_mdeg: [f64; JOINTS],
@@ -125,6 +130,9 @@ impl LearnedEffects {
         if !within(self.pose_error_mdeg, 1.0e5) {
             return bad("pose_error_mdeg".into(), "within 0 to 100000 mdeg");
         }
+        if !within(self.pose_error_std_mdeg, 1.0e5) {
+            return bad("pose_error_std_mdeg".into(), "within 0 to 100000 mdeg");
+        }
         for (name, v, most, what) in [
             ("backlash_mdeg", &self.backlash_mdeg, 1.0e5, "a width within 0 to 100000 mdeg"),
             ("backlash_std_mdeg", &self.backlash_std_mdeg, 1.0e5, "within 0 to 100000 mdeg"),
@@ -169,6 +177,7 @@ impl LearnedEffects {
     pub fn is_none(&self) -> bool {
         self.repeatability_mm == 0.0
             && self.pose_error_mdeg == 0.0
+            && self.pose_error_std_mdeg == 0.0
             && self.backlash_mdeg.iter().all(|&x| x == 0.0)
             && self.sag_mdeg_per_m.iter().all(|&x| x == 0.0)
             && self.drift_mm_per_pose.iter().all(|&x| x == 0.0)
@@ -176,8 +185,9 @@ impl LearnedEffects {
     }
 
     /// One world's effects on `truth`: every coefficient drawn from its normal distribution
-    /// (a backlash width kept non-negative), the per-pose error as encoder-like harmonics of
-    /// random orders and phases. Draws from `rng` in a fixed order.
+    /// (a backlash width kept non-negative), the per-pose error's level likewise (where its
+    /// standard deviation is given: a table without one draws no level), the per-pose error as
+    /// encoder-like harmonics of random orders and phases. Draws from `rng` in a fixed order.
     pub fn draw<R: Rng + ?Sized>(&self, truth: &RobotModel, rng: &mut R) -> DrawnEffects {
         let mdeg = |x: f64| (x * 1e-3).to_radians();
         let unit = Normal::new(0.0, 1.0).expect("unit normal");
@@ -189,9 +199,14 @@ impl LearnedEffects {
             .collect();
         let half_backlash = std::array::from_fn(|j| mdeg(around(self.backlash_mdeg[j], self.backlash_std_mdeg[j]).max(0.0)) / 2.0);
         let sag_per_m: Joints = std::array::from_fn(|j| mdeg(around(self.sag_mdeg_per_m[j], self.sag_std_mdeg_per_m[j])));
-        if self.pose_error_mdeg > 0.0 {
+        let pose_error_mdeg = if self.pose_error_std_mdeg > 0.0 {
+            around(self.pose_error_mdeg, self.pose_error_std_mdeg).max(0.0)
+        } else {
+            self.pose_error_mdeg
+        };
+        if pose_error_mdeg > 0.0 {
             // Each harmonic's RMS is amplitude / sqrt(2); POSE_ERROR_HARMONICS of them per joint.
-            let amplitude = mdeg(self.pose_error_mdeg) * (2.0 / POSE_ERROR_HARMONICS as f64).sqrt();
+            let amplitude = mdeg(pose_error_mdeg) * (2.0 / POSE_ERROR_HARMONICS as f64).sqrt();
             let phase = Uniform::new(0.0, 2.0 * PI).expect("range");
             for j in 0..JOINTS {
                 for _ in 0..POSE_ERROR_HARMONICS {
@@ -309,6 +324,37 @@ mod tests {
         assert_eq!(bad.check().unwrap_err().0, "drift_mm_per_pose[1]");
         let bad = LearnedEffects { drift_std_mm_per_pose: [0.0, 0.0, -1e-3], ..Default::default() };
         assert_eq!(bad.check().unwrap_err().0, "drift_std_mm_per_pose[2]");
+    }
+
+    #[test]
+    fn the_per_pose_errors_level_is_drawn_per_world_only_where_its_spread_is_given() {
+        let truth = irb120();
+        let fixed = LearnedEffects { pose_error_mdeg: 2.0, backlash_mdeg: [0.0, 6.0, 0.0, 0.0, 0.0, 0.0], ..Default::default() };
+        let spread = LearnedEffects { pose_error_std_mdeg: 0.5, ..fixed.clone() };
+        let rms = |d: &DrawnEffects| {
+            let s: f64 = d.harmonics.iter().map(|h| h.2 * h.2 + h.3 * h.3).sum::<f64>() / 2.0 / JOINTS as f64;
+            (s.sqrt() * 1e3).to_degrees()
+        };
+        let mut levels = Vec::new();
+        for seed in 0..200 {
+            let draw = |l: &LearnedEffects| l.draw(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+            let (a, b) = (draw(&fixed), draw(&spread));
+            assert!((rms(&a) - 2.0).abs() < 1e-9, "without a spread the level is the table's: {}", rms(&a));
+            assert_eq!(a.half_backlash, b.half_backlash, "the level is drawn after the coefficients");
+            levels.push(rms(&b));
+        }
+        let mean = levels.iter().sum::<f64>() / levels.len() as f64;
+        let sd = (levels.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (levels.len() - 1) as f64).sqrt();
+        // 200 draws: the mean within 4 standard errors of 2.0, the spread within 20 % of 0.5.
+        assert!((mean - 2.0).abs() < 4.0 * 0.5 / 200f64.sqrt(), "mean level {mean}");
+        assert!((sd - 0.5).abs() < 0.1, "level's spread {sd}");
+        // A level estimated at zero with a spread: some worlds draw none, others some.
+        let zero = LearnedEffects { pose_error_std_mdeg: 0.5, ..Default::default() };
+        assert!(!zero.is_none());
+        let some = (0..40).filter(|&s| !zero.draw(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(s)).harmonics.is_empty()).count();
+        assert!((5..=35).contains(&some), "{some} of 40 worlds with a per-pose error");
+        let bad = LearnedEffects { pose_error_std_mdeg: -0.1, ..Default::default() };
+        assert_eq!(bad.check().unwrap_err().0, "pose_error_std_mdeg");
     }
 
     #[test]

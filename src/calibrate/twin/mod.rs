@@ -85,6 +85,12 @@ impl Level {
         Level { sigma_mm: var.max(0.0).sqrt(), interval_mm: [(var - h).max(0.0).sqrt(), (var + h).max(0.0).sqrt()], by }
     }
 
+    /// This level with its variance (and interval) multiplied by `f`, estimated `by`.
+    fn scaled(&self, f: f64, by: String) -> Self {
+        let r = f.max(0.0).sqrt();
+        Level { sigma_mm: self.sigma_mm * r, interval_mm: [self.interval_mm[0] * r, self.interval_mm[1] * r], by }
+    }
+
     fn var(&self) -> f64 {
         self.sigma_mm * self.sigma_mm
     }
@@ -189,11 +195,13 @@ pub struct Twin {
 }
 
 impl Twin {
-    /// The learned effects a plan draws: the fitted values, without their standard deviations.
-    /// The coefficients are correlated with each other and with the model's parameters (a
-    /// harmonic of a joint with its geometry), and `[learned]` keeps one standard deviation each:
-    /// drawn independently, they would put a world's robot far from the data the twin was fitted
-    /// on. Per world, the randomness is the repeatability, the per-pose error and the noise.
+    /// The learned effects a plan draws: the coefficients at their fitted values, without their
+    /// standard deviations. The coefficients are correlated with each other and with the model's
+    /// parameters (a harmonic of a joint with its geometry), and `[learned]` keeps one standard
+    /// deviation each: drawn independently, they would put a world's robot far from the data the
+    /// twin was fitted on. Per world, the randomness is the repeatability, the per-pose error (its
+    /// level drawn from its estimate's standard deviation: a level, not a coefficient the model's
+    /// parameters share) and the noise.
     pub fn plan_effects(&self) -> LearnedEffects {
         let mut l = self.learned.clone();
         l.backlash_std_mdeg = [0.0; JOINTS];
@@ -539,7 +547,7 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let after_mm = unweigh(&(&rw - &fitted_w));
     let dof_total = (3 * train.len()).saturating_sub(free.len()) as f64;
     let dof_after = dof_total - kept_coefs.len() as f64;
-    let decomposition = decompose(DecomposeInput {
+    let mut decomposition = decompose(DecomposeInput {
         c,
         train: &train,
         resid_mm: &resid_mm,
@@ -547,8 +555,35 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
         dof: (dof_total, dof_after),
         stated_noise_mm,
     });
+    // The fit's share of a per-pose joint error: the residual's degrees of freedom are white
+    // noise's; a per-pose joint error moves every point of a pose together along the link-angle
+    // Jacobian, and the fit (model and kept effects) absorbs more of it where its leverage is.
+    let kept_projected = hstack(kept.iter().map(|&k| &projected[k]));
+    // A per-pose error is repeatable at a joint value: the visits of one pose (joints within
+    // SAME_POSE_RAD, any session) share it.
+    let mut visited: Vec<crate::robot::Joints> = Vec::new();
+    let same_q: Vec<usize> = train
+        .iter()
+        .map(|&i| {
+            let q = m.poses[m.points[i].pose].q;
+            visited.iter().position(|v| v.iter().zip(&q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD)).unwrap_or_else(|| {
+                visited.push(q);
+                visited.len() - 1
+            })
+        })
+        .collect();
+    let field = field_share(&jl, &same_q, &model_lsq, &kept_projected, dof_after);
+    if let Some(left) = decomposition.left.as_mut() {
+        *left = left.scaled(
+            1.0 / field,
+            format!(
+                "{}; divided by {field:.3}, the share of a per-pose joint error the fit leaves in the residual over the white noise's",
+                left.by
+            ),
+        );
+    }
     let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
-    let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len());
+    let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
     let noise_mm = decomposition.instrument.as_ref().map(|l| l.sigma_mm);
     Ok(Twin {
         decomposition,
@@ -832,10 +867,55 @@ fn repeated_scatter(m: &super::Measurements, train: &[usize], resid: &DVector<f6
     (ss / (3.0 * dof as f64), 3 * dof, groups.len())
 }
 
+/// The share of a per-pose joint error's variance that the training fit leaves in its residual,
+/// over the share it leaves of white noise (`dof / rows`): `(tr S - tr H S) / tr S` against
+/// `dof / rows`, with `S` the covariance over the training rows of a unit independent error per
+/// joint and per pose (block `L_p L_p^T` over the rows of every visit of pose `p`, `L` the weighted link-angle
+/// Jacobian `jl`) and `H` the hat matrix of the model's columns and the kept effects' (projected
+/// off the model). 1 when the fit absorbs the field as it absorbs white noise.
+fn field_share(jl: &DMatrix<f64>, pose_of_point: &[usize], model: &Lsq, kept_projected: &DMatrix<f64>, dof: f64) -> f64 {
+    let poses = pose_of_point.iter().copied().max().map_or(0, |p| p + 1);
+    let mut rows_of: Vec<Vec<usize>> = vec![Vec::new(); poses];
+    for (point, &p) in pose_of_point.iter().enumerate() {
+        rows_of[p].extend([3 * point, 3 * point + 1, 3 * point + 2]);
+    }
+    let apply = |x: &DMatrix<f64>| -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(x.nrows(), x.ncols());
+        for rows in &rows_of {
+            let l = jl.select_rows(rows);
+            let y = &l * (l.tr_mul(&x.select_rows(rows)));
+            for (k, &r) in rows.iter().enumerate() {
+                out.row_mut(r).copy_from(&y.row(k));
+            }
+        }
+        out
+    };
+    let total = jl.norm_squared();
+    let rows = jl.nrows() as f64;
+    if total <= 0.0 || dof <= 0.0 || rows == 0.0 {
+        return 1.0;
+    }
+    let mut absorbed = model.coef(&apply(&model.a)).trace();
+    if kept_projected.ncols() > 0 {
+        let e = Lsq::new(kept_projected.clone());
+        absorbed += e.coef(&apply(&e.a)).trace();
+    }
+    let share = ((total - absorbed) / total) / (dof / rows);
+    if share.is_finite() && share > 0.0 { share } else { 1.0 }
+}
+
 /// The `[learned]` table: the kept effects, the repeatability (RP from its level per coordinate),
-/// the per-pose joint error the systematic part leaves (`jl_mm`: the link-angle Jacobian over
-/// the training points, mm per rad).
-fn learned_table(c: &Calibration, d: &Decomposition, effects: &[Effect], jl_mm: &DMatrix<f64>, points: usize) -> LearnedEffects {
+/// the per-pose joint error the systematic part leaves and the standard deviation of its level
+/// (`jl_mm`: the link-angle Jacobian over the training points, mm per rad; `field`: the fit's
+/// share of a per-pose joint error, [`field_share`]).
+fn learned_table(
+    c: &Calibration,
+    d: &Decomposition,
+    effects: &[Effect],
+    jl_mm: &DMatrix<f64>,
+    points: usize,
+    field: f64,
+) -> LearnedEffects {
     let mut l = LearnedEffects {
         source: Some(format!(
             "calsim calibrate of {} ({} model, calibration split: {points} points)",
@@ -889,14 +969,21 @@ fn learned_table(c: &Calibration, d: &Decomposition, effects: &[Effect], jl_mm: 
     // The systematic part left, as a per-pose joint error: per coordinate, an independent error of
     // RMS s per joint moves a point by s^2 |J|_F^2 / 3 on average.
     // Nothing random estimated: all the residual left after the effects is taken as per-pose error.
-    let left_var = match (&d.left, &d.instrument, &d.together) {
-        (Some(left), _, _) => left.var(),
-        (None, None, None) => d.after.var(),
-        _ => 0.0,
+    // Its level's standard deviation: the 95 % interval's width over 2 x 1.96 (a plan draws the
+    // level per world from it).
+    let (left_var, left_interval) = match (&d.left, &d.instrument, &d.together) {
+        (Some(left), _, _) => (left.var(), left.interval_mm),
+        (None, None, None) => (d.after.var() / field, d.after.scaled(1.0 / field, String::new()).interval_mm),
+        _ => (0.0, [0.0; 2]),
     };
     let mean_jf2 = jl_mm.iter().map(|v| v * v).sum::<f64>() / (jl_mm.nrows() / 3).max(1) as f64;
-    if left_var > 0.0 && mean_jf2 > 0.0 {
-        l.pose_error_mdeg = (3.0 * left_var / mean_jf2).sqrt().to_degrees() * 1e3;
+    if mean_jf2 > 0.0 {
+        if left_var > 0.0 {
+            l.pose_error_mdeg = (3.0 * left_var / mean_jf2).sqrt().to_degrees() * 1e3;
+        }
+        // mdeg per mm of the level per coordinate.
+        let per_mm = (3.0 / mean_jf2).sqrt().to_degrees() * 1e3;
+        l.pose_error_std_mdeg = per_mm * (left_interval[1] - left_interval[0]).max(0.0) / (2.0 * Z95);
     }
     l
 }
