@@ -243,11 +243,21 @@ pub struct FramesUnidentifiable {
     pub names: Vec<String>,
 }
 
+/// Shares of a null direction within this fraction of the largest are a tie: of robot parameters
+/// tied for the largest share, the last in the parameter list is fixed first. Two parameters
+/// confounded alike with the frames (the joint-6 offset with each target's rotation about the
+/// flange axis, `d6` with each target's height along it: half of each null direction's length
+/// each) then are named in the same order whatever the rounding of the factorisation.
+pub const TIE_RTOL: f64 = 1e-6;
+
 /// The robot parameters of `layout` the points `idx` can separate, at `x`, from each other and
 /// from the bases and tools: the column-scaled Jacobian's null space (singular values below
 /// [`RANK_RTOL`] of the largest) is emptied greedily by fixing, each time, the robot parameter with
-/// the largest share in it. Returns the kept set and the parameters fixed; an error when the null
-/// space holds base or tool unknowns only (a session or target the poses do not fix).
+/// the largest share in it (ties by [`TIE_RTOL`]: the last in the parameter list). The singular
+/// values and directions are those of the Jacobian's triangular factor ([`Problem::r_factor`]: the
+/// same as the Jacobian's, from a factorisation of its rows done once). Returns the kept set and
+/// the parameters fixed; an error when the null space holds base or tool unknowns only (a session
+/// or target the poses do not fix).
 pub fn prune(
     problem: &Problem<'_>,
     x: &[f64],
@@ -256,7 +266,7 @@ pub fn prune(
 ) -> Result<(crate::robot::ParamSet, Vec<Unidentifiable>), FramesUnidentifiable> {
     let layout = &problem.layout;
     let names = layout.names(labels.0, labels.1);
-    let Some((_, j)) = problem.linearise(x, idx) else {
+    let Some(r) = problem.r_factor(x, idx) else {
         return Err(FramesUnidentifiable { names: vec!["(the start model gives no finite prediction)".into()] });
     };
     let still: Vec<usize> = (0..layout.sessions)
@@ -265,7 +275,7 @@ pub fn prune(
     let mut kept: Vec<usize> = (0..layout.len()).filter(|c| !still.contains(c)).collect();
     let mut fixed = Vec::new();
     loop {
-        let mut js = j.select_columns(&kept);
+        let mut js = r.select_columns(&kept);
         for mut c in js.column_iter_mut() {
             let n = c.norm();
             if n > 0.0 {
@@ -279,8 +289,8 @@ pub fn prune(
             break;
         }
         let robot = layout.robot.len();
-        let Some(&worst) = involved.iter().filter(|&&k| kept[k] < robot).max_by(|&&a, &&b| shares[a].total_cmp(&shares[b]).then(a.cmp(&b)))
-        else {
+        let top = involved.iter().filter(|&&k| kept[k] < robot).map(|&k| shares[k]).fold(f64::NEG_INFINITY, f64::max);
+        let Some(&worst) = involved.iter().filter(|&&k| kept[k] < robot && shares[k] >= top * (1.0 - TIE_RTOL)).max() else {
             return Err(FramesUnidentifiable { names: involved.iter().map(|&k| names[kept[k]].clone()).collect() });
         };
         let with = involved.iter().filter(|&&k| k != worst).map(|&k| names[kept[k]].clone()).collect();
