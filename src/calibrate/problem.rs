@@ -589,6 +589,47 @@ mod tests {
         assert_eq!(n, n.transpose(), "symmetric");
     }
 
+    /// The triangular factor has the Gram matrix and the singular values of the dense weighted
+    /// Jacobian: `R^T R = J^T J` to 1e-12 of the largest entry, singular values to 1e-9 of the
+    /// largest, at most one row per unknown; the IRB 120 with Table 7's compliance, 3 sessions, 2
+    /// targets, 240 points (groups of more rows than their columns: each piece factored).
+    #[test]
+    fn r_factor_has_the_jacobians_gram_matrix_and_singular_values() {
+        let model = crate::robot::builtin::trical_2018_table7();
+        let set = ParamSet::trical_31();
+        let robot = ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).unwrap();
+        let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(37);
+        let obs: Vec<Obs> = (0..240)
+            .map(|k| Obs {
+                q: crate::robot::uniform_configuration(&model, 0.1, &mut rng),
+                measured_mm: Vector3::new(rng.random_range(-500.0..500.0), rng.random_range(-500.0..500.0), rng.random_range(0.0..600.0)),
+                session: (k * 7) % 3,
+                target: (k / 2) % 2,
+                sigma: 0.5 + 0.1 * (k % 4) as f64,
+            })
+            .collect();
+        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
+        let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
+        x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
+        x.extend([10.0, 20.0, 80.0, -30.0, 5.0, 60.0]);
+        let idx: Vec<usize> = (0..obs.len()).filter(|i| i % 7 != 3).collect();
+        let (_, j) = problem.linearise(&x, &idx).unwrap();
+        let r = problem.r_factor(&x, &idx).unwrap();
+        assert!(r.nrows() <= layout.len(), "{} rows", r.nrows());
+        let (want, got) = (j.tr_mul(&j), r.tr_mul(&r));
+        assert!((&got - &want).amax() <= 1e-12 * want.amax(), "R^T R differs by {}", (&got - &want).amax());
+        let sorted = |m: DMatrix<f64>| {
+            let mut s: Vec<f64> = m.singular_values().iter().copied().collect();
+            s.sort_by(|a, b| b.total_cmp(a));
+            s
+        };
+        let (sj, sr) = (sorted(j), sorted(r));
+        for (a, b) in sj.iter().zip(&sr) {
+            assert!((a - b).abs() <= 1e-9 * sj[0], "singular values {a} and {b}");
+        }
+    }
+
     /// The Gram matrix of a block equals nalgebra's `B^T B` bit for bit (the normal equations of
     /// every fit are summed by it): blocks of 1 to 600 rows (rows left over past a multiple of eight
     /// among them), 1 to 9 columns, entries of mixed sign and magnitude.
