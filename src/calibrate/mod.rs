@@ -42,7 +42,7 @@ use measurements::{MeasurementError, Measurements};
 use problem::{Layout, Obs, Problem, SolveOptions};
 use registration::{Raw, Unidentifiable, Unplaced};
 pub use robust::OutlierMode;
-use robust::{RobustFit, fit_without, robust_fit};
+use robust::{RobustFit, fit_without, robust_fit_and_first};
 pub use validation::KFoldBy;
 use validation::{HeldOutSpec, Split, SplitError, free_columns};
 
@@ -571,18 +571,22 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     // on every point (a simpler model would take its own misfit for outliers). `flagged` are the
     // points the rule flags; `outliers` the points every fit and statistic below leaves out (the
     // flagged ones under `OutlierMode::Reject`, none otherwise).
-    let (flagged, outliers_by) = {
+    // The robust fit's first round (every point, none flagged) is the most complete model's fit on
+    // every point when no point is left out: kept, with its layout and columns, for that fit.
+    let (flagged, outliers_by, first_round) = {
         let (kind, layout, _) = cands.last().expect("at least one model");
         let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
         let all: Vec<usize> = (0..s.obs.len()).collect();
         let x0 = validation::start_values(layout, &robot.nominal, &s.frames_x);
-        let flagged = match opts.outliers {
-            OutlierMode::Off => vec![false; s.obs.len()],
+        let free = free_columns(&problem, &all, true);
+        let (flagged, first) = match opts.outliers {
+            OutlierMode::Off => (vec![false; s.obs.len()], None),
             OutlierMode::Report | OutlierMode::Reject => {
-                robust_fit(&problem, &x0, &free_columns(&problem, &all, true), &all, opts.outlier_threshold, &sopts).outlier
+                let (fit, first) = robust_fit_and_first(&problem, &x0, &free, &all, opts.outlier_threshold, &sopts);
+                (fit.outlier, Some(first))
             }
         };
-        (flagged, kind.name())
+        (flagged, kind.name(), first.map(|f| (layout.clone(), free, f)))
     };
     let outliers = match opts.outliers {
         OutlierMode::Reject => flagged.clone(),
@@ -613,7 +617,10 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
             let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
             let free = free_columns(&problem, &all, !layout.robot.is_empty());
-            let all_fit = fit_without(&problem, &x0, &free, &all, &outliers, &sopts);
+            let all_fit = match &first_round {
+                Some((l, f, fit)) if *l == layout && *f == free && outliers.iter().all(|o| !o) => fit.clone(),
+                _ => fit_without(&problem, &x0, &free, &all, &outliers, &sopts),
+            };
             let drop = match kind {
                 Some(_) if !layout.robot.is_empty() && all_fit.solved.outcome.is_converged() => undetermined(&problem, &all_fit, &free),
                 _ => vec![],
@@ -758,6 +765,9 @@ pub const DETERMINED: f64 = 2.0;
 /// time, because the others move once it is fixed: a positive compliance first (the most
 /// positive in standard deviations), else the smallest value in standard deviations.
 fn undetermined(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Vec<(ParamId, String)> {
+    if !problem.layout.robot.ids().iter().any(|id| matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. })) {
+        return vec![];
+    }
     let Some(cov) = robust::covariance(problem, fit, free) else { return vec![] };
     let mut worst: Option<(bool, f64, ParamId, String)> = None;
     for (k, id) in problem.layout.robot.ids().iter().enumerate() {

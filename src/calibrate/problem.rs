@@ -149,17 +149,30 @@ pub struct Problem<'a> {
 /// (session, target) and its members as (row in `idx`, point index).
 type Group = ((usize, usize), Vec<(usize, usize)>);
 
-/// The points of `idx` grouped by (session, target): each group sees one model.
+/// The points of `idx` grouped by (session, target): each group sees one model. Groups in the order
+/// of their first point, members in the order of `idx`.
 fn groups(obs: &[Obs], idx: &[usize]) -> Vec<Group> {
     let mut out: Vec<Group> = Vec::new();
+    let mut at: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
     for (row, &i) in idx.iter().enumerate() {
         let key = (obs[i].session, obs[i].target);
-        match out.iter_mut().find(|(k, _)| *k == key) {
-            Some((_, v)) => v.push((row, i)),
-            None => out.push((key, vec![(row, i)])),
-        }
+        let k = *at.entry(key).or_insert_with(|| {
+            out.push((key, Vec::new()));
+            out.len() - 1
+        });
+        out[k].1.push((row, i));
     }
     out
+}
+
+/// Points per piece of the loops over a group's points that run side by side (each point's
+/// kinematics is its own: a piece's results are those of its points whatever the pieces; sums over
+/// pieces are taken in their order, so that every result is the same for any thread count).
+const PIECE: usize = 1024;
+
+/// The pieces of `groups`: (group, range of its members), groups in order, each in runs of [`PIECE`].
+fn pieces(groups: &[Group]) -> Vec<(usize, std::ops::Range<usize>)> {
+    groups.iter().enumerate().flat_map(|(g, (_, m))| (0..m.len()).step_by(PIECE).map(move |s| (g, s..(s + PIECE).min(m.len())))).collect()
 }
 
 impl Problem<'_> {
@@ -175,42 +188,68 @@ impl Problem<'_> {
     /// Unweighted position errors (measured minus predicted, mm, in the session's registered
     /// frame) of the points `idx` at `x`; `None` when `x` makes no model.
     pub fn errors(&self, x: &[f64], idx: &[usize]) -> Option<Vec<Vector3<f64>>> {
+        use rayon::prelude::*;
+        let groups = groups(self.obs, idx);
+        let models = self.models(x, &groups)?;
+        let pieces = pieces(&groups);
+        let tcps: Vec<Vec<Vector3<f64>>> = pieces
+            .par_iter()
+            .map(|(g, r)| crate::robot::tcps_world(&models[*g], groups[*g].1[r.clone()].iter().map(|(_, i)| &self.obs[*i].q)))
+            .collect();
         let mut out = vec![Vector3::zeros(); idx.len()];
-        for ((s, t), members) in groups(self.obs, idx) {
-            let model = self.model_at(x, s, t)?;
-            let tcps = crate::robot::tcps_world(&model, members.iter().map(|(_, i)| &self.obs[*i].q));
-            for ((row, i), p) in members.iter().zip(tcps) {
+        for ((g, r), tcps) in pieces.iter().zip(tcps) {
+            for ((row, i), p) in groups[*g].1[r.clone()].iter().zip(tcps) {
                 out[*row] = self.obs[*i].measured_mm - p;
             }
         }
         out.iter().all(|e| e.iter().all(|v| v.is_finite())).then_some(out)
     }
 
+    /// The model of each group at `x`; `None` when `x` makes no model.
+    fn models(&self, x: &[f64], groups: &[Group]) -> Option<Vec<RobotModel>> {
+        groups.iter().map(|((s, t), _)| self.model_at(x, *s, *t)).collect()
+    }
+
+    /// The identification Jacobians (transposed, [`tcp_jacobians_transposed`]) and predicted
+    /// positions of the members `r` of group `g`.
+    fn piece_jacobians(&self, set: &ParamSet, model: &RobotModel, members: &[(usize, usize)]) -> (Vec<f64>, Vec<Vector3<f64>>) {
+        let qs: Vec<Joints> = members.iter().map(|(_, i)| self.obs[*i].q).collect();
+        let mut jt = vec![0.0; set.len() * 3 * qs.len()];
+        let mut tcps = vec![Vector3::zeros(); qs.len()];
+        tcp_jacobians_transposed(model, set, &qs, &mut jt, &mut tcps);
+        (jt, tcps)
+    }
+
     /// Weighted residuals `r` (3 per point of `idx`) and the weighted Jacobian `J = d pred / dx`
     /// (3 |idx| x layout.len()) at `x`, so that a Gauss-Newton step solves `J dx = r`.
     pub fn linearise(&self, x: &[f64], idx: &[usize]) -> Option<(DVector<f64>, DMatrix<f64>)> {
+        use rayon::prelude::*;
         let l = &self.layout;
         let set = l.point_set();
         let p = set.len();
         let mut r = DVector::zeros(3 * idx.len());
         let mut j = DMatrix::zeros(3 * idx.len(), l.len());
-        for ((s, t), members) in groups(self.obs, idx) {
-            let model = self.model_at(x, s, t)?;
-            let qs: Vec<Joints> = members.iter().map(|(_, i)| self.obs[*i].q).collect();
-            let mut jt = vec![0.0; p * 3 * qs.len()];
-            let mut tcps = vec![Vector3::zeros(); qs.len()];
-            tcp_jacobians_transposed(&model, &set, &qs, &mut jt, &mut tcps);
-            // Column c of the point's set goes to: the robot block, session s's base block or
-            // target t's tool block.
-            let target_col = |c: usize| l.column_of(c, s, t);
-            for (k, ((row, i), tcp)) in members.iter().zip(&tcps).enumerate() {
-                let o = &self.obs[*i];
-                let e = (o.measured_mm - tcp) / o.sigma;
-                for a in 0..3 {
-                    r[3 * row + a] = e[a];
-                    let jrow = &jt[(3 * k + a) * p..(3 * k + a + 1) * p];
-                    for (c, v) in jrow.iter().enumerate() {
-                        j[(3 * row + a, target_col(c))] = v / o.sigma;
+        let groups = groups(self.obs, idx);
+        let models = self.models(x, &groups)?;
+        let pieces = pieces(&groups);
+        // A few pieces at a time (their Jacobians side by side), each scattered into `r` and `J`.
+        for batch in pieces.chunks(16) {
+            let done: Vec<(Vec<f64>, Vec<Vector3<f64>>)> =
+                batch.par_iter().map(|(g, rg)| self.piece_jacobians(&set, &models[*g], &groups[*g].1[rg.clone()])).collect();
+            for ((g, rg), (jt, tcps)) in batch.iter().zip(done) {
+                let ((s, t), members) = &groups[*g];
+                // Column c of the point's set goes to: the robot block, session s's base block or
+                // target t's tool block.
+                let target_col = |c: usize| l.column_of(c, *s, *t);
+                for (k, ((row, i), tcp)) in members[rg.clone()].iter().zip(&tcps).enumerate() {
+                    let o = &self.obs[*i];
+                    let e = (o.measured_mm - tcp) / o.sigma;
+                    for a in 0..3 {
+                        r[3 * row + a] = e[a];
+                        let jrow = &jt[(3 * k + a) * p..(3 * k + a + 1) * p];
+                        for (c, v) in jrow.iter().enumerate() {
+                            j[(3 * row + a, target_col(c))] = v / o.sigma;
+                        }
                     }
                 }
             }
@@ -218,11 +257,63 @@ impl Problem<'_> {
         (r.iter().all(|v| v.is_finite()) && j.iter().all(|v| v.is_finite())).then_some((r, j))
     }
 
+    /// The triangular factor `R` of the weighted Jacobian of [`Self::linearise`] over the points
+    /// `idx` at `x` (`J = Q R`, `Q` with orthonormal columns; at most `layout.len()` rows): each
+    /// piece's rows reduced to its own factor on its few nonzero columns, the factors stacked in
+    /// order and reduced again. `R` has the singular values and right singular vectors of `J` (and
+    /// of any selection of its columns, `R`'s same columns), without `J`'s rows in memory. `None`
+    /// when `x` makes no model or a value is not finite.
+    pub fn r_factor(&self, x: &[f64], idx: &[usize]) -> Option<DMatrix<f64>> {
+        use rayon::prelude::*;
+        let l = &self.layout;
+        let set = l.point_set();
+        let p = set.len();
+        let groups = groups(self.obs, idx);
+        let models = self.models(x, &groups)?;
+        let pieces = pieces(&groups);
+        let factors: Vec<Option<DMatrix<f64>>> = pieces
+            .par_iter()
+            .map(|(g, rg)| {
+                let ((s, t), members) = &groups[*g];
+                let members = &members[rg.clone()];
+                let (jt, _) = self.piece_jacobians(&set, &models[*g], members);
+                let mut block = DMatrix::zeros(3 * members.len(), p);
+                for (k, (_, i)) in members.iter().enumerate() {
+                    let sigma = self.obs[*i].sigma;
+                    for a in 0..3 {
+                        for c in 0..p {
+                            block[(3 * k + a, c)] = jt[(3 * k + a) * p + c] / sigma;
+                        }
+                    }
+                }
+                if !block.iter().all(|v| v.is_finite()) {
+                    return None;
+                }
+                let r = reduce(block);
+                let mut out = DMatrix::zeros(r.nrows(), l.len());
+                for c in 0..p {
+                    out.column_mut(l.column_of(c, *s, *t)).copy_from(&r.column(c));
+                }
+                Some(out)
+            })
+            .collect();
+        let factors: Vec<DMatrix<f64>> = factors.into_iter().collect::<Option<_>>()?;
+        let rows: usize = factors.iter().map(|f| f.nrows()).sum();
+        let mut stacked = DMatrix::zeros(rows, l.len());
+        let mut at = 0;
+        for f in &factors {
+            stacked.rows_mut(at, f.nrows()).copy_from(f);
+            at += f.nrows();
+        }
+        Some(reduce(stacked))
+    }
+
     /// The normal equations of the columns `cols` over the points `idx` at `x`: `N = J_c^T J_c`
     /// and `b = J_c^T r` with `J` and `r` of [`Self::linearise`], accumulated point by point from
     /// each point's few nonzero columns (its robot parameters, its session's base, its target's
     /// tool), so that their cost grows with the points, not with points times unknowns.
     pub fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        use rayon::prelude::*;
         let l = &self.layout;
         let set = l.point_set();
         let p = set.len();
@@ -233,51 +324,42 @@ impl Problem<'_> {
         let m = cols.len();
         let mut n = DMatrix::zeros(m, m);
         let mut b = DVector::zeros(m);
-        let mut slot = vec![0usize; p];
-        let mut targets = vec![0usize; p];
-        for ((s, t), members) in groups(self.obs, idx) {
-            let model = self.model_at(x, s, t)?;
-            let qs: Vec<Joints> = members.iter().map(|(_, i)| self.obs[*i].q).collect();
-            let mut jt = vec![0.0; p * 3 * qs.len()];
-            let mut tcps = vec![Vector3::zeros(); qs.len()];
-            tcp_jacobians_transposed(&model, &set, &qs, &mut jt, &mut tcps);
-            // The free columns of the point's set and where they sit in `cols`.
-            let mut used = 0;
-            for c in 0..p {
-                let col = l.column_of(c, s, t);
-                if at[col] != usize::MAX {
-                    slot[used] = c;
-                    targets[used] = at[col];
-                    used += 1;
-                }
-            }
-            // The group's rows in chunks: each chunk's dense block (rows x free columns of the
-            // point's set, then the residuals as one more column) multiplied out, its products
-            // scattered into N and b.
-            const CHUNK: usize = 1024;
-            let mut local = vec![0.0; (used + 1) * (used + 1)];
-            let mut block = vec![0.0; (3 * CHUNK.min(members.len())).div_ceil(8) * 8 * (used + 1)];
-            let (mut products, mut acc) = (Vec::new(), Vec::new());
-            for start in (0..members.len()).step_by(CHUNK) {
-                let end = (start + CHUNK).min(members.len());
-                let rows = 3 * (end - start);
+        let groups = groups(self.obs, idx);
+        let models = self.models(x, &groups)?;
+        // Per group, the free columns of the point's set (`slot`) and where they sit in `cols`.
+        let free: Vec<(Vec<usize>, Vec<usize>)> = groups
+            .iter()
+            .map(|((s, t), _)| (0..p).map(|c| (c, at[l.column_of(c, *s, *t)])).filter(|(_, a)| *a != usize::MAX).unzip())
+            .collect();
+        // Each piece's dense block (rows x free columns of the point's set, then the residuals as
+        // one more column) multiplied out, side by side; the products summed per group in order
+        // and scattered into N and b.
+        let pieces = pieces(&groups);
+        let products: Vec<Option<Vec<f64>>> = pieces
+            .par_iter()
+            .map(|(g, rg)| {
+                let members = &groups[*g].1[rg.clone()];
+                let slot = &free[*g].0;
+                let used = slot.len();
+                let (jt, tcps) = self.piece_jacobians(&set, &models[*g], members);
+                let rows = 3 * members.len();
                 // In groups of eight rows ([`gram`]'s layout); the residuals are column `used`.
-                let block = &mut block[..rows.div_ceil(8) * 8 * (used + 1)];
-                for k in start..end {
-                    let o = &self.obs[members[k].1];
+                let mut block = vec![0.0; rows.div_ceil(8) * 8 * (used + 1)];
+                for (k, (_, i)) in members.iter().enumerate() {
+                    let o = &self.obs[*i];
                     let e = (o.measured_mm - tcps[k]) / o.sigma;
                     for a in 0..3 {
-                        let row = 3 * (k - start) + a;
+                        let row = 3 * k + a;
                         let (group, lane) = (row / 8, row % 8);
                         let at = group * (used + 1) * 8 + lane;
                         block[at + used * 8] = e[a];
                         let jrow = &jt[(3 * k + a) * p..(3 * k + a + 1) * p];
                         if o.sigma == 1.0 {
-                            for (u, &c) in slot[..used].iter().enumerate() {
+                            for (u, &c) in slot.iter().enumerate() {
                                 block[at + u * 8] = jrow[c];
                             }
                         } else {
-                            for (u, &c) in slot[..used].iter().enumerate() {
+                            for (u, &c) in slot.iter().enumerate() {
                                 block[at + u * 8] = jrow[c] / o.sigma;
                             }
                         }
@@ -286,8 +368,18 @@ impl Problem<'_> {
                 if !block.iter().all(|v| v.is_finite()) {
                     return None;
                 }
-                gram(block, rows, used + 1, &mut acc, &mut products);
-                for (l, v) in local.iter_mut().zip(&products) {
+                let (mut products, mut acc) = (Vec::new(), Vec::new());
+                gram(&block, rows, used + 1, &mut acc, &mut products);
+                Some(products)
+            })
+            .collect();
+        let mut products = products.into_iter();
+        let mut pieces = pieces.iter().peekable();
+        for (g, (_, targets)) in free.iter().enumerate() {
+            let used = targets.len();
+            let mut local = vec![0.0; (used + 1) * (used + 1)];
+            while pieces.next_if(|(h, _)| *h == g).is_some() {
+                for (l, v) in local.iter_mut().zip(&products.next().expect("a product per piece")?) {
                     *l += v;
                 }
             }
@@ -306,6 +398,12 @@ impl Problem<'_> {
     pub fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
         self.errors(x, idx).map_or(f64::INFINITY, |e| e.iter().zip(idx).map(|(e, &i)| (e / self.obs[i].sigma).norm_squared()).sum())
     }
+}
+
+/// A matrix with the Gram matrix `B^T B` of `b`: `b` itself when it has no more rows than columns,
+/// else the triangular factor of its QR factorisation.
+fn reduce(b: DMatrix<f64>) -> DMatrix<f64> {
+    if b.nrows() <= b.ncols() { b } else { b.qr().r() }
 }
 
 /// The Gram matrix `G = B^T B` of the block `b` (`rows` x `cols`) into `out` (row-major, `cols` x
@@ -489,6 +587,47 @@ mod tests {
         assert!((&n - &n_dense).amax() <= 1e-12 * scale, "N differs by {}", (&n - &n_dense).amax());
         assert!((&b - &b_dense).amax() <= 1e-12 * scale, "b differs by {}", (&b - &b_dense).amax());
         assert_eq!(n, n.transpose(), "symmetric");
+    }
+
+    /// The triangular factor has the Gram matrix and the singular values of the dense weighted
+    /// Jacobian: `R^T R = J^T J` to 1e-12 of the largest entry, singular values to 1e-9 of the
+    /// largest, at most one row per unknown; the IRB 120 with Table 7's compliance, 3 sessions, 2
+    /// targets, 240 points (groups of more rows than their columns: each piece factored).
+    #[test]
+    fn r_factor_has_the_jacobians_gram_matrix_and_singular_values() {
+        let model = crate::robot::builtin::trical_2018_table7();
+        let set = ParamSet::trical_31();
+        let robot = ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).unwrap();
+        let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(37);
+        let obs: Vec<Obs> = (0..240)
+            .map(|k| Obs {
+                q: crate::robot::uniform_configuration(&model, 0.1, &mut rng),
+                measured_mm: Vector3::new(rng.random_range(-500.0..500.0), rng.random_range(-500.0..500.0), rng.random_range(0.0..600.0)),
+                session: (k * 7) % 3,
+                target: (k / 2) % 2,
+                sigma: 0.5 + 0.1 * (k % 4) as f64,
+            })
+            .collect();
+        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
+        let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
+        x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
+        x.extend([10.0, 20.0, 80.0, -30.0, 5.0, 60.0]);
+        let idx: Vec<usize> = (0..obs.len()).filter(|i| i % 7 != 3).collect();
+        let (_, j) = problem.linearise(&x, &idx).unwrap();
+        let r = problem.r_factor(&x, &idx).unwrap();
+        assert!(r.nrows() <= layout.len(), "{} rows", r.nrows());
+        let (want, got) = (j.tr_mul(&j), r.tr_mul(&r));
+        assert!((&got - &want).amax() <= 1e-12 * want.amax(), "R^T R differs by {}", (&got - &want).amax());
+        let sorted = |m: DMatrix<f64>| {
+            let mut s: Vec<f64> = m.singular_values().iter().copied().collect();
+            s.sort_by(|a, b| b.total_cmp(a));
+            s
+        };
+        let (sj, sr) = (sorted(j), sorted(r));
+        for (a, b) in sj.iter().zip(&sr) {
+            assert!((a - b).abs() <= 1e-9 * sj[0], "singular values {a} and {b}");
+        }
     }
 
     /// The Gram matrix of a block equals nalgebra's `B^T B` bit for bit (the normal equations of

@@ -83,16 +83,31 @@ impl RobustFit {
 
 /// Fits `free` over the points `idx` from `x0` with the outlier rule of this module.
 pub fn robust_fit(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usize], threshold: f64, opts: &SolveOptions) -> RobustFit {
+    robust_fit_and_first(problem, x0, free, idx, threshold, opts).0
+}
+
+/// [`robust_fit`] and its first round: the fit of every point of `idx` from `x0`
+/// ([`fit_without`] with no point flagged).
+pub fn robust_fit_and_first(
+    problem: &Problem<'_>,
+    x0: &[f64],
+    free: &[usize],
+    idx: &[usize],
+    threshold: f64,
+    opts: &SolveOptions,
+) -> (RobustFit, RobustFit) {
     let mut outlier = vec![false; idx.len()];
     let mut x = x0.to_vec();
     let mut rounds = 0;
+    let mut first = None;
     loop {
         rounds += 1;
         let fit = fit_without(problem, &x, free, idx, &outlier, opts);
+        let first = first.get_or_insert_with(|| fit.clone());
         // NaN (no model) flags nothing: the fit's outcome says what happened.
         let flags: Vec<bool> = fit.normalized.iter().map(|u| *u > threshold).collect();
         if flags == outlier || rounds == MOST_ROUNDS || !fit.robust_scale.is_finite() {
-            return RobustFit { rounds, ..fit };
+            return (RobustFit { rounds, ..fit }, first.clone());
         }
         x.clone_from(&fit.solved.x);
         outlier = flags;
@@ -117,10 +132,18 @@ pub fn fit_without(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usi
 }
 
 /// The first-order covariance `sigma_hat^2 (J^T J)^-1` of the free unknowns of `fit` (internal
-/// units, in the order of `free`), over its points not flagged. `None` when singular.
+/// units, in the order of `free`), over its points not flagged: `J^T J` summed by
+/// [`Problem::normal_equations`], scaled to a unit diagonal, inverted. `None` when singular.
 pub fn covariance(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Option<DMatrix<f64>> {
-    let (_, j) = problem.linearise(&fit.solved.x, &fit.inliers())?;
-    crate::identify::observability::covariance_of_jacobian(j.select_columns(free), fit.sigma_hat)
+    let (n, _) = problem.normal_equations(&fit.solved.x, &fit.inliers(), free)?;
+    let k = n.nrows();
+    let scale: Vec<f64> = (0..k).map(|c| n[(c, c)].sqrt()).collect();
+    if scale.iter().any(|s| *s == 0.0 || !s.is_finite()) {
+        return None;
+    }
+    let inv = DMatrix::from_fn(k, k, |a, c| n[(a, c)] / scale[a] / scale[c]).try_inverse()?;
+    let s2 = fit.sigma_hat * fit.sigma_hat;
+    Some(DMatrix::from_fn(k, k, |a, c| s2 * inv[(a, c)] / (scale[a] * scale[c])))
 }
 
 #[cfg(test)]

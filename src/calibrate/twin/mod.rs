@@ -26,6 +26,7 @@ mod report;
 use std::collections::HashMap;
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 pub use effects::{Coefficient, Family};
 use effects::{PointData, columns};
@@ -402,7 +403,9 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     // the families fitted on the other folds (Frisch-Waugh-Lovell through Gram matrices), the
     // error at the fold's poses.
     let fold_of: Vec<usize> = train.iter().map(|&i| c.assignment.fold[m.points[i].pose].unwrap_or(0)).collect();
+    // The folds side by side, gathered in their order (the same for any thread count).
     let folds: Vec<CvFold> = (0..c.assignment.folds)
+        .into_par_iter()
         .filter_map(|f| {
             let inside: Vec<usize> = (0..train.len()).filter(|&r| fold_of[r] != f).collect();
             let out: Vec<usize> = (0..train.len()).filter(|&r| fold_of[r] == f).collect();
