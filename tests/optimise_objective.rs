@@ -303,6 +303,13 @@ fn a_design_in_reach_whose_cell_blocks_the_arm_scores_by_its_collisions_and_its_
         let s = calsim::device::from_table(&text, d.table.clone(), &space.path).unwrap();
         s.run(s.header().seed, &|_, _| {}).err().map(|e| e.to_string())
     };
+    // The candidates are tried in parallel and gathered in order: the same figures on 1 and 2 threads.
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| feasibility(&space, 4, &start))
+    };
+    assert_eq!(on(1), on(2));
+    assert_eq!(on(1), f);
     let why = run(&start).expect("the start's campaign fails");
     assert!(why.contains("no valid configuration"), "{why}");
     let ctx = Context { space: &space, cache: tmp.path().join("w"), worlds: &Unreachable };
