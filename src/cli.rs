@@ -335,7 +335,7 @@ struct OptimiseArgs {
     /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
-    /// Search method replacing the file's: nelder_mead or particle_swarm.
+    /// Search method replacing the file's: nelder_mead, particle_swarm or cmaes.
     #[arg(long, value_parser = parse_method)]
     method: Option<crate::design::optimise::spec::Method>,
     /// Skip the figures.
@@ -348,7 +348,8 @@ fn parse_method(s: &str) -> Result<crate::design::optimise::spec::Method, String
     match s {
         "nelder_mead" => Ok(Method::NelderMead),
         "particle_swarm" => Ok(Method::ParticleSwarm),
-        _ => Err(format!("`{s}`: nelder_mead or particle_swarm")),
+        "cmaes" => Ok(Method::Cmaes),
+        _ => Err(format!("`{s}`: nelder_mead, particle_swarm or cmaes")),
     }
 }
 

@@ -166,20 +166,26 @@ pub mod plan {
 
 /// The streams of `calsim optimise`, keyed under the design file's `search.seed`.
 pub mod optimise {
-    /// The start of a later repetition of restart r: `stream(seed, r)` (the restart's index is
-    /// its key).
-    pub const RESTART_START: u64 = 0;
     /// The swarm's draws of restart r: `split_seed(seed, SWARM + r)`.
     pub const SWARM: u64 = 1000;
-
-    /// The stream of restart `r`'s start point (a later repetition of a restart).
-    pub fn restart_start(seed: u64, r: usize) -> rand_chacha::ChaCha8Rng {
-        super::stream(seed, RESTART_START + r as u64)
-    }
+    /// The spread starts of the later repetitions of a count of points: `stream(seed, SPREAD + count)`.
+    pub const SPREAD: u64 = 2000;
+    /// CMA-ES's draws of restart r: `split_seed(seed, CMAES + r)`.
+    pub const CMAES: u64 = 3000;
 
     /// The seed of restart `r`'s swarm.
     pub fn swarm(seed: u64, r: usize) -> u64 {
         super::split_seed(seed, SWARM + r as u64)
+    }
+
+    /// The stream of the spread starts of the searches of `count` points.
+    pub fn spread(seed: u64, count: usize) -> rand_chacha::ChaCha8Rng {
+        super::stream(seed, SPREAD + count as u64)
+    }
+
+    /// The seed of restart `r`'s CMA-ES.
+    pub fn cmaes(seed: u64, r: usize) -> u64 {
+        super::split_seed(seed, CMAES + r as u64)
     }
 }
 
@@ -193,6 +199,9 @@ pub mod fixed {
     /// The joint configurations an optimiser samples for the tool points an arm reaches
     /// (`design::optimise::reach`; "REACH" in ASCII).
     pub const REACH: u64 = 0x5245_4143_4800_0000;
+    /// The candidate poses of a TriCal campaign's feasibility, pool cones and validation
+    /// configurations (`device::trical::campaign::feasibility`; "FEASIB" in ASCII).
+    pub const FEASIBILITY: u64 = 0x4645_4153_4942_0000;
 }
 
 /// A generator seeded with `seed` itself (for the [`fixed`] streams).

@@ -163,7 +163,7 @@ fn the_search_reaches_the_optimum_of_a_two_variable_plate_that_a_dense_grid_find
             }
         }
     }
-    for method in [spec::Method::NelderMead, spec::Method::ParticleSwarm] {
+    for method in [spec::Method::NelderMead, spec::Method::ParticleSwarm, spec::Method::Cmaes] {
         let mut best = (f64::INFINITY, 0.0, 0.0);
         let mut f2 = |x: &[f64]| {
             let v = score(&with(x[0], x[1]));

@@ -206,8 +206,9 @@ fn margins(space: &spec::DesignSpace, count: usize, x: &[f64]) -> Vec<f64> {
 }
 
 /// The paper's cell with five spheres (the shipped file's start from the paper) puts sphere 4
-/// out of the arm's reach, and sphere 5 at the box's far corner is out too: a design whose every world fails scores [`optimise::FAILED`] plus
-/// the sum of its spheres' distances from the reach / 100, so that moving either sphere towards
+/// out of the arm's reach, and sphere 5 at the box's far corner is out too: a design whose every
+/// world fails scores [`optimise::FAILED`] plus the sum of its spheres' distances from the reach
+/// / 100 plus its campaign's shortfall ([`optimise::failed_score`]), so that moving either sphere towards
 /// the arm lowers it; and the start brought into reach (`optimise::into_reach`, no world run)
 /// has every sphere's centring pose reached.
 #[test]
@@ -232,7 +233,8 @@ fn a_design_out_of_reach_scores_by_every_spheres_distance_and_its_start_is_broug
         e.score
     };
     let at_start = score(&start);
-    assert!((at_start - (optimise::FAILED + m.iter().sum::<f64>() / 100.0)).abs() < 1e-9, "{at_start} from {m:?}");
+    let shortfall = feasibility(&space, 5, &start).total();
+    assert!((at_start - (optimise::FAILED + m.iter().sum::<f64>() / 100.0 + shortfall)).abs() < 1e-9, "{at_start} from {m:?}, {shortfall}");
     // Each of spheres 4 and 5 moved a tenth of the way towards sphere 1 (which the arm reaches):
     // nearer the reach, a lower score (not only the farthest sphere counts).
     for k in [3, 4] {
@@ -268,4 +270,63 @@ fn a_design_that_ran_beats_one_that_failed_everywhere_which_beats_one_ruled_out(
     assert!(failed.windows(2).all(|w| w[0] <= w[1]), "{failed:?}");
     assert!(failed[0] > optimise::FAILED && failed[2] > failed[1], "{failed:?}");
     assert!(failed.iter().all(|s| *s < 100.0), "under a geometric violation's 100: {failed:?}");
+}
+
+/// The campaign's feasibility of the design at `x` (`count` spheres).
+fn feasibility(space: &spec::DesignSpace, count: usize, x: &[f64]) -> calsim::device::trical::campaign::Feasibility {
+    let d = space.decode(count, x);
+    assert!(d.violation.is_none(), "{:?}", d.violation);
+    let text = toml::to_string(&d.table).unwrap();
+    let s = calsim::device::from_table(&text, d.table.clone(), &space.path).unwrap();
+    s.campaign_feasibility().expect("a TriCal design")
+}
+
+/// The seeded random start of the TriCal question (`irb120_spheres_from_random.toml`, 4 spheres)
+/// has every sphere's centring pose within the arm's reach, yet its campaign fails: its cell
+/// stands in the arm's way, so that no pool or validation candidate is free of collision. Its
+/// score, where every world fails, is [`optimise::FAILED`] plus the campaign's shortfall (the sets'
+/// nearest candidates' penetration depths; the reach alone would give a flat 30); brought to a
+/// campaign that can run (`optimise::into_reach`, no world run), the shortfall is 0, candidates
+/// of every set are accepted, and the campaign of a real world runs.
+#[test]
+fn a_design_in_reach_whose_cell_blocks_the_arm_scores_by_its_collisions_and_its_start_is_brought_to_a_campaign_that_runs() {
+    let tmp = scratch("optimise-feasible");
+    let space = spec::load(&repo().join("scenarios/designs/irb120_spheres_from_random.toml")).unwrap();
+    let start = space.start(4);
+    assert_eq!(margins(&space, 4, &start), vec![0.0; 4], "every centring pose reached");
+    let f = feasibility(&space, 4, &start);
+    assert!(f.pool_share.iter().all(|s| *s == 0.0) && f.validation_share == 0.0, "{f:?}");
+    assert!(f.shortfall.iter().all(|s| *s > 0.0 && *s < 1.0), "colliding, not unreachable: {f:?}");
+    let run = |x: &[f64]| {
+        let d = space.decode(4, x);
+        let text = toml::to_string(&d.table).unwrap();
+        let s = calsim::device::from_table(&text, d.table.clone(), &space.path).unwrap();
+        s.run(s.header().seed, &|_, _| {}).err().map(|e| e.to_string())
+    };
+    // The candidates are tried in parallel and gathered in order: the same figures on 1 and 2 threads.
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| feasibility(&space, 4, &start))
+    };
+    assert_eq!(on(1), on(2));
+    assert_eq!(on(1), f);
+    let why = run(&start).expect("the start's campaign fails");
+    assert!(why.contains("no valid configuration"), "{why}");
+    let ctx = Context { space: &space, cache: tmp.path().join("w"), worlds: &Unreachable };
+    let score = |x: &[f64]| {
+        let e = ctx.evaluate(optimise::Asked { restart: 0, index: 0, count: 4, x: x.to_vec() }).unwrap();
+        assert_eq!(e.failed, e.worlds);
+        (e.score, e.shortfall)
+    };
+    let (at_start, shortfall) = score(&start);
+    assert!((shortfall - f.total()).abs() < 1e-12 && (at_start - (optimise::FAILED + f.total())).abs() < 1e-9, "{at_start} {f:?}");
+    let repaired = optimise::into_reach(&ctx, 4, start.clone());
+    assert_ne!(repaired, start);
+    let g = feasibility(&space, 4, &repaired);
+    assert_eq!(g.total(), 0.0, "{g:?}");
+    assert!(g.pool_share.iter().all(|s| *s > 0.0) && g.validation_share > 0.0, "{g:?}");
+    assert_eq!(margins(&space, 4, &repaired), vec![0.0; 4]);
+    assert_eq!(score(&repaired).0, optimise::FAILED, "nothing short but the worlds this source fails");
+    assert!(at_start > optimise::FAILED + 1.0, "{at_start}");
+    assert_eq!(run(&repaired), None, "the campaign of world 0 runs");
 }

@@ -457,7 +457,7 @@ def optimise(
     """Searches a design file's space for its objective, races the finalists and verifies them on
     held-out worlds (``calsim optimise``); results in ``out/<design>``. With ``shard=(k, K)``
     only the restarts r with r % K == k run (no results: then ``merge=True``); ``method``
-    (``"nelder_mead"`` or ``"particle_swarm"``) replaces the file's."""
+    (``"nelder_mead"``, ``"particle_swarm"`` or ``"cmaes"``) replaces the file's."""
     with observer(progress) as callback:
         report = _calsim.optimise(
             Path(file),

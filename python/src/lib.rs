@@ -579,7 +579,8 @@ fn optimise<'py>(
         None => None,
         Some("nelder_mead") => Some(Method::NelderMead),
         Some("particle_swarm") => Some(Method::ParticleSwarm),
-        Some(other) => return Err(input(py, "method", format!("{other:?}: \"nelder_mead\" or \"particle_swarm\""))),
+        Some("cmaes") => Some(Method::Cmaes),
+        Some(other) => return Err(input(py, "method", format!("{other:?}: \"nelder_mead\", \"particle_swarm\" or \"cmaes\""))),
     };
     let spec = app::optimise::OptimiseSpec { file, out, shard, merge, threads, method, plots };
     let (r, warnings) = detached(py, progress, |o| app::optimise::run(&spec, o))?;

@@ -6,7 +6,7 @@
 use nalgebra::{Isometry3, Rotation3, UnitQuaternion, Vector3};
 use rapier3d_f64::parry::bounding_volume::BoundingVolume;
 use rapier3d_f64::parry::math::{Pose, Vector};
-use rapier3d_f64::parry::query::{Ray, RayCast, intersection_test};
+use rapier3d_f64::parry::query::{Ray, RayCast, contact, intersection_test};
 use rapier3d_f64::parry::shape::{Capsule, Cuboid, Shape};
 
 use crate::robot::{JOINTS, KinState};
@@ -188,6 +188,48 @@ impl CollisionWorld {
             }
         }
         self.first_self_collision(st).map(|(i, j)| Collision { a: body_name(i), b: body_name(j) })
+    }
+
+    /// How deep the configuration whose frames are in `st` collides, mm: the largest penetration
+    /// depth over the pairs [`Self::first_collision`] tests (links 1..6 and the device against the
+    /// obstacles, bodies two or more apart but the allowed pairs); 0 when the configuration is
+    /// free, above 0 exactly where [`Self::first_collision`] finds one. Continuous in the obstacles' placement, so that a search can move a cell out of the
+    /// arm's way where every configuration it tries collides.
+    pub fn penetration_mm(&self, st: &KinState) -> f64 {
+        let depth = |a: &Capsule, pa: &Pose, b: &dyn Shape, pb: &Pose| -> f64 {
+            if !Self::hits(a, pa, b, pb) {
+                return 0.0;
+            }
+            // Intersecting: at least a hair deep (a touch counts, as it does for `first_collision`).
+            match contact(pa, a, pb, b, 0.0) {
+                Ok(Some(c)) => (-c.dist).max(1e-6),
+                _ => 1e-6,
+            }
+        };
+        let frames: Vec<Pose> = (0..=JOINTS).map(|i| frame_pose(st, i)).collect();
+        let bodies = self.bodies(&frames);
+        let mut deepest = 0.0f64;
+        for (caps, p) in bodies.iter().skip(1) {
+            for o in &self.obstacles {
+                for c in caps.iter() {
+                    deepest = deepest.max(depth(c, p, o.shape.as_ref(), &o.pose));
+                }
+            }
+        }
+        for i in 0..bodies.len() {
+            for j in i + 2..bodies.len() {
+                if (j == JOINTS + 1 && i >= JOINTS - 1) || self.allowed.contains(&(i, j)) {
+                    continue;
+                }
+                let ((ci, pi), (cj, pj)) = (bodies[i], bodies[j]);
+                for a in ci {
+                    for b in cj {
+                        deepest = deepest.max(depth(a, pi, b, pj));
+                    }
+                }
+            }
+        }
+        deepest
     }
 
     /// Whether the segment from `from` to `to` (base frame, mm) crosses no link, device part or

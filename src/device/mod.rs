@@ -122,6 +122,13 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// How near the scenario's campaign is to one that can run, from candidate poses fixed for
+    /// every design (the optimiser's measure of a design whose campaigns fail); `None` where the
+    /// device has no such measure.
+    fn campaign_feasibility(&self) -> Option<trical::campaign::Feasibility> {
+        None
+    }
+
     /// The cell of datum spheres on a plate the scenario measures, as a machinist builds it (the
     /// optimiser's build sheet); `None` where the device has none.
     fn datum_cell(&self) -> Option<DatumCell> {

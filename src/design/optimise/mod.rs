@@ -184,6 +184,10 @@ pub struct Evaluated {
     /// Where some world failed: per point, how far it is from what the arm reaches with the
     /// device in its approach cone, mm ([`reach`]; empty otherwise).
     pub reach_mm: Vec<f64>,
+    /// Where some world failed: how far the campaign's pools and validation set are from having
+    /// enough candidate poses reachable without collision (the sets' shortfalls summed,
+    /// [`crate::device::trical::campaign::Feasibility`]; 0 where the device has no such measure).
+    pub shortfall: f64,
     /// Per set size (with `[robust]`: each row the first model's that has it, its score the
     /// models' scores combined).
     pub sizes: Vec<SizeScore>,
@@ -282,6 +286,26 @@ pub fn quantile_score(per_world: &[f64], level: f64, threshold: f64) -> f64 {
 pub fn reach_score(reach_mm: &[f64]) -> f64 {
     let sum: f64 = reach_mm.iter().map(|d| if d.is_finite() { d.max(0.0) } else { 1e4 }).sum();
     (sum / 100.0).min(6.0 * PENALTY)
+}
+
+/// The score of a design whose every world failed: [`FAILED`], its [`reach_score`], and its
+/// campaign's shortfall (`shortfall`: the pools' and the validation set's, each 0 to 1, summed;
+/// [`crate::device::trical::campaign::Feasibility`]): a design whose spheres are all within reach
+/// still falls as its fixtures move out of the arm's way and more of its candidate poses are
+/// reachable without collision. Under 9 [`PENALTY`] (the reach and the shortfall together at most
+/// 6.9 [`PENALTY`]).
+pub fn failed_score(reach_mm: &[f64], shortfall: f64) -> f64 {
+    let s = if shortfall.is_finite() { shortfall.max(0.0) } else { PENALTY };
+    FAILED + (reach_score(reach_mm) + s).min(6.9 * PENALTY)
+}
+
+/// How far a scenario is from a campaign that runs, in mm of the reach's distance: the sum of its
+/// points' distances from the arm's reach, plus 100 mm per unit of its campaign's shortfall
+/// ([`failed_score`]'s two terms on one scale; 0: in reach with enough candidate poses in every set).
+fn runs_distance(s: &dyn crate::device::Scenario) -> f64 {
+    let reach: f64 = reach::sphere_margins_mm(s).map_or(0.0, |v| v.iter().map(|m| m.min(1e5)).sum());
+    let shortfall = s.campaign_feasibility().map_or(0.0, |f| f.total());
+    reach + 100.0 * shortfall
 }
 
 /// The least score of a design whose every world failed (its reach, [`reach_score`], added).
@@ -422,6 +446,7 @@ impl<'a> Context<'a> {
             failed: 0,
             first_error: None,
             reach_mm: Vec::new(),
+            shortfall: 0.0,
             sizes: Vec::new(),
             score: f64::INFINITY,
             models: Vec::new(),
@@ -450,11 +475,13 @@ impl<'a> Context<'a> {
         e.failed = failed.iter().copied().max().unwrap_or(0);
         e.first_error = units.iter().find_map(|u| u.error.clone());
         if e.failed > 0 {
-            e.reach_mm = reach::sphere_margins_mm(points[0].1.scenario.as_ref()).unwrap_or_default();
+            let s = points[0].1.scenario.as_ref();
+            e.reach_mm = reach::sphere_margins_mm(s).unwrap_or_default();
+            e.shortfall = s.campaign_feasibility().map_or(0.0, |f| f.total());
         }
-        // Every world failed: a violation measured by the worlds (all of them) and by how far
-        // the points are from the arm's reach ([`reach_score`]).
-        let all_failed = FAILED + reach_score(&e.reach_mm);
+        // Every world failed: a violation measured by the worlds (all of them), by how far the
+        // points are from the arm's reach and by the campaign's shortfall ([`failed_score`]).
+        let all_failed = failed_score(&e.reach_mm, e.shortfall);
         let info = self.info(&self.sweep_of(points.iter().map(|p| p.1.clone()).collect(), stride));
         let rows = designs::judge(&info, &units, &[]);
         // Each design's per-world values of the error statistic (for the quantile score).
@@ -606,14 +633,15 @@ fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
     use sha2::Digest;
     let s = &space.search;
     let settings = format!(
-        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}start into reach",
+        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}start into reach and feasibility\u{0}{}",
         space.identity,
         s.method.label(),
         s.evaluations,
         s.restarts,
         s.worlds,
         s.seed,
-        s.score.label()
+        s.score.label(),
+        "latin-hypercube repetitions"
     );
     let key = format!("{:x}", sha2::Sha256::digest(settings.as_bytes()));
     dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
@@ -635,16 +663,62 @@ fn read_record(ctx: &Context<'_>, r: usize) -> Result<Option<Vec<Asked>>, Optimi
     Ok(Some(asked))
 }
 
+/// Latin-hypercube designs drawn per [`spread_starts`], the one whose closest two starts are the
+/// farthest apart kept.
+pub const SPREAD_DRAWS: usize = 32;
+
+/// `n` starts spread over the box `[0.05, 0.95]^d` for the later repetitions of the searches of
+/// `count` points: a Latin hypercube (each variable's range cut into `n` strata, each stratum
+/// holding one start, the strata paired at random), the best of [`SPREAD_DRAWS`] by the least
+/// distance between two of its starts (maximin), drawn from the count's own stream
+/// ([`crate::seeds::optimise::spread`]). In 14-16 dimensions a handful of uniform draws leave
+/// whole ranges of some variable unvisited; the hypercube visits every stratum of every variable.
+pub fn spread_starts(d: usize, n: usize, seed: u64, count: usize) -> Vec<Vec<f64>> {
+    use rand::RngExt;
+    if n == 0 {
+        return Vec::new();
+    }
+    let mut rng = crate::seeds::optimise::spread(seed, count);
+    let mut best: Option<(f64, Vec<Vec<f64>>)> = None;
+    for _ in 0..SPREAD_DRAWS {
+        let mut pts = vec![vec![0.0; d]; n];
+        for k in 0..d {
+            // A random permutation of the strata (Fisher-Yates), a uniform place within each.
+            let mut strata: Vec<usize> = (0..n).collect();
+            for i in (1..n).rev() {
+                strata.swap(i, rng.random_range(0..=i));
+            }
+            for (i, p) in pts.iter_mut().enumerate() {
+                p[k] = 0.05 + 0.9 * (strata[i] as f64 + rng.random_range(0.0..1.0)) / n as f64;
+            }
+        }
+        let mut closest = f64::INFINITY;
+        for i in 0..n {
+            for j in 0..i {
+                closest = closest.min(pts[i].iter().zip(&pts[j]).map(|(a, b)| (a - b).powi(2)).sum::<f64>());
+            }
+        }
+        if best.as_ref().is_none_or(|b| closest > b.0) {
+            best = Some((closest, pts));
+        }
+    }
+    best.map(|b| b.1).unwrap_or_default()
+}
+
 /// Designs the search to bring a start into reach may try ([`into_reach`]).
 pub const INTO_REACH_BUDGET: u32 = 600;
 
-/// The start `start` of a restart of `count` points brought into the arm's reach: where the
-/// design there has points out of reach ([`reach::sphere_margins_mm`], a TriCal design), the
-/// first design of the least sum of the points' distances from the reach that Nelder-Mead finds
-/// from the start within [`INTO_REACH_BUDGET`] designs, minimising that sum (designs the geometry
-/// rules out or the scenario refuses counting as farther than any); elsewhere `start` itself. No
-/// world runs: the reach is the arm's kinematics, the same in every world, so the search then
-/// starts from designs that run rather than spending its evaluations on campaigns that fail.
+/// The start `start` of a restart of `count` points brought into the arm's reach and to a
+/// campaign that can run: where the design there has points out of reach
+/// ([`reach::sphere_margins_mm`], a TriCal design) or a pool or validation set short of candidate
+/// poses reachable without collision ([`crate::device::Scenario::campaign_feasibility`]), the
+/// first design of the least such distance ([`runs_distance`]: the points' distances from the
+/// reach plus 100 mm per unit of the sets' shortfalls) that Nelder-Mead finds from the start
+/// within [`INTO_REACH_BUDGET`] designs, minimising it (designs the geometry rules out or the
+/// scenario refuses counting as farther than any); elsewhere `start` itself. No world runs: the
+/// reach and the candidate poses are the arm's kinematics and the cell's solids at their mean
+/// values, so the search then starts from designs that run rather than spending its evaluations
+/// on campaigns that fail.
 pub fn into_reach(ctx: &Context<'_>, count: usize, start: Vec<f64>) -> Vec<f64> {
     let space = ctx.space;
     let distance = |x: &[f64]| -> f64 {
@@ -653,7 +727,7 @@ pub fn into_reach(ctx: &Context<'_>, count: usize, start: Vec<f64>) -> Vec<f64> 
             return 1e6 + m;
         }
         match ctx.point(String::new(), &d.table) {
-            Ok(p) => reach::sphere_margins_mm(p.scenario.as_ref()).map_or(0.0, |v| v.iter().map(|m| m.min(1e5)).sum()),
+            Ok(p) => runs_distance(p.scenario.as_ref()),
             Err(_) => 1e7,
         }
     };
@@ -692,10 +766,9 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
     let mismatch = |key: String, why: String| OptimiseError::Record { path: file.display().to_string(), key, why };
     let mut start = space.start(count);
     if rep > 0 {
-        // Later repetitions start elsewhere: a point drawn from the restart's own stream.
-        use rand::RngExt;
-        let mut rng = crate::seeds::optimise::restart_start(space.search.seed, r);
-        start = start.iter().map(|_| rng.random_range(0.05..0.95)).collect();
+        // Later repetitions start elsewhere: spread over the box.
+        start = spread_starts(space.dimensions(count), space.search.restarts as usize - 1, space.search.seed, count)
+            .swap_remove(rep as usize - 1);
     }
     let start = into_reach(ctx, count, start);
     let mut out: Vec<Evaluated> = Vec::new();
@@ -1188,6 +1261,42 @@ mod tests {
             .collect();
         names.sort();
         names
+    }
+
+    /// The spread starts: every stratum of every variable holds one start, inside [0.05, 0.95],
+    /// the same for the same seed and count, other starts for another count; and their closest
+    /// pair farther apart than that of as many uniform draws would typically be.
+    #[test]
+    fn spread_starts_are_a_latin_hypercube_over_the_box() {
+        let (d, n) = (16, 8);
+        let s = spread_starts(d, n, 2018, 5);
+        assert_eq!(s.len(), n);
+        for k in 0..d {
+            let mut strata: Vec<usize> = s.iter().map(|p| ((p[k] - 0.05) / 0.9 * n as f64).floor() as usize).collect();
+            strata.sort();
+            assert_eq!(strata, (0..n).collect::<Vec<_>>(), "variable {k}: one start per stratum");
+        }
+        assert!(s.iter().flatten().all(|v| (0.05..0.95).contains(v)));
+        assert_eq!(s, spread_starts(d, n, 2018, 5));
+        assert_ne!(s, spread_starts(d, n, 2018, 6));
+        assert!(spread_starts(d, 0, 2018, 5).is_empty());
+        let closest = |p: &[Vec<f64>]| {
+            let mut c = f64::INFINITY;
+            for i in 0..p.len() {
+                for j in 0..i {
+                    c = c.min(p[i].iter().zip(&p[j]).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt());
+                }
+            }
+            c
+        };
+        // The median closest pair of 32 sets of 8 uniform draws in [0.05, 0.95]^16.
+        use rand::RngExt;
+        let mut rng = crate::seeds::fixed_stream(1);
+        let mut uniform: Vec<f64> = (0..32)
+            .map(|_| closest(&(0..n).map(|_| (0..d).map(|_| rng.random_range(0.05..0.95)).collect()).collect::<Vec<Vec<f64>>>()))
+            .collect();
+        uniform.sort_by(f64::total_cmp);
+        assert!(closest(&s) > uniform[16], "{} against the uniform draws' median {}", closest(&s), uniform[16]);
     }
 
     #[test]

@@ -408,15 +408,19 @@ pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
         let all = failing.iter().filter(|e| e.failed == e.worlds).count();
         let margins: Vec<f64> =
             failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
+        let short: Vec<f64> = failing.iter().map(|e| e.shortfall).collect();
         s += &format!(
             "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by the sum over their \
-             points of each one's distance from the arm's reach, the centre with the device axis along {{W}}'s -z; their farthest \
-             point {} mm from it at most, {} mm at least; `trace.parquet` columns failed_worlds, first_error, reach_margin_mm, \
-             the farthest point's).\n",
+             points of each one's distance from the arm's reach, the centre with the device axis along {{W}}'s -z, and by their \
+             campaign's shortfall of candidate poses reachable without collision; their farthest \
+             point {} mm from it at most, {} mm at least; shortfall {} at most, {} at least; `trace.parquet` columns failed_worlds, \
+             first_error, reach_margin_mm (the farthest point's), campaign_shortfall).\n",
             failing.len(),
             all,
             f3(margins.iter().copied().fold(f64::NAN, f64::max)),
             f3(margins.iter().copied().fold(f64::NAN, f64::min)),
+            f3(short.iter().copied().fold(f64::NAN, f64::max)),
+            f3(short.iter().copied().fold(f64::NAN, f64::min)),
         );
     }
     s
@@ -576,6 +580,7 @@ fn trace_columns(space: &DesignSpace, v: &Verdict) -> Vec<Column> {
         u("failed_worlds", v.trace.iter().map(|e| e.failed).collect()),
         s("first_error", v.trace.iter().map(|e| e.first_error.clone().unwrap_or_default()).collect()),
         f("reach_margin_mm", v.trace.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).collect()),
+        f("campaign_shortfall", v.trace.iter().map(|e| if e.failed > 0 { e.shortfall } else { f64::NAN }).collect()),
         u("set_size", best.iter().map(|b| b.map_or(0, |b| b.row.design.set_size)).collect()),
         f("estimate", bf(&|r| r.estimate)),
         f("lower", bf(&|r| r.interval.0)),

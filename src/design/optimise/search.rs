@@ -1,5 +1,7 @@
-//! The two searches over the unit cube, both argmin's: Nelder-Mead's simplex started around the
-//! start design, and the particle swarm over the whole cube. The objective is any function of a
+//! The searches over the unit cube: argmin's Nelder-Mead simplex started around the start design
+//! and its particle swarm over the whole cube, and a CMA-ES (Hansen's covariance matrix
+//! adaptation evolution strategy, [`cmaes`]) started at the start design, whose ranking of a
+//! generation's samples and averaging over the best half tolerate a noisy objective. The objective is any function of a
 //! point of `[0, 1]^d` (a design's score on common worlds, or a synthetic test function); a
 //! budget caps the evaluations, after which the objective is no longer called.
 //!
@@ -54,7 +56,7 @@ impl CostFunction for Budgeted<'_> {
 }
 
 /// Minimises `f` over `[0, 1]^d` from `start` with `method`, calling it at most `budget` times;
-/// `seed` keys the swarm's draws. The caller keeps what `f` was called with (its trace).
+/// `seed` keys the swarm's and CMA-ES's draws. The caller keeps what `f` was called with (its trace).
 pub fn minimise(method: Method, start: &[f64], budget: u32, seed: u64, f: &mut dyn FnMut(&[f64]) -> f64) -> Result<(), ArgminError> {
     let d = start.len();
     if d == 0 {
@@ -75,6 +77,11 @@ pub fn minimise(method: Method, start: &[f64], budget: u32, seed: u64, f: &mut d
             let solver: NelderMead<Vec<f64>, f64> = NelderMead::new(simplex).with_sd_tolerance(1e-4)?;
             Executor::new(problem, solver).configure(|s| s.max_iters(u64::from(budget))).run()?;
         }
+        Method::Cmaes => {
+            let Budgeted { f, left } = problem;
+            let f = f.into_inner();
+            cmaes(start, *left.borrow(), seed, &mut |x| f(&fold(x)));
+        }
         Method::ParticleSwarm => {
             let particles = (4 + d).min(budget as usize).max(2);
             let solver = ParticleSwarm::new((vec![0.0; d], vec![1.0; d]), particles)
@@ -84,6 +91,97 @@ pub fn minimise(method: Method, start: &[f64], budget: u32, seed: u64, f: &mut d
         }
     }
     Ok(())
+}
+
+/// Step size CMA-ES starts with, in units of each variable's range.
+pub const CMAES_SIGMA: f64 = 0.2;
+
+/// CMA-ES (Hansen, "The CMA Evolution Strategy: A Tutorial", 2016, its default parameters):
+/// generations of `4 + 3 ln d` samples drawn around the mean with the step size and covariance,
+/// the mean moved to the weighted best half, the step size by cumulative path length control
+/// and the covariance by its rank-one and rank-mu updates; started at `start` with step
+/// [`CMAES_SIGMA`], `f` called at most `budget` times (the last generation cut short). Each sample
+/// is folded into the cube ([`fold`]) before `f` sees it, and the update takes the folded point
+/// (the repair keeps the mean inside). `seed` keys the draws; the same seed, the same points.
+pub fn cmaes(start: &[f64], budget: u32, seed: u64, f: &mut dyn FnMut(&[f64]) -> f64) {
+    use nalgebra::{DMatrix, DVector};
+    use rand_distr::{Distribution, StandardNormal};
+    let n = start.len();
+    if n == 0 || budget == 0 {
+        return;
+    }
+    let nf = n as f64;
+    let lambda = 4 + (3.0 * nf.ln()).floor() as usize;
+    let mu = lambda / 2;
+    let raw: Vec<f64> = (0..mu).map(|i| ((lambda as f64 + 1.0) / 2.0).ln() - ((i + 1) as f64).ln()).collect();
+    let total: f64 = raw.iter().sum();
+    let w: Vec<f64> = raw.iter().map(|v| v / total).collect();
+    let mueff = 1.0 / w.iter().map(|v| v * v).sum::<f64>();
+    let cc = (4.0 + mueff / nf) / (nf + 4.0 + 2.0 * mueff / nf);
+    let cs = (mueff + 2.0) / (nf + mueff + 5.0);
+    let c1 = 2.0 / ((nf + 1.3).powi(2) + mueff);
+    let cmu = (1.0 - c1).min(2.0 * (mueff - 2.0 + 1.0 / mueff) / ((nf + 2.0).powi(2) + mueff));
+    let damps = 1.0 + 2.0 * (0.0f64).max(((mueff - 1.0) / (nf + 1.0)).sqrt() - 1.0) + cs;
+    let chi_n = nf.sqrt() * (1.0 - 1.0 / (4.0 * nf) + 1.0 / (21.0 * nf * nf));
+    let mut mean = DVector::from_column_slice(&fold(start));
+    let mut sigma = CMAES_SIGMA;
+    let mut c = DMatrix::<f64>::identity(n, n);
+    let (mut pc, mut ps) = (DVector::<f64>::zeros(n), DVector::<f64>::zeros(n));
+    let mut b = DMatrix::<f64>::identity(n, n);
+    let mut d = DVector::<f64>::from_element(n, 1.0);
+    let mut rng = crate::seeds::fixed_stream(seed);
+    let mut left = budget;
+    let mut generation = 0u32;
+    while left > 0 {
+        generation += 1;
+        // A generation: samples, folded, evaluated in order (the budget may cut it short).
+        let mut pop: Vec<(f64, DVector<f64>)> = Vec::with_capacity(lambda);
+        for _ in 0..lambda {
+            if left == 0 {
+                break;
+            }
+            let z = DVector::<f64>::from_fn(n, |_, _| StandardNormal.sample(&mut rng));
+            let y = &b * d.component_mul(&z);
+            let x = DVector::from_vec(fold((&mean + sigma * y).as_slice()));
+            left -= 1;
+            let v = f(x.as_slice());
+            pop.push((if v.is_nan() { f64::INFINITY } else { v }, x));
+        }
+        if pop.len() < lambda {
+            break;
+        }
+        pop.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let old = mean.clone();
+        mean = DVector::zeros(n);
+        for i in 0..mu {
+            mean += w[i] * &pop[i].1;
+        }
+        let step = (&mean - &old) / sigma;
+        // C^(-1/2) step, by the eigen decomposition C = B D^2 B^T.
+        let inv_sqrt = &b * DMatrix::from_diagonal(&d.map(|v| 1.0 / v)) * b.transpose();
+        ps = (1.0 - cs) * &ps + (cs * (2.0 - cs) * mueff).sqrt() * (&inv_sqrt * &step);
+        let ps_norm = ps.norm();
+        let hsig = ps_norm / (1.0 - (1.0 - cs).powi(2 * generation as i32)).sqrt() / chi_n < 1.4 + 2.0 / (nf + 1.0);
+        let h = if hsig { 1.0 } else { 0.0 };
+        pc = (1.0 - cc) * &pc + h * (cc * (2.0 - cc) * mueff).sqrt() * &step;
+        let mut rank_mu = DMatrix::<f64>::zeros(n, n);
+        for i in 0..mu {
+            let y = (&pop[i].1 - &old) / sigma;
+            rank_mu += w[i] * &y * y.transpose();
+        }
+        c = (1.0 - c1 - cmu) * &c + c1 * (&pc * pc.transpose() + (1.0 - h) * cc * (2.0 - cc) * &c) + cmu * rank_mu;
+        sigma *= ((cs / damps) * (ps_norm / chi_n - 1.0)).exp();
+        // A step size beyond the cube's width searches nothing more: capped there.
+        sigma = sigma.min(1.0);
+        c = (&c + c.transpose()) * 0.5;
+        let eig = nalgebra::SymmetricEigen::new(c.clone());
+        b = eig.eigenvectors;
+        d = eig.eigenvalues.map(|v| v.max(1e-20).sqrt());
+        if sigma * d.max() < 1e-8 {
+            // Converged: nothing left to learn from more samples.
+            break;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -122,6 +220,29 @@ mod tests {
         let (x, v, n) = best_of(Method::ParticleSwarm, 700);
         assert!(n <= 700, "{n} evaluations for a budget of 700");
         assert!(x.iter().zip([0.3, 0.7, 0.55]).all(|(a, b)| (a - b).abs() < 0.015), "best {v} at {x:?}");
+    }
+
+    #[test]
+    fn cmaes_finds_the_minimum_of_a_bowl_within_its_budget() {
+        let (x, v, n) = best_of(Method::Cmaes, 300);
+        assert!(n <= 300, "{n} evaluations for a budget of 300");
+        assert!(x.iter().zip([0.3, 0.7, 0.55]).all(|(a, b)| (a - b).abs() < 0.015), "best {v} at {x:?}");
+    }
+
+    /// The same seed, the same points; another seed, other points.
+    #[test]
+    fn cmaes_is_deterministic_by_its_seed() {
+        let trace = |seed: u64| {
+            let mut t: Vec<Vec<f64>> = Vec::new();
+            cmaes(&[0.5; 4], 40, seed, &mut |x| {
+                t.push(x.to_vec());
+                bowl(&x[..3])
+            });
+            t
+        };
+        assert_eq!(trace(3), trace(3));
+        assert_ne!(trace(3), trace(4));
+        assert_eq!(trace(3).len(), 40);
     }
 
     #[test]

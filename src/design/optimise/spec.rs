@@ -252,6 +252,8 @@ pub enum Method {
     NelderMead,
     /// argmin's particle swarm over the unit cube.
     ParticleSwarm,
+    /// CMA-ES started at the start design ([`super::search::cmaes`]).
+    Cmaes,
 }
 
 impl Method {
@@ -260,6 +262,7 @@ impl Method {
         match self {
             Method::NelderMead => "nelder_mead",
             Method::ParticleSwarm => "particle_swarm",
+            Method::Cmaes => "cmaes",
         }
     }
 }
@@ -823,7 +826,8 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
     let method = match s.method.as_deref() {
         None | Some("nelder_mead") => Method::NelderMead,
         Some("particle_swarm") => Method::ParticleSwarm,
-        Some(m) => return Err(err(path, "search.method", format!("{m:?}: \"nelder_mead\" or \"particle_swarm\""))),
+        Some("cmaes") => Method::Cmaes,
+        Some(m) => return Err(err(path, "search.method", format!("{m:?}: \"nelder_mead\", \"particle_swarm\" or \"cmaes\""))),
     };
     let score = match s.score.as_deref() {
         None | Some("quantile") => SearchScore::Quantile,

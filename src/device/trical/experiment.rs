@@ -228,6 +228,36 @@ impl ExperimentSpec {
         Ok(Experiment { cell, robot, robot_validation, trical, tracker, campaign, links })
     }
 
+    /// How near this cell is to a campaign that can measure it ([`campaign::feasibility`]): the
+    /// noise-free cell, device and tracker (drawn from a fixed stream: a function of the scenario
+    /// alone), the true arm at its mean parameters. `None`: the spheres define no {W}, or the
+    /// tracker has no place.
+    pub fn feasibility(&self) -> Option<campaign::Feasibility> {
+        let quiet = self.noise_free(self.trical.epsilon_mm);
+        let rng = &mut crate::seeds::fixed_stream(seeds::fixed::FEASIBILITY);
+        let cell = Cell::build(&quiet.cell, rng).ok()?;
+        let links = self.link_capsules();
+        let truth = self.truth();
+        let mut trical = TriCal::build(&quiet.trical, self.cell.ball_diameter_mm, rng);
+        trical.frame6_from_flange = self.flange();
+        let base_in_w = world_from_base(&truth).transform_point(&Point3::origin()).coords;
+        let sphere3 = cell.spheres_w[2.min(cell.spheres_w.len() - 1)];
+        let tracker = LaserTracker::place(&quiet.tracker, &sphere3, &base_in_w, &cell.spheres_w, &cell.spheres_w_measured, rng)?;
+        let robot = VirtualRobot::new(truth.clone(), &UnmodelledSpec::default(), 0.0, &[0.0; 6], rng);
+        let nominal = self.nominal();
+        let setup = Setup {
+            cell: &cell,
+            robot: &robot,
+            robot_validation: &robot,
+            trical: &trical,
+            tracker: &tracker,
+            nominal: &nominal,
+            links: &links,
+            spec: &self.campaign,
+        };
+        Some(campaign::feasibility(&setup, &truth))
+    }
+
     /// An identification pool of `count` random configurations measured by an external instrument
     /// (`measure`: the tracker, the optical CMM) on the experiment's robot, for Table 8.
     pub fn instrument_pool(

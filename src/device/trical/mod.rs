@@ -149,6 +149,10 @@ impl Scenario for TricalScenario {
         })
     }
 
+    fn campaign_feasibility(&self) -> Option<campaign::Feasibility> {
+        self.experiment.feasibility()
+    }
+
     fn datum_cell(&self) -> Option<super::DatumCell> {
         let e = &self.experiment;
         let c = &e.cell;

@@ -518,6 +518,119 @@ fn measure_random_poses(
     Ok((out, rejected))
 }
 
+/// Candidate poses per datum sphere and validation configurations a [`feasibility`] tries.
+pub const FEASIBILITY_POOL_SAMPLES: usize = 48;
+/// See [`FEASIBILITY_POOL_SAMPLES`].
+pub const FEASIBILITY_VALIDATION_SAMPLES: usize = 160;
+/// Candidates of a set that must be accepted for [`Feasibility::shortfall`] to be 0 (a margin
+/// above the one in `max_tries_per_configuration` the campaign needs).
+pub const FEASIBILITY_NEEDED: usize = 3;
+/// Penetration depth at which a colliding candidate counts as far from accepted as an
+/// unreachable one, mm.
+pub const FEASIBILITY_DEPTH_MM: f64 = 100.0;
+
+/// How near a cell is to a campaign that can measure it, from fixed candidate poses (the same
+/// for every design): per datum sphere, pool candidates (a direction in the approach cone and a
+/// turn about it, the true arm's inverse kinematics, collisions of arm, device and fixtures), then
+/// validation candidates (configurations within the validation margin: in the tracker's range,
+/// facing it, collision-free, in its sight). The campaign fails a set whose share of accepted
+/// candidates is under 1 in `max_tries_per_configuration`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Feasibility {
+    /// Per datum sphere, the share of its pool candidates accepted.
+    pub pool_share: Vec<f64>,
+    /// The share of validation candidates accepted.
+    pub validation_share: f64,
+    /// Per set (each sphere's pool, then the validation set), the mean over its
+    /// [`FEASIBILITY_NEEDED`] nearest candidates of how far each is from accepted: 0 accepted;
+    /// a colliding one its penetration depth / [`FEASIBILITY_DEPTH_MM`] (at most 1); one the arm
+    /// cannot reach, or out of the tracker's range or view, 1; one out of its sight 0.5. Each is
+    /// 0 where the set has that many accepted candidates, and falls continuously as the fixtures
+    /// move out of the arm's way.
+    pub shortfall: Vec<f64>,
+}
+
+impl Feasibility {
+    /// The sets' shortfalls summed (0 to the count of spheres + 1).
+    pub fn total(&self) -> f64 {
+        self.shortfall.iter().sum()
+    }
+}
+
+/// The mean of the `FEASIBILITY_NEEDED` smallest of `v`.
+fn nearest_needed(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = FEASIBILITY_NEEDED.min(v.len()).max(1);
+    v.iter().take(n).sum::<f64>() / n as f64
+}
+
+/// The [`Feasibility`] of the cell of `setup` for the arm `truth` (placed in {W}): its candidates
+/// drawn from [`crate::seeds::fixed::FEASIBILITY`], tested in parallel and gathered in order (the
+/// same figures for any thread count).
+pub fn feasibility(setup: &Setup<'_>, truth: &RobotModel) -> Feasibility {
+    let Setup { cell, trical, tracker, spec, links, nominal, .. } = *setup;
+    let truth_base = world_from_base(truth);
+    let tcp = truth.data().flange_tcp_mm;
+    let world = collision_world(cell, links, nominal, &truth_base, &tcp, trical);
+    let down = -Vector3::z();
+    let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::FEASIBILITY);
+    let cones: Vec<(Vector3<f64>, f64)> = (0..FEASIBILITY_POOL_SAMPLES)
+        .map(|_| (cone_direction(&down, spec.approach_cone_deg.to_radians(), &mut rng), rng.random_range(0.0..std::f64::consts::TAU)))
+        .collect();
+    let configurations: Vec<Joints> =
+        (0..FEASIBILITY_VALIDATION_SAMPLES).map(|_| uniform_configuration(truth, spec.validation_margin, &mut rng)).collect();
+    let away = |st: &KinState| -> f64 { (world.penetration_mm(st) / FEASIBILITY_DEPTH_MM).min(1.0) };
+    let per_sphere: Vec<Vec<f64>> = cell
+        .spheres_w
+        .par_iter()
+        .map(|c| {
+            let mut st = KinState::default();
+            let seed = inverse(truth, &trical.frame6_pose(tcp_pose(c, &down, 0.0)), &[0.0; JOINTS]).unwrap_or([0.0; JOINTS]);
+            cones
+                .iter()
+                .map(|(axis, spin)| match inverse(truth, &trical.frame6_pose(tcp_pose(c, axis, *spin)), &seed) {
+                    Err(_) => 1.0,
+                    Ok(q) => {
+                        forward(truth, &mut st, &q);
+                        away(&st)
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let setup2 = spec.validation_indicators_removed.then(|| {
+        let mut w = collision_world(cell, links, nominal, &truth_base, &tcp, trical);
+        w.keep_device_parts(1);
+        w
+    });
+    let vworld = setup2.as_ref().unwrap_or(&world);
+    let base_from_world = truth_base.inverse();
+    let tracker_base = (base_from_world * nalgebra::Point3::from(tracker.position_w)).coords;
+    let accept_cos = tracker.spec.smr_acceptance_deg.to_radians().cos();
+    let flange_axis = trical.flange_axis();
+    let validation: Vec<f64> = configurations
+        .par_iter()
+        .map_init(KinState::default, |st, q| {
+            forward(truth, st, q);
+            let tcp = st.tcp_base;
+            let sight = tracker_base - tcp;
+            let facing = st.rot[JOINTS] * flange_axis;
+            if sight.norm() > tracker.spec.max_range_mm || facing.dot(&sight.normalize()) < accept_cos {
+                return 1.0;
+            }
+            let depth = (vworld.penetration_mm(st) / FEASIBILITY_DEPTH_MM).min(1.0);
+            if depth > 0.0 {
+                return depth;
+            }
+            if vworld.line_of_sight(st, &tracker_base, &tcp, 30.0) { 0.0 } else { 0.5 }
+        })
+        .collect();
+    let share = |v: &[f64]| v.iter().filter(|x| **x == 0.0).count() as f64 / v.len().max(1) as f64;
+    let mut shortfall: Vec<f64> = per_sphere.iter().map(|v| nearest_needed(v.clone())).collect();
+    shortfall.push(nearest_needed(validation.clone()));
+    Feasibility { pool_share: per_sphere.iter().map(|v| share(v)).collect(), validation_share: share(&validation), shortfall }
+}
+
 /// An identification pool measured by an external instrument (Table 8: the laser tracker with an
 /// SMR, the optical CMM with a target at the TCP) on the robot as it carries that target, the
 /// robot of setup 2 (the validation's payload and drift), from random configurations of the whole
