@@ -11,6 +11,7 @@ use polars::prelude::Column;
 use sha2::Digest;
 
 use super::{Calibration, ModelResult, ParamStatus};
+use crate::io::results::{Head, Results};
 use crate::study::stats::ErrorStats;
 
 /// The report directory's name for the measurement file `path`: `<stem>.calibration`.
@@ -21,23 +22,18 @@ pub fn directory_name(path: &Path) -> String {
 /// Writes the report of `c` (with `plan.md` when a plan was simulated) into `out/<name>`, replacing
 /// what was there.
 pub fn write(out: &Path, name: &str, c: &Calibration, plan: Option<&super::plan::PlanComparison>) -> std::io::Result<PathBuf> {
-    crate::io::out_dir::write_atomically(out, name, |dir| {
-        if let Some(p) = plan {
-            crate::io::out_dir::write_file(&dir.join("plan.md"), super::plan::markdown(p))?;
-        }
-        write_robot(dir, c)?;
-        tables(dir, c)?;
-        let drawn = if c.options.plots { super::plots::write(dir, c).map_err(std::io::Error::other)? } else { Vec::new() };
-        crate::io::out_dir::write_file(&dir.join("summary.md"), summary(c, &drawn))?;
-        manifest(dir, c)
-    })
+    let mut r = results(name, c)?;
+    if let Some(p) = plan {
+        r.file("plan.md", super::plan::markdown(p));
+    }
+    crate::io::results::write(out, r).map(|w| w.dest)
 }
 
 /// Plans made, and those that could not be with why (`plan.md`, when either is not empty).
 pub type PlanRows<'a> = (&'a [(super::plan::PlanWith, super::plan::PlanComparison)], &'a [(super::plan::PlanWith, String)]);
 
 /// Writes the report of `c` as [`write`] does, with the twin (`twin.toml` and its section of the
-/// summary, or why it could not be fitted) and the plans' table (`plan.md`).
+/// summary, or why it could not be fitted) and the plans' table (`plan.md`, with the plans' figure).
 pub fn write_with(
     out: &Path,
     name: &str,
@@ -45,28 +41,40 @@ pub fn write_with(
     plans: PlanRows<'_>,
     twin: &Result<super::twin::Twin, String>,
 ) -> std::io::Result<PathBuf> {
-    crate::io::out_dir::write_atomically(out, name, |dir| {
-        if !plans.0.is_empty() || !plans.1.is_empty() {
-            let mut text = super::plan::markdown_all(plans.0, plans.1);
-            let figure = if c.options.plots { super::plots::write_plan(dir, plans.0).map_err(std::io::Error::other)? } else { None };
-            if let Some(w) = figure {
-                text += &format!("\n![{}]({}.png)\n\n*{}*\n", w.caption, w.stem, w.caption);
-            }
-            crate::io::out_dir::write_file(&dir.join("plan.md"), text)?;
+    let mut r = results(name, c)?;
+    if !plans.0.is_empty() || !plans.1.is_empty() {
+        let mut text = super::plan::markdown_all(plans.0, plans.1);
+        if c.options.plots && !plans.0.is_empty() {
+            let (stem, caption) = super::plots::PLAN_FIGURE;
+            text += &format!("\n![{caption}]({stem}.png)\n\n*{caption}*\n");
+            // plan.md shows it: not among the summary's figures.
+            r.draw(Box::new(move |dir| super::plots::write_plan(dir, plans.0).map(|_| Vec::new())));
         }
-        write_robot(dir, c)?;
-        if let Ok(t) = twin {
-            crate::io::out_dir::write_file(&dir.join("twin.toml"), twin_text(c, t).map_err(std::io::Error::other)?)?;
-        }
-        tables(dir, c)?;
-        let drawn = if c.options.plots { super::plots::write(dir, c).map_err(std::io::Error::other)? } else { Vec::new() };
-        let section = match twin {
-            Ok(t) => super::twin::markdown(t),
-            Err(why) => format!("## The twin: what the model misses\n\nNot fitted: {why}\n"),
-        };
-        crate::io::out_dir::write_file(&dir.join("summary.md"), summary(c, &drawn) + "\n" + &section)?;
-        manifest(dir, c)
-    })
+        r.file("plan.md", text);
+    }
+    if let Ok(t) = twin {
+        r.file("twin.toml", twin_text(c, t).map_err(std::io::Error::other)?);
+    }
+    let section = match twin {
+        Ok(t) => super::twin::markdown(t),
+        Err(why) => format!("## The twin: what the model misses\n\nNot fitted: {why}\n"),
+    };
+    r.summary.text("\n").text(section);
+    crate::io::results::write(out, r).map(|w| w.dest)
+}
+
+/// The report of `c` as results: the robot files, the tables, the manifest's fields, the figures
+/// and the summary.
+fn results<'a>(name: &str, c: &'a Calibration) -> std::io::Result<Results<'a>> {
+    let mut r = Results::new(name, Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+    robot_files(c, &mut r)?;
+    tables(c, &mut r)?;
+    r.fields(fields(c))?;
+    if c.options.plots {
+        r.draw(Box::new(move |dir| super::plots::write(dir, c)));
+    }
+    r.summary.text(summary(c)).figures("");
+    Ok(r)
 }
 
 /// `twin.toml`: the calibrated robot file (as `robot.toml`, with the twin's robot: the chosen
@@ -93,7 +101,7 @@ pub fn twin_text(c: &Calibration, t: &super::twin::Twin) -> Result<String, Strin
 /// `robot.toml` (the calibrated arm: the robot file's base, tool, capsules and coupling, the
 /// chosen model's parameters with their standard deviations), `before.toml`, `robot.urdf` and
 /// `calibration.yaml`.
-fn write_robot(dir: &Path, c: &Calibration) -> std::io::Result<()> {
+fn robot_files(c: &Calibration, r: &mut Results<'_>) -> std::io::Result<()> {
     let held = c.chosen().held_out.as_ref().map_or(f64::NAN, |h| h.measured.median);
     let std: Vec<_> = c.estimates.iter().filter(|e| e.status == ParamStatus::Identified).map(|e| (e.id, e.std)).collect();
     let (before_model, flange) = (&c.robot.nominal, c.robot.flange.as_ref());
@@ -110,24 +118,19 @@ fn write_robot(dir: &Path, c: &Calibration) -> std::io::Result<()> {
     let robot = crate::robot::file::to_text(&c.model, &source, &std, capsules, flange) + &coupling;
     let before_source = format!("the robot file {} before calibration", c.robot.path.display());
     let before = crate::robot::file::to_text(before_model, &before_source, &[], capsules, flange) + &coupling;
-    crate::io::out_dir::write_file(&dir.join("robot.toml"), robot)?;
-    crate::io::out_dir::write_file(&dir.join("before.toml"), before)?;
-    crate::io::out_dir::write_file(
-        &dir.join("robot.urdf"),
-        crate::robot::export::urdf(before_model, &c.model).map_err(std::io::Error::other)?,
-    )?;
+    let urdf = crate::robot::export::urdf(before_model, &c.model).map_err(std::io::Error::other)?;
     let provenance = format!("calibrate of {}, {} poses", c.measurements.path.display(), c.measurements.poses.len());
-    crate::io::out_dir::write_file(&dir.join("calibration.yaml"), crate::robot::export::yaml_overlay(before_model, &c.model, &provenance))
+    let yaml = crate::robot::export::yaml_overlay(before_model, &c.model, &provenance);
+    r.file("robot.toml", robot).file("before.toml", before).file("robot.urdf", urdf).file("calibration.yaml", yaml);
+    Ok(())
 }
 
-fn tables(dir: &Path, c: &Calibration) -> std::io::Result<()> {
-    let parquet = crate::io::table::parquet;
-    parquet(dir, "points.parquet", point_columns(c))?;
-    parquet(dir, "models.parquet", model_columns(c))?;
+fn tables(c: &Calibration, r: &mut Results<'_>) -> std::io::Result<()> {
+    r.table("points.parquet", point_columns(c))?;
+    r.table("models.parquet", model_columns(c))?;
     let est = &c.estimates;
     let unit = |e: &super::Estimate| e.id.unit();
-    parquet(
-        dir,
+    r.table(
         "parameters.parquet",
         vec![
             Column::new("parameter".into(), est.iter().map(|e| e.id.name()).collect::<Vec<_>>()),
@@ -153,25 +156,25 @@ fn tables(dir: &Path, c: &Calibration) -> std::io::Result<()> {
         let scale = if k < 3 { 1.0 } else { 180.0 / std::f64::consts::PI };
         base_cols.push(Column::new(format!("std_{name}").into(), values(&|b| b.std[k] * scale)));
     }
-    parquet(dir, "bases.parquet", base_cols)?;
+    r.table("bases.parquet", base_cols)?;
     let t = &c.tools;
     let mut tool_cols = vec![Column::new("target".into(), t.iter().map(|t| t.target.clone()).collect::<Vec<_>>())];
     for (k, name) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
         tool_cols.push(Column::new(format!("flange_{name}").into(), t.iter().map(|t| t.flange_mm[k]).collect::<Vec<_>>()));
         tool_cols.push(Column::new(format!("std_{name}").into(), t.iter().map(|t| t.std_mm[k]).collect::<Vec<_>>()));
     }
-    parquet(dir, "tools.parquet", tool_cols)?;
+    r.table("tools.parquet", tool_cols)?;
     let names: Vec<String> = est.iter().filter(|e| e.status == ParamStatus::Identified).map(|e| e.id.name()).collect();
     let n = names.len();
-    parquet(
-        dir,
+    r.table(
         "correlation.parquet",
         vec![
             Column::new("parameter_a".into(), (0..n * n).map(|k| names[k / n].clone()).collect::<Vec<_>>()),
             Column::new("parameter_b".into(), (0..n * n).map(|k| names[k % n].clone()).collect::<Vec<_>>()),
             Column::new("correlation".into(), (0..n * n).map(|k| c.correlation[(k / n, k % n)]).collect::<Vec<_>>()),
         ],
-    )
+    )?;
+    Ok(())
 }
 
 fn status(s: &ParamStatus) -> String {
@@ -285,10 +288,11 @@ fn model_columns(c: &Calibration) -> Vec<Column> {
     cols
 }
 
-fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
+/// The manifest's fields: the inputs with their sha256 and the options.
+fn fields(c: &Calibration) -> serde_json::Value {
     let sha = |p: &Path| crate::io::read_bytes(p).map(|b| format!("{:x}", sha2::Sha256::digest(&b))).unwrap_or_default();
     let o = &c.options;
-    let value = serde_json::json!({
+    serde_json::json!({
         "measurements_path": c.measurements.path.display().to_string(),
         "measurements_sha256": sha(&c.measurements.path),
         "robot_path": c.robot.path.display().to_string(),
@@ -304,10 +308,7 @@ fn manifest(dir: &Path, c: &Calibration) -> std::io::Result<()> {
             "outlier_threshold": o.outlier_threshold,
             "prediction_draws": o.prediction_draws,
         },
-        "tables_sha256": crate::io::table::table_hashes(dir)?,
-    });
-    let value = crate::io::manifest::Provenance::of_run(&[]).joined(value).map_err(std::io::Error::other)?;
-    crate::io::out_dir::write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&value).map_err(std::io::Error::other)?)
+    })
 }
 
 /// What `calsim calibrate` prints: the models' held-out errors, the choice, the outliers, where the
@@ -454,7 +455,7 @@ fn stats_cells(s: &ErrorStats) -> String {
 
 /// `summary.md`: what was measured, the models compared, the held-out errors, the outliers, the
 /// parameters, bases and tools, the figures.
-pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
+pub fn summary(c: &Calibration) -> String {
     let mut s = String::new();
     let m = &c.measurements;
     let _ = writeln!(s, "# Calibration of {} from {}\n", c.model.name(), m.path.display());
@@ -501,9 +502,6 @@ pub fn summary(c: &Calibration, drawn: &[crate::io::plot::Written]) -> String {
     held_out_section(&mut s, c);
     outliers_section(&mut s, c);
     parameters_section(&mut s, c);
-    for w in drawn {
-        let _ = writeln!(s, "![{}]({}.png)\n\n*{}*\n", w.caption, w.stem, w.caption);
-    }
     s
 }
 
