@@ -143,6 +143,9 @@ pub mod calibrate {
     pub const PLAN_NOISE: u64 = 0x4341_4c49_0005;
     /// The folds of the k-fold cross-validation over every pose (`calibrate::validation::assign_every_pose`).
     pub const FOLDS_EVERY_POSE: u64 = 0x4341_4c49_0006;
+    /// The learned effects at their fitted values (a twin plan's flagged points): every spread is
+    /// zero, so the draw takes no number from its stream.
+    pub const FITTED_EFFECTS: u64 = 0;
 }
 
 /// The streams of `calsim plan`, keyed under the plan file's `seed`.

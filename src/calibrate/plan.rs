@@ -513,7 +513,7 @@ fn carried_at(
         for h in &mut f.harmonic {
             h.std_mdeg = 0.0;
         }
-        f.draw(truth_model, &mut crate::seeds::stream(0, crate::seeds::calibrate::PLAN_NOISE))
+        f.draw(truth_model, &mut crate::seeds::stream(crate::seeds::calibrate::FITTED_EFFECTS, crate::seeds::calibrate::PLAN_NOISE))
     });
     let mut from = reference_of(c);
     let links: Vec<crate::robot::Joints> = m

@@ -554,17 +554,16 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
 
-    /// The normal equations accumulated point by point equal `J_f^T J_f` and `J_f^T r` of the dense
-    /// Jacobian on a subset of free columns (robot, bases, tools), to 1e-12 of the largest entry:
-    /// the IRB 120 with Table 7's compliance, 3 sessions, 2 targets, 30 points.
-    #[test]
-    fn normal_equations_equal_the_dense_products() {
+    /// The IRB 120 with Table 7's compliance, its robot parameters free, 3 sessions and 2 targets,
+    /// `count` points drawn from `seed` (weights 0.5-0.8), and a state with session bases at zero
+    /// and two tools.
+    fn fixture(count: usize, seed: u64) -> (crate::robot::RobotModel, Layout, Vec<Obs>, Vec<f64>) {
         let model = crate::robot::builtin::trical_2018_table7();
         let set = ParamSet::trical_31();
         let robot = ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).unwrap();
         let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(36);
-        let obs: Vec<Obs> = (0..30)
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let obs: Vec<Obs> = (0..count)
             .map(|k| Obs {
                 q: crate::robot::uniform_configuration(&model, 0.1, &mut rng),
                 measured_mm: Vector3::new(rng.random_range(-500.0..500.0), rng.random_range(-500.0..500.0), rng.random_range(0.0..600.0)),
@@ -573,10 +572,19 @@ mod tests {
                 sigma: 0.5 + 0.1 * (k % 4) as f64,
             })
             .collect();
-        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
         let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
         x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
         x.extend([10.0, 20.0, 80.0, -30.0, 5.0, 60.0]);
+        (model, layout, obs, x)
+    }
+
+    /// The normal equations accumulated point by point equal `J_f^T J_f` and `J_f^T r` of the dense
+    /// Jacobian on a subset of free columns (robot, bases, tools), to 1e-12 of the largest entry:
+    /// the IRB 120 with Table 7's compliance, 3 sessions, 2 targets, 30 points.
+    #[test]
+    fn normal_equations_equal_the_dense_products() {
+        let (model, layout, obs, x) = fixture(30, 36);
+        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
         let idx: Vec<usize> = (0..obs.len()).filter(|i| i % 5 != 3).collect();
         let free: Vec<usize> = (0..layout.len()).filter(|c| c % 4 != 1).collect();
         let (r, j) = problem.linearise(&x, &idx).unwrap();
@@ -595,24 +603,8 @@ mod tests {
     /// targets, 240 points (groups of more rows than their columns: each piece factored).
     #[test]
     fn r_factor_has_the_jacobians_gram_matrix_and_singular_values() {
-        let model = crate::robot::builtin::trical_2018_table7();
-        let set = ParamSet::trical_31();
-        let robot = ParamSet::new(set.ids().iter().copied().filter(|id| !matches!(id, ParamId::Base(_))).collect()).unwrap();
-        let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(37);
-        let obs: Vec<Obs> = (0..240)
-            .map(|k| Obs {
-                q: crate::robot::uniform_configuration(&model, 0.1, &mut rng),
-                measured_mm: Vector3::new(rng.random_range(-500.0..500.0), rng.random_range(-500.0..500.0), rng.random_range(0.0..600.0)),
-                session: (k * 7) % 3,
-                target: (k / 2) % 2,
-                sigma: 0.5 + 0.1 * (k % 4) as f64,
-            })
-            .collect();
+        let (model, layout, obs, x) = fixture(240, 37);
         let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
-        let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
-        x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
-        x.extend([10.0, 20.0, 80.0, -30.0, 5.0, 60.0]);
         let idx: Vec<usize> = (0..obs.len()).filter(|i| i % 7 != 3).collect();
         let (_, j) = problem.linearise(&x, &idx).unwrap();
         let r = problem.r_factor(&x, &idx).unwrap();
