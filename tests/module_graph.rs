@@ -129,6 +129,30 @@ fn only_io_renames_files_into_place() {
     assert!(wrong.is_empty(), "writers beside io::out_dir:\n{}", wrong.join("\n"));
 }
 
+/// Results directories are made by one writer: a producer returns its results as a value
+/// (`io::results::Results`) and `io::results::write` writes them; no module outside `io` opens
+/// the atomic swap or writes a file into a results directory itself.
+#[test]
+fn only_io_results_writes_a_results_directory() {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut wrong = Vec::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        if rel.starts_with("io") {
+            continue;
+        }
+        let text = code(f);
+        for forbidden in ["write_atomically(", "out_dir::write_file(", "table::parquet(", "table::write_frame("] {
+            if text.contains(forbidden) {
+                wrong.push(format!("{}: calls {forbidden}", rel.display()));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "results written beside io::results:\n{}", wrong.join("\n"));
+}
+
 /// No escape hatch around the device interface: no module reaches a device's own types through
 /// `Any` (a command that needs something of a device asks the [`calsim::device::Scenario`] trait's
 /// hooks). The CLI's panic hook reads a panic's payload, the one downcast there is.

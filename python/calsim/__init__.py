@@ -623,16 +623,13 @@ def keys(name: str) -> pl.DataFrame:
 def init(kind: str, file: PathLike | None = None) -> str:
     """A commented starting scenario of a device (``calsim init``), every key at its default: the
     text, also written to ``file`` when given (never replacing an existing file)."""
+    path = None if file is None else Path(file)
     try:
-        text = _calsim.init(kind)
+        text = _calsim.init(kind, path)
     except InputError as e:
-        raise _named(e, "init", "kind", kind) from None
-    if file is not None:
-        try:
-            with open(file, "x") as f:
-                f.write(text)
-        except FileExistsError:
-            e2 = _input("file", f"{os.fspath(file)}: exists; calsim init does not replace a file")
-            e2.path = os.fspath(file)
-            raise e2 from None
+        if e.path == "init":
+            raise _named(e, "init", "kind", kind) from None
+        # The file exists (calsim init never replaces one): an error of the keyword it came in.
+        e.path, e.key = os.fspath(file) if file is not None else e.path, "file"
+        raise e from None
     return text

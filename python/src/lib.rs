@@ -783,12 +783,13 @@ fn key_names() -> Vec<&'static str> {
     app::keys::names()
 }
 
-/// A commented starting scenario of a device, every key at its default: `calsim init`.
+/// A commented starting scenario of a device, every key at its default, also written to `file`
+/// when given (never replacing one): `calsim init`.
 #[pyfunction]
-#[pyo3(signature = (kind))]
-fn init(py: Python<'_>, kind: &str) -> PyResult<String> {
+#[pyo3(signature = (kind, file=None))]
+fn init(py: Python<'_>, kind: &str, file: Option<PathBuf>) -> PyResult<String> {
     let kind = kind.to_string();
-    let (text, _) = detached(py, None, |_| app::keys::init(&kind))?;
+    let (text, _) = detached(py, None, |_| app::keys::init_file(&kind, file.as_deref()))?;
     Ok(text)
 }
 

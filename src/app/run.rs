@@ -279,18 +279,21 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
         let json = serde_json::to_string_pretty(c).map_err(|e| Error::input("check.json", e.to_string()))?;
         results.file("check.json", json + "\n");
     }
+    // A plain run keeps the earlier check over worlds when its world is this one (the same
+    // tables): its check.json goes into the new results with them.
+    let mut cached_spread = None;
+    if let Some((tables, text, spread)) = earlier {
+        let ours = serde_json::to_value(results.tables_sha256().map_err(Error::io(&spec.out))?).ok();
+        if ours.as_ref() == Some(&tables) {
+            results.file("check.json", text);
+            cached_spread = Some(spread);
+        }
+    }
     let written = crate::io::results::write(&spec.out, results).map_err(Error::io(&spec.out))?;
     let dest = written.dest.clone();
     if let (Some(j), Some(c)) = (&spec.junit, &check_report) {
         crate::io::out_dir::write_file_atomically(j, c.junit()).map_err(Error::io(j))?;
     }
-    let cached_spread = match earlier {
-        Some((tables, text, spread)) if tables_of(&dest).as_ref() == Some(&tables) => {
-            crate::io::out_dir::write_file(&dest.join("check.json"), text).map_err(Error::io(&spec.out))?;
-            Some(spread)
-        }
-        _ => None,
-    };
     let write_s = t_write.elapsed().as_secs_f64();
     if let Some(w) = fit_health(&spec.scenario, outcome.fits())? {
         observer.warning(&w);

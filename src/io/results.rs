@@ -276,6 +276,18 @@ impl<'a> Results<'a> {
         self.tables.iter().find(|(n, _)| n == name).map(|(_, f)| f)
     }
 
+    /// The sha256 of every table as its file will hold it, by file name (what the manifest's
+    /// `tables_sha256` records).
+    pub fn tables_sha256(&self) -> std::io::Result<std::collections::BTreeMap<String, String>> {
+        use sha2::Digest as _;
+        let mut out = std::collections::BTreeMap::new();
+        for (name, frame) in &self.tables {
+            let bytes = crate::io::table::parquet_bytes(name, frame.clone())?;
+            out.insert(name.clone(), format!("{:x}", sha2::Sha256::digest(bytes)));
+        }
+        Ok(out)
+    }
+
     /// The tables, in the order they were added.
     pub fn frames(&self) -> &[(String, DataFrame)] {
         &self.tables
