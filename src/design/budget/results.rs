@@ -119,6 +119,12 @@ fn tables(b: &BudgetReport<'_>, r: &mut Results<'_>) -> std::io::Result<()> {
         ],
     )?;
     r.table("lines.parquet", line_columns(b))?;
+    prediction_table(b, r)
+}
+
+/// `prediction.parquet`, where a configuration has a prediction.
+fn prediction_table(b: &BudgetReport<'_>, r: &mut Results<'_>) -> std::io::Result<()> {
+    let f = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
     if let Some(rows) = prediction_rows(b) {
         r.table(
             "prediction.parquet",

@@ -74,7 +74,7 @@ pub fn results<'a>(
     Ok(out)
 }
 
-/// `beams.parquet` (the truth and every identification of the head) and `measurements.parquet`.
+/// `beams.parquet` (the truth and every identification of the head), then `measurements.parquet`.
 fn beam_tables(r: &SpmsResults, r_: &mut Results<'_>) -> std::io::Result<()> {
     let h = &r.head;
     // Beams: truth and both identifications.
@@ -119,6 +119,13 @@ fn beam_tables(r: &SpmsResults, r_: &mut Results<'_>) -> std::io::Result<()> {
             c("angle_error_deg", aerr),
         ],
     )?;
+    measurement_table(r, r_)
+}
+
+/// `measurements.parquet`: per accuracy measurement and identified head.
+fn measurement_table(r: &SpmsResults, r_: &mut Results<'_>) -> std::io::Result<()> {
+    let h = &r.head;
+    let c = |n: &str, v: Vec<f64>| Column::new(n.into(), v);
     let (mut which, mut sample, mut error, mut resid) = (vec![], vec![], vec![], vec![]);
     for (label, id) in [("pso_lm_paper", &h.paper), ("lm_paper", &h.paper_lm_only), ("lm_minimal", &h.minimal)] {
         for (k, (e, res)) in id.measuring_error_mm.iter().zip(&id.fit_residual_max_mm).enumerate() {
