@@ -218,6 +218,11 @@ fn every_command_writes_the_same_provenance_block_with_the_built_commit() {
     let shard_file =
         std::fs::read_dir(&shard).unwrap().map(|e| e.unwrap().path()).find(|p| p.is_file()).expect("a file in the shard directory");
     record("merge", ran(&["merge", s(&shard), "--out", s(&merged)], &merged, &shard_file, &commit));
+    // `--realisations` changes the sweep file: an override, kept by the shard's record for the merge.
+    for dir in [&sw, &merged] {
+        let m: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("sw/manifest.json")).unwrap()).unwrap();
+        assert_eq!(m["overrides"], serde_json::json!([["realisations", "1"]]), "{}", dir.display());
+    }
 
     let bud = t.join("bud");
     let a = ["budget", s(&scenario), "--realisations", "1", "--repetitions", "1", "--factors", "2", "--out", s(&bud)];

@@ -361,6 +361,7 @@ impl<'a> Context<'a> {
         Sweep {
             name: self.space.name.clone(),
             realisations,
+            overrides: Vec::new(),
             race: None,
             objective: self.space.objective.clone(),
             thresholds_mm: self.space.objective.threshold_mm.into_iter().collect(),

@@ -360,6 +360,10 @@ pub struct ShardInfo {
     pub identity: String,
     /// Realisations per point.
     pub realisations: u32,
+    /// Command-line changes to the sweep file (`key`, TOML value), recorded in the merged
+    /// manifest's provenance.
+    #[serde(default)]
+    pub overrides: Vec<(String, String)>,
     /// Thresholds, mm.
     pub thresholds_mm: Vec<f64>,
     /// The axes' keys.
@@ -441,6 +445,7 @@ pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
         name: sweep.name.clone(),
         identity: sweep.identity.clone(),
         realisations: sweep.realisations,
+        overrides: sweep.overrides.clone(),
         thresholds_mm: sweep.thresholds_mm.clone(),
         keys: sweep.keys.clone(),
         points: sweep.points.iter().map(|p| p.values.iter().map(|(_, v)| v.clone()).collect()).collect(),

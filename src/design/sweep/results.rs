@@ -127,7 +127,7 @@ pub fn write(out: &Path, m: &Merged) -> std::io::Result<(PathBuf, String)> {
 /// The results of a merged sweep (the files of the module doc).
 pub fn results(m: &Merged) -> std::io::Result<Results<'_>> {
     let (info, units) = (&m.info, &m.units[..]);
-    let mut r = Results::new(info.name.clone(), Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+    let mut r = Results::new(info.name.clone(), Head::Run(crate::io::manifest::Provenance::of_run(&info.overrides)));
     r.table("sweep.parquet", unit_columns(m))?;
     r.table("points.parquet", point_columns(m))?;
     r.table("designs.parquet", design_columns(m))?;

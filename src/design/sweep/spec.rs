@@ -88,6 +88,8 @@ pub struct Sweep {
     pub name: String,
     /// Realisations per grid point (the most, for adaptive realisations).
     pub realisations: u32,
+    /// Command-line changes to the sweep file (`key`, TOML value): `realisations` when given.
+    pub overrides: Vec<(String, String)>,
     /// Adaptive realisations, when the sweep races its designs.
     pub race: Option<super::race::Race>,
     /// What the sweep decides.
@@ -438,6 +440,7 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
     Ok(Sweep {
         name: stem,
         realisations: realisations_n,
+        overrides: realisations_override.map(|r| ("realisations".to_string(), r.to_string())).into_iter().collect(),
         race,
         objective,
         thresholds_mm,
@@ -472,6 +475,7 @@ pub fn from_tables(
     Ok(Sweep {
         name: name.into(),
         realisations,
+        overrides: Vec::new(),
         race: None,
         objective: super::objective::Objective::default(),
         thresholds_mm,
