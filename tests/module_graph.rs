@@ -33,6 +33,14 @@ fn code(p: &Path) -> String {
     }
 }
 
+/// Every source file outside `src/io` (by its path under `src/`) with its code ([`code`]).
+fn code_outside_io() -> Vec<(PathBuf, String)> {
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    files.iter().map(|f| (f.strip_prefix(&src).unwrap().to_path_buf(), code(f))).filter(|(rel, _)| !rel.starts_with("io")).collect()
+}
+
 /// Every `crate::a` and `crate::a::b` the text names, as (a, b).
 fn named(text: &str) -> Vec<(String, Option<String>)> {
     let mut out = Vec::new();
@@ -110,16 +118,8 @@ fn the_kernels_name_no_io_randomness_tables_or_recording() {
 /// command writes through the one rule of what may be replaced.
 #[test]
 fn only_io_renames_files_into_place() {
-    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
     let mut wrong = Vec::new();
-    for f in &files {
-        let rel = f.strip_prefix(&src).unwrap();
-        if rel.starts_with("io") {
-            continue;
-        }
-        let text = code(f);
+    for (rel, text) in code_outside_io() {
         for forbidden in ["fs::rename", "renameat"] {
             if text.contains(forbidden) {
                 wrong.push(format!("{}: names {forbidden}", rel.display()));
@@ -134,16 +134,8 @@ fn only_io_renames_files_into_place() {
 /// the atomic swap or writes a file into a results directory itself.
 #[test]
 fn only_io_results_writes_a_results_directory() {
-    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
     let mut wrong = Vec::new();
-    for f in &files {
-        let rel = f.strip_prefix(&src).unwrap();
-        if rel.starts_with("io") {
-            continue;
-        }
-        let text = code(f);
+    for (rel, text) in code_outside_io() {
         for forbidden in ["write_atomically(", "out_dir::write_file(", "table::parquet(", "table::write_frame("] {
             if text.contains(forbidden) {
                 wrong.push(format!("{}: calls {forbidden}", rel.display()));
