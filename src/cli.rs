@@ -721,8 +721,10 @@ fn import_urdf(args: &ImportUrdfArgs) -> Result<ExitCode, String> {
 }
 
 fn simulate_measurements(args: &SimulateMeasurementsArgs) -> Result<ExitCode, String> {
-    let path = crate::calibrate::simulate::write_spec_file(&args.spec, &args.out)?;
-    println!("simulate-measurements: {}", path.display());
+    let r = app::simulate::run(&args.spec, Some(&args.out)).map_err(|e| e.to_string())?;
+    if let Some(path) = &r.written {
+        println!("simulate-measurements: {} ({} rows)", path.display(), r.rows);
+    }
     Ok(ExitCode::SUCCESS)
 }
 

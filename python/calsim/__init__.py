@@ -13,7 +13,8 @@ released, and its tables come back as polars DataFrames::
 
 The real-robot path as well: :func:`import_urdf` (an arm's URDF as a robot file), :func:`calibrate`
 (measurements from a CSV file or a polars DataFrame), :func:`compensate` (targets from a CSV file
-or a DataFrame) and :func:`fk`; and :func:`optimise` and :func:`table8`.
+or a DataFrame), :func:`fk` and :func:`simulate_measurements` (a measurement file of a
+simulation file, to try the path before the robot is measured); and :func:`optimise` and :func:`table8`.
 
 Errors are :class:`CalsimError` subclasses whose message is the CLI's one line, with the file
 (``path``), the key (``key``) and the value (``value``) as attributes where known.
@@ -58,6 +59,7 @@ from ._results import (
     PlanResult,
     Results,
     RunResult,
+    SimulatedMeasurements,
     SweepResult,
     Table8Result,
 )
@@ -78,6 +80,7 @@ __all__ = [
     "table8",
     "import_urdf",
     "fk",
+    "simulate_measurements",
     "keys",
     "init",
     "Results",
@@ -92,6 +95,7 @@ __all__ = [
     "Table8Result",
     "ImportResult",
     "FkResult",
+    "SimulatedMeasurements",
     "Progress",
     "CalsimError",
     "CalsimWarning",
@@ -599,6 +603,16 @@ def fk(
     else:
         report = _calsim.fk(_model_path(robot), Path(joints), **keywords)
     return FkResult(report)
+
+
+def simulate_measurements(spec: PathLike, *, out: PathLike | None = None) -> SimulatedMeasurements:
+    """A measurement file for :func:`calibrate` simulated from the simulation file ``spec``
+    (``calsim simulate-measurements``; its keys in docs/calibrate.md): the robot file's truth
+    measured at random poses of its sessions and lines with the instrument's noise. ``out``: also
+    write ``<out>/<spec stem>.csv`` (the directory created; an existing file is refused, never
+    replaced)."""
+    report = _calsim.simulate_measurements(Path(spec), out=None if out is None else Path(out))
+    return SimulatedMeasurements(report)
 
 
 def _named(e: InputError, command: str, keyword: str, value: str) -> InputError:

@@ -742,6 +742,19 @@ fn import_urdf<'py>(
     Ok(d)
 }
 
+/// A measurement file for `calibrate` simulated from a simulation file: `calsim
+/// simulate-measurements` (with `out`, also written to `<out>/<spec stem>.csv`).
+#[pyfunction]
+#[pyo3(signature = (spec, *, out=None))]
+fn simulate_measurements<'py>(py: Python<'py>, spec: PathBuf, out: Option<PathBuf>) -> PyResult<Bound<'py, PyDict>> {
+    let (r, _) = detached(py, None, |_| app::simulate::run(&spec, out.as_deref()))?;
+    let d = PyDict::new(py);
+    d.set_item("csv", &r.csv)?;
+    d.set_item("rows", r.rows)?;
+    d.set_item("written", &r.written)?;
+    Ok(d)
+}
+
 /// The tool frame, gravity torques and deflections at joint values: `calsim fk`.
 #[pyfunction]
 #[pyo3(signature = (robot, joints, *, out=None))]
@@ -820,6 +833,7 @@ fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(table8, m)?)?;
     m.add_function(wrap_pyfunction!(import_urdf, m)?)?;
     m.add_function(wrap_pyfunction!(fk, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate_measurements, m)?)?;
     m.add_function(wrap_pyfunction!(keys, m)?)?;
     m.add_function(wrap_pyfunction!(key_names, m)?)?;
     m.add_function(wrap_pyfunction!(init, m)?)?;

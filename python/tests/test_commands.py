@@ -371,3 +371,59 @@ def test_bad_plan_files_name_the_file_and_the_key(tmp_path: Path) -> None:
     f.write_text(f.read_text().replace("poses = 40 ", "poses = 10 "))
     with pytest.raises(calsim.InputError, match="poses"):
         calsim.plan(f, out=tmp_path / "py", progress=False)
+
+
+def small_simulation(tmp_path: Path, poses: int = 40) -> Path:
+    """docs/calibrate/imported_example.toml at ``poses`` poses a session, its robot named absolutely."""
+    text = (REPO / "docs" / "calibrate" / "imported_example.toml").read_text()
+    robot = REPO / "robots" / "examples" / "lrmate200ic_coupled.toml"
+    small = text.replace("poses_per_session = 17000", f"poses_per_session = {poses}").replace(
+        '"../../robots/examples/lrmate200ic_coupled.toml"', f'"{robot}"'
+    )
+    assert small != text
+    spec = tmp_path / "imported_example.toml"
+    spec.write_text(small)
+    return spec
+
+
+def test_simulate_measurements_gives_the_cli_file_and_calibrates(tmp_path: Path) -> None:
+    spec = small_simulation(tmp_path)
+    r = calsim.simulate_measurements(spec)
+    assert r.path is None and r.rows == 3 * 40 * 2 + 30 == r.table.height
+    cli("simulate-measurements", spec, "--out", tmp_path / "cli")
+    assert (tmp_path / "cli" / "imported_example.csv").read_text() == r.csv
+    written = calsim.simulate_measurements(spec, out=tmp_path / "py")
+    assert written.path == tmp_path / "py" / "imported_example.csv" and written.path.read_text() == r.csv
+    assert r.table["session"].unique().sort().to_list() == ["A", "B", "C", "L"]
+    # The frame holds the file's numbers bit for bit.
+    first = next(line for line in r.csv.splitlines() if not line.startswith("#") and not line.startswith("pose"))
+    assert r.table["x_mm"][0] == float(first.split(",")[9])
+    c = calsim.calibrate(
+        REPO / "robots" / "examples" / "lrmate200ic_coupled.toml",
+        written.path,
+        out=tmp_path / "out",
+        plots=False,
+        hold_out_session="L",
+        tool_per_session=True,
+    )
+    assert c.tables["points"].height == r.rows
+
+
+def test_bad_simulation_files_name_the_file_key_and_value(tmp_path: Path) -> None:
+    spec = small_simulation(tmp_path)
+    first = calsim.simulate_measurements(spec, out=tmp_path)
+    assert first.path is not None
+    before = first.path.read_bytes()
+    with pytest.raises(calsim.InputError) as e:
+        calsim.simulate_measurements(spec, out=tmp_path)
+    assert e.value.path == str(first.path) and "the file exists" in str(e.value)
+    assert first.path.read_bytes() == before
+    bad = tmp_path / "bad.toml"
+    bad.write_text(spec.read_text().replace("noise_mm = 0.012", "noise_mm = nan"))
+    with pytest.raises(calsim.InputError) as e2:
+        calsim.simulate_measurements(bad, out=tmp_path / "never")
+    assert (e2.value.path, e2.value.key) == (str(bad), "noise_mm")
+    assert not (tmp_path / "never").exists()
+    with pytest.raises(calsim.InputError) as e3:
+        calsim.simulate_measurements(tmp_path / "missing.toml")
+    assert e3.value.path == str(tmp_path / "missing.toml")

@@ -16,6 +16,7 @@ pub mod message;
 pub mod optimise;
 pub mod plan;
 pub mod run;
+pub mod simulate;
 pub mod sweep;
 pub mod table8;
 

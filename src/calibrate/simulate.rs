@@ -473,23 +473,3 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
     };
     Ok(SpecFile { spec, robot })
 }
-
-/// `calsim simulate-measurements`: the measurement file of the simulation file `spec`, written to
-/// `<out>/<spec stem>.csv` (the directory created; an existing file is refused, not replaced).
-/// Returns the file written.
-pub fn write_spec_file(spec: &std::path::Path, out: &std::path::Path) -> Result<std::path::PathBuf, String> {
-    let s = read_spec(spec)?;
-    let stem = crate::io::names::of_file(spec).map_err(|e| e.to_string())?;
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: --out: {e}", out.display()))?;
-    let path = out.join(format!("{stem}.csv"));
-    let text = to_csv(&s.spec);
-    let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::AlreadyExists {
-            format!("{}: --out: the file exists (calsim does not replace a file: remove it or choose another --out)", path.display())
-        } else {
-            format!("{}: --out: {e}", path.display())
-        }
-    })?;
-    std::io::Write::write_all(&mut f, text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok(path)
-}

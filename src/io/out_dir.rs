@@ -395,6 +395,20 @@ pub fn write_file_atomically(path: &Path, text: impl AsRef<[u8]>) -> io::Result<
     result
 }
 
+/// Writes `bytes` to the new file `path`, which must not exist: through a temporary beside it
+/// (`<name>.partial-<pid>`, created afresh) linked into place, so that `path` appears whole or not
+/// at all and a file that appeared there meanwhile is never replaced (`AlreadyExists`); the
+/// temporary is removed in every case.
+pub fn write_new_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(format!(".partial-{}", std::process::id()));
+    let tmp = path.with_file_name(name);
+    let mut file = fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+    let written = std::io::Write::write_all(&mut file, bytes).and_then(|()| file.sync_all()).and_then(|()| fs::hard_link(&tmp, path));
+    let _ = fs::remove_file(&tmp);
+    written
+}
+
 /// Writes `bytes` to the file `path` of a cache that several threads or processes may fill at once
 /// with the same contents (an optimisation's per-world files and restart records, written from a
 /// worker pool and from shards): through a temporary beside it named by the process and the thread
@@ -452,6 +466,19 @@ mod tests {
             .collect();
         names.sort();
         names
+    }
+
+    #[test]
+    fn a_new_file_never_replaces_one_and_leaves_no_temporary() {
+        let tmp = scratch();
+        let path = tmp.path().join("m.csv");
+        write_new_file(&path, b"first").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"first");
+        let e = write_new_file(&path, b"second").unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::AlreadyExists);
+        assert_eq!(fs::read(&path).unwrap(), b"first", "the file there is kept");
+        let names: Vec<_> = fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, ["m.csv"], "no temporary left");
     }
 
     #[test]

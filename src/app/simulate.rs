@@ -1,0 +1,58 @@
+//! `simulate-measurements`: a measurement file for `calibrate`, simulated from a simulation file
+//! (a robot file's truth measured at random poses with an instrument's noise; docs/calibrate.md).
+
+use std::path::{Path, PathBuf};
+
+use super::Error;
+use crate::calibrate::simulate::{read_spec, to_csv};
+
+/// What `simulate-measurements` made.
+#[derive(Clone, Debug)]
+pub struct Simulated {
+    /// The measurement file's text (the `calibrate` CSV layout).
+    pub csv: String,
+    /// Data rows (one per target measured at a pose).
+    pub rows: usize,
+    /// The file written (`<out>/<spec stem>.csv`), when a directory was given.
+    pub written: Option<PathBuf>,
+}
+
+/// `simulate-measurements`: reads the simulation file `spec` and simulates its measurements; with
+/// `out`, writes them to `<out>/<spec stem>.csv` (the directory created; an existing file is
+/// refused, not replaced; the file appears whole or not at all).
+pub fn run(spec: &Path, out: Option<&Path>) -> Result<Simulated, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
+    let stem = crate::io::names::of_file(spec)?;
+    let s = read_spec(spec).map_err(|e| spec_error(spec, &e))?;
+    let csv = to_csv(&s.spec);
+    let rows = csv.lines().filter(|l| !l.starts_with('#')).count().saturating_sub(1);
+    let written = match out {
+        Some(out) => {
+            std::fs::create_dir_all(out).map_err(|e| Error::input(format!("{}: --out", out.display()), e.to_string()))?;
+            let path = out.join(format!("{stem}.csv"));
+            crate::io::out_dir::vet_file(&path, &[spec])?;
+            crate::io::out_dir::write_new_file(&path, csv.as_bytes()).map_err(|e| match e.kind() {
+                std::io::ErrorKind::AlreadyExists => Error::input(
+                    format!("{}: --out", path.display()),
+                    "the file exists (calsim does not replace a file: remove it or choose another --out)",
+                ),
+                _ => Error::io(&path)(e),
+            })?;
+            Some(path)
+        }
+        None => None,
+    };
+    Ok(Simulated { csv, rows, written })
+}
+
+/// The simulation file's one-line error (`<file>: <key>: <what is wrong>`) as an input error naming
+/// the file and the key.
+fn spec_error(spec: &Path, line: &str) -> Error {
+    let rest = line.strip_prefix(&format!("{}: ", spec.display())).unwrap_or(line);
+    match rest.split_once(": ") {
+        Some((key, why)) if !key.contains(' ') || key.starts_with("line ") || key == "(file)" => {
+            Error::input(format!("{}: {key}", spec.display()), why)
+        }
+        _ => Error::input(spec.display().to_string(), rest),
+    }
+}
