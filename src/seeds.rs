@@ -198,7 +198,7 @@ pub mod fixed {
     /// (`robot::virtual_robot`).
     pub const REPEATABILITY: u64 = 9283;
     /// The bootstrap of a budget's share of source `s`: `BUDGET_SHARE + s`.
-    pub const BUDGET_SHARE: u64 = 0xB0D6_E7;
+    pub const BUDGET_SHARE: u64 = 0x00B0_D6E7;
     /// The joint configurations an optimiser samples for the tool points an arm reaches
     /// (`design::optimise::reach`; "REACH" in ASCII).
     pub const REACH: u64 = 0x5245_4143_4800_0000;
