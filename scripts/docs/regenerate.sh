@@ -64,6 +64,7 @@ more=(
     "sweep-cell-sizing|sweep scenarios/sweeps/cell_sizing.toml"
     "check-ci-quick-400|check scenarios/ci_quick.toml --realisations 400 --no-plots --no-recording"
     "candidates|python3 scripts/fidelity/candidates.py --realisations 20"
+    "fit-transmission-100|python3 scripts/fidelity/candidates.py --fit-default --realisations 100"
     "plan-speed-irb120|plan scenarios/plans/irb120_tracker.toml --threads 2"
     "plan-speed-objective|plan scenarios/plans/irb120_tracker_objective.toml --threads 2"
 )

@@ -8,10 +8,13 @@ over N worlds; this prints one markdown row per candidate with the medians over 
     python3 scripts/fidelity/candidates.py [--realisations 20] [--only NAME ...]
     python3 scripts/fidelity/candidates.py --fit NAME KEY LO HI [--target 0.208]
     python3 scripts/fidelity/candidates.py --fit-all [--realisations 10]
+    python3 scripts/fidelity/candidates.py --fit-default [--realisations 100]
 
 `--fit` finds the value of KEY (a dotted scenario key, e.g. robot.unmodelled.encoder_mdeg) for
 which the median over the worlds of the after-calibration median (Table 8, TriCal row) meets the
-target, by the secant method from LO and HI (3 further evaluations). Stdlib only; needs the release
+target, by the secant method from LO and HI (3 further evaluations), after the value the candidate
+ships with; it then prints the values whose interval of the median (as `calsim check` prints it)
+holds the target. `--fit-default` is `--fit` of the shipped scenarios' candidate. Stdlib only; needs the release
 binary (`cargo build --release`; CALSIM=path to use another).
 """
 import argparse
@@ -44,6 +47,9 @@ CANDIDATES = {
     "validation margin 0.28 (before mean) + harmonic": ({**SAME, "campaign.validation_margin": 0.28, H: 5.8}, H, (5.0, 6.5)),
     "thermal drift 50 ppm": ({**SAME, "robot.unmodelled.thermal_drift_ppm": 50.0, H: 3.30}, H, (3.0, 4.0)),
 }
+
+# The candidate the shipped scenarios are (its knob is the FITTED value of scenarios/irb120_trical.toml).
+DEFAULT = "setup 2 payload 0.7 kg (default)"
 
 FIGURES = [
     ("before calibration: mean error", "before mean"),
@@ -104,33 +110,50 @@ def run(keys, realisations):
         sys.exit(f"calsim check failed: {out.stderr.strip()}")
     # The table over the worlds: figure, published, run 0, median, interval, P10-P90, band, result.
     medians, passed, judged = {}, 0, 0
+    intervals = {}
     for line in out.stdout.splitlines():
         for prefix, label in FIGURES:
             if line.startswith(prefix):
                 cols = re.split(r"\s{2,}", line.strip())
                 number = re.match(r"[-+]?[\d.]+", cols[3])
                 medians[label] = float(number.group()) / (100 if cols[3].endswith("%") else 1)
+                bounds = re.match(r"([-+]?[\d.]+)-([\d.]+) \(([\d.]+ %)\)", cols[4])
+                if bounds:
+                    intervals[label] = (float(bounds.group(1)), float(bounds.group(2)), bounds.group(3))
                 passed += cols[7] == "pass"
                 judged += cols[7] not in ("-",) and not cols[7].startswith("- ")
-    return medians, passed, judged
+    return medians, passed, judged, intervals
 
 
 def row(name, keys, realisations):
-    m, passed, judged = run(keys, realisations)
+    m, passed, judged, _ = run(keys, realisations)
     cells = " | ".join(f"{m.get(label, float('nan')):.3f}" if "T7" not in label else f"{m.get(label, 0):.1f}" for _, label in FIGURES)
     return f"| {name} | {cells} | {passed} of {judged} |"
 
 
 def fit(name, key, lo, hi, target, realisations):
+    """The secant fit of `key`; then the values of `key` whose interval of the median (the one
+    `calsim check` prints) holds the target, by the slope of the last secant step: the fitted
+    value's own interval over the worlds."""
     keys = dict(CANDIDATES[name][0])
+    bounds = {}
     def f(x):
         keys[key] = x
-        v = run(keys, realisations)[0]["after median"]
-        print(f"{key} = {x:.4f}: after-calibration median {v:.4f} mm (median over {realisations} worlds)", flush=True)
+        medians, _, _, intervals = run(keys, realisations)
+        v = medians["after median"]
+        bounds[x] = intervals.get("after median")
+        shown = "" if bounds[x] is None else f", interval {bounds[x][0]:.4f}-{bounds[x][1]:.4f} ({bounds[x][2]})"
+        print(f"{key} = {x:.4f}: after-calibration median {v:.4f} mm (median over {realisations} worlds{shown})", flush=True)
         return v - target
+    shipped = CANDIDATES[name][0].get(key)
+    if shipped is not None:
+        f(shipped)
+        print(f"  (the value the candidate ships with, {shipped})", flush=True)
     a, b = lo, hi
     fa, fb = f(a), f(b)
     tried = [(abs(fa), a, fa), (abs(fb), b, fb)]
+    # The figures are printed to 3 decimals: the bracket's slope, not a short secant step's.
+    slope = (fb - fa) / (b - a)
     for _ in range(3):
         if fb == fa:
             break
@@ -139,7 +162,11 @@ def fit(name, key, lo, hi, target, realisations):
         fb = f(b)
         tried.append((abs(fb), b, fb))
     _, best, fbest = min(tried)
-    print(f"FITTED {name}: {key} = {best:.3f} (after-calibration median {fbest + target:.4f} mm against {target})", flush=True)
+    print(f"FITTED {name}: {key} = {best:.3f} (after-calibration median {fbest + target:.4f} mm against {target}, over {realisations} worlds)", flush=True)
+    if bounds.get(best) and slope > 0:
+        low, high, confidence = bounds[best]
+        print(f"  the values whose interval of the median holds {target}: {best + (target - high) / slope:.3f} to {best + (target - low) / slope:.3f}"
+              f" (slope {slope:.4f} mm per unit, interval at {confidence})", flush=True)
 
 
 def main():
@@ -148,11 +175,16 @@ def main():
     p.add_argument("--only", nargs="*")
     p.add_argument("--fit", nargs=4, metavar=("NAME", "KEY", "LO", "HI"))
     p.add_argument("--fit-all", action="store_true", help="refit every candidate's knob from its bracket")
+    p.add_argument("--fit-default", action="store_true", help="refit the shipped scenario's knob from its bracket")
     p.add_argument("--target", type=float, default=0.208)
     a = p.parse_args()
     if a.fit:
         name, key, lo, hi = a.fit
         fit(name, key, float(lo), float(hi), a.target, a.realisations)
+        return
+    if a.fit_default:
+        _, key, (lo, hi) = CANDIDATES[DEFAULT]
+        fit(DEFAULT, key, lo, hi, a.target, a.realisations)
         return
     if a.fit_all:
         for name, (_, key, (lo, hi)) in CANDIDATES.items():
