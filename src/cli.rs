@@ -774,7 +774,7 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
         p.worlds,
         r.seconds
     );
-    if let (Some(o), Some(search)) = (&r.plan.objective, &r.outcome.search) {
+    if let (Some(o), Some(search)) = (&r.outcome.objective, &r.outcome.search) {
         match search.chosen {
             Some(n) => println!(
                 "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
@@ -796,7 +796,7 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
         }
     }
     if !r.outcome.prediction.unidentifiable.is_empty() {
-        println!("cannot identify: {}", r.outcome.prediction.unidentifiable.join(", "));
+        println!("cannot identify (kept at their values before calibration): {}", r.outcome.prediction.unidentifiable.join(", "));
     }
     println!(
         "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{} in {}",

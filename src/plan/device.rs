@@ -336,6 +336,8 @@ pub struct DeviceOutcome {
     pub poses: usize,
     /// The objective's search (`None`: the count is fixed).
     pub search: Option<Search>,
+    /// The objective as searched (its most poses below the pool kept).
+    pub objective: Option<Objective>,
     /// The model before calibration (in {W}, the device's TCP).
     pub start: RobotModel,
     /// The arm's link capsules.
@@ -435,7 +437,9 @@ pub fn run(plan: &DevicePlan) -> Result<DeviceOutcome, PlanError> {
         let o1 = crate::identify::detmax::o1_of(&jac, &d.selection);
         Ok((d.selection, o1))
     };
-    let search = match &plan.objective {
+    // The search's most poses: below the pool kept.
+    let objective = plan.objective.clone().map(|o| Objective { most_poses: o.most_poses.min(kept.len() - 1), ..o });
+    let search = match &objective {
         None => None,
         Some(o) => {
             let score = |n: usize| -> Result<Candidate, PlanError> {
@@ -512,6 +516,7 @@ pub fn run(plan: &DevicePlan) -> Result<DeviceOutcome, PlanError> {
         prediction,
         poses,
         search,
+        objective,
         start,
         links,
         device,
@@ -741,7 +746,7 @@ pub fn markdown(plan: &DevicePlan, o: &DeviceOutcome) -> String {
                 .join(", ")
         }
     );
-    if let (Some(obj), Some(search)) = (&plan.objective, &o.search) {
+    if let (Some(obj), Some(search)) = (&o.objective, &o.search) {
         objective_markdown(&mut s, plan, obj, search);
     }
     let _ = writeln!(s, "## Parameters the plan cannot identify\n");
@@ -761,6 +766,12 @@ pub fn markdown(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     );
     let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | median's 90 % interval, mm | pilot, mm |\n|---|---|---|---|---|");
     let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {}-{} | {:.4} |\n", end(lo), end(hi), p.pilot_median_mm);
+    if p.pilot_median_mm > c {
+        let _ = writeln!(
+            s,
+            "The pilot lies above P90: the device's own observations carry what the worlds leave out (below), so the worlds' figures are a lower bound of what this plan buys on this arm.\n"
+        );
+    }
     let _ = writeln!(
         s,
         "The worlds draw the observation error independently at every configuration; the TriCal's errors are partly shared by the configurations of one sphere (the ballbar's location of its centre) and the arm's effects outside its model are systematic: `calsim run` on the device's scenario simulates them whole.\n"
