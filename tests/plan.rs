@@ -965,3 +965,22 @@ fn the_command_exits_2_with_one_line_on_a_bad_trical_plan() {
     assert_eq!(lines.len(), 1, "{err}");
     assert!(lines[0].contains("pool") && lines[0].contains("bad.toml"), "{err}");
 }
+
+#[test]
+fn the_trical_scenario_yields_its_pool_and_the_spms_none() {
+    let s = calsim::device::load(&root().join("scenarios/irb120_trical.toml")).unwrap();
+    let pool = s.candidate_pool().expect("the TriCal has a pool of its own").unwrap();
+    assert_eq!(pool.observations.len(), 360);
+    assert_eq!(pool.group_of.len(), 360);
+    assert_eq!((0..3).map(|g| pool.group_of.iter().filter(|x| **x == g).count()).collect::<Vec<_>>(), [120, 120, 120]);
+    assert_eq!((pool.jacobian.len, pool.jacobian.m), (360, pool.set.len()));
+    assert_eq!(pool.set.len(), 31);
+    // Every configuration of a sphere observes the one centre the ballbar located, near the nominal.
+    for g in 0..3 {
+        let seen: Vec<_> = pool.observations.iter().zip(&pool.group_of).filter(|(_, x)| **x == g).map(|(o, _)| o.tcp_world_mm).collect();
+        assert!(seen.iter().all(|p| *p == seen[0]), "sphere {}", g + 1);
+        assert!((seen[0] - Vector3::from(pool.groups_w_mm[g])).norm() < 0.1, "sphere {}: {:?}", g + 1, seen[0]);
+    }
+    let spms = calsim::device::load(&root().join("scenarios/er20c10_spms.toml")).unwrap();
+    assert!(spms.candidate_pool().is_none());
+}

@@ -246,7 +246,7 @@ fn trical_table(path: &Path, table: &mut toml::Table, raw: &Raw) -> Result<(), P
         _ => crate::cell::CellSpec::default().spheres_w_mm.len(),
     };
     table.insert("cell".into(), toml::Value::Table(cell));
-    if spheres == 0 || raw.pool % spheres != 0 {
+    if spheres == 0 || !raw.pool.is_multiple_of(spheres) {
         return Err(err(
             "pool",
             format!("{}: a multiple of the {spheres} datum spheres (each sphere centres pool / spheres configurations)", raw.pool),
