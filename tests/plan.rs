@@ -984,3 +984,16 @@ fn the_trical_scenario_yields_its_pool_and_the_spms_none() {
     let spms = calsim::device::load(&root().join("scenarios/er20c10_spms.toml")).unwrap();
     assert!(spms.candidate_pool().is_none());
 }
+
+#[test]
+fn the_tracker_planner_refuses_a_device_plan_in_one_line() {
+    let dir = scratch("trical-as-tracker");
+    let file = dir.join("trical.toml");
+    std::fs::write(&file, trical_text(|t| t)).unwrap();
+    let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(1), simulate: false, recording: false };
+    let e = plan(&spec, &calsim::app::Quiet).expect_err("a device plan is not a tracker plan").to_string();
+    assert!(e.starts_with(&file.display().to_string()) && e.contains("instrument") && !e.contains('\n'), "{e}");
+    let e =
+        calsim::app::plan::plan_device(&PlanSpec { simulate: true, ..spec }, &calsim::app::Quiet).expect_err("no --simulate").to_string();
+    assert!(e.contains("--simulate") && !e.contains('\n'), "{e}");
+}

@@ -38,6 +38,12 @@ pub struct PlanReport {
 /// Reads and checks a plan file.
 pub fn load(file: &Path) -> Result<Plan, Error> {
     let text = crate::io::read_text(file).map_err(|e| Error::input(file.display().to_string(), e.to_string()))?;
+    if crate::plan::device::is_device_plan(&text) {
+        return Err(Error::input(
+            format!("{}: instrument", file.display()),
+            "a device plan ([instrument]): `calsim plan` runs it through plan_device, not as a tracker plan".to_string(),
+        ));
+    }
     crate::plan::parse(file, &text).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))
 }
 
