@@ -760,6 +760,54 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
     Ok(ExitCode::SUCCESS)
 }
 
+fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
+    let r = app::plan::plan_device(spec, &Terminal::new()).map_err(|e| e.to_string())?;
+    let p = &r.outcome.prediction;
+    let [a, b, c] = p.quantiles_mm;
+    println!(
+        "calsim plan: {} centred + {} validation configurations, the {} centring {} ({} kept); O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
+        r.outcome.poses,
+        r.plan.validation,
+        r.plan.kind,
+        r.outcome.candidates,
+        r.outcome.candidates - r.outcome.refused[0] - r.outcome.refused[1],
+        r.outcome.o1.0,
+        r.outcome.o1.1,
+        p.worlds,
+        r.seconds
+    );
+    if let (Some(o), Some(search)) = (&r.outcome.objective, &r.outcome.search) {
+        match search.chosen {
+            Some(n) => println!(
+                "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
+                o.statistic.name(),
+                o.threshold_mm,
+                o.success_at_least,
+                o.confidence,
+                search.candidates.len()
+            ),
+            None => println!(
+                "objective P(held-out {} <= {} mm) >= {} at {} confidence: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)",
+                o.statistic.name(),
+                o.threshold_mm,
+                o.success_at_least,
+                o.confidence,
+                o.most_poses,
+                search.planned
+            ),
+        }
+    }
+    if !r.outcome.prediction.unidentifiable.is_empty() {
+        println!("cannot identify (kept at their values before calibration): {}", r.outcome.prediction.unidentifiable.join(", "));
+    }
+    println!(
+        "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{} in {}",
+        if spec.recording { " and the recording plan.rrd" } else { "" },
+        r.dir.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
 fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
     let spec = app::plan::PlanSpec {
         file: args.plan.clone(),
@@ -768,6 +816,9 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
         simulate: args.simulate,
         recording: !args.no_recording,
     };
+    if app::plan::is_device_plan(&spec.file).map_err(|e| e.to_string())? {
+        return plan_device(&spec);
+    }
     let r = app::plan::plan(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
     let p = &r.outcome.prediction;
     let [a, b, c] = p.quantiles_mm;

@@ -754,3 +754,246 @@ fn an_objective_and_a_comparison_write_the_same_bytes_for_1_and_2_threads() {
     };
     assert_eq!(go(1), go(2));
 }
+
+/// The shipped TriCal plan with its files named absolutely (it may run from a scratch directory)
+/// and `edit` applied to its text.
+fn trical_text(edit: impl Fn(String) -> String) -> String {
+    let t = std::fs::read_to_string(root().join("scenarios/plans/irb120_trical.toml")).unwrap();
+    let t = t
+        .replace("\"../../robots/irb120.toml\"", &format!("\"{}\"", root().join("robots/irb120.toml").display()))
+        .replace("\"../irb120_trical.toml\"", &format!("\"{}\"", root().join("scenarios/irb120_trical.toml").display()));
+    edit(t)
+}
+
+struct TricalRun {
+    report: calsim::app::plan::DevicePlanReport,
+    files_1: Vec<(String, Vec<u8>)>,
+    files_2: Vec<(String, Vec<u8>)>,
+}
+
+/// The shipped TriCal plan (fewer worlds) run with 1 and with 2 threads.
+fn trical_run() -> &'static TricalRun {
+    static RUN: OnceLock<TricalRun> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let dir = scratch("trical");
+        let file = dir.join("trical.toml");
+        std::fs::write(&file, trical_text(|t| t.replace("worlds = 30", "worlds = 12"))).unwrap();
+        let go = |threads: u32| {
+            let spec = PlanSpec {
+                file: file.clone(),
+                out: dir.join(format!("out{threads}")),
+                threads: Some(threads),
+                simulate: false,
+                recording: true,
+            };
+            let r = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).unwrap();
+            let f = files(&r.dir).into_iter().filter(|(n, _)| n != "plan.rrd").collect();
+            (r, f)
+        };
+        let (_, files_1) = go(1);
+        let (report, files_2) = go(2);
+        TricalRun { report, files_1, files_2 }
+    })
+}
+
+#[test]
+fn a_trical_plan_writes_the_same_bytes_for_1_and_2_threads() {
+    let r = trical_run();
+    let names: Vec<&str> = r.files_1.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["joints.txt", "manifest.json", "plan.md", "plan_poses.png", "plan_poses.svg", "poses.csv", "tour.csv"]);
+    assert_eq!(r.files_1, r.files_2);
+    assert!(r.report.dir.join("plan.rrd").exists());
+    let svg = String::from_utf8(r.files_1.iter().find(|(n, _)| n == "plan_poses.svg").unwrap().1.clone()).unwrap();
+    for label in
+        ["centred on sphere 1", "centred on sphere 3", "validation configuration", "workspace of interest", "top view", "side view"]
+    {
+        assert!(svg.contains(label), "{label}");
+    }
+    let o = &r.report.outcome;
+    assert_eq!(o.poses, 75);
+    assert_eq!(o.rows.len(), 75 + 30);
+    assert!(o.o1.0 > o.o1.1, "DETMAX's O1 {} above a random set's {}", o.o1.0, o.o1.1);
+    let p = &o.prediction;
+    assert_eq!(p.per_world_mm.len(), 12);
+    assert!(p.quantiles_mm[0] <= p.quantiles_mm[1] && p.quantiles_mm[1] <= p.quantiles_mm[2], "{:?}", p.quantiles_mm);
+    assert!(p.quantiles_mm[1] > 0.0 && p.quantiles_mm[2] < 1.0, "{:?}", p.quantiles_mm);
+}
+
+#[test]
+fn every_trical_pose_is_centred_on_its_sphere_and_feasible_by_an_independent_computation() {
+    let r = trical_run();
+    let robot: toml::Table = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap().parse().unwrap();
+    let joints = robot["joint"].as_array().unwrap();
+    let caps: Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> = robot["collision"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            let v = |k: &str| {
+                let a = c[k].as_array().unwrap();
+                Vector3::new(a[0].as_float().unwrap(), a[1].as_float().unwrap(), a[2].as_float().unwrap())
+            };
+            (c["link"].as_integer().unwrap() as usize, v("a_mm"), v("b_mm"), c["radius_mm"].as_float().unwrap())
+        })
+        .collect();
+    let limits: [[f64; 2]; 6] = [[-120.0, 120.0], [-90.0, 100.0], [-100.0, 60.0], [-150.0, 150.0], [-115.0, 115.0], [-180.0, 180.0]];
+    // The scenario's TCP in the flange frame (frame 6 is the flange in this robot file).
+    let tcp = Vector3::new(35.0, 0.0, 125.0);
+    let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
+    let (w_lo, w_hi) = (Vector3::new(200.0, -250.0, 250.0), Vector3::new(500.0, 250.0, 500.0));
+    let bodies = |q: &[f64; 6]| -> Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> {
+        let f = frames(joints, q);
+        caps.iter().map(|(l, a, b, rad)| (*l, f[*l].1 + f[*l].0 * a, f[*l].1 + f[*l].0 * b, *rad)).collect()
+    };
+    let capsule_gap = |x: &(usize, Vector3<f64>, Vector3<f64>, f64), y: &(usize, Vector3<f64>, Vector3<f64>, f64)| -> f64 {
+        along(&x.1, &x.2, STEP).iter().map(|p| point_segment(p, &y.1, &y.2)).fold(f64::INFINITY, f64::min) - x.3 - y.3
+    };
+    let home = bodies(&[0.0; 6]);
+    let allowed = |i: usize, j: usize| -> bool {
+        let (i, j) = (i.min(j), i.max(j));
+        j < i + 2 || home.iter().filter(|x| x.0 == i).any(|x| home.iter().filter(|y| y.0 == j).any(|y| capsule_gap(x, y) < 0.0))
+    };
+    let csv = std::fs::read_to_string(r.report.dir.join("poses.csv")).unwrap();
+    // The nominal arm's TCP per sphere (base frame), and the sphere's centre the row gives ({W}).
+    let mut clusters: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); 3];
+    let mut centres: Vec<Option<Vector3<f64>>> = vec![None; 3];
+    let (mut train, mut holdout) = (0, 0);
+    for line in csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("pose,")) {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f.len(), 13, "{line}");
+        let q: [f64; 6] = std::array::from_fn(|i| f[4 + i].parse::<f64>().unwrap().to_radians());
+        for i in 0..6 {
+            assert!(q[i] >= limits[i][0].to_radians() - 1e-12 && q[i] <= limits[i][1].to_radians() + 1e-12, "{line}: joint {}", i + 1);
+        }
+        let b = bodies(&q);
+        for x in b.iter().filter(|x| x.0 >= 1) {
+            assert!(x.1.z.min(x.2.z) - x.3 >= 0.0, "{line}: body {} below the table", x.0);
+            assert!(along(&x.1, &x.2, STEP).iter().all(|p| point_box(p, &lo, &hi) >= x.3 - SAMPLED), "{line}: body {} in the cabinet", x.0);
+        }
+        for (k, x) in b.iter().enumerate() {
+            for y in &b[k + 1..] {
+                if !allowed(x.0, y.0) {
+                    assert!(capsule_gap(x, y) >= -SAMPLED, "{line}: bodies {} and {} collide", x.0, y.0);
+                }
+            }
+        }
+        let fr = frames(joints, &q);
+        let p = fr[6].1 + fr[6].0 * tcp;
+        match f[3] {
+            "train" => {
+                let s: usize = f[0].rsplit("_s").next().unwrap().parse().unwrap();
+                let c = Vector3::new(f[10].parse().unwrap(), f[11].parse().unwrap(), f[12].parse().unwrap());
+                assert!(centres[s - 1].is_none_or(|o| o == c), "{line}: one centre per sphere");
+                centres[s - 1] = Some(c);
+                clusters[s - 1].push(p);
+                train += 1;
+            }
+            "holdout" => {
+                assert_eq!(&f[10..13], ["", "", ""], "{line}: a validation row's position is the tracker's to fill");
+                assert!(point_box(&p, &w_lo, &w_hi) < 0.01, "{line}: the TCP {p:?} outside the workspace of interest");
+                holdout += 1;
+            }
+            other => panic!("{line}: split {other}"),
+        }
+    }
+    assert_eq!((train, holdout), (75, 30));
+    // Centred: every configuration of a sphere puts the nominal arm's TCP at one point, up to the
+    // nominal arm's error before calibration (the paper's largest, Fig. 13: 6.3 mm), and the points
+    // of the spheres lie as far apart as the spheres' centres.
+    const BEFORE_MM: f64 = 6.3;
+    let mean = |v: &[Vector3<f64>]| v.iter().sum::<Vector3<f64>>() / v.len() as f64;
+    for (s, v) in clusters.iter().enumerate() {
+        assert!(!v.is_empty(), "sphere {}: no configuration", s + 1);
+        let m = mean(v);
+        let far = v.iter().map(|p| (p - m).norm()).fold(0.0, f64::max);
+        assert!(far < BEFORE_MM, "sphere {}: a TCP {far} mm from the others' mean", s + 1);
+    }
+    for a in 0..3 {
+        for b in a + 1..3 {
+            let planned = (mean(&clusters[a]) - mean(&clusters[b])).norm();
+            let spheres = (centres[a].unwrap() - centres[b].unwrap()).norm();
+            assert!((planned - spheres).abs() < BEFORE_MM, "spheres {} and {}: {planned} mm apart, centres {spheres}", a + 1, b + 1);
+        }
+    }
+    // And the true arm of the planning world: within the centring of the device (its indicators to
+    // 10 um, the arm's repeatability and its effects outside the model) of the located centre.
+    assert!(r.report.outcome.centring_mm.iter().all(|d| *d < 0.1), "{:?}", r.report.outcome.centring_mm);
+}
+
+fn trical_refused(edit: impl Fn(String) -> String, key: &str) -> String {
+    let dir = scratch(&format!("trical-bad-{}", key.replace(['.', '[', ']', ' '], "_")));
+    let file = dir.join("bad.toml");
+    std::fs::write(&file, trical_text(edit)).unwrap();
+    let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false, recording: false };
+    let e = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).expect_err("a bad plan is refused").to_string();
+    assert!(e.starts_with(&file.display().to_string()), "{e}: names the file");
+    assert!(e.contains(key), "{e}: names {key}");
+    assert!(!e.contains('\n'), "{e}: one line");
+    assert!(!dir.join("out").join("bad.plan").exists());
+    e
+}
+
+#[test]
+fn bad_trical_plan_files_are_refused_naming_the_file_and_the_key() {
+    let e = trical_refused(|t| t.replace("kind = \"trical\"", "kind = \"trical\"\nsphere_count = 3"), "sphere_count");
+    assert!(e.contains("unknown field"), "{e}");
+    let e = trical_refused(|t| t.replace("kind = \"trical\"", "kind = \"spms\""), "instrument.kind");
+    assert!(e.contains("not a device with a pool of its own"), "{e}");
+    let e = trical_refused(|t| t.replace("pool = 360", "pool = 361"), "pool");
+    assert!(e.contains("multiple of the 3 datum spheres"), "{e}");
+    trical_refused(|t| t.replace("[300.0, 0.0, 0.0]", "[300.0, nan, 0.0]"), "instrument.spheres_w_mm");
+    let e = trical_refused(|t| t.replace("poses = 75", "poses = 8"), "poses");
+    assert!(e.contains("below 11"), "{e}");
+    trical_refused(|t| t.replace("validation = 30", "validation = 0"), "validation");
+    trical_refused(|t| t.replace("irb120_trical.toml\"", "irb120_tricall.toml\""), "instrument.scenario");
+    // Spheres the arm cannot reach with the device: the device's campaign says which.
+    let e = trical_refused(|t| t.replace("[150.0, 259.8076, 0.0]]", "[150.0, 1900.0, 0.0]]"), "instrument");
+    assert!(e.contains("sphere"), "{e}");
+    trical_refused(|t| t.replace("floor_z_mm = 0.0", "floor_z_mm = inf"), "cell.floor_z_mm");
+}
+
+#[test]
+fn the_command_exits_2_with_one_line_on_a_bad_trical_plan() {
+    let dir = scratch("trical-cli");
+    let file = dir.join("bad.toml");
+    std::fs::write(&file, trical_text(|t| t.replace("pool = 360", "pool = 100"))).unwrap();
+    let o =
+        std::process::Command::new(env!("CARGO_BIN_EXE_calsim")).arg("plan").arg(&file).arg("--out").arg(dir.join("out")).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8(o.stderr).unwrap();
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].contains("pool") && lines[0].contains("bad.toml"), "{err}");
+}
+
+#[test]
+fn the_trical_scenario_yields_its_pool_and_the_spms_none() {
+    let s = calsim::device::load(&root().join("scenarios/irb120_trical.toml")).unwrap();
+    let pool = s.candidate_pool().expect("the TriCal has a pool of its own").unwrap();
+    assert_eq!(pool.observations.len(), 360);
+    assert_eq!(pool.group_of.len(), 360);
+    assert_eq!((0..3).map(|g| pool.group_of.iter().filter(|x| **x == g).count()).collect::<Vec<_>>(), [120, 120, 120]);
+    assert_eq!((pool.jacobian.len, pool.jacobian.m), (360, pool.set.len()));
+    assert_eq!(pool.set.len(), 31);
+    // Every configuration of a sphere observes the one centre the ballbar located, near the nominal.
+    for g in 0..3 {
+        let seen: Vec<_> = pool.observations.iter().zip(&pool.group_of).filter(|(_, x)| **x == g).map(|(o, _)| o.tcp_world_mm).collect();
+        assert!(seen.iter().all(|p| *p == seen[0]), "sphere {}", g + 1);
+        assert!((seen[0] - Vector3::from(pool.groups_w_mm[g])).norm() < 0.1, "sphere {}: {:?}", g + 1, seen[0]);
+    }
+    let spms = calsim::device::load(&root().join("scenarios/er20c10_spms.toml")).unwrap();
+    assert!(spms.candidate_pool().is_none());
+}
+
+#[test]
+fn the_tracker_planner_refuses_a_device_plan_in_one_line() {
+    let dir = scratch("trical-as-tracker");
+    let file = dir.join("trical.toml");
+    std::fs::write(&file, trical_text(|t| t)).unwrap();
+    let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(1), simulate: false, recording: false };
+    let e = plan(&spec, &calsim::app::Quiet).expect_err("a device plan is not a tracker plan").to_string();
+    assert!(e.starts_with(&file.display().to_string()) && e.contains("instrument") && !e.contains('\n'), "{e}");
+    let e =
+        calsim::app::plan::plan_device(&PlanSpec { simulate: true, ..spec }, &calsim::app::Quiet).expect_err("no --simulate").to_string();
+    assert!(e.contains("--simulate") && !e.contains('\n'), "{e}");
+}

@@ -278,6 +278,8 @@ def run_block(out: str) -> str:
 PLAN_IRB120 = "calsim plan scenarios/plans/irb120_tracker.toml"
 PLAN_LRMATE = "calsim plan scenarios/plans/lrmate200ic_tracker.toml"
 PLAN_OBJECTIVE = "calsim plan scenarios/plans/irb120_tracker_objective.toml"
+PLAN_TRICAL = "calsim plan scenarios/plans/irb120_trical.toml"
+PLAN_TRICAL_OBJECTIVE = "calsim plan scenarios/plans/irb120_trical_objective.toml"
 
 
 def plan_printed(out: str) -> str:
@@ -336,6 +338,37 @@ def plan_objective(out: Output) -> str:
     )
 
 
+def plan_trical_table(out: Output) -> str:
+    """The figures of a TriCal plan's plan.md: its pool, its set, the prediction and the pilot, the tour."""
+    md = out.plan
+    pool = re.search(r"- Pool: the device's campaign centred (\d+) configurations on the (\d+) spheres .*; (\d+) kept .* \(refused: (.*)\)\.", md)
+    training = re.search(r"- Training: (\d+) configurations chosen by DETMAX \((.*)\)", md)
+    o1 = re.search(r"- O1 of the chosen set: (\S+) \(a random set of the same size from the same pool: (\S+)\)", md)
+    centring = re.search(r"lies within (\S+) mm of its sphere's located centre", md)
+    tour = re.search(r"(\S+) deg of joint-space path; moves through a collision \(checked every (\S+) deg\): (.*)\.", md)
+    noise = re.search(r"observed at the chosen configurations with (\S+) mm per coordinate", md)
+    worlds = re.search(r"at the validation configurations over (\d+) simulated worlds", md)
+    unid = re.search(r"## Parameters the plan cannot identify\n\n(.*)\n", md).group(1)
+    pred = cells(md_table(md, "| P10, mm | median, mm")[2])
+    colliding = [] if tour.group(3) == "none" else tour.group(3).split(", ")
+    n = int(training.group(1))
+    where = ("below the worlds' P10" if float(pred[4]) < float(pred[0]) else
+             "above the worlds' P90" if float(pred[4]) > float(pred[2]) else "inside the worlds' P10-P90")
+    moves = n + int(re.search(r"- Validation: (\d+) configurations", md).group(1)) - 1
+    return (
+        "| figure | value |\n|---|---|\n"
+        f"| configurations centred by the device's campaign / kept | {int(pool.group(1)):,} on {pool.group(2)} spheres / {int(pool.group(3)):,} (refused: {pool.group(4)}) |\n"
+        f"| chosen by DETMAX | {n} ({training.group(2)}) |\n"
+        f"| O1 of DETMAX's {n} / of a random {n} from the same pool | {o1.group(1)} / {o1.group(2)} |\n"
+        f"| the true arm's TCP from its sphere's located centre, at most | {centring.group(1)} mm |\n"
+        f"| predicted held-out median, P10 / median / P90 ({worlds.group(1)} worlds, {noise.group(1)} mm per coordinate) | {pred[0]} / {pred[1]} / {pred[2]} mm (median's 90 % interval {pred[3]} mm) |\n"
+        f"| the pilot's held-out median (the device's own observations) | {pred[4]} mm |\n"
+        f"| parameters the plan cannot identify | {unid} |\n"
+        f"| tour | {float(tour.group(1)):,.1f} deg of joint-space path; {len(colliding)} of its {moves} moves pass through a collision (checked every {tour.group(2)} deg, named in plan.md) |\n"
+        f"\nThe pilot lies {where} here.\n"
+    )
+
+
 def plan_comparison(out: Output) -> str:
     """The comparison's table of a plan.md and what it shows."""
     table = md_table(out.plan, "| selection | O1 |")
@@ -380,6 +413,9 @@ EXCERPTS = {
     "plan-lrmate-printed": ("docs/plan.md", PLAN_LRMATE, plan_printed),
     "plan-objective": ("docs/plan.md", PLAN_OBJECTIVE, plan_objective),
     "plan-comparison": ("docs/plan.md", PLAN_OBJECTIVE, plan_comparison),
+    "plan-trical-printed": ("docs/plan.md", PLAN_TRICAL, plan_printed),
+    "plan-trical-table": ("docs/plan.md", PLAN_TRICAL, plan_trical_table),
+    "plan-trical-objective": ("docs/plan.md", PLAN_TRICAL_OBJECTIVE, plan_objective),
     "tracker-worlds": ("docs/tracker.md", "calsim run scenarios/irb120_tracker.toml --realisations 10 --no-plots --no-recording", worlds_table),
 }
 

@@ -67,6 +67,8 @@ more=(
     "fit-transmission-100|python3 scripts/fidelity/candidates.py --fit-default --realisations 100"
     "plan-speed-irb120|plan scenarios/plans/irb120_tracker.toml --threads 2"
     "plan-speed-objective|plan scenarios/plans/irb120_tracker_objective.toml --threads 2"
+    "plan-speed-trical|plan scenarios/plans/irb120_trical.toml --threads 2"
+    "plan-speed-trical-objective|plan scenarios/plans/irb120_trical_objective.toml --threads 2"
 )
 for run in "${more[@]}"; do
     IFS='|' read -r name command <<<"$run"

@@ -38,6 +38,12 @@ pub struct PlanReport {
 /// Reads and checks a plan file.
 pub fn load(file: &Path) -> Result<Plan, Error> {
     let text = crate::io::read_text(file).map_err(|e| Error::input(file.display().to_string(), e.to_string()))?;
+    if crate::plan::device::is_device_plan(&text) {
+        return Err(Error::input(
+            format!("{}: instrument", file.display()),
+            "a device plan ([instrument]): `calsim plan` runs it through plan_device, not as a tracker plan".to_string(),
+        ));
+    }
     crate::plan::parse(file, &text).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))
 }
 
@@ -106,4 +112,89 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
     };
     Ok(PlanReport { plan, outcome, dir, seconds })
+}
+
+/// What `calsim plan` returns for a plan whose instrument is a device with a pool of its own.
+#[derive(Debug)]
+pub struct DevicePlanReport {
+    /// The checked plan.
+    pub plan: crate::plan::device::DevicePlan,
+    /// What it computed.
+    pub outcome: crate::plan::device::DeviceOutcome,
+    /// The directory written.
+    pub dir: PathBuf,
+    /// Wall-clock seconds of the device's pool, the planning and the prediction together.
+    pub seconds: f64,
+}
+
+/// Whether the plan file names an `[instrument]` (a device plan, [`plan_device`]) rather than a
+/// `[tracker]` ([`plan`]).
+pub fn is_device_plan(file: &Path) -> Result<bool, Error> {
+    let text = crate::io::read_text(file).map_err(|e| Error::input(file.display().to_string(), e.to_string()))?;
+    Ok(crate::plan::device::is_device_plan(&text))
+}
+
+/// Reads and checks a device plan file.
+pub fn load_device(file: &Path) -> Result<crate::plan::device::DevicePlan, Error> {
+    let text = crate::io::read_text(file).map_err(|e| Error::input(file.display().to_string(), e.to_string()))?;
+    crate::plan::device::parse(file, &text).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))
+}
+
+/// `calsim plan` of a device plan: writes `<out>/<plan stem>.plan/` (`poses.csv`, `joints.txt`,
+/// `tour.csv`, `plan.md`, the figure, the recording).
+pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePlanReport, Error> {
+    let _inputs = crate::io::inputs::Ledger::open();
+    let plan = load_device(&spec.file)?;
+    if spec.simulate {
+        return Err(Error::input(
+            format!("{}: --simulate", spec.file.display()),
+            "a TriCal plan's measurement is the centred configuration: `calsim run` on the device's scenario simulates it".to_string(),
+        ));
+    }
+    let name = format!("{}.plan", crate::io::names::of_file(&spec.file)?);
+    crate::io::out_dir::prepare(&spec.out, &name)?;
+    let (pool, threads) = super::thread_pool(spec.threads)?;
+    let poses = match &plan.objective {
+        None => format!("{}", plan.poses),
+        Some(o) => format!("{} to {} (by objective)", o.fewest_poses, o.most_poses),
+    };
+    observer.started(&format!(
+        "calsim plan: {} ({poses} poses from the {} the {} centres, {} validation, {} worlds), {}",
+        spec.file.display(),
+        plan.pool,
+        plan.kind,
+        plan.validation,
+        plan.worlds,
+        super::threads_label(threads)
+    ));
+    let t0 = std::time::Instant::now();
+    let outcome =
+        pool.install(|| crate::plan::device::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let files = [
+        ("poses.csv", crate::plan::device::csv(&plan, &outcome)),
+        ("joints.txt", crate::plan::device::joint_list(&plan, &outcome)),
+        ("tour.csv", crate::plan::device::tour_csv(&plan, &outcome)),
+        ("plan.md", crate::plan::device::markdown(&plan, &outcome)),
+    ];
+    let dir = {
+        let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+        let io = |e: std::io::Error| Error::io(&spec.out)(e);
+        r.field("plan", &name).map_err(io)?.field("instrument", plan.kind).map_err(io)?.field("recording", spec.recording).map_err(io)?;
+        for (f, text) in files {
+            r.file(f, text);
+        }
+        r.draw(Box::new(|d| crate::plan::device_view::write_figure(d, &plan, &outcome).map(|()| Vec::new())));
+        if spec.recording {
+            r.record_as(
+                crate::plan::record::FILE,
+                Box::new(|path| {
+                    crate::plan::device_view::write_recording(path, &plan, &outcome)
+                        .map_err(|e| crate::io::record::RecordError(e.to_string()))
+                }),
+            );
+        }
+        crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
+    };
+    Ok(DevicePlanReport { plan, outcome, dir, seconds })
 }

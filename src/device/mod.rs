@@ -134,6 +134,47 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     fn datum_cell(&self) -> Option<DatumCell> {
         None
     }
+
+    /// The configurations the device measures at in realisation 0, where it measures only at
+    /// configurations of its own (the TriCal: centred on a datum sphere), with the identification
+    /// Jacobian rows of its parameter set: the pool `calsim plan` chooses the poses from. `None`
+    /// where the device takes any pose its instrument sees.
+    fn candidate_pool(&self) -> Option<Result<CandidatePool, DeviceError>> {
+        None
+    }
+}
+
+/// A device's own pool of configurations, for [`Scenario::candidate_pool`].
+pub struct CandidatePool {
+    /// What a configuration of the pool is (`centred on a datum sphere`).
+    pub what: &'static str,
+    /// What a group of the pool is (`datum sphere`).
+    pub group: &'static str,
+    /// The configurations and what each measures: the recorded joint values and the point the
+    /// device puts the TCP at in {W} as the cell's calibration gives it, mm.
+    pub observations: Vec<crate::identify::Observation>,
+    /// The group of each configuration (the datum sphere, 0-based).
+    pub group_of: Vec<usize>,
+    /// Each group's nominal point in {W} (the sphere centres as the scenario places them), mm.
+    pub groups_w_mm: Vec<[f64; 3]>,
+    /// The model every identification starts from (before calibration, in {W}, the device's TCP).
+    pub start: RobotModel,
+    /// The true arm of realisation 0 (its unmodelled effects are not in it).
+    pub truth: RobotModel,
+    /// The identified parameters.
+    pub set: crate::robot::ParamSet,
+    /// The pool's scaled identification Jacobian for `set` at `start`.
+    pub jacobian: crate::identify::PoolJacobian,
+    /// The identification's options and DETMAX's.
+    pub fit: crate::identify::FitOptions,
+    /// DETMAX's options.
+    pub detmax: crate::identify::DetmaxOptions,
+    /// The arm's link capsules.
+    pub links: crate::robot::file::LinkCapsules,
+    /// The device's capsules in MDH frame 6.
+    pub device: Vec<crate::cell::collision::CapsuleSpec>,
+    /// The device's fixtures (plate, risers, balls) in the robot base frame.
+    pub fixtures: Vec<crate::cell::collision::Obstacle>,
 }
 
 /// The arm that carries a device, for [`Scenario::carried_reach`].

@@ -18,6 +18,8 @@
 //! the plan is the same for any thread count.
 
 pub mod cell;
+pub mod device;
+pub mod device_view;
 pub mod plot;
 pub mod record;
 pub mod select;

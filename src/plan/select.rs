@@ -143,13 +143,18 @@ pub fn choose(plan: &Plan, jac: &PoolJacobian, n: usize) -> Result<(Vec<usize>, 
 /// A tour through `qs`: greedy nearest neighbour in joint space (Euclidean, rad) from the
 /// configuration nearest the middle of the limits. Returns the order and its length, rad.
 pub fn tour(cell: &Cell, qs: &[Joints]) -> (Vec<usize>, f64) {
+    let l = cell.model.limits();
+    tour_from(&std::array::from_fn(|i| 0.5 * (l[i].min + l[i].max)), qs)
+}
+
+/// A tour through `qs`: greedy nearest neighbour in joint space (Euclidean, rad) from the
+/// configuration nearest `mid`. Returns the order and its length, rad.
+pub fn tour_from(mid: &Joints, qs: &[Joints]) -> (Vec<usize>, f64) {
     if qs.is_empty() {
         return (Vec::new(), 0.0);
     }
-    let l = cell.model.limits();
-    let mid: Joints = std::array::from_fn(|i| 0.5 * (l[i].min + l[i].max));
     let dist = |a: &Joints, b: &Joints| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt();
-    let first = (0..qs.len()).min_by(|&a, &b| dist(&qs[a], &mid).total_cmp(&dist(&qs[b], &mid)).then(a.cmp(&b))).expect("not empty");
+    let first = (0..qs.len()).min_by(|&a, &b| dist(&qs[a], mid).total_cmp(&dist(&qs[b], mid)).then(a.cmp(&b))).expect("not empty");
     let mut left: Vec<bool> = vec![true; qs.len()];
     left[first] = false;
     let mut order = vec![first];
@@ -174,6 +179,20 @@ pub const MOVE_STEP_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
 /// The moves of `order` (straight lines in joint space) that pass through a collision, checked
 /// every [`MOVE_STEP_RAD`] of the joint that moves most: (from, to) positions in `order`.
 pub fn colliding_moves(cell: &Cell, qs: &[Joints], order: &[usize]) -> Vec<(usize, usize)> {
+    colliding_moves_with(qs, order, |st, q| {
+        crate::robot::forward(&cell.model, st, q);
+        cell.collides(st)
+    })
+}
+
+/// The moves of `order` through `qs` that pass through a configuration where `collides(st, q)`
+/// (`st` scratch), checked every [`MOVE_STEP_RAD`] of the joint that moves most: (from, to)
+/// positions in `order`.
+pub fn colliding_moves_with(
+    qs: &[Joints],
+    order: &[usize],
+    collides: impl Fn(&mut KinState, &Joints) -> bool + Sync,
+) -> Vec<(usize, usize)> {
     order
         .par_windows(2)
         .enumerate()
@@ -184,8 +203,7 @@ pub fn colliding_moves(cell: &Cell, qs: &[Joints], order: &[usize]) -> Vec<(usiz
             let hit = (1..steps).any(|s| {
                 let f = s as f64 / steps as f64;
                 let q: Joints = std::array::from_fn(|i| a[i] + f * (b[i] - a[i]));
-                crate::robot::forward(&cell.model, st, &q);
-                cell.collides(st)
+                collides(st, &q)
             });
             hit.then_some((k, k + 1))
         })

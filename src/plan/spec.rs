@@ -65,7 +65,7 @@ struct Raw {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawObjective {
+pub(crate) struct RawObjective {
     statistic: String,
     threshold_mm: f64,
     success_at_least: f64,
@@ -130,7 +130,7 @@ fn z_axis() -> [f64; 3] {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawCell {
+pub(crate) struct RawCell {
     joint_limits_deg: Option<Vec<[f64; 2]>>,
     floor_z_mm: Option<f64>,
     #[serde(default)]
@@ -298,6 +298,101 @@ fn builtin(name: &str) -> Option<RobotFile> {
     }
 }
 
+/// The plan's robot: a built-in arm by name, or a robot file relative to the plan; it must have
+/// collision capsules.
+pub(crate) fn load_robot(path: &Path, name: &str) -> Result<RobotFile, PlanError> {
+    let err = |key: &str, message: String| PlanError::new(path, key, message);
+    let robot = match builtin(name) {
+        Some(r) => r,
+        None => {
+            let file = crate::device::scenario::relative_to(path, Path::new(name));
+            RobotFile::load(&file).map_err(|e| {
+                err(
+                    "robot",
+                    format!(
+                        "{} (a robot file relative to the plan, or a built-in arm: {})",
+                        e.to_string().replace('\n', " "),
+                        BUILTIN.join(", ")
+                    ),
+                )
+            })?
+        }
+    };
+    if robot.capsules.is_none() {
+        return Err(err("robot", format!("{} has no [[collision]] capsules: a plan needs them to keep the poses free of collision", name)));
+    }
+    Ok(robot)
+}
+
+/// The checked `[cell]` of a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellKeys {
+    /// The joint limits (the robot file's, narrowed), rad.
+    pub limits: [JointLimit; JOINTS],
+    /// Floor height, mm (`None`: no floor).
+    pub floor_z_mm: Option<f64>,
+    /// Keep-out boxes.
+    pub keep_out: Vec<BoxMm>,
+    /// The workspace of interest.
+    pub workspace: BoxMm,
+}
+
+/// Checks a plan's `[cell]` against its robot file.
+pub(crate) fn cell(path: &Path, c: &RawCell, robot: &RobotFile) -> Result<CellKeys, PlanError> {
+    let err = |key: &str, message: String| PlanError::new(path, key, message);
+    let finite = |key: &str, v: &[f64]| -> Result<(), PlanError> {
+        match v.iter().find(|x| !x.is_finite() || x.abs() > MOST_MM) {
+            Some(x) => Err(err(key, format!("{x} is not a finite number within +-{MOST_MM} "))),
+            None => Ok(()),
+        }
+    };
+    let mut limits = *robot.nominal.limits();
+    if let Some(l) = &c.joint_limits_deg {
+        if l.len() != JOINTS {
+            return Err(err("cell.joint_limits_deg", format!("{} pairs: one [min, max] per joint, {JOINTS}", l.len())));
+        }
+        for (i, [lo, hi]) in l.iter().enumerate() {
+            let file = robot.nominal.limits()[i];
+            let (lo_r, hi_r) = (lo.to_radians(), hi.to_radians());
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(err("cell.joint_limits_deg", format!("joint {}: [{lo}, {hi}] is not an interval", i + 1)));
+            }
+            if lo_r < file.min - 1e-12 || hi_r > file.max + 1e-12 {
+                return Err(err(
+                    "cell.joint_limits_deg",
+                    format!(
+                        "joint {}: [{lo}, {hi}] deg leaves the robot file's limits [{:.3}, {:.3}] deg (narrow them, do not widen them)",
+                        i + 1,
+                        file.min.to_degrees(),
+                        file.max.to_degrees()
+                    ),
+                ));
+            }
+            limits[i] = JointLimit { min: lo_r.max(file.min), max: hi_r.min(file.max) };
+        }
+    }
+    if let Some(f) = c.floor_z_mm {
+        finite("cell.floor_z_mm", &[f])?;
+    }
+    let mut keep_out = Vec::new();
+    for (k, b) in c.keep_out.iter().enumerate() {
+        let key = |f: &str| format!("cell.keep_out[{}].{f}", k + 1);
+        finite(&key("min_mm"), &b.min_mm)?;
+        finite(&key("max_mm"), &b.max_mm)?;
+        if (0..3).any(|i| b.min_mm[i] >= b.max_mm[i]) {
+            return Err(err(&key("max_mm"), "every coordinate above min_mm's".into()));
+        }
+        keep_out.push(BoxMm { name: b.name.clone(), min: vec3(b.min_mm), max: vec3(b.max_mm) });
+    }
+    finite("cell.workspace_min_mm", &c.workspace_min_mm)?;
+    finite("cell.workspace_max_mm", &c.workspace_max_mm)?;
+    if (0..3).any(|i| c.workspace_min_mm[i] >= c.workspace_max_mm[i]) {
+        return Err(err("cell.workspace_max_mm", "every coordinate above workspace_min_mm's".into()));
+    }
+    let workspace = BoxMm { name: "workspace of interest".into(), min: vec3(c.workspace_min_mm), max: vec3(c.workspace_max_mm) };
+    Ok(CellKeys { limits, floor_z_mm: c.floor_z_mm, keep_out, workspace })
+}
+
 fn vec3(v: [f64; 3]) -> Vector3<f64> {
     Vector3::new(v[0], v[1], v[2])
 }
@@ -317,28 +412,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
         }
     };
     // Robot.
-    let robot = match builtin(&raw.robot) {
-        Some(r) => r,
-        None => {
-            let file = crate::device::scenario::relative_to(path, Path::new(&raw.robot));
-            RobotFile::load(&file).map_err(|e| {
-                err(
-                    "robot",
-                    format!(
-                        "{} (a robot file relative to the plan, or a built-in arm: {})",
-                        e.to_string().replace('\n', " "),
-                        BUILTIN.join(", ")
-                    ),
-                )
-            })?
-        }
-    };
-    if robot.capsules.is_none() {
-        return Err(err(
-            "robot",
-            format!("{} has no [[collision]] capsules: a plan needs them to keep the poses free of collision", raw.robot),
-        ));
-    }
+    let robot = load_robot(path, &raw.robot)?;
     let model = ModelKind::ALL
         .into_iter()
         .find(|k| k.name() == raw.model)
@@ -465,52 +539,8 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
         targets.push(Target { name: rt.name.clone(), frame6_mm: flange * vec3(rt.flange_mm), axis6: flange * axis.normalize() });
     }
     // Cell.
-    let c = &raw.cell;
-    let mut limits = *robot.nominal.limits();
-    if let Some(l) = &c.joint_limits_deg {
-        if l.len() != JOINTS {
-            return Err(err("cell.joint_limits_deg", format!("{} pairs: one [min, max] per joint, {JOINTS}", l.len())));
-        }
-        for (i, [lo, hi]) in l.iter().enumerate() {
-            let file = robot.nominal.limits()[i];
-            let (lo_r, hi_r) = (lo.to_radians(), hi.to_radians());
-            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(err("cell.joint_limits_deg", format!("joint {}: [{lo}, {hi}] is not an interval", i + 1)));
-            }
-            if lo_r < file.min - 1e-12 || hi_r > file.max + 1e-12 {
-                return Err(err(
-                    "cell.joint_limits_deg",
-                    format!(
-                        "joint {}: [{lo}, {hi}] deg leaves the robot file's limits [{:.3}, {:.3}] deg (narrow them, do not widen them)",
-                        i + 1,
-                        file.min.to_degrees(),
-                        file.max.to_degrees()
-                    ),
-                ));
-            }
-            limits[i] = JointLimit { min: lo_r.max(file.min), max: hi_r.min(file.max) };
-        }
-    }
-    if let Some(f) = c.floor_z_mm {
-        finite("cell.floor_z_mm", &[f])?;
-    }
-    let mut keep_out = Vec::new();
-    for (k, b) in c.keep_out.iter().enumerate() {
-        let key = |f: &str| format!("cell.keep_out[{}].{f}", k + 1);
-        finite(&key("min_mm"), &b.min_mm)?;
-        finite(&key("max_mm"), &b.max_mm)?;
-        if (0..3).any(|i| b.min_mm[i] >= b.max_mm[i]) {
-            return Err(err(&key("max_mm"), "every coordinate above min_mm's".into()));
-        }
-        keep_out.push(BoxMm { name: b.name.clone(), min: vec3(b.min_mm), max: vec3(b.max_mm) });
-    }
-    finite("cell.workspace_min_mm", &c.workspace_min_mm)?;
-    finite("cell.workspace_max_mm", &c.workspace_max_mm)?;
-    if (0..3).any(|i| c.workspace_min_mm[i] >= c.workspace_max_mm[i]) {
-        return Err(err("cell.workspace_max_mm", "every coordinate above workspace_min_mm's".into()));
-    }
-    let workspace = BoxMm { name: "workspace of interest".into(), min: vec3(c.workspace_min_mm), max: vec3(c.workspace_max_mm) };
-    if let Some(f) = c.floor_z_mm
+    let CellKeys { limits, floor_z_mm, keep_out, workspace } = cell(path, &raw.cell, &robot)?;
+    if let Some(f) = floor_z_mm
         && tracker.position_mm.z < f
     {
         return Err(err("tracker.position_mm", format!("is below the floor (z {} < floor_z_mm {f})", tracker.position_mm.z)));
@@ -533,7 +563,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
         worlds: raw.worlds,
         tracker,
         targets,
-        floor_z_mm: c.floor_z_mm,
+        floor_z_mm,
         keep_out,
         workspace,
     })
@@ -542,7 +572,14 @@ pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
 /// Checks `[objective]`: a statistic by name, a threshold within (0, 1000] mm, a probability
 /// below 1 that `worlds` worlds can show at the confidence, a confidence within [0.5, 0.999], a
 /// most poses between the model's count and the pool's.
-fn objective(path: &Path, o: &RawObjective, poses: Option<usize>, pool: usize, worlds: usize, m: usize) -> Result<Objective, PlanError> {
+pub(crate) fn objective(
+    path: &Path,
+    o: &RawObjective,
+    poses: Option<usize>,
+    pool: usize,
+    worlds: usize,
+    m: usize,
+) -> Result<Objective, PlanError> {
     let err = |key: &str, message: String| PlanError::new(path, key, message);
     let names: Vec<&str> = OBJECTIVE_STATISTICS.iter().map(|s| s.name()).collect();
     let statistic = OBJECTIVE_STATISTICS.into_iter().find(|s| s.name() == o.statistic).ok_or_else(|| {

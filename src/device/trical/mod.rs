@@ -169,6 +169,40 @@ impl Scenario for TricalScenario {
             ball_diameter_mm: c.ball_diameter_mm,
         })
     }
+
+    fn candidate_pool(&self) -> Option<Result<super::CandidatePool, DeviceError>> {
+        Some(candidate_pool(self))
+    }
+}
+
+/// The TriCal's pool of realisation 0: the campaign's configurations centred on the datum
+/// spheres, each observing its sphere's centre as the ballbar located it.
+fn candidate_pool(s: &TricalScenario) -> Result<super::CandidatePool, DeviceError> {
+    let spec = &s.experiment;
+    let e = spec.build(s.header.seed).map_err(|e| DeviceError::new(format!("campaign: {e}")))?;
+    let start = spec.before_model(&e.campaign);
+    let set = s.study.parameter_set(crate::robot::ParamSet::trical_31).map_err(DeviceError::of)?;
+    let observations: Vec<_> = e.campaign.pool.iter().map(|p| e.campaign.observation(&e.cell, p)).collect();
+    let qs: Vec<_> = observations.iter().map(|o: &crate::identify::Observation| o.q).collect();
+    let jacobian = crate::identify::PoolJacobian::new(&start, &set, &qs);
+    let truth_base = crate::robot::world_from_base(&e.robot.truth);
+    let up = -start.data().gravity_base.normalize();
+    Ok(super::CandidatePool {
+        what: "centred on a datum sphere",
+        group: "datum sphere",
+        group_of: e.campaign.pool.iter().map(|p| p.sphere).collect(),
+        groups_w_mm: spec.cell.spheres_w_mm.clone(),
+        observations,
+        truth: e.robot.truth.clone(),
+        set,
+        jacobian,
+        fit: s.study.fit_options(),
+        detmax: s.study.detmax_options(),
+        device: e.trical.capsules(&e.campaign.semi_automatic.tcp_cmm_mm),
+        fixtures: crate::cell::solids::obstacles(&e.cell, &truth_base.inverse(), &up),
+        links: e.links,
+        start,
+    })
 }
 
 /// A TriCal study in one world: the experiment, the model before calibration, every

@@ -1,0 +1,843 @@
+//! `calsim plan` with a device that measures at configurations of its own (`[instrument] kind =
+//! "trical"`: the TriCal centred on datum spheres).
+//!
+//! ```text
+//! plan file ─► parse (the device's scenario, its spheres and pool size set from the plan; the cell)
+//!  ─► Scenario::candidate_pool (the device's campaign in realisation 0: the centred
+//!     configurations, what each observes, the identification Jacobian rows)
+//!  ─► the pool kept within the plan's limits and free of collision (arm, device, the device's
+//!     fixtures, the floor, the keep-out boxes)
+//!  ─► validation configurations spread over the workspace of interest (farthest-point sampling)
+//!  ─► DETMAX on the kept rows  ─► tour (greedy nearest neighbour, moves checked every degree)
+//!  ─► prediction: the device's own observations at the chosen configurations identified (the
+//!     pilot), then the plan's worlds: the true arm observed at the chosen configurations with the
+//!     pool's observation error, identified, compared with the true arm at the validation
+//!     configurations
+//! ```
+//!
+//! Every stream is keyed under the plan's seed (`seeds::plan`): the plan is the same for any
+//! thread count.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
+use serde::Deserialize;
+
+use super::spec::{self, BoxMm, CellKeys, Objective, PlanError, RawCell, RawObjective};
+use super::{Candidate, Search, TRAIN, TRAINING, VALIDATION};
+use crate::calibrate::plan::Statistic;
+use crate::cell::collision::{CapsuleSpec, CollisionWorld, Obstacle};
+use crate::device::{CandidatePool, Scenario};
+use crate::identify::{Observation, PoolJacobian};
+use crate::robot::file::{LinkCapsules, RobotFile};
+use crate::robot::{JOINTS, JointLimit, Joints, KinState, ParamSet, RobotModel, forward, uniform_configuration};
+use crate::study::ErrorStats;
+
+/// Instruments a plan's `[instrument]` may name: devices that measure at configurations of their own.
+pub const KINDS: [&str; 1] = ["trical"];
+
+/// Candidates drawn per validation configuration kept before the workspace of interest is given
+/// up as out of reach.
+const MOST_TRIES_PER_VALIDATION: usize = 2_000;
+
+/// Validation configurations the farthest-point sampling chooses from, per one kept.
+const VALIDATION_CANDIDATES_PER_POSE: usize = 10;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Raw {
+    robot: String,
+    poses: Option<usize>,
+    pool: usize,
+    validation: usize,
+    #[serde(default = "one")]
+    seed: u64,
+    #[serde(default = "thirty")]
+    worlds: usize,
+    instrument: RawInstrument,
+    cell: RawCell,
+    objective: Option<RawObjective>,
+}
+
+fn one() -> u64 {
+    1
+}
+
+fn thirty() -> usize {
+    30
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInstrument {
+    kind: String,
+    scenario: Option<String>,
+    spheres_w_mm: Option<Vec<[f64; 3]>>,
+}
+
+/// A checked plan whose instrument is a device with a pool of its own.
+#[derive(Clone, Debug)]
+pub struct DevicePlan {
+    /// The plan file.
+    pub path: PathBuf,
+    /// The robot as the plan names it.
+    pub robot_name: String,
+    /// The robot file.
+    pub robot: RobotFile,
+    /// The joint limits the poses keep to, rad.
+    pub limits: [JointLimit; JOINTS],
+    /// Training poses (with an objective: the fewest its search tries).
+    pub poses: usize,
+    /// The number of poses by objective (`None`: `poses` fixed).
+    pub objective: Option<Objective>,
+    /// Configurations the device's campaign centres (split evenly over its spheres).
+    pub pool: usize,
+    /// Validation configurations over the workspace of interest.
+    pub validation: usize,
+    /// Seed of every stream of the plan (and of the device's realisation).
+    pub seed: u64,
+    /// Simulated worlds of the predicted held-out error.
+    pub worlds: usize,
+    /// The instrument's kind (`trical`).
+    pub kind: &'static str,
+    /// The device's scenario file as the plan names it (`None`: the device's defaults).
+    pub scenario_file: Option<String>,
+    /// The device's scenario, the plan's spheres, pool size, robot and seed set in it.
+    pub scenario: Box<dyn Scenario>,
+    /// The parameters the device identifies.
+    pub set: ParamSet,
+    /// Floor height, mm (`None`: no floor).
+    pub floor_z_mm: Option<f64>,
+    /// Keep-out boxes.
+    pub keep_out: Vec<BoxMm>,
+    /// The workspace of interest.
+    pub workspace: BoxMm,
+}
+
+/// Whether the plan text names an `[instrument]` (a device plan) rather than a `[tracker]`.
+pub fn is_device_plan(text: &str) -> bool {
+    toml::from_str::<toml::Table>(text).is_ok_and(|t| t.contains_key("instrument"))
+}
+
+/// The fewest training poses of a set of `m` parameters: three equations per configuration.
+pub fn fewest_poses(m: usize) -> usize {
+    m.div_ceil(3)
+}
+
+/// Checks a device plan's text (`path` names it in errors; files are found relative to it).
+pub fn parse(path: &Path, text: &str) -> Result<DevicePlan, PlanError> {
+    let err = |key: &str, message: String| PlanError::new(path, key, message);
+    let raw: Raw = toml::from_str(text).map_err(|e| {
+        let line = e.span().map(|s| text[..s.start.min(text.len())].lines().count().max(1));
+        err(&line.map_or_else(|| "(file)".to_string(), |l| format!("line {l}")), e.message().replace('\n', " "))
+    })?;
+    let robot = spec::load_robot(path, &raw.robot)?;
+    let kind = KINDS.into_iter().find(|k| *k == raw.instrument.kind).ok_or_else(|| {
+        err(
+            "instrument.kind",
+            format!(
+                "\"{}\" is not a device with a pool of its own ({}; a laser tracker or optical CMM is a [tracker] table)",
+                raw.instrument.kind.escape_default(),
+                KINDS.map(|k| format!("\"{k}\"")).join(", ")
+            ),
+        )
+    })?;
+    let device = crate::device::REGISTRY.iter().copied().find(|d| d.kind() == kind).expect("every plan instrument is a device");
+    let (anchor, mut table) = match &raw.instrument.scenario {
+        Some(f) => {
+            let file = crate::device::scenario::relative_to(path, Path::new(f));
+            let shown = file.display().to_string();
+            let text = crate::io::read_text(&file).map_err(|e| err("instrument.scenario", format!("{shown}: {e}")))?;
+            let t = crate::device::scenario::table(&text, &shown).map_err(|e| err("instrument.scenario", e.to_string()))?;
+            (file, t)
+        }
+        None => (path.to_path_buf(), device.defaults()),
+    };
+    if let Some(k) = table.get("kind")
+        && k.as_str() != Some(kind)
+    {
+        return Err(err("instrument.scenario", format!("is a {k} scenario, not a {kind} one")));
+    }
+    table.insert("kind".into(), kind.into());
+    trical_table(path, &mut table, &raw)?;
+    let scenario_text = toml::to_string(&table).map_err(|e| err("instrument.scenario", e.to_string()))?;
+    let mut scenario = device.load(&scenario_text, table, &anchor).map_err(|e| err("instrument.scenario", e.to_string()))?;
+    scenario.header_mut().seed = raw.seed;
+    let set = scenario.study().parameter_set(ParamSet::trical_31).map_err(|e| err("instrument.scenario", e.to_string()))?;
+    let m = fewest_poses(set.len());
+    if !(1..=spec::MOST_WORLDS).contains(&raw.worlds) {
+        return Err(err("worlds", format!("{}: 1 to {}", raw.worlds, spec::MOST_WORLDS)));
+    }
+    let objective = match &raw.objective {
+        None => None,
+        Some(o) => Some(spec::objective(path, o, raw.poses, raw.pool, raw.worlds, m)?),
+    };
+    let poses = match (raw.poses, &objective) {
+        (Some(n), None) => n,
+        (None, Some(o)) => o.fewest_poses,
+        (None, None) => return Err(err("poses", "missing: a count of training poses, or an [objective] that sets it".into())),
+        (Some(_), Some(_)) => return Err(err("poses", "and [objective] both set the count of training poses: give one of them".into())),
+    };
+    if poses < m {
+        return Err(err("poses", format!("{poses} is below {m}: the {} parameters of the device need 3 equations each", set.len())));
+    }
+    if poses > spec::MOST_POSES {
+        return Err(err("poses", format!("{poses} is above {}", spec::MOST_POSES)));
+    }
+    if !(spec::FEWEST_VALIDATION..=spec::MOST_POSES).contains(&raw.validation) {
+        return Err(err(
+            "validation",
+            format!(
+                "{}: {} to {} (the configurations over the workspace of interest the prediction is judged on)",
+                raw.validation,
+                spec::FEWEST_VALIDATION,
+                spec::MOST_POSES
+            ),
+        ));
+    }
+    if raw.pool <= poses || raw.pool > spec::MOST_POOL {
+        return Err(err("pool", format!("{}: more than the {poses} poses, at most {}", raw.pool, spec::MOST_POOL)));
+    }
+    let CellKeys { limits, floor_z_mm, keep_out, workspace } = spec::cell(path, &raw.cell, &robot)?;
+    Ok(DevicePlan {
+        path: path.to_path_buf(),
+        robot_name: raw.robot,
+        robot,
+        limits,
+        poses,
+        objective,
+        pool: raw.pool,
+        validation: raw.validation,
+        seed: raw.seed,
+        worlds: raw.worlds,
+        kind,
+        scenario_file: raw.instrument.scenario,
+        scenario,
+        set,
+        floor_z_mm,
+        keep_out,
+        workspace,
+    })
+}
+
+/// Sets the plan's spheres, pool size and robot in a TriCal scenario's table. The campaign's own tracker validation is cut to one pose: the plan's validation
+/// configurations replace it.
+fn trical_table(path: &Path, table: &mut toml::Table, raw: &Raw) -> Result<(), PlanError> {
+    let err = |key: &str, message: String| PlanError::new(path, key, message);
+    let section = |table: &mut toml::Table, name: &str| -> toml::Table {
+        match table.remove(name) {
+            Some(toml::Value::Table(t)) => t,
+            _ => toml::Table::new(),
+        }
+    };
+    let mut cell = section(table, "cell");
+    if let Some(s) = &raw.instrument.spheres_w_mm {
+        if let Some(x) = s.iter().flatten().find(|x| !x.is_finite()) {
+            return Err(err("instrument.spheres_w_mm", format!("{x} is not a finite number")));
+        }
+        let arr: Vec<toml::Value> = s.iter().map(|p| toml::Value::Array(p.iter().map(|v| toml::Value::Float(*v)).collect())).collect();
+        cell.insert("spheres_w_mm".into(), toml::Value::Array(arr));
+    }
+    let spheres = match cell.get("spheres_w_mm") {
+        Some(toml::Value::Array(a)) => a.len(),
+        _ => crate::cell::CellSpec::default().spheres_w_mm.len(),
+    };
+    table.insert("cell".into(), toml::Value::Table(cell));
+    if spheres == 0 || !raw.pool.is_multiple_of(spheres) {
+        return Err(err(
+            "pool",
+            format!("{}: a multiple of the {spheres} datum spheres (each sphere centres pool / spheres configurations)", raw.pool),
+        ));
+    }
+    let per_sphere = i64::try_from(raw.pool / spheres).unwrap_or(i64::MAX);
+    let mut campaign = section(table, "campaign");
+    campaign.insert("pool_per_sphere".into(), per_sphere.into());
+    campaign.insert("validation_poses".into(), 1i64.into());
+    table.insert("campaign".into(), toml::Value::Table(campaign));
+    let mut r = section(table, "robot");
+    if spec::BUILTIN.contains(&raw.robot.as_str()) {
+        r.remove("file");
+    } else {
+        let file = crate::device::scenario::relative_to(path, Path::new(&raw.robot));
+        // Absolute: the scenario's loader reads it relative to the scenario.
+        let file = std::path::absolute(&file).map_err(|e| err("robot", e.to_string()))?;
+        r.insert("file".into(), file.display().to_string().into());
+    }
+    table.insert("robot".into(), toml::Value::Table(r));
+    Ok(())
+}
+
+/// One row of a device plan: a training configuration centred on its group (sphere), or a
+/// validation configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeviceRow {
+    /// Label (`p001_s1`, `v001`).
+    pub label: String,
+    /// `train` or `holdout`.
+    pub split: &'static str,
+    /// The datum sphere of a training row (0-based).
+    pub group: Option<usize>,
+    /// The model's joint angles, rad.
+    pub q: Joints,
+}
+
+/// A device plan's predicted held-out error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DevicePrediction {
+    /// The pool's observation error per coordinate (the device's observations of realisation 0
+    /// against the true arm's model, pooled), mm.
+    pub noise_mm: f64,
+    /// Held-out median per world over the validation configurations, mm (NaN: no model).
+    pub per_world_mm: Vec<f64>,
+    /// P10, median, P90 over the worlds with a value, mm.
+    pub quantiles_mm: [f64; 3],
+    /// The distribution-free 90 % interval of the median over the worlds, mm.
+    pub median_interval_mm: (f64, f64),
+    /// Worlds with a value.
+    pub worlds: usize,
+    /// The pilot: the device's own observations at the chosen configurations identified, its
+    /// held-out median against the true arm, mm.
+    pub pilot_median_mm: f64,
+    /// Parameters the chosen configurations cannot separate (kept at their start values).
+    pub unidentifiable: Vec<String>,
+}
+
+/// What a device plan computed.
+#[derive(Clone, Debug)]
+pub struct DeviceOutcome {
+    /// The device's pool: configurations centred.
+    pub candidates: usize,
+    /// Refused: outside the plan's limits, in collision.
+    pub refused: [usize; 2],
+    /// Validation candidates drawn.
+    pub validation_tried: usize,
+    /// Training then validation rows.
+    pub rows: Vec<DeviceRow>,
+    /// Each training row's observed point in {W} (the sphere centre as the ballbar located it), mm.
+    pub observed_w_mm: Vec<Vector3<f64>>,
+    /// Each training row's distance between the true arm's TCP and its observed point, mm.
+    pub centring_mm: Vec<f64>,
+    /// The nominal sphere centres in {W}, mm.
+    pub groups_w_mm: Vec<[f64; 3]>,
+    /// O1 of DETMAX's set and of a random set of the same size.
+    pub o1: (f64, f64),
+    /// Parameters (columns) DETMAX scored.
+    pub params: Vec<String>,
+    /// Tour: positions in `rows`, and its length, rad.
+    pub tour: (Vec<usize>, f64),
+    /// Moves of the tour through a collision (positions in the tour).
+    pub colliding_moves: Vec<(usize, usize)>,
+    /// The prediction.
+    pub prediction: DevicePrediction,
+    /// Training poses planned.
+    pub poses: usize,
+    /// The objective's search (`None`: the count is fixed).
+    pub search: Option<Search>,
+    /// The objective as searched (its most poses below the pool kept).
+    pub objective: Option<Objective>,
+    /// The model before calibration (in {W}, the device's TCP).
+    pub start: RobotModel,
+    /// The arm's link capsules.
+    pub links: LinkCapsules,
+    /// The device's capsules in MDH frame 6.
+    pub device: Vec<CapsuleSpec>,
+}
+
+/// The plan's collision world: the arm, the device, its fixtures, the floor and the keep-out boxes.
+pub fn collision_world(
+    plan: &DevicePlan,
+    pool_links: &LinkCapsules,
+    device: &[CapsuleSpec],
+    fixtures: Vec<Obstacle>,
+    start: &RobotModel,
+) -> CollisionWorld {
+    let mut obstacles = fixtures;
+    if let Some(f) = plan.floor_z_mm {
+        let centre = nalgebra::Isometry3::translation(0.0, 0.0, f - 500.0);
+        obstacles.push(Obstacle::cuboid("floor", Vector3::new(100_000.0, 100_000.0, 500.0), &centre));
+    }
+    for b in &plan.keep_out {
+        let centre = nalgebra::Isometry3::translation((b.min.x + b.max.x) / 2.0, (b.min.y + b.max.y) / 2.0, (b.min.z + b.max.z) / 2.0);
+        obstacles.push(Obstacle::cuboid(&format!("keep-out {}", b.name), (b.max - b.min) / 2.0, &centre));
+    }
+    let mut world = CollisionWorld::new(pool_links, device, obstacles);
+    let mut st = KinState::default();
+    forward(start, &mut st, &[0.0; JOINTS]);
+    world.allow_pairs_touching_at(&st);
+    world
+}
+
+/// Runs a device plan (on the caller's rayon pool).
+pub fn run(plan: &DevicePlan) -> Result<DeviceOutcome, PlanError> {
+    let err = |key: &str, message: String| PlanError::new(&plan.path, key, message);
+    let pool: CandidatePool = plan
+        .scenario
+        .candidate_pool()
+        .ok_or_else(|| err("instrument.kind", format!("{} has no pool of its own", plan.kind)))?
+        .map_err(|e| err("instrument", format!("the device's campaign: {e}")))?;
+    let CandidatePool {
+        observations, group_of, groups_w_mm, start, truth, set, jacobian, fit, detmax: dopts, links, device, fixtures, ..
+    } = pool;
+    let world = collision_world(plan, &links, &device, fixtures, &start);
+    // The pool kept within the plan's limits and free of collision.
+    let checks: Vec<Result<(), usize>> = observations
+        .par_iter()
+        .map_init(KinState::default, |st, o| {
+            if o.q.iter().zip(&plan.limits).any(|(v, l)| !(*v >= l.min && *v <= l.max)) {
+                return Err(0);
+            }
+            forward(&start, st, &o.q);
+            if world.first_collision(st).is_some() { Err(1) } else { Ok(()) }
+        })
+        .collect();
+    let mut refused = [0usize; 2];
+    let mut kept = Vec::new();
+    for (i, c) in checks.iter().enumerate() {
+        match c {
+            Ok(()) => kept.push(i),
+            Err(k) => refused[*k] += 1,
+        }
+    }
+    if kept.len() <= plan.poses {
+        return Err(err(
+            "cell.joint_limits_deg",
+            format!(
+                "{} of the device's {} configurations are within the limits and free of collision (refused: joint limits {}, collision {}): not more than the {} poses",
+                kept.len(),
+                observations.len(),
+                refused[0],
+                refused[1],
+                plan.poses
+            ),
+        ));
+    }
+    let m = jacobian.m;
+    let mut rows_j = nalgebra::DMatrix::zeros(3 * kept.len(), m);
+    for (r, &i) in kept.iter().enumerate() {
+        rows_j.rows_mut(3 * r, 3).copy_from(&jacobian.j.rows(3 * i, 3));
+    }
+    let jac = PoolJacobian::from_scaled(rows_j, jacobian.scale.clone());
+    // Validation configurations over the workspace of interest.
+    let limited = start.edited(|d| d.limits = plan.limits).map_err(|e| err("cell.joint_limits_deg", e.to_string()))?;
+    let (validation, validation_tried) = validation_configurations(plan, &limited, &world)?;
+    let mut st = KinState::default();
+    let truth_val: Vec<Vector3<f64>> = validation.iter().map(|q| forward(&truth, &mut st, q)).collect();
+    let kept_obs: Vec<Observation> = kept.iter().map(|&i| observations[i]).collect();
+    let noise_mm = {
+        let ss: f64 = kept_obs.iter().map(|o| (forward(&truth, &mut st, &o.q) - o.tcp_world_mm).norm_squared()).sum();
+        (ss / (3 * kept_obs.len()) as f64).sqrt()
+    };
+    let cx = Worlds { plan, start: &start, truth: &truth, set: &set, fit: &fit, validation: &validation, truth_val: &truth_val, noise_mm };
+    let choose = |n: usize| -> Result<(Vec<usize>, f64), PlanError> {
+        let mut rng = crate::seeds::stream(plan.seed, crate::seeds::plan::DETMAX);
+        let d = crate::identify::detmax(&jac, n, &dopts, &mut rng).map_err(|e| err("poses", e.to_string()))?;
+        let o1 = crate::identify::detmax::o1_of(&jac, &d.selection);
+        Ok((d.selection, o1))
+    };
+    // The search's most poses: below the pool kept.
+    let objective = plan.objective.clone().map(|o| Objective { most_poses: o.most_poses.min(kept.len() - 1), ..o });
+    let search = match &objective {
+        None => None,
+        Some(o) => {
+            let score = |n: usize| -> Result<Candidate, PlanError> {
+                let (chosen, _) = choose(n)?;
+                let qs: Vec<Joints> = chosen.iter().map(|&k| kept_obs[k].q).collect();
+                let stats = cx.at(&qs);
+                let successes = stats.iter().filter(|s| s.is_some_and(|s| o.statistic.of_stats(&s) <= o.threshold_mm)).count();
+                let lower = crate::study::interval::clopper_pearson_lower(successes as f64, stats.len() as f64, o.confidence);
+                Ok(Candidate { n, successes, worlds: stats.len(), lower, meets: lower >= o.success_at_least })
+            };
+            Some(super::search(o, score)?)
+        }
+    };
+    let poses = search.as_ref().map_or(plan.poses, |s| s.planned);
+    let (chosen, o1) = choose(poses)?;
+    let random = {
+        let mut rng = crate::seeds::stream(plan.seed, crate::seeds::plan::RANDOM);
+        let mut s = rand::seq::index::sample(&mut rng, kept.len(), poses).into_vec();
+        s.sort_unstable();
+        crate::identify::detmax::o1_of(&jac, &s)
+    };
+    // Rows: training by sphere, then validation.
+    let mut order: Vec<usize> = chosen.clone();
+    order.sort_by_key(|&k| (group_of[kept[k]], k));
+    let mut rows: Vec<DeviceRow> = Vec::with_capacity(order.len() + validation.len());
+    let mut observed_w_mm = Vec::new();
+    let mut centring_mm = Vec::new();
+    for (n, &k) in order.iter().enumerate() {
+        let g = group_of[kept[k]];
+        rows.push(DeviceRow { label: format!("p{:03}_s{}", n + 1, g + 1), split: TRAIN, group: Some(g), q: kept_obs[k].q });
+        observed_w_mm.push(kept_obs[k].tcp_world_mm);
+        centring_mm.push((forward(&truth, &mut st, &kept_obs[k].q) - kept_obs[k].tcp_world_mm).norm());
+    }
+    for (k, q) in validation.iter().enumerate() {
+        rows.push(DeviceRow { label: format!("v{:03}", k + 1), split: VALIDATION, group: None, q: *q });
+    }
+    let qs: Vec<Joints> = rows.iter().map(|r| r.q).collect();
+    let mid: Joints = std::array::from_fn(|i| 0.5 * (plan.limits[i].min + plan.limits[i].max));
+    let tour = super::select::tour_from(&mid, &qs);
+    let colliding_moves = super::select::colliding_moves_with(&qs, &tour.0, |st, q| {
+        forward(&start, st, q);
+        world.first_collision(st).is_some()
+    });
+    // The prediction: the pilot on the device's own observations, then the worlds.
+    let chosen_obs: Vec<Observation> = order.iter().map(|&k| kept_obs[k]).collect();
+    let pilot = crate::identify::identify(&start, &set, &chosen_obs, &crate::identify::FitOptions { truncate: true, ..fit });
+    let unidentifiable: Vec<String> = set.names().into_iter().zip(&pilot.values).filter(|(_, v)| v.is_none()).map(|(n, _)| n).collect();
+    let pilot_median_mm = pilot.model.as_ref().map_or(f64::NAN, |model| Statistic::Median.of_stats(&cx.errors(model)));
+    let stats = cx.at(&chosen_obs.iter().map(|o| o.q).collect::<Vec<_>>());
+    let per_world_mm: Vec<f64> = stats.iter().map(|s| s.map_or(f64::NAN, |s| Statistic::Median.of_stats(&s))).collect();
+    let sorted = crate::study::stats::finite_sorted(&per_world_mm);
+    let q = |p: f64| crate::numeric::quantile(&sorted, p);
+    let prediction = DevicePrediction {
+        noise_mm,
+        quantiles_mm: [q(0.1), q(0.5), q(0.9)],
+        median_interval_mm: super::quantile_interval(&sorted, 0.5, super::COMPARISON_CONFIDENCE),
+        worlds: sorted.len(),
+        per_world_mm,
+        pilot_median_mm,
+        unidentifiable,
+    };
+    Ok(DeviceOutcome {
+        candidates: observations.len(),
+        refused,
+        validation_tried,
+        rows,
+        observed_w_mm,
+        centring_mm,
+        groups_w_mm,
+        o1: (o1, random),
+        params: set.names(),
+        tour,
+        colliding_moves,
+        prediction,
+        poses,
+        search,
+        objective,
+        start,
+        links,
+        device,
+    })
+}
+
+/// The simulated worlds of a device plan: the true arm observed at a set of configurations with
+/// the pool's observation error (world w's noise from its own stream), identified from the model
+/// before calibration, and compared with the true arm at the validation configurations.
+struct Worlds<'a> {
+    plan: &'a DevicePlan,
+    start: &'a RobotModel,
+    truth: &'a RobotModel,
+    set: &'a ParamSet,
+    fit: &'a crate::identify::FitOptions,
+    validation: &'a [Joints],
+    truth_val: &'a [Vector3<f64>],
+    noise_mm: f64,
+}
+
+impl Worlds<'_> {
+    /// The held-out errors of `model` at the validation configurations.
+    fn errors(&self, model: &RobotModel) -> ErrorStats {
+        let mut st = KinState::default();
+        let e: Vec<f64> = self.validation.iter().zip(self.truth_val).map(|(q, t)| (forward(model, &mut st, q) - t).norm()).collect();
+        ErrorStats::of(&e)
+    }
+
+    /// Each world's held-out statistics at the training configurations `qs` (`None`: the world's
+    /// identification gave no model).
+    fn at(&self, qs: &[Joints]) -> Vec<Option<ErrorStats>> {
+        let seed = crate::seeds::split_seed(self.plan.seed, crate::seeds::plan::WORLDS);
+        let unit = Normal::new(0.0, 1.0).expect("unit normal");
+        (0..self.plan.worlds)
+            .into_par_iter()
+            .map(|w| {
+                let mut rng = crate::seeds::stream(seed, w as u64);
+                let mut st = KinState::default();
+                let obs: Vec<Observation> = qs
+                    .iter()
+                    .map(|q| {
+                        let p = forward(self.truth, &mut st, q);
+                        Observation { q: *q, tcp_world_mm: p + Vector3::from_fn(|_, _| self.noise_mm * unit.sample(&mut rng)) }
+                    })
+                    .collect();
+                let fit = crate::identify::identify(self.start, self.set, &obs, self.fit);
+                fit.model.map(|m| self.errors(&m))
+            })
+            .collect()
+    }
+}
+
+/// `plan.validation` configurations within the limits, free of collision, the device's TCP in the
+/// workspace of interest, spread by farthest-point sampling of the TCP (the first nearest the
+/// box's centre) among candidates drawn from their own streams (`seeds::plan::POOL`, i). Returns
+/// them and the candidates drawn.
+fn validation_configurations(plan: &DevicePlan, limited: &RobotModel, world: &CollisionWorld) -> Result<(Vec<Joints>, usize), PlanError> {
+    let seed = crate::seeds::split_seed(plan.seed, crate::seeds::plan::POOL);
+    let want = plan.validation * VALIDATION_CANDIDATES_PER_POSE;
+    let most = want.saturating_mul(MOST_TRIES_PER_VALIDATION);
+    let mut inside: Vec<(Joints, Vector3<f64>)> = Vec::with_capacity(want);
+    let mut tried = 0;
+    let mut chunk = (4 * want).max(256);
+    while inside.len() < want && tried < most {
+        let end = (tried + chunk).min(most);
+        let found: Vec<Option<(Joints, Vector3<f64>)>> = (tried..end)
+            .into_par_iter()
+            .map_init(KinState::default, |st, i| {
+                let q = uniform_configuration(limited, 0.0, &mut crate::seeds::stream(seed, i as u64));
+                forward(limited, st, &q);
+                let p = st.tcp_base;
+                (plan.workspace.contains(&p) && world.first_collision(st).is_none()).then_some((q, p))
+            })
+            .collect();
+        for f in found {
+            tried += 1;
+            if let Some(x) = f {
+                inside.push(x);
+                if inside.len() == want {
+                    break;
+                }
+            }
+        }
+        chunk *= 2;
+    }
+    if inside.len() < plan.validation {
+        return Err(PlanError::new(
+            &plan.path,
+            "cell.workspace_min_mm",
+            format!(
+                "{} of {tried} configurations drawn within the limits put the device's TCP in the workspace of interest free of collision: fewer than validation = {}",
+                inside.len(),
+                plan.validation
+            ),
+        ));
+    }
+    let centre = (plan.workspace.min + plan.workspace.max) / 2.0;
+    let first =
+        (0..inside.len()).min_by(|&a, &b| (inside[a].1 - centre).norm().total_cmp(&(inside[b].1 - centre).norm())).expect("not empty");
+    let mut chosen = vec![first];
+    let mut nearest: Vec<f64> = inside.iter().map(|(_, p)| (p - inside[first].1).norm()).collect();
+    while chosen.len() < plan.validation {
+        let next = (0..inside.len()).max_by(|&a, &b| nearest[a].total_cmp(&nearest[b]).then(b.cmp(&a))).expect("not empty");
+        chosen.push(next);
+        for (k, (_, p)) in inside.iter().enumerate() {
+            nearest[k] = nearest[k].min((p - inside[next].1).norm());
+        }
+    }
+    chosen.sort_unstable();
+    Ok((chosen.into_iter().map(|k| inside[k].0).collect(), tried))
+}
+
+/// The controller's joint values of `q` in degrees.
+fn controller_deg(plan: &DevicePlan, q: &Joints) -> [f64; JOINTS] {
+    let qc = plan.robot.coupling.as_ref().map_or(*q, |c| c.controller_from_model(q));
+    qc.map(f64::to_degrees)
+}
+
+/// The measurement file of a device plan: the training rows with the joint columns filled (the
+/// configuration the device was centred at in the planning world: the robot is brought there and
+/// the device's centring loop finishes the job; the recorded joints replace these) and their
+/// sphere's nominal centre in {W} in the position columns (the centres the ballbar locates replace
+/// them); the validation rows with empty positions (a laser tracker registered to {W} on the
+/// sphere nests fills them).
+pub fn csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
+    s.push_str("# joints = controller\n");
+    let _ = writeln!(s, "# robot = {}", plan.robot_name);
+    s.push_str("# frame = {W}, the datum spheres' frame\n");
+    s.push_str("# TriCal plan (calsim plan): a train row is a configuration centred on datum sphere N (its label ends in _sN); its position is that sphere's nominal centre\n");
+    s.push_str("# replace the joints with those recorded when the centring loop ends and the centres with the ballbar's; holdout rows: a tracker registered to {W} on the nests\n");
+    s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
+    for r in &o.rows {
+        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v}")).collect();
+        let xyz = r.group.map_or_else(
+            || ",,".to_string(),
+            |g| {
+                let c = o.groups_w_mm[g];
+                format!("{},{},{}", c[0], c[1], c[2])
+            },
+        );
+        let _ = writeln!(s, "{},{TRAINING},TCP,{},{},{xyz}", r.label, r.split, q.join(","));
+    }
+    s
+}
+
+/// The plain joint list: pose, split, sphere, controller joint values in degrees.
+pub fn joint_list(plan: &DevicePlan, o: &DeviceOutcome) -> String {
+    let mut s =
+        String::from("# pose split sphere q1_deg q2_deg q3_deg q4_deg q5_deg q6_deg (controller values; sphere - for validation)\n");
+    for r in &o.rows {
+        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v:.6}")).collect();
+        let g = r.group.map_or_else(|| "-".to_string(), |g| (g + 1).to_string());
+        let _ = writeln!(s, "{} {} {g} {}", r.label, r.split, q.join(" "));
+    }
+    s
+}
+
+/// The tour as CSV: step, pose, split, sphere, joint values (deg, controller), the largest joint
+/// move to it (deg).
+pub fn tour_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
+    let mut s = String::from("step,pose,split,sphere,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
+    let mut prev: Option<Joints> = None;
+    for (k, &i) in o.tour.0.iter().enumerate() {
+        let r = &o.rows[i];
+        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v:.6}")).collect();
+        let step = prev.map_or(0.0, |p| p.iter().zip(&r.q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
+        let g = r.group.map_or_else(String::new, |g| (g + 1).to_string());
+        let _ = writeln!(s, "{},{},{},{g},{},{step:.3}", k + 1, r.label, r.split, q.join(","));
+        prev = Some(r.q);
+    }
+    s
+}
+
+/// `plan.md` of a device plan.
+pub fn markdown(plan: &DevicePlan, o: &DeviceOutcome) -> String {
+    let mut s = String::new();
+    let p = &o.prediction;
+    let spheres = o.groups_w_mm.len();
+    let _ = writeln!(s, "# Calibration plan: {}\n", plan.path.file_name().map_or_else(String::new, |f| f.to_string_lossy().into_owned()));
+    let _ = writeln!(
+        s,
+        "Robot {} ({}), the TriCal device centred on {spheres} datum spheres ({}), the device's {} parameters ({}).\n",
+        plan.robot_name,
+        plan.robot.nominal.data().name,
+        plan.scenario_file.as_deref().map_or_else(|| "the device's default scenario".to_string(), |f| format!("scenario {f}")),
+        o.params.len(),
+        o.params.join(", ")
+    );
+    let _ = writeln!(s, "## Poses\n");
+    let _ = writeln!(
+        s,
+        "- Pool: the device's campaign centred {} configurations on the {spheres} spheres ({} per sphere, tool axes within its approach cone); {} kept within the plan's limits and free of collision with the floor, the keep-out boxes and the device's fixtures (refused: joint limits {}, collision {}).",
+        o.candidates,
+        o.candidates / spheres.max(1),
+        o.candidates - o.refused[0] - o.refused[1],
+        o.refused[0],
+        o.refused[1]
+    );
+    let per: Vec<String> =
+        (0..spheres).map(|g| format!("{} on sphere {}", o.rows.iter().filter(|r| r.group == Some(g)).count(), g + 1)).collect();
+    let _ = writeln!(s, "- Training: {} configurations chosen by DETMAX ({}), session {TRAINING} in `poses.csv`.", o.poses, per.join(", "));
+    let _ = writeln!(
+        s,
+        "- Validation: {} configurations spread over the workspace of interest (of {} drawn within the limits), marked `{VALIDATION}`: the prediction's held-out points; the TriCal cannot measure them, a laser tracker registered to {{W}} on the sphere nests can.",
+        plan.validation, o.validation_tried
+    );
+    let _ = writeln!(s, "- O1 of the chosen set: {:.6} (a random set of the same size from the same pool: {:.6}).", o.o1.0, o.o1.1);
+    let most = o.centring_mm.iter().copied().fold(0.0, f64::max);
+    let _ = writeln!(
+        s,
+        "- Centring: at every chosen configuration the true arm's TCP lies within {most:.4} mm of its sphere's located centre (the device's centring loop, the arm's repeatability and effects outside its model in the planning world)."
+    );
+    let _ = writeln!(
+        s,
+        "- Tour (`tour.csv`): greedy nearest neighbour in joint space, {:.1} deg of joint-space path; moves through a collision (checked every {:.0} deg): {}.\n",
+        o.tour.1.to_degrees(),
+        super::select::MOVE_STEP_RAD.to_degrees(),
+        if o.colliding_moves.is_empty() {
+            "none".to_string()
+        } else {
+            o.colliding_moves
+                .iter()
+                .map(|(a, b)| format!("{} -> {}", o.rows[o.tour.0[*a]].label, o.rows[o.tour.0[*b]].label))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    );
+    if let (Some(obj), Some(search)) = (&o.objective, &o.search) {
+        objective_markdown(&mut s, plan, obj, search);
+    }
+    let _ = writeln!(s, "## Parameters the plan cannot identify\n");
+    if p.unidentifiable.is_empty() {
+        let _ = writeln!(s, "None of the device's {} parameters.\n", o.params.len());
+    } else {
+        let _ = writeln!(s, "{}: kept at their values before calibration.\n", p.unidentifiable.join(", "));
+    }
+    let _ = writeln!(s, "## Predicted held-out error\n");
+    let [a, b, c] = p.quantiles_mm;
+    let (lo, hi) = p.median_interval_mm;
+    let end = |x: f64| if x.is_finite() { format!("{x:.4}") } else { "unbounded".to_string() };
+    let _ = writeln!(
+        s,
+        "The held-out median error after calibration at the validation configurations over {} simulated worlds: the true arm of the planning world observed at the chosen configurations with {:.4} mm per coordinate (the device's observations in the planning world against the true arm's model, pooled over the pool kept: centring, repeatability, the ballbar's location of the spheres and the arm's effects outside its model), identified from the model before calibration, compared with the true arm at the validation configurations. The pilot identifies the device's own observations at the chosen configurations.\n",
+        p.worlds, p.noise_mm
+    );
+    let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | median's 90 % interval, mm | pilot, mm |\n|---|---|---|---|---|");
+    let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {}-{} | {:.4} |\n", end(lo), end(hi), p.pilot_median_mm);
+    if p.pilot_median_mm > c {
+        let _ = writeln!(
+            s,
+            "The pilot lies above P90: the device's own observations carry what the worlds leave out (below), so the worlds' figures are a lower bound of what this plan buys on this arm.\n"
+        );
+    }
+    let _ = writeln!(
+        s,
+        "The worlds draw the observation error independently at every configuration; the TriCal's errors are partly shared by the configurations of one sphere (the ballbar's location of its centre) and the arm's effects outside its model are systematic: `calsim run` on the device's scenario simulates them whole.\n"
+    );
+    let _ = writeln!(s, "## Files\n");
+    let _ = writeln!(
+        s,
+        "- `poses.csv`: the calibrate measurement file: each training row a configuration centred on the sphere its label ends with (`_s1` ...), its sphere's nominal centre in {{W}} as its position; the validation rows with empty positions."
+    );
+    let _ = writeln!(s, "- `joints.txt`: the same configurations as a plain joint list, with their sphere.");
+    let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
+    let _ = writeln!(
+        s,
+        "- `{0}.png`, `{0}.svg`: the device's TCP at every configuration in the base frame (top and side views), the spheres, the validation configurations ringed, the arm at {1} of them and the workspace of interest.",
+        super::plot::STEM,
+        super::plot::SHOWN
+    );
+    let _ = writeln!(
+        s,
+        "- `{}` (unless `--no-recording`): the Rerun recording, the arm and the device at every configuration in the order of the tour, the spheres and the cell, and the predicted held-out median per world.",
+        super::record::FILE
+    );
+    s
+}
+
+fn objective_markdown(s: &mut String, plan: &DevicePlan, obj: &Objective, search: &Search) {
+    let pct = |x: f64| format!("{}", (x * 1000.0).round() / 10.0);
+    let _ = writeln!(s, "## Number of poses by objective\n");
+    let _ = writeln!(
+        s,
+        "Objective: P(held-out {} <= {} mm) >= {} at {} % confidence, a world's held-out {} taken over the validation configurations (the workspace of interest). P(success) is bounded below by the one-sided Clopper-Pearson bound over {} simulated worlds (a world whose identification gives no model counts as a failure). Every count is DETMAX's set of that size from the same pool, on the same worlds. Counts doubled from {} (a third of the device's parameters) up to at most {}, then bisected.\n",
+        obj.statistic.name(),
+        obj.threshold_mm,
+        obj.success_at_least,
+        pct(obj.confidence),
+        obj.statistic.name(),
+        plan.worlds,
+        obj.fewest_poses,
+        obj.most_poses
+    );
+    let _ =
+        writeln!(s, "| poses | successes / worlds | P(success) | lower bound ({} %) | meets |\n|---|---|---|---|---|", pct(obj.confidence));
+    for c in search.by_count() {
+        let _ = writeln!(
+            s,
+            "| {} | {} / {} | {:.3} | {:.4} | {} |",
+            c.n,
+            c.successes,
+            c.worlds,
+            c.successes as f64 / c.worlds.max(1) as f64,
+            c.lower,
+            if c.meets { "yes" } else { "no" }
+        );
+    }
+    s.push('\n');
+    match search.chosen {
+        Some(n) => {
+            let _ = writeln!(s, "Chosen: {n} poses, the smallest count in the table whose lower bound clears {}.\n", obj.success_at_least);
+        }
+        None => {
+            let best = search.candidates.iter().find(|c| c.n == search.planned).expect("the planned count was scored");
+            let _ = writeln!(
+                s,
+                "Not met: no count up to {} clears {}; planned with the best found, {} poses (lower bound {:.4}).\n",
+                obj.most_poses, obj.success_at_least, best.n, best.lower
+            );
+        }
+    }
+}
