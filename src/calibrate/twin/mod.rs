@@ -293,6 +293,9 @@ impl Lsq {
 /// An orthonormal basis of the column space of `m` (its left singular vectors of singular values
 /// above 1e-9 of the largest).
 fn column_basis(m: &DMatrix<f64>) -> DMatrix<f64> {
+    if m.nrows() == 0 || m.ncols() == 0 {
+        return DMatrix::zeros(m.nrows(), 0);
+    }
     let svd = m.clone().svd(true, false);
     let u = svd.u.expect("u asked");
     let top = svd.singular_values.iter().fold(0.0f64, |x, v| x.max(*v));
@@ -989,4 +992,22 @@ fn learned_table(
         l.pose_error_std_mdeg = per_mm * (left_interval[1] - left_interval[0]).max(0.0) / (2.0 * Z95);
     }
     l
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A family with no rows (no training point where it acts) or no columns has an empty basis:
+    /// it is confounded with nothing, and no decomposition of an empty matrix is attempted.
+    #[test]
+    fn an_empty_matrix_has_an_empty_basis_confounded_with_nothing() {
+        for (rows, cols) in [(0, 3), (4, 0), (0, 0)] {
+            let b = column_basis(&DMatrix::zeros(rows, cols));
+            assert_eq!((b.nrows(), b.ncols()), (rows, 0));
+        }
+        let full = column_basis(&DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, 0.0, 0.0]));
+        assert_eq!(full.ncols(), 2);
+        assert_eq!(principal_cos(&column_basis(&DMatrix::zeros(0, 2)), &full), 0.0);
+    }
 }
