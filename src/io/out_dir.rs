@@ -444,11 +444,8 @@ pub fn remove_stale_cache_temporaries(dir: &Path) -> Result<usize, OutDirError> 
 /// `.tmp-`), sorted: what the tests of a cache's writers look for.
 #[cfg(test)]
 pub fn cache_temporaries(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n.contains(".tmp-"))
-        .collect();
+    let mut names: Vec<String> =
+        fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.contains(".tmp-")).collect();
     names.sort();
     names
 }

@@ -228,9 +228,11 @@ impl<'a> Summary<'a> {
 
 /// The result table `name` of `tables`.
 fn find<'f>(tables: &'f [(String, DataFrame)], name: &str) -> std::io::Result<&'f DataFrame> {
-    tables.iter().find(|(n, _)| n == name).map(|(_, f)| f).ok_or_else(|| {
-        std::io::Error::other(format!("summary.md: the summary shows the table {name}, which the results do not hold"))
-    })
+    tables
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, f)| f)
+        .ok_or_else(|| std::io::Error::other(format!("summary.md: the summary shows the table {name}, which the results do not hold")))
 }
 
 /// What `read` makes of the first row of the table `name` of `tables`.
@@ -494,6 +496,19 @@ mod tests {
         let e = write(tmp.path(), r).unwrap_err().to_string();
         assert!(e.contains("the table t.parquet has no column y"), "{e}");
         assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "nothing left behind");
+    }
+
+    #[test]
+    fn text_from_a_table_reads_its_rows_and_fails_on_a_missing_column() {
+        let tmp = tempfile::Builder::new().prefix("calsim-results-").tempdir().unwrap();
+        let mut r = results();
+        r.summary.text_from("t.parquet", |row| format!("{} rows, n = {} then {}.\n", row.height(), row.u64("n"), row.at(1).u64("n")));
+        let dest = write(tmp.path(), r).unwrap().dest;
+        assert_eq!(std::fs::read_to_string(dest.join("summary.md")).unwrap(), "2 rows, n = 3 then 4.\n");
+        let mut r = results();
+        r.summary.text_from("t.parquet", |row| row.f64("z").to_string());
+        let e = write(tmp.path(), r).unwrap_err().to_string();
+        assert!(e.contains("the table t.parquet has no column z"), "{e}");
     }
 
     #[test]

@@ -32,6 +32,7 @@ pub mod search;
 pub mod sheet;
 pub mod space;
 pub mod spec;
+pub mod summary;
 
 use std::collections::BTreeMap;
 use std::fs;
