@@ -92,9 +92,7 @@ pub fn results<'a>(scenario: &'a TricalScenario, r: &'a StudyResults, report: Re
 
 /// The tables of a study validated on the tracker poses: `tasks.parquet`,
 /// `compensated.parquet` (when the study ran the compensated validation), `parameters.parquet`
-/// and `validation_errors.parquet`.
-///
-/// Long by design: one block per table, in the order of the README's list of result files.
+/// and `validation_errors.parquet`, in the order of the README's list of result files.
 pub fn tables(r: &StudyResults, out: &mut Results<'_>) -> std::io::Result<()> {
     let t = &r.tasks;
     let f64c = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
@@ -127,7 +125,13 @@ pub fn tables(r: &StudyResults, out: &mut Results<'_>) -> std::io::Result<()> {
         )?;
     }
     out.table("parameters.parquet", parameter_columns(&r.set, t.iter().map(|x| (&x.task, &x.id)), &r.truth, &r.start))?;
+    out.table("validation_errors.parquet", validation_columns(r))?;
+    Ok(())
+}
 
+/// `validation_errors.parquet`: every validation pose before calibration, then after each
+/// identification validated at its poses.
+fn validation_columns(r: &StudyResults) -> Vec<Column> {
     let (mut which, mut task, mut pose, mut error, mut dbase, mut dccz) = (vec![], vec![], vec![], vec![], vec![], vec![]);
     let mut push = |label: &str, tk: Option<u32>, errs: &[f64]| {
         for (k, e) in errs.iter().enumerate() {
@@ -140,21 +144,17 @@ pub fn tables(r: &StudyResults, out: &mut Results<'_>) -> std::io::Result<()> {
         }
     };
     push("before", None, &r.before_errors);
-    for x in t {
+    for x in &r.tasks {
         if let Some(errs) = &x.errors {
             push("after", Some(x.task.index as u32), errs);
         }
     }
-    out.table(
-        "validation_errors.parquet",
-        vec![
-            Column::new("calibration".into(), which),
-            Column::new("task".into(), task),
-            Column::new("pose".into(), pose),
-            Column::new("error_mm".into(), error),
-            Column::new("distance_to_base_mm".into(), dbase),
-            Column::new("distance_to_ccz_mm".into(), dccz),
-        ],
-    )?;
-    Ok(())
+    vec![
+        Column::new("calibration".into(), which),
+        Column::new("task".into(), task),
+        Column::new("pose".into(), pose),
+        Column::new("error_mm".into(), error),
+        Column::new("distance_to_base_mm".into(), dbase),
+        Column::new("distance_to_ccz_mm".into(), dccz),
+    ]
 }
