@@ -260,7 +260,9 @@ fn markdown_table(
     cells: &[Cell<'_>],
 ) -> std::io::Result<String> {
     let missing = RefCell::new(None);
-    let mut s = format!("| {} |\n|{}\n", cells.iter().map(|c| c.0.as_str()).collect::<Vec<_>>().join(" | "), "---|".repeat(cells.len()));
+    // The header: an empty one as `| |`.
+    let head: String = cells.iter().map(|c| if c.0.is_empty() { " |".to_string() } else { format!(" {} |", c.0) }).collect();
+    let mut s = format!("|{head}\n|{}\n", "---|".repeat(cells.len()));
     for index in rows(frame) {
         let row = Row { tables, frame, index, missing: &missing };
         let shown: Vec<String> = cells.iter().map(|(_, show)| show(&row)).collect();
