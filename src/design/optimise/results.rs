@@ -12,8 +12,6 @@ use super::{Candidate, DesignSpace, Verdict};
 use crate::design::sweep::designs::DesignRow;
 use crate::io::results::{Head, Results};
 
-/// Writes one world of the winner into a directory (as `calsim run` writes its results).
-
 /// The optimiser's outcome as the report shows it.
 #[derive(Clone, Debug)]
 pub struct Outcome {

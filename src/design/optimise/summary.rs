@@ -391,6 +391,10 @@ fn robust_order(space: &DesignSpace, r: &RobustVerdict) -> Vec<(&'static str, Op
     out
 }
 
+/// A robust choice's rows of `robust.parquet`: its race score's, its held-out row under each
+/// model, its combined held-out score's.
+type ChoiceRows = (Option<usize>, Vec<Option<usize>>, Option<usize>);
+
 /// The robust table: the winner under each model and under the combined score, each on the
 /// held-out worlds under every model (read from `robust.parquet`), and whether the winner changes
 /// with the error model.
@@ -410,9 +414,8 @@ fn robust<'a>(space: &'a DesignSpace, v: &'a Verdict, r: &'a RobustVerdict, part
     ));
     let order = robust_order(space, r);
     let at = move |stage: &str, model: Option<usize>, key: &RowKey| order.iter().position(|o| o.0 == stage && o.1 == model && &o.2 == key);
-    // Per choice: its race score's row (the finalist under its criterion), its held-out row under
-    // each model and its combined held-out row.
-    let rows: Vec<(Option<usize>, Vec<Option<usize>>, Option<usize>)> = r
+    // Per choice: its race score's row (the finalist under its criterion).
+    let rows: Vec<ChoiceRows> = r
         .choices
         .iter()
         .enumerate()
@@ -420,7 +423,7 @@ fn robust<'a>(space: &'a DesignSpace, v: &'a Verdict, r: &'a RobustVerdict, part
             let key = (c.verified, c.selection.clone(), c.set_size);
             let finalist = v.finalists.iter().position(|f| f.key == v.verified[c.verified].key);
             let race = finalist.and_then(|p| at("race", (k < r.models.len()).then_some(k), &(p, c.selection.clone(), c.set_size)));
-            ((race), (0..r.models.len()).map(|m| at("held_out", Some(m), &key)).collect(), at("held_out", None, &key))
+            (race, (0..r.models.len()).map(|m| at("held_out", Some(m), &key)).collect(), at("held_out", None, &key))
         })
         .collect();
     parts.text_from("robust.parquet", move |t| robust_table(v, r, &rows, t));
@@ -428,7 +431,7 @@ fn robust<'a>(space: &'a DesignSpace, v: &'a Verdict, r: &'a RobustVerdict, part
 }
 
 /// The robust table's Markdown from `robust.parquet` (read through `t`) at the rows of each choice.
-fn robust_table(v: &Verdict, r: &RobustVerdict, rows: &[(Option<usize>, Vec<Option<usize>>, Option<usize>)], t: &Row<'_>) -> String {
+fn robust_table(v: &Verdict, r: &RobustVerdict, rows: &[ChoiceRows], t: &Row<'_>) -> String {
     let mut s = "| chosen by | design | selection | n | score on the race's worlds |".to_string();
     for m in &r.models {
         s += &format!(" held-out under {m}: estimate (interval) |");

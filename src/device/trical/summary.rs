@@ -35,13 +35,16 @@ pub fn figure_tables(r: &StudyResults, f: &Figures, paper: bool, out: &mut Resul
     Ok(())
 }
 
+/// A row of `errors.parquet`: calibration, set size, mean, median, std, p95 and max, targets failed.
+type ErrorRow = (&'static str, Option<u32>, [Option<f64>; 5], Option<u32>);
+
 /// The columns of `errors.parquet`: one row before calibration, one after at the table set size
 /// (medians over the repetitions), one for the compensated targets when the study ran them.
 fn error_columns(r: &StudyResults, f: &Figures, paper: bool) -> Vec<Column> {
     let comp: Vec<&super::study::Compensated> = r.tasks.iter().filter_map(|x| x.compensated.as_ref()).collect();
     let med = |g: fn(&crate::study::ErrorStats) -> f64| crate::study::stats::median(&comp.iter().map(|c| g(&c.stats)).collect::<Vec<_>>());
     let b = &f.before;
-    let mut rows: Vec<(&str, Option<u32>, [Option<f64>; 5], Option<u32>)> = vec![
+    let mut rows: Vec<ErrorRow> = vec![
         ("before", None, [Some(b.mean), Some(b.median), Some(b.std), Some(b.p95), Some(b.max)], None),
         ("after", Some(f.table_n as u32), [Some(f.after_mean), Some(f.after_median), Some(f.after_std), None, Some(f.after_max)], None),
     ];
