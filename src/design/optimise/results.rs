@@ -450,6 +450,13 @@ mod tests {
         assert!(text.contains("ranks the answer 2 of 2"), "{text}");
         assert!(text.contains("with a longer campaign (3.000 h against 2.500 h)"), "{text}");
         assert!(text.contains("3 of the race's rows meet every constraint"), "{text}");
+        // The held-out table shows the rows of verified.parquet, the leader's paired column included.
+        assert!(
+            text.contains(
+                "| 1 | 4 points, restart 0 #1 | detmax | 450 | 0.970 | 0.920-0.970 | 0.970 | 3.000 | 40 | 0 | undecided | leader |"
+            ),
+            "{text}"
+        );
         // No row meets it: the race's first, and the summary says the race's worlds cannot show it.
         let undecided: Vec<DesignRow> = rows.iter().map(|r| DesignRow { feasibility: Feasibility::Undecided, ..r.clone() }).collect();
         let v = Verdict { race_rows: undecided.clone(), answer: answer_of(&s, &undecided), ..o.verdict.clone() };
