@@ -52,7 +52,7 @@ def test_run_returns_every_table_as_a_dataframe_with_the_overrides_applied(small
 
 def test_run_checks_are_a_dataframe_of_the_published_figures(small_run: calsim.RunResult) -> None:
     checks = small_run.checks
-    assert checks.columns == ["figure", "published", "published_value", "calsim", "value", "band", "result"]
+    assert checks.columns == ["figure", "published", "published_value", "calsim", "value", "band", "result", "scope"]
     assert set(checks["result"].unique()) <= {"pass", "miss", "-"}
     before = checks.filter(pl.col("figure").str.starts_with("before calibration: mean error"))
     assert before.height == 1 and before["published_value"][0] == pytest.approx(2.628)

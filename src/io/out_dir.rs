@@ -454,19 +454,19 @@ pub fn remove_stale_cache_temporaries(dir: &Path) -> Result<usize, OutDirError> 
     Ok(removed)
 }
 
+/// The names of the temporaries of [`write_cache_file`] in `dir` (every entry whose name holds
+/// `.tmp-`), sorted: what the tests of a cache's writers look for.
+#[cfg(test)]
+pub fn cache_temporaries(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> =
+        fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).filter(|n| n.contains(".tmp-")).collect();
+    names.sort();
+    names
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn cache_temporaries(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.contains(".tmp-"))
-            .collect();
-        names.sort();
-        names
-    }
 
     #[test]
     fn a_new_file_never_replaces_one_and_leaves_no_temporary() {

@@ -69,6 +69,16 @@ impl Row<'_> {
         self.index
     }
 
+    /// The number of rows of its table.
+    pub fn height(&self) -> usize {
+        self.frame.height()
+    }
+
+    /// The rows of its table whose column `name` holds the text `value`.
+    pub fn count(&self, name: &str, value: &str) -> usize {
+        (0..self.height()).filter(|&i| self.at(i).str(name) == value).count()
+    }
+
     /// A number (floating or integer column; a null is NaN).
     pub fn f64(&self, name: &str) -> f64 {
         match self.value(name) {
@@ -125,11 +135,20 @@ impl Row<'_> {
 /// A column of a summary table: its header and how a row shows in it.
 pub type Cell<'a> = (String, Box<dyn Fn(&Row<'_>) -> String + 'a>);
 
+/// A cell of a summary table from its header and how a row shows in it.
+pub fn cell<'a>(header: impl Into<String>, show: impl Fn(&Row<'_>) -> String + 'a) -> Cell<'a> {
+    (header.into(), Box::new(show))
+}
+
+/// Text read from a result table (its first row, and any other row or table through it).
+pub type Read<'a> = Box<dyn Fn(&Row<'_>) -> String + 'a>;
+
 /// Which rows of a table a summary shows, in which order (the frame is the written table).
 pub type Rows<'a> = Box<dyn Fn(&DataFrame) -> Vec<usize> + 'a>;
 
 enum Part<'a> {
     Text(String),
+    TextFrom { table: String, read: Read<'a> },
     Table { table: String, rows: Rows<'a>, cells: Vec<Cell<'a>> },
     Figures(String),
 }
@@ -144,6 +163,14 @@ impl<'a> Summary<'a> {
     /// Text, as Markdown.
     pub fn text(&mut self, text: impl Into<String>) -> &mut Self {
         self.parts.push(Part::Text(text.into()));
+        self
+    }
+
+    /// Text whose figures are read from the result table `table` (a name of [`Results::table`]):
+    /// `read` is given its first row (an empty table reads as missing values and makes the
+    /// rendering fail naming the column).
+    pub fn text_from(&mut self, table: &str, read: impl Fn(&Row<'_>) -> String + 'a) -> &mut Self {
+        self.parts.push(Part::TextFrom { table: table.to_string(), read: Box::new(read) });
         self
     }
 
@@ -183,11 +210,13 @@ impl<'a> Summary<'a> {
                         file.push_str(&format!("![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n\n", w.caption, w.stem, w.caption, w.stem));
                     }
                 }
+                Part::TextFrom { table, read } => {
+                    let t = read_text(tables, &table, &read)?;
+                    file.push_str(&t);
+                    shown.push_str(&t);
+                }
                 Part::Table { table, rows, cells } => {
-                    let frame = tables.iter().find(|(n, _)| *n == table).map(|(_, f)| f).ok_or_else(|| {
-                        std::io::Error::other(format!("summary.md: the summary shows the table {table}, which the results do not hold"))
-                    })?;
-                    let t = markdown_table(tables, &table, frame, &rows(frame), &cells)?;
+                    let t = markdown_table(tables, &table, find(tables, &table)?, &rows, &cells)?;
                     file.push_str(&t);
                     shown.push_str(&t);
                 }
@@ -197,27 +226,50 @@ impl<'a> Summary<'a> {
     }
 }
 
-/// The Markdown table of rows `rows` of `frame` (the table `name` of `tables`) with the columns
-/// `cells`.
+/// The result table `name` of `tables`.
+fn find<'f>(tables: &'f [(String, DataFrame)], name: &str) -> std::io::Result<&'f DataFrame> {
+    tables
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, f)| f)
+        .ok_or_else(|| std::io::Error::other(format!("summary.md: the summary shows the table {name}, which the results do not hold")))
+}
+
+/// What `read` makes of the first row of the table `name` of `tables`.
+fn read_text(tables: &[(String, DataFrame)], name: &str, read: &Read<'_>) -> std::io::Result<String> {
+    let missing = RefCell::new(None);
+    let text = read(&Row { tables, frame: find(tables, name)?, index: 0, missing: &missing });
+    checked(name, missing, text)
+}
+
+/// `text`, or the error naming the column of the table `name` that a row lacked.
+fn checked(name: &str, missing: RefCell<Option<String>>, text: String) -> std::io::Result<String> {
+    match missing.into_inner() {
+        Some(column) => Err(std::io::Error::other(format!("summary.md: the table {name} has no column {column}"))),
+        None => Ok(text),
+    }
+}
+
+/// The Markdown table of the rows `rows` picks of `frame` (the table `name` of `tables`) with the
+/// columns `cells`.
 fn markdown_table(
     tables: &[(String, DataFrame)],
     name: &str,
     frame: &DataFrame,
-    rows: &[usize],
+    rows: &Rows<'_>,
     cells: &[Cell<'_>],
 ) -> std::io::Result<String> {
     let missing = RefCell::new(None);
-    let mut s = format!("| {} |\n|{}\n", cells.iter().map(|c| c.0.as_str()).collect::<Vec<_>>().join(" | "), "---|".repeat(cells.len()));
-    for &index in rows {
+    // The header: an empty one as `| |`.
+    let head: String = cells.iter().map(|c| if c.0.is_empty() { " |".to_string() } else { format!(" {} |", c.0) }).collect();
+    let mut s = format!("|{head}\n|{}\n", "---|".repeat(cells.len()));
+    for index in rows(frame) {
         let row = Row { tables, frame, index, missing: &missing };
         let shown: Vec<String> = cells.iter().map(|(_, show)| show(&row)).collect();
         s.push_str(&format!("| {} |\n", shown.join(" | ")));
     }
     s.push('\n');
-    match missing.into_inner() {
-        Some(column) => Err(std::io::Error::other(format!("summary.md: the table {name} has no column {column}"))),
-        None => Ok(s),
-    }
+    checked(name, missing, s)
 }
 
 /// Where the manifest's provenance comes from: the head of a scenario's run (name, path, sha256,
@@ -446,6 +498,19 @@ mod tests {
         let e = write(tmp.path(), r).unwrap_err().to_string();
         assert!(e.contains("the table t.parquet has no column y"), "{e}");
         assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "nothing left behind");
+    }
+
+    #[test]
+    fn text_from_a_table_reads_its_rows_and_fails_on_a_missing_column() {
+        let tmp = tempfile::Builder::new().prefix("calsim-results-").tempdir().unwrap();
+        let mut r = results();
+        r.summary.text_from("t.parquet", |row| format!("{} rows, n = {} then {}.\n", row.height(), row.u64("n"), row.at(1).u64("n")));
+        let dest = write(tmp.path(), r).unwrap().dest;
+        assert_eq!(std::fs::read_to_string(dest.join("summary.md")).unwrap(), "2 rows, n = 3 then 4.\n");
+        let mut r = results();
+        r.summary.text_from("t.parquet", |row| row.f64("z").to_string());
+        let e = write(tmp.path(), r).unwrap_err().to_string();
+        assert!(e.contains("the table t.parquet has no column z"), "{e}");
     }
 
     #[test]

@@ -318,18 +318,33 @@ fn interval_with_missing(sorted: &[f64], missing: usize, confidence: f64) -> (f6
     }
 }
 
-/// The published-versus-reproduced table of a summary (one world), under a heading: each figure
-/// of this world beside its band, without a verdict (one world is one draw; `calsim check` judges
-/// the figures over worlds).
-pub fn checks_markdown(heading: &str, checks: &[Check]) -> String {
-    let mut s = format!(
+/// The published-versus-reproduced table of a summary (one world), under a heading, rendered from
+/// `checks.parquet` ([`check_columns`], which a run adds to its world's results): each figure of
+/// this world beside its band, without a verdict (one world is one draw; `calsim check` judges the
+/// figures over worlds).
+pub fn checks_summary(heading: &str, parts: &mut crate::io::results::Summary<'_>) {
+    use crate::io::results::{Summary, cell};
+    parts.text(format!(
         "## {heading}\n\nOne simulated world, one draw of each figure; whether the model reproduces a figure is judged over \
-         worlds by `calsim check`.\n\n| figure | published | calsim (this world) | band | this world |\n|---|---|---|---|---|\n"
+         worlds by `calsim check`.\n\n"
+    ));
+    parts.table(
+        "checks.parquet",
+        Summary::all_rows(),
+        vec![
+            cell("figure", |r| r.str("figure")),
+            cell("published", |r| r.str("published")),
+            cell("calsim (this world)", |r| r.str("calsim")),
+            cell("band", |r| r.str("band")),
+            // What this world says of the figure, as [`Check::this_world`].
+            cell("this world", |r| match (r.str("scope"), r.str("result").as_str()) {
+                (scope, _) if !scope.is_empty() => scope,
+                (_, "pass") => "in band".to_string(),
+                (_, "miss") => "outside band".to_string(),
+                _ => "-".to_string(),
+            }),
+        ],
     );
-    for c in checks {
-        let _ = writeln!(s, "| {} | {} | {} | {} | {} |", c.figure, c.published, c.reproduced, c.band, c.this_world());
-    }
-    s
 }
 
 /// The comparison as a text table for the terminal (columns as wide as their widest cell). With
@@ -652,6 +667,7 @@ pub fn check_columns(checks: &[Check]) -> Vec<polars::prelude::Column> {
         Column::new("value".into(), checks.iter().map(|c| c.value).collect::<Vec<_>>()),
         s("band", checks.iter().map(|c| c.band.clone()).collect()),
         s("result", checks.iter().map(|c| verdict_word(c.pass).to_string()).collect()),
+        Column::new("scope".into(), checks.iter().map(|c| c.scope.clone()).collect::<Vec<_>>()),
     ]
 }
 

@@ -32,6 +32,7 @@ pub mod search;
 pub mod sheet;
 pub mod space;
 pub mod spec;
+pub mod summary;
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -1253,16 +1254,7 @@ pub fn compared(path: &Path) -> Result<Vec<Candidate>, crate::design::sweep::Swe
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn temporaries(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.contains(".tmp-"))
-            .collect();
-        names.sort();
-        names
-    }
+    use crate::io::out_dir::cache_temporaries as temporaries;
 
     /// The spread starts: every stratum of every variable holds one start, inside [0.05, 0.95],
     /// the same for the same seed and count, other starts for another count; and their closest

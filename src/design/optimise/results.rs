@@ -1,7 +1,8 @@
 //! What `calsim optimise` writes (through the io kit, atomically): `trace.parquet` (every design
 //! the search evaluated, its estimate and interval on the search worlds), `race.parquet` (the
 //! finalists on more search worlds), `verified.parquet` (the held-out worlds: the reported
-//! figures), `best_design.toml` (runnable from any directory), `summary.md` and the figures.
+//! figures), `answer.parquet` (the answer at each stage), `best_design.toml` (runnable from any
+//! directory), `summary.md` (rendered from the tables, [`super::summary`]) and the figures.
 
 use std::path::{Path, PathBuf};
 
@@ -10,8 +11,6 @@ use polars::prelude::Column;
 use super::{Candidate, DesignSpace, Verdict};
 use crate::design::sweep::designs::DesignRow;
 use crate::io::results::{Head, Results};
-
-/// Writes one world of the winner into a directory (as `calsim run` writes its results).
 
 /// The optimiser's outcome as the report shows it.
 #[derive(Clone, Debug)]
@@ -101,46 +100,6 @@ fn no_negative_zero(v: &mut toml::Value) {
     }
 }
 
-/// The objective's verdict on a held-out row in words: each constraint met (its confidence bound
-/// on the right side of the target), not met (on the wrong side) or not shown (the interval
-/// holds the target: more worlds would decide).
-pub fn status_words(space: &DesignSpace, r: &DesignRow) -> String {
-    use crate::study::interval::{clopper_pearson_lower, clopper_pearson_upper};
-    let o = &space.objective;
-    let mut out = Vec::new();
-    if let (Some(target), Some((p, _))) = (o.success_at_least, r.success) {
-        let n = f64::from(r.worlds);
-        let (lo, hi) = (clopper_pearson_lower(p * n, n, o.confidence), clopper_pearson_upper(p * n, n, o.confidence));
-        let what = format!(
-            "P({} <= {} mm) >= {target} at {} % confidence",
-            o.statistic.label(),
-            o.threshold_mm.unwrap_or(f64::NAN),
-            o.confidence * 100.0
-        );
-        out.push(if lo >= target {
-            format!("{what}: **met** (P = {} over {} worlds, its lower bound {} >= {target})", f3(p), r.worlds, f3(lo))
-        } else if hi < target {
-            format!("{what}: **not met** (P = {} over {} worlds, its upper bound {} < {target})", f3(p), r.worlds, f3(hi))
-        } else {
-            format!(
-                "{what}: **not shown** (P = {} over {} worlds, bounds {}-{} hold {target}: more worlds would decide)",
-                f3(p),
-                r.worlds,
-                f3(lo),
-                f3(hi)
-            )
-        });
-    }
-    if let Some(h) = o.campaign_h_at_most {
-        let met = r.campaign_h <= h;
-        out.push(format!("campaign {} h <= {h} h: **{}**", f3(r.campaign_h), if met { "met" } else { "not met" }));
-    }
-    if let Some(n) = o.set_size_at_most {
-        out.push(format!("set size {} <= {n}: **{}**", r.design.set_size, if r.design.set_size <= n { "met" } else { "not met" }));
-    }
-    out.join("; ")
-}
-
 /// The FITTED values of the base scenario (`section.key = value`, from its text's comments), the
 /// error model a design's figures rest on; empty when the file cannot be read or has none.
 pub fn fitted_values(space: &DesignSpace) -> Vec<String> {
@@ -167,107 +126,6 @@ pub fn fitted_values(space: &DesignSpace) -> Vec<String> {
     out
 }
 
-/// The answer rule in words, how it chose the answer `r` (a held-out row of `v`), and, when the
-/// held-out table does not rank the answer first, why each design above it is not the answer.
-pub fn answer_words(space: &DesignSpace, v: &Verdict, r: &DesignRow) -> String {
-    use super::AnswerBasis;
-    let o = &space.objective;
-    if v.robust.is_some() {
-        return "Answer rule: the winner under the combined score of `[robust]` on the race's worlds (the table below). The held-out \
-                worlds report the answer and do not choose it.\n\n"
-            .to_string();
-    }
-    let mut s = String::from("Answer rule: ");
-    let meet_rule = o.goal == crate::design::sweep::objective::Goal::MaximiseSuccess && o.success_at_least.is_some();
-    if meet_rule {
-        s += "of the race's rows (every finalist, set size and selection on the search worlds, `race.parquet`), those that meet \
-              every constraint at the confidence; of them the smallest campaign, ties broken by the smaller set size, then the \
-              higher P, then the race's order. Without such a row, the race's first (rank 1: the undecided designs before those \
-              that fail a constraint, the highest P within each). ";
-    } else {
-        s += "the race's first on the search worlds (`race.parquet` rank 1): the designs meeting every constraint at the confidence \
-              first, then those the worlds leave undecided, then the rest; within each the best objective estimate; ties by the \
-              finalists' order (count, then search score), then selection, then the smaller set size. ";
-    }
-    s += "The held-out worlds report the answer and do not choose it (chosen on them, the figure would be the luckiest of the \
-          verified designs on the worlds that chose it).\n\n";
-    let basis = v.answer.map(|a| a.1);
-    let worlds = v.race_worlds;
-    if meet_rule {
-        s += &match basis {
-            Some(AnswerBasis::SmallestMeeting) => {
-                let n = v.race_rows.iter().filter(|x| x.feasibility == crate::design::sweep::designs::Feasibility::Feasible).count();
-                format!(
-                    "Here: {n} of the race's rows meet every constraint at the confidence; the answer is the one with the smallest campaign.\n\n"
-                )
-            }
-            _ => {
-                let n = f64::from(worlds);
-                let best = crate::study::interval::clopper_pearson_lower(n, n, o.confidence);
-                format!(
-                    "Here: no row of the race meets every constraint at {} % confidence on its {worlds} worlds{}; the answer is the race's first.\n\n",
-                    o.confidence * 100.0,
-                    if best < o.success_at_least.unwrap_or(0.0) {
-                        format!(
-                            " (even {worlds} successes of {worlds} bound P below by {} < {}: the race cannot show P >= {} at this confidence)",
-                            f3(best),
-                            o.success_at_least.unwrap_or(0.0),
-                            o.success_at_least.unwrap_or(0.0)
-                        )
-                    } else {
-                        String::new()
-                    }
-                )
-            }
-        };
-    }
-    let above: Vec<&DesignRow> = v.held_out_rows.iter().filter(|h| h.rank < r.rank).collect();
-    if above.is_empty() {
-        s += "The held-out table below ranks the answer first.\n\n";
-        return s;
-    }
-    let answer_race = v.answer.and_then(|(i, _)| v.race_rows.get(i));
-    let why = |h: &DesignRow| -> String {
-        let c = &v.verified[h.design.point];
-        let head = format!("{} ({} sets of {}: {})", c.label, h.design.selection, h.design.set_size, f3(h.estimate));
-        if c.compared {
-            return format!("{head}: a compared design (a sweep file's), not a finalist the rule chooses from");
-        }
-        let raced = v.race_rows.iter().find(|x| {
-            v.finalists[x.design.point].key == c.key && x.design.selection == h.design.selection && x.design.set_size == h.design.set_size
-        });
-        match (raced, answer_race) {
-            (Some(x), Some(a)) if basis == Some(AnswerBasis::SmallestMeeting) => {
-                if x.feasibility != crate::design::sweep::designs::Feasibility::Feasible {
-                    format!("{head}: on the race's worlds it does not meet every constraint at the confidence ({})", x.feasibility.label())
-                } else if x.campaign_h > a.campaign_h {
-                    format!("{head}: it meets them too, with a longer campaign ({} h against {} h)", f3(x.campaign_h), f3(a.campaign_h))
-                } else {
-                    format!("{head}: it meets them too, at the same campaign with a larger set or lower P on the race's worlds")
-                }
-            }
-            (Some(x), Some(a)) => format!(
-                "{head}: the race ranks it {} (P = {} over {} worlds, {}) below the answer (P = {}, {})",
-                x.rank,
-                f3(x.estimate),
-                x.worlds,
-                x.feasibility.label(),
-                f3(a.estimate),
-                a.feasibility.label()
-            ),
-            _ => format!("{head}: not a row of the race"),
-        }
-    };
-    s += &format!(
-        "The held-out table below ranks the answer {} of {}; above it: {}. The held-out worlds report these figures and choose \
-         nothing: the paired column (worlds the leader did better / worse) says whether they separate the designs.\n\n",
-        r.rank,
-        v.held_out_rows.len(),
-        above.iter().map(|h| why(h)).collect::<Vec<_>>().join("; ")
-    );
-    s
-}
-
 /// What the search minimises, in words.
 pub fn score_words(space: &DesignSpace) -> String {
     let o = &space.objective;
@@ -286,7 +144,8 @@ pub fn score_words(space: &DesignSpace) -> String {
     }
 }
 
-/// A held-out or race row in words: `P = 0.95 (0.90-0.98), 100 worlds, campaign 2.10 h`.
+/// A held-out or race row in words: `0.950 (0.900-0.980) over 100 worlds, n = 75, campaign 2.100 h,
+/// feasible` (the head of `best_design.toml`).
 pub fn row_words(r: &DesignRow) -> String {
     format!(
         "{} ({}-{}) over {} worlds, n = {}, campaign {} h, {}",
@@ -298,206 +157,6 @@ pub fn row_words(r: &DesignRow) -> String {
         f3(r.campaign_h),
         r.feasibility.label()
     )
-}
-
-/// The summary in Markdown.
-pub fn summary(space: &DesignSpace, o: &Outcome) -> String {
-    let v = &o.verdict;
-    let mut s = format!(
-        "# {}: {}\n\nObjective: {}{}. Search: {} ({} designs at most per restart, {} restarts) on {} common worlds; \
-         race of the finalists up to {} worlds; verification on {} held-out worlds (realisations from {}).\n\n",
-        space.name,
-        space.path.display(),
-        space.objective.describe(),
-        space.objective.constraints().iter().map(|c| format!("; {c}")).collect::<String>(),
-        space.search.method.label(),
-        space.search.evaluations,
-        super::restarts(space).len(),
-        space.search.worlds,
-        space.search.race.max,
-        space.held_out,
-        super::HELD_OUT_BASE
-    );
-    if let Some((i, r)) = &o.winner {
-        let c = &v.verified[*i];
-        let race = v
-            .race_rows
-            .iter()
-            .filter(|x| v.finalists[x.design.point].key == c.key && x.design.set_size == r.design.set_size)
-            .min_by_key(|x| x.rank);
-        let search = v
-            .trace
-            .iter()
-            .filter(|e| e.key == c.key)
-            .find_map(|e| e.sizes.iter().find(|z| z.row.design.set_size == r.design.set_size).map(|z| z.row.clone()));
-        s += &format!("## The answer\n\n{} ({} sets of {}).\n\n", c.label, r.design.selection, r.design.set_size);
-        // Under [robust] the rows below are the first model's (the robust table has every model's).
-        let under = v.robust.as_ref().map_or(String::new(), |x| format!(", under {}", x.models[0]));
-        s += "| stage | estimate (interval) |\n|---|---|\n";
-        if let Some(x) = search {
-            s += &format!("| search worlds{under} | {} |\n", row_words(&x));
-        }
-        if let Some(x) = race {
-            s += &format!("| race (search worlds){under} | {} |\n", row_words(x));
-        }
-        s += &format!("| **held-out worlds (reported)**{under} | **{}** |\n\n", row_words(r));
-        s += &format!("Points as searched (the region's frame, mm): {:?}\n\n", c.points_mm);
-        let status = status_words(space, r);
-        if !status.is_empty() {
-            s += &format!("Status on the held-out worlds: {status}.\n\n");
-        }
-        s += &answer_words(space, v, r);
-        let fitted = fitted_values(space);
-        let models = match &v.robust {
-            Some(x) => format!("the {} error models of `[robust]` ({})", x.models.len(), x.models.join(", ")),
-            None => "one error model, the base scenario's (`[robust]` scores a design over several)".to_string(),
-        };
-        s += &format!(
-            "Error model: the figures rest on {models}{}.\n\n",
-            if fitted.is_empty() { String::new() } else { format!("; its FITTED values: {}", fitted.join(", ")) }
-        );
-        s += &format!("Search score: {}.\n\n", score_words(space));
-    } else {
-        s += "## No answer\n\nNo design of the search ran in any world.\n\n";
-    }
-    if let Some(sheet) = &o.sheet {
-        s += &sheet.markdown();
-    }
-    if let Some(r) = &v.robust {
-        s += &robust_section(space, v, r);
-    }
-    s += "## Held-out worlds: every verified design\n\n| rank | design | selection | n | estimate | interval | P(success) | campaign, h | worlds | failed | feasibility | worlds the leader did better / worse |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-    let mut rows: Vec<&DesignRow> = v.held_out_rows.iter().collect();
-    rows.sort_by_key(|r| r.rank);
-    for r in rows {
-        let c = &v.verified[r.design.point];
-        // Worlds in which the leader did better / worse than this design (paired on common worlds).
-        let vs = r.vs_leader.as_ref().map_or("leader".to_string(), |p| {
-            let (better, worse) =
-                if space.objective.maximises() { (p.test.negative, p.test.positive) } else { (p.test.positive, p.test.negative) };
-            format!("{better} / {worse}")
-        });
-        s += &format!(
-            "| {} | {} | {} | {} | {} | {}-{} | {} | {} | {} | {} | {} | {} |\n",
-            r.rank,
-            c.label,
-            r.design.selection,
-            r.design.set_size,
-            f3(r.estimate),
-            f3(r.interval.0),
-            f3(r.interval.1),
-            r.success.map_or("-".into(), |x| f3(x.0)),
-            f3(r.campaign_h),
-            r.worlds,
-            r.failed_worlds,
-            r.feasibility.label(),
-            vs
-        );
-    }
-    let ran = v.trace.iter().filter(|e| e.table.is_some()).count();
-    let ruled = v.trace.len() - ran;
-    s += &format!(
-        "\n## Search\n\n{} designs evaluated ({} ruled out by their geometry or refused, not run); {} finalists raced over up to {} worlds.\n",
-        v.trace.len(),
-        ruled,
-        v.finalists.len(),
-        v.race_worlds
-    );
-    let failing: Vec<&super::Evaluated> = v.trace.iter().filter(|e| e.failed > 0).collect();
-    if !failing.is_empty() {
-        let all = failing.iter().filter(|e| e.failed == e.worlds).count();
-        let margins: Vec<f64> =
-            failing.iter().map(|e| e.reach_mm.iter().copied().fold(f64::NAN, f64::max)).filter(|m| m.is_finite()).collect();
-        let short: Vec<f64> = failing.iter().map(|e| e.shortfall).collect();
-        s += &format!(
-            "\n{} designs' campaigns failed in some worlds ({} in every world: constraint violations, scored by the sum over their \
-             points of each one's distance from the arm's reach, the centre with the device axis along {{W}}'s -z, and by their \
-             campaign's shortfall of candidate poses reachable without collision; their farthest \
-             point {} mm from it at most, {} mm at least; shortfall {} at most, {} at least; `trace.parquet` columns failed_worlds, \
-             first_error, reach_margin_mm (the farthest point's), campaign_shortfall).\n",
-            failing.len(),
-            all,
-            f3(margins.iter().copied().fold(f64::NAN, f64::max)),
-            f3(margins.iter().copied().fold(f64::NAN, f64::min)),
-            f3(short.iter().copied().fold(f64::NAN, f64::max)),
-            f3(short.iter().copied().fold(f64::NAN, f64::min)),
-        );
-    }
-    s
-}
-
-/// The robust table: the winner under each model and under the combined score, each on the
-/// held-out worlds under every model, and whether the winner changes with the error model.
-pub fn robust_section(space: &DesignSpace, v: &Verdict, r: &super::RobustVerdict) -> String {
-    let held = super::combined(space, &r.held_out);
-    let mut s = format!(
-        "## Robust: the winner under each error model\n\nEvery design runs under each of {} error models (`[robust]`: scenario keys set on top of \
-         the design) on the same worlds; its score under the file's objective is combined by their {} (lower is better). The race ran every \
-         finalist under every model on the search worlds 0-{} (no elimination) and chose the winner of each row below; the held-out worlds \
-         (realisations {}-{}) report it under each model. `race.parquet`, `verified.parquet` and the held-out table below hold the first \
-         model's rows ({:?}); `robust.parquet` holds every model's.\n\n| chosen by | design | selection | n | score on the race's worlds |",
-        r.models.len(),
-        r.combine.label(),
-        v.race_worlds.saturating_sub(1),
-        super::HELD_OUT_BASE,
-        super::HELD_OUT_BASE + space.held_out - 1,
-        r.models[0]
-    );
-    for m in &r.models {
-        s += &format!(" held-out under {m}: estimate (interval) |");
-    }
-    s += &format!(" held-out score, {} |\n|---|---|---|---|---|", r.combine.label());
-    s += &"---|".repeat(r.models.len() + 1);
-    s += "\n";
-    for c in &r.choices {
-        s += &format!("| {} | {} | {} | {} | {} |", c.criterion, v.verified[c.verified].label, c.selection, c.set_size, f3(c.race_score));
-        for rows in &r.held_out {
-            let row =
-                rows.iter().find(|h| h.design.point == c.verified && h.design.selection == c.selection && h.design.set_size == c.set_size);
-            s += &match row {
-                Some(h) => format!(
-                    " {} ({}-{}), {} worlds, {} failed |",
-                    f3(h.estimate),
-                    f3(h.interval.0),
-                    f3(h.interval.1),
-                    h.worlds,
-                    h.failed_worlds
-                ),
-                None => " every world failed |".to_string(),
-            };
-        }
-        let comb = held.iter().find(|x| x.key == (c.verified, c.selection.clone(), c.set_size)).map(|x| x.score);
-        s += &format!(" {} |\n", comb.map_or("-".into(), f3));
-    }
-    let same = |a: &super::Choice, b: &super::Choice| a.verified == b.verified && a.selection == b.selection && a.set_size == b.set_size;
-    let first = &r.choices[0];
-    let models: Vec<&super::Choice> = r.choices.iter().take(r.models.len()).collect();
-    let robust = r.choices.last().expect("a choice");
-    if r.choices.iter().all(|c| same(c, first)) {
-        s += &format!(
-            "\n**The winner does not change with the error model**: every model and the {} score choose {} ({} sets of {}).\n\n",
-            r.combine.label(),
-            v.verified[first.verified].label,
-            first.selection,
-            first.set_size
-        );
-    } else {
-        let cells = models.iter().map(|c| c.verified).collect::<std::collections::BTreeSet<_>>().len();
-        let differ: Vec<String> = models.iter().filter(|c| !same(c, robust)).map(|c| c.criterion.clone()).collect();
-        s += &format!(
-            "\n**The winner changes with the error model**: the models choose {} distinct design{} ({}); the {} score's winner differs from the choice of {}.\n\n",
-            cells,
-            if cells == 1 { " (the same cell, another set size or selection)" } else { "s" },
-            models
-                .iter()
-                .map(|c| format!("{}: {} {} {}", c.criterion, v.verified[c.verified].label, c.selection, c.set_size))
-                .collect::<Vec<_>>()
-                .join("; "),
-            r.combine.label(),
-            if differ.is_empty() { "no model".to_string() } else { differ.join(", ") }
-        );
-    }
-    s
 }
 
 /// A row of `robust.parquet`: a stage, a model (or the combination), a design's judged row.
@@ -527,7 +186,9 @@ pub fn results<'a>(
     let mut out = Results::new(space.name.clone(), Head::Run(crate::io::manifest::Provenance::of_run(overrides)));
     out.table("trace.parquet", trace_columns(space, v))?;
     out.table("race.parquet", row_columns(&v.race_rows, &|p| v.finalists[p].label.clone()))?;
-    out.table("verified.parquet", row_columns(&v.held_out_rows, &|p| v.verified[p].label.clone()))?;
+    let mut verified = row_columns(&v.held_out_rows, &|p| v.verified[p].label.clone());
+    verified.extend(super::summary::leader_columns(space, v));
+    out.table("verified.parquet", verified)?;
     if let Some(r) = &v.robust {
         out.table("robust.parquet", robust_columns(space, v, r))?;
     }
@@ -546,7 +207,12 @@ pub fn results<'a>(
         out.file("spheres.csv", sheet.csv());
     }
     out.fields(fields)?;
-    out.summary.text(summary(space, o));
+    if let Some((i, _)) = &o.winner {
+        let label = v.verified[*i].label.clone();
+        let answer = super::summary::answer_columns(space, o, &|rows| row_columns(rows, &|_| label.clone()));
+        out.table("answer.parquet", answer.unwrap_or_default())?;
+    }
+    super::summary::summary(space, o, &mut out.summary);
     if let Some(w) = winner {
         out.nested("winner", w);
         out.summary.text(
@@ -741,6 +407,14 @@ mod tests {
         assert_eq!(answer_of(&p95, &rows), Some((0, AnswerBasis::RaceFirst)));
     }
 
+    /// The summary of `o` as its results directory holds it (rendered from the tables written).
+    fn rendered(s: &DesignSpace, o: &Outcome) -> String {
+        let tmp = tempfile::Builder::new().prefix("calsim-optimise-summary-").tempdir().unwrap();
+        let r = results(s, o, None, serde_json::json!({}), &[], None).unwrap();
+        let dest = crate::io::results::write(tmp.path(), r).unwrap().dest;
+        std::fs::read_to_string(dest.join("summary.md")).unwrap()
+    }
+
     #[test]
     fn the_summary_says_why_the_answer_is_not_first_on_the_held_out_worlds() {
         use super::super::{Verdict, answer_of};
@@ -772,16 +446,23 @@ mod tests {
         let o = Outcome::of(&s, v);
         let (i, r) = o.winner.clone().expect("the answer's held-out row");
         assert_eq!((i, r.design.set_size), (1, 300));
-        let text = summary(&s, &o);
+        let text = rendered(&s, &o);
         assert!(text.contains("ranks the answer 2 of 2"), "{text}");
         assert!(text.contains("with a longer campaign (3.000 h against 2.500 h)"), "{text}");
         assert!(text.contains("3 of the race's rows meet every constraint"), "{text}");
+        // The held-out table shows the rows of verified.parquet, the leader's paired column included.
+        assert!(
+            text.contains(
+                "| 1 | 4 points, restart 0 #1 | detmax | 450 | 0.970 | 0.920-0.970 | 0.970 | 3.000 | 40 | 0 | undecided | leader |"
+            ),
+            "{text}"
+        );
         // No row meets it: the race's first, and the summary says the race's worlds cannot show it.
         let undecided: Vec<DesignRow> = rows.iter().map(|r| DesignRow { feasibility: Feasibility::Undecided, ..r.clone() }).collect();
         let v = Verdict { race_rows: undecided.clone(), answer: answer_of(&s, &undecided), ..o.verdict.clone() };
         let o = Outcome::of(&s, v);
         assert_eq!(o.winner.as_ref().map(|w| (w.0, w.1.design.set_size)), Some((0, 450)));
-        let text = summary(&s, &o);
+        let text = rendered(&s, &o);
         assert!(text.contains("no row of the race meets every constraint at 90 % confidence on its 40 worlds"), "{text}");
         assert!(text.contains("The held-out table below ranks the answer first"), "{text}");
     }

@@ -13,6 +13,7 @@ pub mod recording;
 pub mod results;
 pub mod spec;
 pub mod study;
+pub mod summary;
 
 use std::path::Path;
 

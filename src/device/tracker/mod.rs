@@ -27,7 +27,7 @@ use crate::io::manifest::ScenarioHead;
 use crate::io::record::{RecordError, Rr, heat, p3};
 
 use crate::robot::Joints;
-use crate::study::check::{Check, checks_markdown};
+use crate::study::check::Check;
 use crate::study::engine::Identified;
 use crate::study::prediction::Prediction;
 use crate::study::published::published;
@@ -235,7 +235,9 @@ impl Outcome for TrackerOutcome {
             };
             out.draw(Box::new(move |dir| plots::write_all(dir, &self.results, &inputs)));
         }
-        out.summary.text(self.summary(checks)).figures("\n## Figures\n\nEach as PNG (shown) and SVG beside this file.\n\n");
+        super::trical::summary::figure_tables(&self.results, &self.figures, false, &mut out).map_err(DeviceError::of)?;
+        self.summary(!checks.is_empty(), &mut out.summary);
+        out.summary.figures("## Figures\n\nEach as PNG (shown) and SVG beside this file.\n\n");
         if options.recording {
             out.record(Box::new(move |path: &Path| self.record(path)));
         }
@@ -301,32 +303,36 @@ impl TrackerOutcome {
     }
 
     /// `summary.md`: Table 8's row beside calsim's, the errors before and after calibration, and
-    /// the median error per set size.
-    fn summary(&self, checks: &[Check]) -> String {
-        let (s, f, r) = (&self.scenario, &self.figures, &self.results);
-        let mut o = format!(
+    /// the median error per set size, read from `errors.parquet` and `set_sizes.parquet`.
+    fn summary(&self, checks: bool, parts: &mut crate::io::results::Summary<'_>) {
+        let s = &self.scenario;
+        let (sizes, reps) = (s.cell.study.set_sizes.len(), s.cell.study.repetitions);
+        parts.text(format!(
             "# {}: the robot calibrated with the {} (seed {})\n\nA pool of {} random workspace configurations measured by the \
-             instrument, DETMAX on O1, {} identifications ({} set sizes x {} repetitions), validation on the TriCal cell's {} \
-             tracker poses (the same robot and poses as the TriCal study of this seed).\n\n",
+             instrument, DETMAX on O1, ",
             s.cell.header.name,
             s.external().label(),
             s.cell.header.seed,
             self.pool.len(),
-            r.tasks.len(),
-            s.cell.study.set_sizes.len(),
-            s.cell.study.repetitions,
-            r.before_errors.len()
-        );
-        o.push_str(&checks_markdown("Table 8, published versus reproduced", checks));
-        o.push_str(&format!(
-            "\n## Errors before and after calibration (mm)\n\n| | mean | median | std | p95 | max |\n|---|---|---|---|---|---|\n\
-             | before | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |\n| after, n = {} (medians over repetitions) | {:.3} | {:.3} | {:.3} | - | {:.3} |\n",
-            f.before.mean, f.before.median, f.before.std, f.before.p95, f.before.max, f.table_n, f.after_mean, f.after_median, f.after_std, f.after_max
         ));
-        o.push_str("\n## Median of the mean error per set size (mm)\n\n| n | median of means | IQR | not converged |\n|---|---|---|---|\n");
-        for z in &f.sizes {
-            o.push_str(&format!("| {} | {:.4} | {:.4} | {} |\n", z.n, z.median_of_means, z.iqr_of_means, z.not_converged));
+        parts.text_from("tasks.parquet", move |r| {
+            format!(
+                "{} identifications ({sizes} set sizes x {reps} repetitions), validation on the TriCal cell's {} tracker poses \
+                 (the same robot and poses as the TriCal study of this seed).\n\n",
+                r.height(),
+                r.of("validation_errors.parquet", 0).count("calibration", "before")
+            )
+        });
+        if checks {
+            crate::study::check::checks_summary("Table 8, published versus reproduced", parts);
         }
-        o
+        parts.text("## Errors before and after calibration (mm)\n\n");
+        // Before and after calibration (the compensated validation's row is in the table only).
+        let rows = Box::new(|f: &polars::prelude::DataFrame| (0..f.height().min(2)).collect());
+        super::trical::summary::errors(parts, rows, |r| match r.str("calibration").as_str() {
+            "before" => "before".to_string(),
+            _ => format!("after, n = {} (medians over repetitions)", r.u64("set_size")),
+        });
+        super::trical::summary::size_table(parts, false);
     }
 }

@@ -11,6 +11,7 @@ pub mod recording;
 pub mod results;
 pub mod spec;
 pub mod study;
+pub mod summary;
 pub mod table8;
 
 use crate::io::results::Results;
