@@ -27,7 +27,7 @@
 //! Usage: cargo run --release --example twin_plan_check -- FIRST_SEED LAST_SEED [WORLDS [VARIANT [PLANS]]]
 use std::path::Path;
 
-use calsim::calibrate::plan::{Basis, Effects, Noise, compare_values, residual_noise_mm, simulate_basis, Statistic};
+use calsim::calibrate::plan::{Basis, Effects, Noise, Statistic, compare_values, residual_noise_mm, simulate_basis};
 use calsim::calibrate::simulate::SimulationSpec;
 use nalgebra::Vector3;
 use rand_distr::{Distribution, Normal};
@@ -240,12 +240,17 @@ fn main() -> Result<(), String> {
                             "effects-1x1000" => {
                                 Basis { noise: Noise::Fixed(spec.noise_mm), effects: Some(&one_high), twin: None, label: None }
                             }
-                            "twin-true-level" => {
-                                Basis { noise: Noise::Fixed(spec.noise_mm), effects: None, twin: Some((&t.model, &true_level)), label: None }
-                            }
+                            "twin-true-level" => Basis {
+                                noise: Noise::Fixed(spec.noise_mm),
+                                effects: None,
+                                twin: Some((&t.model, &true_level)),
+                                label: None,
+                            },
                             p => return Err(format!("{p}: not a plan of this check (see its doc)")),
                         };
-                        simulate_basis(&c, worlds as usize, Statistic::Median, c.options.seed, &basis).map_err(|e| e.to_string())?.per_world_mm
+                        simulate_basis(&c, worlds as usize, Statistic::Median, c.options.seed, &basis)
+                            .map_err(|e| e.to_string())?
+                            .per_world_mm
                     }
                 };
                 let p = compare_values(h.median, &per_world);

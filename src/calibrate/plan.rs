@@ -547,8 +547,7 @@ fn carried_at(
     let pose_index = pose_index_of(c, m);
     let targets = c.tools.len();
     let mut st = KinState::default();
-    Ok(m
-        .points
+    Ok(m.points
         .iter()
         .enumerate()
         .map(|(i, p)| {
