@@ -94,17 +94,27 @@ pub struct PlanComparison {
 
 /// Compares the measured calibration `c` with the simulated outcome `sim`.
 pub fn compare(c: &Calibration, sim: &SimulatedOutcome) -> PlanComparison {
-    let sorted = finite_sorted(&sim.per_world_mm);
-    let q = |p: f64| quantile(&sorted, p);
-    let measured = sim.statistic.of(c).unwrap_or(f64::NAN);
-    let simulated = [q(0.1), q(0.5), q(0.9)];
     PlanComparison {
         scenario: sim.scenario.clone(),
         statistic: sim.statistic,
-        measured_mm: measured,
+        ..compare_values(sim.statistic.of(c).unwrap_or(f64::NAN), &sim.per_world_mm)
+    }
+}
+
+/// The measured figure `measured_mm` beside the worlds' values `per_world_mm` (NaN: a world
+/// without a value): their P10, median and P90, and whether it lies within the P10-P90 (the
+/// scenario's name is left empty and the statistic is the median).
+pub fn compare_values(measured_mm: f64, per_world_mm: &[f64]) -> PlanComparison {
+    let sorted = finite_sorted(per_world_mm);
+    let q = |p: f64| quantile(&sorted, p);
+    let simulated = [q(0.1), q(0.5), q(0.9)];
+    PlanComparison {
+        scenario: String::new(),
+        statistic: Statistic::Median,
+        measured_mm,
         simulated_mm: simulated,
         worlds: sorted.len(),
-        inside: measured >= simulated[0] && measured <= simulated[2],
+        inside: measured_mm >= simulated[0] && measured_mm <= simulated[2],
     }
 }
 
@@ -355,7 +365,7 @@ impl Prepared {
         }
         let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
         let placed = placed_of(c, truth_model)?;
-        let carried = carried_at(c, m, basis, &placed);
+        let carried = carried_at(c, m, basis, &placed)?;
         Ok(Self { placed, carried, pose_index: pose_index_of(c, m) })
     }
 
@@ -387,8 +397,14 @@ impl Prepared {
                     (None, Some((_, l))) => l.repeatability_mm,
                     (None, None) => 0.0,
                 };
-                let robot = crate::robot::VirtualRobot::new(truth_model.clone(), &unmodelled, repeatability, &reference, &mut rng)
+                let mut robot = crate::robot::VirtualRobot::new(truth_model.clone(), &unmodelled, repeatability, &reference, &mut rng)
                     .with_learned(learned_of(basis), &mut rng);
+                // The twin's repeatability level drawn for this world from its estimate's standard
+                // deviation, after every other draw of the robot (a table without one draws nothing).
+                if let Some((_, l)) = basis.twin.filter(|(_, l)| l.repeatability_std_mm > 0.0) {
+                    let drawn = l.drawn_repeatability_mm(&mut rng);
+                    robot = robot.with_repeatability(effects.map_or(drawn, |e| e.repeatability_mm.hypot(drawn)), &reference);
+                }
                 drift = robot.learned.as_ref().map_or([0.0; 3], |l| l.drift_mm_per_pose);
                 let mut from = reference;
                 m.poses
@@ -491,11 +507,12 @@ fn carried_at(
     m: &super::measurements::Measurements,
     basis: &Basis<'_>,
     placed: &[crate::robot::RobotModel],
-) -> Vec<Option<Vector3<f64>>> {
+) -> Result<Vec<Option<Vector3<f64>>>, CalibrateError> {
     let flagged = |i: usize| c.flagged.get(i).copied().unwrap_or(false);
     if !(std::ptr::eq(m, &c.measurements) && c.options.outliers == super::OutlierMode::Report && (0..m.points.len()).any(flagged)) {
-        return vec![None; m.points.len()];
+        return Ok(vec![None; m.points.len()]);
     }
+    let pull = flagged_pull_mm(c)?;
     let truth_model = basis.twin.map_or(&c.model, |(model, _)| model);
     // The learned effects at their fitted values: every spread, the repeatability and the
     // per-pose error set to zero, so that the draw takes nothing from its stream but the fixed
@@ -503,6 +520,7 @@ fn carried_at(
     let fixed = learned_of(basis).map(|l| {
         let mut f = crate::robot::learned::LearnedEffects {
             repeatability_mm: 0.0,
+            repeatability_std_mm: 0.0,
             pose_error_mdeg: 0.0,
             pose_error_std_mdeg: 0.0,
             backlash_std_mdeg: [0.0; crate::robot::JOINTS],
@@ -529,7 +547,7 @@ fn carried_at(
     let pose_index = pose_index_of(c, m);
     let targets = c.tools.len();
     let mut st = KinState::default();
-    m.points
+    Ok(m.points
         .iter()
         .enumerate()
         .map(|(i, p)| {
@@ -539,10 +557,45 @@ fn carried_at(
                 if drift.iter().any(|&d| d != 0.0) {
                     at += c.bases[session].session_from_base.isometry().rotation * (Vector3::from(drift) * pose_index[p.pose]);
                 }
-                p.measured_mm - at
+                p.measured_mm - at + pull[i]
             })
         })
-        .collect()
+        .collect())
+}
+
+/// Per point of the calibration's file, how far the chosen model's fit on every point was drawn
+/// towards it by the flagged points it kept, at the flagged points (zero elsewhere), in the point's
+/// session frame, mm: the point's residual in the fit on every point but the flagged ones less its
+/// residual in the fit on every point. A flagged point's residual in the fit that kept it is its
+/// offset shrunk by its own leverage (the fit moved towards it); its offset from the robot the
+/// other points describe is the residual of the fit without it, and that is what a plan's world
+/// carries (the offset off the plan's robot plus this), so that each world's fit is drawn towards
+/// it as the measured fit was.
+pub fn flagged_pull_mm(c: &Calibration) -> Result<Vec<Vector3<f64>>, CalibrateError> {
+    let m = &c.measurements;
+    let n = m.points.len();
+    let chosen = c.chosen();
+    let s = super::setup(&c.robot, m)?;
+    let problem = super::problem::Problem { start: &c.robot.nominal, layout: chosen.layout.clone(), obs: &s.obs };
+    let all: Vec<usize> = (0..n).collect();
+    let x0 = super::validation::start_values(&problem.layout, &c.robot.nominal, &s.frames_x);
+    let free = super::validation::free_columns(&problem, &all, !problem.layout.robot.is_empty());
+    let flagged: Vec<bool> = (0..n).map(|i| c.flagged.get(i).copied().unwrap_or(false)).collect();
+    let without = super::robust::fit_without(&problem, &x0, &free, &all, &flagged, &super::problem::SolveOptions::default());
+    let at: Vec<usize> = (0..n).filter(|&i| flagged[i]).collect();
+    let errors = without.solved.outcome.is_converged().then(|| problem.errors(&without.solved.x, &at)).flatten().ok_or_else(|| {
+        CalibrateError::Option {
+            key: "plan-worlds".into(),
+            message: format!("the {} model's fit without the flagged points gave no model", chosen.name()),
+        }
+    })?;
+    let mut pull = vec![Vector3::zeros(); n];
+    for (&i, e) in at.iter().zip(&errors) {
+        let session = s.obs[i].session;
+        let base = problem.layout.base_delta(&without.solved.x, session).isometry().inverse_transform_vector(e);
+        pull[i] = c.bases[session].session_from_base.isometry().rotation * (base - chosen.fit.residual_base_mm[i]);
+    }
+    Ok(pull)
 }
 
 /// What a planning scenario adds to the calibrated robot in each world of a plan: its effects

@@ -5,6 +5,7 @@
 //! [learned]
 //! source = "calsim calibrate of m.csv (geometric model, calibration split)"
 //! repeatability_mm = 0.012          # ISO 9283 RP of a move (joint noise scaled as the scenarios')
+//! repeatability_std_mm = 0.002      # standard deviation of that level's estimate (calibrate's plan)
 //! pose_error_mdeg = 1.5             # per-joint error the effects below leave, repeatable per pose
 //! pose_error_std_mdeg = 0.4         # standard deviation of that level's estimate
 //! backlash_mdeg = [0, 6, 4, 0, 0, 0]      # full width per joint: the link lags half of it
@@ -70,6 +71,11 @@ pub struct LearnedEffects {
     /// ISO 9283 repeatability of a move, mm.
     #[serde(default)]
     pub repeatability_mm: f64,
+    /// Standard deviation of the estimate of `repeatability_mm`, mm: each world of `calsim
+    /// calibrate`'s plan draws the level from a normal distribution about it (kept non-negative,
+    /// [`LearnedEffects::drawn_repeatability_mm`]); a scenario takes the level as given.
+    #[serde(default)]
+    pub repeatability_std_mm: f64,
     /// RMS of the per-pose joint error the effects leave, mdeg (repeatable at a pose).
     #[serde(default)]
     pub pose_error_mdeg: f64,
@@ -127,6 +133,9 @@ impl LearnedEffects {
         if !within(self.repeatability_mm, 100.0) {
             return bad("repeatability_mm".into(), "within 0 to 100 mm");
         }
+        if !within(self.repeatability_std_mm, 100.0) {
+            return bad("repeatability_std_mm".into(), "within 0 to 100 mm");
+        }
         if !within(self.pose_error_mdeg, 1.0e5) {
             return bad("pose_error_mdeg".into(), "within 0 to 100000 mdeg");
         }
@@ -176,6 +185,7 @@ impl LearnedEffects {
     /// No effect at all (every amplitude zero).
     pub fn is_none(&self) -> bool {
         self.repeatability_mm == 0.0
+            && self.repeatability_std_mm == 0.0
             && self.pose_error_mdeg == 0.0
             && self.pose_error_std_mdeg == 0.0
             && self.backlash_mdeg.iter().all(|&x| x == 0.0)
@@ -234,6 +244,21 @@ impl LearnedEffects {
             [0.0; 3]
         };
         DrawnEffects { harmonics, half_backlash, sag_per_m, drift_mm_per_pose, sag_arm }
+    }
+}
+
+impl LearnedEffects {
+    /// One world's repeatability, ISO 9283 RP, mm: a normal draw about `repeatability_mm` with
+    /// standard deviation `repeatability_std_mm`, kept non-negative (a level estimated at zero with
+    /// an interval above zero still gives some worlds a repeatability); without a standard
+    /// deviation the level itself, and nothing is drawn from `rng`.
+    pub fn drawn_repeatability_mm<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        if self.repeatability_std_mm > 0.0 {
+            let unit: f64 = Normal::new(0.0, 1.0).expect("unit normal").sample(rng);
+            (self.repeatability_mm + self.repeatability_std_mm * unit).max(0.0)
+        } else {
+            self.repeatability_mm
+        }
     }
 }
 
@@ -307,6 +332,28 @@ mod tests {
         let mut bad = l;
         bad.backlash_mdeg[1] = f64::NAN;
         assert_eq!(bad.check().unwrap_err().0, "backlash_mdeg[1]");
+    }
+
+    #[test]
+    fn a_repeatability_with_a_spread_is_drawn_per_world_and_without_one_draws_nothing() {
+        use rand::Rng;
+        let point = LearnedEffects { repeatability_mm: 0.02, ..Default::default() };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        assert_eq!(point.drawn_repeatability_mm(&mut rng), 0.02);
+        let next: u64 = rng.random();
+        assert_eq!(next, rand_chacha::ChaCha8Rng::seed_from_u64(7).random::<u64>(), "nothing drawn without a spread");
+        let spread = LearnedEffects { repeatability_std_mm: 0.01, ..point.clone() };
+        let draws: Vec<f64> = (0..2000).map(|_| spread.drawn_repeatability_mm(&mut rng)).collect();
+        assert!(draws.iter().all(|&d| d >= 0.0));
+        let mean = draws.iter().sum::<f64>() / draws.len() as f64;
+        let sd = (draws.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (draws.len() - 1) as f64).sqrt();
+        // A normal about 0.02 with sd 0.01 kept >= 0: mean 0.0201, sd 0.0098 (its 2.3 % below zero clipped).
+        assert!((mean - 0.0201).abs() < 0.0007 && (sd - 0.0098).abs() < 0.0007, "{mean} {sd}");
+        let zero = LearnedEffects { repeatability_std_mm: 0.01, ..Default::default() };
+        assert!(!zero.is_none());
+        assert!((0..50).any(|_| zero.drawn_repeatability_mm(&mut rng) > 0.0), "a level estimated at zero still draws some");
+        let bad = LearnedEffects { repeatability_std_mm: f64::NAN, ..Default::default() };
+        assert_eq!(bad.check().unwrap_err().0, "repeatability_std_mm");
     }
 
     #[test]

@@ -114,6 +114,13 @@ impl VirtualRobot {
         self
     }
 
+    /// This robot with the joint noise of its moves scaled so that its ISO 9283 repeatability at
+    /// `reference_q` is `repeatability_mm` (as [`VirtualRobot::new`] scales it).
+    pub fn with_repeatability(mut self, repeatability_mm: f64, reference_q: &Joints) -> Self {
+        self.sigma_q = repeatability_mm / repeatability_per_radian(&self.truth, reference_q);
+        self
+    }
+
     /// Link angles after a move to `q` coming from `from`, with a fresh draw of the joint noise.
     pub fn link_angles<R: Rng + ?Sized>(&self, q: &Joints, from: &Joints, rng: &mut R) -> Joints {
         let noise = Normal::new(0.0, self.sigma_q.max(0.0)).expect("finite sigma");

@@ -972,6 +972,9 @@ fn learned_table(
     // draws no separate instrument noise).
     let rep = d.repeatability.as_ref().or(d.together.as_ref());
     l.repeatability_mm = rep.map_or(0.0, |r| RP_PER_SIGMA * r.sigma_mm);
+    // Its standard deviation as the per-pose error's below: the 95 % interval's width over
+    // 2 x 1.96 (a plan draws the level per world from it).
+    l.repeatability_std_mm = rep.map_or(0.0, |r| RP_PER_SIGMA * (r.interval_mm[1] - r.interval_mm[0]).max(0.0) / (2.0 * Z95));
     // The systematic part left, as a per-pose joint error: per coordinate, an independent error of
     // RMS s per joint moves a point by s^2 |J|_F^2 / 3 on average.
     // Nothing random estimated: all the residual left after the effects is taken as per-pose error.

@@ -110,9 +110,11 @@ pub fn markdown(t: &Twin) -> String {
     let l = &t.learned;
     let _ = writeln!(
         s,
-        "\n`[learned]`: repeatability_mm = {:.4} (ISO 9283 RP of the repeatability per coordinate), pose_error_mdeg = {:.3} \
+        "\n`[learned]`: repeatability_mm = {:.4} (ISO 9283 RP of the repeatability per coordinate; repeatability_std_mm = {:.4}, \
+         from its 95 % interval: a plan draws the level per world), pose_error_mdeg = {:.3} \
          (pose_error_std_mdeg = {:.3}, from its 95 % interval: a plan draws the level per world), {} harmonics.",
         l.repeatability_mm,
+        l.repeatability_std_mm,
         l.pose_error_mdeg,
         l.pose_error_std_mdeg,
         l.harmonic.len()
