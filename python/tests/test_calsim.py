@@ -35,7 +35,17 @@ def small_run(tmp_path_factory: pytest.TempPathFactory) -> calsim.RunResult:
 def test_run_returns_every_table_as_a_dataframe_with_the_overrides_applied(small_run: calsim.RunResult) -> None:
     r = small_run
     assert r.name == "ci_quick" and r.kind == "trical" and r.seed == 2018
-    assert set(r.tables) == {"tasks", "parameters", "validation_errors", "compensated", "checks"}
+    assert set(r.tables) == {
+        "tasks",
+        "parameters",
+        "validation_errors",
+        "compensated",
+        "checks",
+        "errors",
+        "set_sizes",
+        "table7",
+        "correlations",
+    }
     # The checks the run hands over are the table it wrote, schema and values.
     assert r.checks.equals(r.tables["checks"]) and r.checks.schema == r.tables["checks"].schema
     tasks = r.tables["tasks"]
