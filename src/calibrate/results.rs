@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::measurements::Measurements;
-use super::problem::{Layout, Problem};
+use super::problem::{Fit, Layout, Oriented};
 use super::registration::Unidentifiable;
 use super::robust::RobustFit;
 use super::validation::{Assignment, CrossValidation, HeldOut, free_columns};
@@ -171,7 +171,8 @@ impl Calibration {
 }
 
 /// The per-point view of a fit on every point.
-pub(super) fn point_fit(problem: &Problem<'_>, fit: &RobustFit, flagged: &[bool]) -> PointFit {
+pub(super) fn point_fit(oriented: &Oriented<'_>, fit: &RobustFit, flagged: &[bool]) -> PointFit {
+    let problem = &oriented.problem;
     let n = problem.obs.len();
     let errors = problem.errors(&fit.solved.x, &fit.idx).unwrap_or_else(|| vec![Vector3::repeat(f64::NAN); n]);
     let residual_base_mm: Vec<Vector3<f64>> = errors
@@ -213,7 +214,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     let Parts { robot, m, opts, s, assignment, before, models, chosen, full, inert, outliers_by, flagged } = parts;
     let r = &models[chosen];
     let layout = &r.layout;
-    let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+    let problem = s.fit(&robot.nominal, layout.clone());
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let free = free_columns(&problem, &all, true);
     let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
@@ -233,7 +234,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     // `free` holds every column (every session and target has points) but the bases' columns kept
     // at their registration (`Layout::still`): cov in layout order, none for those.
     let cov_free = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix"))?;
-    let mut cov = DMatrix::zeros(layout.len(), layout.len());
+    let mut cov = DMatrix::zeros(problem.unknowns(), problem.unknowns());
     for (a, &ca) in free.iter().enumerate() {
         for (b, &cb) in free.iter().enumerate() {
             cov[(ca, cb)] = cov_free[(a, b)];
