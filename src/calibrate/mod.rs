@@ -47,7 +47,7 @@ use robust::{RobustFit, fit_without, robust_fit_and_first};
 pub use validation::KFoldBy;
 use validation::{HeldOutSpec, Split, SplitError, free_columns};
 
-pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ToolEstimate};
+pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ProbeRotation, ToolEstimate};
 use results::{Parts, finish, point_fit};
 
 /// The models compared, simplest first.

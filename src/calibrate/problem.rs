@@ -317,9 +317,12 @@ impl Problem<'_> {
         let l = &self.layout;
         let set = l.point_set();
         let p = set.len();
+        // Columns past the layout's (a fit's own, [`Fit`]) get nothing from the positions.
         let mut at = vec![usize::MAX; l.len()];
         for (k, &c) in cols.iter().enumerate() {
-            at[c] = k;
+            if let Some(a) = at.get_mut(c) {
+                *a = k;
+            }
         }
         let m = cols.len();
         let mut n = DMatrix::zeros(m, m);

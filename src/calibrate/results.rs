@@ -87,6 +87,9 @@ pub struct PointFit {
     pub stats: ErrorStats,
     /// The a-posteriori noise per coordinate of unit weight (mm without per-point uncertainties).
     pub sigma_hat: f64,
+    /// Per point: its rotation error `log(R_measured R_model^T)` about the robot base's axes,
+    /// mdeg (`None`: the point has no orientation reading; empty when the file has none).
+    pub rotation_base_mdeg: Vec<Option<Vector3<f64>>>,
 }
 
 /// One model's results.
@@ -154,6 +157,18 @@ pub struct Calibration {
     /// Joint compliances with no gravity torque to act through (kept nominal, in no model): name
     /// and reason.
     pub inert: Vec<(String, String)>,
+    /// Per target: its probe's rotation on the flange (`None`: the target has no orientation
+    /// reading).
+    pub probe_rotations: Vec<Option<ProbeRotation>>,
+}
+
+/// A six-degree-of-freedom probe's rotation on the flange.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeRotation {
+    /// `flange_from_probe` (in the robot file's flange frame).
+    pub flange_from_probe: nalgebra::Rotation3<f64>,
+    /// Standard deviations of its small rotations about the flange's x, y, z axes, mdeg.
+    pub std_mdeg: [f64; 3],
 }
 
 impl ModelResult {
@@ -182,7 +197,18 @@ pub(super) fn point_fit(oriented: &Oriented<'_>, fit: &RobustFit, flagged: &[boo
         .collect();
     let errors_mm: Vec<f64> = errors.iter().map(|e| e.norm()).collect();
     let kept: Vec<f64> = errors_mm.iter().zip(&fit.outlier).filter(|(_, o)| !**o).map(|(e, _)| *e).collect();
+    let rotation_base_mdeg = match oriented.rotation_errors(&fit.solved.x, &fit.idx) {
+        Some(r) => r
+            .iter()
+            .zip(problem.obs)
+            .map(|(e, o)| {
+                e.map(|e| problem.layout.base_delta(&fit.solved.x, o.session).isometry().inverse_transform_vector(&e).map(|v| v.to_degrees() * 1e3))
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     PointFit {
+        rotation_base_mdeg,
         outcome: fit.solved.outcome.clone(),
         stats: ErrorStats::of(&kept),
         errors_mm,
@@ -259,6 +285,18 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         })
         .collect();
     let tools = (0..m.targets.len()).map(|t| tool(&m.targets[t], layout.tool(t), x, &cov, robot.flange.as_ref())).collect();
+    let r6 = robot.flange.unwrap_or_else(Matrix3::identity);
+    let probe_rotations = (0..m.targets.len())
+        .map(|t| {
+            let c = problem.rotation_column(t)?;
+            let r = problem.tool_rotation(x, t)?;
+            let in_flange = r6.transpose() * cov.fixed_view::<3, 3>(c, c) * r6;
+            Some(ProbeRotation {
+                flange_from_probe: nalgebra::Rotation3::from_matrix_unchecked(r6.transpose() * r.matrix()),
+                std_mdeg: std::array::from_fn(|i| in_flange[(i, i)].max(0.0).sqrt().to_degrees() * 1e3),
+            })
+        })
+        .collect();
     let points_base_mm =
         s.obs.iter().map(|o| layout.base_delta(x, o.session).isometry().inverse_transform_point(&o.measured_mm.into()).coords).collect();
     Ok(Calibration {
@@ -278,6 +316,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         outliers_by,
         flagged,
         inert,
+        probe_rotations,
     })
 }
 
