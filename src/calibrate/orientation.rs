@@ -60,7 +60,10 @@ fn mean(rs: impl Iterator<Item = Rotation3<f64>>) -> Option<Rotation3<f64>> {
     if sum == Matrix3::zeros() {
         return None;
     }
-    Some(Rotation3::from_matrix_eps(&sum, 1e-15, 100, Rotation3::identity()))
+    let svd = sum.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let d = (u * v_t).determinant().signum();
+    Some(Rotation3::from_matrix_unchecked(u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t))
 }
 
 /// Kabsch: the rotation `B` minimising `sum |B a - c|^2` over the pairs, and the second largest

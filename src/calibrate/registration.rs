@@ -346,7 +346,7 @@ mod tests {
                 sigma: 1.0,
             })
             .collect();
-        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
+        let problem = super::super::problem::Problem { start: &model, layout: layout.clone(), obs: &obs };
         let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
         x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
         x.extend([30.0, 0.0, 40.0, -25.0, 35.0, 45.0, 10.0, -20.0, 60.0]);

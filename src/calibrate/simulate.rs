@@ -548,7 +548,7 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
 /// in the robot file's flange frame, as `frame6_from_probe`'s rotation vector, rad.
 fn flange_rotation(robot: &crate::robot::file::RobotFile, v: [f64; 3]) -> Vector3<f64> {
     let r = nalgebra::Rotation3::new(Vector3::from(v.map(f64::to_radians)));
-    robot.flange.map_or(r, |f| nalgebra::Rotation3::from_matrix_eps(&(f * r.matrix()), 1e-15, 20, r)).scaled_axis()
+    robot.flange.map_or(r, |f| nalgebra::Rotation3::from_matrix_unchecked(f * r.matrix())).scaled_axis()
 }
 
 /// `calsim simulate-measurements`: the measurement file of the simulation file `spec`, written to
