@@ -502,6 +502,7 @@ fn setup_with(robot: &RobotFile, m: &Measurements, noise: &orientation::Noise) -
     frames_x.extend(std::iter::repeat_n(0.0, 3 * tool_rotations.iter().filter(|r| r.is_some()).count()));
     let s = Setup { obs, frames, frames_x, still, readings, tool_rotations };
     check_start(robot, m, &s)?;
+    check_readings(robot, m, &s)?;
     Ok(s)
 }
 
@@ -536,6 +537,47 @@ fn check_start(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), Cal
              millimetres off): check the units in the column names, the joint order and convention (`# joints`, [[coupling]]) and \
              the robot file",
             robot.path.display()
+        ),
+    }
+    .into())
+}
+
+/// Largest median angle between the orientation readings and the nominal robot registered on the
+/// points with each probe's start rotation, deg: a robot before calibration is a fraction of a
+/// degree off; tens of degrees are readings in another convention (the quaternion's order, the
+/// inverse rotation, another frame).
+const MOST_START_MEDIAN_DEG: f64 = 5.0;
+
+/// The readings, with the nominal robot registered and each probe's start rotation, within
+/// [`MOST_START_MEDIAN_DEG`] of the model (the median); an error names the file, the first line
+/// whose reading is that far off and the quaternion's columns.
+fn check_readings(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), CalibrateError> {
+    if !m.orientation_columns {
+        return Ok(());
+    }
+    let layout = Layout {
+        robot: ParamSet::new(vec![]).expect("no parameter"),
+        sessions: m.sessions.len(),
+        targets: m.targets.len(),
+        still: s.still.clone(),
+    };
+    let fit = s.fit(&robot.nominal, layout);
+    let all: Vec<usize> = (0..s.obs.len()).collect();
+    let angles: Vec<f64> = problem::Fit::rotation_errors(&fit, &s.frames_x, &all)
+        .map_or_else(|| vec![f64::NAN], |e| e.iter().map(|e| e.map_or(0.0, |v| v.norm().to_degrees())).collect());
+    let median = crate::study::stats::median(&angles);
+    if median <= MOST_START_MEDIAN_DEG {
+        return Ok(());
+    }
+    let first = angles.iter().position(|a| !(*a <= MOST_START_MEDIAN_DEG)).map(|i| m.points[i].line);
+    Err(MeasurementError {
+        path: m.path.clone(),
+        line: first,
+        column: Some("quat_w, quat_x, quat_y, quat_z".into()),
+        message: format!(
+            "the orientation readings are {median:.1} deg off the nominal robot registered on the points (median; a robot before \
+             calibration is a fraction of a degree off): give each reading as the probe's frame in the session's frame, the \
+             quaternion as w, x, y, z"
         ),
     }
     .into())

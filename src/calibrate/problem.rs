@@ -576,8 +576,8 @@ pub trait Fit: Sync {
     fn own_names(&self, targets: &[String]) -> Vec<String>;
     /// Residuals of the points `idx` past their positions' 3 each.
     fn own_rows(&self, idx: &[usize]) -> usize;
-    /// Per point of `idx`: its rotation error (rad, [`Oriented::rotation_errors`]; `None` for a
-    /// point without a reading); `None` when the fit has no readings or `x` makes no model.
+    /// Per point of `idx`: its rotation error `log(R_measured R_model^T)` (rad; `None` for a point
+    /// without a reading); `None` when the fit has no readings or `x` makes no model.
     fn rotation_errors(&self, x: &[f64], idx: &[usize]) -> Option<Vec<Option<Vector3<f64>>>>;
 }
 
@@ -671,9 +671,14 @@ pub fn left_jacobian(d: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() + a * k + b * k * k
 }
 
-/// The rotation vector of `r` (its logarithm), rad.
+/// The rotation vector of `r` (its logarithm), rad: from its quaternion (Shepperd's method) by
+/// `2 atan2(|v|, w) v / |v|`, accurate at every angle (an angle from `acos` of the trace loses
+/// half the digits near zero, where the fit's residuals end).
 pub fn log(r: &Rotation3<f64>) -> Vector3<f64> {
-    r.scaled_axis()
+    let q = nalgebra::UnitQuaternion::from_rotation_matrix(r);
+    let (w, v) = if q.w < 0.0 { (-q.w, -q.imag()) } else { (q.w, q.imag()) };
+    let n = v.norm();
+    if n == 0.0 { Vector3::zeros() } else { v * (2.0 * n.atan2(w) / n) }
 }
 
 /// Per configuration of `qs` at `model`: the flange's rotation in the model's world frame and, if
@@ -915,6 +920,9 @@ impl Fit for Oriented<'_> {
     /// Per point of `idx`: its rotation error `log(R_measured R_model^T)` at `x`, rad (`None` for a
     /// point without a reading); `None` when `x` makes no model.
     fn rotation_errors(&self, x: &[f64], idx: &[usize]) -> Option<Vec<Option<Vector3<f64>>>> {
+        if self.rotated() == 0 {
+            return None;
+        }
         let rows = self.rotation_rows(x, idx, false)?;
         let mut by: std::collections::HashMap<usize, Vector3<f64>> = rows.into_iter().map(|(i, e, _)| (i, e)).collect();
         Some(idx.iter().map(|i| by.remove(i)).collect())
