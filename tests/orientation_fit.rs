@@ -167,7 +167,8 @@ fn the_fitted_std_agrees_with_the_scatter_over_seeds() {
     let robot = irb120();
     let truth = truth_on(&robot, &identifiable());
     let o = probes(10.0);
-    let opts = Options { position_noise_mm: 0.012, orientation_noise_mdeg: 10.0, outliers: calsim::calibrate::OutlierMode::Off, ..options() };
+    let opts =
+        Options { position_noise_mm: 0.012, orientation_noise_mdeg: 10.0, outliers: calsim::calibrate::OutlierMode::Off, ..options() };
     let mut z = Vec::new();
     for seed in 0..6 {
         let s = spec(truth.clone(), &robot, 0.012, 100 + seed);

@@ -404,11 +404,20 @@ fn check_options(o: &Options) -> Result<(), CalibrateError> {
             return bad("payload-com-mm", format!("{v}: each coordinate within +-{MOST_PAYLOAD_COM_MM} mm of the flange"));
         }
     }
-    if !(o.orientation_noise_mdeg.is_finite() && o.orientation_noise_mdeg > 0.0 && o.orientation_noise_mdeg <= orientation::MOST_ORIENTATION_NOISE_MDEG) {
-        return bad("orientation-noise-mdeg", format!("{}: above 0 and at most {} mdeg", o.orientation_noise_mdeg, orientation::MOST_ORIENTATION_NOISE_MDEG));
+    if !(o.orientation_noise_mdeg.is_finite()
+        && o.orientation_noise_mdeg > 0.0
+        && o.orientation_noise_mdeg <= orientation::MOST_ORIENTATION_NOISE_MDEG)
+    {
+        return bad(
+            "orientation-noise-mdeg",
+            format!("{}: above 0 and at most {} mdeg", o.orientation_noise_mdeg, orientation::MOST_ORIENTATION_NOISE_MDEG),
+        );
     }
     if !(o.position_noise_mm.is_finite() && o.position_noise_mm > 0.0 && o.position_noise_mm <= orientation::MOST_POSITION_NOISE_MM) {
-        return bad("position-noise-mm", format!("{}: above 0 and at most {} mm", o.position_noise_mm, orientation::MOST_POSITION_NOISE_MM));
+        return bad(
+            "position-noise-mm",
+            format!("{}: above 0 and at most {} mm", o.position_noise_mm, orientation::MOST_POSITION_NOISE_MM),
+        );
     }
     if let Some(p) = &o.params {
         if let Some(id) = p.ids().iter().find(|id| matches!(id, ParamId::Base(_) | ParamId::Tool(_))) {

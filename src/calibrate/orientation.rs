@@ -136,7 +136,8 @@ pub fn orient_sessions(
                     sum / members.len() as f64
                 };
                 let steps = (360.0 / SCAN_STEP_DEG) as usize;
-                let costs: Vec<(f64, f64)> = (0..steps).map(|k| ((k as f64 * SCAN_STEP_DEG).to_radians(), 0.0)).map(|(p, _)| (p, cost(p))).collect();
+                let costs: Vec<(f64, f64)> =
+                    (0..steps).map(|k| ((k as f64 * SCAN_STEP_DEG).to_radians(), 0.0)).map(|(p, _)| (p, cost(p))).collect();
                 let (best, least) = costs.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or((0.0, f64::INFINITY));
                 let most = costs.iter().map(|c| c.1).fold(0.0, f64::max);
                 if !(least.is_finite() && most - least > SCAN_CONTRAST_RAD2) {
@@ -189,11 +190,7 @@ pub fn tool_rotations(nominal: &RobotModel, obs: &[Obs], readings: &[Option<Read
     let flanges = flange_rotations(nominal, obs);
     (0..targets)
         .map(|t| {
-            mean(
-                (0..obs.len())
-                    .filter(|&i| obs[i].target == t)
-                    .filter_map(|i| readings[i].map(|r| flanges[i].inverse() * r.measured)),
-            )
+            mean((0..obs.len()).filter(|&i| obs[i].target == t).filter_map(|i| readings[i].map(|r| flanges[i].inverse() * r.measured)))
         })
         .collect()
 }

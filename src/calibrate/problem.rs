@@ -667,7 +667,8 @@ pub fn right_jacobian_inverse(e: &Vector3<f64>) -> Matrix3<f64> {
 pub fn left_jacobian(d: &Vector3<f64>) -> Matrix3<f64> {
     let t = d.norm();
     let k = skew(d);
-    let (a, b) = if t < 1e-4 { (0.5 - t * t / 24.0, 1.0 / 6.0 - t * t / 120.0) } else { ((1.0 - t.cos()) / (t * t), (t - t.sin()) / (t * t * t)) };
+    let (a, b) =
+        if t < 1e-4 { (0.5 - t * t / 24.0, 1.0 / 6.0 - t * t / 120.0) } else { ((1.0 - t.cos()) / (t * t), (t - t.sin()) / (t * t * t)) };
     Matrix3::identity() + a * k + b * k * k
 }
 
@@ -714,7 +715,11 @@ pub fn flange_rotations(model: &RobotModel, set: Option<&ParamSet>, qs: &[Joints
             let dr = Matrix3::from_fn(|i, a| (jts[a + 1][(3 * k + i) * p + c] - jts[0][(3 * k + i) * p + c]) / AXIS_MM);
             // dR = [w] R: [w] = dR R^T.
             let w = dr * r.matrix().transpose();
-            d.column_mut(c).copy_from(&Vector3::new(0.5 * (w[(2, 1)] - w[(1, 2)]), 0.5 * (w[(0, 2)] - w[(2, 0)]), 0.5 * (w[(1, 0)] - w[(0, 1)])));
+            d.column_mut(c).copy_from(&Vector3::new(
+                0.5 * (w[(2, 1)] - w[(1, 2)]),
+                0.5 * (w[(0, 2)] - w[(2, 0)]),
+                0.5 * (w[(1, 0)] - w[(0, 1)]),
+            ));
         }
         out.push((r, d));
     }
@@ -825,7 +830,9 @@ impl Fit for Oriented<'_> {
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
         let positions = self.problem.cost(x, idx);
         match self.rotation_rows(x, idx, false) {
-            Some(rows) => positions + rows.iter().map(|(i, e, _)| (e / self.readings[*i].map_or(1.0, |r| r.sigma_rad)).norm_squared()).sum::<f64>(),
+            Some(rows) => {
+                positions + rows.iter().map(|(i, e, _)| (e / self.readings[*i].map_or(1.0, |r| r.sigma_rad)).norm_squared()).sum::<f64>()
+            }
             None => f64::INFINITY,
         }
     }
@@ -839,8 +846,10 @@ impl Fit for Oriented<'_> {
             let o = &self.problem.obs[i];
             let j = j?;
             let r = e / self.readings[i]?.sigma_rad;
-            let used: Vec<(usize, usize)> =
-                (0..j.ncols()).map(|c| (c, at[self.rotation_column_of(c, o.session, o.target)])).filter(|(_, a)| *a != usize::MAX).collect();
+            let used: Vec<(usize, usize)> = (0..j.ncols())
+                .map(|c| (c, at[self.rotation_column_of(c, o.session, o.target)]))
+                .filter(|(_, a)| *a != usize::MAX)
+                .collect();
             for &(u, au) in &used {
                 b[au] += j.column(u).dot(&r);
                 for &(w, aw) in &used {
@@ -1096,8 +1105,9 @@ mod tests {
         let layout = Layout { robot, sessions: 3, targets: 2, still: vec![] };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(42);
         let mut turn = || Vector3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3));
-        let readings: Vec<Option<Reading>> =
-            (0..24).map(|k| (k % 5 != 2).then(|| Reading { measured: Rotation3::new(turn()), sigma_rad: 0.01 + 0.002 * (k % 3) as f64 })).collect();
+        let readings: Vec<Option<Reading>> = (0..24)
+            .map(|k| (k % 5 != 2).then(|| Reading { measured: Rotation3::new(turn()), sigma_rad: 0.01 + 0.002 * (k % 3) as f64 }))
+            .collect();
         let tool_rotations = vec![Some(Rotation3::new(turn())), Some(Rotation3::new(turn()))];
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(43);
         let obs: Vec<Obs> = (0..24)
@@ -1109,7 +1119,11 @@ mod tests {
                 sigma: 0.5,
             })
             .collect();
-        let fit = Oriented { problem: Problem { start: &model, layout: layout.clone(), obs: &obs }, readings: &readings, tool_rotations: &tool_rotations };
+        let fit = Oriented {
+            problem: Problem { start: &model, layout: layout.clone(), obs: &obs },
+            readings: &readings,
+            tool_rotations: &tool_rotations,
+        };
         let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
         for _ in 0..layout.sessions {
             x.extend([12.0, -30.0, 4.0, 0.02, -0.01, 0.03].iter().map(|v| v + rng.random_range(-1.0..1.0) * 1e-3));
@@ -1143,7 +1157,12 @@ mod tests {
                 let fd = -(ep[i].unwrap() - em[i].unwrap()) / (2.0 * h) / readings[i].unwrap().sigma_rad;
                 for a in 0..3 {
                     let an = j[(3 * idx.len() + 3 * k + a, c)];
-                    assert!((an - fd[a]).abs() <= 1e-5 * scale + 1e-7, "{}: point {i} axis {a}: analytic {an}, central {}", names[c], fd[a]);
+                    assert!(
+                        (an - fd[a]).abs() <= 1e-5 * scale + 1e-7,
+                        "{}: point {i} axis {a}: analytic {an}, central {}",
+                        names[c],
+                        fd[a]
+                    );
                 }
             }
         }
@@ -1157,5 +1176,4 @@ mod tests {
         assert!((rf.tr_mul(&rf) - &nd).amax() <= 1e-10 * nd.amax());
         assert!((fit.cost(&x, &idx) - r.norm_squared()).abs() <= 1e-12 * r.norm_squared());
     }
-
 }

@@ -613,7 +613,14 @@ fn orientation_section(s: &mut String, c: &Calibration) {
     }
     let fit: Vec<f64> = c.chosen().fit.rotation_base_mdeg.iter().flatten().map(|v| v.norm()).collect();
     let f = ErrorStats::of(&fit);
-    let _ = writeln!(s, "\nRotation errors of the chosen model ({}), mdeg: fit on every point mean {:.2}, max {:.2}, RMS {:.2}.", c.chosen().name(), f.mean, f.max, f.rms);
+    let _ = writeln!(
+        s,
+        "\nRotation errors of the chosen model ({}), mdeg: fit on every point mean {:.2}, max {:.2}, RMS {:.2}.",
+        c.chosen().name(),
+        f.mean,
+        f.max,
+        f.rms
+    );
     if let Some(r) = c.chosen().held_out.as_ref().and_then(|h| h.rotation) {
         let _ = writeln!(s, "Held-out points: mean {:.2}, max {:.2}, RMS {:.2}.", r.mean, r.max, r.rms);
     }

@@ -202,7 +202,14 @@ pub(super) fn point_fit(oriented: &Oriented<'_>, fit: &RobustFit, flagged: &[boo
             .iter()
             .zip(problem.obs)
             .map(|(e, o)| {
-                e.map(|e| problem.layout.base_delta(&fit.solved.x, o.session).isometry().inverse_transform_vector(&e).map(|v| v.to_degrees() * 1e3))
+                e.map(|e| {
+                    problem
+                        .layout
+                        .base_delta(&fit.solved.x, o.session)
+                        .isometry()
+                        .inverse_transform_vector(&e)
+                        .map(|v| v.to_degrees() * 1e3)
+                })
             })
             .collect(),
         None => Vec::new(),

@@ -82,7 +82,14 @@ impl RobustFit {
 }
 
 /// Fits `free` over the points `idx` from `x0` with the outlier rule of this module.
-pub fn robust_fit<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[usize], threshold: f64, opts: &SolveOptions) -> RobustFit {
+pub fn robust_fit<P: Fit + ?Sized>(
+    problem: &P,
+    x0: &[f64],
+    free: &[usize],
+    idx: &[usize],
+    threshold: f64,
+    opts: &SolveOptions,
+) -> RobustFit {
     robust_fit_and_first(problem, x0, free, idx, threshold, opts).0
 }
 
@@ -117,7 +124,14 @@ pub fn robust_fit_and_first<P: Fit + ?Sized>(
 /// Fits `free` over the points of `idx` not flagged in `outlier` (one flag per point of `idx`):
 /// the flags are given, not decided; the robust scale and normalized residuals are of every
 /// point of `idx`.
-pub fn fit_without<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[usize], outlier: &[bool], opts: &SolveOptions) -> RobustFit {
+pub fn fit_without<P: Fit + ?Sized>(
+    problem: &P,
+    x0: &[f64],
+    free: &[usize],
+    idx: &[usize],
+    outlier: &[bool],
+    opts: &SolveOptions,
+) -> RobustFit {
     let active: Vec<usize> = idx.iter().zip(outlier).filter(|(_, o)| !**o).map(|(i, _)| *i).collect();
     let solved = solve(problem, x0, free, &active, opts);
     let positions = problem.positions();

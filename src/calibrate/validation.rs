@@ -391,9 +391,8 @@ pub fn held_out<P: Fit + ?Sized>(fit: &P, train: &RobustFit, free: &[usize], spe
         .rotation_errors(&x, spec.test)
         .map(|r| r.iter().map(|e| e.map_or(f64::NAN, |e| e.norm().to_degrees() * 1e3)).collect())
         .unwrap_or_default();
-    let rotation = (!rotation_errors_mdeg.is_empty()).then(|| {
-        ErrorStats::of(&kept.iter().map(|&k| rotation_errors_mdeg[k]).filter(|v| v.is_finite()).collect::<Vec<_>>())
-    });
+    let rotation = (!rotation_errors_mdeg.is_empty())
+        .then(|| ErrorStats::of(&kept.iter().map(|&k| rotation_errors_mdeg[k]).filter(|v| v.is_finite()).collect::<Vec<_>>()));
     HeldOut {
         errors_mm,
         outlier,
