@@ -578,7 +578,7 @@ fn check_readings(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), 
     if median <= MOST_START_MEDIAN_DEG {
         return Ok(());
     }
-    let first = angles.iter().position(|a| !(*a <= MOST_START_MEDIAN_DEG)).map(|i| m.points[i].line);
+    let first = angles.iter().position(|a| a.is_nan() || *a > MOST_START_MEDIAN_DEG).map(|i| m.points[i].line);
     Err(MeasurementError {
         path: m.path.clone(),
         line: first,
