@@ -828,6 +828,9 @@ impl Fit for Oriented<'_> {
         self.problem.layout.len() + 3 * self.rotated()
     }
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
+        if self.rotated() == 0 {
+            return self.problem.cost(x, idx);
+        }
         let positions = self.problem.cost(x, idx);
         match self.rotation_rows(x, idx, false) {
             Some(rows) => {
@@ -837,6 +840,9 @@ impl Fit for Oriented<'_> {
         }
     }
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        if self.rotated() == 0 {
+            return self.problem.normal_equations(x, idx, cols);
+        }
         let (mut n, mut b) = self.problem.normal_equations(x, idx, cols)?;
         let mut at = vec![usize::MAX; self.unknowns()];
         for (k, &c) in cols.iter().enumerate() {
@@ -860,6 +866,9 @@ impl Fit for Oriented<'_> {
         Some((n, b))
     }
     fn linearise(&self, x: &[f64], idx: &[usize]) -> Option<(DVector<f64>, DMatrix<f64>)> {
+        if self.rotated() == 0 {
+            return self.problem.linearise(x, idx);
+        }
         let (r, j) = self.problem.linearise(x, idx)?;
         let rows = self.rotation_rows(x, idx, true)?;
         let n = r.len();
@@ -879,6 +888,9 @@ impl Fit for Oriented<'_> {
         Some((r, j))
     }
     fn r_factor(&self, x: &[f64], idx: &[usize]) -> Option<DMatrix<f64>> {
+        if self.rotated() == 0 {
+            return self.problem.r_factor(x, idx);
+        }
         let r = self.problem.r_factor(x, idx)?.resize_horizontally(self.unknowns(), 0.0);
         let rows = self.rotation_rows(x, idx, true)?;
         if rows.is_empty() {
@@ -914,6 +926,9 @@ impl Fit for Oriented<'_> {
         out
     }
     fn own_rows(&self, idx: &[usize]) -> usize {
+        if self.rotated() == 0 {
+            return 0;
+        }
         3 * self.read(idx).len()
     }
     fn own_names(&self, targets: &[String]) -> Vec<String> {
