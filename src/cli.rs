@@ -147,6 +147,14 @@ struct CalibrateArgs {
     /// The payload's centre of mass in the flange frame, mm: x,y,z (default 0,0,0; needs --payload-kg).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, requires = "payload_kg")]
     payload_com_mm: Option<Vec<f64>>,
+    /// The orientation readings' uncertainty about each axis when the file has no sigma_deg column,
+    /// mdeg (default 10; six-degree-of-freedom probes: the quat_w..quat_z columns).
+    #[arg(long)]
+    orientation_noise_mdeg: Option<f64>,
+    /// The positions' uncertainty per coordinate the rotation residuals are weighted against when
+    /// the file has orientation columns and no sigma_mm column, mm (default 0.025).
+    #[arg(long)]
+    position_noise_mm: Option<f64>,
     /// A tool per session: each session's targets get their own position on the flange (a probe
     /// or SMR nest re-mounted between sessions); a session held out whole has its tools registered
     /// with its base on its own points.
@@ -886,12 +894,11 @@ fn calibrate(args: &CalibrateArgs) -> Result<ExitCode, String> {
         tool_per_session: args.tool_per_session,
         payload_kg: args.payload_kg,
         payload_com_mm: args.payload_com_mm.clone(),
+        orientation_noise_mdeg: args.orientation_noise_mdeg,
+        position_noise_mm: args.position_noise_mm,
         ..app::calibrate::CalibrateArgs::new(args.robot.clone(), args.measurements.clone(), args.out.clone())
     };
     let report = app::calibrate::run(&spec).map_err(|e| e.to_string())?;
-    if let Some(line) = crate::calibrate::report::orientation_warning(&report.calibration) {
-        eprintln!("{line}");
-    }
     if let Some(line) = crate::calibrate::report::outlier_warning(&report.calibration) {
         eprintln!("{line}");
     }

@@ -139,6 +139,8 @@ pub mod calibrate {
     pub const SIMULATED_POSES: u64 = 0x4341_4c49_0003;
     /// A simulated measurement file: the robot's unmodelled effects, move and instrument noise.
     pub const SIMULATED_NOISE: u64 = 0x4341_4c49_0004;
+    /// A simulated measurement file: the noise of the probes' orientation readings.
+    pub const SIMULATED_ORIENTATION: u64 = 0x4341_4c49_0010;
     /// The noise of a plan's simulated worlds (`calibrate::plan::simulate`), per world.
     pub const PLAN_NOISE: u64 = 0x4341_4c49_0005;
     /// The folds of the k-fold cross-validation over every pose (`calibrate::validation::assign_every_pose`).

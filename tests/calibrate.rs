@@ -1040,11 +1040,12 @@ fn a_fit_failure_names_the_sessions_points_and_parameters_involved() {
     assert!(!e.contains('\n'), "one line: {e}");
 }
 
-/// Orientation readings (a six-degree-of-freedom probe's `quat_*` columns) are checked and not
-/// used, and calibrate says so: a WARNING line on standard error naming the file and the columns,
-/// and a sentence in summary.md; the positions' figures are those of the file without the columns.
+/// Orientation readings that do not describe the robot (every row reading the identity, whatever
+/// the flange's turn) are one line naming the file, the first line that far off and the
+/// quaternion's columns, exit 2: the fit uses the readings, and readings in another convention
+/// would pull it.
 #[test]
-fn orientation_columns_are_not_read_and_ignored_silently() {
+fn orientation_readings_that_do_not_describe_the_robot_are_one_line_exit_2() {
     let dir = common::scratch("calibrate-quat");
     let text = std::fs::read_to_string(common::repo().join("docs/calibrate/example_measurements.csv")).unwrap();
     let with: String = text
@@ -1066,14 +1067,10 @@ fn orientation_columns_are_not_read_and_ignored_silently() {
         .arg(&csv)
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        stderr.lines().any(|l| l.contains("WARNING") && l.contains("probe.csv") && l.contains("quat_w") && l.contains("NOT used")),
-        "{stderr}"
-    );
-    let summary = std::fs::read_to_string(dir.path().join("out/probe.calibration/summary.md")).unwrap();
-    assert!(summary.contains("**Orientation readings not used**"), "{summary}");
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("probe.csv: line ") && stderr.contains("quat_w") && stderr.contains("deg off the nominal robot"), "{stderr}");
 }
 
 /// The report's figures: the residuals per joint are signed components (x, y, z in the base

@@ -53,6 +53,11 @@ pub struct CalibrateArgs {
     pub payload_kg: Option<f64>,
     /// The payload's centre of mass in the flange frame, mm (three numbers; `None`: 0, 0, 0).
     pub payload_com_mm: Option<Vec<f64>>,
+    /// The orientation readings' uncertainty when the file gives none, mdeg (`None`: the default).
+    pub orientation_noise_mdeg: Option<f64>,
+    /// The positions' uncertainty the rotation residuals are weighted against when the file gives
+    /// none, mm (`None`: the default).
+    pub position_noise_mm: Option<f64>,
 }
 
 impl CalibrateArgs {
@@ -81,6 +86,8 @@ impl CalibrateArgs {
             tool_per_session: false,
             payload_kg: None,
             payload_com_mm: None,
+            orientation_noise_mdeg: None,
+            position_noise_mm: None,
         }
     }
 
@@ -147,6 +154,8 @@ impl CalibrateArgs {
             outlier_threshold: self.outlier_threshold.unwrap_or(defaults.outlier_threshold),
             outliers,
             plots: self.plots,
+            orientation_noise_mdeg: self.orientation_noise_mdeg.unwrap_or(defaults.orientation_noise_mdeg),
+            position_noise_mm: self.position_noise_mm.unwrap_or(defaults.position_noise_mm),
             ..defaults
         };
         Ok(CalibrateSpec {

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use super::Error;
-use crate::calibrate::simulate::{read_spec, to_csv};
+use crate::calibrate::simulate::{read_spec, to_csv_with};
 
 /// What `simulate-measurements` made.
 #[derive(Clone, Debug)]
@@ -24,7 +24,7 @@ pub fn run(spec: &Path, out: Option<&Path>) -> Result<Simulated, Error> {
     let _inputs = crate::io::inputs::Ledger::open();
     let stem = crate::io::names::of_file(spec)?;
     let s = read_spec(spec).map_err(|e| spec_error(spec, &e))?;
-    let csv = to_csv(&s.spec);
+    let csv = to_csv_with(&s.spec, s.orientation.as_ref());
     let rows = csv.lines().filter(|l| !l.starts_with('#')).count().saturating_sub(1);
     let written = match out {
         Some(out) => {

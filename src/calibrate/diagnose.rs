@@ -4,7 +4,7 @@
 
 use std::fmt::Write as _;
 
-use super::problem::Problem;
+use super::problem::{Fit, Problem};
 use super::registration::RANK_RTOL;
 
 /// A dependent unknown's least share of a null direction to be named (as `registration::prune`).
@@ -28,10 +28,12 @@ pub struct Labels<'a> {
 /// fit failed): the unknowns with no effect on these points, else those of its null space (else
 /// of its weakest direction, with the condition number), and every session and target they
 /// belong to with its points in the fit.
-pub fn why(problem: &Problem<'_>, x: &[f64], free: &[usize], idx: &[usize], labels: &Labels<'_>) -> String {
+pub fn why<P: Fit + ?Sized>(fit: &P, x: &[f64], free: &[usize], idx: &[usize], labels: &Labels<'_>) -> String {
+    let problem = fit.positions();
     let l = &problem.layout;
-    let names = l.names(labels.sessions, labels.targets);
-    let Some((_, j)) = problem.linearise(x, idx) else {
+    let mut names = l.names(labels.sessions, labels.targets);
+    names.extend(fit.own_names(labels.targets));
+    let Some((_, j)) = fit.linearise(x, idx) else {
         return "the model gives no finite prediction at these values".into();
     };
     let mut j = j.select_columns(free);

@@ -21,6 +21,7 @@
 
 pub mod diagnose;
 pub mod measurements;
+pub mod orientation;
 pub mod plan;
 mod plots;
 pub mod problem;
@@ -39,14 +40,14 @@ use nalgebra::Isometry3;
 use crate::robot::file::{RobotFile, RobotFileError};
 use crate::robot::{LinkParam, ParamId, ParamSet};
 use measurements::{MeasurementError, Measurements};
-use problem::{Layout, Obs, Problem, SolveOptions};
+use problem::{Layout, Obs, Oriented, Problem, Reading, SolveOptions};
 use registration::{Raw, Unidentifiable, Unplaced};
 pub use robust::OutlierMode;
 use robust::{RobustFit, fit_without, robust_fit_and_first};
 pub use validation::KFoldBy;
 use validation::{HeldOutSpec, Split, SplitError, free_columns};
 
-pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ToolEstimate};
+pub use results::{BaseEstimate, Calibration, Estimate, ModelResult, ParamStatus, PointFit, ProbeRotation, ToolEstimate};
 use results::{Parts, finish, point_fit};
 
 /// The models compared, simplest first.
@@ -114,6 +115,19 @@ pub struct Options {
     /// A lumped payload at the flange in place of the robot file's `[payload]` (`--payload-kg`):
     /// the mass the joint compliances act through when the robot file gives no masses.
     pub payload: Option<Payload>,
+    /// The orientation readings' uncertainty when the file gives no `sigma_deg` column, mdeg
+    /// (`--orientation-noise-mdeg`).
+    pub orientation_noise_mdeg: f64,
+    /// The positions' uncertainty per coordinate the rotation residuals are weighted against when
+    /// the file has no `sigma_mm` column, mm (`--position-noise-mm`).
+    pub position_noise_mm: f64,
+}
+
+impl Options {
+    /// The weights of the orientation readings.
+    fn noise(&self) -> orientation::Noise {
+        orientation::Noise { orientation_rad: (self.orientation_noise_mdeg * 1e-3).to_radians(), position_mm: self.position_noise_mm }
+    }
 }
 
 /// A lumped payload at the flange: the SMR nest, probe or tool the arm holds while measured.
@@ -147,6 +161,8 @@ impl Default for Options {
             plots: true,
             tool_per_session: false,
             payload: None,
+            orientation_noise_mdeg: orientation::DEFAULT_ORIENTATION_NOISE_MDEG,
+            position_noise_mm: orientation::DEFAULT_POSITION_NOISE_MM,
         }
     }
 }
@@ -388,6 +404,21 @@ fn check_options(o: &Options) -> Result<(), CalibrateError> {
             return bad("payload-com-mm", format!("{v}: each coordinate within +-{MOST_PAYLOAD_COM_MM} mm of the flange"));
         }
     }
+    if !(o.orientation_noise_mdeg.is_finite()
+        && o.orientation_noise_mdeg > 0.0
+        && o.orientation_noise_mdeg <= orientation::MOST_ORIENTATION_NOISE_MDEG)
+    {
+        return bad(
+            "orientation-noise-mdeg",
+            format!("{}: above 0 and at most {} mdeg", o.orientation_noise_mdeg, orientation::MOST_ORIENTATION_NOISE_MDEG),
+        );
+    }
+    if !(o.position_noise_mm.is_finite() && o.position_noise_mm > 0.0 && o.position_noise_mm <= orientation::MOST_POSITION_NOISE_MM) {
+        return bad(
+            "position-noise-mm",
+            format!("{}: above 0 and at most {} mm", o.position_noise_mm, orientation::MOST_POSITION_NOISE_MM),
+        );
+    }
     if let Some(p) = &o.params {
         if let Some(id) = p.ids().iter().find(|id| matches!(id, ParamId::Base(_) | ParamId::Tool(_))) {
             return bad("params", format!("{}: the bases and tools are fitted per session and target, not as robot parameters", id.name()));
@@ -413,9 +444,24 @@ struct Setup {
     frames_x: Vec<f64>,
     /// Per session, the base columns its points do not fix ([`Layout::still`]).
     still: Vec<[bool; 6]>,
+    /// Per point: its orientation reading in its session's registered frame.
+    readings: Vec<Option<Reading>>,
+    /// Per target: the start value of its probe's rotation on the flange (`None`: no reading).
+    tool_rotations: Vec<Option<nalgebra::Rotation3<f64>>>,
+}
+
+impl Setup {
+    /// The fit of the model `layout` from `start`: the points' positions and readings.
+    fn fit<'a>(&'a self, start: &'a crate::robot::RobotModel, layout: Layout) -> Oriented<'a> {
+        Oriented { problem: Problem { start, layout, obs: &self.obs }, readings: &self.readings, tool_rotations: &self.tool_rotations }
+    }
 }
 
 fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
+    setup_with(robot, m, &orientation::Noise::default())
+}
+
+fn setup_with(robot: &RobotFile, m: &Measurements, noise: &orientation::Noise) -> Result<Setup, CalibrateError> {
     let raw: Vec<Raw> = m
         .points
         .iter()
@@ -438,7 +484,8 @@ fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
                 message: format!("{column} {label}: its points do not fix its frame (fewer than 3 distinct positions, or all on a line)"),
             }
         })?;
-    let obs = raw
+    let mut frames = frames;
+    let mut obs: Vec<Obs> = raw
         .iter()
         .zip(&m.points)
         .map(|(r, p)| Obs {
@@ -449,13 +496,22 @@ fn setup(robot: &RobotFile, m: &Measurements) -> Result<Setup, CalibrateError> {
             sigma: p.sigma_mm.unwrap_or(1.0),
         })
         .collect();
+    let mut still: Vec<[bool; 6]> = spans.iter().zip(&frames).map(|(span, f)| span.still(f)).collect();
+    let mut readings = orientation::readings(m, &frames, noise);
+    for (s, fixed) in orientation::orient_sessions(nominal, &spans, &mut frames, &mut obs, &mut readings).into_iter().enumerate() {
+        if fixed {
+            still[s] = [false; 6];
+        }
+    }
+    let tool_rotations = orientation::tool_rotations(nominal, &obs, &readings, m.targets.len());
     let mut frames_x = vec![0.0; 6 * m.sessions.len()];
     for t in &tools {
         frames_x.extend(t.iter());
     }
-    let still = spans.iter().zip(&frames).map(|(span, f)| span.still(f)).collect();
-    let s = Setup { obs, frames, frames_x, still };
+    frames_x.extend(std::iter::repeat_n(0.0, 3 * tool_rotations.iter().filter(|r| r.is_some()).count()));
+    let s = Setup { obs, frames, frames_x, still, readings, tool_rotations };
     check_start(robot, m, &s)?;
+    check_readings(robot, m, &s)?;
     Ok(s)
 }
 
@@ -495,6 +551,47 @@ fn check_start(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), Cal
     .into())
 }
 
+/// Largest median angle between the orientation readings and the nominal robot registered on the
+/// points with each probe's start rotation, deg: a robot before calibration is a fraction of a
+/// degree off; tens of degrees are readings in another convention (the quaternion's order, the
+/// inverse rotation, another frame).
+const MOST_START_MEDIAN_DEG: f64 = 5.0;
+
+/// The readings, with the nominal robot registered and each probe's start rotation, within
+/// [`MOST_START_MEDIAN_DEG`] of the model (the median); an error names the file, the first line
+/// whose reading is that far off and the quaternion's columns.
+fn check_readings(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), CalibrateError> {
+    if !m.orientation_columns {
+        return Ok(());
+    }
+    let layout = Layout {
+        robot: ParamSet::new(vec![]).expect("no parameter"),
+        sessions: m.sessions.len(),
+        targets: m.targets.len(),
+        still: s.still.clone(),
+    };
+    let fit = s.fit(&robot.nominal, layout);
+    let all: Vec<usize> = (0..s.obs.len()).collect();
+    let angles: Vec<f64> = problem::Fit::rotation_errors(&fit, &s.frames_x, &all)
+        .map_or_else(|| vec![f64::NAN], |e| e.iter().map(|e| e.map_or(0.0, |v| v.norm().to_degrees())).collect());
+    let median = crate::study::stats::median(&angles);
+    if median <= MOST_START_MEDIAN_DEG {
+        return Ok(());
+    }
+    let first = angles.iter().position(|a| a.is_nan() || *a > MOST_START_MEDIAN_DEG).map(|i| m.points[i].line);
+    Err(MeasurementError {
+        path: m.path.clone(),
+        line: first,
+        column: Some("quat_w, quat_x, quat_y, quat_z".into()),
+        message: format!(
+            "the orientation readings are {median:.1} deg off the nominal robot registered on the points (median; a robot before \
+             calibration is a fraction of a degree off): give each reading as the probe's frame in the session's frame, the \
+             quaternion as w, x, y, z"
+        ),
+    }
+    .into())
+}
+
 /// The models of `full` after the identifiability check on every point (duplicates left out).
 fn candidates(
     robot: &RobotFile,
@@ -511,7 +608,7 @@ fn candidates(
         }
         let layout = Layout { robot: set, sessions: m.sessions.len(), targets: m.targets.len(), still: s.still.clone() };
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
-        let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+        let problem = s.fit(&robot.nominal, layout.clone());
         let (kept, fixed) = registration::prune(&problem, &x0, &all, (&m.sessions, &m.targets)).map_err(|e| MeasurementError {
             path: m.path.clone(),
             line: None,
@@ -564,7 +661,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     let mut assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
     (assignment.fold_all, assignment.folds_all) = validation::assign_every_pose(m, opts.kfold_by, opts.folds, opts.seed)
         .map_err(|message| CalibrateError::Option { key: "kfold-by".into(), message })?;
-    let s = setup(robot, m)?;
+    let s = setup_with(robot, m, &opts.noise())?;
     let cands = candidates(robot, m, &s, &full)?;
     let sopts = SolveOptions::default();
     // Outliers are a property of the data, decided once by the most complete model's robust fit
@@ -575,7 +672,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     // every point when no point is left out: kept, with its layout and columns, for that fit.
     let (flagged, outliers_by, first_round) = {
         let (kind, layout, _) = cands.last().expect("at least one model");
-        let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+        let problem = s.fit(&robot.nominal, layout.clone());
         let all: Vec<usize> = (0..s.obs.len()).collect();
         let x0 = validation::start_values(layout, &robot.nominal, &s.frames_x);
         let free = free_columns(&problem, &all, true);
@@ -615,7 +712,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
         let mut undetermined_params: Vec<(String, String)> = Vec::new();
         let all_fit = loop {
             let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
-            let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+            let problem = s.fit(&robot.nominal, layout.clone());
             let free = free_columns(&problem, &all, !layout.robot.is_empty());
             let all_fit = match &first_round {
                 Some((l, f, fit)) if *l == layout && *f == free && outliers.iter().all(|o| !o) => fit.clone(),
@@ -633,7 +730,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             layout = registration::with_robot(&layout, ParamSet::new(keep).expect("a subset of a set"));
         };
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
-        let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+        let problem = s.fit(&robot.nominal, layout.clone());
         let with_robot = !layout.robot.is_empty();
         // The two cross-validations and the training fit are independent (run side by side).
         let cv = || match kind {
@@ -764,13 +861,13 @@ pub const DETERMINED: f64 = 2.0;
 /// least determined by [`DETERMINED`]'s rule, with the reason (none: every one meets it). One at a
 /// time, because the others move once it is fixed: a positive compliance first (the most
 /// positive in standard deviations), else the smallest value in standard deviations.
-fn undetermined(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Vec<(ParamId, String)> {
-    if !problem.layout.robot.ids().iter().any(|id| matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. })) {
+fn undetermined(problem: &Oriented<'_>, fit: &RobustFit, free: &[usize]) -> Vec<(ParamId, String)> {
+    if !problem.problem.layout.robot.ids().iter().any(|id| matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. })) {
         return vec![];
     }
     let Some(cov) = robust::covariance(problem, fit, free) else { return vec![] };
     let mut worst: Option<(bool, f64, ParamId, String)> = None;
-    for (k, id) in problem.layout.robot.ids().iter().enumerate() {
+    for (k, id) in problem.problem.layout.robot.ids().iter().enumerate() {
         let Some(c) = free.iter().position(|&f| f == k) else { continue };
         let (value, std) = (fit.solved.x[k], cov[(c, c)].max(0.0).sqrt());
         let u = id.unit();

@@ -4,7 +4,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use super::problem::{Layout, Problem};
+use super::problem::{Fit, Layout};
 use crate::robot::{KinState, RobotModel, world_from_flange};
 
 /// Alternations of registration and tool estimate at most (each is a few microseconds per point).
@@ -254,25 +254,26 @@ pub const TIE_RTOL: f64 = 1e-6;
 /// from the bases and tools: the column-scaled Jacobian's null space (singular values below
 /// [`RANK_RTOL`] of the largest) is emptied greedily by fixing, each time, the robot parameter with
 /// the largest share in it (ties by [`TIE_RTOL`]: the last in the parameter list). The singular
-/// values and directions are those of the Jacobian's triangular factor ([`Problem::r_factor`]: the
+/// values and directions are those of the Jacobian's triangular factor ([`Fit::r_factor`]: the
 /// same as the Jacobian's, from a factorisation of its rows done once). Returns the kept set and
 /// the parameters fixed; an error when the null space holds base or tool unknowns only (a session
 /// or target the poses do not fix).
-pub fn prune(
-    problem: &Problem<'_>,
+pub fn prune<P: Fit + ?Sized>(
+    problem: &P,
     x: &[f64],
     idx: &[usize],
     labels: (&[String], &[String]),
 ) -> Result<(crate::robot::ParamSet, Vec<Unidentifiable>), FramesUnidentifiable> {
-    let layout = &problem.layout;
-    let names = layout.names(labels.0, labels.1);
+    let layout = &problem.positions().layout;
+    let mut names = layout.names(labels.0, labels.1);
+    names.extend(problem.own_names(labels.1));
     let Some(r) = problem.r_factor(x, idx) else {
         return Err(FramesUnidentifiable { names: vec!["(the start model gives no finite prediction)".into()] });
     };
     let still: Vec<usize> = (0..layout.sessions)
         .flat_map(|s| (layout.base(s)..layout.base(s) + 6).filter(move |c| !layout.base_columns(s).any(|f| f == *c)))
         .collect();
-    let mut kept: Vec<usize> = (0..layout.len()).filter(|c| !still.contains(c)).collect();
+    let mut kept: Vec<usize> = (0..problem.unknowns()).filter(|c| !still.contains(c)).collect();
     let mut fixed = Vec::new();
     loop {
         let mut js = r.select_columns(&kept);
@@ -345,7 +346,7 @@ mod tests {
                 sigma: 1.0,
             })
             .collect();
-        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
+        let problem = super::super::problem::Problem { start: &model, layout: layout.clone(), obs: &obs };
         let mut x: Vec<f64> = layout.robot.pack(&model).iter().copied().collect();
         x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
         x.extend([30.0, 0.0, 40.0, -25.0, 35.0, 45.0, 10.0, -20.0, 60.0]);

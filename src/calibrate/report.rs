@@ -229,6 +229,25 @@ fn point_columns(c: &Calibration) -> Vec<Column> {
         Column::new("kfold_all_fold".into(), p.iter().map(|x| c.assignment.fold_all[x.pose] as u32).collect::<Vec<_>>()),
         Column::new("kfold_all_error_mm".into(), c.chosen().cv_all.errors_mm.clone()),
     ]);
+    if m.orientation_columns {
+        // The rotation errors (measured minus model, about the robot base's axes) of the chosen
+        // model's fit on every point, and at the held-out points of its training fit; NaN where a
+        // point has no reading.
+        let rot = &after.rotation_base_mdeg;
+        let component = |i: usize, k: usize| rot.get(i).copied().flatten().map_or(f64::NAN, |v| v[k]);
+        for (k, a) in ["x", "y", "z"].iter().enumerate() {
+            cols.push(Column::new(format!("rotation_residual_{a}_mdeg").into(), (0..n).map(|i| component(i, k)).collect::<Vec<_>>()));
+        }
+        let norm = |i: usize| rot.get(i).copied().flatten().map_or(f64::NAN, |v| v.norm());
+        cols.push(Column::new("rotation_error_after_mdeg".into(), (0..n).map(norm).collect::<Vec<_>>()));
+        let mut held_rotation = vec![f64::NAN; n];
+        if let Some(h) = held {
+            for (k, &i) in test.iter().enumerate() {
+                held_rotation[i] = h.rotation_errors_mdeg.get(k).copied().unwrap_or(f64::NAN);
+            }
+        }
+        cols.push(Column::new("held_out_rotation_error_mdeg".into(), held_rotation));
+    }
     cols
 }
 
@@ -349,6 +368,9 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
             cv_cell(&r.cv_all)
         );
     }
+    if let Some(r) = c.chosen().held_out.as_ref().and_then(|h| h.rotation) {
+        let _ = writeln!(s, "held-out rotation error of the chosen model (mdeg): mean {:.2}, max {:.2}, RMS {:.2}", r.mean, r.max, r.rms);
+    }
     let _ = writeln!(
         s,
         "CV: {} folds of the training poses (chooses the model); k-fold all poses: {} (comparable with a k-fold CV of the literature)",
@@ -396,18 +418,6 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
 /// `n` and the noun, plural unless `n` is 1 ("1 session", "3 sessions").
 fn count(n: usize, noun: &str) -> String {
     if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
-}
-
-/// The line `calsim calibrate` writes to standard error when the file gives orientation readings:
-/// they are checked and not used (the fit is of positions only).
-pub fn orientation_warning(c: &Calibration) -> Option<String> {
-    c.measurements.orientation_columns.then(|| {
-        format!(
-            "calsim calibrate: WARNING: {}: the orientation columns quat_w, quat_x, quat_y, quat_z are checked and NOT used: the fit \
-             is of positions only (the probe's rotation constrains nothing here)",
-            c.measurements.path.display()
-        )
-    })
 }
 
 /// The loud line `calsim calibrate` writes to standard error when the outlier rule flags points:
@@ -491,11 +501,7 @@ pub fn summary(c: &Calibration) -> String {
         let _ = writeln!(s, "**{} kept nominal, in no model**: {why}.\n", names.join(", "));
     }
     if m.orientation_columns {
-        let _ = writeln!(
-            s,
-            "**Orientation readings not used**: the file's columns quat_w, quat_x, quat_y, quat_z are checked (numbers, unit norm) \
-             and not used; every figure here is of positions only.\n"
-        );
+        orientation_section(&mut s, c);
     }
     models_section(&mut s, c);
     kfold_section(&mut s, c);
@@ -568,6 +574,55 @@ fn kfold_section(s: &mut String, c: &Calibration) {
         for (f, why) in &r.cv_all.failed {
             let _ = writeln!(s, "|  | fold {f} gave no model ({why}) | | | | | |");
         }
+    }
+    let _ = writeln!(s);
+}
+
+/// The orientation readings: how they are weighted, each probe's rotation on the flange, and the
+/// chosen model's rotation errors (fit on every point, held out).
+fn orientation_section(s: &mut String, c: &Calibration) {
+    let m = &c.measurements;
+    let read = m.points.iter().filter(|p| p.orientation.is_some()).count();
+    let sigma = if m.points.iter().any(|p| p.sigma_rad.is_some()) {
+        "the file's sigma_deg".to_string()
+    } else {
+        format!("{} mdeg about each axis (--orientation-noise-mdeg)", c.options.orientation_noise_mdeg)
+    };
+    let against = if m.points.iter().any(|p| p.sigma_mm.is_some()) {
+        "the file's sigma_mm".to_string()
+    } else {
+        format!("{} mm per coordinate (--position-noise-mm)", c.options.position_noise_mm)
+    };
+    let _ = writeln!(
+        s,
+        "## Orientation readings\n\n{} with an orientation reading (quat_w .. quat_z: the probe's frame in the session's frame). Each \
+         gives three rotation residuals `log(R_measured R_model^T)` beside its position's, weighted by {sigma} against the positions' \
+         {against}; each target with readings has its probe's rotation on the flange among the unknowns.\n",
+        count(read, "point")
+    );
+    let _ = writeln!(s, "| target | flange_from_probe: rotation vector (deg) | std about x, y, z (mdeg) |\n|---|---|---|");
+    for (t, r) in c.probe_rotations.iter().enumerate() {
+        if let Some(r) = r {
+            let v = r.flange_from_probe.scaled_axis().map(f64::to_degrees);
+            let _ = writeln!(
+                s,
+                "| {} | {:.5}, {:.5}, {:.5} | {:.2}, {:.2}, {:.2} |",
+                m.targets[t], v.x, v.y, v.z, r.std_mdeg[0], r.std_mdeg[1], r.std_mdeg[2]
+            );
+        }
+    }
+    let fit: Vec<f64> = c.chosen().fit.rotation_base_mdeg.iter().flatten().map(|v| v.norm()).collect();
+    let f = ErrorStats::of(&fit);
+    let _ = writeln!(
+        s,
+        "\nRotation errors of the chosen model ({}), mdeg: fit on every point mean {:.2}, max {:.2}, RMS {:.2}.",
+        c.chosen().name(),
+        f.mean,
+        f.max,
+        f.rms
+    );
+    if let Some(r) = c.chosen().held_out.as_ref().and_then(|h| h.rotation) {
+        let _ = writeln!(s, "Held-out points: mean {:.2}, max {:.2}, RMS {:.2}.", r.mean, r.max, r.rms);
     }
     let _ = writeln!(s);
 }

@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::measurements::Measurements;
-use super::problem::{Layout, Problem};
+use super::problem::{Fit, Layout, Oriented};
 use super::registration::Unidentifiable;
 use super::robust::RobustFit;
 use super::validation::{Assignment, CrossValidation, HeldOut, free_columns};
@@ -87,6 +87,9 @@ pub struct PointFit {
     pub stats: ErrorStats,
     /// The a-posteriori noise per coordinate of unit weight (mm without per-point uncertainties).
     pub sigma_hat: f64,
+    /// Per point: its rotation error `log(R_measured R_model^T)` about the robot base's axes,
+    /// mdeg (`None`: the point has no orientation reading; empty when the file has none).
+    pub rotation_base_mdeg: Vec<Option<Vector3<f64>>>,
 }
 
 /// One model's results.
@@ -154,6 +157,18 @@ pub struct Calibration {
     /// Joint compliances with no gravity torque to act through (kept nominal, in no model): name
     /// and reason.
     pub inert: Vec<(String, String)>,
+    /// Per target: its probe's rotation on the flange (`None`: the target has no orientation
+    /// reading).
+    pub probe_rotations: Vec<Option<ProbeRotation>>,
+}
+
+/// A six-degree-of-freedom probe's rotation on the flange.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeRotation {
+    /// `flange_from_probe` (in the robot file's flange frame).
+    pub flange_from_probe: nalgebra::Rotation3<f64>,
+    /// Standard deviations of its small rotations about the flange's x, y, z axes, mdeg.
+    pub std_mdeg: [f64; 3],
 }
 
 impl ModelResult {
@@ -171,7 +186,8 @@ impl Calibration {
 }
 
 /// The per-point view of a fit on every point.
-pub(super) fn point_fit(problem: &Problem<'_>, fit: &RobustFit, flagged: &[bool]) -> PointFit {
+pub(super) fn point_fit(oriented: &Oriented<'_>, fit: &RobustFit, flagged: &[bool]) -> PointFit {
+    let problem = &oriented.problem;
     let n = problem.obs.len();
     let errors = problem.errors(&fit.solved.x, &fit.idx).unwrap_or_else(|| vec![Vector3::repeat(f64::NAN); n]);
     let residual_base_mm: Vec<Vector3<f64>> = errors
@@ -181,7 +197,25 @@ pub(super) fn point_fit(problem: &Problem<'_>, fit: &RobustFit, flagged: &[bool]
         .collect();
     let errors_mm: Vec<f64> = errors.iter().map(|e| e.norm()).collect();
     let kept: Vec<f64> = errors_mm.iter().zip(&fit.outlier).filter(|(_, o)| !**o).map(|(e, _)| *e).collect();
+    let rotation_base_mdeg = match oriented.rotation_errors(&fit.solved.x, &fit.idx) {
+        Some(r) => r
+            .iter()
+            .zip(problem.obs)
+            .map(|(e, o)| {
+                e.map(|e| {
+                    problem
+                        .layout
+                        .base_delta(&fit.solved.x, o.session)
+                        .isometry()
+                        .inverse_transform_vector(&e)
+                        .map(|v| v.to_degrees() * 1e3)
+                })
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     PointFit {
+        rotation_base_mdeg,
         outcome: fit.solved.outcome.clone(),
         stats: ErrorStats::of(&kept),
         errors_mm,
@@ -213,7 +247,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     let Parts { robot, m, opts, s, assignment, before, models, chosen, full, inert, outliers_by, flagged } = parts;
     let r = &models[chosen];
     let layout = &r.layout;
-    let problem = Problem { start: &robot.nominal, layout: layout.clone(), obs: &s.obs };
+    let problem = s.fit(&robot.nominal, layout.clone());
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let free = free_columns(&problem, &all, true);
     let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
@@ -233,7 +267,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
     // `free` holds every column (every session and target has points) but the bases' columns kept
     // at their registration (`Layout::still`): cov in layout order, none for those.
     let cov_free = super::robust::covariance(&problem, &fit, &free).ok_or_else(|| no_model("singular normal matrix"))?;
-    let mut cov = DMatrix::zeros(layout.len(), layout.len());
+    let mut cov = DMatrix::zeros(problem.unknowns(), problem.unknowns());
     for (a, &ca) in free.iter().enumerate() {
         for (b, &cb) in free.iter().enumerate() {
             cov[(ca, cb)] = cov_free[(a, b)];
@@ -258,6 +292,18 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         })
         .collect();
     let tools = (0..m.targets.len()).map(|t| tool(&m.targets[t], layout.tool(t), x, &cov, robot.flange.as_ref())).collect();
+    let r6 = robot.flange.unwrap_or_else(Matrix3::identity);
+    let probe_rotations = (0..m.targets.len())
+        .map(|t| {
+            let c = problem.rotation_column(t)?;
+            let r = problem.tool_rotation(x, t)?;
+            let in_flange = r6.transpose() * cov.fixed_view::<3, 3>(c, c) * r6;
+            Some(ProbeRotation {
+                flange_from_probe: nalgebra::Rotation3::from_matrix_unchecked(r6.transpose() * r.matrix()),
+                std_mdeg: std::array::from_fn(|i| in_flange[(i, i)].max(0.0).sqrt().to_degrees() * 1e3),
+            })
+        })
+        .collect();
     let points_base_mm =
         s.obs.iter().map(|o| layout.base_delta(x, o.session).isometry().inverse_transform_point(&o.measured_mm.into()).coords).collect();
     Ok(Calibration {
@@ -277,6 +323,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         outliers_by,
         flagged,
         inert,
+        probe_rotations,
     })
 }
 

@@ -11,7 +11,7 @@
 
 use nalgebra::DMatrix;
 
-use super::problem::{Problem, SolveOptions, Solved, solve};
+use super::problem::{Fit, SolveOptions, Solved, solve};
 
 /// Median of the chi distribution with 3 degrees of freedom (the square root of the median of
 /// chi-square(3), 2.365974).
@@ -82,14 +82,21 @@ impl RobustFit {
 }
 
 /// Fits `free` over the points `idx` from `x0` with the outlier rule of this module.
-pub fn robust_fit(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usize], threshold: f64, opts: &SolveOptions) -> RobustFit {
+pub fn robust_fit<P: Fit + ?Sized>(
+    problem: &P,
+    x0: &[f64],
+    free: &[usize],
+    idx: &[usize],
+    threshold: f64,
+    opts: &SolveOptions,
+) -> RobustFit {
     robust_fit_and_first(problem, x0, free, idx, threshold, opts).0
 }
 
 /// [`robust_fit`] and its first round: the fit of every point of `idx` from `x0`
 /// ([`fit_without`] with no point flagged).
-pub fn robust_fit_and_first(
-    problem: &Problem<'_>,
+pub fn robust_fit_and_first<P: Fit + ?Sized>(
+    problem: &P,
     x0: &[f64],
     free: &[usize],
     idx: &[usize],
@@ -117,15 +124,23 @@ pub fn robust_fit_and_first(
 /// Fits `free` over the points of `idx` not flagged in `outlier` (one flag per point of `idx`):
 /// the flags are given, not decided; the robust scale and normalized residuals are of every
 /// point of `idx`.
-pub fn fit_without(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usize], outlier: &[bool], opts: &SolveOptions) -> RobustFit {
+pub fn fit_without<P: Fit + ?Sized>(
+    problem: &P,
+    x0: &[f64],
+    free: &[usize],
+    idx: &[usize],
+    outlier: &[bool],
+    opts: &SolveOptions,
+) -> RobustFit {
     let active: Vec<usize> = idx.iter().zip(outlier).filter(|(_, o)| !**o).map(|(i, _)| *i).collect();
     let solved = solve(problem, x0, free, &active, opts);
-    let norms: Vec<f64> = match problem.errors(&solved.x, idx) {
-        Some(e) => e.iter().zip(idx).map(|(e, &i)| e.norm() / problem.obs[i].sigma).collect(),
+    let positions = problem.positions();
+    let norms: Vec<f64> = match positions.errors(&solved.x, idx) {
+        Some(e) => e.iter().zip(idx).map(|(e, &i)| e.norm() / positions.obs[i].sigma).collect(),
         None => vec![f64::NAN; idx.len()],
     };
     let scale = (crate::study::stats::median(&norms) / CHI3_MEDIAN).max(LEAST_SCALE);
-    let dof = (3 * active.len()).saturating_sub(free.len());
+    let dof = (3 * active.len() + problem.own_rows(&active)).saturating_sub(free.len());
     let sigma_hat = if dof == 0 { f64::NAN } else { (solved.cost / dof as f64).sqrt() };
     let normalized = norms.iter().map(|u| u / scale).collect();
     RobustFit { solved, idx: idx.to_vec(), outlier: outlier.to_vec(), normalized, robust_scale: scale, sigma_hat, rounds: 1 }
@@ -134,7 +149,7 @@ pub fn fit_without(problem: &Problem<'_>, x0: &[f64], free: &[usize], idx: &[usi
 /// The first-order covariance `sigma_hat^2 (J^T J)^-1` of the free unknowns of `fit` (internal
 /// units, in the order of `free`), over its points not flagged: `J^T J` summed by
 /// [`Problem::normal_equations`], scaled to a unit diagonal, inverted. `None` when singular.
-pub fn covariance(problem: &Problem<'_>, fit: &RobustFit, free: &[usize]) -> Option<DMatrix<f64>> {
+pub fn covariance<P: Fit + ?Sized>(problem: &P, fit: &RobustFit, free: &[usize]) -> Option<DMatrix<f64>> {
     let (n, _) = problem.normal_equations(&fit.solved.x, &fit.inliers(), free)?;
     let k = n.nrows();
     let scale: Vec<f64> = (0..k).map(|c| n[(c, c)].sqrt()).collect();

@@ -90,11 +90,49 @@ pub struct SimulatedRow {
     pub q_controller: Joints,
     /// The measured position in the session's frame, mm.
     pub measured_mm: Vector3<f64>,
+    /// The probe's measured orientation in the session's frame (`None`: not simulated).
+    pub orientation: Option<nalgebra::UnitQuaternion<f64>>,
+}
+
+/// Orientation readings of six-degree-of-freedom probes: each target's probe frame on the flange
+/// and the readings' noise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OrientationSim {
+    /// Per target (in the order of [`SimulationSpec::targets`]): `flange_from_probe`, its rotation
+    /// vector (axis times angle), rad.
+    pub probe_rotations: Vec<Vector3<f64>>,
+    /// Standard deviation of the reading's error about each axis of the session's frame, rad.
+    pub noise_rad: f64,
+}
+
+/// The true orientation reading of `row`'s probe: the flange's rotation in the session's frame
+/// (`model`: the truth with that session's frame, at the link angles `links`) times the probe's on
+/// the flange, with its noise drawn from `rng`.
+fn reading(
+    o: &OrientationSim,
+    model: &RobotModel,
+    st: &mut KinState,
+    links: &Joints,
+    target: usize,
+    rng: &mut impl rand::Rng,
+) -> nalgebra::UnitQuaternion<f64> {
+    let flange = crate::robot::world_from_flange(model, st, links).rotation;
+    let probe = nalgebra::UnitQuaternion::from_scaled_axis(o.probe_rotations[target]);
+    let noise = Normal::new(0.0, o.noise_rad).expect("a finite noise");
+    let e = Vector3::from_fn(|_, _| noise.sample(rng));
+    nalgebra::UnitQuaternion::from_scaled_axis(e) * flange * probe
 }
 
 /// The rows of `spec`: per session, its poses (drawn within the limits), each measured at every
 /// target.
 pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
+    rows_with(spec, None)
+}
+
+/// [`rows`] with the probes' orientation readings of `orientation` (drawn from a stream of their
+/// own: the positions are those of [`rows`]).
+pub fn rows_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> Vec<SimulatedRow> {
+    let mut orientation_rng = crate::seeds::stream(spec.seed, crate::seeds::calibrate::SIMULATED_ORIENTATION);
     let mut poses = crate::seeds::stream(spec.seed, crate::seeds::calibrate::SIMULATED_POSES);
     let mut noise_rng = crate::seeds::stream(spec.seed, crate::seeds::calibrate::SIMULATED_NOISE);
     let reference: Joints = std::array::from_fn(|i| {
@@ -124,12 +162,13 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
             // The base's drift over the session, in the session's frame.
             let shifted = drift.iter().any(|&d| d != 0.0).then(|| frame.isometry().rotation * (Vector3::from(drift) * k as f64));
             let moved = spec.moved.iter().find(|(l, _)| l == session).map_or_else(Vector3::zeros, |(_, v)| *v);
-            for (target, tool) in &spec.targets {
+            for (t, (target, tool)) in spec.targets.iter().enumerate() {
                 let model = spec.truth.edited(|d| {
                     d.world_from_base = *frame;
                     d.flange_tcp_mm = tool + moved;
                 });
-                let mut p = forward(&model.expect("the truth with a session's frame and a target"), &mut st, &links);
+                let model = model.expect("the truth with a session's frame and a target");
+                let mut p = forward(&model, &mut st, &links);
                 if let Some(d) = shifted {
                     p += d;
                 }
@@ -140,6 +179,7 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
                     target: target.clone(),
                     q_controller: spec.coupling.as_ref().map_or(q, |c| c.controller_from_model(&q)),
                     measured_mm: p + e,
+                    orientation: orientation.map(|o| reading(o, &model, &mut st, &links, t, &mut orientation_rng)),
                 });
             }
         }
@@ -180,6 +220,7 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
                 target: target.clone(),
                 q_controller: spec.coupling.as_ref().map_or(q, |c| c.controller_from_model(&q)),
                 measured_mm: p + e,
+                orientation: orientation.map(|o| reading(o, &in_session, &mut st, &links, line.target, &mut orientation_rng)),
             });
         }
     }
@@ -193,16 +234,22 @@ pub fn rows(spec: &SimulationSpec) -> Vec<SimulatedRow> {
 
 /// The measurement file's text of `spec`'s rows (every number written to round-trip exactly).
 pub fn to_csv(spec: &SimulationSpec) -> String {
+    to_csv_with(spec, None)
+}
+
+/// [`to_csv`] with the columns `quat_w, quat_x, quat_y, quat_z` of `orientation`'s readings.
+pub fn to_csv_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> String {
     let mut s = String::from("# simulated = true\n");
     s.push_str(&format!("# format = {}\n", super::measurements::FORMAT));
     for c in &spec.comments {
         s.push_str(&format!("# {c}\n"));
     }
-    s.push_str("pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
-    for r in rows(spec) {
+    s.push_str("pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm");
+    s.push_str(if orientation.is_some() { ",quat_w,quat_x,quat_y,quat_z\n" } else { "\n" });
+    for r in rows_with(spec, orientation) {
         let q: Vec<String> = r.q_controller.iter().map(|v| format!("{}", v.to_degrees())).collect();
         s.push_str(&format!(
-            "{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{}",
             r.pose,
             r.session,
             r.target,
@@ -211,6 +258,10 @@ pub fn to_csv(spec: &SimulationSpec) -> String {
             r.measured_mm.y,
             r.measured_mm.z
         ));
+        if let Some(o) = r.orientation {
+            s.push_str(&format!(",{},{},{},{}", o.w, o.i, o.j, o.k));
+        }
+        s.push('\n');
     }
     s
 }
@@ -281,6 +332,10 @@ struct RawSpec {
     target: Vec<RawTarget>,
     #[serde(default)]
     line: Vec<RawLine>,
+    #[serde(default)]
+    orientation: bool,
+    #[serde(default)]
+    orientation_noise_mdeg: f64,
 }
 
 fn default_margin() -> f64 {
@@ -301,6 +356,8 @@ struct RawSession {
 struct RawTarget {
     label: String,
     flange_mm: [f64; 3],
+    #[serde(default)]
+    probe_rotation_deg: [f64; 3],
 }
 
 #[derive(serde::Deserialize)]
@@ -326,6 +383,8 @@ pub struct SpecFile {
     pub spec: SimulationSpec,
     /// The robot file (its `[truth]`, with the file's payload, is the robot measured).
     pub robot: crate::robot::file::RobotFile,
+    /// The probes' orientation readings (`orientation = true`; `None`: positions only).
+    pub orientation: Option<OrientationSim>,
 }
 
 /// Reads the simulation file `path`; an error is one line naming the file, the key and what is
@@ -382,8 +441,19 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
         if targets.iter().any(|(o, _)| *o == l) {
             return Err(err(&format!("target[{}].label", k + 1), format!("{l}: given twice")));
         }
+        finite(&format!("target[{}].probe_rotation_deg", k + 1), &t.probe_rotation_deg, 360.0)?;
         targets.push((l, flange(t.flange_mm)));
     }
+    if !raw.orientation && (raw.orientation_noise_mdeg != 0.0 || raw.target.iter().any(|t| t.probe_rotation_deg != [0.0; 3])) {
+        return Err(err("orientation", "orientation_noise_mdeg and probe_rotation_deg need `orientation = true`".into()));
+    }
+    if !(raw.orientation_noise_mdeg.is_finite() && (0.0..=1e4).contains(&raw.orientation_noise_mdeg)) {
+        return Err(err("orientation_noise_mdeg", format!("{}: within 0 to 10000 mdeg", raw.orientation_noise_mdeg)));
+    }
+    let orientation = raw.orientation.then(|| OrientationSim {
+        probe_rotations: raw.target.iter().map(|t| flange_rotation(&robot, t.probe_rotation_deg)).collect(),
+        noise_rad: (raw.orientation_noise_mdeg * 1e-3).to_radians(),
+    });
     let frame = |key: &str, v: [f64; 6]| -> Result<XyzZyx, String> {
         finite(key, &v[..3], MOST_SPEC_MM)?;
         finite(key, &v[3..], 360.0)?;
@@ -471,5 +541,12 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
         seed: raw.seed,
         comments,
     };
-    Ok(SpecFile { spec, robot })
+    Ok(SpecFile { spec, robot, orientation })
+}
+
+/// The probe's rotation on the flange, given as the rotation vector `v` (deg) of `flange_from_probe`
+/// in the robot file's flange frame, as `frame6_from_probe`'s rotation vector, rad.
+fn flange_rotation(robot: &crate::robot::file::RobotFile, v: [f64; 3]) -> Vector3<f64> {
+    let r = nalgebra::Rotation3::new(Vector3::from(v.map(f64::to_radians)));
+    robot.flange.map_or(r, |f| nalgebra::Rotation3::from_matrix_unchecked(f * r.matrix())).scaled_axis()
 }

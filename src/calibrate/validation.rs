@@ -11,7 +11,7 @@ use rand::seq::SliceRandom;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::measurements::Measurements;
-use super::problem::{Layout, Problem, SolveOptions};
+use super::problem::{Fit, Layout, SolveOptions};
 use super::robust::{RobustFit, covariance, fit_without};
 use crate::study::stats::{ErrorStats, finite_sorted, quantile};
 
@@ -290,7 +290,8 @@ pub fn assign_every_pose(m: &Measurements, by: KFoldBy, folds: usize, seed: u64)
 
 /// The columns free in a fit over the points `idx`: the robot's (unless `robot` is false), and the
 /// base and tool blocks of the sessions and targets those points have.
-pub fn free_columns(problem: &Problem<'_>, idx: &[usize], robot: bool) -> Vec<usize> {
+pub fn free_columns<P: Fit + ?Sized>(fit: &P, idx: &[usize], robot: bool) -> Vec<usize> {
+    let problem = fit.positions();
     let l = &problem.layout;
     let mut free: Vec<usize> = if robot { (0..l.robot.len()).collect() } else { Vec::new() };
     for s in 0..l.sessions {
@@ -303,6 +304,7 @@ pub fn free_columns(problem: &Problem<'_>, idx: &[usize], robot: bool) -> Vec<us
             free.extend(l.tool(t)..l.tool(t) + 3);
         }
     }
+    free.extend(fit.own_columns(idx));
     free
 }
 
@@ -327,6 +329,12 @@ pub struct HeldOut {
     pub predicted: ErrorStats,
     /// Points in the statistics.
     pub points: usize,
+    /// Per held-out point: its rotation error, mdeg (NaN for a point without an orientation
+    /// reading or when the model gave none; empty when the file has no orientation columns).
+    pub rotation_errors_mdeg: Vec<f64>,
+    /// Statistics of the rotation errors of the held-out points with a reading not left out,
+    /// mdeg (`None`: the file has no orientation columns).
+    pub rotation: Option<ErrorStats>,
 }
 
 /// What [`held_out`] needs besides the training fit.
@@ -351,21 +359,22 @@ pub struct HeldOutSpec<'a> {
 }
 
 /// The held-out errors of the model of `train` (fitted with the columns `free`).
-pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: &HeldOutSpec<'_>, opts: &SolveOptions) -> HeldOut {
+pub fn held_out<P: Fit + ?Sized>(fit: &P, train: &RobustFit, free: &[usize], spec: &HeldOutSpec<'_>, opts: &SolveOptions) -> HeldOut {
+    let problem = fit.positions();
     let l = &problem.layout;
     let mut x = train.solved.x.clone();
     let mut reg_cols: Vec<usize> = spec.register.iter().flat_map(|&s| l.base_columns(s)).collect();
     reg_cols.extend(spec.register_tools.iter().flat_map(|&t| l.tool(t)..l.tool(t) + 3));
     if !reg_cols.is_empty() {
         let mask: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
-        x = fit_without(problem, &x, &reg_cols, spec.test, &mask, opts).solved.x;
+        x = fit_without(fit, &x, &reg_cols, spec.test, &mask, opts).solved.x;
     }
     let errors_mm: Vec<f64> =
         problem.errors(&x, spec.test).map_or_else(|| vec![f64::NAN; spec.test.len()], |e| e.iter().map(|v| v.norm()).collect());
     let outlier: Vec<bool> = spec.test.iter().map(|&i| spec.outliers[i]).collect();
     let kept: Vec<usize> = (0..spec.test.len()).filter(|&k| !outlier[k]).collect();
     let measured = ErrorStats::of(&kept.iter().map(|&k| errors_mm[k]).collect::<Vec<_>>());
-    let predicted = predict(problem, train, free, &x, spec, &reg_cols, &kept).unwrap_or(ErrorStats {
+    let predicted = predict(fit, train, free, &x, spec, &reg_cols, &kept).unwrap_or(ErrorStats {
         mean: f64::NAN,
         median: f64::NAN,
         std: f64::NAN,
@@ -378,12 +387,29 @@ pub fn held_out(problem: &Problem<'_>, train: &RobustFit, free: &[usize], spec: 
     let with_flagged = of(&|_| true);
     let without_flagged = of(&|k| !spec.flagged[spec.test[k]]);
     let flagged = spec.test.iter().filter(|&&i| spec.flagged[i]).count();
-    HeldOut { errors_mm, outlier, measured, predicted, points: kept.len(), flagged, with_flagged, without_flagged }
+    let rotation_errors_mdeg: Vec<f64> = fit
+        .rotation_errors(&x, spec.test)
+        .map(|r| r.iter().map(|e| e.map_or(f64::NAN, |e| e.norm().to_degrees() * 1e3)).collect())
+        .unwrap_or_default();
+    let rotation = (!rotation_errors_mdeg.is_empty())
+        .then(|| ErrorStats::of(&kept.iter().map(|&k| rotation_errors_mdeg[k]).filter(|v| v.is_finite()).collect::<Vec<_>>()));
+    HeldOut {
+        errors_mm,
+        outlier,
+        measured,
+        predicted,
+        points: kept.len(),
+        flagged,
+        with_flagged,
+        without_flagged,
+        rotation_errors_mdeg,
+        rotation,
+    }
 }
 
 /// The predicted error statistics at the held-out points `kept` (positions in `spec.test`).
-fn predict(
-    problem: &Problem<'_>,
+fn predict<P: Fit + ?Sized>(
+    fit: &P,
     train: &RobustFit,
     free: &[usize],
     x: &[f64],
@@ -391,13 +417,16 @@ fn predict(
     reg_cols: &[usize],
     kept: &[usize],
 ) -> Option<ErrorStats> {
-    let c = covariance(problem, train, free)?;
+    let problem = fit.positions();
+    let c = covariance(fit, train, free)?;
     let chol = c.cholesky()?;
     let points: Vec<usize> = kept.iter().map(|&k| spec.test[k]).collect();
     if points.is_empty() {
         return None;
     }
-    let (_, j) = problem.linearise(x, &points)?;
+    // The positions' rows (the fit's own rows follow them).
+    let (_, j) = fit.linearise(x, &points)?;
+    let j = j.rows(0, 3 * points.len()).into_owned();
     let sigmas: Vec<f64> = points.iter().map(|&i| problem.obs[i].sigma).collect();
     // Unweighted rows (mm per unit of each unknown).
     let unweight = |m: DMatrix<f64>| DMatrix::from_fn(m.nrows(), m.ncols(), |r, k| m[(r, k)] * sigmas[r / 3]);
@@ -464,8 +493,8 @@ type FoldResult = Option<Result<(Vec<usize>, Vec<f64>), String>>;
 
 /// Cross-validates the model of `problem` (its layout) from `x0`: for each fold, a fit on the
 /// other training points (the data's `outliers` left out) and the errors at the fold's.
-pub fn cross_validate(
-    problem: &Problem<'_>,
+pub fn cross_validate<P: Fit + ?Sized>(
+    problem: &P,
     x0: &[f64],
     point_fold: &[Option<usize>],
     folds: usize,
@@ -474,6 +503,8 @@ pub fn cross_validate(
     labels: &super::diagnose::Labels<'_>,
 ) -> CrossValidation {
     use rayon::prelude::*;
+    let fit_of = problem;
+    let problem = fit_of.positions();
     let n = problem.obs.len();
     let l = &problem.layout;
     // Each fold on its own (in parallel: a fold's fit depends on nothing but its points, so the
@@ -484,11 +515,11 @@ pub fn cross_validate(
         if test.is_empty() {
             return None;
         }
-        let free = free_columns(problem, &train, true);
+        let free = free_columns(fit_of, &train, true);
         let mask: Vec<bool> = train.iter().map(|&i| outliers[i]).collect();
-        let fit = fit_without(problem, x0, &free, &train, &mask, opts);
+        let fit = fit_without(fit_of, x0, &free, &train, &mask, opts);
         if !fit.solved.outcome.is_converged() {
-            let why = super::diagnose::why(problem, &fit.solved.x, &free, &fit.inliers(), labels);
+            let why = super::diagnose::why(fit_of, &fit.solved.x, &free, &fit.inliers(), labels);
             return Some(Err(format!("{}: {why}", fit.solved.outcome.label())));
         }
         if let Some(t) =
@@ -505,7 +536,7 @@ pub fn cross_validate(
         let mut fit = fit;
         if !register.is_empty() {
             let mask: Vec<bool> = test.iter().map(|&i| outliers[i]).collect();
-            fit.solved.x = fit_without(problem, &fit.solved.x, &register, &test, &mask, opts).solved.x;
+            fit.solved.x = fit_without(fit_of, &fit.solved.x, &register, &test, &mask, opts).solved.x;
         }
         let Some(e) = problem.errors(&fit.solved.x, &test) else {
             return Some(Err("not_finite".into()));
