@@ -101,8 +101,14 @@ for run in "${more[@]}"; do
     echo "regenerate: $name: docs/generated/$name.md"
 done
 
+# The simulated examples of docs/calibrate.md (their measurement files are made, not kept).
 if [ $# -eq 0 ] || [[ " $* " == *" imported-example "* ]]; then
-    bash scripts/docs/imported_example.sh
+    bash scripts/docs/simulated_example.sh docs/calibrate/imported_example.toml robots/examples/lrmate200ic_coupled.toml \
+        --payload-kg 2 --payload-com-mm 0,0,50 --tool-per-session --hold-out-session L
+fi
+if [ $# -eq 0 ] || [[ " $* " == *" probe-example "* ]]; then
+    bash scripts/docs/simulated_example.sh docs/calibrate/probe_example.toml robots/irb120.toml \
+        --orientation-noise-mdeg 10 --position-noise-mm 0.012 --hold-out-session L --no-plots
 fi
 
 python3 scripts/ci/doc_numbers.py "$calsim" --write

@@ -812,32 +812,5 @@ fn objective_markdown(s: &mut String, plan: &DevicePlan, obj: &Objective, search
         obj.fewest_poses,
         obj.most_poses
     );
-    let _ =
-        writeln!(s, "| poses | successes / worlds | P(success) | lower bound ({} %) | meets |\n|---|---|---|---|---|", pct(obj.confidence));
-    for c in search.by_count() {
-        let _ = writeln!(
-            s,
-            "| {} | {} / {} | {:.3} | {:.4} | {} |",
-            c.n,
-            c.successes,
-            c.worlds,
-            c.successes as f64 / c.worlds.max(1) as f64,
-            c.lower,
-            if c.meets { "yes" } else { "no" }
-        );
-    }
-    s.push('\n');
-    match search.chosen {
-        Some(n) => {
-            let _ = writeln!(s, "Chosen: {n} poses, the smallest count in the table whose lower bound clears {}.\n", obj.success_at_least);
-        }
-        None => {
-            let best = search.candidates.iter().find(|c| c.n == search.planned).expect("the planned count was scored");
-            let _ = writeln!(
-                s,
-                "Not met: no count up to {} clears {}; planned with the best found, {} poses (lower bound {:.4}).\n",
-                obj.most_poses, obj.success_at_least, best.n, best.lower
-            );
-        }
-    }
+    super::counts_markdown(s, obj, search, "");
 }

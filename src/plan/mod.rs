@@ -714,6 +714,18 @@ fn objective_markdown(s: &mut String, plan: &Plan, obj: &spec::Objective, search
         obj.fewest_poses,
         obj.most_poses
     );
+    counts_markdown(
+        s,
+        obj,
+        search,
+        " More worlds, a lower threshold's demand, a larger `most_poses` or another instrument placement may reach it.",
+    );
+}
+
+/// The objective's table (P(success) against the count of poses) and its verdict: the count chosen,
+/// or the best found with `hint` (what may reach the objective) after it.
+pub(crate) fn counts_markdown(s: &mut String, obj: &spec::Objective, search: &Search, hint: &str) {
+    let pct = |x: f64| format!("{}", (x * 1000.0).round() / 10.0);
     let _ =
         writeln!(s, "| poses | successes / worlds | P(success) | lower bound ({} %) | meets |\n|---|---|---|---|---|", pct(obj.confidence));
     for c in search.by_count() {
@@ -737,7 +749,7 @@ fn objective_markdown(s: &mut String, plan: &Plan, obj: &spec::Objective, search
             let best = search.candidates.iter().find(|c| c.n == search.planned).expect("the planned count was scored");
             let _ = writeln!(
                 s,
-                "Not met: no count up to {} clears {}; planned with the best found, {} poses (lower bound {:.4}). More worlds, a lower threshold's demand, a larger `most_poses` or another instrument placement may reach it.\n",
+                "Not met: no count up to {} clears {}; planned with the best found, {} poses (lower bound {:.4}).{hint}\n",
                 obj.most_poses, obj.success_at_least, best.n, best.lower
             );
         }
