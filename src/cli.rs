@@ -785,25 +785,7 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
         r.seconds
     );
     if let (Some(o), Some(search)) = (&r.outcome.objective, &r.outcome.search) {
-        match search.chosen {
-            Some(n) => println!(
-                "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
-                o.statistic.name(),
-                o.threshold_mm,
-                o.success_at_least,
-                o.confidence,
-                search.candidates.len()
-            ),
-            None => println!(
-                "objective P(held-out {} <= {} mm) >= {} at {} confidence: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)",
-                o.statistic.name(),
-                o.threshold_mm,
-                o.success_at_least,
-                o.confidence,
-                o.most_poses,
-                search.planned
-            ),
-        }
+        print_objective(o, search);
     }
     if !r.outcome.prediction.unidentifiable.is_empty() {
         println!("cannot identify (kept at their values before calibration): {}", r.outcome.prediction.unidentifiable.join(", "));
@@ -814,6 +796,29 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
         r.dir.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The line of a plan's objective: the count that met it, or the best found.
+fn print_objective(o: &crate::plan::spec::Objective, search: &crate::plan::Search) {
+    match search.chosen {
+        Some(n) => println!(
+            "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
+            o.statistic.name(),
+            o.threshold_mm,
+            o.success_at_least,
+            o.confidence,
+            search.candidates.len()
+        ),
+        None => println!(
+            "objective P(held-out {} <= {} mm) >= {} at {} confidence: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)",
+            o.statistic.name(),
+            o.threshold_mm,
+            o.success_at_least,
+            o.confidence,
+            o.most_poses,
+            search.planned
+        ),
+    }
 }
 
 fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
@@ -842,25 +847,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
         r.seconds
     );
     if let (Some(o), Some(search)) = (&r.plan.objective, &r.outcome.search) {
-        match search.chosen {
-            Some(n) => println!(
-                "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
-                o.statistic.name(),
-                o.threshold_mm,
-                o.success_at_least,
-                o.confidence,
-                search.candidates.len()
-            ),
-            None => println!(
-                "objective P(held-out {} <= {} mm) >= {} at {} confidence: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)",
-                o.statistic.name(),
-                o.threshold_mm,
-                o.success_at_least,
-                o.confidence,
-                o.most_poses,
-                search.planned
-            ),
-        }
+        print_objective(o, search);
     }
     if !p.unidentifiable.is_empty() {
         println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
