@@ -43,6 +43,6 @@ calibrated=$((SECONDS - start))
     sed "s#$scratch/out#out#g; s#$scratch/data#data#g" "$scratch/calibrate.stdout"
     echo '```'
     echo
-    cat "$scratch/out/$stem.calibration/summary.md"
+    sed "s#$scratch/data#data#g" "$scratch/out/$stem.calibration/summary.md"
 } >"$page"
 echo "simulated_example: $page"
