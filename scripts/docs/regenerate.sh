@@ -111,4 +111,9 @@ if [ $# -eq 0 ] || [[ " $* " == *" probe-example "* ]]; then
         --orientation-noise-mdeg 10 --position-noise-mm 0.012 --hold-out-session L --no-plots
 fi
 
+# The README's quick start timed from a fresh clone and an empty target directory (a cold build).
+if [ $# -eq 0 ] || [[ " $* " == *" first-hour "* ]]; then
+    bash scripts/docs/first_hour.sh
+fi
+
 python3 scripts/ci/doc_numbers.py "$calsim" --write
