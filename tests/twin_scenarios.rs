@@ -157,6 +157,47 @@ fn the_twins_effects_raise_the_error_after_calibration_in_every_world() {
     assert!(ratios[worlds as usize / 2] > 1.5, "the median ratio over {worlds} worlds: {ratios:?}");
 }
 
+/// A twin whose `[learned]` table gives the spread of its repeatability's estimate
+/// (`repeatability_std_mm = 0.004` about 0.012 mm): a scenario that takes the twin's level draws it
+/// in every world (the joint noise of the robot's moves scales with it), every other draw of the
+/// world unchanged. Over 100 worlds the drawn levels' mean is within four standard errors of
+/// 0.012 mm (0.004 / sqrt(100)) and their standard deviation within four of 0.004 mm
+/// (0.004 / sqrt(200)); a scenario that sets its own `robot.repeatability_mm` takes it in every
+/// world (the first 5).
+#[test]
+fn a_twins_repeatability_spread_draws_the_level_per_world() {
+    let tmp = scratch("twin-rp-spread");
+    let dir = tmp.path();
+    arm(dir, "point.toml", LEARNED);
+    arm(dir, "spread.toml", &LEARNED.replace("repeatability_mm = 0.012\n", "repeatability_mm = 0.012\nrepeatability_std_mm = 0.004\n"));
+    let no_rp = |t: String| t.replace("repeatability_mm = 0.010 ", "# repeatability_mm left to the twin ");
+    let point = load(&scenario(dir, "point.toml", "point.toml", no_rp));
+    let spread = load(&scenario(dir, "spread.toml", "spread.toml", no_rp));
+    let own = load(&scenario(dir, "own.toml", "spread.toml", |t| t));
+    assert_eq!(spread.experiment.robot.learned.as_ref().map(|l| l.repeatability_std_mm), Some(0.004));
+    let worlds = 100;
+    let mut levels = Vec::new();
+    for seed in 0..worlds {
+        let (p, s) = (point.experiment.build(seed).unwrap(), spread.experiment.build(seed).unwrap());
+        assert_eq!(p.robot.harmonics, s.robot.harmonics, "world {seed}: the scenario's own harmonics");
+        assert_eq!(
+            p.robot.learned.as_ref().map(|l| &l.harmonics),
+            s.robot.learned.as_ref().map(|l| &l.harmonics),
+            "world {seed}: the learned effects"
+        );
+        if seed < 5 {
+            let own_level = 0.012 * own.experiment.build(seed).unwrap().robot.sigma_q / p.robot.sigma_q;
+            assert!((own_level - 0.010).abs() < 1e-12, "world {seed}: the scenario's own level, {own_level} mm");
+        }
+        levels.push(0.012 * s.robot.sigma_q / p.robot.sigma_q);
+    }
+    let n = levels.len() as f64;
+    let mean = levels.iter().sum::<f64>() / n;
+    let sd = (levels.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    assert!((mean - 0.012).abs() < 4.0 * 0.004 / n.sqrt(), "mean level {mean} mm over {worlds} worlds");
+    assert!((sd - 0.004).abs() < 4.0 * 0.004 / (2.0 * n).sqrt(), "std of the level {sd} mm over {worlds} worlds");
+}
+
 /// An all-zero `[learned]` table, and a twin scaled by 0, give the results of the arm without the
 /// table bit for bit (the learned effects draw after every draw of the scenario's own).
 #[test]

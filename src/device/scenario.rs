@@ -395,7 +395,9 @@ pub fn sets_repeatability(t: &toml::Table) -> bool {
 /// `robot.learned_scale`, drawn in every world on top of the scenario's own `[robot.unmodelled]`
 /// effects; and the repeatability of its moves: the twin's learned `repeatability_mm` where it is
 /// above zero and the scenario does not set `robot.repeatability_mm` (`sets_repeatability`, see
-/// [`sets_repeatability`]: a scenario that sets it runs a what-if on the measured robot). `most_rp_mm` is the scenario's
+/// [`sets_repeatability`]: a scenario that sets it runs a what-if on the measured robot), drawn in
+/// each world about that level where the twin gives its standard deviation
+/// ([`crate::robot::VirtualRobot::with_learned_repeatability`]). `most_rp_mm` is the scenario's
 /// bound on a repeatability; a twin's above it is refused, naming the scenario, `robot.file`, the
 /// robot file and `learned.repeatability_mm`. A scale other than 1 without a twin is refused.
 pub fn twin(
@@ -428,8 +430,12 @@ pub fn twin(
         });
     }
     let mut effects = l.clone();
-    // The repeatability is the scenario's robot's own (above); the rest scales.
+    // The repeatability is the scenario's robot's own (above), its level drawn per world from the
+    // twin's spread only when it is the twin's level; the rest scales.
     effects.repeatability_mm = 0.0;
+    if repeatability.is_none() {
+        effects.repeatability_std_mm = 0.0;
+    }
     effects.pose_error_mdeg *= scale;
     effects.pose_error_std_mdeg *= scale;
     for v in [&mut effects.backlash_mdeg, &mut effects.backlash_std_mdeg, &mut effects.sag_mdeg_per_m, &mut effects.sag_std_mdeg_per_m] {

@@ -73,7 +73,8 @@ pub struct LearnedEffects {
     pub repeatability_mm: f64,
     /// Standard deviation of the estimate of `repeatability_mm`, mm: each world of `calsim
     /// calibrate`'s plan draws the level from a normal distribution about it (kept non-negative,
-    /// [`LearnedEffects::drawn_repeatability_mm`]); a scenario takes the level as given.
+    /// [`LearnedEffects::drawn_repeatability_mm`]); so does each world of a scenario whose robot
+    /// takes the twin's level ([`crate::robot::VirtualRobot::with_learned_repeatability`]).
     #[serde(default)]
     pub repeatability_std_mm: f64,
     /// RMS of the per-pose joint error the effects leave, mdeg (repeatable at a pose).
@@ -253,11 +254,17 @@ impl LearnedEffects {
     /// an interval above zero still gives some worlds a repeatability); without a standard
     /// deviation the level itself, and nothing is drawn from `rng`.
     pub fn drawn_repeatability_mm<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        self.drawn_repeatability_about(self.repeatability_mm, rng)
+    }
+
+    /// [`LearnedEffects::drawn_repeatability_mm`] about the level `level_mm` (a scenario's robot
+    /// takes the twin's level as its own `robot.repeatability_mm`).
+    pub fn drawn_repeatability_about<R: Rng + ?Sized>(&self, level_mm: f64, rng: &mut R) -> f64 {
         if self.repeatability_std_mm > 0.0 {
             let unit: f64 = Normal::new(0.0, 1.0).expect("unit normal").sample(rng);
-            (self.repeatability_mm + self.repeatability_std_mm * unit).max(0.0)
+            (level_mm + self.repeatability_std_mm * unit).max(0.0)
         } else {
-            self.repeatability_mm
+            level_mm
         }
     }
 }

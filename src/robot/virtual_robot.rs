@@ -114,6 +114,26 @@ impl VirtualRobot {
         self
     }
 
+    /// This robot with the repeatability of its moves drawn for this world when a twin's table
+    /// gives the standard deviation of its level (`repeatability_std_mm`): a normal draw about
+    /// `repeatability_mm` from `rng`, kept non-negative, made after every other draw of the robot.
+    /// Without one (or without a twin) the robot is unchanged and nothing is drawn.
+    pub fn with_learned_repeatability<R: Rng + ?Sized>(
+        self,
+        learned: Option<&super::learned::LearnedEffects>,
+        repeatability_mm: f64,
+        reference_q: &Joints,
+        rng: &mut R,
+    ) -> Self {
+        match learned.filter(|l| l.repeatability_std_mm > 0.0) {
+            Some(l) => {
+                let level = l.drawn_repeatability_about(repeatability_mm, rng);
+                self.with_repeatability(level, reference_q)
+            }
+            None => self,
+        }
+    }
+
     /// This robot with the joint noise of its moves scaled so that its ISO 9283 repeatability at
     /// `reference_q` is `repeatability_mm` (as [`VirtualRobot::new`] scales it).
     pub fn with_repeatability(mut self, repeatability_mm: f64, reference_q: &Joints) -> Self {

@@ -328,7 +328,8 @@ pub fn build(arm: &ArmSpec, station: &StationSpec, spms: &Spms, head: &Identifie
     // The twin's learned effects are drawn after the scenario's own, from the same stream.
     let robot_rng = &mut stream(seed, streams::ROBOT);
     let robot = VirtualRobot::new(truth, &arm.unmodelled, arm.repeatability_mm, &reference_q, robot_rng)
-        .with_learned(arm.learned.as_ref(), robot_rng);
+        .with_learned(arm.learned.as_ref(), robot_rng)
+        .with_learned_repeatability(arm.learned.as_ref(), arm.repeatability_mm, &reference_q, robot_rng);
     // The controller plans in {S} of the nominal layout.
     let nominal_s_from_base = nominal_heads[0].inverse();
 

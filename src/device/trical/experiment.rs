@@ -196,7 +196,8 @@ impl ExperimentSpec {
         // The twin's learned effects are drawn after the scenario's own, from the same stream.
         let robot_rng = &mut stream(seed, seeds::experiment::ROBOT);
         let robot = VirtualRobot::new(truth, &self.robot.unmodelled, self.robot.repeatability_mm, &reference, robot_rng)
-            .with_learned(self.robot.learned.as_ref(), robot_rng);
+            .with_learned(self.robot.learned.as_ref(), robot_rng)
+            .with_learned_repeatability(self.robot.learned.as_ref(), self.robot.repeatability_mm, &reference, robot_rng);
         let mut robot_validation = robot.drifted(self.robot.unmodelled.thermal_drift_ppm);
         if let Some(dm) = self.robot.validation_payload_change_kg.filter(|dm| *dm != 0.0) {
             robot_validation.truth = robot_validation.truth.edited(|d| d.payload.mass_kg += dm).expect("a checked mass");
