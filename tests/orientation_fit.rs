@@ -233,7 +233,8 @@ fn orientation_columns_reach_points_parquet_and_the_summary() {
 }
 
 /// Readings in another convention (the quaternion written x, y, z, w) are one line naming the file,
-/// a line and the column, exit 2; so is a reading that is no rotation.
+/// a line and the column, exit 2; so are those of one target in one session among right ones
+/// (naming both), and a reading that is no rotation.
 #[test]
 fn readings_in_another_convention_are_one_line_exit_2() {
     let robot_path = common::repo().join("robots/irb120.toml");
@@ -255,13 +256,33 @@ fn readings_in_another_convention_are_one_line_exit_2() {
             format!("{}\n", f.join(","))
         })
         .collect();
+    // Only the readings of one target in the last session in the other convention, among right ones.
+    let header: Vec<&str> = text.lines().find(|l| l.starts_with("pose,")).unwrap().split(',').collect();
+    let (col, tcol) = (header.iter().position(|c| *c == "session").unwrap(), header.iter().position(|c| *c == "target").unwrap());
+    let last_row: Vec<&str> = text.lines().filter(|l| !l.starts_with('#') && !l.starts_with("pose,")).last().unwrap().split(',').collect();
+    let (last, target) = (last_row[col].to_string(), last_row[tcol].to_string());
+    let one_session: String = text
+        .lines()
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            if !l.starts_with('#') && !l.starts_with("pose,") && f[col] == last && f[tcol] == target {
+                let n = f.len();
+                f[n - 4..].rotate_left(1);
+            }
+            format!("{}\n", f.join(","))
+        })
+        .collect();
+    assert_ne!(one_session, text);
     let not_unit: String = text
         .lines()
         .enumerate()
         .map(|(k, l)| if k == 10 { format!("{},0.1\n", l.rsplit_once(',').unwrap().0) } else { format!("{l}\n") })
         .collect();
     let dir = common::scratch("orientation-bad");
-    for (name, text, want) in [("swapped.csv", &swapped, "quat_w"), ("norm.csv", &not_unit, "quat_w")] {
+    let in_session = format!("of target {target} in session {last}");
+    for (name, text, want) in
+        [("swapped.csv", &swapped, "quat_w"), ("norm.csv", &not_unit, "quat_w"), ("one_session.csv", &one_session, in_session.as_str())]
+    {
         let csv = dir.path().join(name);
         std::fs::write(&csv, text).unwrap();
         let o = common::calsim()

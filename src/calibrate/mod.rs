@@ -558,8 +558,10 @@ fn check_start(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), Cal
 const MOST_START_MEDIAN_DEG: f64 = 5.0;
 
 /// The readings, with the nominal robot registered and each probe's start rotation, within
-/// [`MOST_START_MEDIAN_DEG`] of the model (the median); an error names the file, the first line
-/// whose reading is that far off and the quaternion's columns.
+/// [`MOST_START_MEDIAN_DEG`] of the model (the median over every reading, and over the readings of
+/// each target in each session, so that a session or a probe written in another convention is
+/// caught among right ones); an error names the file, the first line whose reading is that far off,
+/// the session and target where only they are, and the quaternion's columns.
 fn check_readings(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), CalibrateError> {
     if !m.orientation_columns {
         return Ok(());
@@ -574,22 +576,40 @@ fn check_readings(robot: &RobotFile, m: &Measurements, s: &Setup) -> Result<(), 
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let angles: Vec<f64> = problem::Fit::rotation_errors(&fit, &s.frames_x, &all)
         .map_or_else(|| vec![f64::NAN], |e| e.iter().map(|e| e.map_or(0.0, |v| v.norm().to_degrees())).collect());
+    let far = |i: &usize| angles[*i].is_nan() || angles[*i] > MOST_START_MEDIAN_DEG;
+    let fail = |median: f64, idx: &[usize], group: String| {
+        let first = idx.iter().find(|i| far(i)).map(|&i| m.points[i].line);
+        Err(MeasurementError {
+            path: m.path.clone(),
+            line: first,
+            column: Some("quat_w, quat_x, quat_y, quat_z".into()),
+            message: format!(
+                "the orientation readings{group} are {median:.1} deg off the nominal robot registered on the points (median; a \
+                 robot before calibration is a fraction of a degree off): give each reading as the probe's frame in the session's \
+                 frame, the quaternion as w, x, y, z"
+            ),
+        }
+        .into())
+    };
     let median = crate::study::stats::median(&angles);
-    if median <= MOST_START_MEDIAN_DEG {
-        return Ok(());
+    if median > MOST_START_MEDIAN_DEG || angles.len() != m.points.len() {
+        return fail(median, &all, String::new());
     }
-    let first = angles.iter().position(|a| a.is_nan() || *a > MOST_START_MEDIAN_DEG).map(|i| m.points[i].line);
-    Err(MeasurementError {
-        path: m.path.clone(),
-        line: first,
-        column: Some("quat_w, quat_x, quat_y, quat_z".into()),
-        message: format!(
-            "the orientation readings are {median:.1} deg off the nominal robot registered on the points (median; a robot before \
-             calibration is a fraction of a degree off): give each reading as the probe's frame in the session's frame, the \
-             quaternion as w, x, y, z"
-        ),
+    let mut groups: Vec<((usize, usize), Vec<usize>)> = Vec::new();
+    for (i, p) in m.points.iter().enumerate().filter(|(_, p)| p.orientation.is_some()) {
+        let key = (m.poses[p.pose].session, p.target);
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, idx)) => idx.push(i),
+            None => groups.push((key, vec![i])),
+        }
     }
-    .into())
+    for ((session, target), idx) in &groups {
+        let median = crate::study::stats::median(&idx.iter().map(|&i| angles[i]).collect::<Vec<_>>());
+        if median > MOST_START_MEDIAN_DEG {
+            return fail(median, idx, format!(" of target {} in session {}", m.targets[*target], m.sessions[*session]));
+        }
+    }
+    Ok(())
 }
 
 /// The models of `full` after the identifiability check on every point (duplicates left out).

@@ -125,7 +125,8 @@ pub struct Measurements {
     pub coupled: bool,
     /// The file has a split column (`train` or `holdout` per pose).
     pub split_column: bool,
-    /// The file has orientation columns (`quat_w` .. `quat_z`): checked, not used by the fit.
+    /// The file has orientation columns (`quat_w` .. `quat_z`): each reading adds three rotation
+    /// residuals to the fit.
     pub orientation_columns: bool,
 }
 
