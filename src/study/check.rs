@@ -115,9 +115,13 @@ impl Check {
         }
     }
 
-    /// The figure marked as outside the model's scope, with the reason shown beside it.
+    /// The figure marked as outside the model's scope, with the reason shown beside it: reported
+    /// with its band as written, never judged (it counts neither as checked nor as missed, in one
+    /// world or over worlds).
     pub fn outside_scope(mut self, why: &str) -> Self {
         self.scope = Some(why.into());
+        self.bound = None;
+        self.pass = None;
         self
     }
 
@@ -366,7 +370,7 @@ pub fn terminal_table(rows: &[Check], verdict: bool) -> String {
             (false, _) => r.this_world(),
         };
         let last = match (&r.scope, verdict) {
-            (Some(why), true) => format!("{last} ({why})"),
+            (Some(why), true) => format!("not judged ({why})"),
             _ => last.to_string(),
         };
         let _ = writeln!(s, "{:<wf$}  {:>wp$}  {:>wc$}  {:>wb$}  {last}", r.figure, r.published, r.reproduced, r.band);
@@ -478,7 +482,7 @@ pub fn distribution_table(rows: &[DistributionCheck]) -> String {
     let mut s = line(head, "result");
     for (d, c) in rows.iter().zip(&cells) {
         let verdict = d.verdict.map_or("-", Verdict::word);
-        let verdict = d.row.scope.as_ref().map_or_else(|| verdict.to_string(), |why| format!("{verdict} ({why})"));
+        let verdict = d.row.scope.as_ref().map_or_else(|| verdict.to_string(), |why| format!("not judged ({why})"));
         s.push_str(&line([&c[0], &c[1], &c[2], &c[3], &c[4], &c[5], &c[6]], &verdict));
     }
     s
@@ -633,6 +637,24 @@ impl CheckReport {
 #[cfg(test)]
 mod form_tests {
     use super::in_the_form_of;
+
+    /// A figure out of the model's scope (another study's row) keeps its band as written but is
+    /// never judged: in one world it counts neither as checked nor as missed, over worlds it has
+    /// no verdict and does not widen the other figures' intervals (the Bonferroni count).
+    #[test]
+    fn a_figure_out_of_scope_is_reported_not_judged() {
+        use super::{Band, Check, over_realisations, tally};
+        let band = Some(Band { value: 0.146, tolerance: 0.25 });
+        let judged = Check::band("judged", 0.208, 0.5, Some(Band { value: 0.208, tolerance: 0.15 }));
+        let other = Check::band("another study's", 0.146, 0.035, band).outside_scope("another study, ref. [9]");
+        assert_eq!((other.pass, other.bound.is_none(), other.band.as_str()), (None, true, "0.146 +-25 %"));
+        assert_eq!(tally(&[judged.clone(), other.clone()]), (1, 1), "the judged figure misses, the other is not counted");
+        let runs: Vec<Vec<Check>> = (0..30).map(|_| vec![judged.clone(), other.clone()]).collect();
+        let alone: Vec<Vec<Check>> = (0..30).map(|_| vec![judged.clone()]).collect();
+        let d = over_realisations(&runs, 30, 0.01);
+        assert_eq!((d[1].verdict, d[1].pass), (None, None));
+        assert_eq!(d[0].confidence, over_realisations(&alone, 30, 0.01)[0].confidence, "one figure judged");
+    }
 
     #[test]
     fn values_over_realisations_are_written_in_the_form_of_run_0() {
