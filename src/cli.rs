@@ -652,6 +652,16 @@ fn run(args: &RunArgs, check: bool) -> Result<ExitCode, String> {
         return Ok(ExitCode::SUCCESS);
     }
     let (checked, missed) = r.tally();
+    if checked == 0 {
+        // A check that judges nothing must not pass (a CI gate on it would pass vacuously).
+        return Err(format!(
+            "{}: [expect]: the scenario sets no band, so check has nothing to judge (its run is in {}); `calsim keys {}` lists the \
+             [expect] keys, `calsim run` runs a scenario without them",
+            args.scenario.display(),
+            r.dest.display(),
+            r.kind
+        ));
+    }
     match r.distribution {
         Some(_) => println!(
             "check: {} of {checked} figures not missed over {} realisations (false-alarm rate {}); verdict in {}",
@@ -915,8 +925,11 @@ fn compensate(args: &CompensateArgs) -> Result<ExitCode, String> {
         out: args.out.clone(),
     };
     let r = app::compensate::run(&spec).map_err(|e| e.to_string())?;
-    if args.out.is_none() {
-        print!("{}", r.csv);
+    match &args.out {
+        None => print!("{}", r.csv),
+        Some(out) => {
+            eprintln!("calsim compensate: {} targets, {} reached, written to {}", r.targets, r.targets - r.unreachable.len(), out.display())
+        }
     }
     Ok(match r.unreachable_line() {
         Some(line) => {
@@ -974,7 +987,11 @@ fn table8(args: &Table8Args) -> Result<ExitCode, String> {
         "{:<16} {:>26} {:>44}",
         "instrument",
         "published median / std / max",
-        format!("calsim median / std / max (median of {} worlds; P10-P90 of the median)", r.worlds)
+        if r.worlds == 1 {
+            "calsim median / std / max (one world; --realisations N for the P10-P90 over worlds)".to_string()
+        } else {
+            format!("calsim median / std / max (median of {} worlds; P10-P90 of the median)", r.worlds)
+        }
     );
     for row in &r.rows {
         let (p, c, q) = (row.published, row.calsim, row.median_p10_p90);

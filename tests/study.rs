@@ -167,6 +167,29 @@ fn the_reduced_scenario_matches_the_paper_scenario_outside_study_and_expect() {
     assert_eq!(full, quick);
 }
 
+/// `calsim check` of a scenario whose `[expect]` table sets no band (a scenario `calsim init`
+/// writes) judges nothing, so it does not pass: one line naming the scenario and `[expect]`, exit 2.
+#[test]
+fn a_check_of_a_scenario_without_bands_is_refused() {
+    let tmp = scratch("check-no-bands");
+    let dir = tmp.path();
+    let scenario = dir.join("my_cell.toml");
+    let init = calsim().args(["init", "trical"]).arg(&scenario).output().unwrap();
+    assert!(init.status.success(), "{}", String::from_utf8_lossy(&init.stderr));
+    let out = calsim()
+        .arg("check")
+        .arg(&scenario)
+        .args(["--realisations", "1", "--set-sizes", "20", "--repetitions", "1", "--no-plots", "--no-recording", "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].contains("my_cell.toml") && lines[0].contains("[expect]") && lines[0].contains("no band"), "{err}");
+}
+
 /// A check of the reduced study's own world (seed 2018, one realisation) leaves the complete result
 /// set with its machine-readable verdict (check.json, and JUnit XML on request, one test case per
 /// figure and a failure per miss) and no temporary directory behind, and exits by its verdict. The
