@@ -1310,3 +1310,51 @@ fn every_figure_of_the_calibrate_summary_equals_its_stored_value() {
         row_matches(row, 1, &families, i, &["coefficients", "gain_per_pose", "gain_se"]);
     }
 }
+
+/// The held-out errors with and without the flagged points (the shipped example at seed 7 flags a
+/// held-out point) and the orientation readings (docs/calibrate/probe_example.toml's probe): every
+/// figure of their summary tables and lines equals the value its table stores.
+#[test]
+fn the_flagged_and_orientation_figures_of_the_summary_equal_their_stored_values() {
+    let out = common::scratch("calibrate-summary-flagged");
+    let calibrate = |args: &[&str]| {
+        let run = common::calsim().arg("calibrate").args(args).args(["--no-plots", "--out"]).arg(out.path()).output().unwrap();
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    };
+    calibrate(&["robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--seed", "7", "--folds", "3"]);
+    let dir = out.path().join("example_measurements.calibration");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let errors = read_parquet(&dir.join("model_errors.parquet"));
+    let rows = markdown_rows(&summary, "With and without the");
+    assert_eq!(rows.len(), errors.height(), "{summary}");
+    let stats = |prefix: &str| ["mean", "median", "p95", "max", "rms"].map(|s| format!("{prefix}_{s}_mm"));
+    let columns: Vec<String> = [stats("held_out_with_flagged"), stats("held_out_without_flagged")].concat();
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], stored_text(&errors, "model", i));
+        row_matches(row, 1, &errors, i, &columns.iter().map(String::as_str).collect::<Vec<_>>());
+    }
+
+    let data = out.path().join("data");
+    let run = common::calsim().args(["simulate-measurements", "docs/calibrate/probe_example.toml", "--out"]).arg(&data).output().unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let csv = data.join("probe_example.csv");
+    calibrate(&["robots/irb120.toml", csv.to_str().unwrap(), "--orientation-noise-mdeg", "10", "--hold-out-session", "L"]);
+    let dir = out.path().join("probe_example.calibration");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let probes = read_parquet(&dir.join("probe_rotations.parquet"));
+    let rows = markdown_rows(&summary, "## Orientation readings");
+    assert!(!rows.is_empty() && rows.len() == probes.height(), "{summary}");
+    let columns = ["rotation_x_deg", "rotation_y_deg", "rotation_z_deg", "std_x_mdeg", "std_y_mdeg", "std_z_mdeg"];
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], stored_text(&probes, "target", i));
+        row_matches(row, 1, &probes, i, &columns);
+    }
+    let (models, errors) = (read_parquet(&dir.join("models.parquet")), read_parquet(&dir.join("model_errors.parquet")));
+    let chosen = (0..models.height()).find(|&i| models.column("chosen").unwrap().bool().unwrap().get(i) == Some(true)).unwrap();
+    let three = |name: &str| {
+        let v = |s: &str| stored(&errors, &format!("{name}_{s}_mdeg"), chosen);
+        format!("mean {:.2}, max {:.2}, RMS {:.2}.", v("mean"), v("max"), v("rms"))
+    };
+    assert!(summary.contains(&format!("fit on every point {}", three("rotation_fit"))), "{summary}");
+    assert!(summary.contains(&format!("Held-out points: {}", three("held_out_rotation"))), "{summary}");
+}
