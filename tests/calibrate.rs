@@ -233,6 +233,16 @@ fn the_shipped_example_and_its_report_are_reproduced() {
         "points.parquet",
         "bases.parquet",
         "tools.parquet",
+        "calibration.parquet",
+        "model_errors.parquet",
+        "unidentifiable.parquet",
+        "failed_folds.parquet",
+        "twin.parquet",
+        "twin_decomposition.parquet",
+        "twin_notes.parquet",
+        "twin_families.parquet",
+        "twin_effects.parquet",
+        "twin_confounded.parquet",
         "robot.toml",
         "twin.toml",
     ] {
@@ -1142,4 +1152,209 @@ fn a_tool_per_session_registers_a_remounted_probe() {
     assert!(rms(&own) < 0.05, "a tool per session registers it: {}", rms(&own));
     assert_eq!(own.tools.len(), 6, "two targets in three sessions");
     assert!(own.tools.iter().any(|t| t.target == "SMR1@C"));
+}
+
+/// The rows of the first Markdown table after `heading` in `summary`, each as its cells.
+fn markdown_rows(summary: &str, heading: &str) -> Vec<Vec<String>> {
+    let after = &summary[summary.find(heading).unwrap_or_else(|| panic!("no {heading} in {summary}"))..];
+    let table = after.lines().skip_while(|l| !l.starts_with('|')).take_while(|l| l.starts_with('|'));
+    table.skip(2).map(|l| l.trim_matches('|').split(" | ").map(|c| c.trim().to_string()).collect()).collect()
+}
+
+/// `printed` is `stored` at the printed precision (decimals, or the mantissa's decimals of an
+/// exponent form); NaN printed as NaN.
+fn close(printed: &str, stored: f64) {
+    if stored.is_nan() {
+        assert_eq!(printed, "NaN", "stored NaN");
+        return;
+    }
+    let p: f64 = printed.parse().unwrap_or_else(|_| panic!("{printed} is not a number (stored {stored})"));
+    let (mantissa, exponent) = printed.split_once('e').map_or((printed, 0), |(m, e)| (m, e.parse::<i32>().unwrap()));
+    let decimals = mantissa.split_once('.').map_or(0, |(_, d)| d.len() as i32);
+    let half = 0.5 * 10f64.powi(exponent - decimals);
+    assert!((p - stored).abs() <= half * (1.0 + 1e-9), "printed {printed}, stored {stored}");
+}
+
+/// A number of a table's column (any numeric type; a null is NaN).
+fn stored(frame: &polars::prelude::DataFrame, column: &str, row: usize) -> f64 {
+    let c = frame.column(column).unwrap_or_else(|e| panic!("{column}: {e}"));
+    c.cast(&polars::prelude::DataType::Float64).unwrap().f64().unwrap().get(row).unwrap_or(f64::NAN)
+}
+
+/// A text of a table's column.
+fn stored_text(frame: &polars::prelude::DataFrame, column: &str, row: usize) -> String {
+    frame.column(column).unwrap().str().unwrap().get(row).unwrap_or("").to_string()
+}
+
+/// Every cell of `row` from `first` on is the number the columns `columns` of `frame` store at
+/// `index`, each cell's comma-separated parts in turn.
+fn row_matches(row: &[String], first: usize, frame: &polars::prelude::DataFrame, index: usize, columns: &[&str]) {
+    let printed: Vec<&str> = row[first..].iter().flat_map(|c| c.split(", ")).collect();
+    assert!(printed.len() >= columns.len(), "{row:?} against {columns:?}");
+    for (p, c) in printed.iter().zip(columns) {
+        close(p, stored(frame, c, index));
+    }
+}
+
+/// Every figure of the shipped example's summary tables (the models compared, the k-fold over
+/// every pose, the held-out errors, the fit on every point, the outliers, the parameters, bases
+/// and targets, the twin's decomposition and families) equals the value its table stores, at
+/// the printed precision.
+#[test]
+fn every_figure_of_the_calibrate_summary_equals_its_stored_value() {
+    let out = common::scratch("calibrate-summary-figures");
+    let run = common::calsim()
+        .args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--no-plots", "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let dir = out.path().join("example_measurements.calibration");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let table = |name: &str| read_parquet(&dir.join(name));
+    let (models, errors, run_row) = (table("models.parquet"), table("model_errors.parquet"), table("calibration.parquet"));
+    let stats = |prefix: &str| ["mean", "median", "p95", "max", "rms"].map(|s| format!("{prefix}_{s}_mm"));
+    let header = format!("{} points at {} poses", table("points.parquet").height(), stored(&run_row, "poses", 0));
+    assert!(summary.contains(&header), "{header}: {summary}");
+
+    let rows = markdown_rows(&summary, "## Models compared");
+    assert_eq!(rows.len(), models.height() - 1, "every model but the registration only");
+    for (k, row) in rows.iter().enumerate() {
+        let i = k + 1;
+        assert_eq!(row[0], stored_text(&models, "model", i));
+        close(&row[1], stored(&models, "parameters", i));
+        close(&row[3], stored(&models, "cv_points", i));
+        row_matches(row, 4, &models, i, &stats("cv").each_ref().map(String::as_str));
+        if models.column("chosen").unwrap().bool().unwrap().get(i) == Some(true) {
+            assert_eq!(row[9], "(chosen)");
+        } else {
+            let (difference, se) = row[9].trim_end_matches(')').split_once(" (").unwrap();
+            close(difference, stored(&models, "cv_paired_mse_difference_mm2", i));
+            close(se, stored(&models, "cv_paired_standard_error_mm2", i));
+        }
+        close(&row[10], stored(&models, "fit_rms_mm", i));
+        let kfold = &markdown_rows(&summary, "### k-fold cross-validation over every pose")[k];
+        close(&kfold[1], stored(&models, "kfold_all_points", i));
+        row_matches(kfold, 2, &models, i, &stats("kfold_all").each_ref().map(String::as_str));
+    }
+
+    let rows = markdown_rows(&summary, "## Held-out errors");
+    assert_eq!(rows.len(), models.height());
+    for (i, row) in rows.iter().enumerate() {
+        close(&row[1], stored(&models, "held_out_points", i));
+        row_matches(row, 2, &models, i, &stats("held_out").each_ref().map(String::as_str));
+        row_matches(row, 7, &models, i, &stats("predicted").each_ref().map(String::as_str));
+    }
+    let chosen = (0..models.height()).find(|&i| models.column("chosen").unwrap().bool().unwrap().get(i) == Some(true)).unwrap();
+    let rows = markdown_rows(&summary, "### Every point, fitted on every point");
+    for (row, i) in rows.iter().zip([0, chosen]) {
+        row_matches(row, 1, &models, i, &[stats("fit").each_ref().map(String::as_str).as_slice(), &["fit_outliers"]].concat());
+        close(&row[7], stored(&errors, "noise_estimate_mm", i));
+    }
+
+    let points = table("points.parquet");
+    let flagged: Vec<usize> =
+        (0..points.height()).filter(|&i| points.column("outlier").unwrap().bool().unwrap().get(i) == Some(true)).collect();
+    let rows = markdown_rows(&summary, "## Outliers");
+    assert!(!flagged.is_empty() && rows.len() == flagged.len(), "{summary}");
+    for (row, &i) in rows.iter().zip(&flagged) {
+        close(&row[0], stored(&points, "line", i));
+        row_matches(row, 4, &points, i, &["error_after_mm", "normalized_residual"]);
+    }
+
+    let parameters = table("parameters.parquet");
+    let rows = markdown_rows(&summary, "## Parameters of the calibrated robot");
+    assert_eq!(rows.len(), parameters.height());
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(
+            (row[0].as_str(), row[7].as_str()),
+            (stored_text(&parameters, "parameter", i).as_str(), stored_text(&parameters, "status", i).as_str())
+        );
+        row_matches(row, 2, &parameters, i, &["nominal", "calibrated"]);
+        close(&row[4], stored(&parameters, "calibrated", i) - stored(&parameters, "nominal", i));
+        close(&row[5], stored(&parameters, "std", i));
+    }
+    let bases = table("bases.parquet");
+    let rows = markdown_rows(&summary, "### Bases");
+    assert_eq!(rows.len(), bases.height());
+    let columns = ["x_mm", "y_mm", "z_mm", "alpha_deg", "beta_deg", "gamma_deg", "std_x_mm", "std_y_mm", "std_z_mm"];
+    for (i, row) in rows.iter().enumerate() {
+        row_matches(row, 1, &bases, i, &[columns.as_slice(), &["std_alpha_deg", "std_beta_deg", "std_gamma_deg"]].concat());
+    }
+    let tools = table("tools.parquet");
+    let rows = markdown_rows(&summary, "### Targets");
+    assert_eq!(rows.len(), tools.height());
+    for (i, row) in rows.iter().enumerate() {
+        row_matches(row, 1, &tools, i, &["flange_x_mm", "flange_y_mm", "flange_z_mm", "std_x_mm", "std_y_mm", "std_z_mm"]);
+    }
+
+    let decomposition = table("twin_decomposition.parquet");
+    let rows = markdown_rows(&summary, "## The twin: what the model misses");
+    assert_eq!(rows.len(), decomposition.height());
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], stored_text(&decomposition, "part", i));
+        if decomposition.column("estimated").unwrap().bool().unwrap().get(i) == Some(true) {
+            close(&row[1], stored(&decomposition, "sigma_mm", i));
+            let (low, high) = row[2].split_once('-').unwrap();
+            close(low, stored(&decomposition, "interval_low_mm", i));
+            close(high, stored(&decomposition, "interval_high_mm", i));
+        } else {
+            assert_eq!((row[1].as_str(), row[2].as_str()), ("-", "-"));
+        }
+    }
+    let families = table("twin_families.parquet");
+    let rows = markdown_rows(&summary, "### Effect families");
+    assert_eq!(rows.len(), families.height());
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], stored_text(&families, "family", i));
+        row_matches(row, 1, &families, i, &["coefficients", "gain_per_pose", "gain_se"]);
+    }
+}
+
+/// The held-out errors with and without the flagged points (the shipped example at seed 7 flags a
+/// held-out point) and the orientation readings (docs/calibrate/probe_example.toml's probe): every
+/// figure of their summary tables and lines equals the value its table stores.
+#[test]
+fn the_flagged_and_orientation_figures_of_the_summary_equal_their_stored_values() {
+    let out = common::scratch("calibrate-summary-flagged");
+    let calibrate = |args: &[&str]| {
+        let run = common::calsim().arg("calibrate").args(args).args(["--no-plots", "--out"]).arg(out.path()).output().unwrap();
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    };
+    calibrate(&["robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--seed", "7", "--folds", "3"]);
+    let dir = out.path().join("example_measurements.calibration");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let errors = read_parquet(&dir.join("model_errors.parquet"));
+    let rows = markdown_rows(&summary, "With and without the");
+    assert_eq!(rows.len(), errors.height(), "{summary}");
+    let stats = |prefix: &str| ["mean", "median", "p95", "max", "rms"].map(|s| format!("{prefix}_{s}_mm"));
+    let columns: Vec<String> = [stats("held_out_with_flagged"), stats("held_out_without_flagged")].concat();
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], stored_text(&errors, "model", i));
+        row_matches(row, 1, &errors, i, &columns.iter().map(String::as_str).collect::<Vec<_>>());
+    }
+
+    let data = out.path().join("data");
+    let run = common::calsim().args(["simulate-measurements", "docs/calibrate/probe_example.toml", "--out"]).arg(&data).output().unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let csv = data.join("probe_example.csv");
+    calibrate(&["robots/irb120.toml", csv.to_str().unwrap(), "--orientation-noise-mdeg", "10", "--hold-out-session", "L"]);
+    let dir = out.path().join("probe_example.calibration");
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    let probes = read_parquet(&dir.join("probe_rotations.parquet"));
+    let rows = markdown_rows(&summary, "## Orientation readings");
+    assert!(!rows.is_empty() && rows.len() == probes.height(), "{summary}");
+    let columns = ["rotation_x_deg", "rotation_y_deg", "rotation_z_deg", "std_x_mdeg", "std_y_mdeg", "std_z_mdeg"];
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], stored_text(&probes, "target", i));
+        row_matches(row, 1, &probes, i, &columns);
+    }
+    let (models, errors) = (read_parquet(&dir.join("models.parquet")), read_parquet(&dir.join("model_errors.parquet")));
+    let chosen = (0..models.height()).find(|&i| models.column("chosen").unwrap().bool().unwrap().get(i) == Some(true)).unwrap();
+    let three = |name: &str| {
+        let v = |s: &str| stored(&errors, &format!("{name}_{s}_mdeg"), chosen);
+        format!("mean {:.2}, max {:.2}, RMS {:.2}.", v("mean"), v("max"), v("rms"))
+    };
+    assert!(summary.contains(&format!("fit on every point {}", three("rotation_fit"))), "{summary}");
+    assert!(summary.contains(&format!("Held-out points: {}", three("held_out_rotation"))), "{summary}");
 }

@@ -149,7 +149,7 @@ pub type Rows<'a> = Box<dyn Fn(&DataFrame) -> Vec<usize> + 'a>;
 enum Part<'a> {
     Text(String),
     TextFrom { table: String, read: Read<'a> },
-    Table { table: String, rows: Rows<'a>, cells: Vec<Cell<'a>> },
+    Table { table: String, rows: Rows<'a>, cells: Vec<Cell<'a>>, if_rows: bool },
     Figures(String),
 }
 
@@ -177,7 +177,13 @@ impl<'a> Summary<'a> {
     /// A Markdown table rendered from the result table `table` (a name of [`Results::table`]):
     /// the rows `rows` picks, in its order, and one column per cell (followed by an empty line).
     pub fn table(&mut self, table: &str, rows: Rows<'a>, cells: Vec<Cell<'a>>) -> &mut Self {
-        self.parts.push(Part::Table { table: table.to_string(), rows, cells });
+        self.parts.push(Part::Table { table: table.to_string(), rows, cells, if_rows: false });
+        self
+    }
+
+    /// As [`Summary::table`], but nothing at all (no header) when `rows` picks no row.
+    pub fn table_if_rows(&mut self, table: &str, rows: Rows<'a>, cells: Vec<Cell<'a>>) -> &mut Self {
+        self.parts.push(Part::Table { table: table.to_string(), rows, cells, if_rows: true });
         self
     }
 
@@ -215,8 +221,12 @@ impl<'a> Summary<'a> {
                     file.push_str(&t);
                     shown.push_str(&t);
                 }
-                Part::Table { table, rows, cells } => {
-                    let t = markdown_table(tables, &table, find(tables, &table)?, &rows, &cells)?;
+                Part::Table { table, rows, cells, if_rows } => {
+                    let frame = find(tables, &table)?;
+                    if if_rows && rows(frame).is_empty() {
+                        continue;
+                    }
+                    let t = markdown_table(tables, &table, frame, &rows, &cells)?;
                     file.push_str(&t);
                     shown.push_str(&t);
                 }
@@ -390,6 +400,12 @@ impl<'a> Results<'a> {
         self
     }
 
+    /// The summary as a command prints it (without the figures), rendered from the tables; nothing
+    /// is written.
+    pub fn summary_text(self) -> std::io::Result<String> {
+        self.summary.render(&self.tables, &[]).map(|(_, shown)| shown)
+    }
+
     /// Writes everything into `dir`, an empty directory (the order of the module doc); the
     /// summary as printed and the time the recording took, s.
     pub fn write_into(self, dir: &Path) -> std::io::Result<(String, f64)> {
@@ -511,6 +527,17 @@ mod tests {
         r.summary.text_from("t.parquet", |row| row.f64("z").to_string());
         let e = write(tmp.path(), r).unwrap_err().to_string();
         assert!(e.contains("the table t.parquet has no column z"), "{e}");
+    }
+
+    #[test]
+    fn a_table_if_rows_shows_nothing_without_a_row_and_the_rows_it_picks_otherwise() {
+        let x = || -> Vec<Cell<'static>> { vec![cell("x", |row| format!("{:.1}", row.f64("x")))] };
+        let mut r = results();
+        r.summary.text("a\n").table_if_rows("t.parquet", Box::new(|_| Vec::new()), x()).text("b\n");
+        assert_eq!(r.summary_text().unwrap(), "a\nb\n");
+        let mut r = results();
+        r.summary.table_if_rows("t.parquet", Box::new(|_| vec![1, 0]), x());
+        assert_eq!(r.summary_text().unwrap(), "| x |\n|---|\n| NaN |\n| 1.5 |\n\n");
     }
 
     #[test]

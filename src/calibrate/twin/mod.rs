@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 pub use effects::{Coefficient, Family};
 use effects::{PointData, columns};
-pub use report::markdown;
+pub use report::{markdown, results_into};
 
 use super::problem::{Layout, Problem, SolveOptions};
 use super::robust::fit_without;

@@ -1,123 +1,234 @@
-//! The twin's section of `summary.md`.
+//! The twin's tables and its section of `summary.md`, every figure read from them: `twin.parquet`
+//! (one row: the split, the thresholds, the held-out gain, the `[learned]` levels),
+//! `twin_decomposition.parquet` (a row per part of the residual), `twin_notes.parquet` (what
+//! cannot be separated or was not estimated), `twin_families.parquet` (a row per family tried),
+//! `twin_effects.parquet` (a row per kept coefficient) and `twin_confounded.parquet` (a row per
+//! pair of families the poses do not tell apart).
 
-use std::fmt::Write as _;
+use polars::prelude::Column;
 
 use super::{Level, Twin};
+use crate::io::results::{Head, Results, Row, Summary, cell};
 
-fn row(s: &mut String, part: &str, l: Option<&Level>, none: &str) {
-    match l {
-        Some(l) => {
-            let _ = writeln!(s, "| {part} | {:.4} | {:.4}-{:.4} | {} |", l.sigma_mm, l.interval_mm[0], l.interval_mm[1], l.by);
-        }
-        None => {
-            let _ = writeln!(s, "| {part} | - | - | {none} |");
-        }
-    }
+const TWIN: &str = "twin.parquet";
+
+/// The twin's tables and its section of the summary, added to `r`.
+pub fn results_into(t: &Twin, r: &mut Results<'_>) -> std::io::Result<()> {
+    tables(t, r)?;
+    section(&mut r.summary);
+    Ok(())
 }
 
-/// The twin as a section of the summary: the decomposition, the families with their held-out
-/// evidence, the kept effects, what cannot be told apart.
+/// The twin's section of a summary as `summary.md` shows it, rendered from its tables (or the
+/// error that kept it from rendering).
 pub fn markdown(t: &Twin) -> String {
+    let mut r = Results::new("twin", Head::Run(crate::io::manifest::Provenance::of_run(&[])));
+    results_into(t, &mut r).and_then(|()| r.summary_text()).unwrap_or_else(|e| e.to_string())
+}
+
+/// The parts of the residual in the summary's order: name, level (`None`: not estimated) and
+/// what the summary says then.
+fn parts(t: &Twin) -> Vec<(&'static str, Option<&Level>, &'static str)> {
     let d = &t.decomposition;
-    let mut s = String::new();
-    let _ = writeln!(s, "## The twin: what the model misses\n");
-    let _ = writeln!(
-        s,
-        "The chosen model refitted on the calibration split ({} points at {} poses, outliers left out); its residual \
-         per coordinate, decomposed (95 % intervals). `twin.toml` is the calibrated robot file with the `[learned]` table below.\n",
-        d.points, d.poses
-    );
-    let _ = writeln!(s, "| part | per coordinate, mm | 95 % interval | estimated by |\n|---|---|---|---|");
-    row(&mut s, "residual (total)", Some(&d.total), "");
-    row(&mut s, "instrument noise", d.instrument.as_ref(), "not estimated");
-    for l in &d.instrument_checks {
-        row(&mut s, "instrument noise (check)", Some(l), "");
-    }
-    row(&mut s, "repeatability", d.repeatability.as_ref(), "not estimated");
+    let mut rows = vec![("residual (total)", Some(&d.total), ""), ("instrument noise", d.instrument.as_ref(), "not estimated")];
+    rows.extend(d.instrument_checks.iter().map(|l| ("instrument noise (check)", Some(l), "")));
+    rows.push(("repeatability", d.repeatability.as_ref(), "not estimated"));
     if let Some(l) = &d.together {
-        row(&mut s, "instrument + repeatability (not separable)", Some(l), "");
+        rows.push(("instrument + repeatability (not separable)", Some(l), ""));
     }
-    row(&mut s, "systematic (model misses)", d.systematic.as_ref(), "not separated from the random part");
-    row(&mut s, "explained by the kept effects", Some(&d.explained), "");
-    row(&mut s, "residual after the kept effects", Some(&d.after), "");
-    row(&mut s, "systematic left (per-pose error)", d.left.as_ref(), "not separated from the random part");
-    for n in &d.notes {
-        let _ = writeln!(s, "\n- {n}");
+    rows.extend([
+        ("systematic (model misses)", d.systematic.as_ref(), "not separated from the random part"),
+        ("explained by the kept effects", Some(&d.explained), ""),
+        ("residual after the kept effects", Some(&d.after), ""),
+        ("systematic left (per-pose error)", d.left.as_ref(), "not separated from the random part"),
+    ]);
+    rows
+}
+
+fn tables(t: &Twin, r: &mut Results<'_>) -> std::io::Result<()> {
+    r.table(TWIN, twin_columns(t))?;
+    let p = parts(t);
+    let level = |f: fn(&Level) -> f64| p.iter().map(|x| x.1.map(f)).collect::<Vec<_>>();
+    r.table(
+        "twin_decomposition.parquet",
+        vec![
+            Column::new("part".into(), p.iter().map(|x| x.0).collect::<Vec<_>>()),
+            Column::new("estimated".into(), p.iter().map(|x| x.1.is_some()).collect::<Vec<_>>()),
+            Column::new("sigma_mm".into(), level(|l| l.sigma_mm)),
+            Column::new("interval_low_mm".into(), level(|l| l.interval_mm[0])),
+            Column::new("interval_high_mm".into(), level(|l| l.interval_mm[1])),
+            Column::new("estimated_by".into(), p.iter().map(|x| x.1.map_or_else(|| x.2.to_string(), |l| l.by.clone())).collect::<Vec<_>>()),
+        ],
+    )?;
+    r.table("twin_notes.parquet", vec![Column::new("note".into(), t.decomposition.notes.clone())])?;
+    let f = &t.families;
+    r.table(
+        "twin_families.parquet",
+        vec![
+            Column::new("family".into(), f.iter().map(|x| x.family.name()).collect::<Vec<_>>()),
+            Column::new("coefficients".into(), f.iter().map(|x| x.columns as u32).collect::<Vec<_>>()),
+            Column::new("gain_per_pose".into(), f.iter().map(|x| x.gain.0).collect::<Vec<_>>()),
+            Column::new("gain_se".into(), f.iter().map(|x| x.gain.1).collect::<Vec<_>>()),
+            Column::new("kept".into(), f.iter().map(|x| x.kept).collect::<Vec<_>>()),
+            Column::new("absorbed".into(), f.iter().map(|x| x.absorbed.join(", ")).collect::<Vec<_>>()),
+        ],
+    )?;
+    let e = &t.effects;
+    let half = |x: &super::Effect| super::Z95 * x.std;
+    r.table(
+        "twin_effects.parquet",
+        vec![
+            Column::new("family".into(), e.iter().map(|x| x.coefficient.family.name()).collect::<Vec<_>>()),
+            Column::new("coefficient".into(), e.iter().map(|x| x.coefficient.name.clone()).collect::<Vec<_>>()),
+            Column::new("value".into(), e.iter().map(|x| x.value).collect::<Vec<_>>()),
+            Column::new("std".into(), e.iter().map(|x| x.std).collect::<Vec<_>>()),
+            Column::new("low_95".into(), e.iter().map(|x| x.value - half(x)).collect::<Vec<_>>()),
+            Column::new("high_95".into(), e.iter().map(|x| x.value + half(x)).collect::<Vec<_>>()),
+            Column::new("unit".into(), e.iter().map(|x| x.coefficient.unit()).collect::<Vec<_>>()),
+        ],
+    )?;
+    let c = &t.confounded;
+    r.table(
+        "twin_confounded.parquet",
+        vec![
+            Column::new("family_a".into(), c.iter().map(|x| x.0.clone()).collect::<Vec<_>>()),
+            Column::new("family_b".into(), c.iter().map(|x| x.1.clone()).collect::<Vec<_>>()),
+            Column::new("cosine".into(), c.iter().map(|x| x.2).collect::<Vec<_>>()),
+        ],
+    )?;
+    Ok(())
+}
+
+/// `twin.parquet`'s one row.
+fn twin_columns(t: &Twin) -> Vec<Column> {
+    let (d, l) = (&t.decomposition, &t.learned);
+    let whole = |name: &str, v: usize| Column::new(name.into(), vec![v as u32]);
+    let number = |name: &str, v: f64| Column::new(name.into(), vec![v]);
+    vec![
+        whole("points", d.points),
+        whole("poses", d.poses),
+        whole("cv_poses", t.cv_poses),
+        number("keep_se", super::KEEP_SE),
+        whole("held_out_poses", t.held_out_poses),
+        Column::new("held_out_judged".into(), vec![t.held_out_gain.is_some()]),
+        Column::new("held_out_gain_per_pose".into(), vec![t.held_out_gain.map(|g| g.0)]),
+        Column::new("held_out_gain_se".into(), vec![t.held_out_gain.map(|g| g.1)]),
+        number("confounded_cos", super::CONFOUNDED_COS),
+        number("repeatability_mm", l.repeatability_mm),
+        number("repeatability_std_mm", l.repeatability_std_mm),
+        number("pose_error_mdeg", l.pose_error_mdeg),
+        number("pose_error_std_mdeg", l.pose_error_std_mdeg),
+        whole("harmonics", l.harmonic.len()),
+    ]
+}
+
+/// The twin's section: the decomposition, the families with their cross-validated evidence, the
+/// kept effects, what cannot be told apart, the `[learned]` levels.
+fn section(parts: &mut Summary<'_>) {
+    parts.text_from(TWIN, |r| {
+        format!(
+            "## The twin: what the model misses\n\nThe chosen model refitted on the calibration split ({} points at {} poses, outliers \
+             left out); its residual per coordinate, decomposed (95 % intervals). `twin.toml` is the calibrated robot file with the \
+             `[learned]` table below.\n\n",
+            r.u64("points"),
+            r.u64("poses")
+        )
+    });
+    let known = |show: fn(&Row<'_>) -> String| move |r: &Row<'_>| if r.bool("estimated") { show(r) } else { "-".to_string() };
+    let cells = vec![
+        cell("part", |r| r.str("part")),
+        cell("per coordinate, mm", known(|r| format!("{:.4}", r.f64("sigma_mm")))),
+        cell("95 % interval", known(|r| format!("{:.4}-{:.4}", r.f64("interval_low_mm"), r.f64("interval_high_mm")))),
+        cell("estimated by", |r| r.str("estimated_by")),
+    ];
+    parts.table("twin_decomposition.parquet", Summary::all_rows(), cells);
+    parts.text_from(TWIN, |r| {
+        let notes = r.of("twin_notes.parquet", 0);
+        let mut pieces: Vec<String> = (0..notes.height()).map(|i| format!("- {}\n", notes.at(i).str("note"))).collect();
+        pieces.push(format!(
+            "### Effect families\n\nEach fitted jointly with the model (its columns projected off the model's Jacobian) on the calibration \
+             split only, judged by cross-validation over its folds ({} poses): kept, one at a time, while adding it lowers the \
+             cross-validated squared error per pose by more than {} paired standard errors (5 % shared by the nine families). Columns \
+             the model's parameters absorb are left out (the calibrated robot carries them).\n\n",
+            r.u64("cv_poses"),
+            r.f64("keep_se")
+        ));
+        pieces.join("\n")
+    });
+    let cells = vec![
+        cell("family", |r| r.str("family")),
+        cell("coefficients", |r| r.u64("coefficients").to_string()),
+        cell("cross-validated gain per pose", |r| format!("{:.3e}", r.f64("gain_per_pose"))),
+        cell("paired s.e.", |r| format!("{:.3e}", r.f64("gain_se"))),
+        cell("kept", |r| if r.bool("kept") { "yes" } else { "no" }.to_string()),
+        cell("absorbed by the model", |r| Some(r.str("absorbed")).filter(|a| !a.is_empty()).unwrap_or_else(|| "-".into())),
+    ];
+    parts.table("twin_families.parquet", Summary::all_rows(), cells);
+    parts.text_from(TWIN, |r| {
+        let text = effects(r) + &confounded(r) + &learned(r);
+        // The families' table ends with the empty line that the first paragraph starts with.
+        text.strip_prefix('\n').unwrap_or(&text).to_string()
+    });
+}
+
+/// The kept effects with their intervals and their gain on the held-out poses.
+fn effects(r: &Row<'_>) -> String {
+    let e = r.of("twin_effects.parquet", 0);
+    if e.height() == 0 {
+        return "\nNo effect family kept.\n".into();
     }
-    let _ = writeln!(
-        s,
-        "\n### Effect families\n\nEach fitted jointly with the model (its columns projected off the model's Jacobian) on the calibration \
-         split only, judged by cross-validation over its folds ({} poses): kept, one at a time, while adding it lowers the \
-         cross-validated squared error per pose by more than {} paired standard errors (5 % shared by the nine families). Columns \
-         the model's parameters absorb are left out (the calibrated robot carries them).\n",
-        t.cv_poses,
-        super::KEEP_SE
-    );
-    let _ = writeln!(
-        s,
-        "| family | coefficients | cross-validated gain per pose | paired s.e. | kept | absorbed by the model |\n|---|---|---|---|---|---|"
-    );
-    for f in &t.families {
-        let absorbed = if f.absorbed.is_empty() { "-".to_string() } else { f.absorbed.join(", ") };
-        let _ = writeln!(
-            s,
-            "| {} | {} | {:.3e} | {:.3e} | {} | {absorbed} |",
-            f.family.name(),
-            f.columns,
-            f.gain.0,
-            f.gain.1,
-            if f.kept { "yes" } else { "no" }
+    let mut s = "\n| kept effect | value | 95 % interval | unit |\n|---|---|---|---|\n".to_string();
+    for x in (0..e.height()).map(|i| e.at(i)) {
+        let f = |name: &str| x.f64(name);
+        s += &format!(
+            "| {}: {} | {:.4} | {:.4} to {:.4} | {} |\n",
+            x.str("family"),
+            x.str("coefficient"),
+            f("value"),
+            f("low_95"),
+            f("high_95"),
+            x.str("unit")
         );
     }
-    if t.effects.is_empty() {
-        let _ = writeln!(s, "\nNo effect family kept.");
-    } else {
-        let _ = writeln!(s, "\n| kept effect | value | 95 % interval | unit |\n|---|---|---|---|");
-        for e in &t.effects {
-            let h = super::Z95 * e.std;
-            let _ = writeln!(
-                s,
-                "| {}: {} | {:.4} | {:.4} to {:.4} | {} |",
-                e.coefficient.family.name(),
-                e.coefficient.name,
-                e.value,
-                e.value - h,
-                e.value + h,
-                e.coefficient.unit()
-            );
-        }
-    }
-    if let (Some((g, se)), false) = (t.held_out_gain, t.effects.is_empty()) {
-        let _ = writeln!(
-            s,
-            "\nOn the {} held-out poses (not used to choose), the kept effects lower the squared error per pose by {g:.3e} \
-             (paired s.e. {se:.3e}).",
-            t.held_out_poses
+    if r.bool("held_out_judged") {
+        s += &format!(
+            "\nOn the {} held-out poses (not used to choose), the kept effects lower the squared error per pose by {:.3e} \
+             (paired s.e. {:.3e}).\n",
+            r.u64("held_out_poses"),
+            r.f64("held_out_gain_per_pose"),
+            r.f64("held_out_gain_se")
         );
     }
-    if t.confounded.is_empty() {
-        let _ = writeln!(
-            s,
-            "\nEvery pair of families is told apart (cosine of the smallest principal angle at most {}).",
-            super::CONFOUNDED_COS
+    s
+}
+
+/// The pairs of families the poses do not tell apart.
+fn confounded(r: &Row<'_>) -> String {
+    let c = r.of("twin_confounded.parquet", 0);
+    if c.height() == 0 {
+        return format!(
+            "\nEvery pair of families is told apart (cosine of the smallest principal angle at most {}).\n",
+            r.f64("confounded_cos")
         );
-    } else {
-        let _ = writeln!(s, "\nNot told apart by these poses (cosine of the smallest principal angle of their columns after the model):\n");
-        for (a, b, cos) in &t.confounded {
-            let _ = writeln!(s, "- {a} and {b}: {cos:.3}");
-        }
     }
-    let l = &t.learned;
-    let _ = writeln!(
-        s,
+    let mut s =
+        "\nNot told apart by these poses (cosine of the smallest principal angle of their columns after the model):\n\n".to_string();
+    for x in (0..c.height()).map(|i| c.at(i)) {
+        s += &format!("- {} and {}: {:.3}\n", x.str("family_a"), x.str("family_b"), x.f64("cosine"));
+    }
+    s
+}
+
+/// The `[learned]` levels.
+fn learned(r: &Row<'_>) -> String {
+    format!(
         "\n`[learned]`: repeatability_mm = {:.4} (ISO 9283 RP of the repeatability per coordinate; repeatability_std_mm = {:.4}, \
          from its 95 % interval: a plan draws the level per world), pose_error_mdeg = {:.3} \
-         (pose_error_std_mdeg = {:.3}, from its 95 % interval: a plan draws the level per world), {} harmonics.",
-        l.repeatability_mm,
-        l.repeatability_std_mm,
-        l.pose_error_mdeg,
-        l.pose_error_std_mdeg,
-        l.harmonic.len()
-    );
-    s
+         (pose_error_std_mdeg = {:.3}, from its 95 % interval: a plan draws the level per world), {} harmonics.\n",
+        r.f64("repeatability_mm"),
+        r.f64("repeatability_std_mm"),
+        r.f64("pose_error_mdeg"),
+        r.f64("pose_error_std_mdeg"),
+        r.u64("harmonics")
+    )
 }
