@@ -491,7 +491,7 @@ pub fn run(plan: &DevicePlan) -> Result<DeviceOutcome, PlanError> {
         forward(&start, st, q);
         world.first_collision(st).is_some()
     };
-    let colliding_moves = super::select::colliding_moves_with(&qs, &tour.0, &collides);
+    let colliding_moves = super::select::colliding_moves_with(&qs, &tour.0, collides);
     // Via candidates: the pool kept and the validation configurations (free of collision).
     let free: Vec<Joints> = kept_obs.iter().map(|o| o.q).chain(validation.iter().copied()).collect();
     let routing = super::select::reroute(&qs, &tour.0, &colliding_moves, &free, &plan.limits, collides);
