@@ -184,7 +184,8 @@ struct PlanArgs {
     /// Worker threads (default: RAYON_NUM_THREADS, else every core).
     #[arg(long)]
     threads: Option<u32>,
-    /// Also write simulated.csv: the poses measured on the robot file's truth with the tracker's noise.
+    /// Also write simulated.csv: the poses measured on the robot file's truth with the tracker's
+    /// noise (a device plan: the planning world's true arm with the pool's observation error).
     #[arg(long)]
     simulate: bool,
     /// Skip the Rerun recording (plan.rrd).
@@ -801,7 +802,8 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
         println!("cannot identify (kept at their values before calibration): {}", r.outcome.prediction.unidentifiable.join(", "));
     }
     println!(
-        "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{} in {}",
+        "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{}{} in {}",
+        if spec.simulate { ", simulated.csv" } else { "" },
         if spec.recording { " and the recording plan.rrd" } else { "" },
         r.dir.display()
     );

@@ -551,9 +551,12 @@ def plan(
     """Plans a calibration (``calsim plan``): the poses to measure on a real robot, feasible in
     its cell, chosen by DETMAX, with the held-out error predicted over simulated worlds, written
     to ``out/<plan stem>.plan`` (``poses.csv`` to fill, ``joints.txt``, ``tour.csv``, ``plan.md``,
-    the figure, the Rerun recording ``plan.rrd``); ``simulate`` also writes ``simulated.csv`` (the poses measured on the robot
-    file's truth). The plan file's keys: docs/plan.md (``[objective]`` for the number of poses by
-    objective, ``compare = true`` for DETMAX against random and greedy selection)."""
+    the figure, the Rerun recording ``plan.rrd``); ``simulate`` also writes ``simulated.csv`` (the
+    poses measured on the robot file's truth; a device plan: on its planning world's true arm).
+    A plan file with ``[tracker]`` plans for a laser tracker, one with ``[instrument] kind =
+    "trical"`` for the TriCal device on datum spheres. The plan file's keys: docs/plan.md
+    (``[objective]`` for the number of poses by objective, ``compare = true`` for DETMAX against
+    random and greedy selection)."""
     with observer(progress) as callback:
         report = _calsim.plan(
             Path(file),

@@ -294,16 +294,24 @@ class Table8Result:
 
 
 class PlanResult:
-    """A calibration plan (``calsim plan``): ``dest`` (its directory), ``poses`` (the training
-    poses planned: the plan's count or its objective's), ``table`` (``poses.csv`` as a DataFrame:
-    the measurement file to fill), ``prediction`` (the predicted held-out median: ``p10_mm``,
-    ``median_mm``, ``p90_mm``, ``worlds``, ``pilot_mm``, ``twin``), ``unidentifiable``,
-    ``objective`` (``None``, or ``met``, ``poses`` and ``table``: P(success) against the number of
-    poses), ``comparison`` (``None``, or DETMAX, random and greedy selection as a DataFrame),
-    ``figure`` (``plan_poses.png``) and ``seconds``."""
+    """A calibration plan (``calsim plan``), of a laser tracker (``instrument`` ``"tracker"``) or
+    of a device with configurations of its own (``"trical"``): ``dest`` (its directory),
+    ``poses`` (the training poses planned: the plan's count or its objective's), ``pool`` (the
+    feasible poses chosen from) and ``drawn`` (the candidates drawn; a device plan: the
+    configurations its campaign centred), ``table`` (``poses.csv`` as a DataFrame: the measurement
+    file to fill), ``tour`` (``tour.csv``: the order to visit them, via configurations of re-routed
+    moves split ``via``), ``simulated`` (``simulated.csv`` with ``simulate``, else ``None``),
+    ``prediction`` (the predicted held-out median: ``p10_mm``, ``median_mm``, ``p90_mm``,
+    ``worlds``, ``pilot_mm``, ``twin``), ``unidentifiable``, ``objective`` (``None``, or ``met``,
+    ``poses`` and ``table``: P(success) against the number of poses), ``comparison`` (``None``,
+    or DETMAX, random and greedy selection as a DataFrame; a tracker plan's), ``figure``
+    (``plan_poses.png``) and ``seconds``."""
 
     def __init__(self, report: Report) -> None:
+        self.instrument: str = report["instrument"]
         self.dest: Path = Path(report["dest"])
+        self.pool: int = report["pool"]
+        self.drawn: int = report["drawn"]
         self.poses: int = report["poses"]
         self.validation: int = report["validation"]
         self.o1: float = report["o1"]
@@ -325,14 +333,21 @@ class PlanResult:
         )
         comparison = report["comparison"]
         self.comparison: pl.DataFrame | None = None if comparison is None else pl.DataFrame(comparison)
-        self.table: pl.DataFrame = pl.read_csv(
-            self.dest / "poses.csv", comment_prefix="#", schema_overrides={"x_mm": pl.Float64, "y_mm": pl.Float64, "z_mm": pl.Float64}
+        positions = {"x_mm": pl.Float64, "y_mm": pl.Float64, "z_mm": pl.Float64}
+        self.table: pl.DataFrame = pl.read_csv(self.dest / "poses.csv", comment_prefix="#", schema_overrides=positions)
+        self.tour: pl.DataFrame = pl.read_csv(self.dest / "tour.csv")
+        simulated = self.dest / "simulated.csv"
+        self.simulated: pl.DataFrame | None = (
+            pl.read_csv(simulated, comment_prefix="#", schema_overrides=positions) if simulated.exists() else None
         )
         self.figure: Path = self.dest / "plan_poses.png"
         self.seconds: float = report["seconds"]
 
     def __repr__(self) -> str:
-        return f"PlanResult(dest={str(self.dest)!r}, poses={self.poses}, predicted_median_mm={self.prediction['median_mm']:.4f})"
+        return (
+            f"PlanResult(instrument={self.instrument!r}, dest={str(self.dest)!r}, poses={self.poses}, "
+            f"predicted_median_mm={self.prediction['median_mm']:.4f})"
+        )
 
 
 class ImportResult:

@@ -662,10 +662,14 @@ fn plan<'py>(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let spec = app::plan::PlanSpec { file, out, threads, simulate, recording: true };
+    if app::plan::is_device_plan(&spec.file).map_err(|e| to_py(py, e))? {
+        return plan_device(py, &spec, progress);
+    }
     let (r, warnings) = detached(py, progress, |o| app::plan::plan(&spec, o))?;
     let o = &r.outcome;
     let p = &o.prediction;
     let d = PyDict::new(py);
+    d.set_item("instrument", "tracker")?;
     d.set_item("dest", &r.dir)?;
     d.set_item("poses", o.poses)?;
     d.set_item("validation", r.plan.validation)?;
@@ -680,26 +684,7 @@ fn plan<'py>(
     d.set_item("pilot_mm", p.pilot_median_mm)?;
     d.set_item("twin", p.twin)?;
     d.set_item("unidentifiable", p.unidentifiable.iter().map(|u| u.name.clone()).collect::<Vec<_>>())?;
-    match &o.search {
-        None => d.set_item("objective", py.None())?,
-        Some(s) => {
-            let x = PyDict::new(py);
-            x.set_item("met", s.chosen.is_some())?;
-            x.set_item("poses", s.planned)?;
-            let rows = PyList::empty(py);
-            for c in s.by_count() {
-                let row = PyDict::new(py);
-                row.set_item("poses", c.n)?;
-                row.set_item("successes", c.successes)?;
-                row.set_item("worlds", c.worlds)?;
-                row.set_item("lower_bound", c.lower)?;
-                row.set_item("meets", c.meets)?;
-                rows.append(row)?;
-            }
-            x.set_item("table", rows)?;
-            d.set_item("objective", x)?;
-        }
-    }
+    d.set_item("objective", objective_of(py, o.search.as_ref())?)?;
     match &o.comparison {
         None => d.set_item("comparison", py.None())?,
         Some(c) => {
@@ -719,6 +704,55 @@ fn plan<'py>(
             d.set_item("comparison", rows)?;
         }
     }
+    d.set_item("seconds", r.seconds)?;
+    d.set_item("warnings", warnings)?;
+    Ok(d)
+}
+
+/// The objective's search as the plan's report gives it (`None`: the count is fixed).
+fn objective_of<'py>(py: Python<'py>, search: Option<&calsim::plan::Search>) -> PyResult<Bound<'py, PyAny>> {
+    let Some(s) = search else { return Ok(py.None().into_bound(py)) };
+    let x = PyDict::new(py);
+    x.set_item("met", s.chosen.is_some())?;
+    x.set_item("poses", s.planned)?;
+    let rows = PyList::empty(py);
+    for c in s.by_count() {
+        let row = PyDict::new(py);
+        row.set_item("poses", c.n)?;
+        row.set_item("successes", c.successes)?;
+        row.set_item("worlds", c.worlds)?;
+        row.set_item("lower_bound", c.lower)?;
+        row.set_item("meets", c.meets)?;
+        rows.append(row)?;
+    }
+    x.set_item("table", rows)?;
+    Ok(x.into_any())
+}
+
+/// `calsim plan` of a device plan (`[instrument]`): the tracker plan's report, the device's
+/// figures in its keys.
+fn plan_device<'py>(py: Python<'py>, spec: &app::plan::PlanSpec, progress: Option<Py<PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+    let (r, warnings) = detached(py, progress, |o| app::plan::plan_device(spec, o))?;
+    let o = &r.outcome;
+    let p = &o.prediction;
+    let d = PyDict::new(py);
+    d.set_item("instrument", r.plan.kind)?;
+    d.set_item("dest", &r.dir)?;
+    d.set_item("poses", o.poses)?;
+    d.set_item("validation", r.plan.validation)?;
+    d.set_item("pool", o.candidates - o.refused[0] - o.refused[1])?;
+    d.set_item("drawn", o.candidates)?;
+    d.set_item("o1", o.o1.0)?;
+    d.set_item("o1_random", o.o1.1)?;
+    d.set_item("predicted_p10_mm", p.quantiles_mm[0])?;
+    d.set_item("predicted_mm", p.quantiles_mm[1])?;
+    d.set_item("predicted_p90_mm", p.quantiles_mm[2])?;
+    d.set_item("worlds", p.worlds)?;
+    d.set_item("pilot_mm", p.pilot_median_mm)?;
+    d.set_item("twin", false)?;
+    d.set_item("unidentifiable", p.unidentifiable.clone())?;
+    d.set_item("objective", objective_of(py, o.search.as_ref())?)?;
+    d.set_item("comparison", py.None())?;
     d.set_item("seconds", r.seconds)?;
     d.set_item("warnings", warnings)?;
     Ok(d)

@@ -373,6 +373,65 @@ def test_bad_plan_files_name_the_file_and_the_key(tmp_path: Path) -> None:
         calsim.plan(f, out=tmp_path / "py", progress=False)
 
 
+def small_trical_plan(tmp_path: Path) -> Path:
+    """The shipped TriCal plan (``[instrument] kind = "trical"``), its files named absolutely, 8 worlds."""
+    text = (REPO / "scenarios" / "plans" / "irb120_trical.toml").read_text()
+    scenario = REPO / "scenarios" / "irb120_trical.toml"
+    for old, new in [('"../../robots/irb120.toml"', f'"{ROBOT}"'), ('"../irb120_trical.toml"', f'"{scenario}"'), ("worlds = 30 ", "worlds = 8 ")]:
+        assert old in text
+        text = text.replace(old, new)
+    f = tmp_path / "trical.toml"
+    f.write_text(text)
+    return f
+
+
+def test_a_trical_plan_gives_the_cli_files_and_its_tables_as_frames(tmp_path: Path) -> None:
+    f = small_trical_plan(tmp_path)
+    r = calsim.plan(f, out=tmp_path / "py", threads=2, simulate=True, progress=False)
+    assert (r.instrument, r.poses, r.validation, r.drawn) == ("trical", 75, 30, 360)
+    assert 75 < r.pool <= 360 and r.comparison is None and r.objective is None
+    assert r.table["split"].value_counts().sort("split")["count"].to_list() == [30, 75]
+    assert r.prediction["worlds"] == 8
+    assert 0 < r.prediction["p10_mm"] <= r.prediction["median_mm"] <= r.prediction["p90_mm"]
+    cli("plan", f, "--out", tmp_path / "cli", "--threads", "2", "--simulate")
+    dest = tmp_path / "cli" / "trical.plan"
+    for name in ["poses.csv", "joints.txt", "tour.csv", "plan.md", "plan_poses.png", "simulated.csv"]:
+        assert (r.dest / name).read_bytes() == (dest / name).read_bytes(), name
+    # The frames are the CLI's tables, every number bit for bit.
+    for frame, name in [(r.table, "poses.csv"), (r.simulated, "simulated.csv"), (r.tour, "tour.csv")]:
+        assert frame is not None
+        lines = [line.split(",") for line in (dest / name).read_text().splitlines() if not line.startswith("#")]
+        assert frame.columns == lines[0] and frame.height == len(lines) - 1, name
+        for column, dtype in zip(frame.columns, frame.dtypes):
+            k = lines[0].index(column)
+            for value, row in zip(frame[column].to_list(), lines[1:]):
+                text = row[k]
+                if dtype == pl.String:
+                    assert value == text, (name, column)
+                elif text == "":
+                    assert value is None, (name, column)
+                else:
+                    assert value == float(text) and not (dtype.is_integer() and "." in text), (name, column, value, text)
+    assert r.tour.filter(pl.col("split") != "via").height == 105
+    assert r.simulated is not None and r.simulated["x_mm"].is_not_null().all()
+    assert (r.table.filter(pl.col("split") == "holdout")["x_mm"].is_null()).all()
+    # The predicted median as plan.md rounds it.
+    assert f"| {r.prediction['p10_mm']:.4f} | {r.prediction['median_mm']:.4f} | {r.prediction['p90_mm']:.4f} |" in (dest / "plan.md").read_text()
+
+
+def test_a_bad_trical_plan_raises_naming_the_file_and_the_key(tmp_path: Path) -> None:
+    f = small_trical_plan(tmp_path)
+    f.write_text(f.read_text().replace("pool = 360 ", "pool = 361 "))
+    with pytest.raises(calsim.InputError, match="multiple of the 3 datum spheres") as e:
+        calsim.plan(f, out=tmp_path / "py", progress=False)
+    assert (e.value.path, e.value.key) == (str(f), "pool")
+    assert not (tmp_path / "py" / "trical.plan").exists()
+    f.write_text(f.read_text().replace("pool = 361 ", "pool = 360 ").replace('kind = "trical"', 'kind = "trical"\nspheres = 3'))
+    with pytest.raises(calsim.InputError, match="unknown field") as e:
+        calsim.plan(f, out=tmp_path / "py", progress=False)
+    assert e.value.path == str(f) and e.value.key is not None and "line" in e.value.key
+
+
 def small_simulation(tmp_path: Path, poses: int = 40) -> Path:
     """docs/calibrate/imported_example.toml at ``poses`` poses a session, its robot named absolutely."""
     text = (REPO / "docs" / "calibrate" / "imported_example.toml").read_text()

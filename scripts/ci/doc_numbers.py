@@ -296,20 +296,37 @@ def plan_printed(out: str) -> str:
     return fenced(lines)
 
 
+TOUR = re.compile(
+    r"(\S+) deg of joint-space path; straight moves through a collision \(checked every (\S+) deg of the joint that moves most\): (none|.*?)"
+    r"(?:\. Re-routed through (\d+) via configurations? .*?, (\S+) deg of path in all)?(?:; no via path found for (.*?): move around it by hand)?\.\n"
+)
+
+
+def tour_row(md: str, moves: int) -> str:
+    """The tour's row of a plan's table: its length, its straight moves through a collision, their via paths."""
+    t = TOUR.search(md)
+    colliding = [] if t.group(3) == "none" else t.group(3).split(", ")
+    unrouted = [] if t.group(6) is None else t.group(6).split(", ")
+    row = f"| tour | {float(t.group(1)):,.1f} deg of joint-space path; {len(colliding)} of its {moves} straight moves pass through a collision (checked every {t.group(2)} deg)"
+    if t.group(4):
+        row += f", re-routed through {t.group(4)} via configuration{'' if t.group(4) == '1' else 's'} ({float(t.group(5)):,.1f} deg of path in all)"
+    if colliding:
+        row += f"; not re-routed: {len(unrouted)}"
+    return row + " |\n"
+
+
 def plan_figures(md: str) -> dict:
     """The figures of a plan.md."""
     pool = re.search(r"- Pool: (\d+) feasible configurations of (\d+) drawn within the limits \(refused: (.*)\)\.", md)
     o1 = re.search(r"- O1 of the chosen set: (\S+) \(a random set of the same size from the same pool: (\S+)\)", md)
-    tour = re.search(r"(\S+) deg of joint-space path; moves through a collision \(checked every (\S+) deg\): (.*)\.", md)
     noise = re.search(r"measured again with (\S+) mm per coordinate", md)
     worlds = re.search(r"The held-out median error after calibration over (\d+) simulated worlds", md)
     training = re.search(r"- Training: (\d+) poses", md)
     validation = re.search(r"- Validation: (\d+) poses", md)
     pred = cells(md_table(md, "| P10, mm | median, mm")[2])
-    colliding = [] if tour.group(3) == "none" else tour.group(3).split(", ")
     refused = re.sub(r"(\d+)", lambda m: f"{int(m.group(1)):,}", pool.group(3))
     return {"feasible": int(pool.group(1)), "drawn": int(pool.group(2)), "refused": refused, "o1": o1.group(1),
-            "o1_random": o1.group(2), "tour_deg": float(tour.group(1)), "step_deg": tour.group(2), "colliding": colliding,
+            "o1_random": o1.group(2),
             "noise": noise.group(1), "worlds": int(worlds.group(1)), "p10": pred[0], "median": pred[1], "p90": pred[2],
             "pilot": pred[3], "poses": int(training.group(1)), "validation": int(validation.group(1))}
 
@@ -326,7 +343,7 @@ def plan_table(out: Output) -> str:
         f"| O1 of DETMAX's {f['poses']} poses / of a random {f['poses']} from the same pool | {f['o1']} / {f['o1_random']} |\n"
         f"| predicted held-out median, P10 / median / P90 ({f['worlds']} worlds, {f['noise']} mm per coordinate) | {f['p10']} / {f['median']} / {f['p90']} mm |\n"
         f"| the pilot world's held-out median (the file's truth) | {f['pilot']} mm |\n"
-        f"| tour | {f['tour_deg']:,.1f} deg of joint-space path; {len(f['colliding'])} of its {moves} moves pass through a collision (checked every {f['step_deg']} deg, named in plan.md) |\n"
+        + tour_row(out.plan, moves) +
         f"\nThe pilot world lies {where} here (see Limits for how often a simulated outcome falls in the band).\n"
     )
 
@@ -352,12 +369,10 @@ def plan_trical_table(out: Output) -> str:
     training = re.search(r"- Training: (\d+) configurations chosen by DETMAX \((.*)\)", md)
     o1 = re.search(r"- O1 of the chosen set: (\S+) \(a random set of the same size from the same pool: (\S+)\)", md)
     centring = re.search(r"lies within (\S+) mm of its sphere's located centre", md)
-    tour = re.search(r"(\S+) deg of joint-space path; moves through a collision \(checked every (\S+) deg\): (.*)\.", md)
     noise = re.search(r"observed at the chosen configurations with (\S+) mm per coordinate", md)
     worlds = re.search(r"at the validation configurations over (\d+) simulated worlds", md)
     unid = re.search(r"## Parameters the plan cannot identify\n\n(.*)\n", md).group(1)
     pred = cells(md_table(md, "| P10, mm | median, mm")[2])
-    colliding = [] if tour.group(3) == "none" else tour.group(3).split(", ")
     n = int(training.group(1))
     where = ("below the worlds' P10" if float(pred[4]) < float(pred[0]) else
              "above the worlds' P90" if float(pred[4]) > float(pred[2]) else "inside the worlds' P10-P90")
@@ -371,7 +386,7 @@ def plan_trical_table(out: Output) -> str:
         f"| predicted held-out median, P10 / median / P90 ({worlds.group(1)} worlds, {noise.group(1)} mm per coordinate) | {pred[0]} / {pred[1]} / {pred[2]} mm (median's 90 % interval {pred[3]} mm) |\n"
         f"| the pilot's held-out median (the device's own observations) | {pred[4]} mm |\n"
         f"| parameters the plan cannot identify | {unid} |\n"
-        f"| tour | {float(tour.group(1)):,.1f} deg of joint-space path; {len(colliding)} of its {moves} moves pass through a collision (checked every {tour.group(2)} deg, named in plan.md) |\n"
+        + tour_row(md, moves) +
         f"\nThe pilot lies {where} here.\n"
     )
 

@@ -141,16 +141,10 @@ pub fn load_device(file: &Path) -> Result<crate::plan::device::DevicePlan, Error
 }
 
 /// `calsim plan` of a device plan: writes `<out>/<plan stem>.plan/` (`poses.csv`, `joints.txt`,
-/// `tour.csv`, `plan.md`, the figure, the recording).
+/// `tour.csv`, `plan.md`, the figure, the recording, and `simulated.csv` with `--simulate`).
 pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePlanReport, Error> {
     let _inputs = crate::io::inputs::Ledger::open();
     let plan = load_device(&spec.file)?;
-    if spec.simulate {
-        return Err(Error::input(
-            format!("{}: --simulate", spec.file.display()),
-            "a TriCal plan's measurement is the centred configuration: `calsim run` on the device's scenario simulates it".to_string(),
-        ));
-    }
     let name = format!("{}.plan", crate::io::names::of_file(&spec.file)?);
     crate::io::out_dir::prepare(&spec.out, &name)?;
     let (pool, threads) = super::thread_pool(spec.threads)?;
@@ -170,6 +164,7 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
     let t0 = std::time::Instant::now();
     let outcome =
         pool.install(|| crate::plan::device::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+    let simulated = spec.simulate.then(|| crate::plan::device::simulated_csv(&plan, &outcome));
     let seconds = t0.elapsed().as_secs_f64();
     let files = [
         ("poses.csv", crate::plan::device::csv(&plan, &outcome)),
@@ -180,9 +175,19 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
         let io = |e: std::io::Error| Error::io(&spec.out)(e);
-        r.field("plan", &name).map_err(io)?.field("instrument", plan.kind).map_err(io)?.field("recording", spec.recording).map_err(io)?;
+        r.field("plan", &name)
+            .map_err(io)?
+            .field("instrument", plan.kind)
+            .map_err(io)?
+            .field("simulate", spec.simulate)
+            .map_err(io)?
+            .field("recording", spec.recording)
+            .map_err(io)?;
         for (f, text) in files {
             r.file(f, text);
+        }
+        if let Some(text) = simulated {
+            r.file("simulated.csv", text);
         }
         r.draw(Box::new(|d| crate::plan::device_view::write_figure(d, &plan, &outcome).map(|()| Vec::new())));
         if spec.recording {

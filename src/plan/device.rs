@@ -8,7 +8,8 @@
 //!  ─► the pool kept within the plan's limits and free of collision (arm, device, the device's
 //!     fixtures, the floor, the keep-out boxes)
 //!  ─► validation configurations spread over the workspace of interest (farthest-point sampling)
-//!  ─► DETMAX on the kept rows  ─► tour (greedy nearest neighbour, moves checked every degree)
+//!  ─► DETMAX on the kept rows  ─► tour (greedy nearest neighbour, moves checked every degree, a
+//!     colliding move re-routed through via configurations)
 //!  ─► prediction: the device's own observations at the chosen configurations identified (the
 //!     pilot), then the plan's worlds: the true arm observed at the chosen configurations with the
 //!     pool's observation error, identified, compared with the true arm at the validation
@@ -328,8 +329,10 @@ pub struct DeviceOutcome {
     pub params: Vec<String>,
     /// Tour: positions in `rows`, and its length, rad.
     pub tour: (Vec<usize>, f64),
-    /// Moves of the tour through a collision (positions in the tour).
+    /// Straight moves of the tour through a collision (positions in the tour).
     pub colliding_moves: Vec<(usize, usize)>,
+    /// Those moves re-routed through via configurations, and those that could not be.
+    pub routing: super::select::Routing,
     /// The prediction.
     pub prediction: DevicePrediction,
     /// Training poses planned.
@@ -340,6 +343,11 @@ pub struct DeviceOutcome {
     pub objective: Option<Objective>,
     /// The model before calibration (in {W}, the device's TCP).
     pub start: RobotModel,
+    /// The true arm of the planning world (in {W}, the device's TCP; its effects outside the
+    /// model not in it).
+    pub truth: RobotModel,
+    /// The identification's options (the device's study).
+    pub fit: crate::identify::FitOptions,
     /// The arm's link capsules.
     pub links: LinkCapsules,
     /// The device's capsules in MDH frame 6.
@@ -479,10 +487,14 @@ pub fn run(plan: &DevicePlan) -> Result<DeviceOutcome, PlanError> {
     let qs: Vec<Joints> = rows.iter().map(|r| r.q).collect();
     let mid: Joints = std::array::from_fn(|i| 0.5 * (plan.limits[i].min + plan.limits[i].max));
     let tour = super::select::tour_from(&mid, &qs);
-    let colliding_moves = super::select::colliding_moves_with(&qs, &tour.0, |st, q| {
+    let collides = |st: &mut KinState, q: &Joints| {
         forward(&start, st, q);
         world.first_collision(st).is_some()
-    });
+    };
+    let colliding_moves = super::select::colliding_moves_with(&qs, &tour.0, collides);
+    // Via candidates: the pool kept and the validation configurations (free of collision).
+    let free: Vec<Joints> = kept_obs.iter().map(|o| o.q).chain(validation.iter().copied()).collect();
+    let routing = super::select::reroute(&qs, &tour.0, &colliding_moves, &free, &plan.limits, collides);
     // The prediction: the pilot on the device's own observations, then the worlds.
     let chosen_obs: Vec<Observation> = order.iter().map(|&k| kept_obs[k]).collect();
     let pilot = crate::identify::identify(&start, &set, &chosen_obs, &crate::identify::FitOptions { truncate: true, ..fit });
@@ -513,11 +525,14 @@ pub fn run(plan: &DevicePlan) -> Result<DeviceOutcome, PlanError> {
         params: set.names(),
         tour,
         colliding_moves,
+        routing,
         prediction,
         poses,
         search,
         objective,
         start,
+        truth,
+        fit,
         links,
         device,
     })
@@ -664,6 +679,74 @@ pub fn csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     s
 }
 
+/// `simulated.csv` of a device plan (`--simulate`): the measurement file with its positions
+/// filled in a simulated world. A training row keeps its planned configuration (the planning
+/// world's centred one) and gets the true arm's TCP there plus the pool's observation error per
+/// coordinate (`DevicePrediction::noise_mm`, the plan's worlds' draw; stream
+/// `seeds::plan::SIMULATE`); a validation row gets the true arm's TCP without error (the reference
+/// the plan's worlds judge a calibration against).
+pub fn simulated_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
+    let mut rng = crate::seeds::stream(plan.seed, crate::seeds::plan::SIMULATE);
+    let unit = Normal::new(0.0, 1.0).expect("unit normal");
+    let mut st = KinState::default();
+    let mut s = String::new();
+    let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
+    s.push_str("# joints = controller\n");
+    let _ = writeln!(s, "# robot = {}", plan.robot_name);
+    s.push_str("# frame = {W}, the datum spheres' frame\n");
+    s.push_str("# SIMULATED by calsim plan --simulate: the true arm of the plan's planning world at the planned configurations; train rows: its TCP in {W}\n");
+    let _ = writeln!(
+        s,
+        "# with {:.6} mm per coordinate (the pool's observation error, drawn independently per row); holdout rows: its TCP without error",
+        o.prediction.noise_mm
+    );
+    s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
+    for r in &o.rows {
+        let mut p = forward(&o.truth, &mut st, &r.q);
+        if r.group.is_some() {
+            p += Vector3::from_fn(|_, _| o.prediction.noise_mm * unit.sample(&mut rng));
+        }
+        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v}")).collect();
+        let _ = writeln!(s, "{},{TRAINING},TCP,{},{},{},{},{}", r.label, r.split, q.join(","), p.x, p.y, p.z);
+    }
+    s
+}
+
+/// The device study's own identification on a measured device-plan file (`simulated.csv`, or the
+/// plan's `poses.csv` filled on the robot), read as `calsim calibrate` reads it: its training
+/// points, the TCP in {W} at the model's joint angles, identified from the plan's model before
+/// calibration for the device's parameters with the study's options (the plan's worlds' fit); the
+/// errors of the identified model at the validation rows against their positions. `None`: the
+/// identification gave no model.
+pub fn identify_measured(
+    plan: &DevicePlan,
+    o: &DeviceOutcome,
+    m: &crate::calibrate::measurements::Measurements,
+) -> Result<Option<ErrorStats>, PlanError> {
+    let err = |message: String| PlanError::new(&m.path, "split", message);
+    if !m.split_column {
+        return Err(err("no split column: the validation rows are those marked holdout".into()));
+    }
+    let (mut train, mut held) = (Vec::new(), Vec::new());
+    for p in &m.points {
+        let pose = &m.poses[p.pose];
+        if pose.held_out == Some(true) {
+            held.push((pose.q, p.measured_mm));
+        } else {
+            train.push(Observation { q: pose.q, tcp_world_mm: p.measured_mm });
+        }
+    }
+    if held.is_empty() || train.is_empty() {
+        return Err(err(format!("{} training and {} holdout points: both are needed", train.len(), held.len())));
+    }
+    let fit = crate::identify::identify(&o.start, &plan.set, &train, &o.fit);
+    Ok(fit.model.map(|model| {
+        let mut st = KinState::default();
+        let e: Vec<f64> = held.iter().map(|(q, p)| (forward(&model, &mut st, q) - p).norm()).collect();
+        ErrorStats::of(&e)
+    }))
+}
+
 /// The plain joint list: pose, split, sphere, controller joint values in degrees.
 pub fn joint_list(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     let mut s =
@@ -677,17 +760,21 @@ pub fn joint_list(plan: &DevicePlan, o: &DeviceOutcome) -> String {
 }
 
 /// The tour as CSV: step, pose, split, sphere, joint values (deg, controller), the largest joint
-/// move to it (deg).
+/// move to it (deg); a via configuration of a re-routed move is a row of its own, split `via`
+/// (passed, not measured).
 pub fn tour_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     let mut s = String::from("step,pose,split,sphere,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
     let mut prev: Option<Joints> = None;
-    for (k, &i) in o.tour.0.iter().enumerate() {
-        let r = &o.rows[i];
-        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v:.6}")).collect();
-        let step = prev.map_or(0.0, |p| p.iter().zip(&r.q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        let g = r.group.map_or_else(String::new, |g| (g + 1).to_string());
-        let _ = writeln!(s, "{},{},{},{g},{},{step:.3}", k + 1, r.label, r.split, q.join(","));
-        prev = Some(r.q);
+    for (k, stop) in super::select::stops(&o.tour.0, &o.routing).iter().enumerate() {
+        let (label, split, group, q) = match stop {
+            super::select::Stop::Pose(i) => (o.rows[*i].label.as_str(), o.rows[*i].split, o.rows[*i].group, o.rows[*i].q),
+            super::select::Stop::Via(label, q) => (label.as_str(), super::select::VIA, None, *q),
+        };
+        let qd: Vec<String> = controller_deg(plan, &q).iter().map(|v| format!("{v:.6}")).collect();
+        let step = prev.map_or(0.0, |p| p.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
+        let g = group.map_or_else(String::new, |g| (g + 1).to_string());
+        let _ = writeln!(s, "{},{label},{split},{g},{},{step:.3}", k + 1, qd.join(","));
+        prev = Some(q);
     }
     s
 }
@@ -731,21 +818,7 @@ pub fn markdown(plan: &DevicePlan, o: &DeviceOutcome) -> String {
         s,
         "- Centring: at every chosen configuration the true arm's TCP lies within {most:.4} mm of its sphere's located centre (the device's centring loop, the arm's repeatability and effects outside its model in the planning world)."
     );
-    let _ = writeln!(
-        s,
-        "- Tour (`tour.csv`): greedy nearest neighbour in joint space, {:.1} deg of joint-space path; moves through a collision (checked every {:.0} deg): {}.\n",
-        o.tour.1.to_degrees(),
-        super::select::MOVE_STEP_RAD.to_degrees(),
-        if o.colliding_moves.is_empty() {
-            "none".to_string()
-        } else {
-            o.colliding_moves
-                .iter()
-                .map(|(a, b)| format!("{} -> {}", o.rows[o.tour.0[*a]].label, o.rows[o.tour.0[*b]].label))
-                .collect::<Vec<_>>()
-                .join(", ")
-        }
-    );
+    let _ = writeln!(s, "{}\n", super::select::tour_words(o.tour.1, &o.colliding_moves, &o.routing, |k| o.rows[o.tour.0[k]].label.clone()));
     if let (Some(obj), Some(search)) = (&o.objective, &o.search) {
         objective_markdown(&mut s, plan, obj, search);
     }

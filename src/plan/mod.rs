@@ -6,7 +6,8 @@
 //!  ─► select::pool (uniform candidates within the limits, each from its own stream, kept if feasible)
 //!  ─► select::validation (spread over the workspace of interest: farthest-point sampling)
 //!  ─► select::choose (DETMAX on the identification Jacobian of the model's identifiable
-//!     parameters, a base and a tool)      ─► select::tour (greedy nearest neighbour in joint space)
+//!     parameters, a base and a tool)      ─► select::tour (greedy nearest neighbour in joint space;
+//!     select::reroute: a move through a collision re-routed through via configurations)
 //!  ─► predict: a pilot world (the robot file's truth measured at the plan's poses with the
 //!     tracker's noise, calibrated by `calibrate::run`) and `calibrate::plan::simulate` over the
 //!     plan's worlds: the predicted held-out error, median and P10-P90
@@ -129,8 +130,10 @@ pub struct Outcome {
     pub detmax_params: Vec<String>,
     /// Tour: positions in `rows`, and its length in joint space, rad.
     pub tour: (Vec<usize>, f64),
-    /// Moves of the tour through a collision (positions in the tour).
+    /// Straight moves of the tour through a collision (positions in the tour).
     pub colliding_moves: Vec<(usize, usize)>,
+    /// Those moves re-routed through via configurations, and those that could not be.
+    pub routing: select::Routing,
     /// The prediction.
     pub prediction: Prediction,
     /// Training poses planned (the plan's `poses`, or the count its objective's search chose).
@@ -290,6 +293,10 @@ pub fn run(plan: &Plan) -> Result<Outcome, PlanError> {
     let qs: Vec<Joints> = rows.iter().map(|r| r.q).collect();
     let tour = select::tour(&cell, &qs);
     let colliding_moves = select::colliding_moves(&cell, &qs, &tour.0);
+    let routing = select::reroute(&qs, &tour.0, &colliding_moves, &pool.qs, cell.model.limits(), |st, q| {
+        forward(&cell.model, st, q);
+        cell.collides(st)
+    });
     let (prediction, pilot_c) = predict_with_pilot(plan, &cell, &rows)?;
     let comparison = if plan.compare {
         let confidence = plan.objective.as_ref().map_or(COMPARISON_CONFIDENCE, |o| o.confidence);
@@ -315,7 +322,19 @@ pub fn run(plan: &Plan) -> Result<Outcome, PlanError> {
     } else {
         None
     };
-    Ok(Outcome { pool, rows, o1: (o1, random), detmax_params: set.names(), tour, colliding_moves, prediction, poses, search, comparison })
+    Ok(Outcome {
+        pool,
+        rows,
+        o1: (o1, random),
+        detmax_params: set.names(),
+        tour,
+        colliding_moves,
+        routing,
+        prediction,
+        poses,
+        search,
+        comparison,
+    })
 }
 
 /// The objective's search: DETMAX's set of each count scored by `score`; counts doubled from the
@@ -556,17 +575,21 @@ pub fn joint_list(plan: &Plan, rows: &[PoseRow]) -> String {
 }
 
 /// The tour as CSV: step, pose, split, joint values (deg, controller), the move to it (largest
-/// joint change, deg).
+/// joint change, deg); a via configuration of a re-routed move is a row of its own, split `via`
+/// (passed, not measured).
 pub fn tour_csv(plan: &Plan, o: &Outcome) -> String {
     let mut s = String::from("step,pose,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
     let mut prev: Option<Joints> = None;
-    for (k, &i) in o.tour.0.iter().enumerate() {
-        let r = &o.rows[i];
-        let qc = plan.robot.coupling.as_ref().map_or(r.q, |c| c.controller_from_model(&r.q));
-        let q: Vec<String> = qc.iter().map(|v| format!("{:.6}", v.to_degrees())).collect();
-        let step = prev.map_or(0.0, |p| p.iter().zip(&r.q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        let _ = writeln!(s, "{},{},{},{},{step:.3}", k + 1, r.label, r.split, q.join(","));
-        prev = Some(r.q);
+    for (k, stop) in select::stops(&o.tour.0, &o.routing).iter().enumerate() {
+        let (label, split, q) = match stop {
+            select::Stop::Pose(i) => (o.rows[*i].label.as_str(), o.rows[*i].split, o.rows[*i].q),
+            select::Stop::Via(label, q) => (label.as_str(), select::VIA, *q),
+        };
+        let qc = plan.robot.coupling.as_ref().map_or(q, |c| c.controller_from_model(&q));
+        let qd: Vec<String> = qc.iter().map(|v| format!("{:.6}", v.to_degrees())).collect();
+        let step = prev.map_or(0.0, |p| p.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
+        let _ = writeln!(s, "{},{label},{split},{},{step:.3}", k + 1, qd.join(","));
+        prev = Some(q);
     }
     s
 }
@@ -610,21 +633,7 @@ pub fn markdown(plan: &Plan, o: &Outcome) -> String {
         o.detmax_params.len(),
         o.detmax_params.join(", ")
     );
-    let _ = writeln!(
-        s,
-        "- Tour (`tour.csv`): greedy nearest neighbour in joint space, {:.1} deg of joint-space path; moves through a collision (checked every {:.0} deg): {}.\n",
-        o.tour.1.to_degrees(),
-        select::MOVE_STEP_RAD.to_degrees(),
-        if o.colliding_moves.is_empty() {
-            "none".to_string()
-        } else {
-            o.colliding_moves
-                .iter()
-                .map(|(a, b)| format!("{} -> {}", o.rows[o.tour.0[*a]].label, o.rows[o.tour.0[*b]].label))
-                .collect::<Vec<_>>()
-                .join(", ")
-        }
-    );
+    let _ = writeln!(s, "{}\n", select::tour_words(o.tour.1, &o.colliding_moves, &o.routing, |k| o.rows[o.tour.0[k]].label.clone()));
     if let (Some(obj), Some(search)) = (&plan.objective, &o.search) {
         objective_markdown(&mut s, plan, obj, search);
     }

@@ -1,6 +1,8 @@
 //! The pool of feasible configurations, the validation poses spread over the workspace of
 //! interest, DETMAX's choice of the training poses, and the tour between them.
 
+use std::fmt::Write as _;
+
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -196,17 +198,7 @@ pub fn colliding_moves_with(
     order
         .par_windows(2)
         .enumerate()
-        .map_init(KinState::default, |st, (k, w)| {
-            let (a, b) = (&qs[w[0]], &qs[w[1]]);
-            let most = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
-            let steps = (most / MOVE_STEP_RAD).ceil().max(1.0) as usize;
-            let hit = (1..steps).any(|s| {
-                let f = s as f64 / steps as f64;
-                let q: Joints = std::array::from_fn(|i| a[i] + f * (b[i] - a[i]));
-                collides(st, &q)
-            });
-            hit.then_some((k, k + 1))
-        })
+        .map_init(KinState::default, |st, (k, w)| move_collides(&qs[w[0]], &qs[w[1]], st, &collides).then_some((k, k + 1)))
         .flatten()
         .collect()
 }
@@ -255,4 +247,275 @@ pub fn greedy(jac: &PoolJacobian, n: usize) -> Vec<usize> {
     }
     chosen.sort_unstable();
     chosen
+}
+
+/// A move of the tour re-routed through via configurations (stops on the way, not measured).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Via {
+    /// The move: (from, to) positions in the tour.
+    pub between: (usize, usize),
+    /// The via configurations in the order they are passed, rad.
+    pub qs: Vec<Joints>,
+}
+
+/// The tour's colliding moves re-routed, and those no via path was found for.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Routing {
+    /// The re-routed moves, in the order of the tour.
+    pub vias: Vec<Via>,
+    /// Colliding moves without a via path found: (from, to) positions in the tour.
+    pub unrouted: Vec<(usize, usize)>,
+    /// Length of the tour with its via paths in joint space (Euclidean, rad).
+    pub length_rad: f64,
+}
+
+/// Joint offsets of the via search's lifted and retracted configurations about the move's
+/// middle, deg: every combination of joints 2, 3 and 5 (joint 1, 4 and 6 kept on the straight
+/// line).
+pub const VIA_OFFSETS_DEG: [f64; 5] = [-40.0, -20.0, 0.0, 20.0, 40.0];
+
+/// Candidates of the search with two vias: the nearest this many one-leg-free candidates of each
+/// end.
+const TWO_VIA_NEAREST: usize = 40;
+
+/// Joint-space distance (Euclidean, rad).
+fn dist(a: &Joints, b: &Joints) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+}
+
+/// Whether the straight move `a` -> `b` passes through a configuration where `collides`, checked
+/// every [`MOVE_STEP_RAD`] of the joint that moves most (the ends not checked).
+pub fn move_collides(a: &Joints, b: &Joints, st: &mut KinState, collides: &impl Fn(&mut KinState, &Joints) -> bool) -> bool {
+    let most = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    let steps = (most / MOVE_STEP_RAD).ceil().max(1.0) as usize;
+    (1..steps).any(|s| {
+        let f = s as f64 / steps as f64;
+        let q: Joints = std::array::from_fn(|i| a[i] + f * (b[i] - a[i]));
+        collides(st, &q)
+    })
+}
+
+/// Re-routes each colliding move of `order` through `qs` (`colliding`, as
+/// [`colliding_moves_with`] gives them) by a deterministic search: the candidates are `extra`
+/// (configurations free of collision, such as the pool's) and the move's middle with joints 2, 3
+/// and 5 offset by every combination of [`VIA_OFFSETS_DEG`] (clamped to `limits`); the path with
+/// one via of the smallest detour (|a - v| + |v - b|, then the candidate's index) whose via is free
+/// and whose two moves are free at the same step is taken, else two vias among the nearest
+/// candidates of each end. A move no such path clears is named in `unrouted`.
+pub fn reroute(
+    qs: &[Joints],
+    order: &[usize],
+    colliding: &[(usize, usize)],
+    extra: &[Joints],
+    limits: &[crate::robot::JointLimit; crate::robot::JOINTS],
+    collides: impl Fn(&mut KinState, &Joints) -> bool + Sync,
+) -> Routing {
+    let mut out = Routing::default();
+    let straight: f64 = order.windows(2).map(|w| dist(&qs[w[0]], &qs[w[1]])).sum();
+    out.length_rad = straight;
+    for &(from, to) in colliding {
+        let (a, b) = (qs[order[from]], qs[order[to]]);
+        match via_path(&a, &b, extra, limits, &collides) {
+            Some(path) => {
+                let mut prev = a;
+                let mut len = 0.0;
+                for v in path.iter().chain(std::iter::once(&b)) {
+                    len += dist(&prev, v);
+                    prev = *v;
+                }
+                out.length_rad += len - dist(&a, &b);
+                out.vias.push(Via { between: (from, to), qs: path });
+            }
+            None => out.unrouted.push((from, to)),
+        }
+    }
+    out
+}
+
+/// The via path of one move (see [`reroute`]).
+fn via_path(
+    a: &Joints,
+    b: &Joints,
+    extra: &[Joints],
+    limits: &[crate::robot::JointLimit; crate::robot::JOINTS],
+    collides: &(impl Fn(&mut KinState, &Joints) -> bool + Sync),
+) -> Option<Vec<Joints>> {
+    let mid: Joints = std::array::from_fn(|i| 0.5 * (a[i] + b[i]));
+    let mut candidates: Vec<Joints> = extra.to_vec();
+    for d2 in VIA_OFFSETS_DEG {
+        for d3 in VIA_OFFSETS_DEG {
+            for d5 in VIA_OFFSETS_DEG {
+                let mut v = mid;
+                for (j, d) in [(1, d2), (2, d3), (4, d5)] {
+                    v[j] = (v[j] + d.to_radians()).clamp(limits[j].min, limits[j].max);
+                }
+                candidates.push(v);
+            }
+        }
+    }
+    let mut ranked: Vec<(f64, usize)> = candidates.iter().enumerate().map(|(k, v)| (dist(a, v) + dist(v, b), k)).collect();
+    ranked.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    // The first candidate by rank that is free, with free moves from `a` and to `b`.
+    let one = ranked
+        .par_iter()
+        .map_init(KinState::default, |st, &(_, k)| {
+            let v = &candidates[k];
+            !collides(st, v) && !move_collides(a, v, st, collides) && !move_collides(v, b, st, collides)
+        })
+        .position_first(|ok| ok);
+    if let Some(r) = one {
+        return Some(vec![candidates[ranked[r].1]]);
+    }
+    // Each candidate: free, the move from `a` free, the move to `b` free.
+    let legs: Vec<(bool, bool, bool)> = ranked
+        .par_iter()
+        .map_init(KinState::default, |st, &(_, k)| {
+            let v = &candidates[k];
+            if collides(st, v) {
+                return (false, false, false);
+            }
+            (true, !move_collides(a, v, st, collides), !move_collides(v, b, st, collides))
+        })
+        .collect();
+    // Two vias: v1 reached from `a`, v2 reaching `b`, the move v1 -> v2 free; the pairs by their
+    // path length, then by their ranks.
+    let nearest = |leg: fn(&(bool, bool, bool)) -> bool, end: &Joints| -> Vec<usize> {
+        let mut v: Vec<usize> = (0..ranked.len()).filter(|&r| legs[r].0 && leg(&legs[r])).collect();
+        v.sort_by(|&x, &y| dist(end, &candidates[ranked[x].1]).total_cmp(&dist(end, &candidates[ranked[y].1])).then(x.cmp(&y)));
+        v.truncate(TWO_VIA_NEAREST);
+        v
+    };
+    let firsts = nearest(|l| l.1, a);
+    let seconds = nearest(|l| l.2, b);
+    let mut pairs: Vec<(f64, usize, usize)> = firsts
+        .iter()
+        .flat_map(|&x| seconds.iter().map(move |&y| (x, y)))
+        .filter(|(x, y)| x != y)
+        .map(|(x, y)| {
+            let (v1, v2) = (&candidates[ranked[x].1], &candidates[ranked[y].1]);
+            (dist(a, v1) + dist(v1, v2) + dist(v2, b), x, y)
+        })
+        .collect();
+    pairs.sort_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)).then(p.2.cmp(&q.2)));
+    pairs
+        .par_iter()
+        .map_init(KinState::default, |st, &(_, x, y)| {
+            let (v1, v2) = (&candidates[ranked[x].1], &candidates[ranked[y].1]);
+            (!move_collides(v1, v2, st, collides)).then(|| vec![*v1, *v2])
+        })
+        .find_first(|p| p.is_some())
+        .flatten()
+}
+
+/// A stop of the tour with its via paths.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stop {
+    /// A planned pose: its position in the plan's rows.
+    Pose(usize),
+    /// A via configuration (not measured): its label (`via01`, in the order of the tour) and joints, rad.
+    Via(String, Joints),
+}
+
+/// The stops of the tour `order` (positions in the rows) with the via paths of `routing`.
+pub fn stops(order: &[usize], routing: &Routing) -> Vec<Stop> {
+    let mut out = Vec::with_capacity(order.len());
+    let mut n = 0;
+    for (k, &i) in order.iter().enumerate() {
+        if let Some(v) = routing.vias.iter().find(|v| v.between.1 == k) {
+            for q in &v.qs {
+                n += 1;
+                out.push(Stop::Via(format!("via{n:02}"), *q));
+            }
+        }
+        out.push(Stop::Pose(i));
+    }
+    out
+}
+
+/// Split column of a via configuration in `tour.csv`.
+pub const VIA: &str = "via";
+
+/// The tour's sentence in `plan.md`: its length, the straight moves through a collision, the via
+/// paths and what could not be re-routed (`label` names the pose at a position in the tour).
+pub fn tour_words(straight_rad: f64, colliding: &[(usize, usize)], routing: &Routing, label: impl Fn(usize) -> String) -> String {
+    let moves =
+        |v: &mut dyn Iterator<Item = &(usize, usize)>| v.map(|(a, b)| format!("{} -> {}", label(*a), label(*b))).collect::<Vec<_>>();
+    let mut s = format!(
+        "- Tour (`tour.csv`): greedy nearest neighbour in joint space, {:.1} deg of joint-space path; straight moves through a collision (checked every {:.0} deg of the joint that moves most): ",
+        straight_rad.to_degrees(),
+        MOVE_STEP_RAD.to_degrees()
+    );
+    if colliding.is_empty() {
+        s.push_str("none.");
+        return s;
+    }
+    s.push_str(&moves(&mut colliding.iter()).join(", "));
+    let vias: usize = routing.vias.iter().map(|v| v.qs.len()).sum();
+    if !routing.vias.is_empty() {
+        let _ = write!(
+            s,
+            ". Re-routed through {vias} via configuration{} (rows `{VIA}` in `tour.csv`, not measured: each move of the path free of collision at the same step), {:.1} deg of path in all",
+            if vias == 1 { "" } else { "s" },
+            routing.length_rad.to_degrees()
+        );
+    }
+    if routing.unrouted.is_empty() {
+        s.push('.');
+    } else {
+        let _ = write!(s, "; no via path found for {}: move around it by hand.", moves(&mut routing.unrouted.iter()).join(", "));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::{JOINTS, JointLimit};
+
+    const LIMITS: [JointLimit; JOINTS] = [JointLimit { min: -3.0, max: 3.0 }; JOINTS];
+
+    /// A wall in joint space: joint 1 between 0.4 and 0.6 rad with joint 2 below 0.5 rad (or at
+    /// any joint 2 with `solid`).
+    fn wall(solid: bool) -> impl Fn(&mut KinState, &Joints) -> bool + Sync {
+        move |_, q| q[0] > 0.4 && q[0] < 0.6 && (solid || q[1] < 0.5)
+    }
+
+    /// Every configuration of the straight move a -> b at the stated step, computed here.
+    fn steps(a: &Joints, b: &Joints) -> Vec<Joints> {
+        let most = (0..JOINTS).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max);
+        let n = (most / MOVE_STEP_RAD).ceil() as usize;
+        (0..=n).map(|s| std::array::from_fn(|i| a[i] + (b[i] - a[i]) * s as f64 / n as f64)).collect()
+    }
+
+    #[test]
+    fn a_colliding_move_is_re_routed_through_a_via_whose_every_step_is_free() {
+        let qs = [[0.0; JOINTS], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]];
+        let order = [0, 1];
+        let c = colliding_moves_with(&qs, &order, wall(false));
+        assert_eq!(c, [(0, 1)]);
+        let r = reroute(&qs, &order, &c, &[], &LIMITS, wall(false));
+        assert!(r.unrouted.is_empty());
+        assert_eq!(r.vias.len(), 1);
+        let path: Vec<Joints> = std::iter::once(qs[0]).chain(r.vias[0].qs.iter().copied()).chain(std::iter::once(qs[1])).collect();
+        let mut st = KinState::default();
+        for w in path.windows(2) {
+            for q in steps(&w[0], &w[1]) {
+                assert!(!wall(false)(&mut st, &q), "{q:?} in the wall");
+            }
+        }
+        let length: f64 = path.windows(2).map(|w| dist(&w[0], &w[1])).sum();
+        assert!((r.length_rad - length).abs() < 1e-12 && length > 1.0);
+        let stops = stops(&order, &r);
+        assert_eq!(stops.len(), 2 + r.vias[0].qs.len());
+        assert!(matches!(&stops[1], Stop::Via(l, _) if l == "via01"));
+    }
+
+    #[test]
+    fn a_move_no_via_clears_is_named() {
+        let qs = [[0.0; JOINTS], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]];
+        let c = colliding_moves_with(&qs, &[0, 1], wall(true));
+        let r = reroute(&qs, &[0, 1], &c, &[], &LIMITS, wall(true));
+        assert_eq!((r.vias.len(), r.unrouted.clone()), (0, vec![(0, 1)]));
+        assert!(tour_words(1.0, &c, &r, |k| format!("p{k}")).contains("no via path found for p0 -> p1"));
+    }
 }
