@@ -774,7 +774,7 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
     let text = app::keys::init_file(&args.kind, args.file.as_deref()).map_err(|e| e.to_string())?;
     match &args.file {
         None => print!("{text}"),
-        Some(f) => eprintln!("calsim init: wrote {} (check it with `calsim check {}`)", f.display(), f.display()),
+        Some(f) => eprintln!("calsim init: wrote {} (run it with `calsim run {}`)", f.display(), f.display()),
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -801,6 +801,7 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
     if !r.outcome.prediction.unidentifiable.is_empty() {
         println!("cannot identify (kept at their values before calibration): {}", r.outcome.prediction.unidentifiable.join(", "));
     }
+    print_tour(&r.outcome.routing, r.outcome.tour.0.len());
     println!(
         "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{}{} in {}",
         if spec.simulate { ", simulated.csv" } else { "" },
@@ -808,6 +809,24 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
         r.dir.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// What the tour of `stops` stops had to do about collisions on its straight moves: the moves
+/// re-routed through via configurations, and a warning for those no via path was found for.
+fn print_tour(routing: &crate::plan::select::Routing, stops: usize) {
+    let moves = stops.saturating_sub(1);
+    if !routing.vias.is_empty() {
+        println!(
+            "tour: {} of {moves} moves re-routed around a collision through via configurations (tour.csv rows marked via, not measured)",
+            routing.vias.len()
+        );
+    }
+    if !routing.unrouted.is_empty() {
+        eprintln!(
+            "warning: tour: {} of {moves} moves pass through a collision and no via path was found (named in plan.md): do not drive them as straight moves",
+            routing.unrouted.len()
+        );
+    }
 }
 
 /// The line of a plan's objective: the count that met it, or the best found.
@@ -864,6 +883,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
     if !p.unidentifiable.is_empty() {
         println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
     }
+    print_tour(&r.outcome.routing, r.outcome.tour.0.len());
     println!(
         "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{}{} in {}",
         if args.simulate { ", simulated.csv" } else { "" },
