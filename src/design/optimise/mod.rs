@@ -551,11 +551,49 @@ impl<'a> Context<'a> {
     }
 }
 
-/// A design's key: the first 16 hex digits of the sha256 of its scenario.
+/// A design's key: the first 16 hex digits of the sha256 of its scenario, the robot file it names
+/// (`robot.file`, resolved to an absolute path on loading) keyed by the sha256 of its bytes rather
+/// than by its place on disk, so that the same design has the same key, and its cached worlds
+/// serve, from any checkout or directory (a file that cannot be read keeps its path).
 pub fn design_key(table: &toml::Table) -> String {
     use sha2::Digest;
-    let text = toml::to_string(table).unwrap_or_default();
+    let mut table = table.clone();
+    if let Some(robot) = table.get_mut("robot").and_then(toml::Value::as_table_mut)
+        && let Some(bytes) = robot
+            .get("file")
+            .and_then(toml::Value::as_str)
+            .and_then(|f| crate::io::read_own(Path::new(f), crate::io::MOST_INPUT_BYTES).ok())
+    {
+        robot.insert("file".into(), toml::Value::String(format!("sha256:{:x}", sha2::Sha256::digest(&bytes))));
+    }
+    let text = toml::to_string(&table).unwrap_or_default();
     format!("{:x}", sha2::Sha256::digest(text.as_bytes()))[..16].to_string()
+}
+
+#[cfg(test)]
+mod key_tests {
+    /// The same design naming copies of one robot file in two directories has one key; another
+    /// robot file, or another value of any key, gives another.
+    #[test]
+    fn a_design_key_does_not_depend_on_where_the_robot_file_lies() {
+        let tmp = std::env::temp_dir().join(format!("calsim-design-key-{}", std::process::id()));
+        let (a, b) = (tmp.join("a"), tmp.join("b"));
+        for d in [&a, &b] {
+            std::fs::create_dir_all(d).unwrap();
+            std::fs::write(d.join("arm.toml"), "the same bytes").unwrap();
+        }
+        std::fs::write(a.join("other.toml"), "other bytes").unwrap();
+        let design = |file: &std::path::Path, height: f64| -> toml::Table {
+            let text = format!("[robot]\nfile = {:?}\nrepeatability_mm = 0.01\n[cell]\nheight_mm = {height}\n", file.display().to_string());
+            toml::from_str(&text).unwrap()
+        };
+        let key = super::design_key(&design(&a.join("arm.toml"), 100.0));
+        assert_eq!(key, super::design_key(&design(&b.join("arm.toml"), 100.0)));
+        assert_ne!(key, super::design_key(&design(&a.join("other.toml"), 100.0)));
+        assert_ne!(key, super::design_key(&design(&a.join("arm.toml"), 100.5)));
+        assert_eq!(key.len(), 16);
+        std::fs::remove_dir_all(&tmp).unwrap();
+    }
 }
 
 /// Removes the temporaries of the cache writer ([`crate::io::out_dir::write_cache_file`]) that a
