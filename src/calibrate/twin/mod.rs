@@ -303,40 +303,35 @@ const GRAM_PIECE: usize = 1024;
 
 /// Per fold, the Gram matrix `M_f^T M_f` of the columns of `parts` side by side (`M`), over the
 /// rows of the training points in fold `f` (`fold_of`, per point; rows `3 r .. 3 r + 3`): each
-/// fold's rows in pieces of [`GRAM_PIECE`], the pieces' products summed in order (the same bits for
-/// any thread count).
+/// fold's rows in pieces of [`GRAM_PIECE`], each piece's product by a blocked matrix product, the
+/// products summed in order (the same bits for any thread count).
 fn fold_grams(parts: &[&DMatrix<f64>], fold_of: &[usize], folds: usize) -> Vec<DMatrix<f64>> {
     let cols: usize = parts.iter().map(|p| p.ncols()).sum();
     let rows_of: Vec<Vec<usize>> =
         (0..folds).map(|f| (0..fold_of.len()).filter(|&r| fold_of[r] == f).flat_map(|r| [3 * r, 3 * r + 1, 3 * r + 2]).collect()).collect();
     let pieces: Vec<(usize, &[usize])> =
         rows_of.iter().enumerate().flat_map(|(f, rows)| rows.chunks(GRAM_PIECE).map(move |c| (f, c))).collect();
-    let products: Vec<Vec<f64>> = pieces
+    let products: Vec<DMatrix<f64>> = pieces
         .par_iter()
         .map(|(_, rows)| {
-            // In groups of eight rows (`problem::gram`'s layout).
-            let mut block = vec![0.0; rows.len().div_ceil(8) * 8 * cols];
+            let mut block = DMatrix::zeros(rows.len(), cols);
             let mut c = 0;
             for part in parts {
                 for k in 0..part.ncols() {
                     let column = part.column(k);
                     for (row, &r) in rows.iter().enumerate() {
-                        block[((row / 8) * cols + c) * 8 + row % 8] = column[r];
+                        block[(row, c)] = column[r];
                     }
                     c += 1;
                 }
             }
-            let (mut out, mut acc) = (Vec::new(), Vec::new());
-            super::problem::gram(&block, rows.len(), cols, &mut acc, &mut out);
-            out
+            // A blocked matrix product (the same operations for the same piece, on any thread).
+            block.transpose() * &block
         })
         .collect();
     let mut grams = vec![DMatrix::zeros(cols, cols); folds];
     for ((f, _), product) in pieces.iter().zip(products) {
-        // Row-major and symmetric: the same as column-major.
-        for (g, v) in grams[*f].iter_mut().zip(&product) {
-            *g += v;
-        }
+        grams[*f] += product;
     }
     grams
 }
