@@ -290,8 +290,9 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     let m = measurements::read(&spec.measurements, &robot)?;
     let name = report::directory_name(&spec.measurements);
     crate::io::out_dir::prepare(&spec.out, &name)?;
-    let calibration = run(&robot, &m, &spec.options)?;
-    let twin = twin::analyse(&calibration, spec.instrument_noise_mm).map_err(|e| e.to_string());
+    let (calibration, kept) = run_keeping(&robot, &m, &spec.options)?;
+    let twin = twin::analyse_with(&calibration, spec.instrument_noise_mm, Some(&kept)).map_err(|e| e.to_string());
+    drop(kept);
     let (plans, missing) = plans(spec, &calibration, twin.as_ref().ok(), plan_effects.as_ref())?;
     let dir = report::write_with(&spec.out, &name, &calibration, (&plans, &missing), &twin)
         .map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
@@ -437,6 +438,7 @@ pub fn default_params() -> ParamSet {
 }
 
 /// The points in their sessions' registered frames and those frames.
+#[derive(Clone)]
 struct Setup {
     obs: Vec<Obs>,
     frames: Vec<Isometry3<f64>>,
@@ -643,6 +645,36 @@ fn candidates(
 /// Calibrates the arm of `robot` from `m`: every model cross-validated, the chosen one fitted on
 /// every point, nothing written.
 pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibration, CalibrateError> {
+    run_keeping(robot, m, opts).map(|(c, _)| c)
+}
+
+/// What a calibration computed that its twin ([`twin::analyse_with`]) computes again from the
+/// calibration: taken as it is where it is the same computation.
+pub(crate) struct Kept {
+    /// The setup of the points (their registration), when the twin's is the same: a file without
+    /// orientation readings (the twin's setup weighs none).
+    setup: Option<Setup>,
+    /// The chosen model's fit on the training points: the points fitted (outliers left out), its
+    /// layout, free columns and solution.
+    train_fit: Option<(Vec<usize>, Layout, Vec<usize>, problem::Solved)>,
+}
+
+impl Kept {
+    /// The setup, when the twin's is this one.
+    fn setup(&self) -> Option<&Setup> {
+        self.setup.as_ref()
+    }
+
+    /// The chosen model's training fit when it is that of the points `idx` on `layout` with the
+    /// columns `free`.
+    fn train_fit(&self, idx: &[usize], layout: &Layout, free: &[usize]) -> Option<&problem::Solved> {
+        let (i, l, f, solved) = self.train_fit.as_ref()?;
+        (i == idx && l == layout && f == free).then_some(solved)
+    }
+}
+
+/// [`run`], and what its twin can take from it ([`Kept`]).
+fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(Calibration, Kept), CalibrateError> {
     use rayon::prelude::*;
     check_options(opts)?;
     let with_payload;
@@ -725,7 +757,10 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
     let all: Vec<usize> = (0..s.obs.len()).collect();
     let lines: Vec<u64> = m.points.iter().map(|p| p.line).collect();
     let labels = diagnose::Labels { sessions: &m.sessions, targets: &m.targets, lines: &lines, outliers: &outliers };
-    let evaluate = |kind: Option<ModelKind>, mut layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> (ModelResult, RobustFit) {
+    // Per model: its result, its fit on every point and its training fit (the points fitted, the
+    // free columns, the solution).
+    type Evaluated = (ModelResult, RobustFit, (Vec<usize>, Vec<usize>, problem::Solved));
+    let evaluate = |kind: Option<ModelKind>, mut layout: Layout, fixed: Vec<Unidentifiable>, key: u64| -> Evaluated {
         // The fit on every point first: the parameters it leaves undetermined are kept nominal and
         // the model refitted without them, until every freed parameter meets the rule; the
         // cross-validation and the held-out fit then use the model that remains.
@@ -780,6 +815,7 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             let why = diagnose::why(&problem, &fit.solved.x, &free, &fit.inliers(), &labels);
             format!("{}: {why}", fit.solved.outcome.label())
         });
+        let trained = (fit.inliers(), free.clone(), fit.solved.clone());
         let fit = point_fit(&problem, &all_fit, &flagged);
         let r = ModelResult {
             kind,
@@ -793,24 +829,36 @@ pub fn run(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<Calibr
             fit,
             against_chosen: (f64::NAN, f64::NAN, 0),
         };
-        (r, all_fit)
+        (r, all_fit, trained)
     };
     let empty = ParamSet::new(vec![]).expect("no parameter");
     // The models are independent of each other (evaluated side by side, gathered in order).
     let before_layout = registration::with_robot(&cands[0].1, empty);
-    let (before, (mut models, fits)): (_, (Vec<ModelResult>, Vec<RobustFit>)) = rayon::join(
+    let (before, evaluated): (_, Vec<Evaluated>) = rayon::join(
         || evaluate(None, before_layout, vec![], 0).0,
-        || cands.into_par_iter().enumerate().map(|(k, (kind, layout, fixed))| evaluate(Some(kind), layout, fixed, k as u64 + 1)).unzip(),
+        || cands.into_par_iter().enumerate().map(|(k, (kind, layout, fixed))| evaluate(Some(kind), layout, fixed, k as u64 + 1)).collect(),
     );
+    let (mut models, mut fits, mut trained) = (Vec::new(), Vec::new(), Vec::new());
+    for (r, fit, t) in evaluated {
+        models.push(r);
+        fits.push(fit);
+        trained.push(t);
+    }
     let chosen = validation::select(&models.iter().map(|r| Some(&r.cv)).collect::<Vec<_>>()).unwrap_or(models.len() - 1);
     for k in 0..models.len() {
         models[k].against_chosen = validation::paired_difference(&models[k].cv, &models[chosen].cv);
     }
     let fit = fits.into_iter().nth(chosen).expect("a fit per model");
-    finish(
+    let (idx, free, solved) = trained.into_iter().nth(chosen).expect("a training fit per model");
+    let kept = Kept {
+        setup: (!m.orientation_columns).then(|| s.clone()),
+        train_fit: (!m.orientation_columns).then(|| (idx, models[chosen].layout.clone(), free, solved)),
+    };
+    let c = finish(
         Parts { robot, m, opts, s, assignment, before, models, chosen, full: &listed, inert, outliers_by, flagged: flagged.clone() },
         fit,
-    )
+    )?;
+    Ok((c, kept))
 }
 
 /// `m` with a target per session and target (`SMR1@A`): each session's targets get their own

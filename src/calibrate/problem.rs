@@ -313,6 +313,13 @@ impl Problem<'_> {
     /// each point's few nonzero columns (its robot parameters, its session's base, its target's
     /// tool), so that their cost grows with the points, not with points times unknowns.
     pub fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        self.normal_equations_and_cost(x, idx, cols).map(|(n, b, _)| (n, b))
+    }
+
+    /// [`Self::normal_equations`] and [`Self::cost`] at `x` from one pass over the points (the
+    /// residuals of the normal equations are the cost's, summed in the order of `idx`: the same
+    /// bits as [`Self::cost`]). `None` where [`Self::normal_equations`] gives none.
+    pub fn normal_equations_and_cost(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
         use rayon::prelude::*;
         let l = &self.layout;
         let set = l.point_set();
@@ -338,7 +345,9 @@ impl Problem<'_> {
         // one more column) multiplied out, side by side; the products summed per group in order
         // and scattered into N and b.
         let pieces = pieces(&groups);
-        let products: Vec<Option<Vec<f64>>> = pieces
+        // Per piece, its product and each member's squared weighted residual.
+        type Product = Option<(Vec<f64>, Vec<f64>)>;
+        let products: Vec<Product> = pieces
             .par_iter()
             .map(|(g, rg)| {
                 let members = &groups[*g].1[rg.clone()];
@@ -348,9 +357,11 @@ impl Problem<'_> {
                 let rows = 3 * members.len();
                 // In groups of eight rows ([`gram`]'s layout); the residuals are column `used`.
                 let mut block = vec![0.0; rows.div_ceil(8) * 8 * (used + 1)];
+                let mut squares = Vec::with_capacity(members.len());
                 for (k, (_, i)) in members.iter().enumerate() {
                     let o = &self.obs[*i];
                     let e = (o.measured_mm - tcps[k]) / o.sigma;
+                    squares.push(e.norm_squared());
                     for a in 0..3 {
                         let row = 3 * k + a;
                         let (group, lane) = (row / 8, row % 8);
@@ -373,17 +384,22 @@ impl Problem<'_> {
                 }
                 let (mut products, mut acc) = (Vec::new(), Vec::new());
                 gram(&block, rows, used + 1, &mut acc, &mut products);
-                Some(products)
+                Some((products, squares))
             })
             .collect();
         let mut products = products.into_iter();
+        let mut squares = vec![0.0; idx.len()];
         let mut pieces = pieces.iter().peekable();
         for (g, (_, targets)) in free.iter().enumerate() {
             let used = targets.len();
             let mut local = vec![0.0; (used + 1) * (used + 1)];
-            while pieces.next_if(|(h, _)| *h == g).is_some() {
-                for (l, v) in local.iter_mut().zip(&products.next().expect("a product per piece")?) {
+            while let Some((_, rg)) = pieces.next_if(|(h, _)| *h == g) {
+                let (product, piece_squares) = products.next().expect("a product per piece")?;
+                for (l, v) in local.iter_mut().zip(&product) {
                     *l += v;
+                }
+                for ((row, _), v) in groups[g].1[rg.clone()].iter().zip(piece_squares) {
+                    squares[*row] = v;
                 }
             }
             let (local_n, local_b) = (|u: usize, w: usize| local[u * (used + 1) + w], |u: usize| local[u * (used + 1) + used]);
@@ -394,7 +410,9 @@ impl Problem<'_> {
                 }
             }
         }
-        Some((n, b))
+        // In the order of `idx`, as [`Self::cost`] sums them.
+        let cost = squares.iter().sum::<f64>();
+        Some((n, b, cost))
     }
 
     /// Weighted sum of squared residuals of `idx` at `x`; infinite when `x` makes no model.
@@ -417,6 +435,28 @@ fn reduce(b: DMatrix<f64>) -> DMatrix<f64> {
 /// (a group's rows of every column sit together, in the cache), zero past the last row. `acc`:
 /// scratch.
 fn gram(b: &[f64], rows: usize, cols: usize, acc: &mut Vec<[f64; 8]>, out: &mut Vec<f64>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU was just found to support AVX2, the only requirement of `gram_avx2`.
+        #[allow(unsafe_code)]
+        unsafe {
+            gram_avx2(b, rows, cols, acc, out)
+        };
+        return;
+    }
+    gram_body(b, rows, cols, acc, out);
+}
+
+/// [`gram`] compiled for AVX2 (the eight running sums in wider vectors; the same separate
+/// products and sums, no fused multiply-add: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gram_avx2(b: &[f64], rows: usize, cols: usize, acc: &mut Vec<[f64; 8]>, out: &mut Vec<f64>) {
+    gram_body(b, rows, cols, acc, out);
+}
+
+#[inline(always)]
+fn gram_body(b: &[f64], rows: usize, cols: usize, acc: &mut Vec<[f64; 8]>, out: &mut Vec<f64>) {
     let pairs = cols * (cols + 1) / 2;
     acc.clear();
     acc.resize(pairs, [0.0; 8]);
@@ -492,10 +532,12 @@ pub struct Solved {
 pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[usize], opts: &SolveOptions) -> Solved {
     let mut x = x0.to_vec();
     let mut damping = Damping::none();
-    let mut cost = problem.cost(&x, idx);
+    // The normal equations at each accepted point come with its cost (one pass over the points);
+    // a step whose change of the residuals already meets the step rule gets its cost alone.
+    let (mut cost, mut next) = equations_and_cost(problem, &x, free, idx);
     let rows = (3 * idx.len()).max(1) as f64;
     for iteration in 1..=opts.max_iterations {
-        let Some((n, b)) = problem.normal_equations(&x, idx, free) else {
+        let Some((n, b)) = next.take() else {
             return Solved { x, outcome: FitOutcome::NotFinite, cost: f64::NAN };
         };
         let norms: Vec<f64> = (0..free.len()).map(|c| n[(c, c)].sqrt()).collect();
@@ -525,17 +567,19 @@ pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[us
             for (a, &c) in free.iter().enumerate() {
                 trial[c] += step[a] * inv[a];
             }
-            let trial_cost = problem.cost(&trial, idx);
+            let moved = (step.dot(&(&ns * &step))).max(0.0).sqrt() / rows.sqrt();
+            let (trial_cost, pending) =
+                if moved < opts.step_tol { (problem.cost(&trial, idx), None) } else { equations_and_cost(problem, &trial, free, idx) };
             let gain = 2.0 * step.dot(&bs) - step.dot(&(&ns * &step));
             let rho = if gain > 0.0 && trial_cost.is_finite() { (cost - trial_cost) / gain } else { -1.0 };
             if damping.update(rho) {
-                let moved = (step.dot(&(&ns * &step))).max(0.0).sqrt() / rows.sqrt();
                 let change = (cost - trial_cost).abs();
                 x = trial;
                 cost = trial_cost;
                 if moved < opts.step_tol || change <= opts.cost_rtol * cost {
                     return Solved { x, outcome: FitOutcome::Converged { iterations: iteration }, cost };
                 }
+                next = pending;
                 break;
             }
             if damping.mu > 1e16 {
@@ -545,6 +589,18 @@ pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[us
         }
     }
     Solved { x, outcome: FitOutcome::IterationCap { iterations: opts.max_iterations }, cost }
+}
+
+/// The normal equations of a step, when there are.
+type Equations = Option<(DMatrix<f64>, DVector<f64>)>;
+
+/// The cost at `x` and the normal equations of the columns `free` there (`None` where they give
+/// none: the cost then on its own, as [`Fit::cost`] gives it).
+fn equations_and_cost<P: Fit + ?Sized>(problem: &P, x: &[f64], free: &[usize], idx: &[usize]) -> (f64, Equations) {
+    match problem.normal_equations_and_cost(x, idx, free) {
+        Some((n, b, cost)) => (cost, Some((n, b))),
+        None => (problem.cost(x, idx), None),
+    }
 }
 
 fn rank_deficient<P: Fit + ?Sized>(problem: &P, free: &[usize]) -> FitOutcome {
@@ -565,6 +621,12 @@ pub trait Fit: Sync {
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64;
     /// `N = J_c^T J_c` and `b = J_c^T r` of the columns `cols` over the points `idx` at `x`.
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)>;
+    /// [`Fit::normal_equations`] and [`Fit::cost`] at `x` (`None` where the normal equations give
+    /// none); a fit may take both from one pass over the points, with the same bits.
+    fn normal_equations_and_cost(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        let (n, b) = self.normal_equations(x, idx, cols)?;
+        Some((n, b, self.cost(x, idx)))
+    }
     /// Weighted residuals and Jacobian: the positions' rows (3 per point of `idx`, in its order)
     /// first, then any rows of the fit's own.
     fn linearise(&self, x: &[f64], idx: &[usize]) -> Option<(DVector<f64>, DMatrix<f64>)>;
@@ -593,6 +655,9 @@ impl Fit for Problem<'_> {
     }
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         Problem::normal_equations(self, x, idx, cols)
+    }
+    fn normal_equations_and_cost(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        Problem::normal_equations_and_cost(self, x, idx, cols)
     }
     fn linearise(&self, x: &[f64], idx: &[usize]) -> Option<(DVector<f64>, DMatrix<f64>)> {
         Problem::linearise(self, x, idx)
@@ -839,6 +904,13 @@ impl Fit for Oriented<'_> {
             None => f64::INFINITY,
         }
     }
+    fn normal_equations_and_cost(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
+        if self.rotated() == 0 {
+            return self.problem.normal_equations_and_cost(x, idx, cols);
+        }
+        let (n, b) = self.normal_equations(x, idx, cols)?;
+        Some((n, b, self.cost(x, idx)))
+    }
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         if self.rotated() == 0 {
             return self.problem.normal_equations(x, idx, cols);
@@ -1001,6 +1073,21 @@ mod tests {
         assert_eq!(n, n.transpose(), "symmetric");
     }
 
+    /// The normal equations' cost is the cost's to the bit, and its normal equations those of
+    /// [`Problem::normal_equations`]: points in an order of their own (not by group), groups of
+    /// more than one piece, weights other than one.
+    #[test]
+    fn normal_equations_and_cost_give_the_cost_bit_for_bit() {
+        let (model, layout, obs, x) = fixture(7000, 38);
+        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
+        let idx: Vec<usize> = (0..obs.len()).rev().filter(|i| i % 7 != 2).collect();
+        let free: Vec<usize> = (0..layout.len()).filter(|c| c % 3 != 1).collect();
+        let (n, b, cost) = problem.normal_equations_and_cost(&x, &idx, &free).unwrap();
+        assert_eq!(cost.to_bits(), problem.cost(&x, &idx).to_bits());
+        assert!(cost > 0.0 && cost.is_finite());
+        assert_eq!((n, b), problem.normal_equations(&x, &idx, &free).unwrap());
+    }
+
     /// The triangular factor has the Gram matrix and the singular values of the dense weighted
     /// Jacobian: `R^T R = J^T J` to 1e-12 of the largest entry, singular values to 1e-9 of the
     /// largest, at most one row per unknown; the IRB 120 with Table 7's compliance, 3 sessions, 2
@@ -1042,10 +1129,13 @@ mod tests {
                 }
             }
             gram(&grouped, rows, cols, &mut acc, &mut out);
+            let mut portable = Vec::new();
+            gram_body(&grouped, rows, cols, &mut acc, &mut portable);
             let want = b.tr_mul(&b);
             for u in 0..cols {
                 for w in 0..cols {
                     assert_eq!(out[u * cols + w].to_bits(), want[(u, w)].to_bits(), "{rows} x {cols}: ({u}, {w})");
+                    assert_eq!(portable[u * cols + w].to_bits(), want[(u, w)].to_bits(), "portable {rows} x {cols}: ({u}, {w})");
                 }
             }
         }

@@ -225,35 +225,13 @@ struct Lsq {
 impl Lsq {
     fn new(a: DMatrix<f64>) -> Self {
         let scale: Vec<f64> = a.column_iter().map(|c| c.norm()).map(|v| if v > 0.0 { 1.0 / v } else { 0.0 }).collect();
-        let k = a.ncols();
-        let mut n = a.tr_mul(&a);
-        for r in 0..k {
-            for c in 0..k {
-                n[(r, c)] *= scale[r] * scale[c];
-            }
-        }
-        let pinv = if k == 0 {
-            DMatrix::zeros(0, 0)
-        } else {
-            let e = n.symmetric_eigen();
-            let top = e.eigenvalues.iter().fold(0.0f64, |m, v| m.max(*v));
-            let inv = DVector::from_iterator(k, e.eigenvalues.iter().map(|v| if *v > 1e-12 * top { 1.0 / v } else { 0.0 }));
-            &e.eigenvectors * DMatrix::from_diagonal(&inv) * e.eigenvectors.transpose()
-        };
+        let pinv = scaled_pinv(a.tr_mul(&a), &scale);
         Self { a, scale, pinv }
     }
 
     /// Coefficients of `b`'s columns on `a` (internal units).
     fn coef(&self, b: &DMatrix<f64>) -> DMatrix<f64> {
-        let mut atb = self.a.tr_mul(b);
-        for (r, s) in self.scale.iter().enumerate() {
-            atb.row_mut(r).scale_mut(*s);
-        }
-        let mut x = &self.pinv * atb;
-        for (r, s) in self.scale.iter().enumerate() {
-            x.row_mut(r).scale_mut(*s);
-        }
-        x
+        scaled_solve(&self.pinv, &self.scale, self.a.tr_mul(b))
     }
 
     /// `b` less its projection on `a`'s columns.
@@ -290,6 +268,74 @@ impl Lsq {
     }
 }
 
+/// The pseudo-inverse of the normal matrix `n` (`A^T A`) scaled by `scale` on both sides (each
+/// column of `A` to unit norm): its eigenvalues above 1e-12 of the largest inverted.
+fn scaled_pinv(mut n: DMatrix<f64>, scale: &[f64]) -> DMatrix<f64> {
+    let k = n.nrows();
+    for r in 0..k {
+        for c in 0..k {
+            n[(r, c)] *= scale[r] * scale[c];
+        }
+    }
+    if k == 0 {
+        return DMatrix::zeros(0, 0);
+    }
+    let e = n.symmetric_eigen();
+    let top = e.eigenvalues.iter().fold(0.0f64, |m, v| m.max(*v));
+    let inv = DVector::from_iterator(k, e.eigenvalues.iter().map(|v| if *v > 1e-12 * top { 1.0 / v } else { 0.0 }));
+    &e.eigenvectors * DMatrix::from_diagonal(&inv) * e.eigenvectors.transpose()
+}
+
+/// The coefficients `S P S A^T b` from `A^T b` (`atb`), `P` of [`scaled_pinv`] and `S` its scale.
+fn scaled_solve(pinv: &DMatrix<f64>, scale: &[f64], mut atb: DMatrix<f64>) -> DMatrix<f64> {
+    for (r, s) in scale.iter().enumerate() {
+        atb.row_mut(r).scale_mut(*s);
+    }
+    let mut x = pinv * atb;
+    for (r, s) in scale.iter().enumerate() {
+        x.row_mut(r).scale_mut(*s);
+    }
+    x
+}
+
+/// Rows per piece of [`fold_grams`] (each piece's Gram matrix on its own, side by side).
+const GRAM_PIECE: usize = 1024;
+
+/// Per fold, the Gram matrix `M_f^T M_f` of the columns of `parts` side by side (`M`), over the
+/// rows of the training points in fold `f` (`fold_of`, per point; rows `3 r .. 3 r + 3`): each
+/// fold's rows in pieces of [`GRAM_PIECE`], each piece's product by a blocked matrix product, the
+/// products summed in order (the same bits for any thread count).
+fn fold_grams(parts: &[&DMatrix<f64>], fold_of: &[usize], folds: usize) -> Vec<DMatrix<f64>> {
+    let cols: usize = parts.iter().map(|p| p.ncols()).sum();
+    let rows_of: Vec<Vec<usize>> =
+        (0..folds).map(|f| (0..fold_of.len()).filter(|&r| fold_of[r] == f).flat_map(|r| [3 * r, 3 * r + 1, 3 * r + 2]).collect()).collect();
+    let pieces: Vec<(usize, &[usize])> =
+        rows_of.iter().enumerate().flat_map(|(f, rows)| rows.chunks(GRAM_PIECE).map(move |c| (f, c))).collect();
+    let products: Vec<DMatrix<f64>> = pieces
+        .par_iter()
+        .map(|(_, rows)| {
+            let mut block = DMatrix::zeros(rows.len(), cols);
+            let mut c = 0;
+            for part in parts {
+                for k in 0..part.ncols() {
+                    let column = part.column(k);
+                    for (row, &r) in rows.iter().enumerate() {
+                        block[(row, c)] = column[r];
+                    }
+                    c += 1;
+                }
+            }
+            // A blocked matrix product (the same operations for the same piece, on any thread).
+            block.transpose() * &block
+        })
+        .collect();
+    let mut grams = vec![DMatrix::zeros(cols, cols); folds];
+    for ((f, _), product) in pieces.iter().zip(products) {
+        grams[*f] += product;
+    }
+    grams
+}
+
 /// An orthonormal basis of the column space of `m` (its left singular vectors of singular values
 /// above 1e-9 of the largest).
 fn column_basis(m: &DMatrix<f64>) -> DMatrix<f64> {
@@ -316,8 +362,21 @@ fn principal_cos(ua: &DMatrix<f64>, ub: &DMatrix<f64>) -> f64 {
 /// decomposed, effect families fitted and chosen by held-out error. `stated_noise_mm`: the
 /// instrument's noise per coordinate as the user states it.
 pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, CalibrateError> {
+    analyse_with(c, stated_noise_mm, None)
+}
+
+/// [`analyse`], taking from `reuse` what the calibration computed that the twin computes again
+/// (the points' setup, the chosen model's training fit) where it is the same computation.
+pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse: Option<&super::Kept>) -> Result<Twin, CalibrateError> {
     let m = &c.measurements;
-    let s = super::setup(&c.robot, m)?;
+    let owned;
+    let s = match reuse.and_then(|k| k.setup()) {
+        Some(s) => s,
+        None => {
+            owned = super::setup(&c.robot, m)?;
+            &owned
+        }
+    };
     let chosen = c.chosen();
     let layout = chosen.layout.clone();
     let nominal = &c.robot.nominal;
@@ -329,11 +388,14 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let x0 = start_values(&layout, nominal, &s.frames_x);
     let with_robot = !layout.robot.is_empty();
     let free = free_columns(&problem, &train, with_robot);
-    let fit = fit_without(&problem, &x0, &free, &train, &vec![false; train.len()], &SolveOptions::default());
-    if !fit.solved.outcome.is_converged() {
-        return Err(no_model(format!("the twin's training fit: {}", fit.solved.outcome.label())));
+    let solved = match reuse.and_then(|k| k.train_fit(&train, &layout, &free)) {
+        Some(solved) => solved.clone(),
+        None => fit_without(&problem, &x0, &free, &train, &vec![false; train.len()], &SolveOptions::default()).solved,
+    };
+    if !solved.outcome.is_converged() {
+        return Err(no_model(format!("the twin's training fit: {}", solved.outcome.label())));
     }
-    let x = fit.solved.x;
+    let x = solved.x;
     let pr = layout.robot.len();
     let fitted = layout.robot.unpack(nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
     let (rw, jw) = problem.linearise(&x, &train).ok_or_else(|| no_model("the twin's training fit has no model".into()))?;
@@ -406,26 +468,45 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     // the families fitted on the other folds (Frisch-Waugh-Lovell through Gram matrices), the
     // error at the fold's poses.
     let fold_of: Vec<usize> = train.iter().map(|&i| c.assignment.fold[m.points[i].pose].unwrap_or(0)).collect();
+    // The Gram matrix of [model's columns | families' columns | residuals] over each fold's rows;
+    // a fold's training part is the sum of the other folds' (no copy of its rows).
+    let folds_n = c.assignment.folds;
+    let grams = fold_grams(&[jf, &all_e, &rw_m], &fold_of, folds_n);
+    let (p, q) = (jf.ncols(), all_e.ncols());
     // The folds side by side, gathered in their order (the same for any thread count).
-    let folds: Vec<CvFold> = (0..c.assignment.folds)
+    let folds: Vec<CvFold> = (0..folds_n)
         .into_par_iter()
         .filter_map(|f| {
-            let inside: Vec<usize> = (0..train.len()).filter(|&r| fold_of[r] != f).collect();
             let out: Vec<usize> = (0..train.len()).filter(|&r| fold_of[r] == f).collect();
-            if inside.is_empty() || out.is_empty() {
+            if out.is_empty() || out.len() == train.len() {
                 return None;
             }
-            let rows = |pts: &[usize]| pts.iter().flat_map(|&r| [3 * r, 3 * r + 1, 3 * r + 2]).collect::<Vec<usize>>();
-            let (ri, ro) = (rows(&inside), rows(&out));
-            let model = Lsq::new(jf.select_rows(&ri));
-            let (e_in, r_in) = (all_e.select_rows(&ri), rw_m.select_rows(&ri));
-            let (g, beta) = (model.coef(&e_in), model.coef(&r_in));
-            let e_perp = &e_in - &model.a * &g;
-            let r_perp = &r_in - &model.a * &beta;
+            let mut inside = DMatrix::zeros(p + q + 1, p + q + 1);
+            for (h, g) in grams.iter().enumerate() {
+                if h != f {
+                    inside += g;
+                }
+            }
+            // The model's fit on the fold's training part (Frisch-Waugh-Lovell): the families'
+            // columns and the residuals less their projections on the model's columns, through
+            // the blocks of the Gram matrix.
+            let ata = inside.view((0, 0), (p, p)).into_owned();
+            let ate = inside.view((0, p), (p, q)).into_owned();
+            let atr = inside.view((0, p + q), (p, 1)).into_owned();
+            let ete = inside.view((p, p), (q, q)).into_owned();
+            let etr = inside.view((p, p + q), (q, 1)).into_owned();
+            let scale: Vec<f64> = (0..p).map(|k| ata[(k, k)].sqrt()).map(|v| if v > 0.0 { 1.0 / v } else { 0.0 }).collect();
+            let pinv = scaled_pinv(ata.clone(), &scale);
+            let (g, beta) = (scaled_solve(&pinv, &scale, ate.clone()), scaled_solve(&pinv, &scale, atr.clone()));
+            // (E - A g)^T (E - A g) and (E - A g)^T (r - A beta), expanded.
+            let gram = &ete - ate.tr_mul(&g) - g.tr_mul(&ate) + g.tr_mul(&(&ata * &g));
+            let gram = (&gram + gram.transpose()) * 0.5;
+            let rhs = &etr - ate.tr_mul(&beta) - g.tr_mul(&atr) + g.tr_mul(&(&ata * &beta));
+            let ro: Vec<usize> = out.iter().flat_map(|&r| [3 * r, 3 * r + 1, 3 * r + 2]).collect();
             let j_out = jf.select_rows(&ro);
             Some(CvFold {
-                gram: e_perp.tr_mul(&e_perp),
-                rhs: e_perp.tr_mul(&r_perp),
+                gram,
+                rhs,
                 r_out: rw_m.select_rows(&ro) - &j_out * beta,
                 e_out: all_e.select_rows(&ro) - &j_out * g,
                 pose: out.iter().map(|&r| train_pose[r]).collect(),
@@ -567,17 +648,8 @@ pub fn analyse(c: &Calibration, stated_noise_mm: Option<f64>) -> Result<Twin, Ca
     let kept_projected = hstack(kept.iter().map(|&k| &projected[k]));
     // A per-pose error is repeatable at a joint value: the visits of one pose (joints within
     // SAME_POSE_RAD, any session) share it.
-    let mut visited: Vec<crate::robot::Joints> = Vec::new();
-    let same_q: Vec<usize> = train
-        .iter()
-        .map(|&i| {
-            let q = m.poses[m.points[i].pose].q;
-            visited.iter().position(|v| v.iter().zip(&q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD)).unwrap_or_else(|| {
-                visited.push(q);
-                visited.len() - 1
-            })
-        })
-        .collect();
+    let mut visited = SamePose::default();
+    let same_q: Vec<usize> = train.iter().map(|&i| visited.group(&m.poses[m.points[i].pose].q)).collect();
     let field = field_share(&jl, &same_q, &model_lsq, &kept_projected, dof_after);
     if let Some(left) = decomposition.left.as_mut() {
         *left = left.scaled(
@@ -843,15 +915,9 @@ fn repeated_scatter(m: &super::Measurements, train: &[usize], resid: &DVector<f6
     poses.sort_unstable();
     poses.dedup();
     let mut group_of: HashMap<usize, usize> = HashMap::new();
-    let mut reps: Vec<usize> = Vec::new();
+    let mut reps = SamePose::default();
     for &p in &poses {
-        let q = m.poses[p].q;
-        let found = reps.iter().position(|&r| m.poses[r].q.iter().zip(&q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD));
-        let g = found.unwrap_or_else(|| {
-            reps.push(p);
-            reps.len() - 1
-        });
-        group_of.insert(p, g);
+        group_of.insert(p, reps.group(&m.poses[p].q));
     }
     let mut members: std::collections::BTreeMap<(usize, usize), Vec<usize>> = std::collections::BTreeMap::new();
     for (row, &i) in train.iter().enumerate() {
@@ -871,6 +937,66 @@ fn repeated_scatter(m: &super::Measurements, train: &[usize], resid: &DVector<f6
         return (f64::NAN, 0, 0);
     }
     (ss / (3.0 * dof as f64), 3 * dof, groups.len())
+}
+
+/// The visits of one pose: each joint vector joins the first group (in the order the groups were
+/// opened) whose first member is within [`SAME_POSE_RAD`] of it at every joint, else opens a group.
+/// The groups' first members are kept in cells of [`SamePose::CELL`] per joint, so that a search
+/// looks at the few cells within reach of the joints, not at every group (the same groups as a
+/// scan of every group in order: the lowest matching group of the cells searched).
+#[derive(Default)]
+struct SamePose {
+    /// Each group's first member.
+    firsts: Vec<crate::robot::Joints>,
+    /// Per cell, the groups whose first member lies in it, in order.
+    cells: HashMap<[i64; JOINTS], Vec<usize>>,
+}
+
+impl SamePose {
+    /// Cell size per joint, rad: sixteen times the reach, so that the interval within reach of a
+    /// joint value spans one cell, or two near a cell's edge.
+    const CELL: f64 = 16.0 * SAME_POSE_RAD;
+
+    fn cell(v: f64) -> i64 {
+        (v / Self::CELL).floor() as i64
+    }
+
+    /// The group of `q` (opened when no group is within reach).
+    fn group(&mut self, q: &crate::robot::Joints) -> usize {
+        // The cells of each joint within reach, widened by 1 % of the reach: a value within
+        // SAME_POSE_RAD as the comparison below rounds it is inside, whatever the division rounds.
+        let reach = 1.01 * SAME_POSE_RAD;
+        let spans: [(i64, i64); JOINTS] = std::array::from_fn(|j| (Self::cell(q[j] - reach), Self::cell(q[j] + reach)));
+        let mut best: Option<usize> = None;
+        let mut key = [0i64; JOINTS];
+        let mut visit = |key: &[i64; JOINTS]| {
+            for &g in self.cells.get(key).into_iter().flatten() {
+                if best.is_some_and(|b| b <= g) {
+                    break;
+                }
+                if self.firsts[g].iter().zip(q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD) {
+                    best = Some(g);
+                    break;
+                }
+            }
+        };
+        // Every combination of the joints' cells (1 to 2^6).
+        let combos = spans.iter().map(|(lo, hi)| (hi - lo + 1) as usize).product::<usize>();
+        for mut c in 0..combos {
+            for j in 0..JOINTS {
+                let width = (spans[j].1 - spans[j].0 + 1) as usize;
+                key[j] = spans[j].0 + (c % width) as i64;
+                c /= width;
+            }
+            visit(&key);
+        }
+        best.unwrap_or_else(|| {
+            let g = self.firsts.len();
+            self.firsts.push(*q);
+            self.cells.entry(std::array::from_fn(|j| Self::cell(q[j]))).or_default().push(g);
+            g
+        })
+    }
 }
 
 /// The share of a per-pose joint error's variance that the training fit leaves in its residual,
@@ -1000,6 +1126,70 @@ fn learned_table(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The visits of one pose: the groups of a scan of every group in order (the first whose first
+    /// member is within reach at every joint), near the cells' edges and in a sweep of one joint.
+    #[test]
+    fn same_pose_groups_are_those_of_a_scan_in_order() {
+        use rand::RngExt;
+        let mut rng = crate::seeds::stream(7, 0);
+        let mut qs: Vec<crate::robot::Joints> = Vec::new();
+        for k in 0..3000 {
+            let q: crate::robot::Joints = match k % 4 {
+                // Random poses, revisited within and beyond the reach.
+                0 => std::array::from_fn(|_| rng.random_range(-0.01..0.01)),
+                1 => {
+                    let mut q = qs[rng.random_range(0..qs.len())];
+                    q[rng.random_range(0..JOINTS)] += rng.random_range(-2.0..2.0) * SAME_POSE_RAD;
+                    q
+                }
+                // A sweep of one joint in steps of about the reach, on cell edges.
+                2 => {
+                    let mut q = [0.0; JOINTS];
+                    q[1] = (k / 4) as f64 * SAME_POSE_RAD * 0.999;
+                    q[2] = SamePose::CELL * (k % 7) as f64;
+                    q
+                }
+                _ => std::array::from_fn(|j| SamePose::CELL * ((k + j) % 3) as f64 + rng.random_range(-1.5..1.5) * SAME_POSE_RAD),
+            };
+            qs.push(q);
+        }
+        let mut firsts: Vec<crate::robot::Joints> = Vec::new();
+        let scanned: Vec<usize> = qs
+            .iter()
+            .map(|q| {
+                firsts.iter().position(|v| v.iter().zip(q).all(|(a, b)| (a - b).abs() <= SAME_POSE_RAD)).unwrap_or_else(|| {
+                    firsts.push(*q);
+                    firsts.len() - 1
+                })
+            })
+            .collect();
+        let mut index = SamePose::default();
+        let found: Vec<usize> = qs.iter().map(|q| index.group(q)).collect();
+        assert_eq!(found, scanned);
+        assert!(firsts.len() > 100 && firsts.len() < qs.len() - 100, "groups: {}", firsts.len());
+    }
+
+    /// The twin of a calibration with what the calibration kept (its setup and the chosen model's
+    /// training fit) is the twin computed afresh: the shipped example, its flagged points left out
+    /// of the fits (`--outliers reject`), as the twin leaves them out.
+    #[test]
+    fn the_twin_with_the_calibrations_setup_and_fit_is_the_twin_afresh() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let robot = crate::robot::file::RobotFile::load(&root.join("robots/irb120.toml")).unwrap();
+        let m = crate::calibrate::measurements::read(&root.join("docs/calibrate/example_measurements.csv"), &robot).unwrap();
+        let opts = crate::calibrate::Options { plots: false, outliers: crate::calibrate::OutlierMode::Reject, ..Default::default() };
+        let (c, kept) = crate::calibrate::run_keeping(&robot, &m, &opts).unwrap();
+        assert!(kept.setup.is_some());
+        assert!(c.flagged.iter().any(|f| *f), "flagged points to leave out");
+        // The training fit is taken (its points are the twin's).
+        let train: Vec<usize> =
+            (0..m.points.len()).filter(|&i| !c.assignment.held_out[c.measurements.points[i].pose] && !c.flagged[i]).collect();
+        assert_eq!(kept.train_fit.as_ref().map(|t| &t.0), Some(&train));
+        let with = analyse_with(&c, None, Some(&kept)).unwrap();
+        let afresh = analyse(&c, None).unwrap();
+        assert_eq!(format!("{with:?}"), format!("{afresh:?}"));
+    }
 
     /// A family with no rows (no training point where it acts) or no columns has an empty basis:
     /// it is confounded with nothing, and no decomposition of an empty matrix is attempted.
