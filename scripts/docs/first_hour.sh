@@ -4,12 +4,12 @@
 # cache or the registry), then the quick start's two commands. Writes docs/generated/first-hour.md
 # with the machine's core count and load, so that the figures read for what they are.
 #
-# Usage: bash scripts/docs/first_hour.sh [--no-tests]
+# Usage: bash scripts/docs/first_hour.sh [--tests]   (--tests: the test suite too, its build included)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 repo="$(pwd)"
-tests=1
-[ "${1:-}" = "--no-tests" ] && tests=0
+tests=0
+[ "${1:-}" = "--tests" ] && tests=1
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
 git clone -q "$repo" "$scratch/calsim"
@@ -42,7 +42,7 @@ if [ "$tests" = 1 ]; then
 fi
 {
     echo "<!-- made by scripts/docs/first_hour.sh: do not edit -->"
-    echo "*Made by \`bash scripts/docs/first_hour.sh\` at commit $commit on $(nproc) cores,"
+    echo "*Made by \`bash scripts/docs/first_hour.sh${1:+ $1}\` at commit $commit on $(nproc) cores,"
     echo "load average $load_before before the start.*"
     echo
     echo "The README's quick start from a fresh clone with an empty target directory (the crates"
