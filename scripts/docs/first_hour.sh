@@ -26,11 +26,14 @@ timed() {
         tail -n 20 "$scratch/out.log" >&2
         return 1
     }
-    awk '{ printf "%.0f %.0f %.0f %.0f", $1, $2, $3, $4 / 1024 }' "$log"
+    awk '{ printf "%.1f %.0f %.0f %.0f", $1, $2, $3, $4 / 1024 }' "$log"
 }
 row() { # name, command, "wall user system rss"
     read -r wall user sys rss <<<"$3"
-    printf '| `%s` | %s | %d min %02d s | %d s | %d s | %d |\n' "$1" "$2" $((wall / 60)) $((wall % 60)) "$user" "$sys" "$rss"
+    local shown="$wall s"
+    local whole="${wall%.*}"
+    [ "$whole" -ge 60 ] && shown="$((whole / 60)) min $(printf '%02d' $((whole % 60))) s"
+    printf '| `%s` | %s | %s | %d s | %d s | %d |\n' "$1" "$2" "$shown" "$user" "$sys" "$rss"
 }
 
 echo "first-hour: cold build of $commit in $scratch"
