@@ -82,10 +82,15 @@ def test_calibrate_from_a_dataframe_gives_the_same_tables_as_the_file(calibratio
     assert frame.height == 240
     c = calsim.calibrate(ROBOT, frame, out=tmp_path, name="tracker_log", header=header_of(MEASUREMENTS), plots=False)
     assert c.dest == tmp_path / "tracker_log.calibration"
-    # Every table bit for bit but the points' file lines: the frame's CSV has the header keys
-    # without the file's free comment lines, so each point sits that many lines higher.
+    # Every table bit for bit but the points' file lines (the frame's CSV has the header keys
+    # without the file's free comment lines, so each point sits that many lines higher) and the
+    # run's table, which names the file calibrated (the frame's CSV in the report).
     ours, theirs = tables_sha256(c.dest), tables_sha256(calibration.dest)
-    assert {k: v for k, v in ours.items() if k != "points.parquet"} == {k: v for k, v in theirs.items() if k != "points.parquet"}
+    named = {"points.parquet", "calibration.parquet"}
+    assert {k: v for k, v in ours.items() if k not in named} == {k: v for k, v in theirs.items() if k not in named}
+    run, file_run = c.tables["calibration"], calibration.tables["calibration"]
+    assert run["measurements"].to_list() != file_run["measurements"].to_list()
+    assert run.drop("measurements").equals(file_run.drop("measurements"))
     free_comments = sum(1 for line in MEASUREMENTS.read_text().splitlines() if line.startswith("#")) - len(header_of(MEASUREMENTS))
     assert free_comments == 2
     points, file_points = c.tables["points"], calibration.tables["points"]

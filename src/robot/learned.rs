@@ -343,7 +343,6 @@ mod tests {
 
     #[test]
     fn a_repeatability_with_a_spread_is_drawn_per_world_and_without_one_draws_nothing() {
-        use rand::Rng;
         let point = LearnedEffects { repeatability_mm: 0.02, ..Default::default() };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         assert_eq!(point.drawn_repeatability_mm(&mut rng), 0.02);
