@@ -9,7 +9,7 @@ use std::path::Path;
 
 use calsim::calibrate::plan::{Basis, Noise, Statistic, compare, flagged_pull_mm, simulate_basis, world_file};
 use calsim::calibrate::simulate::{SimulationSpec, example_spec, to_csv};
-use calsim::calibrate::twin::{Family, Twin, analyse};
+use calsim::calibrate::twin::{Family, KEEP_SE_SCANNED, Twin, analyse};
 use calsim::calibrate::{Calibration, Options, default_params, measurements, run};
 use calsim::robot::file::RobotFile;
 use calsim::robot::{JOINTS, LearnedEffects, LearnedHarmonic, ParamSet, RobotModel, UnmodelledSpec, VirtualRobot};
@@ -187,6 +187,67 @@ fn a_twin_recovers_injected_effects_repeatability_and_noise_within_their_interva
     assert!(!loaded.learned.as_ref().unwrap().is_none());
     let summary = std::fs::read_to_string(report.dir.join("summary.md")).unwrap();
     assert!(summary.contains("## The twin: what the model misses"), "{summary}");
+}
+
+/// A harmonic above order 3 (joint 3, order 23, 15 and -9 mdeg: a gear stage's mesh) on the same
+/// arm without repeatability (480 points, 12 um noise): the scan of joint 3 picks order 23, the
+/// family is kept past [`KEEP_SE_SCANNED`] paired standard errors, both coefficients lie within
+/// 1.96 of their standard deviations of the injected values, no other family is kept, and the
+/// twin's `[learned]` table carries the harmonic at its order for the plans.
+#[test]
+fn a_twin_finds_a_harmonic_above_order_three_at_its_order() {
+    let robot = robot();
+    let gear = LearnedHarmonic { joint: 3, order: 23.0, sin_mdeg: 15.0, cos_mdeg: -9.0, std_mdeg: 0.0 };
+    let spec = arm(&robot, Some(LearnedEffects { harmonic: vec![gear.clone()], ..LearnedEffects::default() }), 0.0);
+    let c = calibrated(&spec, &robot);
+    let t = analyse(&c, None).unwrap();
+    eprintln!("{}", calsim::calibrate::twin::markdown(&t));
+    let family = Family::Harmonic(2, 23);
+    let trial = t.families.iter().find(|f| f.family == family).expect("the scan of joint 3 picks order 23");
+    assert!(trial.kept && trial.gain.0 > KEEP_SE_SCANNED * trial.gain.1, "{trial:?}");
+    for f in t.families.iter().filter(|f| f.family != family) {
+        assert!(!f.kept, "{f:?}");
+    }
+    for (sine, v) in [(true, gear.sin_mdeg), (false, gear.cos_mdeg)] {
+        let (value, std) = kept(&t, family, Some(2), Some((23, sine)), None).expect("both coefficients kept");
+        assert!((value - v).abs() <= 1.96 * std, "order 23 {}: {value} +- {std} against {v}", if sine { "sin" } else { "cos" });
+    }
+    let h = t.learned.harmonic.iter().find(|h| h.joint == 3 && h.order == 23.0).expect("the learned table carries it");
+    let value = |sine| kept(&t, family, Some(2), Some((23, sine)), None).unwrap().0;
+    assert_eq!((h.sin_mdeg, h.cos_mdeg), (value(true), value(false)), "{h:?}");
+}
+
+/// The shipped example (`docs/calibrate/example_measurements.csv`, simulated by `example_spec`
+/// with one harmonic of 2.82 mdeg per joint at an order drawn in 20-120, 240 points): every
+/// harmonic above order 3 the twin keeps is one the simulation drew, at its joint and order, with
+/// its amplitude within 1.96 of its standard deviations of 2.82 mdeg; the shoulder's joints 1-3
+/// (the largest lever arms) are found.
+#[test]
+fn the_example_twin_keeps_the_gear_harmonics_the_simulation_drew() {
+    let robot = robot();
+    let spec = example_spec(&robot).unwrap();
+    let reference: calsim::robot::Joints = std::array::from_fn(|i| {
+        let l = spec.truth.limits()[i];
+        0.5 * (l.min + l.max)
+    });
+    let mut rng = calsim::seeds::stream(spec.seed, calsim::seeds::calibrate::SIMULATED_NOISE);
+    let drawn = VirtualRobot::new(spec.truth.clone(), &spec.unmodelled, spec.repeatability_mm, &reference, &mut rng).harmonics;
+    let path = common::repo().join("docs/calibrate/example_measurements.csv");
+    let m = measurements::parse(&path, &std::fs::read_to_string(&path).unwrap(), &robot).unwrap();
+    let c = run(&robot, &m, &Options { plots: false, prediction_draws: 10, ..Options::default() }).unwrap();
+    let t = analyse(&c, None).unwrap();
+    let mut found = Vec::new();
+    for f in t.families.iter().filter(|f| f.kept) {
+        let Family::Harmonic(j, k) = f.family else { panic!("only scanned harmonics are in the example: {f:?}") };
+        assert!(drawn[j].iter().any(|h| h.order == k as f64), "joint {} order {k} kept, drawn {:?}", j + 1, drawn[j]);
+        let (s, c) =
+            (kept(&t, f.family, Some(j), Some((k, true)), None).unwrap(), kept(&t, f.family, Some(j), Some((k, false)), None).unwrap());
+        let amplitude = s.0.hypot(c.0);
+        let std = ((s.1 * s.1 + c.1 * c.1) / 2.0).sqrt();
+        assert!((amplitude - 2.82).abs() <= 1.96 * std, "joint {} order {k}: amplitude {amplitude} +- {std} mdeg against 2.82", j + 1);
+        found.push(j);
+    }
+    assert_eq!(found, [0, 1, 2], "{:?}", t.families);
 }
 
 /// The same arm with nothing outside the model and no repeatability (480 points, 60 poses visited

@@ -6,10 +6,12 @@
 //!  ─► residual decomposition: instrument noise (the file's sigma column, --instrument-noise-mm,
 //!     or the scatter of distances between targets measured at one pose), repeatability (the
 //!     scatter of poses visited more than once, less the instrument's), the systematic rest
-//!  ─► effect families (effects.rs: harmonics per joint, backlash, sag, drift) fitted jointly
+//!  ─► effect families (effects.rs: harmonics per joint of orders 1-3 and of the one order above
+//!     3 a scan of the residual picks per joint, backlash, sag, drift) fitted jointly
 //!     with the model (their columns projected off the model's Jacobian: Frisch-Waugh-Lovell),
 //!     kept one at a time while each lowers the error cross-validated over the calibration
-//!     split's folds by more than [`KEEP_SE`] paired standard errors (poses as the pairs); the
+//!     split's folds by more than [`KEEP_SE`] ([`KEEP_SE_SCANNED`] for a scanned order) paired
+//!     standard errors (poses as the pairs); the
 //!     held-out split is left to judge the result (and the plan)
 //!  ─► the twin: the calibrated robot moved by the joint fit, its [learned] table (the kept
 //!     effects with their standard deviations, the repeatability, the per-pose joint error left)
@@ -28,7 +30,7 @@ use std::collections::HashMap;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
-pub use effects::{Coefficient, Family};
+pub use effects::{Coefficient, Family, KEEP_SE, KEEP_SE_SCANNED};
 use effects::{PointData, columns};
 pub use report::{markdown, results_into};
 
@@ -43,9 +45,6 @@ use crate::robot::{JOINTS, LinkParam, ParamId, ParamSet, RobotModel};
 pub const SAME_POSE_RAD: f64 = 1e-4;
 /// The two-sided 95 % normal quantile.
 const Z95: f64 = 1.959_963_984_540_054;
-/// A family is kept when its held-out gain exceeds this many paired standard errors: the
-/// one-sided normal quantile of 5 % shared by the nine families tried (Bonferroni, 0.05 / 9).
-pub const KEEP_SE: f64 = 2.54;
 /// Families whose projected column spaces have a principal angle with cosine above this are named
 /// as not told apart.
 pub const CONFOUNDED_COS: f64 = 0.95;
@@ -441,7 +440,7 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     // Every family's columns (those the model absorbs left out: the calibrated robot carries them).
     let mut families: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> = Vec::new();
     let mut absorbed: Vec<Vec<String>> = Vec::new();
-    for f in Family::all() {
+    for f in Family::all().into_iter().chain(effects::scan(&train, &jl, &data, &rw)) {
         let (e, coefs) = columns(f, &train, &jl, &data);
         if e.ncols() == 0 {
             continue;
@@ -545,7 +544,7 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
                 let d: Vec<f64> = current.iter().zip(&sse).map(|(a, b)| a - b).collect();
                 let (mean, se) = mean_se(&d);
                 gains[k] = (mean, se);
-                let qualifies = mean > KEEP_SE * se && mean > 0.0;
+                let qualifies = mean > families[k].0.keep_se() * se && mean > 0.0;
                 if qualifies && best.as_ref().is_none_or(|b| mean > b.1) {
                     best = Some((k, mean, sse));
                 }
@@ -1060,7 +1059,7 @@ fn learned_table(
     for e in effects {
         let co = &e.coefficient;
         match (co.family, co.joint, co.harmonic, co.axis) {
-            (Family::Harmonics(_), Some(j), Some((order, sine)), _) => {
+            (Family::Harmonics(_) | Family::Harmonic(..), Some(j), Some((order, sine)), _) => {
                 let h = harmonics.entry((j, order)).or_insert((0.0, 0.0, 0.0, 0.0));
                 if sine {
                     (h.0, h.2) = (e.value, e.std);

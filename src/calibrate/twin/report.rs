@@ -109,6 +109,7 @@ fn twin_columns(t: &Twin) -> Vec<Column> {
         whole("poses", d.poses),
         whole("cv_poses", t.cv_poses),
         number("keep_se", super::KEEP_SE),
+        number("keep_se_scanned", super::KEEP_SE_SCANNED),
         whole("held_out_poses", t.held_out_poses),
         Column::new("held_out_judged".into(), vec![t.held_out_gain.is_some()]),
         Column::new("held_out_gain_per_pose".into(), vec![t.held_out_gain.map(|g| g.0)]),
@@ -148,10 +149,14 @@ fn section(parts: &mut Summary<'_>) {
         pieces.push(format!(
             "### Effect families\n\nEach fitted jointly with the model (its columns projected off the model's Jacobian) on the calibration \
              split only, judged by cross-validation over its folds ({} poses): kept, one at a time, while adding it lowers the \
-             cross-validated squared error per pose by more than {} paired standard errors (5 % shared by the nine families). Columns \
-             the model's parameters absorb are left out (the calibrated robot carries them).\n\n",
+             cross-validated squared error per pose by more than {} paired standard errors (5 % shared by the nine families; {} for a \
+             joint's harmonic of the order, among {}-{}, that explains most of the residual: 5 % shared by every order of every joint \
+             it could have been). Columns the model's parameters absorb are left out (the calibrated robot carries them).\n\n",
             r.u64("cv_poses"),
-            r.f64("keep_se")
+            r.f64("keep_se"),
+            r.f64("keep_se_scanned"),
+            super::effects::SCANNED_ORDERS.start(),
+            super::effects::SCANNED_ORDERS.end()
         ));
         pieces.join("\n")
     });
