@@ -155,13 +155,9 @@ pub fn columns(family: Family, idx: &[usize], jl: &DMatrix<f64>, d: &PointData) 
         }
     };
     let base = |joint: Option<usize>, name: String| Coefficient { family, joint, harmonic: None, axis: None, name };
-    let orders = match family {
-        Family::Harmonics(_) => 1..=ORDERS,
-        Family::Harmonic(_, k) => k..=k,
-        _ => 1..=0,
-    };
     match family {
         Family::Harmonics(j) | Family::Harmonic(j, _) => {
+            let orders = if let Family::Harmonic(_, k) = family { k..=k } else { 1..=ORDERS };
             for order in orders {
                 for sine in [true, false] {
                     let k = order as f64;
