@@ -10,6 +10,13 @@ __version__: str
 Callback = Callable[[str, str, int, int], object]
 Report = dict[str, Any]
 
+class ArrowFrame:
+    """A result frame through the Arrow PyCapsule interface: ``polars.DataFrame(frame)`` reads it."""
+
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    def __arrow_c_stream__(self, requested_schema: object | None = None) -> object: ...
+
 class CalsimError(Exception):
     path: str | None
     key: str | None

@@ -93,17 +93,23 @@ class Results:
 
 
 def _frames(report: Report) -> dict[str, pl.DataFrame]:
-    """The report's result frames by name, each sent as the bytes of its parquet encoding (its
-    schema travels with it: no column is named between calsim and here)."""
-    return {name: pl.read_parquet(io.BytesIO(data)) for name, data in report["frames"].items()}
+    """The report's result frames by name, each handed over through the Arrow PyCapsule interface
+    (its schema travels with it: no column is named between calsim and here)."""
+    return {name: pl.DataFrame(frame) for name, frame in report["frames"].items()}
 
 
 class RunResult(Results):
     """What ``run`` and ``check`` did: the results directory, and ``checks`` (the published
-    figures beside calsim's, with band and verdict ``pass``, ``miss`` or ``-``), ``distribution``
-    (the same over realisations, or None: each figure's median with its interval and confidence,
-    the worlds without a value, and ``pass``, ``open``, ``miss`` or ``unresolved``, the last a
-    failure: too few worlds to judge), ``passed`` / ``missed``, ``timing``, ``warnings``."""
+    figures beside calsim's, with band and ``result`` ``pass``, ``miss`` or ``-``: whether realisation
+    0's value lies in its band), ``distribution`` (the same over realisations, or None: each
+    figure's median with its interval and confidence, the worlds without a value, and ``pass``,
+    ``open``, ``miss`` or ``unresolved``, the last a failure: too few worlds to judge), ``judged``,
+    ``passed`` / ``checked`` / ``missed``, ``timing``, ``warnings``.
+
+    As the CLI: a check judges its figures (over one world, that world's values; over several, the
+    distribution); a run over one world shows one draw of each figure and judges nothing
+    (``judged`` False, ``passed``, ``checked`` and ``missed`` None: whether the model reproduces a
+    figure is judged over worlds, by ``check``); a run over realisations judges the distribution."""
 
     def __init__(self, report: Report) -> None:
         super().__init__(report["dest"])
@@ -113,23 +119,28 @@ class RunResult(Results):
         self.threads: int = report["threads"]
         self.timing: str = report["timing"]
         self.realisations: int = report["realisations"]
-        self.checked: int = report["checked"]
-        self.missed: int = report["missed"]
+        self.judged: bool = report["judged"]
+        self.checked: int | None = report["checked"]
+        self.missed: int | None = report["missed"]
         self.warnings: list[str] = list(report["warnings"])
         frames = _frames(report)
         self.checks: pl.DataFrame = frames["checks"]
         self.distribution: pl.DataFrame | None = frames.get("distribution")
 
     @property
-    def passed(self) -> bool:
-        """Every banded figure within its band (over the realisations when several ran)."""
-        return self.missed == 0
+    def passed(self) -> bool | None:
+        """Every banded figure within its band (over the realisations when several ran; the CLI's
+        exit code 0 of a check), or None when nothing was judged (a run of one world)."""
+        return None if self.missed is None else self.missed == 0
 
     def __repr__(self) -> str:
-        return (
-            f"RunResult({self.name!r}, kind={self.kind!r}, seed={self.seed}, "
-            f"{self.checked - self.missed} of {self.checked} figures within their bands, dest={str(self.dest)!r})"
-        )
+        if self.checked is None or self.missed is None:
+            verdict = "one world: one draw of each figure, judged over worlds by check"
+        elif self.distribution is not None:
+            verdict = f"{self.checked - self.missed} of {self.checked} figures not missed over {self.realisations} realisations"
+        else:
+            verdict = f"{self.checked - self.missed} of {self.checked} figures within their bands"
+        return f"RunResult({self.name!r}, kind={self.kind!r}, seed={self.seed}, {verdict}, dest={str(self.dest)!r})"
 
 
 class SweepResult(Results):
