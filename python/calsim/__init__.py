@@ -274,7 +274,7 @@ def merge(shards: Sequence[PathLike], *, out: PathLike = "results") -> SweepResu
     if isinstance(shards, str | os.PathLike):
         shards = [shards]
     merged = _calsim.merge([Path(s) for s in shards], out=Path(out))
-    return SweepResult({"name": Path(merged["dest"]).name, "merged": merged, "warnings": []})
+    return SweepResult(None, merged)
 
 
 def budget(

@@ -1,14 +1,21 @@
-"""Stubs of the native module ``calsim._calsim``: each command returns a dict the pure-Python half
-turns into a result object (the keys are read there, in ``_results.py``)."""
+"""Stubs of the native module ``calsim._calsim``: each command returns a report (a dict typed
+below, one per command) the pure-Python half turns into a result object (``_results.py``); the
+frames a report holds come through the Arrow PyCapsule interface (:class:`ArrowFrame`)."""
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 __version__: str
 
 Callback = Callable[[str, str, int, int], object]
-Report = dict[str, Any]
+
+class ArrowFrame:
+    """A result frame through the Arrow PyCapsule interface: ``polars.DataFrame(frame)`` reads it."""
+
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    def __arrow_c_stream__(self, requested_schema: object | None = None) -> object: ...
 
 class CalsimError(Exception):
     path: str | None
@@ -25,6 +32,170 @@ class StudyError(CalsimError): ...
 class FileError(CalsimError): ...
 class DataError(CalsimError): ...
 
+class RunReport(TypedDict):
+    name: str
+    kind: str
+    seed: int
+    threads: int
+    dest: Path
+    timing: str
+    write_s: float
+    recording_s: float
+    realisations: int
+    false_alarm: float
+    judged: bool
+    checked: int | None
+    missed: int | None
+    frames: dict[str, ArrowFrame]
+    warnings: list[str]
+
+class MergeReport(TypedDict):
+    dest: Path
+    units: int
+    failed: int
+    summary: str
+
+class SweepReport(TypedDict):
+    name: str
+    units: int
+    run_s: float
+    shard_dir: Path
+    shard: tuple[int, int]
+    merged: MergeReport | None
+    warnings: list[str]
+
+class BudgetReport(TypedDict):
+    dest: Path
+    units: int
+    run_s: float
+    summary: str
+    warnings: list[str]
+
+class ExportReport(TypedDict):
+    dest: Path
+    scenario: str
+    task: int
+    set_size: int
+    validation_median_mm: float
+    files: list[str]
+
+class CalibratePlan(TypedDict):
+    scenario: str
+    statistic: str
+    measured_mm: float
+    simulated_p10_mm: float
+    simulated_mm: float
+    simulated_p90_mm: float
+    worlds: int
+    inside: bool
+
+class CalibrateReport(TypedDict):
+    dest: Path
+    model: str
+    report: str
+    plan: CalibratePlan | None
+
+class OptimiseReport(TypedDict):
+    name: str
+    restarts: int
+    evaluations: int
+    search_s: float
+    finish_s: float
+    dest: Path | None
+    summary: str | None
+    cost: str | None
+    warnings: list[str]
+
+class CompensateReport(TypedDict):
+    csv: str
+    targets: int
+    unreachable: list[int]
+    warnings: list[str]
+
+class Table8Row(TypedDict):
+    instrument: str
+    published_median_mm: float
+    calsim_median_mm: float
+    published_std_mm: float
+    calsim_std_mm: float
+    published_max_mm: float
+    calsim_max_mm: float
+    median_p10_mm: float
+    median_p90_mm: float
+
+class Table8Report(TypedDict):
+    rows: list[Table8Row]
+    worlds: int
+    run_s: float
+    warnings: list[str]
+
+class ObjectiveRow(TypedDict):
+    poses: int
+    successes: int
+    worlds: int
+    lower_bound: float
+    meets: bool
+
+class Objective(TypedDict):
+    met: bool
+    poses: int
+    table: list[ObjectiveRow]
+
+class ComparisonRow(TypedDict):
+    selection: str
+    o1: float
+    median_mm: float
+    median_low_mm: float
+    median_high_mm: float
+    p90_mm: float
+    p90_low_mm: float
+    p90_high_mm: float
+
+class PlanReport(TypedDict):
+    instrument: str
+    dest: Path
+    poses: int
+    validation: int
+    pool: int
+    drawn: int
+    o1: float
+    o1_random: float
+    predicted_p10_mm: float
+    predicted_mm: float
+    predicted_p90_mm: float
+    worlds: int
+    pilot_mm: float
+    objective: Objective | None
+    seconds: float
+    warnings: list[str]
+    twin: bool
+    unidentifiable: list[str]
+    comparison: list[ComparisonRow] | None
+
+class ImportReport(TypedDict):
+    out: Path
+    lines: list[str]
+
+class SimulateReport(TypedDict):
+    csv: str
+    rows: int
+    written: Path | None
+
+class FkReport(TypedDict):
+    csv: str
+    rows: int
+
+class KeyRow(TypedDict):
+    key: str
+    unit: str
+    default: str
+    rule: str
+    note: str
+
+class KeysReport(TypedDict):
+    rows: list[KeyRow]
+    text: str
+
 def run(
     scenario: Path,
     *,
@@ -39,7 +210,7 @@ def run(
     plots: bool = True,
     recording: bool = True,
     progress: Callback | None = None,
-) -> Report: ...
+) -> RunReport: ...
 def sweep(
     file: Path,
     *,
@@ -48,8 +219,8 @@ def sweep(
     threads: int | None = None,
     realisations: int | None = None,
     progress: Callback | None = None,
-) -> Report: ...
-def merge(shards: Sequence[Path], *, out: Path) -> Report: ...
+) -> SweepReport: ...
+def merge(shards: Sequence[Path], *, out: Path) -> MergeReport: ...
 def budget(
     scenario: Path,
     *,
@@ -59,7 +230,7 @@ def budget(
     repetitions: int | None = None,
     threads: int | None = None,
     progress: Callback | None = None,
-) -> Report: ...
+) -> BudgetReport: ...
 def export(
     results: Path,
     *,
@@ -67,7 +238,7 @@ def export(
     set_size: int | None = None,
     pick: str = "median",
     out: Path | None = None,
-) -> Report: ...
+) -> ExportReport: ...
 def calibrate(
     robot: Path,
     measurements: Path,
@@ -91,7 +262,7 @@ def calibrate(
     payload_com_mm: Sequence[float] | None = None,
     plan_with: str | None = None,
     instrument_noise_mm: float | None = None,
-) -> Report: ...
+) -> CalibrateReport: ...
 def optimise(
     file: Path,
     *,
@@ -102,8 +273,8 @@ def optimise(
     method: str | None = None,
     plots: bool = True,
     progress: Callback | None = None,
-) -> Report: ...
-def compensate(model: Path, targets: Path, *, nominal: Path | None = None, out: Path | None = None) -> Report: ...
+) -> OptimiseReport: ...
+def compensate(model: Path, targets: Path, *, nominal: Path | None = None, out: Path | None = None) -> CompensateReport: ...
 def table8(
     scenario: Path,
     *,
@@ -111,7 +282,7 @@ def table8(
     pool: int = 360,
     threads: int | None = None,
     progress: Callback | None = None,
-) -> Report: ...
+) -> Table8Report: ...
 def plan(
     file: Path,
     *,
@@ -119,12 +290,12 @@ def plan(
     threads: int | None = None,
     simulate: bool = False,
     progress: Callback | None = None,
-) -> Report:
+) -> PlanReport:
     """``calsim plan`` of a tracker plan (``[tracker]``) or a device plan (``[instrument]``): the
     report's ``instrument`` is ``"tracker"`` or the device's kind (``"trical"``)."""
-def import_urdf(urdf: Path, *, out: Path, package_root: Path | None = None, visual_meshes: bool = False) -> Report: ...
-def fk(robot: Path, joints: Path, *, out: Path | None = None) -> Report: ...
-def simulate_measurements(spec: Path, *, out: Path | None = None) -> Report: ...
-def keys(name: str) -> Report: ...
+def import_urdf(urdf: Path, *, out: Path, package_root: Path | None = None, visual_meshes: bool = False) -> ImportReport: ...
+def fk(robot: Path, joints: Path, *, out: Path | None = None) -> FkReport: ...
+def simulate_measurements(spec: Path, *, out: Path | None = None) -> SimulateReport: ...
+def keys(name: str) -> KeysReport: ...
 def key_names() -> list[str]: ...
 def init(kind: str, file: Path | None = None) -> str: ...

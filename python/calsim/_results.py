@@ -5,14 +5,28 @@ from __future__ import annotations
 
 import io
 import json
-from collections.abc import Mapping
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import polars as pl
 
-Report = Mapping[str, Any]
+if TYPE_CHECKING:
+    from ._calsim import (
+        BudgetReport,
+        CalibrateReport,
+        CompensateReport,
+        ExportReport,
+        FkReport,
+        ImportReport,
+        MergeReport,
+        OptimiseReport,
+        PlanReport,
+        RunReport,
+        SimulateReport,
+        SweepReport,
+        Table8Report,
+    )
 
 # The Rerun version of the recordings calsim writes (the `rerun` crate of Cargo.toml); a viewer of
 # another version may not read them.
@@ -92,20 +106,26 @@ class Results:
         return f"{type(self).__name__}(dest={str(self.dest)!r}, tables=[{names}], figures={len(self.figures)})"
 
 
-def _frames(report: Report) -> dict[str, pl.DataFrame]:
-    """The report's result frames by name, each sent as the bytes of its parquet encoding (its
-    schema travels with it: no column is named between calsim and here)."""
-    return {name: pl.read_parquet(io.BytesIO(data)) for name, data in report["frames"].items()}
+def _frames(report: RunReport) -> dict[str, pl.DataFrame]:
+    """The report's result frames by name, each handed over through the Arrow PyCapsule interface
+    (its schema travels with it: no column is named between calsim and here)."""
+    return {name: pl.DataFrame(frame) for name, frame in report["frames"].items()}
 
 
 class RunResult(Results):
     """What ``run`` and ``check`` did: the results directory, and ``checks`` (the published
-    figures beside calsim's, with band and verdict ``pass``, ``miss`` or ``-``), ``distribution``
-    (the same over realisations, or None: each figure's median with its interval and confidence,
-    the worlds without a value, and ``pass``, ``open``, ``miss`` or ``unresolved``, the last a
-    failure: too few worlds to judge), ``passed`` / ``missed``, ``timing``, ``warnings``."""
+    figures beside calsim's, with band and ``result`` ``pass``, ``miss`` or ``-``: whether realisation
+    0's value lies in its band), ``distribution`` (the same over realisations, or None: each
+    figure's median with its interval and confidence, the worlds without a value, and ``pass``,
+    ``open``, ``miss`` or ``unresolved``, the last a failure: too few worlds to judge), ``judged``,
+    ``passed`` / ``checked`` / ``missed``, ``timing``, ``warnings``.
 
-    def __init__(self, report: Report) -> None:
+    As the CLI: a check judges its figures (over one world, that world's values; over several, the
+    distribution); a run over one world shows one draw of each figure and judges nothing
+    (``judged`` False, ``passed``, ``checked`` and ``missed`` None: whether the model reproduces a
+    figure is judged over worlds, by ``check``); a run over realisations judges the distribution."""
+
+    def __init__(self, report: RunReport) -> None:
         super().__init__(report["dest"])
         self.name: str = report["name"]
         self.kind: str = report["kind"]
@@ -113,39 +133,50 @@ class RunResult(Results):
         self.threads: int = report["threads"]
         self.timing: str = report["timing"]
         self.realisations: int = report["realisations"]
-        self.checked: int = report["checked"]
-        self.missed: int = report["missed"]
+        self.judged: bool = report["judged"]
+        self.checked: int | None = report["checked"]
+        self.missed: int | None = report["missed"]
         self.warnings: list[str] = list(report["warnings"])
         frames = _frames(report)
         self.checks: pl.DataFrame = frames["checks"]
         self.distribution: pl.DataFrame | None = frames.get("distribution")
 
     @property
-    def passed(self) -> bool:
-        """Every banded figure within its band (over the realisations when several ran)."""
-        return self.missed == 0
+    def passed(self) -> bool | None:
+        """Every banded figure within its band (over the realisations when several ran; the CLI's
+        exit code 0 of a check), or None when nothing was judged (a run of one world)."""
+        return None if self.missed is None else self.missed == 0
 
     def __repr__(self) -> str:
-        return (
-            f"RunResult({self.name!r}, kind={self.kind!r}, seed={self.seed}, "
-            f"{self.checked - self.missed} of {self.checked} figures within their bands, dest={str(self.dest)!r})"
-        )
+        if self.checked is None or self.missed is None:
+            verdict = "one world: one draw of each figure, judged over worlds by check"
+        elif self.distribution is not None:
+            verdict = f"{self.checked - self.missed} of {self.checked} figures not missed over {self.realisations} realisations"
+        else:
+            verdict = f"{self.checked - self.missed} of {self.checked} figures within their bands"
+        return f"RunResult({self.name!r}, kind={self.kind!r}, seed={self.seed}, {verdict}, dest={str(self.dest)!r})"
 
 
 class SweepResult(Results):
     """What a sweep or a merge did: the merged results (``tables['points']``, ``tables['sweep']``,
     the figures), the work units and how many failed; for one shard, ``shard_dir`` and no tables."""
 
-    def __init__(self, report: Report) -> None:
-        merged = report.get("merged")
+    def __init__(self, report: SweepReport | None, merged: MergeReport | None = None) -> None:
+        """A sweep's report (its merge within, or none for one shard), or a merge's alone."""
+        if report is not None:
+            merged = report["merged"]
         super().__init__(None if merged is None else merged["dest"])
-        self.name: str = report["name"]
-        self.units: int = merged["units"] if merged else report["units"]
+        if report is None:
+            assert merged is not None, "a sweep's report or a merge's"
+            self.name: str = Path(merged["dest"]).name
+        else:
+            self.name = report["name"]
+        self.units: int = merged["units"] if merged else report["units"] if report else 0
         self.failed: int = merged["failed"] if merged else 0
-        self.run_s: float | None = report.get("run_s")
-        self.shard: tuple[int, int] | None = (report["shard"][0], report["shard"][1]) if "shard" in report else None
-        self.shard_dir: Path | None = Path(report["shard_dir"]) if "shard_dir" in report else None
-        self.warnings: list[str] = list(report.get("warnings", []))
+        self.run_s: float | None = None if report is None else report["run_s"]
+        self.shard: tuple[int, int] | None = None if report is None else (report["shard"][0], report["shard"][1])
+        self.shard_dir: Path | None = None if report is None else Path(report["shard_dir"])
+        self.warnings: list[str] = [] if report is None else list(report["warnings"])
         self._summary: str = merged["summary"] if merged else ""
 
     @property
@@ -158,7 +189,7 @@ class BudgetResult(Results):
     ``tables['prediction']`` (the linear prediction beside the Monte Carlo), the figures and the
     budget table as text (``summary``)."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: BudgetReport) -> None:
         super().__init__(report["dest"])
         self.units: int = report["units"]
         self.run_s: float = report["run_s"]
@@ -174,7 +205,7 @@ class ExportResult:
     """An exported identification: ``dest`` holds ``robot.toml`` (the identified model with each
     parameter's standard deviation), ``before.toml``, ``robot.urdf`` and ``calibration.yaml``."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: ExportReport) -> None:
         self.dest: Path = Path(report["dest"])
         self.scenario: str = report["scenario"]
         self.task: int = report["task"]
@@ -201,7 +232,7 @@ class CalibrationResult(Results):
     CLI's report (``report``) and, with ``plan_worlds``, the plan's comparison (``plan``: the
     measured held-out statistic beside the simulated one with its P10-P90, and ``inside``)."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: CalibrateReport) -> None:
         super().__init__(report["dest"])
         self.dest: Path = Path(report["dest"])
         self.model: str = report["model"]
@@ -222,7 +253,7 @@ class OptimiseResult(Results):
     the restarts and designs this run evaluated, the timings, the summary and the winner's timing
     line (``cost``)."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: OptimiseReport) -> None:
         super().__init__(report["dest"])
         self.name: str = report["name"]
         self.restarts: int = report["restarts"]
@@ -253,7 +284,7 @@ class CompensateResult:
     ``csv`` (the CLI's text), ``unreachable`` (1-based target numbers) and ``out`` (the CSV
     written, or None)."""
 
-    def __init__(self, report: Report, out: Path | None) -> None:
+    def __init__(self, report: CompensateReport, out: Path | None) -> None:
         self.csv: str = report["csv"]
         self.targets: int = report["targets"]
         self.unreachable: list[int] = list(report["unreachable"])
@@ -283,7 +314,7 @@ class Table8Result:
     median, std and max after calibration beside calsim's, each the median over the worlds, with
     the P10-P90 of the median over them), ``worlds`` calibrated, ``run_s``, ``warnings``."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: Table8Report) -> None:
         self.table: pl.DataFrame = pl.DataFrame(report["rows"], schema=_TABLE8_SCHEMA)
         self.worlds: int = report["worlds"]
         self.run_s: float = report["run_s"]
@@ -307,7 +338,7 @@ class PlanResult:
     or DETMAX, random and greedy selection as a DataFrame; a tracker plan's), ``figure``
     (``plan_poses.png``) and ``seconds``."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: PlanReport) -> None:
         self.instrument: str = report["instrument"]
         self.dest: Path = Path(report["dest"])
         self.pool: int = report["pool"]
@@ -354,7 +385,7 @@ class ImportResult:
     """An imported URDF: ``robot_file`` (the robot file written) and ``lines`` (what became of
     the geometry, masses, meshes and passive joints)."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: ImportReport) -> None:
         self.robot_file: Path = Path(report["out"])
         self.lines: list[str] = list(report["lines"])
 
@@ -367,7 +398,7 @@ class FkResult:
     ... ``gamma_deg`` in {W}, gravity torques ``tau*_nm``, deflections ``deflection*_mdeg`` and
     ``within_limits``) and ``csv`` (the CLI's text)."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: FkReport) -> None:
         self.csv: str = report["csv"]
         self.rows: int = report["rows"]
         self.table: pl.DataFrame = _csv_frame(self.csv, [])
@@ -382,7 +413,7 @@ class SimulatedMeasurements:
     joint values and positions as floats read back bit for bit), ``rows`` and ``path`` (the file
     written, or None)."""
 
-    def __init__(self, report: Report) -> None:
+    def __init__(self, report: SimulateReport) -> None:
         self.csv: str = report["csv"]
         self.rows: int = report["rows"]
         self.path: Path | None = None if report["written"] is None else Path(report["written"])

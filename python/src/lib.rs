@@ -16,10 +16,14 @@ use calsim::design::budget::BudgetError as CoreBudgetError;
 use calsim::design::sweep::{MergeError as CoreMergeError, SweepError as CoreSweepError};
 use calsim::device::ScenarioError as CoreScenarioError;
 use calsim::io::out_dir::OutDirError;
+use calsim::io::table::Frame;
 use calsim::robot::fk::JointsCsvError;
+use polars::prelude::{ArrowDataType, ArrowField, CompatLevel};
+use polars_arrow::array::{Array, StructArray};
+use polars_arrow::ffi::{ArrowArrayStream, export_iterator};
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyCapsule, PyDict, PyList};
 
 pyo3::create_exception!(
     calsim,
@@ -359,23 +363,64 @@ fn run<'py>(
     d.set_item("recording_s", r.recording_s)?;
     d.set_item("realisations", r.realisations_run)?;
     d.set_item("false_alarm", r.false_alarm)?;
+    // As the CLI: a check judges its figures, over one world or several; a run shows one world's
+    // figures as draws (no verdict), and judges them only over realisations.
+    let judged = check || r.distribution.is_some();
     let (checked, missed) = r.tally();
-    d.set_item("checked", checked)?;
-    d.set_item("missed", missed)?;
-    d.set_item("frames", frames(py, &r.frames)?)?;
+    d.set_item("judged", judged)?;
+    d.set_item("checked", judged.then_some(checked))?;
+    d.set_item("missed", judged.then_some(missed))?;
+    d.set_item("frames", frames(py, r.frames)?)?;
     d.set_item("warnings", warnings)?;
     Ok(d)
 }
 
-/// Result frames by name, each as the bytes of its parquet encoding (read on the Python side
-/// with `polars.read_parquet`: the schema travels with the values, no column is named here).
-fn frames<'py>(py: Python<'py>, frames: &[(String, calsim::io::table::Frame)]) -> PyResult<Bound<'py, PyDict>> {
+/// Result frames by name, each an [`ArrowFrame`] (read on the Python side with
+/// `polars.DataFrame(frame)`: the schema travels with the values, no column is named here).
+fn frames(py: Python<'_>, frames: Vec<(String, Frame)>) -> PyResult<Bound<'_, PyDict>> {
     let d = PyDict::new(py);
-    let encoded = calsim::io::table::parquet_frames(frames).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
-    for (name, bytes) in encoded {
-        d.set_item(name, pyo3::types::PyBytes::new(py, &bytes))?;
+    for (name, frame) in frames {
+        d.set_item(name, ArrowFrame(frame))?;
     }
     Ok(d)
+}
+
+/// A result frame handed to Python through the Arrow PyCapsule interface: `__arrow_c_stream__`
+/// exports its record batches over the Arrow C stream interface, sharing the frame's buffers (no
+/// value is copied or converted; polars' own Arrow types, string views included).
+#[pyclass(frozen, module = "calsim._calsim")]
+struct ArrowFrame(Frame);
+
+#[pymethods]
+impl ArrowFrame {
+    /// The frame as an `arrow_array_stream` capsule of struct arrays, one per record batch.
+    /// `requested_schema` is not honoured (the interface lets a producer export its own schema).
+    #[pyo3(signature = (requested_schema=None))]
+    fn __arrow_c_stream__<'py>(&self, py: Python<'py>, requested_schema: Option<Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyCapsule>> {
+        let _ = requested_schema;
+        PyCapsule::new_with_value(py, arrow_stream(&self.0), c"arrow_array_stream")
+    }
+
+    /// Rows and columns, as polars gives them.
+    #[getter]
+    fn shape(&self) -> (usize, usize) {
+        self.0.shape()
+    }
+}
+
+/// The Arrow C stream of `frame`: its record batches as struct arrays of polars' newest Arrow
+/// types, the columns' buffers shared (the capsule's consumer releases them).
+fn arrow_stream(frame: &Frame) -> ArrowArrayStream {
+    let level = CompatLevel::newest();
+    let mut frame = frame.clone();
+    frame.rechunk_mut();
+    let fields: Vec<ArrowField> = frame.columns().iter().map(|c| c.field().to_arrow(level)).collect();
+    let dtype = ArrowDataType::Struct(fields);
+    let batches: Vec<Box<dyn Array>> = frame
+        .iter_chunks(level, false)
+        .map(|batch| Box::new(StructArray::new(dtype.clone(), batch.height(), batch.into_arrays(), None)) as Box<dyn Array>)
+        .collect();
+    export_iterator(Box::new(batches.into_iter().map(Ok)), ArrowField::new("".into(), dtype, false))
 }
 
 /// The merge report as a dict.
@@ -666,25 +711,24 @@ fn plan<'py>(
         return plan_device(py, &spec, progress);
     }
     let (r, warnings) = detached(py, progress, |o| app::plan::plan(&spec, o))?;
-    let o = &r.outcome;
-    let p = &o.prediction;
-    let d = PyDict::new(py);
-    d.set_item("instrument", "tracker")?;
-    d.set_item("dest", &r.dir)?;
-    d.set_item("poses", o.poses)?;
-    d.set_item("validation", r.plan.validation)?;
-    d.set_item("pool", o.pool.qs.len())?;
-    d.set_item("drawn", o.pool.tried)?;
-    d.set_item("o1", o.o1.0)?;
-    d.set_item("o1_random", o.o1.1)?;
-    d.set_item("predicted_p10_mm", p.quantiles_mm[0])?;
-    d.set_item("predicted_mm", p.quantiles_mm[1])?;
-    d.set_item("predicted_p90_mm", p.quantiles_mm[2])?;
-    d.set_item("worlds", p.worlds)?;
-    d.set_item("pilot_mm", p.pilot_median_mm)?;
+    let (o, p) = (&r.outcome, &r.outcome.prediction);
+    let shared = PlanShared {
+        instrument: "tracker",
+        dest: &r.dir,
+        poses: o.poses,
+        validation: r.plan.validation,
+        pool: o.pool.qs.len(),
+        drawn: o.pool.tried,
+        o1: o.o1,
+        quantiles_mm: p.quantiles_mm,
+        worlds: p.worlds,
+        pilot_mm: p.pilot_median_mm,
+        search: o.search.as_ref(),
+        seconds: r.seconds,
+    };
+    let d = shared.dict(py, warnings)?;
     d.set_item("twin", p.twin)?;
     d.set_item("unidentifiable", p.unidentifiable.iter().map(|u| u.name.clone()).collect::<Vec<_>>())?;
-    d.set_item("objective", objective_of(py, o.search.as_ref())?)?;
     match &o.comparison {
         None => d.set_item("comparison", py.None())?,
         Some(c) => {
@@ -704,9 +748,47 @@ fn plan<'py>(
             d.set_item("comparison", rows)?;
         }
     }
-    d.set_item("seconds", r.seconds)?;
-    d.set_item("warnings", warnings)?;
     Ok(d)
+}
+
+/// What the report of a tracker plan and of a device plan share.
+struct PlanShared<'a> {
+    instrument: &'a str,
+    dest: &'a std::path::Path,
+    poses: usize,
+    validation: usize,
+    pool: usize,
+    drawn: usize,
+    o1: (f64, f64),
+    quantiles_mm: [f64; 3],
+    worlds: usize,
+    pilot_mm: f64,
+    search: Option<&'a calsim::plan::Search>,
+    seconds: f64,
+}
+
+impl PlanShared<'_> {
+    /// The plan's report with these keys (and `warnings`).
+    fn dict<'py>(&self, py: Python<'py>, warnings: Vec<String>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("instrument", self.instrument)?;
+        d.set_item("dest", self.dest)?;
+        d.set_item("poses", self.poses)?;
+        d.set_item("validation", self.validation)?;
+        d.set_item("pool", self.pool)?;
+        d.set_item("drawn", self.drawn)?;
+        d.set_item("o1", self.o1.0)?;
+        d.set_item("o1_random", self.o1.1)?;
+        d.set_item("predicted_p10_mm", self.quantiles_mm[0])?;
+        d.set_item("predicted_mm", self.quantiles_mm[1])?;
+        d.set_item("predicted_p90_mm", self.quantiles_mm[2])?;
+        d.set_item("worlds", self.worlds)?;
+        d.set_item("pilot_mm", self.pilot_mm)?;
+        d.set_item("objective", objective_of(py, self.search)?)?;
+        d.set_item("seconds", self.seconds)?;
+        d.set_item("warnings", warnings)?;
+        Ok(d)
+    }
 }
 
 /// The objective's search as the plan's report gives it (`None`: the count is fixed).
@@ -733,28 +815,25 @@ fn objective_of<'py>(py: Python<'py>, search: Option<&calsim::plan::Search>) -> 
 /// figures in its keys.
 fn plan_device<'py>(py: Python<'py>, spec: &app::plan::PlanSpec, progress: Option<Py<PyAny>>) -> PyResult<Bound<'py, PyDict>> {
     let (r, warnings) = detached(py, progress, |o| app::plan::plan_device(spec, o))?;
-    let o = &r.outcome;
-    let p = &o.prediction;
-    let d = PyDict::new(py);
-    d.set_item("instrument", r.plan.kind)?;
-    d.set_item("dest", &r.dir)?;
-    d.set_item("poses", o.poses)?;
-    d.set_item("validation", r.plan.validation)?;
-    d.set_item("pool", o.candidates - o.refused[0] - o.refused[1])?;
-    d.set_item("drawn", o.candidates)?;
-    d.set_item("o1", o.o1.0)?;
-    d.set_item("o1_random", o.o1.1)?;
-    d.set_item("predicted_p10_mm", p.quantiles_mm[0])?;
-    d.set_item("predicted_mm", p.quantiles_mm[1])?;
-    d.set_item("predicted_p90_mm", p.quantiles_mm[2])?;
-    d.set_item("worlds", p.worlds)?;
-    d.set_item("pilot_mm", p.pilot_median_mm)?;
+    let (o, p) = (&r.outcome, &r.outcome.prediction);
+    let shared = PlanShared {
+        instrument: r.plan.kind,
+        dest: &r.dir,
+        poses: o.poses,
+        validation: r.plan.validation,
+        pool: o.candidates - o.refused[0] - o.refused[1],
+        drawn: o.candidates,
+        o1: o.o1,
+        quantiles_mm: p.quantiles_mm,
+        worlds: p.worlds,
+        pilot_mm: p.pilot_median_mm,
+        search: o.search.as_ref(),
+        seconds: r.seconds,
+    };
+    let d = shared.dict(py, warnings)?;
     d.set_item("twin", false)?;
     d.set_item("unidentifiable", p.unidentifiable.clone())?;
-    d.set_item("objective", objective_of(py, o.search.as_ref())?)?;
     d.set_item("comparison", py.None())?;
-    d.set_item("seconds", r.seconds)?;
-    d.set_item("warnings", warnings)?;
     Ok(d)
 }
 
@@ -855,6 +934,7 @@ fn _calsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("StudyError", py.get_type::<StudyError>())?;
     m.add("FileError", py.get_type::<FileError>())?;
     m.add("DataError", py.get_type::<DataError>())?;
+    m.add_class::<ArrowFrame>()?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import struct
 import subprocess
 import sys
 import threading
@@ -25,6 +26,11 @@ SPMS = REPO / "scenarios" / "er20c10_spms.toml"
 
 # A study small enough for a debug build: 2 set sizes x 3 repetitions of the CI scenario.
 SMALL: dict[str, Any] = dict(set_sizes=[40, 75], repetitions=3, threads=2, recording=False, progress=False)
+
+
+def bits(frame: pl.DataFrame) -> list[tuple[object, ...]]:
+    """Every cell of the frame, a float as its 8 bytes (signed zeros and NaNs told apart)."""
+    return [tuple(struct.pack("<d", v) if isinstance(v, float) else v for v in row) for row in frame.iter_rows()]
 
 
 @pytest.fixture(scope="module")
@@ -46,8 +52,8 @@ def test_run_returns_every_table_as_a_dataframe_with_the_overrides_applied(small
         "table7",
         "correlations",
     }
-    # The checks the run hands over are the table it wrote, schema and values.
-    assert r.checks.equals(r.tables["checks"]) and r.checks.schema == r.tables["checks"].schema
+    # The checks the run hands over are the table it wrote, schema and every value bit for bit.
+    assert r.checks.schema == r.tables["checks"].schema and bits(r.checks) == bits(r.tables["checks"])
     tasks = r.tables["tasks"]
     assert isinstance(tasks, pl.DataFrame)
     # One DETMAX identification per set size and repetition, in task order.
@@ -66,11 +72,31 @@ def test_run_checks_are_a_dataframe_of_the_published_figures(small_run: calsim.R
     assert set(checks["result"].unique()) <= {"pass", "miss", "-"}
     before = checks.filter(pl.col("figure").str.starts_with("before calibration: mean error"))
     assert before.height == 1 and before["published_value"][0] == pytest.approx(2.628)
-    # The checked and missed counts agree with the rows.
-    banded = checks.filter(pl.col("result") != "-")
-    assert small_run.checked == banded.height
-    assert small_run.missed == banded.filter(pl.col("result") == "miss").height
     assert small_run.distribution is None
+
+
+def test_a_run_of_one_world_judges_nothing_as_the_cli(small_run: calsim.RunResult) -> None:
+    # The CLI shows one world's figures as draws, without a verdict or a tally.
+    r = small_run
+    assert not r.judged and r.passed is None and r.checked is None and r.missed is None
+    assert "judged over worlds by check" in repr(r) and "within their bands" not in repr(r)
+
+
+def test_a_check_of_one_world_judges_its_values_as_the_cli(tmp_path: Path) -> None:
+    r = calsim.check(QUICK, out=tmp_path, realisations=1, plots=False, **{**SMALL, "set_sizes": [75]})
+    assert r.judged and r.distribution is None
+    # The checked and missed counts agree with the rows, and with the CLI's tally and exit code.
+    banded = r.checks.filter(pl.col("result") != "-")
+    missed = banded.filter(pl.col("result") == "miss").height
+    assert r.checked == banded.height and r.missed == missed and r.passed == (missed == 0)
+    assert f"{banded.height - missed} of {banded.height} figures within their bands" in repr(r)
+    cli = os.environ.get("CALSIM_BIN") or shutil.which("calsim")
+    if cli is None:
+        pytest.skip("no calsim binary (set CALSIM_BIN)")
+    args = ["check", str(QUICK), "--out", str(tmp_path / "cli"), "--realisations", "1", "--set-sizes", "75", "--repetitions", "3"]
+    done = subprocess.run([cli, *args, "--threads", "2", "--no-plots", "--no-recording"], capture_output=True, text=True)
+    assert f"check: {banded.height - missed} of {banded.height} figures within their bands" in done.stdout
+    assert done.returncode == (1 if missed else 0)
 
 
 def test_run_lists_its_figures_and_summary(small_run: calsim.RunResult) -> None:
@@ -117,7 +143,10 @@ def test_check_with_realisations_judges_every_figure_over_the_worlds(tmp_path: P
     assert d is not None and d.height == r.checks.height
     assert d["figure"].to_list() == r.checks["figure"].to_list()
     assert (d["count"] <= 5).all()
-    assert r.passed == (d.filter(pl.col("result").is_in(["miss", "unresolved"])).height == 0)
+    # The distribution handed over is the table written, every value bit for bit.
+    written = r.tables["checks_over_worlds"]
+    assert d.schema == written.schema and bits(d) == bits(written)
+    assert r.judged and r.passed == (d.filter(pl.col("result").is_in(["miss", "unresolved"])).height == 0)
 
 
 def test_a_check_over_too_few_worlds_to_judge_is_refused(tmp_path: Path) -> None:

@@ -39,17 +39,11 @@ pub fn write_frame(dir: &Path, name: &str, frame: DataFrame) -> std::io::Result<
     crate::io::out_dir::write_file(&dir.join(name), parquet_bytes(name, frame)?)
 }
 
-/// The parquet encoding of the table `name` (the bytes of its file; what the Python package reads
-/// a frame from: the schema travels with the values, no column is named in between).
+/// The parquet encoding of the table `name` (the bytes of its file).
 pub fn parquet_bytes(name: &str, mut frame: DataFrame) -> std::io::Result<Vec<u8>> {
     let mut bytes = Vec::new();
     ParquetWriter::new(&mut bytes).finish(&mut frame).map_err(|e| std::io::Error::other(format!("{name}: {e}")))?;
     Ok(bytes)
-}
-
-/// Frames by name as the bytes of their parquet encodings ([`parquet_bytes`]), in order.
-pub fn parquet_frames(frames: &[(String, DataFrame)]) -> std::io::Result<Vec<(String, Vec<u8>)>> {
-    frames.iter().map(|(name, frame)| Ok((name.clone(), parquet_bytes(name, frame.clone())?))).collect()
 }
 
 /// The sha256 of every result table (`*.parquet`) in `dir`, by file name: two runs gave the same
