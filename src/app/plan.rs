@@ -170,10 +170,11 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
         Some(o) => format!("{} to {} (by objective)", o.fewest_poses, o.most_poses),
     };
     observer.started(&format!(
-        "calsim plan: {} ({poses} poses from the {} the {} centres, {} validation, {} worlds), {}",
+        "calsim plan: {} ({poses} poses from the {} the {} {}, {} validation, {} worlds), {}",
         spec.file.display(),
         plan.pool,
         plan.kind,
+        if plan.kind == "spms" { "head measures" } else { "centres" },
         plan.validation,
         plan.worlds,
         super::threads_label(threads)
