@@ -783,11 +783,11 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
     let r = app::plan::plan_device(spec, &Terminal::new()).map_err(|e| e.to_string())?;
     let p = &r.outcome.prediction;
     let [a, b, c] = p.quantiles_mm;
+    let (chosen, pool) = if r.plan.kind == "spms" { ("measured", "the spms head's pool") } else { ("centred", "the trical centring") };
     println!(
-        "calsim plan: {} centred + {} validation configurations, the {} centring {} ({} kept); O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
+        "calsim plan: {} {chosen} + {} validation configurations, {pool} {} ({} kept); O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
         r.outcome.poses,
         r.plan.validation,
-        r.plan.kind,
         r.outcome.candidates,
         r.outcome.candidates - r.outcome.refused[0] - r.outcome.refused[1],
         r.outcome.o1.0,

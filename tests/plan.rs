@@ -113,7 +113,20 @@ fn one_and_two_threads_write_the_same_bytes() {
     let names: Vec<&str> = r.files_1.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(
         names,
-        ["joints.txt", "manifest.json", "plan.md", "plan_poses.png", "plan_poses.svg", "poses.csv", "simulated.csv", "tour.csv"]
+        [
+            "joints.txt",
+            "manifest.json",
+            "plan.md",
+            "plan.parquet",
+            "plan_poses.png",
+            "plan_poses.svg",
+            "poses.csv",
+            "simulated.csv",
+            "tour.csv",
+            "tour_moves.parquet",
+            "unidentifiable.parquet",
+            "worlds.parquet"
+        ]
     );
     assert_eq!(r.files_1, r.files_2);
     assert!(r.dir.exists());
@@ -133,6 +146,98 @@ fn one_and_two_threads_write_the_same_bytes() {
         assert!(svg.contains(label), "{label}");
     }
     assert!(r.files_1.iter().find(|(n, _)| n == "plan_poses.png").unwrap().1.starts_with(b"\x89PNG"));
+}
+
+/// The rows of the Markdown table under `heading` in `md`, each as its cells.
+fn markdown_rows(md: &str, heading: &str) -> Vec<Vec<String>> {
+    let after = &md[md.find(heading).unwrap_or_else(|| panic!("no {heading} in {md}"))..];
+    let table = after.lines().skip_while(|l| !l.starts_with('|')).take_while(|l| l.starts_with('|'));
+    table.skip(2).map(|l| l.trim_matches('|').split(" | ").map(|c| c.trim().to_string()).collect()).collect()
+}
+
+fn frame(path: &Path) -> polars::prelude::DataFrame {
+    use polars::prelude::SerReader as _;
+    polars::prelude::ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
+}
+
+/// Column `name` of `f` as numbers (counts and floats alike).
+fn numbers(f: &polars::prelude::DataFrame, name: &str) -> Vec<f64> {
+    let c = f.column(name).unwrap_or_else(|_| panic!("no column {name}")).cast(&polars::prelude::DataType::Float64).unwrap();
+    let c = c.f64().unwrap();
+    (0..c.len()).map(|k| c.get(k).unwrap_or(f64::NAN)).collect()
+}
+
+/// `x` at `decimals`, as plan.md prints an interval's end (`unbounded` when infinite).
+fn shown(x: f64, decimals: usize) -> String {
+    if x.is_finite() { format!("{x:.decimals$}") } else { "unbounded".into() }
+}
+
+/// Every figure of the tables of the plan.md in `dir` equals its stored parquet value at the
+/// printed precision: the predicted held-out error, and when the plan has them the objective's
+/// counts and the comparison's selections. Returns the tables checked.
+fn plan_md_equals_its_stored_tables(dir: &Path) -> usize {
+    let md = std::fs::read_to_string(dir.join("plan.md")).unwrap();
+    let plan = frame(&dir.join("plan.parquet"));
+    let v = |name: &str| numbers(&plan, name)[0];
+    let row = &markdown_rows(&md, "## Predicted held-out error")[0];
+    assert_eq!(row[..3], [shown(v("p10_mm"), 4), shown(v("median_mm"), 4), shown(v("p90_mm"), 4)], "{md}");
+    if plan.column("instrument").is_ok() {
+        assert_eq!(row[3], format!("{}-{}", shown(v("median_lo_mm"), 4), shown(v("median_hi_mm"), 4)));
+        assert_eq!(row[4], shown(v("pilot_median_mm"), 4));
+    } else {
+        assert_eq!(row[3], shown(v("pilot_median_mm"), 4));
+        assert_eq!(row[4], plan.column("pilot_chosen").unwrap().str().unwrap().get(0).unwrap());
+    }
+    let mut checked = 1;
+    if dir.join("search.parquet").exists() {
+        let search = frame(&dir.join("search.parquet"));
+        let rows = markdown_rows(&md, "## Number of poses by objective");
+        assert_eq!(rows.len(), search.height(), "{md}");
+        let meets = search.column("meets").unwrap().bool().unwrap().clone();
+        let meets: Vec<bool> = (0..meets.len()).map(|k| meets.get(k).unwrap()).collect();
+        for (k, r) in rows.iter().enumerate() {
+            let n = |c: &str| numbers(&search, c)[k];
+            assert_eq!(r[0], format!("{}", n("poses")));
+            assert_eq!(r[1], format!("{} / {}", n("successes"), n("worlds")));
+            assert_eq!((r[2].clone(), r[3].clone()), (shown(n("p_success"), 3), shown(n("lower"), 4)));
+            assert_eq!(r[4], if meets[k] { "yes" } else { "no" });
+        }
+        checked += 1;
+    }
+    if dir.join("comparison.parquet").exists() {
+        let c = frame(&dir.join("comparison.parquet"));
+        let rows = markdown_rows(&md, "## DETMAX against random and greedy selection");
+        assert_eq!(rows.len(), c.height(), "{md}");
+        let names = c.column("selection").unwrap().str().unwrap().clone();
+        let names: Vec<String> = (0..names.len()).map(|k| names.get(k).unwrap().to_string()).collect();
+        for (k, r) in rows.iter().enumerate() {
+            let n = |name: &str| numbers(&c, name)[k];
+            let iv = |p: &str| {
+                format!(
+                    "{} ({}-{})",
+                    shown(n(&format!("{p}_mm")), 4),
+                    shown(n(&format!("{p}_lo_mm")), 4),
+                    shown(n(&format!("{p}_hi_mm")), 4)
+                )
+            };
+            assert_eq!(r[..], [names[k].clone(), shown(n("o1"), 6), iv("median"), iv("p90")]);
+        }
+        checked += 1;
+    }
+    checked
+}
+
+/// Every figure of plan.md's tables equals its stored parquet value: the tracker plan, the
+/// TriCal plan, and a plan with an objective and the comparison (`an_objective_and_...`).
+#[test]
+fn every_figure_of_plan_md_equals_its_stored_parquet_value() {
+    assert_eq!(plan_md_equals_its_stored_tables(&run().report.dir), 1);
+    assert_eq!(plan_md_equals_its_stored_tables(&trical_run().report.dir), 1);
+    let worlds = frame(&run().report.dir.join("worlds.parquet"));
+    assert_eq!(
+        numbers(&worlds, "heldout_median_mm").iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        run().report.outcome.prediction.per_world_mm.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
 }
 
 /// The arm's frames 0..6 from the robot file's modified-DH table (alpha_{i-1}, a_{i-1}, theta_i +
@@ -175,12 +280,18 @@ fn point_box(x: &Vector3<f64>, lo: &Vector3<f64>, hi: &Vector3<f64>) -> f64 {
 const STEP: f64 = 0.5;
 const SAMPLED: f64 = STEP / 2.0;
 
-#[test]
-fn every_planned_pose_is_feasible_by_an_independent_computation() {
-    let r = run();
+/// A body of the independent computation: its link (7: an SMR), its ends and radius, mm.
+type Body = (usize, Vector3<f64>, Vector3<f64>, f64);
+
+/// The joint limits of the IRB 120 plans' cells, deg.
+const IRB120_LIMITS_DEG: [[f64; 2]; 6] =
+    [[-120.0, 120.0], [-90.0, 100.0], [-100.0, 60.0], [-150.0, 150.0], [-115.0, 115.0], [-180.0, 180.0]];
+
+/// The IRB 120's robot file read here: its `[[joint]]` table and its capsules (link, ends in the
+/// link's frame, radius).
+fn irb120_capsules() -> (Vec<toml::Value>, Vec<Body>) {
     let robot: toml::Table = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap().parse().unwrap();
-    let joints = robot["joint"].as_array().unwrap();
-    let caps: Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> = robot["collision"]
+    let caps = robot["collision"]
         .as_array()
         .unwrap()
         .iter()
@@ -192,7 +303,58 @@ fn every_planned_pose_is_feasible_by_an_independent_computation() {
             (c["link"].as_integer().unwrap() as usize, v("a_mm"), v("b_mm"), c["radius_mm"].as_float().unwrap())
         })
         .collect();
-    let limits: [[f64; 2]; 6] = [[-120.0, 120.0], [-90.0, 100.0], [-100.0, 60.0], [-150.0, 150.0], [-115.0, 115.0], [-180.0, 180.0]];
+    (robot["joint"].as_array().unwrap().clone(), caps)
+}
+
+/// `tour.csv`'s stops in `dir`: pose, split and the joints (rad) from column `first_joint`.
+fn tour_stops(dir: &Path, first_joint: usize) -> Vec<(String, String, [f64; 6])> {
+    std::fs::read_to_string(dir.join("tour.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[1].to_string(), f[2].to_string(), std::array::from_fn(|i| f[first_joint + i].parse::<f64>().unwrap().to_radians()))
+        })
+        .collect()
+}
+
+/// Walks every move between `stops` at 1 deg of the joint that moves most, both ends included:
+/// each configuration inside [`IRB120_LIMITS_DEG`] and `free`. Returns the configurations checked.
+fn walk_tour(stops: &[(String, String, [f64; 6])], free: impl Fn(&[f64; 6]) -> Result<(), String>) -> usize {
+    let mut checked = 0;
+    for w in stops.windows(2) {
+        let (a, b) = (&w[0].2, &w[1].2);
+        let most = (0..6).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max);
+        let n = (most / 1f64.to_radians()).ceil().max(1.0) as usize;
+        for s in 0..=n {
+            let q: [f64; 6] = std::array::from_fn(|i| a[i] + (b[i] - a[i]) * s as f64 / n as f64);
+            for (i, l) in IRB120_LIMITS_DEG.iter().enumerate() {
+                assert!(q[i].to_degrees() >= l[0] - 1e-6 && q[i].to_degrees() <= l[1] + 1e-6, "joint {}", i + 1);
+            }
+            if let Err(e) = free(&q) {
+                panic!("{} -> {} at step {s} of {n}: {e}", w[0].0, w[1].0);
+            }
+            checked += 1;
+        }
+    }
+    checked
+}
+
+/// The via configurations a recording draws: its `/plan/vias/...` entities, and the rows of its
+/// `/plan/robot` (one per stop of the tour).
+fn recorded_vias(path: &Path) -> (Vec<String>, usize) {
+    let e = recording_entities(path);
+    let vias = e.keys().filter(|k| k.starts_with("/plan/vias/")).map(|k| k["/plan/vias/".len()..].to_string()).collect();
+    (vias, e.get("/plan/robot").map_or(0, |x| x.0))
+}
+
+#[test]
+fn every_planned_pose_is_feasible_by_an_independent_computation() {
+    let r = run();
+    let (joints, caps) = irb120_capsules();
+    let joints = &joints;
+    let limits = IRB120_LIMITS_DEG;
     let tracker = Vector3::new(1800.0, 0.0, 300.0);
     let aim = (Vector3::new(400.0, 0.0, 400.0) - tracker).normalize();
     let targets = [Vector3::new(0.0, 0.0, 40.0), Vector3::new(40.0, 30.0, 30.0)];
@@ -306,11 +468,12 @@ fn the_recording_and_the_figure_draw_the_arm_and_its_lines_of_sight_at_the_plann
     }
     let poses = r.report.outcome.rows.len();
     assert_eq!(poses, 48);
+    let stops = tour_stops(&r.report.dir, 3).len();
     for p in ["/plan/robot", "/plan/sight"] {
-        assert_eq!(rows(p), poses, "{p}: one row per stop of the tour");
+        assert_eq!(rows(p), stops, "{p}: one row per stop of the tour (poses and via configurations)");
         assert!(on(p, "tour_step"), "{p}");
     }
-    assert_eq!(rows("/tour/largest_move_deg"), poses + 1, "one value per stop and the series' style");
+    assert_eq!(rows("/tour/largest_move_deg"), stops + 1, "one value per stop and the series' style");
     let worlds = r.report.outcome.prediction.per_world_mm.iter().filter(|m| m.is_finite()).count();
     assert!(worlds >= 15, "{worlds} worlds with a value");
     assert_eq!(rows("/study/heldout_median_mm"), worlds + 1);
@@ -750,6 +913,7 @@ fn an_objective_and_a_comparison_write_the_same_bytes_for_1_and_2_threads() {
         )
         .unwrap();
         assert!(r.outcome.search.as_ref().unwrap().candidates.len() >= 2, "{:?}", r.outcome.search);
+        assert_eq!(plan_md_equals_its_stored_tables(&r.dir), 3, "the prediction, the objective and the comparison");
         files(&r.dir).into_iter().filter(|(n, _)| n != "manifest.json").collect::<Vec<_>>()
     };
     assert_eq!(go(1), go(2));
@@ -800,7 +964,23 @@ fn trical_run() -> &'static TricalRun {
 fn a_trical_plan_writes_the_same_bytes_for_1_and_2_threads() {
     let r = trical_run();
     let names: Vec<&str> = r.files_1.iter().map(|(n, _)| n.as_str()).collect();
-    assert_eq!(names, ["joints.txt", "manifest.json", "plan.md", "plan_poses.png", "plan_poses.svg", "poses.csv", "tour.csv"]);
+    assert_eq!(
+        names,
+        [
+            "joints.txt",
+            "manifest.json",
+            "plan.md",
+            "plan.parquet",
+            "plan_poses.png",
+            "plan_poses.svg",
+            "poses.csv",
+            "spheres.parquet",
+            "tour.csv",
+            "tour_moves.parquet",
+            "unidentifiable.parquet",
+            "worlds.parquet"
+        ]
+    );
     assert_eq!(r.files_1, r.files_2);
     assert!(r.report.dir.join("plan.rrd").exists());
     let svg = String::from_utf8(r.files_1.iter().find(|(n, _)| n == "plan_poses.svg").unwrap().1.clone()).unwrap();
@@ -822,21 +1002,9 @@ fn a_trical_plan_writes_the_same_bytes_for_1_and_2_threads() {
 #[test]
 fn every_trical_pose_is_centred_on_its_sphere_and_feasible_by_an_independent_computation() {
     let r = trical_run();
-    let robot: toml::Table = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap().parse().unwrap();
-    let joints = robot["joint"].as_array().unwrap();
-    let caps: Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> = robot["collision"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| {
-            let v = |k: &str| {
-                let a = c[k].as_array().unwrap();
-                Vector3::new(a[0].as_float().unwrap(), a[1].as_float().unwrap(), a[2].as_float().unwrap())
-            };
-            (c["link"].as_integer().unwrap() as usize, v("a_mm"), v("b_mm"), c["radius_mm"].as_float().unwrap())
-        })
-        .collect();
-    let limits: [[f64; 2]; 6] = [[-120.0, 120.0], [-90.0, 100.0], [-100.0, 60.0], [-150.0, 150.0], [-115.0, 115.0], [-180.0, 180.0]];
+    let (joints, caps) = irb120_capsules();
+    let joints = &joints;
+    let limits = IRB120_LIMITS_DEG;
     // The scenario's TCP in the flange frame (frame 6 is the flange in this robot file).
     let tcp = Vector3::new(35.0, 0.0, 125.0);
     let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
@@ -937,8 +1105,10 @@ fn trical_refused(edit: impl Fn(String) -> String, key: &str) -> String {
 fn bad_trical_plan_files_are_refused_naming_the_file_and_the_key() {
     let e = trical_refused(|t| t.replace("kind = \"trical\"", "kind = \"trical\"\nsphere_count = 3"), "sphere_count");
     assert!(e.contains("unknown field"), "{e}");
-    let e = trical_refused(|t| t.replace("kind = \"trical\"", "kind = \"spms\""), "instrument.kind");
+    let e = trical_refused(|t| t.replace("kind = \"trical\"", "kind = \"tracker\""), "instrument.kind");
     assert!(e.contains("not a device with a pool of its own"), "{e}");
+    let e = trical_refused(|t| t.replace("kind = \"trical\"", "kind = \"spms\""), "instrument.spheres_w_mm");
+    assert!(e.contains("an SPMS plan's stations"), "{e}");
     let e = trical_refused(|t| t.replace("pool = 360", "pool = 361"), "pool");
     assert!(e.contains("multiple of the 3 datum spheres"), "{e}");
     trical_refused(|t| t.replace("[300.0, 0.0, 0.0]", "[300.0, nan, 0.0]"), "instrument.spheres_w_mm");
@@ -950,6 +1120,28 @@ fn bad_trical_plan_files_are_refused_naming_the_file_and_the_key() {
     let e = trical_refused(|t| t.replace("[150.0, 259.8076, 0.0]]", "[150.0, 1900.0, 0.0]]"), "instrument");
     assert!(e.contains("sphere"), "{e}");
     trical_refused(|t| t.replace("floor_z_mm = 0.0", "floor_z_mm = inf"), "cell.floor_z_mm");
+}
+
+/// Bad SPMS plan files: one line naming the file and the key.
+#[test]
+fn bad_spms_plan_files_are_refused_naming_the_file_and_the_key() {
+    let refused = |edit: &dyn Fn(String) -> String, key: &str| -> String {
+        let dir = scratch(&format!("spms-bad-{}", key.replace(['.', '[', ']', ' '], "_")));
+        let file = dir.join("bad.toml");
+        std::fs::write(&file, spms_text(edit)).unwrap();
+        let spec = PlanSpec { file: file.clone(), out: dir.join("out"), threads: Some(2), simulate: false, recording: false };
+        let e = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).expect_err("a bad plan is refused").to_string();
+        assert!(e.starts_with(&file.display().to_string()) && e.contains(key) && !e.contains('\n'), "{e}: the file, {key}, one line");
+        assert!(!dir.join("out").join("bad.plan").exists());
+        e
+    };
+    let e = refused(&|t| t.replace("kind = \"spms\"", "kind = \"spms\"\nspheres_w_mm = [[0.0, 0.0, 0.0]]"), "instrument.spheres_w_mm");
+    assert!(e.contains("[station]"), "{e}");
+    let e = refused(&|t| t.replace(&t.lines().find(|l| l.starts_with("robot = ")).unwrap().to_string(), "robot = \"irb120\""), "robot");
+    assert!(e.contains("robot file"), "{e}");
+    refused(&|t| t.replace("er20c10_spms.toml\"", "irb120_trical.toml\""), "instrument.scenario");
+    let e = refused(&|t| t.replace("poses = 50", "poses = 5"), "poses");
+    assert!(e.contains("below 9"), "{e}");
 }
 
 #[test]
@@ -967,7 +1159,7 @@ fn the_command_exits_2_with_one_line_on_a_bad_trical_plan() {
 }
 
 #[test]
-fn the_trical_scenario_yields_its_pool_and_the_spms_none() {
+fn the_trical_scenario_yields_its_pool() {
     let s = calsim::device::load(&root().join("scenarios/irb120_trical.toml")).unwrap();
     let pool = s.candidate_pool().expect("the TriCal has a pool of its own").unwrap();
     assert_eq!(pool.observations.len(), 360);
@@ -981,8 +1173,24 @@ fn the_trical_scenario_yields_its_pool_and_the_spms_none() {
         assert!(seen.iter().all(|p| *p == seen[0]), "sphere {}", g + 1);
         assert!((seen[0] - Vector3::from(pool.groups_w_mm[g])).norm() < 0.1, "sphere {}: {:?}", g + 1, seen[0]);
     }
-    let spms = calsim::device::load(&root().join("scenarios/er20c10_spms.toml")).unwrap();
-    assert!(spms.candidate_pool().is_none());
+}
+
+/// The SPMS scenario's pool: the configurations the head measured at its three stations (shared
+/// evenly), each observing the sphere centre within the sphere's travel in the head (+-2, 15, 2
+/// mm) and the head's measuring error of its station's convergence point.
+#[test]
+fn the_spms_scenario_yields_its_pool_of_the_stations() {
+    let s = calsim::device::load(&root().join("scenarios/er20c10_spms.toml")).unwrap();
+    let pool = s.candidate_pool().expect("the SPMS has a pool of its own").unwrap();
+    assert_eq!(pool.observations.len(), 300);
+    assert_eq!((0..3).map(|g| pool.group_of.iter().filter(|x| **x == g).count()).collect::<Vec<_>>(), [100, 100, 100]);
+    assert_eq!((pool.jacobian.len, pool.jacobian.m), (300, pool.set.len()));
+    assert_eq!(pool.groups_w_mm.len(), 3);
+    let travel = Vector3::new(2.0, 15.0, 2.0).norm();
+    for (o, g) in pool.observations.iter().zip(&pool.group_of) {
+        let off = (o.tcp_world_mm - Vector3::from(pool.groups_w_mm[*g])).norm();
+        assert!(off < travel + 0.5, "station {}: {off} mm from its convergence point", g + 1);
+    }
 }
 
 #[test]
@@ -1039,20 +1247,8 @@ fn the_trical_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_in
     assert!(!o.colliding_moves.is_empty(), "the shipped TriCal plan's tour has a straight move through a collision");
     assert!(o.routing.unrouted.is_empty(), "{:?}", o.routing.unrouted);
     assert_eq!(o.routing.vias.iter().map(|v| v.between).collect::<Vec<_>>(), o.colliding_moves);
-    let robot: toml::Table = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap().parse().unwrap();
-    let joints = robot["joint"].as_array().unwrap();
-    let caps: Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> = robot["collision"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| {
-            let v = |k: &str| {
-                let a = c[k].as_array().unwrap();
-                Vector3::new(a[0].as_float().unwrap(), a[1].as_float().unwrap(), a[2].as_float().unwrap())
-            };
-            (c["link"].as_integer().unwrap() as usize, v("a_mm"), v("b_mm"), c["radius_mm"].as_float().unwrap())
-        })
-        .collect();
+    let (joints, caps) = irb120_capsules();
+    let joints = &joints;
     let bodies = |q: &[f64; 6]| -> Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> {
         let f = frames(joints, q);
         caps.iter().map(|(l, a, b, rad)| (*l, f[*l].1 + f[*l].0 * a, f[*l].1 + f[*l].0 * b, *rad)).collect()
@@ -1068,7 +1264,6 @@ fn the_trical_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_in
         j < i + 2 || touching(i, j)
     };
     let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
-    let limits: [[f64; 2]; 6] = [[-120.0, 120.0], [-90.0, 100.0], [-100.0, 60.0], [-150.0, 150.0], [-115.0, 115.0], [-180.0, 180.0]];
     // Free: what the planner's checks see within the 6-decimal rounding of tour.csv's degrees.
     const ROUNDED_MM: f64 = 0.01;
     let free = |q: &[f64; 6]| -> Result<(), String> {
@@ -1090,37 +1285,18 @@ fn the_trical_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_in
         }
         Ok(())
     };
-    let tour = std::fs::read_to_string(r.report.dir.join("tour.csv")).unwrap();
-    let stops: Vec<(String, String, [f64; 6])> = tour
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f[1].to_string(), f[2].to_string(), std::array::from_fn(|i| f[4 + i].parse::<f64>().unwrap().to_radians()))
-        })
-        .collect();
+    let stops = tour_stops(&r.report.dir, 4);
     let vias = stops.iter().filter(|s| s.1 == "via").count();
     assert_eq!(vias, o.routing.vias.iter().map(|v| v.qs.len()).sum::<usize>());
     assert_eq!(stops.len(), o.rows.len() + vias);
     assert!(stops.iter().filter(|s| s.1 == "via").all(|s| s.0.starts_with("via")));
     let poses = std::fs::read_to_string(r.report.dir.join("poses.csv")).unwrap();
     assert!(!poses.contains("via"), "a via configuration is not measured");
-    let mut checked = 0;
-    for w in stops.windows(2) {
-        let (a, b) = (&w[0].2, &w[1].2);
-        let most = (0..6).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max);
-        let n = (most / 1f64.to_radians()).ceil().max(1.0) as usize;
-        for s in 0..=n {
-            let q: [f64; 6] = std::array::from_fn(|i| a[i] + (b[i] - a[i]) * s as f64 / n as f64);
-            for i in 0..6 {
-                assert!(q[i].to_degrees() >= limits[i][0] - 1e-6 && q[i].to_degrees() <= limits[i][1] + 1e-6, "joint {}", i + 1);
-            }
-            if let Err(e) = free(&q) {
-                panic!("{} -> {} at step {s} of {n}: {e}", w[0].0, w[1].0);
-            }
-            checked += 1;
-        }
-    }
+    let checked = walk_tour(&stops, free);
+    // The recording draws the arm at every via configuration of tour.csv, and at every stop.
+    let (drawn, robot_rows) = recorded_vias(&r.report.dir.join("plan.rrd"));
+    assert_eq!(drawn, stops.iter().filter(|s| s.1 == "via").map(|s| s.0.clone()).collect::<Vec<_>>());
+    assert_eq!(robot_rows, stops.len());
     eprintln!("tour: {} stops ({vias} via), {checked} configurations checked", stops.len());
 }
 
@@ -1178,25 +1354,13 @@ fn the_tracker_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_i
     let dir = scratch("tracker-tour");
     let file = shipped_short(&dir, "irb120_tracker.toml", |t| t.replace("worlds = 30", "worlds = 2"));
     let r =
-        plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false, recording: false }, &calsim::app::Quiet).unwrap();
+        plan(&PlanSpec { file, out: dir.join("out"), threads: Some(2), simulate: false, recording: true }, &calsim::app::Quiet).unwrap();
     let o = &r.outcome;
     assert!(!o.colliding_moves.is_empty(), "the shipped tracker plan's tour has a straight move through a collision");
     assert!(o.routing.unrouted.is_empty(), "{:?}", o.routing.unrouted);
     assert_eq!(o.routing.vias.iter().map(|v| v.between).collect::<Vec<_>>(), o.colliding_moves);
-    let robot: toml::Table = std::fs::read_to_string(root().join("robots/irb120.toml")).unwrap().parse().unwrap();
-    let joints = robot["joint"].as_array().unwrap();
-    let caps: Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> = robot["collision"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| {
-            let v = |k: &str| {
-                let a = c[k].as_array().unwrap();
-                Vector3::new(a[0].as_float().unwrap(), a[1].as_float().unwrap(), a[2].as_float().unwrap())
-            };
-            (c["link"].as_integer().unwrap() as usize, v("a_mm"), v("b_mm"), c["radius_mm"].as_float().unwrap())
-        })
-        .collect();
+    let (joints, caps) = irb120_capsules();
+    let joints = &joints;
     let targets = [Vector3::new(0.0, 0.0, 40.0), Vector3::new(40.0, 30.0, 30.0)];
     let smr_r = 38.1 / 2.0;
     let tracker = Vector3::new(1800.0, 0.0, 300.0);
@@ -1220,7 +1384,6 @@ fn the_tracker_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_i
         j < i + 2 || (j == 7 && i >= 5) || touching(i, j)
     };
     let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
-    let limits: [[f64; 2]; 6] = [[-120.0, 120.0], [-90.0, 100.0], [-100.0, 60.0], [-150.0, 150.0], [-115.0, 115.0], [-180.0, 180.0]];
     // Free: what the planner's checks see within the 6-decimal rounding of tour.csv's degrees.
     const ROUNDED_MM: f64 = 0.01;
     let free = |q: &[f64; 6]| -> Result<(), String> {
@@ -1245,15 +1408,7 @@ fn the_tracker_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_i
         }
         Ok(())
     };
-    let tour = std::fs::read_to_string(r.dir.join("tour.csv")).unwrap();
-    let stops: Vec<(String, String, [f64; 6])> = tour
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f[1].to_string(), f[2].to_string(), std::array::from_fn(|i| f[3 + i].parse::<f64>().unwrap().to_radians()))
-        })
-        .collect();
+    let stops = tour_stops(&r.dir, 3);
     let vias = stops.iter().filter(|s| s.1 == "via").count();
     assert_eq!(vias, o.routing.vias.iter().map(|v| v.qs.len()).sum::<usize>());
     assert_eq!(stops.len(), o.rows.len() + vias);
@@ -1269,18 +1424,149 @@ fn the_tracker_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_i
         }
     }
     assert!(seen_straight >= 1, "no straight colliding move seen colliding here");
-    for w in stops.windows(2) {
-        let (a, b) = (&w[0].2, &w[1].2);
-        let most = (0..6).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max);
-        let n = (most / 1f64.to_radians()).ceil().max(1.0) as usize;
-        for s in 0..=n {
-            let q: [f64; 6] = std::array::from_fn(|i| a[i] + (b[i] - a[i]) * s as f64 / n as f64);
-            for i in 0..6 {
-                assert!(q[i].to_degrees() >= limits[i][0] - 1e-6 && q[i].to_degrees() <= limits[i][1] + 1e-6, "joint {}", i + 1);
-            }
-            if let Err(e) = free(&q) {
-                panic!("{} -> {} at step {s} of {n}: {e}", w[0].0, w[1].0);
-            }
+    walk_tour(&stops, free);
+    // The recording draws the arm at every via configuration of tour.csv, and at every stop.
+    let (drawn, robot_rows) = recorded_vias(&r.dir.join("plan.rrd"));
+    assert_eq!(drawn, stops.iter().filter(|s| s.1 == "via").map(|s| s.0.clone()).collect::<Vec<_>>());
+    assert_eq!(robot_rows, stops.len());
+}
+
+/// The shipped SPMS plan with its files named absolutely and `edit` applied to its text.
+fn spms_text(edit: impl Fn(String) -> String) -> String {
+    let t = std::fs::read_to_string(root().join("scenarios/plans/er20c10_spms.toml")).unwrap();
+    let t = t
+        .replace("\"../../robots/er20c10.toml\"", &format!("\"{}\"", root().join("robots/er20c10.toml").display()))
+        .replace("\"../er20c10_spms.toml\"", &format!("\"{}\"", root().join("scenarios/er20c10_spms.toml").display()));
+    edit(t)
+}
+
+/// The shipped SPMS plan (fewer worlds) run with 1 and with 2 threads.
+fn spms_run() -> &'static TricalRun {
+    static RUN: OnceLock<TricalRun> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let dir = scratch("spms");
+        let file = dir.join("spms.toml");
+        std::fs::write(&file, spms_text(|t| t.replace("worlds = 30", "worlds = 12"))).unwrap();
+        let go = |threads: u32| {
+            let spec = PlanSpec {
+                file: file.clone(),
+                out: dir.join(format!("out{threads}")),
+                threads: Some(threads),
+                simulate: true,
+                recording: true,
+            };
+            let r = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).unwrap();
+            let f = files(&r.dir).into_iter().filter(|(n, _)| n != "plan.rrd").collect();
+            (r, f)
+        };
+        let (_, files_1) = go(1);
+        let (report, files_2) = go(2);
+        TricalRun { report, files_1, files_2 }
+    })
+}
+
+#[test]
+fn an_spms_plan_writes_the_same_bytes_for_1_and_2_threads() {
+    let r = spms_run();
+    assert_eq!(r.files_1, r.files_2);
+    let o = &r.report.outcome;
+    assert_eq!(o.poses, 50);
+    assert_eq!(o.rows.len(), 50 + 20);
+    assert_eq!(o.candidates, 300);
+    assert!(o.o1.0 > o.o1.1, "DETMAX's O1 {} above a random set's {}", o.o1.0, o.o1.1);
+    let p = &o.prediction;
+    assert!(p.quantiles_mm[0] <= p.quantiles_mm[1] && p.quantiles_mm[1] <= p.quantiles_mm[2], "{:?}", p.quantiles_mm);
+    assert_eq!(plan_md_equals_its_stored_tables(&r.report.dir), 1);
+    let md = std::fs::read_to_string(r.report.dir.join("plan.md")).unwrap();
+    assert!(md.contains("the SPMS head") && !md.contains("TriCal"), "{md}");
+    let (drawn, robot_rows) = recorded_vias(&r.report.dir.join("plan.rrd"));
+    assert_eq!(robot_rows, tour_stops(&r.report.dir, 4).len());
+    assert_eq!(drawn.len(), o.routing.vias.iter().map(|v| v.qs.len()).sum::<usize>());
+}
+
+/// Every configuration of the shipped SPMS plan, by a computation here: within the plan's joint
+/// limits; the sphere on the flange (the scenario's [40, 0, 150] mm) at the modified-DH frames of
+/// robots/er20c10.toml computed here, in each station's head placed as the scenario's stations
+/// face the robot (head +y back towards the base axis, the convergence point [52, 180, 132] mm of
+/// the head on the station's point); the flange's axis within the 40 deg approach cone of the
+/// line to the head; a station's spheres within its travel (+-2, 15, 2 mm per head axis) of each
+/// other; the five beams of the paper's Table 2 meeting the sphere (50.8143 mm) at distances within
+/// the sensors' 75-130 mm range, the station's spheres taken about the convergence point (its
+/// teaching, by what the head reads, moves the commanded point by the station's placement error
+/// and the arm's error there, which the nominal arm and placement here do not see); the validation
+/// configurations' sphere inside the workspace of interest.
+#[test]
+fn every_spms_pose_is_within_its_stations_range_by_an_independent_computation() {
+    let r = spms_run();
+    let robot: toml::Table = std::fs::read_to_string(root().join("robots/er20c10.toml")).unwrap().parse().unwrap();
+    let joints = robot["joint"].as_array().unwrap();
+    let limits = [[-170.0, 170.0], [-90.0, 150.0], [-80.0, 170.0], [-180.0, 180.0], [-125.0, 125.0], [-360.0, 360.0]];
+    let stations: [Vector3<f64>; 3] = [[1200.0, -400.0, 500.0], [1200.0, 400.0, 500.0], [900.0, 0.0, 1100.0]].map(Vector3::from);
+    let c_head = Vector3::new(52.0, 180.0, 132.0);
+    let travel = Vector3::new(2.0, 15.0, 2.0);
+    let sphere_flange = Vector3::new(40.0, 0.0, 150.0);
+    let (w_lo, w_hi) = (Vector3::new(800.0, -200.0, 600.0), Vector3::new(1200.0, 200.0, 1000.0));
+    let csv = std::fs::read_to_string(r.report.dir.join("poses.csv")).unwrap();
+    let (mut holdout, mut in_head) = (0, vec![Vec::new(); 3]);
+    for line in csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("pose,")) {
+        let f: Vec<&str> = line.split(',').collect();
+        let q: [f64; 6] = std::array::from_fn(|i| f[4 + i].parse::<f64>().unwrap().to_radians());
+        for i in 0..6 {
+            let d = q[i].to_degrees();
+            assert!(d >= limits[i][0] - 1e-9 && d <= limits[i][1] + 1e-9, "{line}: joint {}", i + 1);
+        }
+        let fr = frames(joints, &q);
+        let sphere = fr[6].1 + fr[6].0 * sphere_flange;
+        if f[3] == "holdout" {
+            assert!(point_box(&sphere, &w_lo, &w_hi) < 0.01, "{line}: the sphere {sphere:?} outside the workspace of interest");
+            holdout += 1;
+            continue;
+        }
+        let k: usize = f[0].rsplit("_s").next().unwrap().parse::<usize>().unwrap() - 1;
+        let p = stations[k];
+        let rot = Rotation3::from_axis_angle(&Vector3::z_axis(), p.x.atan2(-p.y));
+        let cone = fr[6].0.column(2).angle(&(rot * -Vector3::y())).to_degrees();
+        assert!(cone <= 40.0 + 1e-6, "{line}: the flange's axis {cone} deg from the line to the head");
+        in_head[k].push((f[0].to_string(), rot.inverse() * (sphere - (p - rot * c_head))));
+    }
+    assert_eq!(holdout, 20);
+    assert_eq!(in_head.iter().map(Vec::len).sum::<usize>(), 50);
+    let mut readings: Vec<f64> = Vec::new();
+    for (k, spheres) in in_head.iter().enumerate() {
+        assert!(!spheres.is_empty(), "station {}: no configuration", k + 1);
+        let lo = spheres.iter().fold(Vector3::repeat(f64::INFINITY), |a, s| a.inf(&s.1));
+        let hi = spheres.iter().fold(Vector3::repeat(f64::NEG_INFINITY), |a, s| a.sup(&s.1));
+        // Within the travel of each other, up to the nominal arm's pose-dependent error (1 mm).
+        assert!((hi - lo).iter().zip(travel.iter()).all(|(d, t)| *d <= 2.0 * t + 1.0), "station {}: spread {:?}", k + 1, hi - lo);
+        let taught = (lo + hi) / 2.0 - c_head;
+        for (label, s) in spheres {
+            readings.extend(spms_readings(&(s - taught)).unwrap_or_else(|| panic!("{label}: a beam misses the sphere")));
         }
     }
+    let (lo, hi) = readings.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), l| (a.min(*l), b.max(*l)));
+    eprintln!("SPMS plan: the beams read {lo:.2}-{hi:.2} mm at the planned configurations");
+    assert!(lo >= 75.0 && hi <= 130.0, "readings {lo}-{hi} mm outside the sensors' 75-130 mm");
+}
+
+/// The distances along the paper's Table 2 beams (head frame) to a 50.8143 mm sphere centred at
+/// `c` (`None`: a beam misses it).
+fn spms_readings(c: &Vector3<f64>) -> Option<Vec<f64>> {
+    let beams: [([f64; 3], [f64; 3]); 5] = [
+        ([74.420, 67.247, 97.126], [-0.104, 0.976, 0.189]),
+        ([11.612, 69.074, 146.755], [0.210, 0.975, -0.069]),
+        ([92.918, 67.986, 142.254], [-0.190, 0.981, -0.031]),
+        ([52.951, 69.811, 175.249], [0.018, 0.981, -0.194]),
+        ([25.346, 70.181, 97.548], [0.143, 0.982, 0.124]),
+    ];
+    let radius = 50.8143 / 2.0;
+    beams
+        .iter()
+        .map(|(point, dir)| {
+            let (a, u) = (Vector3::from(*point), Vector3::from(*dir).normalize());
+            let m = a - c;
+            let b = m.dot(&u);
+            let disc = b * b - (m.norm_squared() - radius * radius);
+            (disc > 0.0).then(|| -b - disc.sqrt())
+        })
+        .collect()
 }

@@ -287,6 +287,7 @@ PLAN_LRMATE = "calsim plan scenarios/plans/lrmate200ic_tracker.toml"
 PLAN_OBJECTIVE = "calsim plan scenarios/plans/irb120_tracker_objective.toml"
 PLAN_TRICAL = "calsim plan scenarios/plans/irb120_trical.toml"
 PLAN_TRICAL_OBJECTIVE = "calsim plan scenarios/plans/irb120_trical_objective.toml"
+PLAN_SPMS = "calsim plan scenarios/plans/er20c10_spms.toml"
 
 
 def plan_printed(out: str) -> str:
@@ -391,6 +392,35 @@ def plan_trical_table(out: Output) -> str:
     )
 
 
+def plan_spms_table(out: Output) -> str:
+    """The figures of an SPMS plan's plan.md: its pool, its set, the prediction and the pilot, the tour."""
+    md = out.plan
+    pool = re.search(r"- Pool: the head measured the sphere at (\d+) configurations at the (\d+) stations .*; (\d+) kept .* \(refused: (.*)\)\.", md)
+    training = re.search(r"- Training: (\d+) configurations chosen by DETMAX \((.*)\)", md)
+    o1 = re.search(r"- O1 of the chosen set: (\S+) \(a random set of the same size from the same pool: (\S+)\)", md)
+    off = re.search(r"the true sphere centre lies within (\S+) mm of the head's measurement", md)
+    noise = re.search(r"observed at the chosen configurations with (\S+) mm per coordinate", md)
+    worlds = re.search(r"at the validation configurations over (\d+) simulated worlds", md)
+    unid = re.search(r"## Parameters the plan cannot identify\n\n(.*)\n", md).group(1)
+    pred = cells(md_table(md, "| P10, mm | median, mm")[2])
+    n = int(training.group(1))
+    where = ("below the worlds' P10" if float(pred[4]) < float(pred[0]) else
+             "above the worlds' P90" if float(pred[4]) > float(pred[2]) else "inside the worlds' P10-P90")
+    moves = n + int(re.search(r"- Validation: (\d+) configurations", md).group(1)) - 1
+    return (
+        "| figure | value |\n|---|---|\n"
+        f"| configurations the head measured / kept | {int(pool.group(1)):,} at {pool.group(2)} stations / {int(pool.group(3)):,} (refused: {pool.group(4)}) |\n"
+        f"| chosen by DETMAX | {n} ({training.group(2)}) |\n"
+        f"| O1 of DETMAX's {n} / of a random {n} from the same pool | {o1.group(1)} / {o1.group(2)} |\n"
+        f"| the true sphere centre from the head's measurement of it, at most | {off.group(1)} mm |\n"
+        f"| predicted held-out median, P10 / median / P90 ({worlds.group(1)} worlds, {noise.group(1)} mm per coordinate) | {pred[0]} / {pred[1]} / {pred[2]} mm (median's 90 % interval {pred[3]} mm) |\n"
+        f"| the pilot's held-out median (the head's own measurements) | {pred[4]} mm |\n"
+        f"| parameters the plan cannot identify | {unid} |\n"
+        + tour_row(md, moves) +
+        f"\nThe pilot lies {where} here.\n"
+    )
+
+
 def plan_comparison(out: Output) -> str:
     """The comparison's table of a plan.md and what it shows."""
     table = md_table(out.plan, "| selection | O1 |")
@@ -438,6 +468,8 @@ EXCERPTS = {
     "plan-trical-printed": ("docs/plan.md", PLAN_TRICAL, plan_printed),
     "plan-trical-table": ("docs/plan.md", PLAN_TRICAL, plan_trical_table),
     "plan-trical-objective": ("docs/plan.md", PLAN_TRICAL_OBJECTIVE, plan_objective),
+    "plan-spms-printed": ("docs/plan.md", PLAN_SPMS, plan_printed),
+    "plan-spms-table": ("docs/plan.md", PLAN_SPMS, plan_spms_table),
     "tracker-worlds": ("docs/tracker.md", "calsim run scenarios/irb120_tracker.toml --realisations 10 --no-plots --no-recording", worlds_table),
 }
 

@@ -93,6 +93,7 @@ more=(
     "plan-speed-objective|plan scenarios/plans/irb120_tracker_objective.toml --threads 2"
     "plan-speed-trical|plan scenarios/plans/irb120_trical.toml --threads 2"
     "plan-speed-trical-objective|plan scenarios/plans/irb120_trical_objective.toml --threads 2"
+    "plan-speed-spms|plan scenarios/plans/er20c10_spms.toml --threads 2"
 )
 for run in "${more[@]}"; do
     IFS='|' read -r name command <<<"$run"

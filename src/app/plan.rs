@@ -1,6 +1,7 @@
 //! `calsim plan`: reads a plan file, plans on the worker pool, writes `<out>/<plan stem>.plan/`
-//! (`poses.csv`, `joints.txt`, `tour.csv`, `plan.md`, the figure `plan_poses.png`/`.svg`, the
-//! Rerun recording `plan.rrd`, and `simulated.csv` with `--simulate`).
+//! (`poses.csv`, `joints.txt`, `tour.csv`, the tables (`plan.parquet` ..., see
+//! [`crate::plan::summary`]) and `plan.md` rendered from them, the figure `plan_poses.png`/`.svg`,
+//! the Rerun recording `plan.rrd`, and `simulated.csv` with `--simulate`).
 
 use std::path::{Path, PathBuf};
 
@@ -83,22 +84,19 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         None
     };
     let seconds = t0.elapsed().as_secs_f64();
+    // plan.md is rendered from the tables the directory stores.
+    let tables = crate::plan::summary::tables(&plan, &outcome);
     let files = [
         ("poses.csv", crate::plan::csv(&plan, &outcome.rows, None, &[])),
         ("joints.txt", crate::plan::joint_list(&plan, &outcome.rows)),
         ("tour.csv", crate::plan::tour_csv(&plan, &outcome)),
-        ("plan.md", crate::plan::markdown(&plan, &outcome)),
+        ("plan.md", crate::plan::summary::markdown(&tables).map_err(Error::io(&spec.out))?),
     ];
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
         let io = |e: std::io::Error| Error::io(&spec.out)(e);
         r.field("plan", &name).map_err(io)?.field("simulate", spec.simulate).map_err(io)?.field("recording", spec.recording).map_err(io)?;
-        for (f, text) in files {
-            r.file(f, text);
-        }
-        if let Some(text) = simulated {
-            r.file("simulated.csv", text);
-        }
+        add_files(&mut r, tables, files, simulated).map_err(io)?;
         // plan.md shows the figure itself.
         r.draw(Box::new(|d| crate::plan::plot::write(d, &plan, &cell, &outcome).map(|()| Vec::new())));
         if spec.recording {
@@ -112,6 +110,25 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
     };
     Ok(PlanReport { plan, outcome, dir, seconds })
+}
+
+/// The plan's tables, its files and `simulated.csv` (with `--simulate`) added to `r`.
+fn add_files(
+    r: &mut crate::io::results::Results<'_>,
+    tables: Vec<crate::plan::summary::Table>,
+    files: [(&str, String); 4],
+    simulated: Option<String>,
+) -> std::io::Result<()> {
+    for (name, columns) in tables {
+        r.table(name, columns)?;
+    }
+    for (f, text) in files {
+        r.file(f, text);
+    }
+    if let Some(text) = simulated {
+        r.file("simulated.csv", text);
+    }
+    Ok(())
 }
 
 /// What `calsim plan` returns for a plan whose instrument is a device with a pool of its own.
@@ -153,10 +170,11 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
         Some(o) => format!("{} to {} (by objective)", o.fewest_poses, o.most_poses),
     };
     observer.started(&format!(
-        "calsim plan: {} ({poses} poses from the {} the {} centres, {} validation, {} worlds), {}",
+        "calsim plan: {} ({poses} poses from the {} the {} {}, {} validation, {} worlds), {}",
         spec.file.display(),
         plan.pool,
         plan.kind,
+        if plan.kind == "spms" { "head measures" } else { "centres" },
         plan.validation,
         plan.worlds,
         super::threads_label(threads)
@@ -166,11 +184,13 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
         pool.install(|| crate::plan::device::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
     let simulated = spec.simulate.then(|| crate::plan::device::simulated_csv(&plan, &outcome));
     let seconds = t0.elapsed().as_secs_f64();
+    // plan.md is rendered from the tables the directory stores.
+    let tables = crate::plan::device_summary::tables(&plan, &outcome);
     let files = [
         ("poses.csv", crate::plan::device::csv(&plan, &outcome)),
         ("joints.txt", crate::plan::device::joint_list(&plan, &outcome)),
         ("tour.csv", crate::plan::device::tour_csv(&plan, &outcome)),
-        ("plan.md", crate::plan::device::markdown(&plan, &outcome)),
+        ("plan.md", crate::plan::device_summary::markdown(&tables).map_err(Error::io(&spec.out))?),
     ];
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
@@ -183,12 +203,7 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
             .map_err(io)?
             .field("recording", spec.recording)
             .map_err(io)?;
-        for (f, text) in files {
-            r.file(f, text);
-        }
-        if let Some(text) = simulated {
-            r.file("simulated.csv", text);
-        }
+        add_files(&mut r, tables, files, simulated).map_err(io)?;
         r.draw(Box::new(|d| crate::plan::device_view::write_figure(d, &plan, &outcome).map(|()| Vec::new())));
         if spec.recording {
             r.record_as(

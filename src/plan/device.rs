@@ -38,7 +38,7 @@ use crate::robot::{JOINTS, JointLimit, Joints, KinState, ParamSet, RobotModel, f
 use crate::study::ErrorStats;
 
 /// Instruments a plan's `[instrument]` may name: devices that measure at configurations of their own.
-pub const KINDS: [&str; 1] = ["trical"];
+pub const KINDS: [&str; 2] = ["trical", "spms"];
 
 /// Candidates drawn per validation configuration kept before the workspace of interest is given
 /// up as out of reach.
@@ -163,11 +163,16 @@ pub fn parse(path: &Path, text: &str) -> Result<DevicePlan, PlanError> {
         return Err(err("instrument.scenario", format!("is a {k} scenario, not a {kind} one")));
     }
     table.insert("kind".into(), kind.into());
-    trical_table(path, &mut table, &raw)?;
+    if kind == "spms" {
+        spms_table(path, &mut table, &raw)?;
+    } else {
+        trical_table(path, &mut table, &raw)?;
+    }
     let scenario_text = toml::to_string(&table).map_err(|e| err("instrument.scenario", e.to_string()))?;
     let mut scenario = device.load(&scenario_text, table, &anchor).map_err(|e| err("instrument.scenario", e.to_string()))?;
     scenario.header_mut().seed = raw.seed;
-    let set = scenario.study().parameter_set(ParamSet::trical_31).map_err(|e| err("instrument.scenario", e.to_string()))?;
+    let default_set = if kind == "spms" { crate::device::spms::calibration::default_parameters } else { ParamSet::trical_31 };
+    let set = scenario.study().parameter_set(default_set).map_err(|e| err("instrument.scenario", e.to_string()))?;
     let m = fewest_poses(set.len());
     if !(1..=spec::MOST_WORLDS).contains(&raw.worlds) {
         return Err(err("worlds", format!("{}: 1 to {}", raw.worlds, spec::MOST_WORLDS)));
@@ -228,12 +233,6 @@ pub fn parse(path: &Path, text: &str) -> Result<DevicePlan, PlanError> {
 /// configurations replace it.
 fn trical_table(path: &Path, table: &mut toml::Table, raw: &Raw) -> Result<(), PlanError> {
     let err = |key: &str, message: String| PlanError::new(path, key, message);
-    let section = |table: &mut toml::Table, name: &str| -> toml::Table {
-        match table.remove(name) {
-            Some(toml::Value::Table(t)) => t,
-            _ => toml::Table::new(),
-        }
-    };
     let mut cell = section(table, "cell");
     if let Some(s) = &raw.instrument.spheres_w_mm {
         if let Some(x) = s.iter().flatten().find(|x| !x.is_finite()) {
@@ -262,11 +261,45 @@ fn trical_table(path: &Path, table: &mut toml::Table, raw: &Raw) -> Result<(), P
     if spec::BUILTIN.contains(&raw.robot.as_str()) {
         r.remove("file");
     } else {
-        let file = crate::device::scenario::relative_to(path, Path::new(&raw.robot));
-        // Absolute: the scenario's loader reads it relative to the scenario.
-        let file = std::path::absolute(&file).map_err(|e| err("robot", e.to_string()))?;
-        r.insert("file".into(), file.display().to_string().into());
+        r.insert("file".into(), absolute_robot(path, raw)?.into());
     }
+    table.insert("robot".into(), toml::Value::Table(r));
+    Ok(())
+}
+
+/// The table `name` of `table`, taken out of it (empty when it has none).
+fn section(table: &mut toml::Table, name: &str) -> toml::Table {
+    match table.remove(name) {
+        Some(toml::Value::Table(t)) => t,
+        _ => toml::Table::new(),
+    }
+}
+
+/// The plan's robot file, absolute (the scenario's loader reads it relative to the scenario).
+fn absolute_robot(path: &Path, raw: &Raw) -> Result<String, PlanError> {
+    let file = crate::device::scenario::relative_to(path, Path::new(&raw.robot));
+    let file = std::path::absolute(&file).map_err(|e| PlanError::new(path, "robot", e.to_string()))?;
+    Ok(file.display().to_string())
+}
+
+/// Sets the plan's pool size (shared evenly among the stations) and robot file in an SPMS
+/// scenario's table. The stations are the scenario's `[station]` table.
+fn spms_table(path: &Path, table: &mut toml::Table, raw: &Raw) -> Result<(), PlanError> {
+    let err = |key: &str, message: &str| PlanError::new(path, key, message.to_string());
+    if raw.instrument.spheres_w_mm.is_some() {
+        return Err(err(
+            "instrument.spheres_w_mm",
+            "the TriCal's datum spheres: an SPMS plan's stations are its scenario's [station] table",
+        ));
+    }
+    if spec::BUILTIN.contains(&raw.robot.as_str()) {
+        return Err(err("robot", "an SPMS plan names the arm's robot file (the built-in arms are the TriCal's)"));
+    }
+    let mut station = section(table, "station");
+    station.insert("pool".into(), i64::try_from(raw.pool).unwrap_or(i64::MAX).into());
+    table.insert("station".into(), toml::Value::Table(station));
+    let mut r = section(table, "robot");
+    r.insert("file".into(), absolute_robot(path, raw)?.into());
     table.insert("robot".into(), toml::Value::Table(r));
     Ok(())
 }
@@ -661,9 +694,15 @@ pub fn csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
     s.push_str("# joints = controller\n");
     let _ = writeln!(s, "# robot = {}", plan.robot_name);
-    s.push_str("# frame = {W}, the datum spheres' frame\n");
-    s.push_str("# TriCal plan (calsim plan): a train row is a configuration centred on datum sphere N (its label ends in _sN); its position is that sphere's nominal centre\n");
-    s.push_str("# replace the joints with those recorded when the centring loop ends and the centres with the ballbar's; holdout rows: a tracker registered to {W} on the nests\n");
+    if plan.kind == "spms" {
+        s.push_str("# frame = {W}, the first station's head frame as the tracker measured it\n");
+        s.push_str("# SPMS plan (calsim plan): a train row is a configuration measured at station N (its label ends in _sN); its position is that station's convergence point\n");
+        s.push_str("# replace the positions with the sphere centres the head measures; holdout rows: a tracker registered to {W} on the first station's A1-A3\n");
+    } else {
+        s.push_str("# frame = {W}, the datum spheres' frame\n");
+        s.push_str("# TriCal plan (calsim plan): a train row is a configuration centred on datum sphere N (its label ends in _sN); its position is that sphere's nominal centre\n");
+        s.push_str("# replace the joints with those recorded when the centring loop ends and the centres with the ballbar's; holdout rows: a tracker registered to {W} on the nests\n");
+    }
     s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
     for r in &o.rows {
         let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v}")).collect();
@@ -693,7 +732,11 @@ pub fn simulated_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
     s.push_str("# joints = controller\n");
     let _ = writeln!(s, "# robot = {}", plan.robot_name);
-    s.push_str("# frame = {W}, the datum spheres' frame\n");
+    s.push_str(if plan.kind == "spms" {
+        "# frame = {W}, the first station's head frame as the tracker measured it\n"
+    } else {
+        "# frame = {W}, the datum spheres' frame\n"
+    });
     s.push_str("# SIMULATED by calsim plan --simulate: the true arm of the plan's planning world at the planned configurations; train rows: its TCP in {W}\n");
     let _ = writeln!(
         s,
@@ -747,10 +790,16 @@ pub fn identify_measured(
     }))
 }
 
-/// The plain joint list: pose, split, sphere, controller joint values in degrees.
+/// What a group of the device's configurations is, as a column names it: `sphere` (the TriCal's
+/// datum sphere) or `station` (the SPMS head's).
+pub fn group_word(plan: &DevicePlan) -> &'static str {
+    if plan.kind == "spms" { "station" } else { "sphere" }
+}
+
+/// The plain joint list: pose, split, sphere (station), controller joint values in degrees.
 pub fn joint_list(plan: &DevicePlan, o: &DeviceOutcome) -> String {
-    let mut s =
-        String::from("# pose split sphere q1_deg q2_deg q3_deg q4_deg q5_deg q6_deg (controller values; sphere - for validation)\n");
+    let g = group_word(plan);
+    let mut s = format!("# pose split {g} q1_deg q2_deg q3_deg q4_deg q5_deg q6_deg (controller values; {g} - for validation)\n");
     for r in &o.rows {
         let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v:.6}")).collect();
         let g = r.group.map_or_else(|| "-".to_string(), |g| (g + 1).to_string());
@@ -763,7 +812,7 @@ pub fn joint_list(plan: &DevicePlan, o: &DeviceOutcome) -> String {
 /// move to it (deg); a via configuration of a re-routed move is a row of its own, split `via`
 /// (passed, not measured).
 pub fn tour_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
-    let mut s = String::from("step,pose,split,sphere,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
+    let mut s = format!("step,pose,split,{},q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n", group_word(plan));
     let mut prev: Option<Joints> = None;
     for (k, stop) in super::select::stops(&o.tour.0, &o.routing).iter().enumerate() {
         let (label, split, group, q) = match stop {
@@ -779,111 +828,8 @@ pub fn tour_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
     s
 }
 
-/// `plan.md` of a device plan.
+/// `plan.md` of a device plan, rendered from its tables ([`super::device_summary::tables`]) by
+/// [`super::device_summary::markdown`] (or the error that kept it from rendering).
 pub fn markdown(plan: &DevicePlan, o: &DeviceOutcome) -> String {
-    let mut s = String::new();
-    let p = &o.prediction;
-    let spheres = o.groups_w_mm.len();
-    let _ = writeln!(s, "# Calibration plan: {}\n", plan.path.file_name().map_or_else(String::new, |f| f.to_string_lossy().into_owned()));
-    let _ = writeln!(
-        s,
-        "Robot {} ({}), the TriCal device centred on {spheres} datum spheres ({}), the device's {} parameters ({}).\n",
-        plan.robot_name,
-        plan.robot.nominal.data().name,
-        plan.scenario_file.as_deref().map_or_else(|| "the device's default scenario".to_string(), |f| format!("scenario {f}")),
-        o.params.len(),
-        o.params.join(", ")
-    );
-    let _ = writeln!(s, "## Poses\n");
-    let _ = writeln!(
-        s,
-        "- Pool: the device's campaign centred {} configurations on the {spheres} spheres ({} per sphere, tool axes within its approach cone); {} kept within the plan's limits and free of collision with the floor, the keep-out boxes and the device's fixtures (refused: joint limits {}, collision {}).",
-        o.candidates,
-        o.candidates / spheres.max(1),
-        o.candidates - o.refused[0] - o.refused[1],
-        o.refused[0],
-        o.refused[1]
-    );
-    let per: Vec<String> =
-        (0..spheres).map(|g| format!("{} on sphere {}", o.rows.iter().filter(|r| r.group == Some(g)).count(), g + 1)).collect();
-    let _ = writeln!(s, "- Training: {} configurations chosen by DETMAX ({}), session {TRAINING} in `poses.csv`.", o.poses, per.join(", "));
-    let _ = writeln!(
-        s,
-        "- Validation: {} configurations spread over the workspace of interest (of {} drawn within the limits), marked `{VALIDATION}`: the prediction's held-out points; the TriCal cannot measure them, a laser tracker registered to {{W}} on the sphere nests can.",
-        plan.validation, o.validation_tried
-    );
-    let _ = writeln!(s, "- O1 of the chosen set: {:.6} (a random set of the same size from the same pool: {:.6}).", o.o1.0, o.o1.1);
-    let most = o.centring_mm.iter().copied().fold(0.0, f64::max);
-    let _ = writeln!(
-        s,
-        "- Centring: at every chosen configuration the true arm's TCP lies within {most:.4} mm of its sphere's located centre (the device's centring loop, the arm's repeatability and effects outside its model in the planning world)."
-    );
-    let _ = writeln!(s, "{}\n", super::select::tour_words(o.tour.1, &o.colliding_moves, &o.routing, |k| o.rows[o.tour.0[k]].label.clone()));
-    if let (Some(obj), Some(search)) = (&o.objective, &o.search) {
-        objective_markdown(&mut s, plan, obj, search);
-    }
-    let _ = writeln!(s, "## Parameters the plan cannot identify\n");
-    if p.unidentifiable.is_empty() {
-        let _ = writeln!(s, "None of the device's {} parameters.\n", o.params.len());
-    } else {
-        let _ = writeln!(s, "{}: kept at their values before calibration.\n", p.unidentifiable.join(", "));
-    }
-    let _ = writeln!(s, "## Predicted held-out error\n");
-    let [a, b, c] = p.quantiles_mm;
-    let (lo, hi) = p.median_interval_mm;
-    let end = |x: f64| if x.is_finite() { format!("{x:.4}") } else { "unbounded".to_string() };
-    let _ = writeln!(
-        s,
-        "The held-out median error after calibration at the validation configurations over {} simulated worlds: the true arm of the planning world observed at the chosen configurations with {:.4} mm per coordinate (the device's observations in the planning world against the true arm's model, pooled over the pool kept: centring, repeatability, the ballbar's location of the spheres and the arm's effects outside its model), identified from the model before calibration, compared with the true arm at the validation configurations. The pilot identifies the device's own observations at the chosen configurations.\n",
-        p.worlds, p.noise_mm
-    );
-    let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | median's 90 % interval, mm | pilot, mm |\n|---|---|---|---|---|");
-    let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {}-{} | {:.4} |\n", end(lo), end(hi), p.pilot_median_mm);
-    if p.pilot_median_mm > c {
-        let _ = writeln!(
-            s,
-            "The pilot lies above P90: the device's own observations carry what the worlds leave out (below), so the worlds' figures are a lower bound of what this plan buys on this arm.\n"
-        );
-    }
-    let _ = writeln!(
-        s,
-        "The worlds draw the observation error independently at every configuration; the TriCal's errors are partly shared by the configurations of one sphere (the ballbar's location of its centre) and the arm's effects outside its model are systematic: `calsim run` on the device's scenario simulates them whole.\n"
-    );
-    let _ = writeln!(s, "## Files\n");
-    let _ = writeln!(
-        s,
-        "- `poses.csv`: the calibrate measurement file: each training row a configuration centred on the sphere its label ends with (`_s1` ...), its sphere's nominal centre in {{W}} as its position; the validation rows with empty positions."
-    );
-    let _ = writeln!(s, "- `joints.txt`: the same configurations as a plain joint list, with their sphere.");
-    let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
-    let _ = writeln!(
-        s,
-        "- `{0}.png`, `{0}.svg`: the device's TCP at every configuration in the base frame (top and side views), the spheres, the validation configurations ringed, the arm at {1} of them and the workspace of interest.",
-        super::plot::STEM,
-        super::plot::SHOWN
-    );
-    let _ = writeln!(
-        s,
-        "- `{}` (unless `--no-recording`): the Rerun recording, the arm and the device at every configuration in the order of the tour, the spheres and the cell, and the predicted held-out median per world.",
-        super::record::FILE
-    );
-    s
-}
-
-fn objective_markdown(s: &mut String, plan: &DevicePlan, obj: &Objective, search: &Search) {
-    let pct = |x: f64| format!("{}", (x * 1000.0).round() / 10.0);
-    let _ = writeln!(s, "## Number of poses by objective\n");
-    let _ = writeln!(
-        s,
-        "Objective: P(held-out {} <= {} mm) >= {} at {} % confidence, a world's held-out {} taken over the validation configurations (the workspace of interest). P(success) is bounded below by the one-sided Clopper-Pearson bound over {} simulated worlds (a world whose identification gives no model counts as a failure). Every count is DETMAX's set of that size from the same pool, on the same worlds. Counts doubled from {} (a third of the device's parameters) up to at most {}, then bisected.\n",
-        obj.statistic.name(),
-        obj.threshold_mm,
-        obj.success_at_least,
-        pct(obj.confidence),
-        obj.statistic.name(),
-        plan.worlds,
-        obj.fewest_poses,
-        obj.most_poses
-    );
-    super::counts_markdown(s, obj, search, "");
+    super::device_summary::markdown(&super::device_summary::tables(plan, o)).unwrap_or_else(|e| e.to_string())
 }

@@ -4,7 +4,9 @@
 //!
 //! Entity paths of the recording: `cell/spheres`, `cell/workspace`, `cell/keep_out`, `cell/floor`,
 //! `cell/frames/base` (static); `plan/tcp` (static, every configuration's TCP, labelled);
-//! `plan/robot` on the `tour_step` timeline (the arm and the device at each stop);
+//! `plan/vias/via01` ... (static, the arm and the device at each via configuration of the tour,
+//! passed, not measured, in orange); `plan/robot` on the `tour_step` timeline (the arm and the
+//! device at each stop of `tour.csv`, a via in orange and labelled);
 //! `tour/largest_move_deg` on `tour_step`; `study/heldout_median_mm` on the `world` timeline.
 
 use std::path::Path;
@@ -73,6 +75,32 @@ pub fn write_figure(dir: &Path, plan: &DevicePlan, o: &DeviceOutcome) -> Result<
     Ok(())
 }
 
+/// The figure's title and key.
+fn title_and_key(plan: &DevicePlan, points: &[(Vector3<f64>, Option<usize>)], groups: usize) -> (String, Vec<(String, Mark)>) {
+    let validation = points.iter().filter(|p| p.1.is_none()).count();
+    let chosen = points.len() - validation;
+    let (title, on) = if plan.kind == "spms" {
+        (
+            format!("SPMS plan: the sphere centre at the {chosen} measured and {validation} validation configurations (base frame, mm)"),
+            "measured at station",
+        )
+    } else {
+        (
+            format!("TriCal plan: the TCP at the {chosen} centred and {validation} validation configurations (base frame, mm)"),
+            "centred on sphere",
+        )
+    };
+    let mut key: Vec<(String, Mark)> = (0..groups).map(|g| (format!("{on} {}", g + 1), Mark::Dot(SPHERES[g % SPHERES.len()]))).collect();
+    key.extend([
+        ("validation configuration".to_string(), Mark::Ring(GREEN)),
+        ("arm at three configurations (frame origins)".to_string(), Mark::Line(BLACK)),
+        ("its and the device's capsules' axes".to_string(), Mark::Line(CAPSULE)),
+        ("robot base".to_string(), Mark::Triangle(BLACK)),
+        ("workspace of interest".to_string(), Mark::Line(BLACK)),
+    ]);
+    (title, key)
+}
+
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     plan: &DevicePlan,
@@ -81,21 +109,8 @@ fn draw<DB: DrawingBackend>(
     spheres: &[Vector3<f64>],
 ) -> DrawResult {
     root.fill(&WHITE).map_err(e2s)?;
-    let validation = points.iter().filter(|p| p.1.is_none()).count();
-    let title = format!(
-        "TriCal plan: the TCP at the {} centred and {validation} validation configurations (base frame, mm)",
-        points.len() - validation
-    );
+    let (title, key) = title_and_key(plan, points, spheres.len());
     let root = root.titled(&title, (FAMILY, 18)).map_err(e2s)?;
-    let mut key: Vec<(String, Mark)> =
-        (0..spheres.len()).map(|g| (format!("centred on sphere {}", g + 1), Mark::Dot(SPHERES[g % SPHERES.len()]))).collect();
-    key.extend([
-        ("validation configuration".to_string(), Mark::Ring(GREEN)),
-        ("arm at three configurations (frame origins)".to_string(), Mark::Line(BLACK)),
-        ("its and the device's capsules' axes".to_string(), Mark::Line(CAPSULE)),
-        ("robot base".to_string(), Mark::Triangle(BLACK)),
-        ("workspace of interest".to_string(), Mark::Line(BLACK)),
-    ]);
     let root = keyed(&root, &key, Side::Bottom)?;
     let (lo, hi) = (plan.workspace.min, plan.workspace.max);
     for (area, (a, b, name)) in root.split_evenly((1, 2)).iter().zip([(0usize, 1usize, "top view"), (0, 2, "side view")]) {
@@ -134,6 +149,37 @@ fn draw<DB: DrawingBackend>(
     Ok(())
 }
 
+/// The arm and the device at each stop of the tour on the `tour_step` timeline (a via
+/// configuration in the via colour, labelled), the largest joint move to each stop, and the arm
+/// at every via configuration.
+fn log_tour(rec: &RecordingStream, o: &DeviceOutcome, views: &[View], colour: impl Fn(usize) -> rerun::Color) -> Rr {
+    let mut st = KinState::default();
+    super::record::log_vias(rec, &o.tour.0, &o.routing, |q| view(o, q, &mut KinState::default()).0)?;
+    rec.log_static("tour/largest_move_deg", &SeriesLines::new().with_names(["largest joint move, deg"]))?;
+    let via = {
+        let [r, g, b] = super::record::VIA_RGB;
+        rerun::Color::from_rgb(r, g, b)
+    };
+    let mut prev: Option<Joints> = None;
+    for (step, stop) in super::select::stops(&o.tour.0, &o.routing).iter().enumerate() {
+        rec.set_time_sequence("tour_step", step as i64);
+        let q = match stop {
+            super::select::Stop::Pose(i) => {
+                rec.log("plan/robot", &capsules(&views[*i].0).with_colors([colour(*i)]))?;
+                o.rows[*i].q
+            }
+            super::select::Stop::Via(label, q) => {
+                rec.log("plan/robot", &capsules(&view(o, q, &mut st).0).with_colors([via]).with_labels([label.clone()]))?;
+                *q
+            }
+        };
+        let step_deg = prev.map_or(0.0, |p| p.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
+        rec.log("tour/largest_move_deg", &Scalars::new([step_deg]))?;
+        prev = Some(q);
+    }
+    Ok(())
+}
+
 /// Writes the recording of `o` to `path`.
 pub fn write_recording(path: &Path, plan: &DevicePlan, o: &DeviceOutcome) -> Result<(), RecordError> {
     let name = plan.path.file_stem().map_or_else(|| "plan".to_string(), |s| s.to_string_lossy().into_owned());
@@ -148,16 +194,8 @@ pub fn write_recording(path: &Path, plan: &DevicePlan, o: &DeviceOutcome) -> Res
     )
 }
 
-fn log_all(rec: &RecordingStream, plan: &DevicePlan, o: &DeviceOutcome) -> Rr {
-    rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-    let spheres = spheres_base(o);
-    rec.log_static(
-        "cell/spheres",
-        &Points3D::new(spheres.iter().map(p3))
-            .with_radii([6.35f32])
-            .with_labels((1..=spheres.len()).map(|k| format!("sphere {k}")))
-            .with_colors([rerun::Color::from_rgb(200, 200, 200)]),
-    )?;
+/// The cell, static: the workspace of interest, the keep-out boxes, the floor and the base frame.
+fn log_cell(rec: &RecordingStream, plan: &DevicePlan) -> Rr {
     let boxed = |lo: &Vector3<f64>, hi: &Vector3<f64>| (p3(&((lo + hi) / 2.0)), p3(&((hi - lo) / 2.0)));
     let (c, h) = boxed(&plan.workspace.min, &plan.workspace.max);
     rec.log_static(
@@ -183,6 +221,20 @@ fn log_all(rec: &RecordingStream, plan: &DevicePlan, o: &DeviceOutcome) -> Rr {
         )?;
     }
     log_axes(rec, "cell/frames/base", &nalgebra::Isometry3::identity(), 150.0)?;
+    Ok(())
+}
+
+fn log_all(rec: &RecordingStream, plan: &DevicePlan, o: &DeviceOutcome) -> Rr {
+    rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+    let spheres = spheres_base(o);
+    rec.log_static(
+        "cell/spheres",
+        &Points3D::new(spheres.iter().map(p3))
+            .with_radii([6.35f32])
+            .with_labels((1..=spheres.len()).map(|k| format!("{} {k}", super::device::group_word(plan))))
+            .with_colors([rerun::Color::from_rgb(200, 200, 200)]),
+    )?;
+    log_cell(rec, plan)?;
     let mut st = KinState::default();
     let views: Vec<View> = o.rows.iter().map(|r| view(o, &r.q, &mut st)).collect();
     let colour = |i: usize| match o.rows[i].group {
@@ -199,16 +251,7 @@ fn log_all(rec: &RecordingStream, plan: &DevicePlan, o: &DeviceOutcome) -> Rr {
             .with_colors((0..views.len()).map(colour))
             .with_labels(o.rows.iter().map(|r| r.label.clone())),
     )?;
-    rec.log_static("tour/largest_move_deg", &SeriesLines::new().with_names(["largest joint move, deg"]))?;
-    let mut prev: Option<&Joints> = None;
-    for (step, &i) in o.tour.0.iter().enumerate() {
-        rec.set_time_sequence("tour_step", step as i64);
-        rec.log("plan/robot", &capsules(&views[i].0).with_colors([colour(i)]))?;
-        let q = &o.rows[i].q;
-        let step_deg = prev.map_or(0.0, |p| p.iter().zip(q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        rec.log("tour/largest_move_deg", &Scalars::new([step_deg]))?;
-        prev = Some(q);
-    }
+    log_tour(rec, o, &views, colour)?;
     rec.reset_time();
     rec.log_static("study/heldout_median_mm", &SeriesLines::new().with_names(["held-out median, mm"]))?;
     for (w, m) in o.prediction.per_world_mm.iter().enumerate() {

@@ -20,11 +20,13 @@
 
 pub mod cell;
 pub mod device;
+pub mod device_summary;
 pub mod device_view;
 pub mod plot;
 pub mod record;
 pub mod select;
 pub mod spec;
+pub mod summary;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -594,196 +596,8 @@ pub fn tour_csv(plan: &Plan, o: &Outcome) -> String {
     s
 }
 
-/// `plan.md`: what was planned and what it will buy.
+/// `plan.md`: what was planned and what it will buy, rendered from the plan's tables
+/// ([`summary::tables`]) by [`summary::markdown`] (or the error that kept it from rendering).
 pub fn markdown(plan: &Plan, o: &Outcome) -> String {
-    let mut s = String::new();
-    let p = &o.prediction;
-    let _ = writeln!(s, "# Calibration plan: {}\n", plan.path.file_name().map_or_else(String::new, |f| f.to_string_lossy().into_owned()));
-    let _ = writeln!(
-        s,
-        "Robot {} ({}), laser tracker at ({:.1}, {:.1}, {:.1}) mm in the base frame, {} target(s) ({}), the {} model.\n",
-        plan.robot_name,
-        plan.robot.nominal.data().name,
-        plan.tracker.position_mm.x,
-        plan.tracker.position_mm.y,
-        plan.tracker.position_mm.z,
-        plan.targets.len(),
-        plan.targets.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", "),
-        plan.model.name()
-    );
-    let _ = writeln!(s, "## Poses\n");
-    let _ = writeln!(
-        s,
-        "- Pool: {} feasible configurations of {} drawn within the limits (refused: {}).",
-        o.pool.qs.len(),
-        o.pool.tried,
-        select::refusals(&o.pool)
-    );
-    let _ = writeln!(s, "- Training: {} poses chosen by DETMAX from {} (session {TRAINING} in `poses.csv`).", o.poses, plan.pool);
-    let _ = writeln!(
-        s,
-        "- Validation: {} poses spread over the workspace of interest (marked `{VALIDATION}` in the `split` column of `poses.csv`: `calsim calibrate` holds them out).",
-        plan.validation
-    );
-    let _ = writeln!(
-        s,
-        "- O1 of the chosen set: {:.6} (a random set of the same size from the same pool: {:.6}); {} columns: {}.",
-        o.o1.0,
-        o.o1.1,
-        o.detmax_params.len(),
-        o.detmax_params.join(", ")
-    );
-    let _ = writeln!(s, "{}\n", select::tour_words(o.tour.1, &o.colliding_moves, &o.routing, |k| o.rows[o.tour.0[k]].label.clone()));
-    if let (Some(obj), Some(search)) = (&plan.objective, &o.search) {
-        objective_markdown(&mut s, plan, obj, search);
-    }
-    if let Some(c) = &o.comparison {
-        comparison_markdown(&mut s, plan, o, c);
-    }
-    let _ = writeln!(s, "## Parameters the plan cannot identify\n");
-    if p.unidentifiable.is_empty() {
-        let _ = writeln!(s, "None of the {} model's parameters.\n", plan.model.name());
-    } else {
-        for u in &p.unidentifiable {
-            let _ = writeln!(
-                s,
-                "- {} (moves the points as {} do): kept nominal",
-                u.name,
-                if u.with.is_empty() { "nothing else".into() } else { u.with.join(", ") }
-            );
-        }
-        s.push('\n');
-    }
-    let _ = writeln!(s, "## Predicted held-out error\n");
-    let [a, b, c] = p.quantiles_mm;
-    let _ = writeln!(
-        s,
-        "The held-out median error after calibration over {} simulated worlds (calibrate's plan simulation: a pilot world, the robot file's truth measured at these poses with the tracker's noise and calibrated; its calibrated robot then taken as the truth in every world, measured again with {:.4} mm per coordinate, the tracker's noise pooled over the plan's points, and calibrated again):\n",
-        p.worlds, p.noise_mm
-    );
-    let _ = writeln!(s, "| P10, mm | median, mm | P90, mm | pilot world, mm | model chosen in the pilot |\n|---|---|---|---|---|");
-    let _ = writeln!(s, "| {a:.4} | {b:.4} | {c:.4} | {:.4} | {} |\n", p.pilot_median_mm, p.pilot_chosen);
-    if p.pilot_median_mm > c && plan.robot.truth.is_empty() && !p.twin {
-        let _ = writeln!(
-            s,
-            "The pilot world lies above P90: the robot file gives no `[truth]`, so the pilot measured its nominal, which the model describes completely; the pilot is one noise draw, and one in ten lies above P90.\n"
-        );
-    } else if p.pilot_median_mm > c {
-        let _ = writeln!(
-            s,
-            "The pilot world lies above P90: the robot file's truth holds what the {} model does not describe (its calibrated robot, the worlds' truth, does not): a richer model would calibrate that robot better.\n",
-            plan.model.name()
-        );
-    }
-    if p.twin {
-        let _ = writeln!(
-            s,
-            "The robot file is a twin: its `[learned]` table's effects (drawn once per world from their fitted spread) are in the pilot world and in every world, so the figures carry what its calibration learned beyond the model.\n"
-        );
-    } else {
-        let _ = writeln!(
-            s,
-            "A robot the model describes completely, measured with this noise, calibrates to this. Effects outside the model (gear harmonics, backlash, temperature) add to it: `calsim calibrate --plan-worlds N` on the measured file says whether the robot does.\n"
-        );
-    }
-    let _ = writeln!(s, "## Files\n");
-    let _ = writeln!(
-        s,
-        "- `poses.csv`: the calibrate measurement file, joint columns filled, position columns to fill with the tracker's readings."
-    );
-    let _ = writeln!(s, "- `joints.txt`: the same poses as a plain joint list.");
-    let _ = writeln!(s, "- `tour.csv`: the order to visit them.");
-    let _ = writeln!(
-        s,
-        "- `{0}.png`, `{0}.svg`: the first target at every pose in the base frame (top and side views), the validation poses ringed, the arm at {1} of the poses with the lines of sight from the tracker to their targets, the tracker, the robot's base and the workspace of interest.",
-        plot::STEM,
-        plot::SHOWN
-    );
-    let _ = writeln!(
-        s,
-        "- `{}` (unless `--no-recording`): the Rerun recording, the arm at every pose in the order of the tour with its lines of sight, the cell, and the predicted held-out median per world.",
-        record::FILE
-    );
-    s
-}
-
-/// The objective's section of `plan.md`: P(success) against the count of poses, and the rule.
-fn objective_markdown(s: &mut String, plan: &Plan, obj: &spec::Objective, search: &Search) {
-    let pct = |x: f64| format!("{}", (x * 1000.0).round() / 10.0);
-    let _ = writeln!(s, "## Number of poses by objective\n");
-    let _ = writeln!(
-        s,
-        "Objective: P(held-out {} <= {} mm) >= {} at {} % confidence, a world's held-out {} taken over the validation poses (the workspace of interest). P(success) is bounded below by the one-sided Clopper-Pearson bound over {} simulated worlds (a world whose calibration gives no value counts as a failure). Every count is DETMAX's set of that size from the same pool, scored on the same worlds: the robot file's truth measured at the whole pool (training and validation poses) and calibrated is every world's truth, and world w's noise comes from the same stream for every count. Counts doubled from {} (the model's parameters with a base and a tool) up to at most {}, then bisected between the largest that failed and the smallest that met it.\n",
-        obj.statistic.name(),
-        obj.threshold_mm,
-        obj.success_at_least,
-        pct(obj.confidence),
-        obj.statistic.name(),
-        plan.worlds,
-        obj.fewest_poses,
-        obj.most_poses
-    );
-    counts_markdown(
-        s,
-        obj,
-        search,
-        " More worlds, a lower threshold's demand, a larger `most_poses` or another instrument placement may reach it.",
-    );
-}
-
-/// The objective's table (P(success) against the count of poses) and its verdict: the count chosen,
-/// or the best found with `hint` (what may reach the objective) after it.
-pub(crate) fn counts_markdown(s: &mut String, obj: &spec::Objective, search: &Search, hint: &str) {
-    let pct = |x: f64| format!("{}", (x * 1000.0).round() / 10.0);
-    let _ =
-        writeln!(s, "| poses | successes / worlds | P(success) | lower bound ({} %) | meets |\n|---|---|---|---|---|", pct(obj.confidence));
-    for c in search.by_count() {
-        let _ = writeln!(
-            s,
-            "| {} | {} / {} | {:.3} | {:.4} | {} |",
-            c.n,
-            c.successes,
-            c.worlds,
-            c.successes as f64 / c.worlds.max(1) as f64,
-            c.lower,
-            if c.meets { "yes" } else { "no" }
-        );
-    }
-    s.push('\n');
-    match search.chosen {
-        Some(n) => {
-            let _ = writeln!(s, "Chosen: {n} poses, the smallest count in the table whose lower bound clears {}.\n", obj.success_at_least);
-        }
-        None => {
-            let best = search.candidates.iter().find(|c| c.n == search.planned).expect("the planned count was scored");
-            let _ = writeln!(
-                s,
-                "Not met: no count up to {} clears {}; planned with the best found, {} poses (lower bound {:.4}).{hint}\n",
-                obj.most_poses, obj.success_at_least, best.n, best.lower
-            );
-        }
-    }
-}
-
-/// The comparison's section of `plan.md`.
-fn comparison_markdown(s: &mut String, plan: &Plan, o: &Outcome, c: &Comparison) {
-    let pct = format!("{}", (c.confidence * 1000.0).round() / 10.0);
-    let iv = |(v, a, b): (f64, f64, f64)| {
-        let end = |x: f64| if x.is_finite() { format!("{x:.4}") } else { "unbounded".to_string() };
-        format!("{v:.4} ({}-{})", end(a), end(b))
-    };
-    let _ = writeln!(s, "## DETMAX against random and greedy selection\n");
-    let _ = writeln!(
-        s,
-        "The same {} training poses chosen three ways from the same pool of {}, each with the same validation poses and simulated on the same {} worlds (the pilot world's calibrated robot as every world's truth, world w's noise from the same stream): DETMAX, a uniform random set, and a greedy D-optimal set (each step adds the pose that raises the determinant of the information matrix most). The figures are over the worlds of each world's held-out median, with distribution-free {pct} % intervals (order statistics).\n",
-        o.poses, plan.pool, plan.worlds
-    );
-    let _ = writeln!(
-        s,
-        "| selection | O1 | median over worlds, mm ({pct} % interval) | P90 over worlds, mm ({pct} % interval) |\n|---|---|---|---|"
-    );
-    for r in &c.rows {
-        let _ = writeln!(s, "| {} | {:.6} | {} | {} |", r.name, r.o1, iv(r.median_mm), iv(r.p90_mm));
-    }
-    s.push('\n');
+    summary::markdown(&summary::tables(plan, o)).unwrap_or_else(|e| e.to_string())
 }

@@ -8,8 +8,11 @@
 //! - `plan/targets`: static, every target at every pose (training blue, validation green,
 //!   labelled with the pose);
 //! - `plan/shown/robot`: static, the arm at the figure's poses ([`super::plot::shown`]);
+//! - `plan/vias/via01` ...: static, the arm at each via configuration of the tour (a re-routed
+//!   move's stop on the way, passed, not measured), one entity each, in orange;
 //! - `plan/robot` and `plan/sight` on the `tour_step` timeline: the arm at each stop of the tour
-//!   and the lines from the tracker to its targets;
+//!   (`tour.csv`'s rows: the planned poses and the via configurations, a via in orange and
+//!   labelled) and the lines from the tracker to its targets (none at a via);
 //! - `tour/largest_move_deg` on `tour_step`: the largest joint move to each stop;
 //! - `study/heldout_median_mm` on the `world` timeline: each world's predicted held-out median.
 //!
@@ -22,6 +25,7 @@ use rerun::{Boxes3D, Color, LineStrips3D, Points3D, RecordingStream, Scalars, Se
 
 use super::cell::Cell;
 use super::plot::{arm_at, shown};
+use super::select::{Routing, Stop, stops};
 use super::{Outcome, Plan, VALIDATION};
 use crate::io::record::{RecordError, Rr, capsules, log_axes, p3};
 use crate::robot::KinState;
@@ -35,10 +39,71 @@ const FLOOR_HALF_MM: f64 = 1500.0;
 const TRAINING_RGB: [u8; 3] = [60, 90, 220];
 const VALIDATION_RGB: [u8; 3] = [40, 170, 70];
 const SIGHT_RGB: [u8; 3] = [235, 90, 90];
+/// Colour of the arm at a via configuration of the tour.
+pub const VIA_RGB: [u8; 3] = [230, 150, 30];
 
 fn rgb(c: [u8; 3]) -> Color {
     Color::from_rgb(c[0], c[1], c[2])
 }
+
+/// The arm at each stop of the tour on the `tour_step` timeline (a via configuration in
+/// [`VIA_RGB`], labelled, without lines of sight), the lines of sight from the tracker to its
+/// targets, the largest joint move to each stop, and the arm at every via configuration.
+fn log_tour(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome, views: &[super::plot::ArmView]) -> Rr {
+    let t = cell.tracker();
+    let mut st = KinState::default();
+    let colour = |i: usize| if o.rows[i].split == VALIDATION { VALIDATION_RGB } else { TRAINING_RGB };
+    log_vias(rec, &o.tour.0, &o.routing, |q| arm_at(plan, cell, q, &mut KinState::default()).capsules)?;
+    rec.log_static("tour/largest_move_deg", &SeriesLines::new().with_names(["largest joint move, deg"]))?;
+    let mut prev: Option<crate::robot::Joints> = None;
+    for (step, stop) in stops(&o.tour.0, &o.routing).iter().enumerate() {
+        rec.set_time_sequence("tour_step", step as i64);
+        let q = match stop {
+            Stop::Pose(i) => {
+                let v = &views[*i];
+                rec.log("plan/robot", &capsules(&v.capsules).with_colors([rgb(colour(*i))]))?;
+                rec.log(
+                    "plan/sight",
+                    &LineStrips3D::new(v.targets.iter().map(|p| vec![p3(&t), p3(p)]))
+                        .with_radii([1.5f32])
+                        .with_colors([rgb(SIGHT_RGB)])
+                        .with_labels(plan.targets.iter().map(|tg| format!("{} {}", o.rows[*i].label, tg.name))),
+                )?;
+                o.rows[*i].q
+            }
+            Stop::Via(label, q) => {
+                let v = arm_at(plan, cell, q, &mut st);
+                rec.log("plan/robot", &capsules(&v.capsules).with_colors([rgb(VIA_RGB)]).with_labels([label.clone()]))?;
+                // A via configuration is passed, not measured: no line of sight.
+                rec.log("plan/sight", &LineStrips3D::new(std::iter::empty::<Vec<[f32; 3]>>()))?;
+                *q
+            }
+        };
+        let step_deg = prev.map_or(0.0, |p| p.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
+        rec.log("tour/largest_move_deg", &Scalars::new([step_deg]))?;
+        prev = Some(q);
+    }
+    Ok(())
+}
+
+/// The arm at every via configuration of the tour, static, one entity each
+/// (`plan/vias/via01` ...: the label of its `tour.csv` row), drawn in [`VIA_RGB`] by `arm` (the
+/// capsules at a configuration); `order` the tour (positions in the rows), `routing` its
+/// re-routed moves.
+pub fn log_vias(rec: &RecordingStream, order: &[usize], routing: &Routing, arm: impl Fn(&crate::robot::Joints) -> Vec<Capsule>) -> Rr {
+    for stop in stops(order, routing) {
+        if let Stop::Via(label, q) = stop {
+            rec.log_static(
+                format!("plan/vias/{label}"),
+                &capsules(&arm(&q)).with_colors([rgb(VIA_RGB)]).with_labels([format!("{label} (passed, not measured)")]),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// A capsule: its ends and radius, mm.
+pub type Capsule = (Vector3<f64>, Vector3<f64>, f64);
 
 /// Writes the recording of `o` to `path`.
 pub fn write(path: &Path, plan: &Plan, cell: &Cell, o: &Outcome) -> Result<(), RecordError> {
@@ -54,8 +119,9 @@ pub fn write(path: &Path, plan: &Plan, cell: &Cell, o: &Outcome) -> Result<(), R
     )
 }
 
-fn log_all(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome) -> Rr {
-    rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+/// The cell, static: the tracker, the workspace of interest, the keep-out boxes, the floor and
+/// the base frame.
+fn log_cell(rec: &RecordingStream, plan: &Plan, cell: &Cell) -> Rr {
     let t = cell.tracker();
     rec.log_static(
         "cell/tracker",
@@ -89,6 +155,12 @@ fn log_all(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome) -> Rr {
         )?;
     }
     log_axes(rec, "cell/frames/base", &nalgebra::Isometry3::identity(), 150.0)?;
+    Ok(())
+}
+
+fn log_all(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome) -> Rr {
+    rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+    log_cell(rec, plan, cell)?;
 
     let mut st = KinState::default();
     let views: Vec<_> = o.rows.iter().map(|r| arm_at(plan, cell, &r.q, &mut st)).collect();
@@ -108,24 +180,7 @@ fn log_all(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome) -> Rr {
     let shown_caps: Vec<_> = shown(o).into_iter().flat_map(|i| views[i].capsules.clone()).collect();
     rec.log_static("plan/shown/robot", &capsules(&shown_caps).with_colors([Color::from_unmultiplied_rgba(110, 110, 110, 160)]))?;
 
-    rec.log_static("tour/largest_move_deg", &SeriesLines::new().with_names(["largest joint move, deg"]))?;
-    let mut prev: Option<&crate::robot::Joints> = None;
-    for (step, &i) in o.tour.0.iter().enumerate() {
-        rec.set_time_sequence("tour_step", step as i64);
-        let v = &views[i];
-        rec.log("plan/robot", &capsules(&v.capsules).with_colors([rgb(colour(i))]))?;
-        rec.log(
-            "plan/sight",
-            &LineStrips3D::new(v.targets.iter().map(|p| vec![p3(&t), p3(p)]))
-                .with_radii([1.5f32])
-                .with_colors([rgb(SIGHT_RGB)])
-                .with_labels(plan.targets.iter().map(|tg| format!("{} {}", o.rows[i].label, tg.name))),
-        )?;
-        let q = &o.rows[i].q;
-        let step_deg = prev.map_or(0.0, |p| p.iter().zip(q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        rec.log("tour/largest_move_deg", &Scalars::new([step_deg]))?;
-        prev = Some(q);
-    }
+    log_tour(rec, plan, cell, o, &views)?;
     rec.reset_time();
 
     rec.log_static("study/heldout_median_mm", &SeriesLines::new().with_names(["held-out median, mm"]))?;

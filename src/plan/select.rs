@@ -435,34 +435,59 @@ pub fn stops(order: &[usize], routing: &Routing) -> Vec<Stop> {
 /// Split column of a via configuration in `tour.csv`.
 pub const VIA: &str = "via";
 
-/// The tour's sentence in `plan.md`: its length, the straight moves through a collision, the via
-/// paths and what could not be re-routed (`label` names the pose at a position in the tour).
-pub fn tour_words(straight_rad: f64, colliding: &[(usize, usize)], routing: &Routing, label: impl Fn(usize) -> String) -> String {
-    let moves =
-        |v: &mut dyn Iterator<Item = &(usize, usize)>| v.map(|(a, b)| format!("{} -> {}", label(*a), label(*b))).collect::<Vec<_>>();
+/// A straight move of the tour through a collision, as `tour_moves.parquet` holds it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TourMove {
+    /// The pose it leaves.
+    pub from: String,
+    /// The pose it reaches.
+    pub to: String,
+    /// Via configurations of its re-routed path (0: no via path found).
+    pub vias: usize,
+    /// A via path was found.
+    pub routed: bool,
+}
+
+/// The tour's colliding moves in its order (`label` names the pose at a position in the tour).
+pub fn tour_moves(colliding: &[(usize, usize)], routing: &Routing, label: impl Fn(usize) -> String) -> Vec<TourMove> {
+    colliding
+        .iter()
+        .map(|&(a, b)| {
+            let via = routing.vias.iter().find(|v| v.between == (a, b));
+            TourMove { from: label(a), to: label(b), vias: via.map_or(0, |v| v.qs.len()), routed: via.is_some() }
+        })
+        .collect()
+}
+
+/// The tour's sentence in `plan.md`: its length, deg of joint-space path, the straight moves
+/// through a collision, the via paths (`path_deg`: the length with them) and what could not be
+/// re-routed.
+pub fn tour_words(straight_deg: f64, path_deg: f64, moves: &[TourMove]) -> String {
+    let named = |routed: Option<bool>| {
+        moves.iter().filter(|m| routed.is_none_or(|r| m.routed == r)).map(|m| format!("{} -> {}", m.from, m.to)).collect::<Vec<_>>()
+    };
     let mut s = format!(
-        "- Tour (`tour.csv`): greedy nearest neighbour in joint space, {:.1} deg of joint-space path; straight moves through a collision (checked every {:.0} deg of the joint that moves most): ",
-        straight_rad.to_degrees(),
+        "- Tour (`tour.csv`): greedy nearest neighbour in joint space, {straight_deg:.1} deg of joint-space path; straight moves through a collision (checked every {:.0} deg of the joint that moves most): ",
         MOVE_STEP_RAD.to_degrees()
     );
-    if colliding.is_empty() {
+    if moves.is_empty() {
         s.push_str("none.");
         return s;
     }
-    s.push_str(&moves(&mut colliding.iter()).join(", "));
-    let vias: usize = routing.vias.iter().map(|v| v.qs.len()).sum();
-    if !routing.vias.is_empty() {
+    s.push_str(&named(None).join(", "));
+    let vias: usize = moves.iter().map(|m| m.vias).sum();
+    if moves.iter().any(|m| m.routed) {
         let _ = write!(
             s,
-            ". Re-routed through {vias} via configuration{} (rows `{VIA}` in `tour.csv`, not measured: each move of the path free of collision at the same step), {:.1} deg of path in all",
+            ". Re-routed through {vias} via configuration{} (rows `{VIA}` in `tour.csv`, not measured: each move of the path free of collision at the same step), {path_deg:.1} deg of path in all",
             if vias == 1 { "" } else { "s" },
-            routing.length_rad.to_degrees()
         );
     }
-    if routing.unrouted.is_empty() {
+    let unrouted = named(Some(false));
+    if unrouted.is_empty() {
         s.push('.');
     } else {
-        let _ = write!(s, "; no via path found for {}: move around it by hand.", moves(&mut routing.unrouted.iter()).join(", "));
+        let _ = write!(s, "; no via path found for {}: move around it by hand.", unrouted.join(", "));
     }
     s
 }
@@ -516,6 +541,8 @@ mod tests {
         let c = colliding_moves_with(&qs, &[0, 1], wall(true));
         let r = reroute(&qs, &[0, 1], &c, &[], &LIMITS, wall(true));
         assert_eq!((r.vias.len(), r.unrouted.clone()), (0, vec![(0, 1)]));
-        assert!(tour_words(1.0, &c, &r, |k| format!("p{k}")).contains("no via path found for p0 -> p1"));
+        let moves = tour_moves(&c, &r, |k| format!("p{k}"));
+        assert_eq!(moves, [TourMove { from: "p0".into(), to: "p1".into(), vias: 0, routed: false }]);
+        assert!(tour_words(1.0, 1.0, &moves).contains("no via path found for p0 -> p1"));
     }
 }

@@ -112,6 +112,44 @@ impl Scenario for SpmsScenario {
     fn layout_mm(&self) -> Vec<[f64; 3]> {
         Vec::new()
     }
+
+    fn candidate_pool(&self) -> Option<Result<super::CandidatePool, DeviceError>> {
+        Some(candidate_pool(self))
+    }
+}
+
+/// The SPMS's pool of realisation 0: the head built and its beams identified, the stations placed
+/// and the pool measured (as the study does), each configuration observing the sphere centre as
+/// the identified head located it, in {W} (the first station's head frame as the tracker measured
+/// it). The groups are the stations, each at its convergence point.
+fn candidate_pool(s: &SpmsScenario) -> Result<super::CandidatePool, DeviceError> {
+    use nalgebra::{Point3, Vector3};
+    let (spec, seed) = (&s.spec, s.header.seed);
+    let set = spec.study.parameter_set(calibration::default_parameters).map_err(DeviceError::of)?;
+    let head = head::run(&spec.head, &spec.beams, seed).map_err(DeviceError::of)?;
+    let cell = calibration::build(&spec.robot, &spec.station, &head.spms, head.identified(spec.beams.calibration_form), seed)
+        .map_err(DeviceError::of)?;
+    let observations: Vec<crate::identify::Observation> =
+        cell.pool.iter().map(|p| crate::identify::Observation { q: p.q, tcp_world_mm: p.measured_world_mm }).collect();
+    let qs: Vec<_> = observations.iter().map(|o| o.q).collect();
+    let jacobian = crate::identify::PoolJacobian::new(&cell.nominal, &set, &qs);
+    let c_head = Point3::from(Vector3::from(spec.station.sphere_centre_head_mm));
+    Ok(super::CandidatePool {
+        what: "measured by the head at a station",
+        group: "station",
+        group_of: cell.pool.iter().map(|p| p.station).collect(),
+        groups_w_mm: cell.stations.iter().map(|st| (st.world_from_head * c_head).coords.into()).collect(),
+        observations,
+        truth: cell.robot.truth.clone(),
+        set,
+        jacobian,
+        fit: spec.study.fit_options(),
+        detmax: spec.study.detmax_options(),
+        links: spec.robot.arm.as_ref().and_then(|a| a.0.capsules.clone()).unwrap_or_default(),
+        device: Vec::new(),
+        fixtures: Vec::new(),
+        start: cell.nominal,
+    })
 }
 
 /// An SPMS study in one world.
