@@ -681,10 +681,15 @@ fn tampered_resume_records_are_refused_in_one_line_or_give_the_untampered_tables
                 (std::fs::copy(at(o), at(record)).map(|_| ()).unwrap(), false)
             }
             17 => {
-                // Another search's record of the same restart in its place.
-                let i = records.iter().position(|r| r == record).unwrap();
-                named = vec![record.clone()];
-                (std::fs::copy(&other_records[i], at(record)).map(|_| ()).unwrap(), false)
+                // Another search's record of the same restart in its place: one that search asked
+                // otherwise (the simplex's first two restarts do not depend on the seed; the third
+                // starts from the seed's Latin hypercube).
+                let i = (0..records.len())
+                    .rev()
+                    .find(|&i| std::fs::read(&records[i]).unwrap() != std::fs::read(&other_records[i]).unwrap())
+                    .expect("a restart the other seed searched otherwise");
+                named = vec![records[i].clone()];
+                (std::fs::copy(&other_records[i], at(&records[i])).map(|_| ()).unwrap(), false)
             }
             18 => {
                 named = vec![record.clone()];

@@ -31,45 +31,50 @@ impl WorldSource for Bowl {
         let get = |k: &str| get_dotted(&table, k).and_then(|v| v.as_float()).expect(k);
         let t = [unit_of(get("trical.wait_s"), 0.5, 2.0), unit_of(get("trical.approach_move_s"), 2.0, 6.0)];
         let d2: f64 = t.iter().zip(OPTIMUM).map(|(a, b)| (a - b).powi(2)).sum();
-        let e = 0.1 + 0.6 * d2 + 0.005 * f64::from(realisation % 10);
-        let study = PointStudy::of(s);
-        let within = |th: &f64| if e <= *th { study.repetitions } else { 0 };
-        let counts: Vec<u32> = sweep.thresholds_mm.iter().map(within).collect();
-        let rows = study
-            .selections
-            .iter()
-            .flat_map(|sel| {
-                let counts = counts.clone();
-                study.set_sizes.iter().map(move |&n| UnitRow {
-                    selection: sel.to_string(),
-                    set_size: n,
-                    table: n == study.table_set_size,
-                    repetitions: study.repetitions,
-                    no_model: 0,
-                    after_median_mm: e / 2.0,
-                    after_p95_mm: e * 0.9,
-                    after_max_mm: e,
-                    after_mean_mm: e / 2.0,
-                    max_within: counts.clone(),
-                    mean_within: counts.clone(),
-                    p95_within: counts.clone(),
-                    median_within: counts.clone(),
-                    o1_median: f64::NAN,
-                })
+        unit_with_error(sweep, point, realisation, 0.1 + 0.6 * d2 + 0.005 * f64::from(realisation % 10))
+    }
+}
+
+/// A synthetic world's unit whose every calibration's largest error is `e` mm.
+fn unit_with_error(sweep: &Sweep, point: usize, realisation: u32, e: f64) -> Unit {
+    let s = sweep.points[point].scenario.as_ref();
+    let study = PointStudy::of(s);
+    let within = |th: &f64| if e <= *th { study.repetitions } else { 0 };
+    let counts: Vec<u32> = sweep.thresholds_mm.iter().map(within).collect();
+    let rows = study
+        .selections
+        .iter()
+        .flat_map(|sel| {
+            let counts = counts.clone();
+            study.set_sizes.iter().map(move |&n| UnitRow {
+                selection: sel.to_string(),
+                set_size: n,
+                table: n == study.table_set_size,
+                repetitions: study.repetitions,
+                no_model: 0,
+                after_median_mm: e / 2.0,
+                after_p95_mm: e * 0.9,
+                after_max_mm: e,
+                after_mean_mm: e / 2.0,
+                max_within: counts.clone(),
+                mean_within: counts.clone(),
+                p95_within: counts.clone(),
+                median_within: counts.clone(),
+                o1_median: f64::NAN,
             })
-            .collect();
-        Unit {
-            unit: point * sweep.realisations as usize + realisation as usize,
-            point,
-            realisation,
-            error: None,
-            before_mm: [1.0, 2.0, 3.0],
-            campaign_s: 3600.0,
-            rows,
-            prediction: None,
-            design: None,
-            digest: None,
-        }
+        })
+        .collect();
+    Unit {
+        unit: point * sweep.realisations as usize + realisation as usize,
+        point,
+        realisation,
+        error: None,
+        before_mm: [1.0, 2.0, 3.0],
+        campaign_s: 3600.0,
+        rows,
+        prediction: None,
+        design: None,
+        digest: None,
     }
 }
 
@@ -94,7 +99,7 @@ fn space(dir: &std::path::Path, score: Option<&str>) -> spec::DesignSpace {
 
 /// The search's designs on the synthetic worlds, and the best (lowest score, the first of ties).
 fn search(space: &spec::DesignSpace, dir: &std::path::Path) -> (Vec<Evaluated>, Vec<f64>) {
-    let ctx = Context { space, cache: dir.join(format!("{}.evaluations", space.name)), worlds: &Bowl };
+    let ctx = Context::with_worlds(space, dir.join(format!("{}.evaluations", space.name)), &Bowl);
     let trace = optimise::run_restart(&ctx, 0, &|_| {}).unwrap();
     let best =
         trace.iter().min_by(|a, b| a.score.total_cmp(&b.score).then(a.asked.index.cmp(&b.asked.index))).expect("evaluated").asked.x.clone();
@@ -226,7 +231,7 @@ fn a_design_out_of_reach_scores_by_every_spheres_distance_and_its_start_is_broug
     start[v + 9] = 1.0;
     let m = margins(&space, 5, &start);
     assert!(m[3] > 20.0 && m[4] > m[3], "spheres 4 and 5 out of reach, 5 the farther: {m:?}");
-    let ctx = Context { space: &space, cache: tmp.path().join("w"), worlds: &Unreachable };
+    let ctx = Context::with_worlds(&space, tmp.path().join("w"), &Unreachable);
     let score = |x: &[f64]| {
         let e = ctx.evaluate(optimise::Asked { restart: 0, index: 0, count: 5, x: x.to_vec() }).unwrap();
         assert_eq!(e.failed, e.worlds);
@@ -312,7 +317,7 @@ fn a_design_in_reach_whose_cell_blocks_the_arm_scores_by_its_collisions_and_its_
     assert_eq!(on(1), f);
     let why = run(&start).expect("the start's campaign fails");
     assert!(why.contains("no valid configuration"), "{why}");
-    let ctx = Context { space: &space, cache: tmp.path().join("w"), worlds: &Unreachable };
+    let ctx = Context::with_worlds(&space, tmp.path().join("w"), &Unreachable);
     let score = |x: &[f64]| {
         let e = ctx.evaluate(optimise::Asked { restart: 0, index: 0, count: 4, x: x.to_vec() }).unwrap();
         assert_eq!(e.failed, e.worlds);
@@ -329,4 +334,186 @@ fn a_design_in_reach_whose_cell_blocks_the_arm_scores_by_its_collisions_and_its_
     assert_eq!(score(&repaired).0, optimise::FAILED, "nothing short but the worlds this source fails");
     assert!(at_start > optimise::FAILED + 1.0, "{at_start}");
     assert_eq!(run(&repaired), None, "the campaign of world 0 runs");
+}
+
+/// The paper's cell of the TriCal question with `count` spheres, in the unit cube, and the
+/// offset of the spheres' coordinates in it.
+fn paper(count: usize) -> (spec::DesignSpace, Vec<f64>, usize) {
+    let space = spec::load(&repo().join("scenarios/designs/irb120_spheres_from_paper.toml")).unwrap();
+    let x = space.start(count);
+    let v = space.variables.len() + 2;
+    (space, x, v)
+}
+
+fn closest_pair_mm(points: &[[f64; 3]]) -> f64 {
+    let mut d = f64::INFINITY;
+    for i in 0..points.len() {
+        for j in 0..i {
+            d = d.min((0..3).map(|k| (points[i][k] - points[j][k]).powi(2)).sum::<f64>().sqrt());
+        }
+    }
+    d
+}
+
+/// A design whose spheres break the spacing rule, lie nearly on one line or turn clockwise is
+/// moved to a valid design near it (`DesignSpace::repair`): spacing cleared, {W} defined with its
+/// z axis up; the clockwise one by renumbering spheres 2 and 3 alone (no sphere moves).
+#[test]
+fn a_design_that_breaks_a_geometric_rule_is_repaired_to_a_valid_design_near_it() {
+    let (space, start, v) = paper(4);
+    assert!(space.search.repair, "the default");
+    assert!(space.decode(4, &start).violation.is_none());
+    assert!(space.repair(4, &start).is_none(), "a valid design needs no repair");
+
+    // Sphere 4 moved 20 mm from sphere 2 (x = 300 mm, y = 0): under the 100 mm spacing.
+    let mut close = start.clone();
+    close[v + 6] = start[v + 2] + 20.0 / 600.0;
+    close[v + 7] = start[v + 3];
+    let broke = space.decode(4, &close).violation.expect("too close").0;
+    assert!(broke.contains("points 2 and 4"), "{broke}");
+    let r = space.repair(4, &close).expect("repaired");
+    assert_eq!(r.broke, broke);
+    let d = space.decode(4, &r.x);
+    assert!(d.violation.is_none(), "{:?}", d.violation);
+    assert!(closest_pair_mm(&d.points_mm) >= 100.0, "{:?}", d.points_mm);
+    // The shortfall is 80 mm: the pair is pushed apart by it, nothing else moves.
+    assert!((r.moved_mm - 80.0).abs() < 0.01, "{}", r.moved_mm);
+    assert_eq!(r.x[..v], close[..v], "the variables and the plate kept");
+    assert_eq!(space.repair(4, &close), Some(r), "deterministic");
+
+    // Sphere 3 on the line through spheres 1 and 2 (x = 150 mm, y = 0): no {W}.
+    let mut line = start.clone();
+    line[v + 5] = start[v + 1];
+    let broke = space.decode(4, &line).violation.expect("on one line").0;
+    assert!(broke.contains("nearly on one line"), "{broke}");
+    let r = space.repair(4, &line).expect("repaired");
+    assert!(space.decode(4, &r.x).violation.is_none());
+    assert_eq!(r.x[..v + 4], line[..v + 4], "spheres 1 and 2 kept");
+
+    // Spheres 2 and 3 swapped: clockwise seen from above, {W}'s z axis down (a plate offset's turn
+    // about x beyond 90 degrees, which the scenario refuses); renumbered, the same places.
+    let mut turned = start.clone();
+    turned.swap(v + 2, v + 4);
+    turned.swap(v + 3, v + 5);
+    let broke = space.decode(4, &turned).violation.expect("clockwise").0;
+    assert!(broke.contains("clockwise"), "{broke}");
+    let r = space.repair(4, &turned).expect("repaired");
+    assert_eq!(r.x, start, "renumbered back");
+    assert_eq!(r.moved_mm, 0.0);
+}
+
+/// The search evaluates the repaired design: its worlds run and its score is theirs plus
+/// `REPAIR_PER_MM` per mm moved; with `[search] repair = false` the same design is ruled out,
+/// runs nothing and scores its violation (100 and more).
+#[test]
+fn the_search_runs_a_repaired_design_where_without_repair_it_rules_it_out() {
+    let tmp = scratch("optimise-repair");
+    let (space, start, v) = paper(4);
+    let mut close = start.clone();
+    close[v + 6] = start[v + 2] + 20.0 / 600.0;
+    close[v + 7] = start[v + 3];
+    let asked = optimise::Asked { restart: 0, index: 0, count: 4, x: close.clone() };
+    let ctx = Context::with_worlds(&space, tmp.path().join("w"), &Unreachable);
+    let e = ctx.evaluate(asked.clone()).unwrap();
+    assert!(e.violation.is_none(), "{:?}", e.violation);
+    let r = e.repaired.clone().expect("repaired");
+    assert_eq!(e.worlds, space.search.worlds);
+    assert!(closest_pair_mm(&e.points_mm) >= 100.0, "{:?}", e.points_mm);
+    assert_eq!(e.asked.x, close, "the trace keeps what the search asked");
+    let at = ctx.evaluate(optimise::Asked { x: r.x.clone(), ..asked.clone() }).unwrap();
+    assert!(at.repaired.is_none());
+    assert_eq!(at.key, e.key, "the repaired design itself");
+    assert!((e.score - (at.score + optimise::REPAIR_PER_MM * r.moved_mm)).abs() < 1e-12, "{} {}", e.score, at.score);
+    assert!(e.score < 100.0);
+
+    let mut off = space.clone();
+    off.search.repair = false;
+    let ctx = Context::with_worlds(&off, tmp.path().join("w"), &Unreachable);
+    let e = ctx.evaluate(asked).unwrap();
+    assert!(e.violation.is_some() && e.repaired.is_none() && e.worlds == 0);
+    assert!(e.score >= 100.0, "{}", e.score);
+}
+
+/// A design brought to another count of spheres (`DesignSpace::recount`): spheres 1 to 3 and the
+/// variables kept; dropped, the spheres closest to another (never 1 to 3); added, at the free
+/// place farthest from every sphere; the result valid.
+#[test]
+fn a_design_is_brought_to_another_count_keeping_w_and_spreading_the_spheres() {
+    let (space, three, v) = paper(3);
+    let six = space.recount(3, &three, 6);
+    assert_eq!(six.len(), space.dimensions(6));
+    assert_eq!(six[..v + 6], three[..], "the variables, the plate and spheres 1 to 3 kept");
+    let d = space.decode(6, &six);
+    assert!(d.violation.is_none(), "{:?}", d.violation);
+    // The 4th sphere at the place farthest from the three: a corner of the box, beyond 300 mm.
+    assert!(closest_pair_mm(&d.points_mm) >= 100.0);
+    let back = space.recount(6, &six, 3);
+    assert_eq!(back, three, "the spheres added are the ones dropped");
+    let four = space.recount(6, &six, 4);
+    assert_eq!(four[..v + 6], three[..]);
+    assert!(space.decode(4, &four).violation.is_none());
+    // Of the paper's six (a circle), the closest spheres go first: the count's own start kept at
+    // spheres 1 to 3.
+    let (_, paper6, _) = paper(6);
+    assert_eq!(space.recount(6, &paper6, 3)[..], paper6[..v + 6]);
+}
+
+/// Synthetic SPMS worlds: the largest error falls with the count of stations and with their
+/// distance from the box's middle (x = 1100, y = 0, z = 800 mm), so that the best design has
+/// three stations spread out.
+struct Stations;
+
+impl WorldSource for Stations {
+    fn run(&self, sweep: &Sweep, point: usize, realisation: u32) -> Unit {
+        let s = sweep.points[point].scenario.as_ref();
+        let table: toml::Table = s.header().text.parse().expect("a scenario's text");
+        let pts = get_dotted(&table, "station.sphere_points_base_mm").and_then(|v| v.as_array()).expect("stations").clone();
+        let spread: f64 = pts
+            .iter()
+            .map(|p| {
+                let c: Vec<f64> = p.as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+                ((c[0] - 1100.0).powi(2) + c[1].powi(2) + (c[2] - 800.0).powi(2)).sqrt()
+            })
+            .sum();
+        let e = 0.9 / pts.len() as f64 + 0.2 / (1.0 + spread / 1000.0) + 0.005 * f64::from(realisation % 10);
+        unit_with_error(sweep, point, realisation, e)
+    }
+}
+
+/// The restarts run the first repetition of every count, then the second of every count; the
+/// second starts from the best design of the first ones at any count, brought to its own count
+/// (`DesignSpace::recount`, then brought into reach as every start); with `across_counts =
+/// false`, from the Latin hypercube.
+#[test]
+fn the_second_repetition_of_every_count_starts_from_the_best_design_at_any_count() {
+    let tmp = scratch("optimise-across");
+    let text = std::fs::read_to_string(repo().join("scenarios/designs/spms_stations.toml")).unwrap();
+    let base = format!("base = {:?}", repo().join("scenarios/er20c10_spms.toml").display().to_string());
+    let text = text.replace("base = \"../er20c10_spms.toml\"", &base);
+    let text = text.replace("evaluations = 20", "evaluations = 6\nrestarts = 2").replace("worlds = 6", "worlds = 2");
+    let text = text.replace("compare = [\"../sweeps/spms_stations.toml\"]", "");
+    let f = tmp.path().join("stations.toml");
+    std::fs::write(&f, &text).unwrap();
+    let space = spec::load(&f).unwrap();
+    assert!(space.search.across_counts, "the default");
+    assert_eq!(optimise::restarts(&space), vec![(1, 0), (2, 0), (3, 0), (1, 1), (2, 1), (3, 1)]);
+    let ctx = Context::with_worlds(&space, tmp.path().join("w"), &Stations);
+    let first: Vec<Evaluated> = (0..3).flat_map(|r| optimise::run_restart(&ctx, r, &|_| {}).unwrap()).collect();
+    let best = first.iter().filter(|e| e.worlds > 0).min_by(|a, b| a.score.total_cmp(&b.score)).unwrap();
+    assert_eq!(best.asked.count, 3, "three stations are best");
+    let best_x = best.repaired.as_ref().map_or(&best.asked.x, |r| &r.x).clone();
+    for (r, count) in [(3, 1), (5, 3)] {
+        let second = optimise::run_restart(&ctx, r, &|_| {}).unwrap();
+        let from = optimise::into_reach(&ctx, count, space.recount(3, &best_x, count));
+        assert_eq!(second[0].asked.x, from, "restart {r} ({count} stations) starts from the best brought to its count");
+    }
+    // The best of count 3 seeds count 3 itself: its second repetition starts at that design.
+    assert_eq!(space.recount(3, &best_x, 3), best_x);
+
+    let mut off = space.clone();
+    off.search.across_counts = false;
+    let ctx = Context::with_worlds(&off, tmp.path().join("w2"), &Stations);
+    let second = optimise::run_restart(&ctx, 3, &|_| {}).unwrap();
+    let lhs = optimise::spread_starts(off.dimensions(1), 1, off.search.seed, 1).swap_remove(0);
+    assert_eq!(second[0].asked.x, optimise::into_reach(&ctx, 1, lhs));
 }

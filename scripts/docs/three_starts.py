@@ -6,8 +6,9 @@ verified.parquet, manifest.json) and the design file its manifest names (the cam
 Usage: python3 scripts/docs/three_starts.py LABEL=DIR [LABEL=DIR ...]
 
 Prints a Markdown table, one row per run: the designs its search asked (ruled out by their
-geometry / failed in every world), the answer (the answer rule's design, `answer.parquet`) with
-its held-out P(success) and 90 % interval and its campaign, the best held-out design within the
+geometry / repaired to a valid design and run, `trace.parquet`'s repaired column / failed in
+every world), the answer (the answer rule's design, `answer.parquet`) with its held-out
+P(success) and 90 % interval and its campaign, the best held-out design within the
 budget and the best whatever its campaign; then, for each pair of runs, whether each answer's P
 lies within the other's interval.
 """
@@ -49,9 +50,12 @@ def one_run(label: str, out: str) -> dict:
     d = results_dir(out)
     manifest = json.load(open(os.path.join(d, "manifest.json")))
     trace = pl.read_parquet(os.path.join(d, "trace.parquet"))
-    designs = trace.select(["restart", "evaluation", "count", "violation", "worlds", "failed_worlds"]).unique()
+    if "repaired" not in trace.columns:
+        trace = trace.with_columns(pl.lit("").alias("repaired"))
+    designs = trace.select(["restart", "evaluation", "count", "violation", "repaired", "worlds", "failed_worlds"]).unique()
     asked = designs.height
     ruled_out = designs.filter(pl.col("violation") != "").height
+    repaired = designs.filter(pl.col("repaired") != "").height
     failed = designs.filter((pl.col("worlds") > 0) & (pl.col("failed_worlds") == pl.col("worlds"))).height
     counts = sorted(designs["count"].unique().to_list())
     answer = pl.read_parquet(os.path.join(d, "answer.parquet")).filter(pl.col("stage") == "held_out").row(0, named=True)
@@ -65,6 +69,7 @@ def one_run(label: str, out: str) -> dict:
         "counts": counts,
         "asked": asked,
         "ruled_out": ruled_out,
+        "repaired": repaired,
         "failed": failed,
         "answer": answer,
         "within": within,
@@ -84,7 +89,7 @@ def main() -> None:
         runs.append(one_run(label, out))
     if not runs:
         sys.exit(__doc__)
-    print("| start | counts searched | designs asked: ruled out by geometry / failed in every world | answer (the answer rule) | its held-out P (90 % interval) | campaign, h | best held-out design within the budget | best held-out design | wall, s (search + race and verification) |")
+    print("| start | counts searched | designs asked: ruled out by geometry / repaired and run / failed in every world | answer (the answer rule) | its held-out P (90 % interval) | campaign, h | best held-out design within the budget | best held-out design | wall, s (search + race and verification) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in runs:
         a = r["answer"]
@@ -92,7 +97,7 @@ def main() -> None:
         within = row_text(r["within"]) if r["within"] else "none"
         overall = row_text(r["overall"]) if r["overall"] else "none"
         print(
-            f"| {r['label']} | {counts} | {r['asked']}: {r['ruled_out']} / {r['failed']} | {a['design']}, sets of {a['set_size']} "
+            f"| {r['label']} | {counts} | {r['asked']}: {r['ruled_out']} / {r['repaired']} / {r['failed']} | {a['design']}, sets of {a['set_size']} "
             f"| {a['estimate']:.3f} ({a['lower']:.3f}-{a['upper']:.3f}) | {a['campaign_h']:.3f} | {within} | {overall} | {r['wall']:.0f} |"
         )
     print()

@@ -54,6 +54,11 @@ pub const HELD_OUT_BASE: u32 = 1_000_000;
 /// Weight of a constraint's shortfall in a search score (a P(success) is within [0, 1]).
 const PENALTY: f64 = 10.0;
 
+/// What a repaired design's search score gains per mm its points were moved
+/// ([`DesignSpace::repair`]): 0.1 per 100 mm, so that of two designs that repair to the same
+/// valid one, the search prefers the nearer, and a valid design beats its repaired copies.
+pub const REPAIR_PER_MM: f64 = 1e-3;
+
 /// Why the optimiser could not run or write.
 #[derive(Debug, thiserror::Error)]
 pub enum OptimiseError {
@@ -176,6 +181,10 @@ pub struct Evaluated {
     pub key: String,
     /// Geometric violation or refusal: what, and the margin (mm, or 1 for a refusal).
     pub violation: Option<(String, f64)>,
+    /// The design asked broke a geometric rule and was moved to the valid design evaluated
+    /// ([`DesignSpace::repair`], `[search] repair`): its values, points and table are the
+    /// repaired design's.
+    pub repaired: Option<space::Repaired>,
     /// Worlds run, and of them failed (the campaign could not run), with the first reason.
     pub worlds: u32,
     /// See `worlds`.
@@ -349,12 +358,19 @@ pub struct Context<'a> {
     pub cache: PathBuf,
     /// Where worlds come from ([`Devices`] but in tests of the search).
     pub worlds: &'a dyn WorldSource,
+    /// The first repetitions' best design, once found ([`run_restart`]).
+    best_of_first: std::sync::OnceLock<Option<(usize, Vec<f64>)>>,
 }
 
 impl<'a> Context<'a> {
     /// The context of `space` keeping its worlds under `cache`, run by the devices.
     pub fn new(space: &'a DesignSpace, cache: PathBuf) -> Self {
-        Self { space, cache, worlds: &Devices }
+        Self::with_worlds(space, cache, &Devices)
+    }
+
+    /// The context of `space` keeping its worlds under `cache`, run by `worlds`.
+    pub fn with_worlds(space: &'a DesignSpace, cache: PathBuf, worlds: &'a dyn WorldSource) -> Self {
+        Self { space, cache, worlds, best_of_first: std::sync::OnceLock::new() }
     }
 
     /// The sweep-shaped record of one design point (for the sweep's statistics).
@@ -435,7 +451,15 @@ impl<'a> Context<'a> {
     /// Evaluates what the search asked on the search worlds `0..worlds` (under every error
     /// model of `[robust]`, on the same worlds).
     pub fn evaluate(&self, asked: Asked) -> Result<Evaluated, OptimiseError> {
-        let d = self.space.decode(asked.count, &asked.x);
+        let mut d = self.space.decode(asked.count, &asked.x);
+        let mut repaired = None;
+        if d.violation.is_some()
+            && self.space.search.repair
+            && let Some(r) = self.space.repair(asked.count, &asked.x)
+        {
+            d = self.space.decode(asked.count, &r.x);
+            repaired = Some(r);
+        }
         let key = design_key(&d.table);
         let mut e = Evaluated {
             asked,
@@ -444,6 +468,7 @@ impl<'a> Context<'a> {
             table: None,
             key,
             violation: d.violation,
+            repaired,
             worlds: 0,
             failed: 0,
             first_error: None,
@@ -540,6 +565,9 @@ impl<'a> Context<'a> {
                 e.score = e.best().map_or(all_failed, |b| b.score);
                 e.models = per_model;
             }
+        }
+        if let Some(r) = &e.repaired {
+            e.score += REPAIR_PER_MM * r.moved_mm;
         }
         Ok(e)
     }
@@ -656,9 +684,37 @@ fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
-/// The restarts of a space: `(count of points, repetition)` in restart order.
+/// The restarts of a space: `(count of points, repetition)` in restart order: the first
+/// repetition of every count, then the second of every count, and so on (the second
+/// repetitions start from the first ones' best design, [`run_restart`]).
 pub fn restarts(space: &DesignSpace) -> Vec<(usize, u32)> {
-    space.counts().into_iter().flat_map(|c| (0..space.search.restarts).map(move |k| (c, k))).collect()
+    let counts = space.counts();
+    (0..space.search.restarts).flat_map(|k| counts.iter().map(move |&c| (c, k))).collect()
+}
+
+/// The best design the first repetitions found at any count (`[search] across_counts`): the
+/// least search score among the designs that ran in some world (repaired ones as repaired),
+/// the first of equal ones in restart order; `(count, x)`. `None` when none ran. Each first
+/// repetition is run (or its record read back, [`run_restart`]) once per context.
+fn best_of_first(ctx: &Context<'_>) -> Result<Option<(usize, Vec<f64>)>, OptimiseError> {
+    if let Some(b) = ctx.best_of_first.get() {
+        return Ok(b.clone());
+    }
+    let all = restarts(ctx.space);
+    let mut best: Option<(f64, usize, Vec<f64>)> = None;
+    for r in (0..all.len()).filter(|&r| all[r].1 == 0) {
+        for e in run_restart(ctx, r, &|_| {})? {
+            if e.violation.is_some() || e.worlds == 0 || e.failed == e.worlds {
+                continue;
+            }
+            if best.as_ref().is_none_or(|b| e.score < b.0) {
+                let x = e.repaired.as_ref().map_or_else(|| e.asked.x.clone(), |r| r.x.clone());
+                best = Some((e.score, e.asked.count, x));
+            }
+        }
+    }
+    let b = best.map(|b| (b.1, b.2));
+    Ok(ctx.best_of_first.get_or_init(|| b).clone())
 }
 
 /// The directory of the restarts' records and of the per-world files under `out`.
@@ -673,7 +729,7 @@ fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
     use sha2::Digest;
     let s = &space.search;
     let settings = format!(
-        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}start into reach and feasibility\u{0}{}",
+        "{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}{}\u{0}start into reach and feasibility\u{0}{}\u{0}repair {}\u{0}across counts {}",
         space.identity,
         s.method.label(),
         s.evaluations,
@@ -681,7 +737,9 @@ fn restart_file(dir: &Path, space: &DesignSpace, r: usize) -> PathBuf {
         s.worlds,
         s.seed,
         s.score.label(),
-        "latin-hypercube repetitions"
+        "latin-hypercube repetitions",
+        s.repair,
+        s.across_counts
     );
     let key = format!("{:x}", sha2::Sha256::digest(settings.as_bytes()));
     dir.join(format!("restart-{r:03}-{}.json", &key[..12]))
@@ -805,7 +863,11 @@ pub fn run_restart(ctx: &Context<'_>, r: usize, progress: &(dyn Fn(usize) + Sync
     let record = read_record(ctx, r)?;
     let mismatch = |key: String, why: String| OptimiseError::Record { path: file.display().to_string(), key, why };
     let mut start = space.start(count);
-    if rep > 0 {
+    let seeded = if rep == 1 && space.search.across_counts { best_of_first(ctx)? } else { None };
+    if let Some((from, x)) = seeded {
+        // The second repetition: from the best design of the first ones at any count.
+        start = space.recount(from, &x, count);
+    } else if rep > 0 {
         // Later repetitions start elsewhere: spread over the box.
         start = spread_starts(space.dimensions(count), space.search.restarts as usize - 1, space.search.seed, count)
             .swap_remove(rep as usize - 1);

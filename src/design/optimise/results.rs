@@ -242,6 +242,8 @@ fn trace_columns(space: &DesignSpace, v: &Verdict) -> Vec<Column> {
         s("x", v.trace.iter().map(|e| format!("{:?}", e.asked.x)).collect()),
         s("violation", v.trace.iter().map(|e| e.violation.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect()),
         f("violation_margin", v.trace.iter().map(|e| e.violation.as_ref().map_or(0.0, |x| x.1)).collect()),
+        s("repaired", v.trace.iter().map(|e| e.repaired.as_ref().map(|r| r.broke.clone()).unwrap_or_default()).collect()),
+        f("repaired_mm", v.trace.iter().map(|e| e.repaired.as_ref().map_or(0.0, |r| r.moved_mm)).collect()),
         u("worlds", v.trace.iter().map(|e| e.worlds).collect()),
         u("failed_worlds", v.trace.iter().map(|e| e.failed).collect()),
         s("first_error", v.trace.iter().map(|e| e.first_error.clone().unwrap_or_default()).collect()),

@@ -112,6 +112,8 @@ struct SearchFile {
     race: Option<RaceFile>,
     seed: Option<u64>,
     score: Option<String>,
+    repair: Option<bool>,
+    across_counts: Option<bool>,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -314,6 +316,15 @@ pub struct Search {
     pub seed: u64,
     /// What the search minimises for `maximise = "success"` (`[search] score`).
     pub score: SearchScore,
+    /// `[search] repair` (default true): a design whose points break the spacing rule, whose
+    /// first three spheres are nearly on one line or turn clockwise seen from above is moved to a
+    /// valid design near it ([`DesignSpace::repair`]) and that design evaluated, rather than
+    /// ruled out.
+    pub repair: bool,
+    /// `[search] across_counts` (default true): the second repetition of every count starts from
+    /// the best design the first repetitions found at any count, brought to its count
+    /// ([`DesignSpace::recount`]); false: from the Latin hypercube as the later repetitions.
+    pub across_counts: bool,
 }
 
 /// An error model of a robust design: scenario keys set on top of every design.
@@ -865,6 +876,8 @@ fn search(path: &Path, s: &SearchFile) -> Result<Search, DesignError> {
         race,
         seed: s.seed.unwrap_or(2018),
         score,
+        repair: s.repair.unwrap_or(true),
+        across_counts: s.across_counts.unwrap_or(true),
     })
 }
 

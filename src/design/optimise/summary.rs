@@ -350,9 +350,11 @@ fn search(v: &Verdict, parts: &mut Summary<'_>) {
     parts.text_from("trace.parquet", move |t| {
         let rows: Vec<Row<'_>> = (0..t.height()).map(|i| t.at(i)).collect();
         let ruled = rows.iter().filter(|r| !r.str("violation").is_empty()).count();
+        let repaired = rows.iter().filter(|r| !r.str("repaired").is_empty()).count();
         let mut s = format!(
-            "## Search\n\n{} designs evaluated ({ruled} ruled out by their geometry or refused, not run); {finalists} finalists \
-             raced over up to {worlds} worlds.\n",
+            "## Search\n\n{} designs evaluated ({ruled} ruled out by their geometry or refused, not run; {repaired} broke a \
+             geometric rule and were moved to a valid design near them, which ran: `trace.parquet` columns repaired, \
+             repaired_mm); {finalists} finalists raced over up to {worlds} worlds.\n",
             rows.len()
         );
         let failing: Vec<&Row<'_>> = rows.iter().filter(|r| r.u64("failed_worlds") > 0).collect();
