@@ -929,35 +929,33 @@ fn trical_text(edit: impl Fn(String) -> String) -> String {
     edit(t)
 }
 
-struct TricalRun {
+struct DeviceRun {
     report: calsim::app::plan::DevicePlanReport,
     files_1: Vec<(String, Vec<u8>)>,
     files_2: Vec<(String, Vec<u8>)>,
 }
 
+/// A device plan file's text (in a scratch directory of its own) run with 1 and with 2 threads.
+fn device_run(name: &str, text: String, simulate: bool) -> DeviceRun {
+    let dir = scratch(name);
+    let file = dir.join(format!("{name}.toml"));
+    std::fs::write(&file, text).unwrap();
+    let go = |threads: u32| {
+        let spec =
+            PlanSpec { file: file.clone(), out: dir.join(format!("out{threads}")), threads: Some(threads), simulate, recording: true };
+        let r = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).unwrap();
+        let f = files(&r.dir).into_iter().filter(|(n, _)| n != "plan.rrd").collect();
+        (r, f)
+    };
+    let (_, files_1) = go(1);
+    let (report, files_2) = go(2);
+    DeviceRun { report, files_1, files_2 }
+}
+
 /// The shipped TriCal plan (fewer worlds) run with 1 and with 2 threads.
-fn trical_run() -> &'static TricalRun {
-    static RUN: OnceLock<TricalRun> = OnceLock::new();
-    RUN.get_or_init(|| {
-        let dir = scratch("trical");
-        let file = dir.join("trical.toml");
-        std::fs::write(&file, trical_text(|t| t.replace("worlds = 30", "worlds = 12"))).unwrap();
-        let go = |threads: u32| {
-            let spec = PlanSpec {
-                file: file.clone(),
-                out: dir.join(format!("out{threads}")),
-                threads: Some(threads),
-                simulate: false,
-                recording: true,
-            };
-            let r = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).unwrap();
-            let f = files(&r.dir).into_iter().filter(|(n, _)| n != "plan.rrd").collect();
-            (r, f)
-        };
-        let (_, files_1) = go(1);
-        let (report, files_2) = go(2);
-        TricalRun { report, files_1, files_2 }
-    })
+fn trical_run() -> &'static DeviceRun {
+    static RUN: OnceLock<DeviceRun> = OnceLock::new();
+    RUN.get_or_init(|| device_run("trical", trical_text(|t| t.replace("worlds = 30", "worlds = 12")), false))
 }
 
 #[test]
@@ -1440,29 +1438,10 @@ fn spms_text(edit: impl Fn(String) -> String) -> String {
     edit(t)
 }
 
-/// The shipped SPMS plan (fewer worlds) run with 1 and with 2 threads.
-fn spms_run() -> &'static TricalRun {
-    static RUN: OnceLock<TricalRun> = OnceLock::new();
-    RUN.get_or_init(|| {
-        let dir = scratch("spms");
-        let file = dir.join("spms.toml");
-        std::fs::write(&file, spms_text(|t| t.replace("worlds = 30", "worlds = 12"))).unwrap();
-        let go = |threads: u32| {
-            let spec = PlanSpec {
-                file: file.clone(),
-                out: dir.join(format!("out{threads}")),
-                threads: Some(threads),
-                simulate: true,
-                recording: true,
-            };
-            let r = calsim::app::plan::plan_device(&spec, &calsim::app::Quiet).unwrap();
-            let f = files(&r.dir).into_iter().filter(|(n, _)| n != "plan.rrd").collect();
-            (r, f)
-        };
-        let (_, files_1) = go(1);
-        let (report, files_2) = go(2);
-        TricalRun { report, files_1, files_2 }
-    })
+/// The shipped SPMS plan (fewer worlds) run with 1 and with 2 threads, its measurements simulated.
+fn spms_run() -> &'static DeviceRun {
+    static RUN: OnceLock<DeviceRun> = OnceLock::new();
+    RUN.get_or_init(|| device_run("spms", spms_text(|t| t.replace("worlds = 30", "worlds = 12")), true))
 }
 
 #[test]
