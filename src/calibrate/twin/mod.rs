@@ -224,13 +224,13 @@ struct Lsq {
 impl Lsq {
     fn new(a: DMatrix<f64>) -> Self {
         let scale: Vec<f64> = a.column_iter().map(|c| c.norm()).map(|v| if v > 0.0 { 1.0 / v } else { 0.0 }).collect();
-        let pinv = scaled_pinv(a.tr_mul(&a), &scale);
+        let pinv = scaled_pinv(super::problem::tr_mul(&a, None), &scale);
         Self { a, scale, pinv }
     }
 
     /// Coefficients of `b`'s columns on `a` (internal units).
     fn coef(&self, b: &DMatrix<f64>) -> DMatrix<f64> {
-        scaled_solve(&self.pinv, &self.scale, self.a.tr_mul(b))
+        scaled_solve(&self.pinv, &self.scale, super::problem::tr_mul(&self.a, Some(b)))
     }
 
     /// `b` less its projection on `a`'s columns.
