@@ -1232,6 +1232,67 @@ fn segment_segment(p1: &Vector3<f64>, q1: &Vector3<f64>, p2: &Vector3<f64>, q2: 
     ((p1 + d1 * s) - (p2 + d2 * t)).norm()
 }
 
+/// An independent collision check of the IRB 120 in the shipped plans' cell: the robot file's
+/// capsules on the modified-DH frames computed here, and `targets` on the flange (spheres of
+/// `target_r` mm, body 7), against each other (pairs touching at the home pose allowed, and the
+/// targets with links 5 and 6), `ground` at z = 0, the cabinet and, where given, a tracker head
+/// (150 mm). Free: what the planner's checks see within the 6-decimal rounding of tour.csv's
+/// degrees; the error names what collides.
+fn irb120_cell_check(
+    targets: &[Vector3<f64>],
+    target_r: f64,
+    ground: &'static str,
+    tracker: Option<Vector3<f64>>,
+) -> impl Fn(&[f64; 6]) -> Result<(), String> {
+    const ROUNDED_MM: f64 = 0.01;
+    let (joints, caps) = irb120_capsules();
+    let targets = targets.to_vec();
+    let bodies = move |q: &[f64; 6]| -> Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> {
+        let f = frames(&joints, q);
+        let mut v: Vec<_> = caps.iter().map(|(l, a, b, rad)| (*l, f[*l].1 + f[*l].0 * a, f[*l].1 + f[*l].0 * b, *rad)).collect();
+        for t in &targets {
+            let p = f[6].1 + f[6].0 * t;
+            v.push((7, p, p, target_r));
+        }
+        v
+    };
+    let home = bodies(&[0.0; 6]);
+    let touching = move |i: usize, j: usize| {
+        home.iter()
+            .filter(|x| x.0 == i)
+            .any(|x| home.iter().filter(|y| y.0 == j).any(|y| segment_segment(&x.1, &x.2, &y.1, &y.2) < x.3 + y.3))
+    };
+    let allowed = move |i: usize, j: usize| -> bool {
+        let (i, j) = (i.min(j), i.max(j));
+        j < i + 2 || (j == 7 && i >= 5) || touching(i, j)
+    };
+    let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
+    move |q: &[f64; 6]| -> Result<(), String> {
+        let b = bodies(q);
+        for x in b.iter().filter(|x| x.0 >= 1) {
+            if x.1.z.min(x.2.z) - x.3 < -ROUNDED_MM {
+                return Err(format!("body {} below {ground}", x.0));
+            }
+            if along(&x.1, &x.2, STEP).iter().any(|p| point_box(p, &lo, &hi) < x.3 - SAMPLED) {
+                return Err(format!("body {} in the cabinet", x.0));
+            }
+            if let Some(t) = &tracker
+                && point_segment(t, &x.1, &x.2) < x.3 + 150.0 - ROUNDED_MM
+            {
+                return Err(format!("body {} meets the tracker head", x.0));
+            }
+        }
+        for (k, x) in b.iter().enumerate() {
+            for y in &b[k + 1..] {
+                if !allowed(x.0, y.0) && segment_segment(&x.1, &x.2, &y.1, &y.2) < x.3 + y.3 - ROUNDED_MM {
+                    return Err(format!("bodies {} and {} collide", x.0, y.0));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The tour of the TriCal plan: its straight moves through a collision are re-routed through via
 /// configurations (rows `via` of `tour.csv`, in no other file), and every move of the tour, via
 /// paths included, is free at the stated step (1 deg of the joint that moves most) by a computation
@@ -1245,44 +1306,7 @@ fn the_trical_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_in
     assert!(!o.colliding_moves.is_empty(), "the shipped TriCal plan's tour has a straight move through a collision");
     assert!(o.routing.unrouted.is_empty(), "{:?}", o.routing.unrouted);
     assert_eq!(o.routing.vias.iter().map(|v| v.between).collect::<Vec<_>>(), o.colliding_moves);
-    let (joints, caps) = irb120_capsules();
-    let joints = &joints;
-    let bodies = |q: &[f64; 6]| -> Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> {
-        let f = frames(joints, q);
-        caps.iter().map(|(l, a, b, rad)| (*l, f[*l].1 + f[*l].0 * a, f[*l].1 + f[*l].0 * b, *rad)).collect()
-    };
-    let home = bodies(&[0.0; 6]);
-    let touching = |i: usize, j: usize| {
-        home.iter()
-            .filter(|x| x.0 == i)
-            .any(|x| home.iter().filter(|y| y.0 == j).any(|y| segment_segment(&x.1, &x.2, &y.1, &y.2) < x.3 + y.3))
-    };
-    let allowed = |i: usize, j: usize| -> bool {
-        let (i, j) = (i.min(j), i.max(j));
-        j < i + 2 || touching(i, j)
-    };
-    let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
-    // Free: what the planner's checks see within the 6-decimal rounding of tour.csv's degrees.
-    const ROUNDED_MM: f64 = 0.01;
-    let free = |q: &[f64; 6]| -> Result<(), String> {
-        let b = bodies(q);
-        for x in b.iter().filter(|x| x.0 >= 1) {
-            if x.1.z.min(x.2.z) - x.3 < -ROUNDED_MM {
-                return Err(format!("body {} below the table", x.0));
-            }
-            if along(&x.1, &x.2, STEP).iter().any(|p| point_box(p, &lo, &hi) < x.3 - SAMPLED) {
-                return Err(format!("body {} in the cabinet", x.0));
-            }
-        }
-        for (k, x) in b.iter().enumerate() {
-            for y in &b[k + 1..] {
-                if !allowed(x.0, y.0) && segment_segment(&x.1, &x.2, &y.1, &y.2) < x.3 + y.3 - ROUNDED_MM {
-                    return Err(format!("bodies {} and {} collide", x.0, y.0));
-                }
-            }
-        }
-        Ok(())
-    };
+    let free = irb120_cell_check(&[], 0.0, "the table", None);
     let stops = tour_stops(&r.report.dir, 4);
     let vias = stops.iter().filter(|s| s.1 == "via").count();
     assert_eq!(vias, o.routing.vias.iter().map(|v| v.qs.len()).sum::<usize>());
@@ -1290,7 +1314,7 @@ fn the_trical_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_in
     assert!(stops.iter().filter(|s| s.1 == "via").all(|s| s.0.starts_with("via")));
     let poses = std::fs::read_to_string(r.report.dir.join("poses.csv")).unwrap();
     assert!(!poses.contains("via"), "a via configuration is not measured");
-    let checked = walk_tour(&stops, free);
+    let checked = walk_tour(&stops, &free);
     // The recording draws the arm at every via configuration of tour.csv, and at every stop.
     let (drawn, robot_rows) = recorded_vias(&r.report.dir.join("plan.rrd"));
     assert_eq!(drawn, stops.iter().filter(|s| s.1 == "via").map(|s| s.0.clone()).collect::<Vec<_>>());
@@ -1357,55 +1381,8 @@ fn the_tracker_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_i
     assert!(!o.colliding_moves.is_empty(), "the shipped tracker plan's tour has a straight move through a collision");
     assert!(o.routing.unrouted.is_empty(), "{:?}", o.routing.unrouted);
     assert_eq!(o.routing.vias.iter().map(|v| v.between).collect::<Vec<_>>(), o.colliding_moves);
-    let (joints, caps) = irb120_capsules();
-    let joints = &joints;
     let targets = [Vector3::new(0.0, 0.0, 40.0), Vector3::new(40.0, 30.0, 30.0)];
-    let smr_r = 38.1 / 2.0;
-    let tracker = Vector3::new(1800.0, 0.0, 300.0);
-    let bodies = |q: &[f64; 6]| -> Vec<(usize, Vector3<f64>, Vector3<f64>, f64)> {
-        let f = frames(joints, q);
-        let mut v: Vec<_> = caps.iter().map(|(l, a, b, rad)| (*l, f[*l].1 + f[*l].0 * a, f[*l].1 + f[*l].0 * b, *rad)).collect();
-        for t in &targets {
-            let p = f[6].1 + f[6].0 * t;
-            v.push((7, p, p, smr_r));
-        }
-        v
-    };
-    let home = bodies(&[0.0; 6]);
-    let touching = |i: usize, j: usize| {
-        home.iter()
-            .filter(|x| x.0 == i)
-            .any(|x| home.iter().filter(|y| y.0 == j).any(|y| segment_segment(&x.1, &x.2, &y.1, &y.2) < x.3 + y.3))
-    };
-    let allowed = |i: usize, j: usize| -> bool {
-        let (i, j) = (i.min(j), i.max(j));
-        j < i + 2 || (j == 7 && i >= 5) || touching(i, j)
-    };
-    let (lo, hi) = (Vector3::new(-800.0, -800.0, 0.0), Vector3::new(-400.0, 800.0, 1500.0));
-    // Free: what the planner's checks see within the 6-decimal rounding of tour.csv's degrees.
-    const ROUNDED_MM: f64 = 0.01;
-    let free = |q: &[f64; 6]| -> Result<(), String> {
-        let b = bodies(q);
-        for x in b.iter().filter(|x| x.0 >= 1) {
-            if x.1.z.min(x.2.z) - x.3 < -ROUNDED_MM {
-                return Err(format!("body {} below the floor", x.0));
-            }
-            if along(&x.1, &x.2, STEP).iter().any(|p| point_box(p, &lo, &hi) < x.3 - SAMPLED) {
-                return Err(format!("body {} in the cabinet", x.0));
-            }
-            if point_segment(&tracker, &x.1, &x.2) < x.3 + 150.0 - ROUNDED_MM {
-                return Err(format!("body {} meets the tracker head", x.0));
-            }
-        }
-        for (k, x) in b.iter().enumerate() {
-            for y in &b[k + 1..] {
-                if !allowed(x.0, y.0) && segment_segment(&x.1, &x.2, &y.1, &y.2) < x.3 + y.3 - ROUNDED_MM {
-                    return Err(format!("bodies {} and {} collide", x.0, y.0));
-                }
-            }
-        }
-        Ok(())
-    };
+    let free = irb120_cell_check(&targets, 38.1 / 2.0, "the floor", Some(Vector3::new(1800.0, 0.0, 300.0)));
     let stops = tour_stops(&r.dir, 3);
     let vias = stops.iter().filter(|s| s.1 == "via").count();
     assert_eq!(vias, o.routing.vias.iter().map(|v| v.qs.len()).sum::<usize>());
@@ -1422,7 +1399,7 @@ fn the_tracker_tour_re_routes_its_colliding_moves_and_every_step_is_free_by_an_i
         }
     }
     assert!(seen_straight >= 1, "no straight colliding move seen colliding here");
-    walk_tour(&stops, free);
+    walk_tour(&stops, &free);
     // The recording draws the arm at every via configuration of tour.csv, and at every stop.
     let (drawn, robot_rows) = recorded_vias(&r.dir.join("plan.rrd"));
     assert_eq!(drawn, stops.iter().filter(|s| s.1 == "via").map(|s| s.0.clone()).collect::<Vec<_>>());
