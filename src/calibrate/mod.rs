@@ -939,7 +939,7 @@ fn undetermined(problem: &Oriented<'_>, fit: &RobustFit, free: &[usize]) -> Vec<
         let Some(c) = free.iter().position(|&f| f == k) else { continue };
         let (value, std) = (fit.solved.x[k], cov[(c, c)].max(0.0).sqrt());
         let u = id.unit();
-        let shown = format!("{:.5} +- {:.5} {}", u.from_internal(value), u.from_internal(std), u.symbol());
+        let shown = format!("{} {}", with_uncertainty(u.from_internal(value), u.from_internal(std)), u.symbol());
         let compliance = matches!(id, ParamId::Link { kind: LinkParam::Compliance, .. });
         if !compliance {
             continue;
@@ -963,7 +963,43 @@ fn undetermined(problem: &Oriented<'_>, fit: &RobustFit, free: &[usize]) -> Vec<
     worst.map(|(_, _, id, why)| (id, why)).into_iter().collect()
 }
 
+/// `value +- std` with the standard deviation to two significant digits and the value to the same
+/// place (`-21433.4, 31519.5` -> `-21000 +- 32000`; `-0.012748, 0.014261` -> `-0.013 +- 0.014`): an
+/// estimate no better than its spread printed without digits it does not have.
+fn with_uncertainty(value: f64, std: f64) -> String {
+    if !(std.is_finite() && std > 0.0 && value.is_finite()) {
+        return format!("{value:.5} +- {std:.5}");
+    }
+    // The decimal place of the standard deviation's second significant digit.
+    let place = std.log10().floor() as i32 - 1;
+    if place >= 0 {
+        let q = 10f64.powi(place);
+        // `+ 0.0`: no `-0`.
+        format!("{:.0} +- {:.0}", (value / q).round() * q + 0.0, (std / q).round() * q)
+    } else {
+        let d = (-place) as usize;
+        format!("{:.d$} +- {std:.d$}", value + 0.0)
+    }
+}
+
 /// The directory `calsim calibrate` writes for the measurement file `path` under `out`.
 pub fn report_dir(out: &Path, path: &Path) -> PathBuf {
     out.join(report::directory_name(path))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::with_uncertainty;
+
+    /// An undetermined parameter's estimate is printed to the place of its standard deviation's
+    /// second significant digit.
+    #[test]
+    fn an_estimate_is_printed_to_the_digits_its_spread_allows() {
+        assert_eq!(with_uncertainty(-21433.38347, 31519.47188), "-21000 +- 32000");
+        assert_eq!(with_uncertainty(-4.61008, 37.97485), "-5 +- 38");
+        assert_eq!(with_uncertainty(-70.32639, 62.25961), "-70 +- 62");
+        assert_eq!(with_uncertainty(-0.01275, 0.01426), "-0.013 +- 0.014");
+        assert_eq!(with_uncertainty(-0.4, 38.0), "0 +- 38");
+        assert_eq!(with_uncertainty(1.0, 0.0), "1.00000 +- 0.00000");
+    }
 }
