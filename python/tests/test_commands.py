@@ -372,8 +372,8 @@ def test_plan_comparison_as_a_frame(tmp_path: Path) -> None:
     assert r.comparison["o1"][0] == r.o1 and r.comparison["o1"][1] == r.o1_random
     # The frames are the tables plan.md is rendered from, as written.
     assert set(r.tables) == {"plan", "tour_moves", "worlds", "unidentifiable", "comparison"}
-    for name, frame in r.tables.items():
-        assert frame.equals(pl.read_parquet(r.dest / f"{name}.parquet")), name
+    for name, stored in r.tables.items():
+        assert stored.equals(pl.read_parquet(r.dest / f"{name}.parquet")), name
     assert r.tables["plan"]["median_mm"][0] == r.prediction["median_mm"] and r.tables["plan"]["training"][0] == r.poses
 
 
@@ -402,8 +402,8 @@ def test_a_trical_plan_gives_the_cli_files_and_its_tables_as_frames(tmp_path: Pa
     assert (r.instrument, r.poses, r.validation, r.drawn) == ("trical", 75, 30, 360)
     assert 75 < r.pool <= 360 and r.comparison is None and r.objective is None and r.search is None
     assert set(r.tables) == {"plan", "spheres", "tour_moves", "worlds", "unidentifiable"}
-    for name, frame in r.tables.items():
-        assert frame.equals(pl.read_parquet(r.dest / f"{name}.parquet")), name
+    for name, stored in r.tables.items():
+        assert stored.equals(pl.read_parquet(r.dest / f"{name}.parquet")), name
     assert r.table["split"].value_counts().sort("split")["count"].to_list() == [30, 75]
     assert r.prediction["worlds"] == 8
     assert 0 < r.prediction["p10_mm"] <= r.prediction["median_mm"] <= r.prediction["p90_mm"]
