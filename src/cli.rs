@@ -781,27 +781,7 @@ fn init(args: &InitArgs) -> Result<ExitCode, String> {
 
 fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
     let r = app::plan::plan_device(spec, &Terminal::new()).map_err(|e| e.to_string())?;
-    let p = &r.outcome.prediction;
-    let [a, b, c] = p.quantiles_mm;
-    let (chosen, pool) = if r.plan.kind == "spms" { ("measured", "the spms head's pool") } else { ("centred", "the trical centring") };
-    println!(
-        "calsim plan: {} {chosen} + {} validation configurations, {pool} {} ({} kept); O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
-        r.outcome.poses,
-        r.plan.validation,
-        r.outcome.candidates,
-        r.outcome.candidates - r.outcome.refused[0] - r.outcome.refused[1],
-        r.outcome.o1.0,
-        r.outcome.o1.1,
-        p.worlds,
-        r.seconds
-    );
-    if let (Some(o), Some(search)) = (&r.outcome.objective, &r.outcome.search) {
-        print_objective(o, search);
-    }
-    if !r.outcome.prediction.unidentifiable.is_empty() {
-        println!("cannot identify (kept at their values before calibration): {}", r.outcome.prediction.unidentifiable.join(", "));
-    }
-    print_tour(&r.outcome.routing, r.outcome.tour.0.len());
+    print_plan(&r.frames, crate::plan::device_summary::terminal_line(r.seconds), "kept at their values before calibration")?;
     println!(
         "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{}{} in {}",
         if spec.simulate { ", simulated.csv" } else { "" },
@@ -811,45 +791,20 @@ fn plan_device(spec: &app::plan::PlanSpec) -> Result<ExitCode, String> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// What the tour of `stops` stops had to do about collisions on its straight moves: the moves
-/// re-routed through via configurations, and a warning for those no via path was found for.
-fn print_tour(routing: &crate::plan::select::Routing, stops: usize) {
-    let moves = stops.saturating_sub(1);
-    if !routing.vias.is_empty() {
-        println!(
-            "tour: {} of {moves} moves re-routed around a collision through via configurations (tour.csv rows marked via, not measured)",
-            routing.vias.len()
-        );
+/// What `calsim plan` prints of a plan, read from its tables ([`crate::plan::summary::terminal`]):
+/// its line (`line`), its objective, the parameters it cannot identify (`kept`: what becomes of
+/// them) and its tour's re-routed moves; moves no via path was found for as a warning.
+fn print_plan(
+    frames: &[(String, crate::io::table::Frame)],
+    line: impl Fn(&crate::io::results::Row<'_>) -> String,
+    kept: &str,
+) -> Result<(), String> {
+    let (out, warning) = crate::plan::summary::terminal(frames, line, kept).map_err(|e| e.to_string())?;
+    print!("{out}");
+    if let Some(w) = warning {
+        eprintln!("warning: {w}");
     }
-    if !routing.unrouted.is_empty() {
-        eprintln!(
-            "warning: tour: {} of {moves} moves pass through a collision and no via path was found (named in plan.md): do not drive them as straight moves",
-            routing.unrouted.len()
-        );
-    }
-}
-
-/// The line of a plan's objective: the count that met it, or the best found.
-fn print_objective(o: &crate::plan::spec::Objective, search: &crate::plan::Search) {
-    match search.chosen {
-        Some(n) => println!(
-            "objective P(held-out {} <= {} mm) >= {} at {} confidence: met at {n} poses, the smallest of {} counts scored (table in plan.md)",
-            o.statistic.name(),
-            o.threshold_mm,
-            o.success_at_least,
-            o.confidence,
-            search.candidates.len()
-        ),
-        None => println!(
-            "objective P(held-out {} <= {} mm) >= {} at {} confidence: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)",
-            o.statistic.name(),
-            o.threshold_mm,
-            o.success_at_least,
-            o.confidence,
-            o.most_poses,
-            search.planned
-        ),
-    }
+    Ok(())
 }
 
 fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
@@ -864,26 +819,7 @@ fn plan(args: &PlanArgs) -> Result<ExitCode, String> {
         return plan_device(&spec);
     }
     let r = app::plan::plan(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
-    let p = &r.outcome.prediction;
-    let [a, b, c] = p.quantiles_mm;
-    println!(
-        "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; O1 {:.6} (random set {:.6}); predicted held-out median {b:.4} mm (P10-P90 {a:.4}-{c:.4}) over {} worlds; {:.2} s",
-        r.outcome.poses,
-        r.plan.validation,
-        r.outcome.pool.qs.len(),
-        r.outcome.pool.tried,
-        r.outcome.o1.0,
-        r.outcome.o1.1,
-        p.worlds,
-        r.seconds
-    );
-    if let (Some(o), Some(search)) = (&r.plan.objective, &r.outcome.search) {
-        print_objective(o, search);
-    }
-    if !p.unidentifiable.is_empty() {
-        println!("cannot identify (kept nominal): {}", p.unidentifiable.iter().map(|u| u.name.as_str()).collect::<Vec<_>>().join(", "));
-    }
-    print_tour(&r.outcome.routing, r.outcome.tour.0.len());
+    print_plan(&r.frames, crate::plan::summary::terminal_line(r.seconds), "kept nominal")?;
     println!(
         "poses.csv, joints.txt, tour.csv, plan.md, plan_poses.png{}{} in {}",
         if args.simulate { ", simulated.csv" } else { "" },
@@ -1005,23 +941,7 @@ fn table8(args: &Table8Args) -> Result<ExitCode, String> {
         threads: args.threads,
     };
     let r = app::table8::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
-    println!(
-        "{:<16} {:>26} {:>44}",
-        "instrument",
-        "published median / std / max",
-        if r.worlds == 1 {
-            "calsim median / std / max (one world; --realisations N for the P10-P90 over worlds)".to_string()
-        } else {
-            format!("calsim median / std / max (median of {} worlds; P10-P90 of the median)", r.worlds)
-        }
-    );
-    for row in &r.rows {
-        let (p, c, q) = (row.published, row.calsim, row.median_p10_p90);
-        println!(
-            "{:<16} {:>10.3} / {:.3} / {:.3} {:>14.3} / {:.3} / {:.3}  ({:.3}-{:.3})",
-            row.instrument, p[0], p[1], p[2], c[0], c[1], c[2], q[0], q[1]
-        );
-    }
+    print!("{}", app::table8::terminal(&r.table, r.worlds).map_err(|e| e.to_string())?);
     println!("timing: {:.3} s", r.run_s);
     Ok(ExitCode::SUCCESS)
 }

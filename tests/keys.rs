@@ -174,3 +174,36 @@ fn calsim_completions_writes_a_script_naming_every_command() {
     let out = common::calsim().args(["completions", "tcsh"]).output().expect("calsim runs");
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// The reference's table holds every row of the reference, column for column, and the terminal's
+/// text is rendered from it: each key's line shows its unit and default, its rule and note below.
+#[test]
+fn the_reference_table_is_the_reference_and_the_text_is_read_from_it() {
+    for name in keys::names() {
+        let rows = keys::reference(name).expect("a reference");
+        let table = keys::table(name).expect("a table");
+        assert_eq!(
+            table.get_column_names().iter().map(|n| n.as_str()).collect::<Vec<_>>(),
+            ["key", "unit", "default", "rule", "note"],
+            "{name}"
+        );
+        assert_eq!(table.height(), rows.len(), "{name}");
+        let column = |c: &str| -> Vec<String> {
+            let v = table.column(c).unwrap().str().unwrap().clone();
+            (0..v.len()).map(|k| v.get(k).expect("no null").to_string()).collect()
+        };
+        assert_eq!(column("key"), rows.iter().map(|r| r.key.clone()).collect::<Vec<_>>(), "{name}");
+        assert_eq!(column("unit"), rows.iter().map(|r| r.unit.to_string()).collect::<Vec<_>>(), "{name}");
+        assert_eq!(column("default"), rows.iter().map(|r| r.default.clone()).collect::<Vec<_>>(), "{name}");
+        assert_eq!(column("rule"), rows.iter().map(|r| r.rule.clone()).collect::<Vec<_>>(), "{name}");
+        assert_eq!(column("note"), rows.iter().map(|r| r.note.clone()).collect::<Vec<_>>(), "{name}");
+        let text = keys::text(name).expect("a text");
+        assert_eq!(text, keys::text_of(name, &table).expect("a text"));
+        let r = &rows[0];
+        let unit = if r.unit == "-" { String::new() } else { format!(" ({})", r.unit) };
+        assert!(text.contains(&format!("\n\n{}{unit} = {}\n", r.key, r.default)), "{name}: {text}");
+        if !r.note.is_empty() {
+            assert!(text.contains(&format!("    note: {}\n", r.note)), "{name}");
+        }
+    }
+}

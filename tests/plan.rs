@@ -233,6 +233,16 @@ fn plan_md_equals_its_stored_tables(dir: &Path) -> usize {
 fn every_figure_of_plan_md_equals_its_stored_parquet_value() {
     assert_eq!(plan_md_equals_its_stored_tables(&run().report.dir), 1);
     assert_eq!(plan_md_equals_its_stored_tables(&trical_run().report.dir), 1);
+    // The frames the report hands on (to Python) are the tables written.
+    for (dir, frames) in [(&run().report.dir, &run().report.frames), (&trical_run().report.dir, &trical_run().report.frames)] {
+        let written: Vec<String> = files(dir).into_iter().map(|(n, _)| n).filter(|n| n.ends_with(".parquet")).collect();
+        let mut names: Vec<String> = frames.iter().map(|(n, _)| n.clone()).collect();
+        names.sort();
+        assert_eq!(names, written);
+        for (name, f) in frames {
+            assert!(f.equals_missing(&frame(&dir.join(name))), "{name}");
+        }
+    }
     let worlds = frame(&run().report.dir.join("worlds.parquet"));
     assert_eq!(
         numbers(&worlds, "heldout_median_mm").iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
@@ -890,6 +900,34 @@ fn an_objective_picks_the_smallest_count_meeting_it_and_writes_the_same_bytes_fo
     let md = std::fs::read_to_string(r.dir.join("plan.md")).unwrap();
     let table = objective_table(&md);
     eprintln!("{table:?}");
+    // What `calsim plan` prints is read from the same tables: its line, the objective's.
+    let (printed, _) = calsim::plan::summary::terminal(&r.frames, calsim::plan::summary::terminal_line(1.5), "kept nominal").unwrap();
+    let lines: Vec<&str> = printed.lines().collect();
+    let (o, p) = (&r.outcome, &r.outcome.prediction);
+    assert_eq!(
+        lines[0],
+        format!(
+            "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; O1 {:.6} (random set {:.6}); predicted held-out median {:.4} mm (P10-P90 {:.4}-{:.4}) over {} worlds; 1.50 s",
+            o.poses,
+            r.plan.validation,
+            o.pool.qs.len(),
+            o.pool.tried,
+            o.o1.0,
+            o.o1.1,
+            p.quantiles_mm[1],
+            p.quantiles_mm[0],
+            p.quantiles_mm[2],
+            p.worlds
+        )
+    );
+    let smallest_met = table.iter().filter(|r| r.4).map(|r| r.0).min().expect("a count meets the objective");
+    assert_eq!(
+        lines[1],
+        format!(
+            "objective P(held-out median <= 0.019 mm) >= 0.6 at 0.9 confidence: met at {smallest_met} poses, the smallest of {} counts scored (table in plan.md)",
+            table.len()
+        )
+    );
     assert!(table.len() >= 2, "{md}");
     for (n, k, w, lower, meets) in &table {
         assert_eq!(*w, 12, "every count on the 12 worlds");

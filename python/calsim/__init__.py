@@ -634,7 +634,7 @@ def keys(name: str) -> pl.DataFrame:
         report = _calsim.keys(name)
     except InputError as e:
         raise _named(e, "keys", "name", name) from None
-    return pl.DataFrame(report["rows"], schema={"key": pl.String, "unit": pl.String, "default": pl.String, "rule": pl.String, "note": pl.String})
+    return pl.DataFrame(report["table"])
 
 
 def init(kind: str, file: PathLike | None = None) -> str:

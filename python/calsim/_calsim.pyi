@@ -112,44 +112,19 @@ class CompensateReport(TypedDict):
     unreachable: list[int]
     warnings: list[str]
 
-class Table8Row(TypedDict):
-    instrument: str
-    published_median_mm: float
-    calsim_median_mm: float
-    published_std_mm: float
-    calsim_std_mm: float
-    published_max_mm: float
-    calsim_max_mm: float
-    median_p10_mm: float
-    median_p90_mm: float
-
 class Table8Report(TypedDict):
-    rows: list[Table8Row]
+    table: ArrowFrame
     worlds: int
     run_s: float
     warnings: list[str]
 
-class ObjectiveRow(TypedDict):
-    poses: int
-    successes: int
-    worlds: int
-    lower_bound: float
-    meets: bool
-
-class Objective(TypedDict):
-    met: bool
-    poses: int
-    table: list[ObjectiveRow]
-
-class ComparisonRow(TypedDict):
-    selection: str
-    o1: float
+class Prediction(TypedDict):
+    p10_mm: float
     median_mm: float
-    median_low_mm: float
-    median_high_mm: float
     p90_mm: float
-    p90_low_mm: float
-    p90_high_mm: float
+    worlds: int
+    pilot_mm: float
+    twin: bool
 
 class PlanReport(TypedDict):
     instrument: str
@@ -160,17 +135,11 @@ class PlanReport(TypedDict):
     drawn: int
     o1: float
     o1_random: float
-    predicted_p10_mm: float
-    predicted_mm: float
-    predicted_p90_mm: float
-    worlds: int
-    pilot_mm: float
-    objective: Objective | None
+    prediction: Prediction
+    frames: dict[str, ArrowFrame]
     seconds: float
     warnings: list[str]
-    twin: bool
     unidentifiable: list[str]
-    comparison: list[ComparisonRow] | None
 
 class ImportReport(TypedDict):
     out: Path
@@ -185,15 +154,8 @@ class FkReport(TypedDict):
     csv: str
     rows: int
 
-class KeyRow(TypedDict):
-    key: str
-    unit: str
-    default: str
-    rule: str
-    note: str
-
 class KeysReport(TypedDict):
-    rows: list[KeyRow]
+    table: ArrowFrame
     text: str
 
 def run(

@@ -7,12 +7,14 @@ import io
 import json
 from functools import cached_property
 from pathlib import Path
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import polars as pl
 
 if TYPE_CHECKING:
     from ._calsim import (
+        ArrowFrame,
         BudgetReport,
         CalibrateReport,
         CompensateReport,
@@ -22,6 +24,7 @@ if TYPE_CHECKING:
         MergeReport,
         OptimiseReport,
         PlanReport,
+        Prediction,
         RunReport,
         SimulateReport,
         SweepReport,
@@ -106,10 +109,10 @@ class Results:
         return f"{type(self).__name__}(dest={str(self.dest)!r}, tables=[{names}], figures={len(self.figures)})"
 
 
-def _frames(report: RunReport) -> dict[str, pl.DataFrame]:
-    """The report's result frames by name, each handed over through the Arrow PyCapsule interface
+def _frames(frames: Mapping[str, ArrowFrame]) -> dict[str, pl.DataFrame]:
+    """A report's result frames by name, each handed over through the Arrow PyCapsule interface
     (its schema travels with it: no column is named between calsim and here)."""
-    return {name: pl.DataFrame(frame) for name, frame in report["frames"].items()}
+    return {name: pl.DataFrame(frame) for name, frame in frames.items()}
 
 
 class RunResult(Results):
@@ -137,7 +140,7 @@ class RunResult(Results):
         self.checked: int | None = report["checked"]
         self.missed: int | None = report["missed"]
         self.warnings: list[str] = list(report["warnings"])
-        frames = _frames(report)
+        frames = _frames(report["frames"])
         self.checks: pl.DataFrame = frames["checks"]
         self.distribution: pl.DataFrame | None = frames.get("distribution")
 
@@ -296,26 +299,14 @@ class CompensateResult:
         return f"CompensateResult(targets={self.targets}, unreachable={len(self.unreachable)})"
 
 
-_TABLE8_SCHEMA = {
-    "instrument": pl.String,
-    "published_median_mm": pl.Float64,
-    "calsim_median_mm": pl.Float64,
-    "published_std_mm": pl.Float64,
-    "calsim_std_mm": pl.Float64,
-    "published_max_mm": pl.Float64,
-    "calsim_max_mm": pl.Float64,
-    "median_p10_mm": pl.Float64,
-    "median_p90_mm": pl.Float64,
-}
-
-
 class Table8Result:
-    """Table 8: ``table`` (per instrument, TriCal, laser tracker and optical CMM, the published
-    median, std and max after calibration beside calsim's, each the median over the worlds, with
-    the P10-P90 of the median over them), ``worlds`` calibrated, ``run_s``, ``warnings``."""
+    """Table 8: ``table`` (the table ``calsim table8`` prints: per instrument, TriCal, laser
+    tracker and optical CMM, the published median, std and max after calibration beside calsim's,
+    each the median over the worlds, with the P10-P90 of the median over them), ``worlds``
+    calibrated, ``run_s``, ``warnings``."""
 
     def __init__(self, report: Table8Report) -> None:
-        self.table: pl.DataFrame = pl.DataFrame(report["rows"], schema=_TABLE8_SCHEMA)
+        self.table: pl.DataFrame = pl.DataFrame(report["table"])
         self.worlds: int = report["worlds"]
         self.run_s: float = report["run_s"]
         self.warnings: list[str] = list(report["warnings"])
@@ -333,10 +324,13 @@ class PlanResult:
     file to fill), ``tour`` (``tour.csv``: the order to visit them, via configurations of re-routed
     moves split ``via``), ``simulated`` (``simulated.csv`` with ``simulate``, else ``None``),
     ``prediction`` (the predicted held-out median: ``p10_mm``, ``median_mm``, ``p90_mm``,
-    ``worlds``, ``pilot_mm``, ``twin``), ``unidentifiable``, ``objective`` (``None``, or ``met``,
-    ``poses`` and ``table``: P(success) against the number of poses), ``comparison`` (``None``,
-    or DETMAX, random and greedy selection as a DataFrame; a tracker plan's), ``figure``
-    (``plan_poses.png``) and ``seconds``."""
+    ``worlds``, ``pilot_mm``, ``twin``), ``unidentifiable``, ``tables`` (the tables ``plan.md``
+    is rendered from, as written: ``plan`` (one row: the plan's inputs and figures),
+    ``tour_moves``, ``worlds``, ``unidentifiable``, ...), ``objective`` (``None``, or the
+    objective's table: its rule, ``met`` and the count ``planned``) with ``search`` (P(success)
+    and its ``lower`` bound against the number of poses), ``comparison`` (``None``, or DETMAX,
+    random and greedy selection; a tracker plan's), ``figure`` (``plan_poses.png``) and
+    ``seconds``."""
 
     def __init__(self, report: PlanReport) -> None:
         self.instrument: str = report["instrument"]
@@ -347,23 +341,12 @@ class PlanResult:
         self.validation: int = report["validation"]
         self.o1: float = report["o1"]
         self.o1_random: float = report["o1_random"]
-        self.prediction: dict[str, Any] = {
-            "p10_mm": report["predicted_p10_mm"],
-            "median_mm": report["predicted_mm"],
-            "p90_mm": report["predicted_p90_mm"],
-            "worlds": report["worlds"],
-            "pilot_mm": report["pilot_mm"],
-            "twin": report["twin"],
-        }
+        self.prediction: Prediction = report["prediction"]
         self.unidentifiable: list[str] = list(report["unidentifiable"])
-        objective = report["objective"]
-        self.objective: dict[str, Any] | None = (
-            None
-            if objective is None
-            else {"met": objective["met"], "poses": objective["poses"], "table": pl.DataFrame(objective["table"])}
-        )
-        comparison = report["comparison"]
-        self.comparison: pl.DataFrame | None = None if comparison is None else pl.DataFrame(comparison)
+        self.tables: dict[str, pl.DataFrame] = _frames(report["frames"])
+        self.objective: pl.DataFrame | None = self.tables.get("objective")
+        self.search: pl.DataFrame | None = self.tables.get("search")
+        self.comparison: pl.DataFrame | None = self.tables.get("comparison")
         positions = {"x_mm": pl.Float64, "y_mm": pl.Float64, "z_mm": pl.Float64}
         self.table: pl.DataFrame = pl.read_csv(self.dest / "poses.csv", comment_prefix="#", schema_overrides=positions)
         self.tour: pl.DataFrame = pl.read_csv(self.dest / "tour.csv")

@@ -23,7 +23,7 @@ use polars_arrow::array::{Array, StructArray};
 use polars_arrow::ffi::{ArrowArrayStream, export_iterator};
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
-use pyo3::types::{PyCapsule, PyDict, PyList};
+use pyo3::types::{PyCapsule, PyDict};
 
 pyo3::create_exception!(
     calsim,
@@ -675,20 +675,8 @@ fn table8<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let spec = app::table8::Table8Spec { scenario, realisations, pool, threads };
     let (r, warnings) = detached(py, progress, |o| app::table8::run(&spec, o))?;
-    let rows = PyList::empty(py);
-    for row in &r.rows {
-        let x = PyDict::new(py);
-        x.set_item("instrument", row.instrument)?;
-        for (k, what) in ["median", "std", "max"].iter().enumerate() {
-            x.set_item(format!("published_{what}_mm"), row.published[k])?;
-            x.set_item(format!("calsim_{what}_mm"), row.calsim[k])?;
-        }
-        x.set_item("median_p10_mm", row.median_p10_p90[0])?;
-        x.set_item("median_p90_mm", row.median_p10_p90[1])?;
-        rows.append(x)?;
-    }
     let d = PyDict::new(py);
-    d.set_item("rows", rows)?;
+    d.set_item("table", ArrowFrame(r.table))?;
     d.set_item("worlds", r.worlds)?;
     d.set_item("run_s", r.run_s)?;
     d.set_item("warnings", warnings)?;
@@ -723,31 +711,11 @@ fn plan<'py>(
         quantiles_mm: p.quantiles_mm,
         worlds: p.worlds,
         pilot_mm: p.pilot_median_mm,
-        search: o.search.as_ref(),
+        twin: p.twin,
         seconds: r.seconds,
     };
-    let d = shared.dict(py, warnings)?;
-    d.set_item("twin", p.twin)?;
+    let d = shared.dict(py, r.frames, warnings)?;
     d.set_item("unidentifiable", p.unidentifiable.iter().map(|u| u.name.clone()).collect::<Vec<_>>())?;
-    match &o.comparison {
-        None => d.set_item("comparison", py.None())?,
-        Some(c) => {
-            let rows = PyList::empty(py);
-            for r in &c.rows {
-                let row = PyDict::new(py);
-                row.set_item("selection", r.name)?;
-                row.set_item("o1", r.o1)?;
-                row.set_item("median_mm", r.median_mm.0)?;
-                row.set_item("median_low_mm", r.median_mm.1)?;
-                row.set_item("median_high_mm", r.median_mm.2)?;
-                row.set_item("p90_mm", r.p90_mm.0)?;
-                row.set_item("p90_low_mm", r.p90_mm.1)?;
-                row.set_item("p90_high_mm", r.p90_mm.2)?;
-                rows.append(row)?;
-            }
-            d.set_item("comparison", rows)?;
-        }
-    }
     Ok(d)
 }
 
@@ -763,13 +731,14 @@ struct PlanShared<'a> {
     quantiles_mm: [f64; 3],
     worlds: usize,
     pilot_mm: f64,
-    search: Option<&'a calsim::plan::Search>,
+    twin: bool,
     seconds: f64,
 }
 
 impl PlanShared<'_> {
-    /// The plan's report with these keys (and `warnings`).
-    fn dict<'py>(&self, py: Python<'py>, warnings: Vec<String>) -> PyResult<Bound<'py, PyDict>> {
+    /// The plan's report with these keys, its tables (`frames`: `plan`, `search`, `comparison`
+    /// ..., the tables written, by stem) and `warnings`.
+    fn dict<'py>(&self, py: Python<'py>, tables: Vec<(String, Frame)>, warnings: Vec<String>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("instrument", self.instrument)?;
         d.set_item("dest", self.dest)?;
@@ -779,36 +748,24 @@ impl PlanShared<'_> {
         d.set_item("drawn", self.drawn)?;
         d.set_item("o1", self.o1.0)?;
         d.set_item("o1_random", self.o1.1)?;
-        d.set_item("predicted_p10_mm", self.quantiles_mm[0])?;
-        d.set_item("predicted_mm", self.quantiles_mm[1])?;
-        d.set_item("predicted_p90_mm", self.quantiles_mm[2])?;
-        d.set_item("worlds", self.worlds)?;
-        d.set_item("pilot_mm", self.pilot_mm)?;
-        d.set_item("objective", objective_of(py, self.search)?)?;
+        let prediction = PyDict::new(py);
+        for (name, value) in [("p10_mm", self.quantiles_mm[0]), ("median_mm", self.quantiles_mm[1]), ("p90_mm", self.quantiles_mm[2])] {
+            prediction.set_item(name, value)?;
+        }
+        prediction.set_item("worlds", self.worlds)?;
+        prediction.set_item("pilot_mm", self.pilot_mm)?;
+        prediction.set_item("twin", self.twin)?;
+        d.set_item("prediction", prediction)?;
+        d.set_item("frames", frames(py, by_stem(tables))?)?;
         d.set_item("seconds", self.seconds)?;
         d.set_item("warnings", warnings)?;
         Ok(d)
     }
 }
 
-/// The objective's search as the plan's report gives it (`None`: the count is fixed).
-fn objective_of<'py>(py: Python<'py>, search: Option<&calsim::plan::Search>) -> PyResult<Bound<'py, PyAny>> {
-    let Some(s) = search else { return Ok(py.None().into_bound(py)) };
-    let x = PyDict::new(py);
-    x.set_item("met", s.chosen.is_some())?;
-    x.set_item("poses", s.planned)?;
-    let rows = PyList::empty(py);
-    for c in s.by_count() {
-        let row = PyDict::new(py);
-        row.set_item("poses", c.n)?;
-        row.set_item("successes", c.successes)?;
-        row.set_item("worlds", c.worlds)?;
-        row.set_item("lower_bound", c.lower)?;
-        row.set_item("meets", c.meets)?;
-        rows.append(row)?;
-    }
-    x.set_item("table", rows)?;
-    Ok(x.into_any())
+/// Tables named by file (`plan.parquet`) named by stem (`plan`), as Python's results name them.
+fn by_stem(tables: Vec<(String, Frame)>) -> Vec<(String, Frame)> {
+    tables.into_iter().map(|(name, frame)| (name.strip_suffix(".parquet").map_or_else(|| name.clone(), str::to_string), frame)).collect()
 }
 
 /// `calsim plan` of a device plan (`[instrument]`): the tracker plan's report, the device's
@@ -827,13 +784,11 @@ fn plan_device<'py>(py: Python<'py>, spec: &app::plan::PlanSpec, progress: Optio
         quantiles_mm: p.quantiles_mm,
         worlds: p.worlds,
         pilot_mm: p.pilot_median_mm,
-        search: o.search.as_ref(),
+        twin: false,
         seconds: r.seconds,
     };
-    let d = shared.dict(py, warnings)?;
-    d.set_item("twin", false)?;
+    let d = shared.dict(py, r.frames, warnings)?;
     d.set_item("unidentifiable", p.unidentifiable.clone())?;
-    d.set_item("comparison", py.None())?;
     Ok(d)
 }
 
@@ -881,24 +836,18 @@ fn fk<'py>(py: Python<'py>, robot: PathBuf, joints: PathBuf, out: Option<PathBuf
 }
 
 /// The reference of every key of a scenario (a device's kind), sweep or robot file: `calsim keys`.
-/// Each row: the key, its unit, default, rules and note; with `text`, the CLI's text too.
+/// Its table (a row per key: the key, its unit, default, rules and note) and the CLI's text of it.
 #[pyfunction]
 #[pyo3(signature = (name))]
 fn keys<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
     let name = name.to_string();
-    let ((rows, text), _) = detached(py, None, |_| Ok((app::keys::reference(&name)?, app::keys::text(&name)?)))?;
-    let list = PyList::empty(py);
-    for r in &rows {
-        let row = PyDict::new(py);
-        row.set_item("key", &r.key)?;
-        row.set_item("unit", r.unit)?;
-        row.set_item("default", &r.default)?;
-        row.set_item("rule", &r.rule)?;
-        row.set_item("note", &r.note)?;
-        list.append(row)?;
-    }
+    let ((table, text), _) = detached(py, None, |_| {
+        let table = app::keys::table(&name)?;
+        let text = app::keys::text_of(&name, &table)?;
+        Ok((table, text))
+    })?;
     let d = PyDict::new(py);
-    d.set_item("rows", list)?;
+    d.set_item("table", ArrowFrame(table))?;
     d.set_item("text", text)?;
     Ok(d)
 }

@@ -286,6 +286,7 @@ def test_bad_optimise_arguments_name_the_key(design: Path, tmp_path: Path) -> No
 def test_table8_gives_the_cli_rows(tmp_path: Path) -> None:
     r = calsim.table8(QUICK, pool=100, threads=2, progress=False)
     assert r.worlds == 1 and r.table["instrument"].to_list() == ["TriCal", "laser tracker", "optical CMM"]
+    assert r.table.columns[1:3] == ["published_median_mm", "calsim_median_mm"] and r.table.dtypes[1:] == [pl.Float64] * 8
     assert (r.table["published_median_mm"] > 0).all() and r.warnings == []
     text = cli("table8", QUICK, "--pool", "100", "--threads", "1").stdout.decode()
     rows = {line[:16].strip(): line[16:] for line in text.splitlines()[1:4]}
@@ -369,6 +370,11 @@ def test_plan_comparison_as_a_frame(tmp_path: Path) -> None:
     assert r.comparison is not None
     assert r.comparison["selection"].to_list() == ["DETMAX", "random", "greedy D-optimal"]
     assert r.comparison["o1"][0] == r.o1 and r.comparison["o1"][1] == r.o1_random
+    # The frames are the tables plan.md is rendered from, as written.
+    assert set(r.tables) == {"plan", "tour_moves", "worlds", "unidentifiable", "comparison"}
+    for name, stored in r.tables.items():
+        assert stored.equals(pl.read_parquet(r.dest / f"{name}.parquet")), name
+    assert r.tables["plan"]["median_mm"][0] == r.prediction["median_mm"] and r.tables["plan"]["training"][0] == r.poses
 
 
 def test_bad_plan_files_name_the_file_and_the_key(tmp_path: Path) -> None:
@@ -394,7 +400,10 @@ def test_a_trical_plan_gives_the_cli_files_and_its_tables_as_frames(tmp_path: Pa
     f = small_trical_plan(tmp_path)
     r = calsim.plan(f, out=tmp_path / "py", threads=2, simulate=True, progress=False)
     assert (r.instrument, r.poses, r.validation, r.drawn) == ("trical", 75, 30, 360)
-    assert 75 < r.pool <= 360 and r.comparison is None and r.objective is None
+    assert 75 < r.pool <= 360 and r.comparison is None and r.objective is None and r.search is None
+    assert set(r.tables) == {"plan", "spheres", "tour_moves", "worlds", "unidentifiable"}
+    for name, stored in r.tables.items():
+        assert stored.equals(pl.read_parquet(r.dest / f"{name}.parquet")), name
     assert r.table["split"].value_counts().sort("split")["count"].to_list() == [30, 75]
     assert r.prediction["worlds"] == 8
     assert 0 < r.prediction["p10_mm"] <= r.prediction["median_mm"] <= r.prediction["p90_mm"]

@@ -6,9 +6,12 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use polars::prelude::Column;
+
 use super::Error;
 use crate::device::keys::{KeyRow, Refusal, accepted_keys};
 use crate::device::{Device, REGISTRY};
+use crate::io::table::Frame;
 
 /// What `calsim keys` takes besides the devices' kinds.
 pub const OTHER_FILES: [&str; 2] = ["sweep", "robot"];
@@ -121,22 +124,50 @@ fn describe(name: &str) -> String {
     }
 }
 
-/// The reference of `name` for the terminal: each key with its unit and default, then its rules
-/// and its note, indented.
-pub fn text(name: &str) -> Result<String, Error> {
+/// The name of the reference's table.
+pub const TABLE: &str = "keys";
+
+/// The reference of `name` as a table: a row per key with its `unit`, `default`, `rule` and
+/// `note`; what the terminal shows ([`text_of`]) and Python receives.
+pub fn table(name: &str) -> Result<Frame, Error> {
     let rows = reference(name)?;
-    let mut s = format!("{name}: {}\n", describe(name));
-    for r in &rows {
-        let unit = if r.unit == "-" { String::new() } else { format!(" ({})", r.unit) };
-        let _ = writeln!(s, "\n{}{unit} = {}", r.key, r.default);
-        if r.rule != "-" && !r.rule.is_empty() {
-            let _ = writeln!(s, "    rule: {}", r.rule);
+    let column = |title: &str, v: &dyn Fn(&KeyRow) -> String| Column::new(title.into(), rows.iter().map(v).collect::<Vec<String>>());
+    let columns = vec![
+        column("key", &|r| r.key.clone()),
+        column("unit", &|r| r.unit.to_string()),
+        column("default", &|r| r.default.clone()),
+        column("rule", &|r| r.rule.clone()),
+        column("note", &|r| r.note.clone()),
+    ];
+    crate::io::table::frame(TABLE, columns).map_err(|e| Error::input(TABLE, e.to_string()))
+}
+
+/// The reference of `name` for the terminal ([`text_of`] its [`table`]).
+pub fn text(name: &str) -> Result<String, Error> {
+    text_of(name, &table(name)?)
+}
+
+/// The reference `table` of `name` for the terminal: each key with its unit and default, then its
+/// rules and its note, indented.
+pub fn text_of(name: &str, table: &Frame) -> Result<String, Error> {
+    let tables = [(TABLE.to_string(), table.clone())];
+    crate::io::results::read_row(&tables, TABLE, |r| {
+        let mut s = format!("{name}: {}\n", describe(name));
+        for k in 0..r.height() {
+            let r = r.at(k);
+            let (unit, rule, note) = (r.str("unit"), r.str("rule"), r.str("note"));
+            let unit = if unit == "-" { String::new() } else { format!(" ({unit})") };
+            let _ = writeln!(s, "\n{}{unit} = {}", r.str("key"), r.str("default"));
+            if rule != "-" && !rule.is_empty() {
+                let _ = writeln!(s, "    rule: {rule}");
+            }
+            if !note.is_empty() {
+                let _ = writeln!(s, "    note: {note}");
+            }
         }
-        if !r.note.is_empty() {
-            let _ = writeln!(s, "    note: {}", r.note);
-        }
-    }
-    Ok(s)
+        s
+    })
+    .map_err(|e| Error::input(TABLE, e.to_string()))
 }
 
 /// `docs/reference.md`: every file's keys as a Markdown table.

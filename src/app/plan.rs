@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{Error, Observer};
+use crate::io::table::Frame;
 use crate::plan::{Outcome, Plan};
 
 /// What `calsim plan` is asked.
@@ -34,6 +35,8 @@ pub struct PlanReport {
     pub dir: PathBuf,
     /// Wall-clock seconds of the planning (pool, DETMAX, tour) and of the prediction together.
     pub seconds: f64,
+    /// The tables written, by file name (`plan.parquet` ..., [`crate::plan::summary`]).
+    pub frames: Vec<(String, Frame)>,
 }
 
 /// Reads and checks a plan file.
@@ -92,11 +95,12 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         ("tour.csv", crate::plan::tour_csv(&plan, &outcome)),
         ("plan.md", crate::plan::summary::markdown(&tables).map_err(Error::io(&spec.out))?),
     ];
+    let frames;
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
         let io = |e: std::io::Error| Error::io(&spec.out)(e);
         r.field("plan", &name).map_err(io)?.field("simulate", spec.simulate).map_err(io)?.field("recording", spec.recording).map_err(io)?;
-        add_files(&mut r, tables, files, simulated).map_err(io)?;
+        frames = add_files(&mut r, tables, files, simulated).map_err(io)?;
         // plan.md shows the figure itself.
         r.draw(Box::new(|d| crate::plan::plot::write(d, &plan, &cell, &outcome).map(|()| Vec::new())));
         if spec.recording {
@@ -109,18 +113,20 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         }
         crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
     };
-    Ok(PlanReport { plan, outcome, dir, seconds })
+    Ok(PlanReport { plan, outcome, dir, seconds, frames })
 }
 
-/// The plan's tables, its files and `simulated.csv` (with `--simulate`) added to `r`.
+/// The plan's tables, its files and `simulated.csv` (with `--simulate`) added to `r`; the tables'
+/// frames by file name.
 fn add_files(
     r: &mut crate::io::results::Results<'_>,
     tables: Vec<crate::plan::summary::Table>,
     files: [(&str, String); 4],
     simulated: Option<String>,
-) -> std::io::Result<()> {
+) -> std::io::Result<Vec<(String, Frame)>> {
+    let mut frames = Vec::new();
     for (name, columns) in tables {
-        r.table(name, columns)?;
+        frames.push((name.to_string(), r.table(name, columns)?.clone()));
     }
     for (f, text) in files {
         r.file(f, text);
@@ -128,7 +134,7 @@ fn add_files(
     if let Some(text) = simulated {
         r.file("simulated.csv", text);
     }
-    Ok(())
+    Ok(frames)
 }
 
 /// What `calsim plan` returns for a plan whose instrument is a device with a pool of its own.
@@ -142,6 +148,8 @@ pub struct DevicePlanReport {
     pub dir: PathBuf,
     /// Wall-clock seconds of the device's pool, the planning and the prediction together.
     pub seconds: f64,
+    /// The tables written, by file name (`plan.parquet` ..., [`crate::plan::device_summary`]).
+    pub frames: Vec<(String, Frame)>,
 }
 
 /// Whether the plan file names an `[instrument]` (a device plan, [`plan_device`]) rather than a
@@ -192,6 +200,7 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
         ("tour.csv", crate::plan::device::tour_csv(&plan, &outcome)),
         ("plan.md", crate::plan::device_summary::markdown(&tables).map_err(Error::io(&spec.out))?),
     ];
+    let frames;
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
         let io = |e: std::io::Error| Error::io(&spec.out)(e);
@@ -203,7 +212,7 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
             .map_err(io)?
             .field("recording", spec.recording)
             .map_err(io)?;
-        add_files(&mut r, tables, files, simulated).map_err(io)?;
+        frames = add_files(&mut r, tables, files, simulated).map_err(io)?;
         r.draw(Box::new(|d| crate::plan::device_view::write_figure(d, &plan, &outcome).map(|()| Vec::new())));
         if spec.recording {
             r.record_as(
@@ -216,5 +225,5 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
         }
         crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
     };
-    Ok(DevicePlanReport { plan, outcome, dir, seconds })
+    Ok(DevicePlanReport { plan, outcome, dir, seconds, frames })
 }

@@ -247,16 +247,23 @@ fn find<'f>(tables: &'f [(String, DataFrame)], name: &str) -> std::io::Result<&'
 
 /// What `read` makes of the first row of the table `name` of `tables`.
 fn read_text(tables: &[(String, DataFrame)], name: &str, read: &Read<'_>) -> std::io::Result<String> {
-    let missing = RefCell::new(None);
-    let text = read(&Row { tables, frame: find(tables, name)?, index: 0, missing: &missing });
-    checked(name, missing, text)
+    read_row(tables, name, |r| read(r))
 }
 
-/// `text`, or the error naming the column of the table `name` that a row lacked.
-fn checked(name: &str, missing: RefCell<Option<String>>, text: String) -> std::io::Result<String> {
+/// What `read` makes of the first row of the result table `name` of `tables` (and of any other row
+/// or table it reads through it), as [`Summary::text_from`] reads it: what a command prints from
+/// the frames its results hold. An error names the table and the column a row lacked.
+pub fn read_row<T>(tables: &[(String, DataFrame)], name: &str, read: impl FnOnce(&Row<'_>) -> T) -> std::io::Result<T> {
+    let missing = RefCell::new(None);
+    let value = read(&Row { tables, frame: find(tables, name)?, index: 0, missing: &missing });
+    checked(name, missing, value)
+}
+
+/// `value`, or the error naming the column of the table `name` that a row lacked.
+fn checked<T>(name: &str, missing: RefCell<Option<String>>, value: T) -> std::io::Result<T> {
     match missing.into_inner() {
         Some(column) => Err(std::io::Error::other(format!("summary.md: the table {name} has no column {column}"))),
-        None => Ok(text),
+        None => Ok(value),
     }
 }
 

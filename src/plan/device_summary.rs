@@ -44,6 +44,28 @@ pub fn tables(plan: &DevicePlan, o: &DeviceOutcome) -> Vec<Table> {
     t
 }
 
+/// The first line `calsim plan` prints of a device plan (`r`: `plan.parquet`'s row; `seconds`:
+/// the planning's wall time).
+pub fn terminal_line(seconds: f64) -> impl Fn(&Row<'_>) -> String {
+    move |r| {
+        let (chosen, pool) =
+            if r.str("instrument") == "spms" { ("measured", "the spms head's pool") } else { ("centred", "the trical centring") };
+        format!(
+            "calsim plan: {} {chosen} + {} validation configurations, {pool} {} ({} kept); O1 {:.6} (random set {:.6}); predicted held-out median {:.4} mm (P10-P90 {:.4}-{:.4}) over {} worlds; {seconds:.2} s",
+            r.u64("training"),
+            r.u64("validation"),
+            r.u64("pool_centred"),
+            r.u64("pool_kept"),
+            r.f64("o1"),
+            r.f64("o1_random"),
+            r.f64("median_mm"),
+            r.f64("p10_mm"),
+            r.f64("p90_mm"),
+            r.u64("worlds_with_value")
+        )
+    }
+}
+
 /// `plan.parquet`'s columns.
 fn plan_columns(plan: &DevicePlan, o: &DeviceOutcome) -> Vec<Column> {
     let p = &o.prediction;

@@ -6,11 +6,11 @@
 //! fix), and with an objective `objective.parquet` (one row) and `search.parquet` (a row per
 //! count scored), with the comparison `comparison.parquet` (a row per selection).
 
-use polars::prelude::Column;
+use polars::prelude::{Column, DataFrame};
 
 use super::select::{TourMove, tour_moves, tour_words};
 use super::{Comparison, Outcome, Plan, Search, TRAINING, VALIDATION, plot, record, spec};
-use crate::io::results::{Head, Results, Row, Summary, cell};
+use crate::io::results::{Head, Results, Row, Summary, cell, read_row};
 
 /// The plan's one-row table.
 pub const PLAN: &str = "plan.parquet";
@@ -44,6 +44,86 @@ fn number(name: &str, v: impl IntoIterator<Item = f64>) -> Column {
 
 fn flag(name: &str, v: impl IntoIterator<Item = bool>) -> Column {
     Column::new(name.into(), v.into_iter().collect::<Vec<bool>>())
+}
+
+/// What `calsim plan` prints of a plan, read from its frames (`frames`: the tables by file name,
+/// as written): the line `line` makes of `plan.parquet`'s row, the objective's line (with one),
+/// the parameters the poses cannot identify (`kept`: what becomes of them) and the tour's moves
+/// re-routed around a collision; and the warning of the moves no via path was found for.
+pub fn terminal(
+    frames: &[(String, DataFrame)],
+    line: impl Fn(&Row<'_>) -> String,
+    kept: &str,
+) -> std::io::Result<(String, Option<String>)> {
+    let mut out = read_row(frames, PLAN, |r| line(r) + "\n")?;
+    if frames.iter().any(|(n, _)| n == OBJECTIVE) {
+        out += &read_row(frames, OBJECTIVE, objective_line)?;
+    }
+    out += &read_row(frames, UNIDENTIFIABLE, |u| {
+        let names: Vec<String> = (0..u.height()).map(|k| u.at(k).str("parameter")).collect();
+        if names.is_empty() { String::new() } else { format!("cannot identify ({kept}): {}\n", names.join(", ")) }
+    })?;
+    let moves = read_row(frames, PLAN, |r| (r.u64("training") + r.u64("validation")).saturating_sub(1))?;
+    let (routed, unrouted) = read_row(frames, TOUR_MOVES, |m| {
+        let routed = (0..m.height()).filter(|&k| m.at(k).bool("routed")).count();
+        (routed, m.height() - routed)
+    })?;
+    if routed > 0 {
+        out += &format!(
+            "tour: {routed} of {moves} moves re-routed around a collision through via configurations (tour.csv rows marked via, not measured)\n"
+        );
+    }
+    let warning = (unrouted > 0).then(|| {
+        format!(
+            "tour: {unrouted} of {moves} moves pass through a collision and no via path was found (named in plan.md): do not drive them as straight moves"
+        )
+    });
+    Ok((out, warning))
+}
+
+/// The line of a plan's objective (`r`: `objective.parquet`'s row): the count that met it, or the
+/// best found.
+fn objective_line(r: &Row<'_>) -> String {
+    let rule = format!(
+        "objective P(held-out {} <= {} mm) >= {} at {} confidence",
+        r.str("statistic"),
+        r.f64("threshold_mm"),
+        r.f64("success_at_least"),
+        r.f64("confidence")
+    );
+    if r.bool("met") {
+        format!(
+            "{rule}: met at {} poses, the smallest of {} counts scored (table in plan.md)\n",
+            r.u64("planned"),
+            r.of(SEARCH, 0).height()
+        )
+    } else {
+        format!(
+            "{rule}: NOT met up to {} poses; planned with the best found, {} poses (table in plan.md)\n",
+            r.u64("most_poses"),
+            r.u64("planned")
+        )
+    }
+}
+
+/// The first line `calsim plan` prints of a tracker plan (`r`: `plan.parquet`'s row; `seconds`:
+/// the planning's wall time).
+pub fn terminal_line(seconds: f64) -> impl Fn(&Row<'_>) -> String {
+    move |r| {
+        format!(
+            "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; O1 {:.6} (random set {:.6}); predicted held-out median {:.4} mm (P10-P90 {:.4}-{:.4}) over {} worlds; {seconds:.2} s",
+            r.u64("training"),
+            r.u64("validation"),
+            r.u64("pool_feasible"),
+            r.u64("pool_tried"),
+            r.f64("o1"),
+            r.f64("o1_random"),
+            r.f64("median_mm"),
+            r.f64("p10_mm"),
+            r.f64("p90_mm"),
+            r.u64("worlds_with_value")
+        )
+    }
 }
 
 /// The plan file's name.
