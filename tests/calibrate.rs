@@ -407,9 +407,22 @@ fn the_first_fault_of_a_long_file_is_the_one_named() {
     };
     assert_eq!(read(&|_| {}).unwrap().points.len(), 10_000);
     // Row k is on line k + 2.
-    let cases: [(&dyn Fn(&mut Vec<String>), &str); 3] = [
-        (&|r| (text_number(r, 6000), short(r, 6001)).1, "long.csv: line 6002: q1_deg: \"abc\" is not a number"),
-        (&|r| (short(r, 6000), text_number(r, 6001)).1, "long.csv: line 6002: 11 fields where the column names give 12"),
+    type Edit<'a> = &'a dyn Fn(&mut Vec<String>);
+    let cases: [(Edit<'_>, &str); 3] = [
+        (
+            &|r| {
+                text_number(r, 6000);
+                short(r, 6001);
+            },
+            "long.csv: line 6002: q1_deg: \"abc\" is not a number",
+        ),
+        (
+            &|r| {
+                short(r, 6000);
+                text_number(r, 6001);
+            },
+            "long.csv: line 6002: 11 fields where the column names give 12",
+        ),
         (&|r| text_number(r, 9999), "long.csv: line 10001: q1_deg: \"abc\" is not a number"),
     ];
     for (edit, expected) in cases {
