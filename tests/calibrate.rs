@@ -379,6 +379,58 @@ fn metres_as_mm() -> String {
 
 const HEADER: &str = "pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm";
 
+/// A long file's first fault in the file's order is the one named, whatever its kind: a value that
+/// is not a number on one line and a short row on the next, the reverse, a fault on the last line,
+/// each thousands of rows into a file of 10,000 (the file without a fault reads whole).
+#[test]
+fn the_first_fault_of_a_long_file_is_the_one_named() {
+    let robot = robot_from(&coupled_irb120_text());
+    let rows: Vec<String> = (0..10_000)
+        .map(|k| {
+            let session = if k % 2 == 0 { "A" } else { "B" };
+            let j = (k % 50) as f64;
+            let q = [j, 5.0 + 0.1 * j, -10.0 + 0.2 * j, 20.0, 30.0 + 0.1 * j, 40.0];
+            let qs: Vec<String> = q.iter().map(|v| format!("{v}")).collect();
+            format!("p{k},{session},SMR1,{},{},{},{}", qs.join(","), 400.0 + j, 10.0 * j, 500.0 - j)
+        })
+        .collect();
+    let text_number = |r: &mut Vec<String>, i: usize| {
+        let mut f: Vec<String> = r[i].split(',').map(str::to_string).collect();
+        f[3] = "abc".into();
+        r[i] = f.join(",");
+    };
+    let short = |r: &mut Vec<String>, i: usize| r[i] = r[i].rsplit_once(',').unwrap().0.to_string();
+    let read = |edit: &dyn Fn(&mut Vec<String>)| {
+        let mut r = rows.clone();
+        edit(&mut r);
+        measurements::parse(Path::new("long.csv"), &format!("{HEADER}\n{}\n", r.join("\n")), &robot)
+    };
+    assert_eq!(read(&|_| {}).unwrap().points.len(), 10_000);
+    // Row k is on line k + 2.
+    type Edit<'a> = &'a dyn Fn(&mut Vec<String>);
+    let cases: [(Edit<'_>, &str); 3] = [
+        (
+            &|r| {
+                text_number(r, 6000);
+                short(r, 6001);
+            },
+            "long.csv: line 6002: q1_deg: \"abc\" is not a number",
+        ),
+        (
+            &|r| {
+                short(r, 6000);
+                text_number(r, 6001);
+            },
+            "long.csv: line 6002: 11 fields where the column names give 12",
+        ),
+        (&|r| text_number(r, 9999), "long.csv: line 10001: q1_deg: \"abc\" is not a number"),
+    ];
+    for (edit, expected) in cases {
+        let message = read(edit).unwrap_err().to_string();
+        assert!(message.starts_with(expected), "{message}");
+    }
+}
+
 /// Bad measurement files, the class: a missing, unknown, duplicated or unit-less column, an unknown
 /// unit, NaN, infinite, absurd, empty and non-numeric values, a short row, a session with too few
 /// poses, a target with too few points, joints out of limits (a plain and a coupled one), a pose

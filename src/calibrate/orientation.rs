@@ -4,6 +4,7 @@
 //! whole frame (a line, or one position) found from its readings.
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
 
 use super::measurements::Measurements;
 use super::problem::{Obs, Reading};
@@ -50,8 +51,7 @@ impl Default for Noise {
 /// model's flange rotation in a session's registered frame at the start values).
 fn flange_rotations(nominal: &RobotModel, obs: &[Obs]) -> Vec<Rotation3<f64>> {
     let at_origin = nominal.edited(|d| d.world_from_base = Default::default()).expect("the nominal model with its base at the origin");
-    let mut st = KinState::default();
-    obs.iter().map(|o| world_from_flange(&at_origin, &mut st, &o.q).rotation.to_rotation_matrix()).collect()
+    obs.par_iter().map_init(KinState::default, |st, o| world_from_flange(&at_origin, st, &o.q).rotation.to_rotation_matrix()).collect()
 }
 
 /// The chordal mean of `rs` (the rotation nearest their sum).
@@ -110,8 +110,13 @@ pub fn orient_sessions(
     obs: &mut [Obs],
     readings: &mut [Option<Reading>],
 ) -> Vec<bool> {
-    let flanges = flange_rotations(nominal, obs);
     let mut fixed = vec![false; spans.len()];
+    // The flanges' rotations, when a session has readings its positions do not already orient.
+    let turned = |i: usize| readings[i].is_some() && spans[obs[i].session] != Span::Full;
+    if !(0..obs.len()).any(turned) {
+        return fixed;
+    }
+    let flanges = flange_rotations(nominal, obs);
     for (s, span) in spans.iter().enumerate() {
         let members: Vec<usize> = (0..obs.len()).filter(|&i| obs[i].session == s && readings[i].is_some()).collect();
         if members.is_empty() || *span == Span::Full {
@@ -187,6 +192,9 @@ pub fn orient_sessions(
 /// Per target: the start value of its probe's rotation on the flange (the mean over its readings
 /// of the nominal flange's rotation taken out of the reading); `None` for a target without one.
 pub fn tool_rotations(nominal: &RobotModel, obs: &[Obs], readings: &[Option<Reading>], targets: usize) -> Vec<Option<Rotation3<f64>>> {
+    if readings.iter().all(Option::is_none) {
+        return vec![None; targets];
+    }
     let flanges = flange_rotations(nominal, obs);
     (0..targets)
         .map(|t| {

@@ -124,40 +124,55 @@ pub fn span(b: &[Vector3<f64>], least_mm: f64) -> Span {
 /// whose points fix no whole frame) and the tools' linear least squares, from `tool0` for every
 /// target, on the model `nominal` (its base ignored); with each session's [`Span`].
 pub fn register(nominal: &RobotModel, points: &[Raw], sessions: usize, targets: usize, tool0: Vector3<f64>) -> Result<Frames, Unplaced> {
+    use rayon::prelude::*;
     let at_origin = nominal.edited(|d| d.world_from_base = Default::default()).expect("the nominal model with its base at the origin");
-    let mut st = KinState::default();
-    let flanges: Vec<Isometry3<f64>> = points.iter().map(|p| world_from_flange(&at_origin, &mut st, &p.q)).collect();
+    let flanges: Vec<Isometry3<f64>> =
+        points.par_iter().map_init(KinState::default, |st, p| world_from_flange(&at_origin, st, &p.q)).collect();
+    // Each session's and each target's points, in the order of `points`.
+    let (mut of_session, mut of_target) = (vec![Vec::new(); sessions], vec![Vec::new(); targets]);
+    for (i, p) in points.iter().enumerate() {
+        of_session[p.session].push(i);
+        of_target[p.target].push(i);
+    }
     let least_mm = SPAN_SHARE * crate::robot::plausible::arm_length_mm(nominal);
-    let spans: Vec<Span> = (0..sessions)
-        .map(|s| span(&points.iter().filter(|p| p.session == s).map(|p| p.measured_mm).collect::<Vec<_>>(), least_mm))
-        .collect();
+    let spans: Vec<Span> =
+        of_session.par_iter().map(|idx| span(&idx.iter().map(|&i| points[i].measured_mm).collect::<Vec<_>>(), least_mm)).collect();
     let mut tools = vec![tool0; targets];
     let mut frames = vec![Isometry3::identity(); sessions];
     for _ in 0..MOST_ALTERNATIONS {
-        for (s, frame) in frames.iter_mut().enumerate() {
-            let pairs: Vec<(Vector3<f64>, Vector3<f64>)> = points
-                .iter()
-                .zip(&flanges)
-                .filter(|(p, _)| p.session == s)
-                .map(|(p, f)| ((f * nalgebra::Point3::from(tools[p.target])).coords, p.measured_mm))
-                .collect();
-            *frame = place(&pairs, spans[s]).ok_or(Unplaced::Session(s))?;
+        let placed: Vec<Option<Isometry3<f64>>> = of_session
+            .par_iter()
+            .zip(&spans)
+            .map(|(idx, span)| {
+                let pairs: Vec<(Vector3<f64>, Vector3<f64>)> = idx
+                    .iter()
+                    .map(|&i| ((flanges[i] * nalgebra::Point3::from(tools[points[i].target])).coords, points[i].measured_mm))
+                    .collect();
+                place(&pairs, *span)
+            })
+            .collect();
+        for (s, (frame, new)) in frames.iter_mut().zip(placed).enumerate() {
+            *frame = new.ok_or(Unplaced::Session(s))?;
         }
+        // measured = R_s (R_f tool + o_f) + t_s, so tool = R_f^T (R_s^T (measured - t_s) - o_f),
+        // averaged over the target's points (every R_f^T R_s^T is a rotation).
+        let estimates: Vec<Option<Vector3<f64>>> = of_target
+            .par_iter()
+            .map(|idx| {
+                let mut sum = Vector3::zeros();
+                let mut n = 0.0;
+                for &i in idx {
+                    let (p, f) = (&points[i], &flanges[i]);
+                    let in_base = frames[p.session].inverse_transform_point(&p.measured_mm.into()).coords;
+                    sum += f.rotation.inverse_transform_vector(&(in_base - f.translation.vector));
+                    n += 1.0;
+                }
+                (n != 0.0).then(|| sum / n)
+            })
+            .collect();
         let mut moved: f64 = 0.0;
-        for (t, tool) in tools.iter_mut().enumerate() {
-            // measured = R_s (R_f tool + o_f) + t_s, so tool = R_f^T (R_s^T (measured - t_s) - o_f),
-            // averaged over the target's points (every R_f^T R_s^T is a rotation).
-            let mut sum = Vector3::zeros();
-            let mut n = 0.0;
-            for (p, f) in points.iter().zip(&flanges).filter(|(p, _)| p.target == t) {
-                let in_base = frames[p.session].inverse_transform_point(&p.measured_mm.into()).coords;
-                sum += f.rotation.inverse_transform_vector(&(in_base - f.translation.vector));
-                n += 1.0;
-            }
-            if n == 0.0 {
-                return Err(Unplaced::Target(t));
-            }
-            let new = sum / n;
+        for (t, (tool, new)) in tools.iter_mut().zip(estimates).enumerate() {
+            let new = new.ok_or(Unplaced::Target(t))?;
             moved = moved.max((new - *tool).norm());
             *tool = new;
         }

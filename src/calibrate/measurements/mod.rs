@@ -18,6 +18,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 mod header;
 mod layout;
@@ -39,6 +40,9 @@ pub const MIN_POSES_PER_SESSION: usize = 5;
 pub const MIN_POINTS_PER_TARGET: usize = 5;
 /// Most rows a file takes (within the CSV inputs' cap, `io::MOST_CSV_BYTES`).
 pub const MAX_ROWS: usize = 1_000_000;
+
+/// Records read before their fields are parsed side by side ([`parse`]).
+const PARSE_BATCH: usize = 4096;
 /// Joint values of two rows of one pose agree to this, rad (well below any encoder's resolution).
 const SAME_POSE_RAD: f64 = 1e-9;
 
@@ -134,12 +138,21 @@ pub struct Measurements {
 /// coupling unless the file says `# joints = model`).
 pub fn read(path: &Path, robot: &RobotFile) -> Result<Measurements, MeasurementError> {
     let fail = |line: Option<u64>, message: String| MeasurementError { path: path.into(), line, column: None, message };
-    let bytes = crate::io::read_bytes_at_most(path, crate::io::MOST_CSV_BYTES).map_err(|e| fail(None, e.to_string()))?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let line = e.as_bytes()[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() as u64 + 1;
-        fail(Some(line), "not UTF-8 text".into())
-    })?;
-    parse(path, &text, robot)
+    let bytes = crate::io::read_own(path, crate::io::MOST_CSV_BYTES).map_err(|e| fail(None, e.to_string()))?;
+    // The file is read as `io::read_bytes_at_most` reads it; it is recorded as an input (its
+    // sha256, on this thread: the ledger's) while it is parsed on another.
+    let checked = || {
+        let text = std::str::from_utf8(&bytes).map_err(|e| {
+            let line = bytes[..e.valid_up_to()].iter().filter(|b| **b == b'\n').count() as u64 + 1;
+            fail(Some(line), "not UTF-8 text".into())
+        })?;
+        parse(path, text, robot)
+    };
+    std::thread::scope(|scope| {
+        let parsing = scope.spawn(checked);
+        crate::io::inputs::record(path, &bytes);
+        parsing.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }
 
 /// Checks the text of a measurement file as [`read`] checks a file (`path` is named in errors).
@@ -172,15 +185,43 @@ pub fn parse(path: &Path, text: &str, robot: &RobotFile) -> Result<Measurements,
         orientation_columns: layout.has_orientation(),
     };
     let mut index = Index::default();
-    for record in reader.records() {
-        let record = record.map_err(|e| fail(e.position().map(|p| p.line()), None, csv_message(&e)))?;
-        let line = record.position().map_or(0, |p| p.line());
-        if m.points.len() + m.rows_left_out >= MAX_ROWS {
-            return Err(fail(Some(line), None, format!("more than {MAX_ROWS} rows")));
+    let joints = JointReader { layout: &layout, robot, coupling };
+    let mut records = reader.records();
+    loop {
+        // The next records in order, up to a CSV error; their fields parsed side by side, the
+        // rows then checked and added in order (the first error in the file's order is the one
+        // named, as row by row).
+        let mut batch: Vec<csv::StringRecord> = Vec::with_capacity(PARSE_BATCH);
+        let mut broken = None;
+        let mut ended = false;
+        while batch.len() < PARSE_BATCH {
+            match records.next() {
+                Some(Ok(record)) => batch.push(record),
+                Some(Err(e)) => {
+                    broken = Some(e);
+                    break;
+                }
+                None => {
+                    ended = true;
+                    break;
+                }
+            }
         }
-        let row = Row::parse(&record, &layout).map_err(|(col, msg)| fail(Some(line), Some(&col), msg))?;
-        let joints = JointReader { layout: &layout, robot, coupling };
-        m.add(row, line, &joints, &mut index).map_err(|(col, msg)| fail(Some(line), Some(&col), msg))?;
+        let rows: Vec<Result<Row, (String, String)>> = batch.par_iter().map(|record| Row::parse(record, &layout)).collect();
+        for (record, row) in batch.iter().zip(rows) {
+            let line = record.position().map_or(0, |p| p.line());
+            if m.points.len() + m.rows_left_out >= MAX_ROWS {
+                return Err(fail(Some(line), None, format!("more than {MAX_ROWS} rows")));
+            }
+            let row = row.map_err(|(col, msg)| fail(Some(line), Some(&col), msg))?;
+            m.add(row, line, &joints, &mut index).map_err(|(col, msg)| fail(Some(line), Some(&col), msg))?;
+        }
+        if let Some(e) = broken {
+            return Err(fail(e.position().map(|p| p.line()), None, csv_message(&e)));
+        }
+        if ended {
+            break;
+        }
     }
     if let Some(wanted) = &m.header.targets
         && let Some(absent) = wanted.iter().find(|t| !m.targets.contains(t))

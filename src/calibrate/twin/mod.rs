@@ -537,10 +537,17 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
         let mut current = cv_sse(&[]);
         loop {
             let mut best: Option<(usize, f64, Vec<f64>)> = None;
-            for k in (0..families.len()).filter(|k| !kept.contains(k)) {
-                let mut set = kept.clone();
-                set.push(k);
-                let sse = cv_sse(&set);
+            // Each candidate's error side by side, weighed in order.
+            let candidates: Vec<usize> = (0..families.len()).filter(|k| !kept.contains(k)).collect();
+            let errors: Vec<Vec<f64>> = candidates
+                .par_iter()
+                .map(|&k| {
+                    let mut set = kept.clone();
+                    set.push(k);
+                    cv_sse(&set)
+                })
+                .collect();
+            for (k, sse) in candidates.into_iter().zip(errors) {
                 let d: Vec<f64> = current.iter().zip(&sse).map(|(a, b)| a - b).collect();
                 let (mean, se) = mean_se(&d);
                 gains[k] = (mean, se);
@@ -725,17 +732,16 @@ fn mean_se(d: &[f64]) -> (f64, f64) {
 }
 
 fn confounded_pairs(families: &[(Family, DMatrix<f64>, Vec<Coefficient>)], projected: &[DMatrix<f64>]) -> Vec<(String, String, f64)> {
-    let mut out = Vec::new();
-    let bases: Vec<DMatrix<f64>> = projected.iter().map(column_basis).collect();
-    for a in 0..families.len() {
-        for b in a + 1..families.len() {
-            let cos = principal_cos(&bases[a], &bases[b]);
-            if cos > CONFOUNDED_COS {
-                out.push((families[a].0.name(), families[b].0.name(), cos));
-            }
-        }
-    }
-    out
+    let bases: Vec<DMatrix<f64>> = projected.par_iter().map(column_basis).collect();
+    // Every pair side by side, gathered in order.
+    let pairs: Vec<(usize, usize)> = (0..families.len()).flat_map(|a| (a + 1..families.len()).map(move |b| (a, b))).collect();
+    let cosines: Vec<f64> = pairs.par_iter().map(|&(a, b)| principal_cos(&bases[a], &bases[b])).collect();
+    pairs
+        .iter()
+        .zip(cosines)
+        .filter(|(_, cos)| *cos > CONFOUNDED_COS)
+        .map(|(&(a, b), cos)| (families[a].0.name(), families[b].0.name(), cos))
+        .collect()
 }
 
 /// Per point of the problem: link angles, approach directions (from the pose before in the
@@ -1010,13 +1016,21 @@ fn field_share(jl: &DMatrix<f64>, pose_of_point: &[usize], model: &Lsq, kept_pro
     for (point, &p) in pose_of_point.iter().enumerate() {
         rows_of[p].extend([3 * point, 3 * point + 1, 3 * point + 2]);
     }
+    // Each pose's block on its own: runs of poses side by side, written in order.
     let apply = |x: &DMatrix<f64>| -> DMatrix<f64> {
         let mut out = DMatrix::zeros(x.nrows(), x.ncols());
-        for rows in &rows_of {
-            let l = jl.select_rows(rows);
-            let y = &l * (l.tr_mul(&x.select_rows(rows)));
-            for (k, &r) in rows.iter().enumerate() {
-                out.row_mut(r).copy_from(&y.row(k));
+        for run in rows_of.chunks(GRAM_PIECE) {
+            let blocks: Vec<DMatrix<f64>> = run
+                .par_iter()
+                .map(|rows| {
+                    let l = jl.select_rows(rows);
+                    &l * (l.tr_mul(&x.select_rows(rows)))
+                })
+                .collect();
+            for (rows, y) in run.iter().zip(&blocks) {
+                for (k, &r) in rows.iter().enumerate() {
+                    out.row_mut(r).copy_from(&y.row(k));
+                }
             }
         }
         out
@@ -1026,10 +1040,19 @@ fn field_share(jl: &DMatrix<f64>, pose_of_point: &[usize], model: &Lsq, kept_pro
     if total <= 0.0 || dof <= 0.0 || rows == 0.0 {
         return 1.0;
     }
-    let mut absorbed = model.coef(&apply(&model.a)).trace();
-    if kept_projected.ncols() > 0 {
-        let e = Lsq::new(kept_projected.clone());
-        absorbed += e.coef(&apply(&e.a)).trace();
+    // The model's share and the kept effects' side by side.
+    let (model_share, kept_share) = rayon::join(
+        || model.coef(&apply(&model.a)).trace(),
+        || {
+            (kept_projected.ncols() > 0).then(|| {
+                let e = Lsq::new(kept_projected.clone());
+                e.coef(&apply(&e.a)).trace()
+            })
+        },
+    );
+    let mut absorbed = model_share;
+    if let Some(share) = kept_share {
+        absorbed += share;
     }
     let share = ((total - absorbed) / total) / (dof / rows);
     if share.is_finite() && share > 0.0 { share } else { 1.0 }
