@@ -407,6 +407,21 @@ impl<'a> State<'a> {
 
 /// Chooses `n` configurations of `pool` by DETMAX from a random start drawn with `rng`.
 pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptions, rng: &mut R) -> Result<Design, DetmaxError> {
+    detmax_from(pool, n, opts, rng, None)
+}
+
+/// [`detmax`] from the set `warm` where it can: the random start is drawn from `rng` as always
+/// (the stream moves on the same), then replaced by `warm`'s indices that are in the pool
+/// (ascending, each once, the first n), completed to n by the random start's indices not among
+/// them in their drawn order; a warm set whose information matrix is singular leaves the random
+/// start. `warm = None` is [`detmax`].
+pub fn detmax_from<R: Rng + ?Sized>(
+    pool: &PoolJacobian,
+    n: usize,
+    opts: &DetmaxOptions,
+    rng: &mut R,
+    warm: Option<&[usize]>,
+) -> Result<Design, DetmaxError> {
     let size = pool.len;
     if n == 0 || n >= size || 3 * n < pool.m {
         return Err(DetmaxError::Size { n, pool: size, m: pool.m });
@@ -415,11 +430,42 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
     for _ in 0..opts.max_starts {
         let start: Vec<usize> = sample(rng, size, n).into_vec();
         if let Some(s) = State::new(pool, &start) {
-            state = Some(s);
+            state = Some((s, start));
             break;
         }
     }
-    let mut state = state.ok_or(DetmaxError::Singular(opts.max_starts))?;
+    let (random, drawn) = state.ok_or(DetmaxError::Singular(opts.max_starts))?;
+    let state = match warm {
+        Some(w) => State::new(pool, &warm_start(w, &drawn, size, n)).unwrap_or(random),
+        None => random,
+    };
+    Ok(exchange(state, opts))
+}
+
+/// The start set of [`detmax_from`]: `warm`'s indices below `size`, ascending and each once, the
+/// first n; then `drawn`'s indices not among them, in order, up to n.
+fn warm_start(warm: &[usize], drawn: &[usize], size: usize, n: usize) -> Vec<usize> {
+    let mut set: Vec<usize> = warm.iter().copied().filter(|&k| k < size).collect();
+    set.sort_unstable();
+    set.dedup();
+    set.truncate(n);
+    let mut member = vec![false; size];
+    set.iter().for_each(|&k| member[k] = true);
+    for &k in drawn {
+        if set.len() == n {
+            break;
+        }
+        if !member[k] {
+            member[k] = true;
+            set.push(k);
+        }
+    }
+    set
+}
+
+/// DETMAX's excursions from `state` until no excursion up to the longest improves it.
+fn exchange(mut state: State<'_>, opts: &DetmaxOptions) -> Design {
+    let pool = state.pool;
     let mut scratch = Scratch::new(pool);
     // Each excursion runs on a copy of the design, kept in one buffer.
     let mut trial = state.clone();
@@ -462,7 +508,7 @@ pub fn detmax<R: Rng + ?Sized>(pool: &PoolJacobian, n: usize, opts: &DetmaxOptio
             k += 1;
         }
     }
-    Ok(Design { selection: state.selection(), o1_history: history, steps })
+    Design { selection: state.selection(), o1_history: history, steps }
 }
 
 /// O1 of a set from scratch (the information matrix's log-determinant), for checks.
@@ -664,5 +710,45 @@ mod tests {
         assert_eq!(cholesky3([1.0, 1.0, 1.0, 2.0, 0.0, 0.0]), None);
         assert_eq!(cholesky3([-1.0, 1.0, 1.0, 0.0, 0.0, 0.0]), None);
         assert_eq!(cholesky3([1.0, 1.0, f64::NAN, 0.0, 0.0, 0.0]), None);
+    }
+
+    /// The warm start keeps the warm set's indices that are in the pool, ascending and each once,
+    /// the first n, and completes them from the drawn start in its order.
+    #[test]
+    fn warm_start_keeps_the_pools_indices_and_completes_from_the_draw() {
+        assert_eq!(warm_start(&[9, 3, 3, 42, 7], &[5, 3, 8, 1], 10, 5), vec![3, 7, 9, 5, 8]);
+        assert_eq!(warm_start(&[9, 3, 7, 1, 0], &[5, 3], 10, 3), vec![0, 1, 3]);
+        assert_eq!(warm_start(&[], &[4, 2, 6], 10, 3), vec![4, 2, 6]);
+    }
+
+    /// Without a warm set, `detmax_from` is `detmax` (the same design, the stream left in the
+    /// same place); warm-started from a finished design of the same pool, it makes no exchange
+    /// that is kept and returns that design; from a singular warm set it is the cold run.
+    #[test]
+    fn warm_started_detmax_keeps_a_finished_design_and_falls_back_when_singular() {
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let pool = pool_with_constant_columns(80, 12, &mut rng);
+        let opts = DetmaxOptions::default();
+        let (mut a, mut b) = (ChaCha8Rng::seed_from_u64(3), ChaCha8Rng::seed_from_u64(3));
+        let cold = detmax(&pool, 20, &opts, &mut a).expect("design");
+        assert_eq!(detmax_from(&pool, 20, &opts, &mut b, None).expect("design"), cold);
+        assert_eq!(a.random::<u64>(), b.random::<u64>());
+        assert!(cold.o1_history.len() > 1, "the random start was improved");
+        let warm = detmax_from(&pool, 20, &opts, &mut ChaCha8Rng::seed_from_u64(4), Some(&cold.selection)).expect("design");
+        assert_eq!(warm.selection, cold.selection);
+        assert_eq!(warm.o1_history.len(), 1);
+        // A warm set of 20 copies of one configuration is singular: the random start is kept.
+        let mut j = pool.j.clone();
+        for k in 1..20 {
+            for r in 0..3 {
+                let row = j.row(r).into_owned();
+                j.row_mut(3 * k + r).copy_from(&row);
+            }
+        }
+        let copies = PoolJacobian::from_scaled(j, vec![1.0; 12]);
+        let set: Vec<usize> = (0..20).collect();
+        assert!(State::new(&copies, &set).is_none());
+        let cold = detmax(&copies, 20, &opts, &mut ChaCha8Rng::seed_from_u64(5)).expect("design");
+        assert_eq!(detmax_from(&copies, 20, &opts, &mut ChaCha8Rng::seed_from_u64(5), Some(&set)).expect("design"), cold);
     }
 }
