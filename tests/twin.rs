@@ -491,7 +491,7 @@ fn a_plan_carries_the_flagged_points_the_fits_kept() {
 }
 
 /// The arm of [`arm`] without effects or repeatability at 100 random poses per session (3
-/// sessions, 2 targets: 600 points, 240 training poses), each pose's link angles moved by
+/// sessions, 2 targets: 600 points, 20 % of each session's poses held out), each pose's link angles moved by
 /// `error(q, rng)` (rad per joint; the same for both targets of a pose), measured with 12 um
 /// noise, calibrated and its twin analysed.
 fn field_twin(
@@ -535,8 +535,8 @@ fn field_twin(
     analyse(&c, None).unwrap()
 }
 
-/// The shape of the error left, by round trip (600 points at 300 poses, 240 of them in the
-/// calibration split: 28,680 pairs of distinct poses, the nearest 1 % of them 287): a smooth joint
+/// The shape of the error left, by round trip (600 points at 300 poses, 232 of them in the
+/// calibration split at seed 5: 26,796 pairs of distinct poses, the nearest 1 % of them 268): a smooth joint
 /// error field the families do not hold (on every joint, 20 mdeg times the sine of 0.4 times the
 /// sum of the six joint values plus a phase per joint) leaves a residual correlated between the
 /// nearest poses beyond the fit's own value for white residuals, and the summary says smooth; an
@@ -559,8 +559,10 @@ fn the_shape_of_the_error_left_tells_a_smooth_field_from_an_error_independent_pe
         let b = &t.correlation.bins;
         assert_eq!(b.len(), 5, "{b:?}");
         assert!(b[0].same_pose && b[0].interval[0] > 0.3, "{name}: {:?}", b[0]);
-        assert_eq!(b[1].pose_pairs, 287, "{name}: {:?}", b[1]);
-        assert_eq!(b[1..].iter().map(|x| x.pose_pairs).sum::<usize>(), 240 * 239 / 2);
+        let poses = t.decomposition.poses;
+        assert_eq!(t.correlation.poses, poses);
+        assert_eq!(b[1..].iter().map(|x| x.pose_pairs).sum::<usize>(), poses * (poses - 1) / 2, "{name}");
+        assert_eq!(b[1].pose_pairs, (0.01 * (poses * (poses - 1) / 2) as f64).round() as usize, "{name}: {:?}", b[1]);
     }
     let s = &smooth.correlation.bins;
     assert!(s[1].above_white() && s[1].correlation > 0.2, "{:?}", s[1]);
