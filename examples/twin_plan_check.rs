@@ -124,9 +124,17 @@ struct Tally {
     inside: usize,
     above: usize,
     below: usize,
-    rank: f64,
+    ranks: Vec<f64>,
     median_over_first: Vec<f64>,
     failed: usize,
+}
+
+/// Mean and standard error of the mean (`NaN` below two values).
+fn mean_se(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, if v.len() > 1 { (var / n).sqrt() } else { f64::NAN })
 }
 
 fn main() -> Result<(), String> {
@@ -147,6 +155,9 @@ fn main() -> Result<(), String> {
         plans.iter().map(|p| format!("{p} P10-P90 (rank)")).collect::<Vec<_>>().join(" | ")
     );
     let mut tallies: Vec<Tally> = plans.iter().map(|_| Tally::default()).collect();
+    // Per file: the held-out median, the held-out RMS per coordinate over the training residual per
+    // coordinate, the twin's per-pose error and its count of kept effects.
+    let (mut medians, mut inflation, mut pose_errors, mut kept) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for seed in first..=last {
         let mut spec = SimulationSpec { seed, ..calsim::calibrate::simulate::example_spec(&robot)? };
         match variant.as_str() {
@@ -172,6 +183,10 @@ fn main() -> Result<(), String> {
         let t = calsim::calibrate::twin::analyse(&c, None).map_err(|e| e.to_string())?;
         let h = &c.chosen().held_out.as_ref().ok_or("no held-out")?.measured;
         let d = &t.decomposition;
+        medians.push(h.median);
+        inflation.push(h.rms / 3f64.sqrt() / d.total.sigma_mm);
+        pose_errors.push(t.learned.pose_error_mdeg);
+        kept.push(t.effects.len() as f64);
         let flagged: Vec<String> =
             (0..m.points.len()).filter(|&i| c.flagged[i]).map(|i| format!("{:.3}", c.chosen().fit.errors_mm[i])).collect();
         let mut line = format!(
@@ -267,7 +282,7 @@ fn main() -> Result<(), String> {
                     tally.below += 1;
                     "BELOW"
                 };
-                tally.rank += rank;
+                tally.ranks.push(rank);
                 tally.failed += per_world.len() - finite.len();
                 if k == 0 {
                     first_median = p.simulated_mm[1];
@@ -279,25 +294,28 @@ fn main() -> Result<(), String> {
         }
         println!("{line} | {} | held-out points {}", c.chosen().name(), c.chosen().held_out.as_ref().map_or(0, |h| h.points));
     }
+    let files = (last + 1 - first) as usize;
+    println!(
+        "\nfiles | held-out median, mm (mean, s.e.) | held-out RMS per coordinate over the training residual per coordinate (mean, s.e.) | pose_error_mdeg (mean, s.e.) | kept coefficients (mean)"
+    );
+    let (a, b, e, k) = (mean_se(&medians), mean_se(&inflation), mean_se(&pose_errors), mean_se(&kept));
+    println!("{files} | {:.4} ({:.4}) | {:.3} ({:.3}) | {:.3} ({:.3}) | {:.2}", a.0, a.1, b.0, b.1, e.0, e.1, k.0);
     if worlds > 0 {
-        let files = (last + 1 - first) as usize;
         println!(
-            "\nplan | inside P10-P90 of {files} (95 % Clopper-Pearson) | above P90 | below P10 | mean rank | median over the first plan's (mean) | worlds without a value"
+            "\nplan | inside P10-P90 of {files} (95 % Clopper-Pearson) | above P90 | below P10 | mean rank (s.e.) | median over the first plan's (mean, s.e.) | worlds without a value"
         );
         for (plan, t) in plans.iter().zip(&tallies) {
             let (lo, hi) = clopper_pearson(t.inside, files);
             let ratio = if t.median_over_first.is_empty() {
                 "-".to_string()
             } else {
-                format!("{:.3}", t.median_over_first.iter().sum::<f64>() / t.median_over_first.len() as f64)
+                let (m, se) = mean_se(&t.median_over_first);
+                format!("{m:.3} ({se:.3})")
             };
+            let rank = mean_se(&t.ranks);
             println!(
-                "{plan} | {} ({lo:.2}-{hi:.2}) | {} | {} | {:.3} | {ratio} | {}",
-                t.inside,
-                t.above,
-                t.below,
-                t.rank / files as f64,
-                t.failed
+                "{plan} | {} ({lo:.2}-{hi:.2}) | {} | {} | {:.3} ({:.3}) | {ratio} | {}",
+                t.inside, t.above, t.below, rank.0, rank.1, t.failed
             );
         }
         let exact = 0.8 * (worlds as f64 - 1.0) / (worlds as f64 + 1.0);

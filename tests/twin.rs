@@ -489,3 +489,86 @@ fn a_plan_carries_the_flagged_points_the_fits_kept() {
     assert!(carried.inside, "{carried:?}");
     assert!(clean.measured_mm > clean.simulated_mm[2], "{clean:?}");
 }
+
+/// The arm of [`arm`] without effects or repeatability at 100 random poses per session (3
+/// sessions, 2 targets: 600 points, 20 % of each session's poses held out), each pose's link angles moved by
+/// `error(q, rng)` (rad per joint; the same for both targets of a pose), measured with 12 um
+/// noise, calibrated and its twin analysed.
+fn field_twin(
+    robot: &RobotFile,
+    seed: u64,
+    error: impl Fn(&calsim::robot::Joints, &mut rand_chacha::ChaCha8Rng) -> calsim::robot::Joints,
+) -> Twin {
+    use rand_distr::{Distribution, Normal};
+    let spec = SimulationSpec { poses_per_session: 100, repeats_per_session: 0, seed, ..arm(robot, None, 0.0) };
+    let mut poses = calsim::seeds::stream(seed, calsim::seeds::calibrate::SIMULATED_POSES);
+    let mut rng = common::rng(seed);
+    let noise = Normal::new(0.0, NOISE_MM).unwrap();
+    let mut st = calsim::robot::KinState::default();
+    let mut text = format!("# simulated = true\n# format = {}\n", measurements::FORMAT);
+    for c in &spec.comments {
+        text += &format!("# {c}\n");
+    }
+    text += "pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n";
+    for (s, (session, frame)) in spec.sessions.iter().enumerate() {
+        for k in 0..spec.poses_per_session {
+            let q = calsim::robot::uniform_configuration(&spec.truth, spec.margin, &mut poses);
+            let e = error(&q, &mut rng);
+            let links: calsim::robot::Joints = std::array::from_fn(|j| q[j] + e[j]);
+            for (target, tool) in &spec.targets {
+                let model = spec
+                    .truth
+                    .edited(|d| {
+                        d.world_from_base = *frame;
+                        d.flange_tcp_mm = *tool;
+                    })
+                    .unwrap();
+                let p = calsim::robot::forward(&model, &mut st, &links) + nalgebra::Vector3::from_fn(|_, _| noise.sample(&mut rng));
+                let qd: Vec<String> = q.iter().map(|v| format!("{}", v.to_degrees())).collect();
+                text +=
+                    &format!("p{:03},{session},{target},{},{},{},{}\n", s * spec.poses_per_session + k + 1, qd.join(","), p.x, p.y, p.z);
+            }
+        }
+    }
+    let m = measurements::parse(Path::new("field.csv"), &text, robot).unwrap();
+    let c = run(robot, &m, &Options { plots: false, prediction_draws: 10, ..Options::default() }).unwrap();
+    analyse(&c, None).unwrap()
+}
+
+/// The shape of the error left, by round trip (600 points at 300 poses, 232 of them in the
+/// calibration split at seed 5: 26,796 pairs of distinct poses, the nearest 1 % of them 268): a smooth joint
+/// error field the families do not hold (on every joint, 20 mdeg times the sine of 0.4 times the
+/// sum of the six joint values plus a phase per joint) leaves a residual correlated between the
+/// nearest poses beyond the fit's own value for white residuals, and the summary says smooth; an
+/// error independent per pose at the same level (20 mdeg per joint, drawn anew at each pose)
+/// leaves no bin of distinct poses above it, and the summary says independent per pose. Both
+/// share their error between the two targets of a pose (the distance-0 bin well above zero).
+#[test]
+fn the_shape_of_the_error_left_tells_a_smooth_field_from_an_error_independent_per_pose() {
+    use rand_distr::{Distribution, Normal};
+    let robot = robot();
+    let amplitude = 0.020f64.to_radians();
+    let smooth = field_twin(&robot, 5, |q, _| {
+        let s: f64 = q.iter().sum();
+        std::array::from_fn(|j| amplitude * (0.4 * s + j as f64).sin())
+    });
+    let per_pose = Normal::new(0.0, amplitude).unwrap();
+    let independent = field_twin(&robot, 5, |_, rng| std::array::from_fn(|_| per_pose.sample(rng)));
+    for (name, t) in [("smooth", &smooth), ("independent", &independent)] {
+        eprintln!("{name}:\n{}", calsim::calibrate::twin::markdown(t));
+        let b = &t.correlation.bins;
+        assert_eq!(b.len(), 5, "{b:?}");
+        assert!(b[0].same_pose && b[0].interval[0] > 0.3, "{name}: {:?}", b[0]);
+        let poses = t.decomposition.poses;
+        assert_eq!(t.correlation.poses, poses);
+        assert_eq!(b[1..].iter().map(|x| x.pose_pairs).sum::<usize>(), poses * (poses - 1) / 2, "{name}");
+        assert_eq!(b[1].pose_pairs, (0.01 * (poses * (poses - 1) / 2) as f64).round() as usize, "{name}: {:?}", b[1]);
+    }
+    let s = &smooth.correlation.bins;
+    assert!(s[1].above_white() && s[1].correlation > 0.2, "{:?}", s[1]);
+    assert!(calsim::calibrate::twin::markdown(&smooth).contains("**Smooth**"));
+    for bin in &independent.correlation.bins[1..] {
+        assert!(!bin.above_white(), "{bin:?}");
+    }
+    assert!(calsim::calibrate::twin::markdown(&independent).contains("**Independent per pose**"));
+}

@@ -10,7 +10,7 @@ cd "$(dirname "$0")/../.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME:-/root}/.cache/calsim-target}"
 cargo build --release --locked --bin calsim
 calsim="$CARGO_TARGET_DIR/release/calsim"
-commit="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src Cargo.toml Cargo.lock scenarios robots reference || echo '+local changes')"
+commit="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src examples Cargo.toml Cargo.lock scenarios robots reference || echo '+local changes')"
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
 mkdir -p docs/generated
@@ -122,6 +122,60 @@ for run in "${more[@]}"; do
         echo "*Made by $made at commit $commit in $((SECONDS - start)) s.*"
         echo
         echo "$body"
+    } >"docs/generated/$name.md"
+    echo "regenerate: $name: docs/generated/$name.md"
+done
+
+# The plan against the outcome on the shipped example (docs/calibrate.md, "Plan against outcome"):
+# the three plans of --plan-with all, plan.md as the page.
+if [ $# -eq 0 ] || [[ " $* " == *" calibrate-example-plan "* ]]; then
+    command="calibrate robots/irb120.toml docs/calibrate/example_measurements.csv --no-plots --plan-worlds 100 --plan-with all"
+    echo "regenerate: calibrate-example-plan: calsim $command"
+    start=$SECONDS
+    # shellcheck disable=SC2086
+    "$calsim" $command --out "$scratch/calibrate-example-plan" >"$scratch/calibrate-example-plan.stdout"
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`calsim $command\` at commit $commit in $((SECONDS - start)) s (plan.md of the report).*"
+        echo
+        cat "$scratch/calibrate-example-plan/example_measurements.calibration/plan.md"
+    } >"docs/generated/calibrate-example-plan.md"
+    echo "regenerate: calibrate-example-plan: docs/generated/calibrate-example-plan.md"
+fi
+
+# The plan against the outcome over files of the example's own generating process
+# (docs/calibrate.md, "Plan against outcome"): examples/twin_plan_check.rs, seeds, worlds, variant
+# and plans as its doc says.
+checks=(
+    "twin-plan-check-pure|1 40 0 pure"
+    "twin-plan-check-no-outlier|1 40 0 no-outlier"
+    "twin-plan-check-as-shipped|1 40 0 as-shipped"
+    "twin-plan-check-causes|1 30 30 as-shipped process,true-effects,effects-4x20,twin,noise,residual"
+    "twin-plan-check-process|1 100 30 as-shipped process"
+    "twin-plan-check-process-world|1 100 30 as-shipped@world process"
+)
+built=""
+for run in "${checks[@]}"; do
+    IFS='|' read -r name arguments <<<"$run"
+    if [ $# -gt 0 ] && [[ " $* " != *" $name "* ]]; then
+        continue
+    fi
+    if [ -z "$built" ]; then
+        cargo build --release --locked --example twin_plan_check
+        built=yes
+    fi
+    command="cargo run --release --example twin_plan_check -- $arguments"
+    echo "regenerate: $name: $command"
+    start=$SECONDS
+    # shellcheck disable=SC2086
+    "$CARGO_TARGET_DIR/release/examples/twin_plan_check" $arguments >"$scratch/$name.stdout"
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`$command\` at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        echo '```text'
+        cat "$scratch/$name.stdout"
+        echo '```'
     } >"docs/generated/$name.md"
     echo "regenerate: $name: docs/generated/$name.md"
 done

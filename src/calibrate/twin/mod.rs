@@ -24,6 +24,7 @@
 
 pub mod effects;
 mod report;
+pub mod shape;
 
 use std::collections::HashMap;
 
@@ -192,6 +193,8 @@ pub struct Twin {
     pub model: RobotModel,
     /// The instrument's noise per coordinate for a plan, mm (`None`: not known).
     pub noise_mm: Option<f64>,
+    /// How the residual left is correlated between poses by their joint-space distance.
+    pub correlation: shape::Correlation,
 }
 
 impl Twin {
@@ -666,6 +669,7 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
             ),
         );
     }
+    let correlation = left_correlation(m, &train, &train_pose, &(&rw - &fitted_w), jf, &kept_projected);
     let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
     let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
     let noise_mm = decomposition.instrument.as_ref().map(|l| l.sigma_mm);
@@ -680,7 +684,28 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
         learned,
         model,
         noise_mm,
+        correlation,
     })
+}
+
+/// The shape of the residual left ([`shape::correlation`]): `resid` the weighted residual after
+/// the kept effects on the training points `train` (dense poses `train_pose`), the fit's columns
+/// the model's (`model`) and the kept effects' projected off them (`kept_projected`).
+fn left_correlation(
+    m: &super::Measurements,
+    train: &[usize],
+    train_pose: &[usize],
+    resid: &DVector<f64>,
+    model: &DMatrix<f64>,
+    kept_projected: &DMatrix<f64>,
+) -> shape::Correlation {
+    let poses = train_pose.iter().copied().max().map_or(0, |v| v + 1);
+    let mut q = vec![[0.0; JOINTS]; poses];
+    for (&i, &p) in train.iter().zip(train_pose) {
+        q[p] = m.poses[m.points[i].pose].q;
+    }
+    let basis = column_basis(&hstack([model, kept_projected].into_iter().filter(|a| a.ncols() > 0)));
+    shape::correlation(resid, train_pose, &q, &basis)
 }
 
 /// One fold of the cross-validation: the Gram matrix and right-hand side of every family's

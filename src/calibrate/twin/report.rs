@@ -2,8 +2,9 @@
 //! (one row: the split, the thresholds, the held-out gain, the `[learned]` levels),
 //! `twin_decomposition.parquet` (a row per part of the residual), `twin_notes.parquet` (what
 //! cannot be separated or was not estimated), `twin_families.parquet` (a row per family tried),
-//! `twin_effects.parquet` (a row per kept coefficient) and `twin_confounded.parquet` (a row per
-//! pair of families the poses do not tell apart).
+//! `twin_effects.parquet` (a row per kept coefficient), `twin_confounded.parquet` (a row per
+//! pair of families the poses do not tell apart) and `twin_correlation.parquet` (a row per bin of
+//! pairs of points: the residual left's correlation by the joint-space distance of their poses).
 
 use polars::prelude::Column;
 
@@ -15,7 +16,9 @@ const TWIN: &str = "twin.parquet";
 /// The twin's tables and its section of the summary, added to `r`.
 pub fn results_into(t: &Twin, r: &mut Results<'_>) -> std::io::Result<()> {
     tables(t, r)?;
+    correlation_table(t, r)?;
     section(&mut r.summary);
+    correlation_section(&mut r.summary);
     Ok(())
 }
 
@@ -236,4 +239,97 @@ fn learned(r: &Row<'_>) -> String {
         r.f64("pose_error_std_mdeg"),
         r.u64("harmonics")
     )
+}
+
+const CORRELATION: &str = "twin_correlation.parquet";
+
+/// `twin_correlation.parquet`: a row per bin of pairs ([`super::shape::correlation`]).
+fn correlation_table(t: &Twin, r: &mut Results<'_>) -> std::io::Result<()> {
+    let b = &t.correlation.bins;
+    let f = |g: fn(&super::shape::CorrelationBin) -> f64| b.iter().map(g).collect::<Vec<_>>();
+    r.table(
+        CORRELATION,
+        vec![
+            Column::new("bin".into(), b.iter().map(|x| x.label.clone()).collect::<Vec<_>>()),
+            Column::new("same_pose".into(), b.iter().map(|x| x.same_pose).collect::<Vec<_>>()),
+            Column::new("distance_low_rad".into(), f(|x| x.distance_rad[0])),
+            Column::new("distance_high_rad".into(), f(|x| x.distance_rad[1])),
+            Column::new("point_pairs".into(), b.iter().map(|x| x.pairs as u64).collect::<Vec<_>>()),
+            Column::new("pose_pairs".into(), b.iter().map(|x| x.pose_pairs as u64).collect::<Vec<_>>()),
+            Column::new("correlation".into(), f(|x| x.correlation)),
+            Column::new("low_95".into(), f(|x| x.interval[0])),
+            Column::new("high_95".into(), f(|x| x.interval[1])),
+            Column::new("white".into(), f(|x| x.white)),
+            Column::new("above_white".into(), b.iter().map(|x| x.above_white()).collect::<Vec<_>>()),
+        ],
+    )?;
+    Ok(())
+}
+
+/// The residual left's shape: its correlation between points by the distance of their poses, and
+/// the line that says whether it is smooth or independent per pose.
+fn correlation_section(parts: &mut Summary<'_>) {
+    parts.text_from(TWIN, |_| {
+        "### The error left between poses\n\nThe residual after the kept effects on the calibration split (weighted by the points' \
+         uncertainties), its correlation between two points (the mean product of their residuals over the mean squared residual of \
+         a point) by the distance of their poses in joint space (Euclidean over the six joint values): the other targets at one pose, \
+         then the pairs of distinct poses by the rank of their distance. 95 % intervals by the delete-one jackknife over poses; \
+         beside them, the value the fit itself gives white residuals (minus the hat matrix's share of the pair).\n\n"
+            .to_string()
+    });
+    let cells = vec![
+        cell("pairs of points", |r| r.str("bin")),
+        cell("distance, rad", |r| format!("{:.2}-{:.2}", r.f64("distance_low_rad"), r.f64("distance_high_rad"))),
+        cell("point pairs (pose pairs)", |r| format!("{} ({})", r.u64("point_pairs"), r.u64("pose_pairs"))),
+        cell("correlation", |r| format!("{:.3}", r.f64("correlation"))),
+        cell("95 % interval", |r| format!("{:.3} to {:.3}", r.f64("low_95"), r.f64("high_95"))),
+        cell("white residuals", |r| format!("{:.3}", r.f64("white"))),
+    ];
+    parts.table(CORRELATION, Summary::all_rows(), cells);
+    parts.text_from(TWIN, |r| {
+        let c = r.of(CORRELATION, 0);
+        let rows: Vec<Row<'_>> = (0..c.height()).map(|i| c.at(i)).collect();
+        let distinct: Vec<&Row<'_>> = rows.iter().filter(|x| !x.bool("same_pose")).collect();
+        let Some(nearest) = distinct.first() else {
+            return "Fewer than two poses: the shape of the error left is not estimated.\n".to_string();
+        };
+        let above: Vec<&&Row<'_>> = distinct.iter().filter(|x| x.bool("above_white")).collect();
+        let shown = |x: &Row<'_>| {
+            format!(
+                "{:.3} ({:.3} to {:.3}) against {:.3} for white residuals, at {:.2}-{:.2} rad",
+                x.f64("correlation"),
+                x.f64("low_95"),
+                x.f64("high_95"),
+                x.f64("white"),
+                x.f64("distance_low_rad"),
+                x.f64("distance_high_rad")
+            )
+        };
+        let line = match above.last() {
+            Some(far) => format!(
+                "**Smooth**: the error left is correlated between distinct poses up to {:.2} rad apart (nearest pairs: {}).",
+                far.f64("distance_high_rad"),
+                shown(nearest)
+            ),
+            None => format!(
+                "**Independent per pose**: no bin of distinct poses is correlated beyond what the fit gives white residuals (nearest \
+                 pairs: {}).",
+                shown(nearest)
+            ),
+        };
+        let same = rows
+            .iter()
+            .find(|x| x.bool("same_pose"))
+            .map(|x| {
+                format!(
+                    " At one pose, the targets' residuals correlate {:.3} ({:.3} to {:.3}): the share of the residual a pose's targets \
+                     have in common.",
+                    x.f64("correlation"),
+                    x.f64("low_95"),
+                    x.f64("high_95")
+                )
+            })
+            .unwrap_or_default();
+        format!("{line}{same}\n")
+    });
 }
