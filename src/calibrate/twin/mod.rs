@@ -704,8 +704,26 @@ fn left_correlation(
     for (&i, &p) in train.iter().zip(train_pose) {
         q[p] = m.poses[m.points[i].pose].q;
     }
-    let basis = column_basis(&hstack([model, kept_projected].into_iter().filter(|a| a.ncols() > 0)));
-    shape::correlation(resid, train_pose, &q, &basis)
+    let a = hstack([model, kept_projected].into_iter().filter(|a| a.ncols() > 0));
+    let Some(sub) = shape::Subset::of(train_pose, &q) else {
+        return shape::correlation(resid, train_pose, &q, &column_basis(&a));
+    };
+    // Many poses: the hat matrix's rows at the kept points only, `A_s V S^-1` from the Gram
+    // matrix's eigenvectors (the same projection as the tall matrix's singular vectors, without
+    // them).
+    let basis = if a.ncols() == 0 {
+        DMatrix::zeros(sub.rows.len(), 0)
+    } else {
+        let eig = nalgebra::SymmetricEigen::new(super::problem::tr_mul(&a, None));
+        let top = eig.eigenvalues.iter().fold(0.0f64, |x, v| x.max(*v));
+        let keep: Vec<usize> = (0..eig.eigenvalues.len()).filter(|&k| eig.eigenvalues[k] > 1e-12 * top).collect();
+        let mut v = eig.eigenvectors.select_columns(&keep);
+        for (c, &k) in keep.iter().enumerate() {
+            v.column_mut(c).scale_mut(1.0 / eig.eigenvalues[k].sqrt());
+        }
+        a.select_rows(&sub.rows) * v
+    };
+    shape::correlation(&resid.select_rows(&sub.rows), &sub.pose_of, &sub.q, &basis)
 }
 
 /// One fold of the cross-validation: the Gram matrix and right-hand side of every family's

@@ -270,12 +270,16 @@ fn correlation_table(t: &Twin, r: &mut Results<'_>) -> std::io::Result<()> {
 /// the line that says whether it is smooth or independent per pose.
 fn correlation_section(parts: &mut Summary<'_>) {
     parts.text_from(TWIN, |_| {
-        "### The error left between poses\n\nThe residual after the kept effects on the calibration split (weighted by the points' \
+        format!(
+            "### The error left between poses\n\nThe residual after the kept effects on the calibration split (weighted by the points' \
          uncertainties), its correlation between two points (the mean product of their residuals over the mean squared residual of \
          a point) by the distance of their poses in joint space (Euclidean over the six joint values): the other targets at one pose, \
          then the pairs of distinct poses by the rank of their distance. 95 % intervals by the delete-one jackknife over poses; \
-         beside them, the value the fit itself gives white residuals (minus the hat matrix's share of the pair).\n\n"
-            .to_string()
+         beside them, the value the fit itself gives white residuals (minus the hat matrix's share of the pair). Above {max} \
+         training poses, every k-th pose and its points (the least k that leaves at most {max}: the pairs grow as the square of \
+         the poses).\n\n",
+            max = super::shape::MAX_POSES
+        )
     });
     let cells = vec![
         cell("pairs of points", |r| r.str("bin")),

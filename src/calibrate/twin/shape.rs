@@ -23,6 +23,10 @@ use nalgebra::{DMatrix, DVector};
 /// The bins of distinct poses: upper edges of the rank of their distance, as a fraction of the
 /// pairs of distinct poses (each bin from the previous edge).
 pub const DISTANCE_BINS: [f64; 4] = [0.01, 0.05, 0.25, 1.0];
+/// The most poses whose pairs are binned: the pairs of distinct poses grow as the square of their
+/// count (70,000 poses would be 2.4e9 pairs); above it, every k-th pose (the least k that leaves at
+/// most this many) and its points.
+pub const MAX_POSES: usize = 3000;
 /// The two-sided 95 % normal quantile.
 const Z95: f64 = 1.959_963_984_540_054;
 
@@ -69,7 +73,43 @@ pub struct Correlation {
 /// distance of their poses: `pose_of[i]` the pose of training point `i` (0-based, dense), `q[p]`
 /// the joint values of pose `p` (rad), `hat_basis` an orthonormal basis (rows as `resid`) of the
 /// columns the fit absorbed (the model's and the kept effects').
+/// Above [`MAX_POSES`] poses, every k-th pose's points (k the least that leaves at most that many,
+/// [`Subset`]).
 pub fn correlation(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Joints], hat_basis: &DMatrix<f64>) -> Correlation {
+    match Subset::of(pose_of, q) {
+        None => correlation_of(resid, pose_of, q, hat_basis),
+        Some(s) => correlation_of(&resid.select_rows(&s.rows), &s.pose_of, &s.q, &hat_basis.select_rows(&s.rows)),
+    }
+}
+
+/// The points [`correlation`] bins when there are more than [`MAX_POSES`] poses: those of every
+/// k-th pose, k the least that leaves at most that many.
+pub struct Subset {
+    /// The rows of the kept points (three per point), in order.
+    pub rows: Vec<usize>,
+    /// The kept points' poses, renumbered densely.
+    pub pose_of: Vec<usize>,
+    /// The kept poses' joint values.
+    pub q: Vec<crate::robot::Joints>,
+}
+
+impl Subset {
+    /// `None`: every pose is binned.
+    pub fn of(pose_of: &[usize], q: &[crate::robot::Joints]) -> Option<Subset> {
+        let stride = q.len().div_ceil(MAX_POSES).max(1);
+        if stride == 1 {
+            return None;
+        }
+        let kept: Vec<usize> = (0..pose_of.len()).filter(|&i| pose_of[i] % stride == 0).collect();
+        Some(Subset {
+            rows: kept.iter().flat_map(|&i| [3 * i, 3 * i + 1, 3 * i + 2]).collect(),
+            pose_of: kept.iter().map(|&i| pose_of[i] / stride).collect(),
+            q: q.iter().step_by(stride).copied().collect(),
+        })
+    }
+}
+
+fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Joints], hat_basis: &DMatrix<f64>) -> Correlation {
     let n = pose_of.len();
     let poses = q.len();
     let k = hat_basis.ncols();
@@ -251,5 +291,27 @@ mod tests {
         // Point pairs: one per pose at distance 0, four per pair of poses.
         assert_eq!(s.bins[0].pairs, poses);
         assert_eq!(s.bins.iter().skip(1).map(|b| b.pairs).sum::<usize>(), 4 * poses * (poses - 1) / 2);
+    }
+
+    /// Above `MAX_POSES` poses the bins are those of every k-th pose and its points (k = 3 for
+    /// 6,001 poses: 2,001 kept), the same as binning that subset directly; the pairs stay bounded.
+    #[test]
+    fn above_the_most_poses_every_kth_pose_is_binned() {
+        use rand::RngExt;
+        let mut rng = crate::seeds::stream(5, 0);
+        let poses = 2 * MAX_POSES + 1;
+        let q: Vec<crate::robot::Joints> = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
+        let pose_of: Vec<usize> = (0..2 * poses).map(|i| i / 2).collect();
+        let resid = DVector::from_fn(6 * poses, |_, _| rng.random_range(-1.0..1.0));
+        let basis = DMatrix::from_fn(6 * poses, 2, |_, _| rng.random_range(-0.01..0.01));
+        let c = correlation(&resid, &pose_of, &q, &basis);
+        assert_eq!(c.poses, 2001);
+        let kept: Vec<usize> = (0..2 * poses).filter(|&i| pose_of[i] % 3 == 0).collect();
+        let rows: Vec<usize> = kept.iter().flat_map(|&i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        let sub_q: Vec<crate::robot::Joints> = (0..poses).filter(|p| p % 3 == 0).map(|p| q[p]).collect();
+        let sub_pose: Vec<usize> = kept.iter().map(|&i| pose_of[i] / 3).collect();
+        let sub = correlation_of(&resid.select_rows(&rows), &sub_pose, &sub_q, &basis.select_rows(&rows));
+        assert_eq!(c, sub);
+        assert_eq!(c.bins.iter().skip(1).map(|b| b.pose_pairs).sum::<usize>(), 2001 * 2000 / 2);
     }
 }
