@@ -100,7 +100,7 @@ impl Subset {
         if stride == 1 {
             return None;
         }
-        let kept: Vec<usize> = (0..pose_of.len()).filter(|&i| pose_of[i] % stride == 0).collect();
+        let kept: Vec<usize> = (0..pose_of.len()).filter(|&i| pose_of[i].is_multiple_of(stride)).collect();
         Some(Subset {
             rows: kept.iter().flat_map(|&i| [3 * i, 3 * i + 1, 3 * i + 2]).collect(),
             pose_of: kept.iter().map(|&i| pose_of[i] / stride).collect(),
@@ -306,9 +306,9 @@ mod tests {
         let basis = DMatrix::from_fn(6 * poses, 2, |_, _| rng.random_range(-0.01..0.01));
         let c = correlation(&resid, &pose_of, &q, &basis);
         assert_eq!(c.poses, 2001);
-        let kept: Vec<usize> = (0..2 * poses).filter(|&i| pose_of[i] % 3 == 0).collect();
+        let kept: Vec<usize> = (0..2 * poses).filter(|&i| pose_of[i].is_multiple_of(3)).collect();
         let rows: Vec<usize> = kept.iter().flat_map(|&i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
-        let sub_q: Vec<crate::robot::Joints> = (0..poses).filter(|p| p % 3 == 0).map(|p| q[p]).collect();
+        let sub_q: Vec<crate::robot::Joints> = (0..poses).filter(|p| p.is_multiple_of(3)).map(|p| q[p]).collect();
         let sub_pose: Vec<usize> = kept.iter().map(|&i| pose_of[i] / 3).collect();
         let sub = correlation_of(&resid.select_rows(&rows), &sub_pose, &sub_q, &basis.select_rows(&rows));
         assert_eq!(c, sub);
