@@ -51,17 +51,12 @@ pub fn terminal_line(seconds: f64) -> impl Fn(&Row<'_>) -> String {
         let (chosen, pool) =
             if r.str("instrument") == "spms" { ("measured", "the spms head's pool") } else { ("centred", "the trical centring") };
         format!(
-            "calsim plan: {} {chosen} + {} validation configurations, {pool} {} ({} kept); O1 {:.6} (random set {:.6}); predicted held-out median {:.4} mm (P10-P90 {:.4}-{:.4}) over {} worlds; {seconds:.2} s",
+            "calsim plan: {} {chosen} + {} validation configurations, {pool} {} ({} kept); {}",
             r.u64("training"),
             r.u64("validation"),
             r.u64("pool_centred"),
             r.u64("pool_kept"),
-            r.f64("o1"),
-            r.f64("o1_random"),
-            r.f64("median_mm"),
-            r.f64("p10_mm"),
-            r.f64("p90_mm"),
-            r.u64("worlds_with_value")
+            super::summary::prediction_clause(r, seconds)
         )
     }
 }

@@ -111,19 +111,28 @@ fn objective_line(r: &Row<'_>) -> String {
 pub fn terminal_line(seconds: f64) -> impl Fn(&Row<'_>) -> String {
     move |r| {
         format!(
-            "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; O1 {:.6} (random set {:.6}); predicted held-out median {:.4} mm (P10-P90 {:.4}-{:.4}) over {} worlds; {seconds:.2} s",
+            "calsim plan: {} training + {} validation poses from {} feasible of {} drawn; {}",
             r.u64("training"),
             r.u64("validation"),
             r.u64("pool_feasible"),
             r.u64("pool_tried"),
-            r.f64("o1"),
-            r.f64("o1_random"),
-            r.f64("median_mm"),
-            r.f64("p10_mm"),
-            r.f64("p90_mm"),
-            r.u64("worlds_with_value")
+            prediction_clause(r, seconds)
         )
     }
+}
+
+/// The end of a plan's first line, the same for every instrument (`r`: `plan.parquet`'s row): O1
+/// against a random set's, the predicted held-out median over the worlds and the wall time.
+pub fn prediction_clause(r: &Row<'_>, seconds: f64) -> String {
+    format!(
+        "O1 {:.6} (random set {:.6}); predicted held-out median {:.4} mm (P10-P90 {:.4}-{:.4}) over {} worlds; {seconds:.2} s",
+        r.f64("o1"),
+        r.f64("o1_random"),
+        r.f64("median_mm"),
+        r.f64("p10_mm"),
+        r.f64("p90_mm"),
+        r.u64("worlds_with_value")
+    )
 }
 
 /// The plan file's name.
