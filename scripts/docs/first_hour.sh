@@ -5,6 +5,8 @@
 # with the machine's core count and load, so that the figures read for what they are.
 #
 # Usage: bash scripts/docs/first_hour.sh [--tests]   (--tests: the test suite too, its build included)
+# With FIRST_HOUR_TARGET_DIR set to a directory that does not exist yet, the builds go there and
+# are kept afterwards (a new machine's build cache, warmed by the timing itself).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 repo="$(pwd)"
@@ -17,6 +19,13 @@ git clone -q "$repo" "$scratch/calsim"
 [ -d "$repo/../shared" ] && ln -s "$(cd "$repo/../shared" && pwd)" "$scratch/shared"
 commit="$(git -C "$scratch/calsim" rev-parse --short HEAD)"
 export CARGO_TARGET_DIR="$scratch/target"
+if [ -n "${FIRST_HOUR_TARGET_DIR:-}" ]; then
+    [ -e "$FIRST_HOUR_TARGET_DIR" ] && {
+        echo "first-hour: FIRST_HOUR_TARGET_DIR=$FIRST_HOUR_TARGET_DIR exists: the build would not be a first one" >&2
+        exit 2
+    }
+    export CARGO_TARGET_DIR="$FIRST_HOUR_TARGET_DIR"
+fi
 load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
 
 # Runs "$@" in the clone under /usr/bin/time; prints "wall user system peak-RSS-MB".
