@@ -478,11 +478,41 @@ def block(name: str) -> re.Pattern:
     return re.compile(rf"(<!-- doc_numbers: {re.escape(name)} -->\n)(.*?)(<!-- /doc_numbers: {re.escape(name)} -->)", re.S)
 
 
+USAGE = "usage: python3 scripts/ci/doc_numbers.py <calsim binary> [--write] [--only NAME]"
+
+
+def parse_args(argv: list[str]) -> tuple[Path, bool, str | None] | str:
+    """The binary, --write and --only NAME; or what is wrong with the command line."""
+    write, only, binary = False, None, []
+    rest = iter(argv)
+    for a in rest:
+        if a == "--write":
+            write = True
+        elif a == "--only":
+            only = next(rest, None)
+            if only not in EXCERPTS:
+                return f"--only {only}: not an excerpt; the excerpts: {', '.join(EXCERPTS)}"
+        elif a.startswith("-"):
+            return f"{a}: not an option"
+        else:
+            binary.append(a)
+    if len(binary) != 1:
+        return "one calsim binary expected" + (f", got {len(binary)}: {' '.join(binary)}" if binary else "")
+    calsim = Path(binary[0]).resolve()
+    if not (calsim.is_file() and os.access(calsim, os.X_OK)):
+        return f"{binary[0]}: not an executable file"
+    return calsim, write, only
+
+
 def main() -> int:
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    write = "--write" in sys.argv
-    only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else None
-    calsim = Path(args[0]).resolve()
+    if "-h" in sys.argv[1:] or "--help" in sys.argv[1:]:
+        print(__doc__)
+        return 0
+    parsed = parse_args(sys.argv[1:])
+    if isinstance(parsed, str):
+        print(f"doc_numbers: {parsed}\n{USAGE}", file=sys.stderr)
+        return 2
+    calsim, write, only = parsed
     outputs: dict[str, str] = {}
     failed = 0
     with tempfile.TemporaryDirectory(prefix="calsim-docnumbers-") as scratch:
