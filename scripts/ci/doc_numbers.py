@@ -269,6 +269,19 @@ def sweep_spms_stations(out: str) -> str:
     )
 
 
+def sweep_pairing(out: Output) -> str:
+    """The ranking of a two-design sweep: each design's objective, its paired difference with the
+    leader and the pairing's correlation and variance saved, from summary.md."""
+    table = md_table(out.summary, "| rank | design |")
+    head = cells(table[0])
+    pick = [head.index(c) for c in ("design", "objective (95 % interval)", "vs leader (paired on common worlds)", "pairing: r, variance saved")]
+    rows = ["| design | p95 after, mm (95 % interval) | vs the leader, paired on common worlds | pairing: r, variance saved |", "|---|---|---|---|"]
+    for line in table[2:]:
+        c = cells(line)
+        rows.append("| " + " | ".join(c[i] for i in pick) + " |")
+    return "\n".join(rows) + "\n"
+
+
 def budget_prediction(out: Output) -> str:
     """summary.md's linear prediction against the Monte Carlo."""
     return "\n".join(md_table(out.summary, "| configuration | identifications |")) + "\n"
@@ -453,6 +466,8 @@ EXCERPTS = {
     "guide-sweeps-set-size": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/set_size_success.toml", sweep_set_sizes),
     "guide-sweeps-epsilon": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/epsilon_time.toml", sweep_epsilon),
     "guide-sweeps-spms-stations": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/spms_stations.toml", sweep_spms_stations),
+    "guide-sweeps-pairing-detmax": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/pairing_detmax.toml", sweep_pairing),
+    "guide-sweeps-pairing-random": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/pairing_random.toml", sweep_pairing),
     "guide-budget-prediction": ("docs/guide-budget.md", BUDGET, budget_prediction),
     "guide-model-out-kr6": ("docs/guide-model-out.md", "calsim run scenarios/kr6r900sixx_trical.toml --no-plots --no-recording", summary_errors),
     "guide-model-out-trical": ("docs/guide-model-out.md", RUN_TRICAL, summary_errors),
