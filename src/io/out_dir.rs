@@ -405,7 +405,7 @@ pub fn write_file_atomically(path: &Path, text: impl AsRef<[u8]>) -> io::Result<
     result
 }
 
-/// How a JUnit report of `calsim check` begins ([`crate::study::check::CheckReport::junit`]).
+/// How a JUnit report of `calsim check` begins (the check report writes it so).
 pub const JUNIT_HEAD: &str = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<testsuites><testsuite name=\"calsim check ";
 
 /// Whether the regular file `path` is one calsim wrote and may write again: a JUnit report of
