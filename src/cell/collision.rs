@@ -1,13 +1,13 @@
-//! The collision world (rapier3d's geometry, parry): the robot's links as capsules
+//! The collision world (parry's geometry): the robot's links as capsules
 //! (`shared/reference/irb120.toml`), the measuring device attached to the flange, the ball plate,
 //! its risers and pedestal, and the table. Static queries only: intersection tests for collisions
 //! and ray casts for line of sight.
 
 use nalgebra::{Isometry3, Rotation3, UnitQuaternion, Vector3};
-use rapier3d_f64::parry::bounding_volume::BoundingVolume;
-use rapier3d_f64::parry::math::{Pose, Vector};
-use rapier3d_f64::parry::query::{Ray, RayCast, contact, intersection_test};
-use rapier3d_f64::parry::shape::{Capsule, Cuboid, Shape};
+use parry3d_f64::bounding_volume::BoundingVolume;
+use parry3d_f64::math::{Pose, Vector};
+use parry3d_f64::query::{Ray, RayCast, contact, intersection_test};
+use parry3d_f64::shape::{Capsule, Cuboid, Shape};
 
 use crate::robot::{JOINTS, KinState};
 
@@ -85,7 +85,7 @@ fn vec(v: &Vector3<f64>) -> Vector {
 fn pose(iso: &Isometry3<f64>) -> Pose {
     let q = iso.rotation.quaternion();
     let t = iso.translation.vector;
-    Pose::from_parts(Vector::new(t.x, t.y, t.z), rapier3d_f64::parry::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w))
+    Pose::from_parts(Vector::new(t.x, t.y, t.z), parry3d_f64::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w))
 }
 
 /// Frame i of the last forward pass as a parry pose. The rotation is a product of rotations,
@@ -94,7 +94,7 @@ fn pose(iso: &Isometry3<f64>) -> Pose {
 fn frame_pose(st: &KinState, i: usize) -> Pose {
     let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(st.rot[i]));
     let t = st.org[i];
-    Pose::from_parts(Vector::new(t.x, t.y, t.z), rapier3d_f64::parry::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w))
+    Pose::from_parts(Vector::new(t.x, t.y, t.z), parry3d_f64::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w))
 }
 
 fn body_name(i: usize) -> String {
@@ -252,7 +252,7 @@ impl CollisionWorld {
 mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use rapier3d_f64::parry::query::distance;
+    use parry3d_f64::query::distance;
 
     use super::*;
 
