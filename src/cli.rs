@@ -96,7 +96,7 @@ struct CalibrateArgs {
     #[arg(long, default_value = "results")]
     out: PathBuf,
     /// Cross-validation folds.
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5, value_parser = clap::value_parser!(u32).range(2..=20))]
     folds: u32,
     /// How the k-fold cross-validation over every pose (the figure comparable with the
     /// literature's) groups the poses: `pose` (--folds folds of each session's poses) or `session`
@@ -105,7 +105,7 @@ struct CalibrateArgs {
     kfold_by: String,
     /// Fraction of each session's poses held out, drawn at random (default: the file's `split`
     /// column when it has one, else 0.2).
-    #[arg(long, conflicts_with_all = ["hold_out_session", "hold_out_file"])]
+    #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["hold_out_session", "hold_out_file"])]
     hold_out: Option<f64>,
     /// Hold out every pose of this session instead.
     #[arg(long, conflicts_with = "hold_out_file")]
@@ -114,13 +114,13 @@ struct CalibrateArgs {
     #[arg(long)]
     hold_out_file: Option<PathBuf>,
     /// Seed of the split, the folds and the prediction's draws.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     seed: u64,
     /// Robot parameters of the most complete model, comma-separated (default: the TriCal set less the base).
     #[arg(long, value_delimiter = ',')]
     params: Option<Vec<String>>,
     /// Outlier threshold, robust standard deviations of a point's residual (default 4.5943).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     outlier_threshold: Option<f64>,
     /// What flagged points do: `off` (none flagged), `report` (flagged, listed, kept in every fit
     /// and figure) or `reject` (flagged, listed, left out of every fit and figure).
@@ -129,11 +129,11 @@ struct CalibrateArgs {
     /// Also simulate the calibration's plan over this many worlds (by default the twin: the
     /// calibrated robot with its learned effects and repeatability, the instrument's noise;
     /// calibrated again each time) and set the measured held-out median beside it (plan.md); 0: none.
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=crate::calibrate::MOST_PLAN_WORLDS as i64))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=crate::calibrate::MOST_PLAN_WORLDS as i64))]
     plan_worlds: u32,
     /// The plan's instrument noise per coordinate, mm, for the twin and noise-only plans (default:
     /// the twin's instrument noise: --instrument-noise-mm, the points' sigma column, or estimated).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     plan_noise_mm: Option<f64>,
     /// The scenario that planned the calibration: its robot's effects outside the model
     /// ([robot.unmodelled]) and repeatability are drawn in each world of the plan.
@@ -149,11 +149,11 @@ struct CalibrateArgs {
     payload_com_mm: Option<Vec<f64>>,
     /// The orientation readings' uncertainty about each axis when the file has no sigma_deg column,
     /// mdeg (default 10; six-degree-of-freedom probes: the quat_w..quat_z columns).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     orientation_noise_mdeg: Option<f64>,
     /// The positions' uncertainty per coordinate the rotation residuals are weighted against when
     /// the file has orientation columns and no sigma_mm column, mm (default 0.025).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     position_noise_mm: Option<f64>,
     /// A tool per session: each session's targets get their own position on the flange (a probe
     /// or SMR nest re-mounted between sessions); a session held out whole has its tools registered
@@ -167,7 +167,7 @@ struct CalibrateArgs {
     plan_with: Option<String>,
     /// The instrument's noise per coordinate, mm, as stated (default: the points' sigma column,
     /// else estimated from distances between targets measured at one pose).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     instrument_noise_mm: Option<f64>,
     /// Skip the figures.
     #[arg(long)]
@@ -182,7 +182,7 @@ struct PlanArgs {
     #[arg(long, default_value = "results")]
     out: PathBuf,
     /// Worker threads (default: RAYON_NUM_THREADS, else every core).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     threads: Option<u32>,
     /// Also write simulated.csv: the poses measured on the robot file's truth with the tracker's
     /// noise (a device plan: the planning world's true arm with the pool's observation error).
@@ -249,10 +249,10 @@ struct ExportArgs {
     /// A results directory of `calsim run` (with its manifest.json and tasks.parquet).
     results: PathBuf,
     /// The task to export, by index (see tasks.parquet).
-    #[arg(long, conflicts_with_all = ["set_size", "pick"])]
+    #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["set_size", "pick"])]
     task: Option<usize>,
     /// Set size to pick from (default: the scenario's table set size, 75 in the paper).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     set_size: Option<u32>,
     /// Which task of that set size: the median, best or worst validation median.
     #[arg(long, value_enum, default_value_t = PickArg::Median)]
@@ -274,13 +274,13 @@ struct Table8Args {
     /// A TriCal scenario file.
     scenario: PathBuf,
     /// Realisations (worlds): the medians over them, with P10-P90, beside the published rows.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     realisations: u32,
     /// Configurations of each external instrument's pool (random in the workspace, in its view).
-    #[arg(long, default_value_t = 360, value_parser = clap::value_parser!(u32).range(100..=100_000))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 360, value_parser = clap::value_parser!(u32).range(100..=100_000))]
     pool: u32,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
 }
 
@@ -292,16 +292,16 @@ struct BudgetArgs {
     #[arg(long, default_value = "results")]
     out: PathBuf,
     /// Realisations (worlds) per configuration.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     realisations: u32,
     /// What-if factors applied to each source in turn, comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [0.5, 2.0], value_parser = parse_factor)]
     factors: Vec<f64>,
     /// Repetitions per configuration and realisation, replacing the scenario's.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_REPETITIONS as i64))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_REPETITIONS as i64))]
     repetitions: Option<u32>,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
 }
 
@@ -321,10 +321,10 @@ struct SweepArgs {
     #[arg(long, value_parser = parse_shard)]
     shard: Option<(usize, usize)>,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
     /// Realisations replacing the file's count (or the most of an adaptive sweep).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     realisations: Option<u32>,
 }
 
@@ -342,7 +342,7 @@ struct OptimiseArgs {
     #[arg(long, conflicts_with = "shard")]
     merge: bool,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
     /// Search method replacing the file's: nelder_mead, particle_swarm or cmaes.
     #[arg(long, value_parser = parse_method)]
@@ -425,16 +425,16 @@ struct RunArgs {
     #[arg(long, default_value = "results")]
     out: PathBuf,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=1024))]
     threads: Option<u32>,
     /// Seed, replacing the scenario's.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     seed: Option<u64>,
     /// Set sizes as start:end:step (inclusive), replacing the scenario's.
     #[arg(long, value_parser = parse_sizes)]
     set_sizes: Option<SetSizes>,
     /// Repetitions per set size, replacing the scenario's.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_REPETITIONS as i64))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_REPETITIONS as i64))]
     repetitions: Option<u32>,
     /// Skip the figures (PNG and SVG of the paper's Figs. 7-13).
     #[arg(long)]
@@ -446,11 +446,11 @@ struct RunArgs {
     /// misses when the interval of its median over them lies wholly outside its band. Realisation 0
     /// is the run whose results are written [default: 1 for run, the scenario's
     /// study.check_realisations for check].
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_CHECK_REALISATIONS as i64))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=crate::study::MAX_CHECK_REALISATIONS as i64))]
     realisations: Option<u32>,
     /// The check's false-alarm rate over realisations: the probability that a model whose medians
     /// meet every band fails [default: the scenario's study.check_false_alarm, 0.01].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     false_alarm: Option<f64>,
     /// Also write the check's verdict as JUnit XML to this file (check.json is always written).
     #[arg(long)]

@@ -625,3 +625,23 @@ fn refusals_name_the_key_or_flag_the_user_wrote() {
     refused(dir, &["calibrate", s(&robot), s(&m), "--plan-noise-mm", "0.01", "--out", "out"], &["--plan-noise-mm", "--plan-worlds"]);
     assert!(!dir.join("out").exists(), "nothing written");
 }
+
+/// A negative number given to a counting flag is refused naming the flag and the value (clap
+/// would otherwise read it as an unknown option), and a value TOML itself cannot read (an integer
+/// beyond 64 bits) names its line, table and key.
+#[test]
+fn a_negative_count_names_its_flag_and_an_unreadable_value_its_key() {
+    let tmp = scratch("negative-and-huge");
+    let dir = tmp.path();
+    let base = repo().join("scenarios/ci_quick.toml");
+    for (flag, value) in [("--seed", "-1"), ("--realisations", "-3"), ("--threads", "-2"), ("--repetitions", "-5")] {
+        refused(dir, &["run", s(&base), flag, value, "--out", "out"], &[flag, value]);
+    }
+    let text = common::scenario_text_anywhere("ci_quick.toml");
+    let huge = text.replacen("repetitions = 10", "repetitions = 99999999999999999999", 1);
+    assert_ne!(huge, text, "ci_quick.toml sets `repetitions = 10` in [study]");
+    let f = dir.join("huge.toml");
+    std::fs::write(&f, huge).unwrap();
+    refused(dir, &["run", s(&f), "--out", "out"], &[s(&f), "line ", "[study] repetitions"]);
+    assert!(!dir.join("out").exists(), "nothing written");
+}

@@ -250,9 +250,9 @@ impl CollisionWorld {
 
 #[cfg(test)]
 mod tests {
+    use parry3d_f64::query::distance;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use parry3d_f64::query::distance;
 
     use super::*;
 

@@ -76,7 +76,7 @@ pub enum ScenarioError {
 pub fn table(text: &str, shown: &str) -> Result<toml::Table, ScenarioError> {
     toml::from_str(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
         path: shown.into(),
-        key: position(text, e.span()),
+        key: crate::io::toml_position(text, e.span()),
         message: e.message().to_string(),
     })
 }
@@ -133,17 +133,6 @@ pub fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) 
             message: e.into_inner().message().to_string(),
         }
     })
-}
-
-/// `line N` of the byte range a TOML error points at (`(file)` without one).
-pub fn position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
-    match span {
-        Some(s) => {
-            let line = text[..s.start.min(text.len())].lines().count().max(1);
-            format!("line {line}")
-        }
-        None => "(file)".into(),
-    }
 }
 
 /// Range checks that name the file, section, key, value and rule of what fails. Every rule a

@@ -40,6 +40,42 @@ pub fn check_input(path: &Path, most: Option<u64>) -> std::io::Result<()> {
     }
 }
 
+/// Where a TOML parse error points, for a one-line message: `line N` of the error's byte range,
+/// with the key assigned on that line and its table (`line 35, [study] repetitions`) when the line
+/// assigns one; `(file)` when the error has no range.
+pub fn toml_position(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    let Some(span) = span else { return "(file)".into() };
+    let before = text.get(..span.start).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let key = text.lines().nth(line - 1).and_then(|l| assigned_key(l.split('#').next().unwrap_or("")));
+    let table = text.lines().take(line - 1).filter_map(|l| table_header(l.trim())).last();
+    match (key, table) {
+        (Some(k), Some(t)) => format!("line {line}, [{t}] {k}"),
+        (Some(k), None) => format!("line {line}, {k}"),
+        _ => format!("line {line}"),
+    }
+}
+
+/// A TOML key as written: bare, dotted or quoted.
+fn is_key(key: &str) -> bool {
+    !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || "_-.\" '".contains(c))
+}
+
+/// The key a TOML line assigns (`key = ...`).
+fn assigned_key(line: &str) -> Option<&str> {
+    let (key, _) = line.split_once('=')?;
+    let key = key.trim();
+    is_key(key).then_some(key)
+}
+
+/// The table a header line opens (`[cell]`, `[[session]]`); none for an array's row (`[1, 2],`).
+fn table_header(line: &str) -> Option<&str> {
+    let line = line.split('#').next().unwrap_or("").trim();
+    let inner = line.strip_prefix("[[").and_then(|l| l.strip_suffix("]]"));
+    let inner = inner.or_else(|| line.strip_prefix('[').and_then(|l| l.strip_suffix(']')))?.trim();
+    is_key(inner).then_some(inner)
+}
+
 fn too_large(most: u64) -> std::io::Error {
     std::io::Error::other(format!("larger than {} MiB, the most an input file may have", most >> 20))
 }
@@ -112,4 +148,34 @@ pub(crate) fn read_own(path: &Path, most: u64) -> std::io::Result<Vec<u8>> {
         return Err(too_large(most));
     }
     Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::toml_position;
+
+    /// The position of the error toml itself reports for `text`.
+    fn at(text: &str) -> String {
+        let e = toml::from_str::<toml::Table>(text).map(|_| ()).expect_err("the text is not valid TOML");
+        toml_position(text, e.span())
+    }
+
+    #[test]
+    fn a_toml_error_names_its_line_and_the_key_assigned_there() {
+        let text = "seed = 1\n\n[study]\n# a comment\nrepetitions = 99999999999999999999  # too large\n";
+        assert_eq!(at(text), "line 5, [study] repetitions");
+        assert_eq!(at("a = 1\nb = \n"), "line 2, b");
+        assert_eq!(at("[[session]]\nname = \"A\"\n\"quoted key\" = [1, \n"), "line 3, [session] \"quoted key\"");
+        // A row of a multi-line array is not a table header; a line assigning nothing gives its number.
+        assert_eq!(at("[cell]\nxs = [\n  [1, 2]\n]\ny = \n"), "line 5, [cell] y");
+        assert_eq!(at("[cell]\nxs = [\n  [1, 2]\n]\n]\n"), "line 5");
+        assert_eq!(toml_position("a = 1", None), "(file)");
+    }
+
+    #[test]
+    fn an_error_at_the_start_of_a_line_is_on_that_line() {
+        let text = "a = 1\nb = 2\n";
+        let start = text.find('b').unwrap();
+        assert_eq!(toml_position(text, Some(start..start + 1)), "line 2, b");
+    }
 }

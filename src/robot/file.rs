@@ -336,9 +336,7 @@ impl RobotFile {
     fn parse(path: &Path, text: &str) -> Result<Self, (String, String)> {
         let f: File = toml::from_str(text).map_err(|e| {
             let msg = e.message().to_string();
-            // toml names the table or key when it can; the span's line otherwise.
-            let at = e.span().map(|s| format!("line {}", text[..s.start.min(text.len())].lines().count().max(1))).unwrap_or_default();
-            (if at.is_empty() { "(file)".to_string() } else { at }, msg)
+            (crate::io::toml_position(text, e.span()), msg)
         })?;
         let finite = |field: String, v: f64| if v.is_finite() { Ok(v) } else { Err((field, format!("{v} is not a finite number"))) };
         let within = |field: String, v: f64, lo: f64, hi: f64| {

@@ -601,13 +601,8 @@ impl CheckReport {
         let esc = |t: &str| t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;");
         let skipped = self.figures.iter().filter(|f| f.verdict == "report").count();
         let mut s = String::from(crate::io::out_dir::JUNIT_HEAD);
-        let _ = writeln!(
-            s,
-            "{}\" tests=\"{}\" failures=\"{}\" skipped=\"{skipped}\">",
-            esc(&self.scenario),
-            self.figures.len(),
-            self.missed
-        );
+        let _ =
+            writeln!(s, "{}\" tests=\"{}\" failures=\"{}\" skipped=\"{skipped}\">", esc(&self.scenario), self.figures.len(), self.missed);
         for f in &self.figures {
             let interval = f.interval.map_or(String::new(), |[a, b]| format!(", interval {a:.4}-{b:.4}"));
             let what = format!("calsim {:.4}{interval}, published {}, band {}", f.value, f.published, f.band);

@@ -438,7 +438,7 @@ const MOST_EVALUATIONS: u32 = 100_000;
 pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
     let text = crate::io::read_text(path).map_err(|e| err(path, "(file)", format!("cannot read: {e}")))?;
     let file: DesignFile = {
-        let de = toml::Deserializer::parse(&text).map_err(|e| err(path, scenario::position(&text, e.span()), e.message()))?;
+        let de = toml::Deserializer::parse(&text).map_err(|e| err(path, crate::io::toml_position(&text, e.span()), e.message()))?;
         serde_path_to_error::deserialize(de).map_err(|e| {
             let key = e.path().to_string();
             err(path, key, e.into_inner().message())

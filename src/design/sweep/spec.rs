@@ -359,7 +359,7 @@ pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Swee
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
     let file: SweepFile = {
-        let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, &scenario::position(&text, e.span()), e.message()))?;
+        let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, &crate::io::toml_position(&text, e.span()), e.message()))?;
         serde_path_to_error::deserialize(de).map_err(|e| {
             let key = e.path().to_string();
             file_err(path, &key, e.into_inner().message())
