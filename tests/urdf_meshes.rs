@@ -200,8 +200,7 @@ fn capsules_fitted_to_meshes_hold_every_vertex_and_the_hull_gives_the_same() {
     assert_eq!(every_vertex_inside(&urdf, &root, &file), tris.len() * 3);
 
     // The convex hull of the cloud: the same capsule.
-    let points: Vec<parry3d_f64::math::Vector3> =
-        tris.iter().flatten().map(|v| parry3d_f64::math::Vector3::new(v.x, v.y, v.z)).collect();
+    let points: Vec<parry3d_f64::math::Vector3> = tris.iter().flatten().map(|v| parry3d_f64::math::Vector3::new(v.x, v.y, v.z)).collect();
     let (hull, faces) = parry3d_f64::transformation::convex_hull(&points);
     let hull_tris: Vec<[Vector3<f64>; 3]> =
         faces.iter().map(|f| f.map(|i| Vector3::new(hull[i as usize].x, hull[i as usize].y, hull[i as usize].z))).collect();
