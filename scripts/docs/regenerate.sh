@@ -82,8 +82,9 @@ if [ $# -eq 0 ] || [[ " $* " == *" optimise-three-starts "* ]]; then
 fi
 
 # The findings' candidate error models, the CI gate's figures over 400 worlds, the sizing
-# sweep's ranking and the plans' wall clock on 2 threads (docs/findings.md,
-# docs/guide-reproduce.md, docs/guide-sweeps.md, docs/plan.md).
+# sweep's ranking, the plans' wall clock on 2 threads and an optimiser evaluation's CPU and its
+# split (docs/findings.md, docs/guide-reproduce.md, docs/guide-sweeps.md, docs/plan.md,
+# docs/optimise.md).
 more=(
     "sweep-cell-sizing|sweep scenarios/sweeps/cell_sizing.toml"
     "check-ci-quick-400|check scenarios/ci_quick.toml --realisations 400 --no-plots --no-recording"
@@ -94,6 +95,8 @@ more=(
     "plan-speed-trical|plan scenarios/plans/irb120_trical.toml --threads 2"
     "plan-speed-trical-objective|plan scenarios/plans/irb120_trical_objective.toml --threads 2"
     "plan-speed-spms|plan scenarios/plans/er20c10_spms.toml --threads 2"
+    "optimise-cost-hand|bash scripts/docs/optimise_cost.sh scenarios/designs/irb120_spheres.toml"
+    "optimise-cost-paper|bash scripts/docs/optimise_cost.sh scenarios/designs/irb120_spheres_from_paper.toml"
 )
 for run in "${more[@]}"; do
     IFS='|' read -r name command <<<"$run"
@@ -102,11 +105,15 @@ for run in "${more[@]}"; do
     fi
     echo "regenerate: $name: $command"
     start=$SECONDS
-    if [[ $command == python3* ]]; then
+    if [[ $command == python3* || $command == bash* ]]; then
         # shellcheck disable=SC2086
         CALSIM="$calsim" $command >"$scratch/$name.stdout"
         made="\`$command\`"
-        body="$(cat "$scratch/$name.stdout")"
+        if [[ $command == bash* ]]; then
+            body="$(printf '%s\n' '```text'; cat "$scratch/$name.stdout"; printf '%s' '```')"
+        else
+            body="$(cat "$scratch/$name.stdout")"
+        fi
     else
         # shellcheck disable=SC2086
         "$calsim" $command --out "$scratch/$name" >"$scratch/$name.stdout" || [ $? -eq 1 ]
@@ -179,6 +186,30 @@ for run in "${checks[@]}"; do
     } >"docs/generated/$name.md"
     echo "regenerate: $name: docs/generated/$name.md"
 done
+
+# DETMAX warm-started from a neighbouring design's set against its random start
+# (docs/optimise.md, "What an evaluation costs"): examples/detmax_warm.rs, 200 designs of 300 from
+# a pool of 3 x 251 with sphere 2 moved 5, 20 and 100 mm.
+if [ $# -eq 0 ] || [[ " $* " == *" detmax-warm "* ]]; then
+    cargo build --release --locked --example detmax_warm
+    command="cargo run --release --example detmax_warm -- 200 300 251 SHIFT"
+    echo "regenerate: detmax-warm: $command"
+    start=$SECONDS
+    for shift in 5 20 100; do
+        echo "sphere 2 moved $shift mm:"
+        "$CARGO_TARGET_DIR/release/examples/detmax_warm" 200 300 251 "$shift"
+        echo
+    done >"$scratch/detmax-warm.stdout"
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`$command\` for SHIFT 5, 20 and 100 at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        echo '```text'
+        cat "$scratch/detmax-warm.stdout"
+        echo '```'
+    } >"docs/generated/detmax-warm.md"
+    echo "regenerate: detmax-warm: docs/generated/detmax-warm.md"
+fi
 
 # The simulated examples of docs/calibrate.md (their measurement files are made, not kept).
 if [ $# -eq 0 ] || [[ " $* " == *" imported-example "* ]]; then
