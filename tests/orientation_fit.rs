@@ -297,3 +297,135 @@ fn readings_in_another_convention_are_one_line_exit_2() {
         assert!(e.contains(name) && e.contains("line ") && e.contains(want), "{name}: {e}");
     }
 }
+
+/// `text` with the orientation reading of data line `line` (1-based, as the report names lines)
+/// turned by `deg` about the measuring frame's x axis.
+fn turn_reading(text: &str, line: usize, deg: f64) -> String {
+    let turn = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), deg.to_radians());
+    text.lines()
+        .enumerate()
+        .map(|(k, l)| {
+            if k + 1 != line {
+                return format!("{l}\n");
+            }
+            let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+            let n = f.len();
+            let q: Vec<f64> = f[n - 4..].iter().map(|v| v.parse().unwrap()).collect();
+            let q = turn * nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+            for (k, v) in [q.w, q.i, q.j, q.k].iter().enumerate() {
+                f[n - 4 + k] = format!("{v:.12}");
+            }
+            format!("{}\n", f.join(","))
+        })
+        .collect()
+}
+
+/// The file's 40th data line (a point of the first session).
+fn data_line(text: &str, k: usize) -> usize {
+    text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.starts_with("pose,")).nth(k).unwrap().0 + 1
+}
+
+/// Noisy positions (12 um) and readings (10 mdeg), one reading turned by 2 deg (200 of its
+/// standard deviations): the rule flags that reading alone, by its point (its position is not
+/// flagged); under `reject` the calibration equals that of the file without that reading (the
+/// same points, the reading taken out of the parsed file) to the last bit in every estimate and
+/// probe rotation; under `report` the reading stays in the fit and moves it.
+#[test]
+fn a_corrupted_reading_is_flagged_and_reject_equals_the_file_without_it() {
+    let robot = irb120();
+    let truth = truth_on(&robot, &identifiable());
+    let s = spec(truth, &robot, 0.012, 21);
+    let text = to_csv_with(&s, Some(&probes(10.0)));
+    let line = data_line(&text, 40);
+    let m = parse(&turn_reading(&text, line, 2.0), &robot);
+    let k = m.points.iter().position(|p| p.line == line as u64).unwrap();
+    let noisy = Options { position_noise_mm: 0.012, orientation_noise_mdeg: 10.0, ..options() };
+    let reject = Options { outliers: calsim::calibrate::OutlierMode::Reject, ..noisy.clone() };
+    let c = run(&robot, &m, &reject).unwrap();
+    let flagged: Vec<usize> = (0..m.points.len()).filter(|&i| c.readings_flagged.flagged[i]).collect();
+    assert_eq!(flagged, vec![k], "the turned reading alone: {:?}", flagged.iter().map(|&i| m.points[i].line).collect::<Vec<_>>());
+    assert!(!c.flagged[k], "its position is not flagged");
+    assert!(c.readings_flagged.normalized[k] > 100.0, "{}", c.readings_flagged.normalized[k]);
+    let warning = calsim::calibrate::report::outlier_warning(&c).unwrap();
+    assert!(warning.contains(&format!("orientation reading of {} flagged as outliers (line {line})", m.points.len())), "{warning}");
+    let mut without = m.clone();
+    without.points[k].orientation = None;
+    let w = run(&robot, &without, &reject).unwrap();
+    assert!(w.readings_flagged.flagged.iter().all(|f| !f), "the file without the reading flags none");
+    for (a, b) in c.estimates.iter().zip(&w.estimates) {
+        assert_eq!((a.value.to_bits(), a.std.to_bits()), (b.value.to_bits(), b.std.to_bits()), "{}", a.id.name());
+    }
+    assert_eq!(c.probe_rotations, w.probe_rotations);
+    let report = run(&robot, &m, &Options { outliers: calsim::calibrate::OutlierMode::Report, ..noisy }).unwrap();
+    assert_eq!(report.readings_flagged.flagged, c.readings_flagged.flagged);
+    assert_ne!(report.probe_rotations, w.probe_rotations, "kept in the fit, the reading moves it");
+}
+
+/// Clean files (12 um, 10 mdeg, Gaussian) flag no reading over 4 seeds: 4 x 240 = 960 readings,
+/// where the threshold's false-alarm probability of 1e-4 per reading gives 0.096 false flags
+/// expected (a flag in about 9 % of such 4-seed runs).
+#[test]
+fn clean_readings_are_not_flagged() {
+    let robot = irb120();
+    let truth = truth_on(&robot, &identifiable());
+    let noisy = Options { position_noise_mm: 0.012, orientation_noise_mdeg: 10.0, ..options() };
+    let mut readings = 0;
+    for seed in 0..4 {
+        let m = parse(&to_csv_with(&spec(truth.clone(), &robot, 0.012, 300 + seed), Some(&probes(10.0))), &robot);
+        let c = run(&robot, &m, &noisy).unwrap();
+        let flagged: Vec<u64> = (0..m.points.len()).filter(|&i| c.readings_flagged.flagged[i]).map(|i| m.points[i].line).collect();
+        assert!(flagged.is_empty(), "seed {seed}: lines {flagged:?} flagged");
+        let scaled: Vec<f64> = c.readings_flagged.normalized.iter().copied().filter(|v| v.is_finite()).collect();
+        assert_eq!(scaled.len(), m.points.len(), "every reading scaled");
+        readings += scaled.len();
+    }
+    assert_eq!(readings, 960);
+}
+
+/// On the command line: the turned reading is named by its line on standard error and in
+/// summary.md's table, and points.parquet carries the flag; NaN, inf and absurd numbers in an
+/// orientation column are one line naming the file, the line and the column, exit 2.
+#[test]
+fn a_flagged_reading_is_named_by_its_line_and_bad_readings_exit_2() {
+    let robot_path = common::repo().join("robots/irb120.toml");
+    let robot = irb120();
+    let truth = truth_on(&robot, &identifiable());
+    let mut s = spec(truth, &robot, 0.01, 3);
+    s.poses_per_session = 12;
+    let text = to_csv_with(&s, Some(&probes(5.0)));
+    let line = data_line(&text, 10);
+    let dir = common::scratch("orientation-outlier");
+    let csv = dir.path().join("turned.csv");
+    std::fs::write(&csv, turn_reading(&text, line, 2.0)).unwrap();
+    let args = ["calibrate", robot_path.to_str().unwrap(), "--no-plots", "--params", "a2,a3,d4,theta_offs2,theta_offs3,theta_offs4"];
+    let o = common::calsim().args(args).arg("--out").arg(dir.path().join("out")).arg(&csv).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains(&format!("1 orientation reading of 72 flagged as outliers (line {line})")), "{e}");
+    let report = dir.path().join("out/turned.calibration");
+    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    assert!(summary.contains("1 of 72 readings flagged"), "{summary}");
+    assert!(summary.lines().any(|l| l.starts_with(&format!("| {line} |"))), "{summary}");
+    let points = {
+        use polars::prelude::SerReader;
+        polars::prelude::ParquetReader::new(std::fs::File::open(report.join("points.parquet")).unwrap()).finish().unwrap()
+    };
+    let flags = points.column("reading_outlier").unwrap().bool().unwrap().clone();
+    let lines = points.column("line").unwrap().u64().unwrap().clone();
+    let flagged: Vec<u64> = (0..flags.len()).filter(|&i| flags.get(i) == Some(true)).map(|i| lines.get(i).unwrap()).collect();
+    assert_eq!(flagged, vec![line as u64]);
+    for bad in ["NaN", "inf", "-inf", "1e308"] {
+        let bad_text: String = text
+            .lines()
+            .enumerate()
+            .map(|(k, l)| if k + 1 == line { format!("{},{bad}\n", l.rsplit_once(',').unwrap().0) } else { format!("{l}\n") })
+            .collect();
+        let csv = dir.path().join("bad.csv");
+        std::fs::write(&csv, bad_text).unwrap();
+        let o = common::calsim().args(args).arg("--out").arg(dir.path().join("out")).arg(&csv).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {e}");
+        assert_eq!(e.trim().lines().count(), 1, "{bad}: one line: {e}");
+        assert!(e.contains("bad.csv") && e.contains(&format!("line {line}")) && e.contains("quat_z"), "{bad}: {e}");
+    }
+}

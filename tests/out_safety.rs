@@ -274,6 +274,34 @@ fn calibrate_export_and_the_file_writers_refuse_their_inputs() {
     let urdf = write(&t.join("arm.urdf"), "<robot name=\"x\"/>");
     let urdf_link = link(&urdf, &t.join("arm_link.urdf"));
     refused(t, &["import-urdf", s(&urdf), "--out", s(&urdf_link)], "--out", "is the input");
+    // compensate, fk, import-urdf --out and check --junit: a user's file already there (or a
+    // dangling link) is refused and left as it is; no temporary is left beside it.
+    let mine = write(&t.join("mine/joints.csv"), "my joints");
+    let mine_link = link(&t.join("mine/nowhere.csv"), &t.join("mine/dangling.csv"));
+    let chk = t.join("chk");
+    for out in [&mine, &mine_link] {
+        refused(t, &["compensate", s(&model), s(&targets), "--out", s(out)], "--out", "the file exists");
+        refused(t, &["fk", s(&model), s(&joints), "--out", s(out)], "--out", "the file exists");
+        refused(t, &["import-urdf", "robots/kr6r900sixx.urdf", "--out", s(out)], "--out", "the file exists");
+        let mut a = vec!["check", s(&scenario)];
+        a.extend(SMALL);
+        a.extend(["1", "--out", s(&chk), "--junit", s(out)]);
+        refused(t, &a, "--junit", "the file exists");
+    }
+    assert_eq!(std::fs::read_to_string(&mine).unwrap(), "my joints");
+    // A JUnit report calsim wrote is a CI job's output of every run: replaced.
+    let report = t.join("mine/check.xml");
+    for _ in 0..2 {
+        let mut a = vec!["check", s(&scenario)];
+        a.extend(SMALL);
+        a.extend(["1", "--out", s(&chk), "--junit", s(&report)]);
+        let o = calsim().args(&a).output().unwrap();
+        assert!(o.status.code().is_some_and(|c| c < 2), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert!(std::fs::read_to_string(&report).unwrap().contains("<testsuite name=\"calsim check"));
+    std::fs::remove_file(&report).unwrap();
+    let left: Vec<_> = std::fs::read_dir(t.join("mine")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 2, "only the user's file and link: {left:?}");
     // init: an existing file, and a link (even a dangling one), are never replaced.
     let dangling = link(&t.join("nowhere.toml"), &t.join("dangling.toml"));
     for f in [&model, &dangling] {

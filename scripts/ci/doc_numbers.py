@@ -269,6 +269,19 @@ def sweep_spms_stations(out: str) -> str:
     )
 
 
+def sweep_pairing(out: Output) -> str:
+    """The ranking of a two-design sweep: each design's objective, its paired difference with the
+    leader and the pairing's correlation and variance saved, from summary.md."""
+    table = md_table(out.summary, "| rank | design |")
+    head = cells(table[0])
+    pick = [head.index(c) for c in ("design", "objective (95 % interval)", "vs leader (paired on common worlds)", "pairing: r, variance saved")]
+    rows = ["| design | p95 after, mm (95 % interval) | vs the leader, paired on common worlds | pairing: r, variance saved |", "|---|---|---|---|"]
+    for line in table[2:]:
+        c = cells(line)
+        rows.append("| " + " | ".join(c[i] for i in pick) + " |")
+    return "\n".join(rows) + "\n"
+
+
 def budget_prediction(out: Output) -> str:
     """summary.md's linear prediction against the Monte Carlo."""
     return "\n".join(md_table(out.summary, "| configuration | identifications |")) + "\n"
@@ -453,6 +466,8 @@ EXCERPTS = {
     "guide-sweeps-set-size": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/set_size_success.toml", sweep_set_sizes),
     "guide-sweeps-epsilon": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/epsilon_time.toml", sweep_epsilon),
     "guide-sweeps-spms-stations": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/spms_stations.toml", sweep_spms_stations),
+    "guide-sweeps-pairing-detmax": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/pairing_detmax.toml", sweep_pairing),
+    "guide-sweeps-pairing-random": ("docs/guide-sweeps.md", "calsim sweep scenarios/sweeps/pairing_random.toml", sweep_pairing),
     "guide-budget-prediction": ("docs/guide-budget.md", BUDGET, budget_prediction),
     "guide-model-out-kr6": ("docs/guide-model-out.md", "calsim run scenarios/kr6r900sixx_trical.toml --no-plots --no-recording", summary_errors),
     "guide-model-out-trical": ("docs/guide-model-out.md", RUN_TRICAL, summary_errors),
@@ -478,11 +493,41 @@ def block(name: str) -> re.Pattern:
     return re.compile(rf"(<!-- doc_numbers: {re.escape(name)} -->\n)(.*?)(<!-- /doc_numbers: {re.escape(name)} -->)", re.S)
 
 
+USAGE = "usage: python3 scripts/ci/doc_numbers.py <calsim binary> [--write] [--only NAME]"
+
+
+def parse_args(argv: list[str]) -> tuple[Path, bool, str | None] | str:
+    """The binary, --write and --only NAME; or what is wrong with the command line."""
+    write, only, binary = False, None, []
+    rest = iter(argv)
+    for a in rest:
+        if a == "--write":
+            write = True
+        elif a == "--only":
+            only = next(rest, None)
+            if only not in EXCERPTS:
+                return f"--only {only}: not an excerpt; the excerpts: {', '.join(EXCERPTS)}"
+        elif a.startswith("-"):
+            return f"{a}: not an option"
+        else:
+            binary.append(a)
+    if len(binary) != 1:
+        return "one calsim binary expected" + (f", got {len(binary)}: {' '.join(binary)}" if binary else "")
+    calsim = Path(binary[0]).resolve()
+    if not (calsim.is_file() and os.access(calsim, os.X_OK)):
+        return f"{binary[0]}: not an executable file"
+    return calsim, write, only
+
+
 def main() -> int:
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    write = "--write" in sys.argv
-    only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else None
-    calsim = Path(args[0]).resolve()
+    if "-h" in sys.argv[1:] or "--help" in sys.argv[1:]:
+        print(__doc__)
+        return 0
+    parsed = parse_args(sys.argv[1:])
+    if isinstance(parsed, str):
+        print(f"doc_numbers: {parsed}\n{USAGE}", file=sys.stderr)
+        return 2
+    calsim, write, only = parsed
     outputs: dict[str, str] = {}
     failed = 0
     with tempfile.TemporaryDirectory(prefix="calsim-docnumbers-") as scratch:

@@ -187,7 +187,7 @@ pub fn run(spec: &CompensateSpec) -> Result<CompensateReport, Error> {
     }
     let csv = to_csv(&rows).map_err(|e| Error::input("compensate", e))?;
     if let Some(out) = &spec.out {
-        crate::io::out_dir::write_file_atomically(out, &csv).map_err(Error::io(out))?;
+        crate::io::out_dir::write_output_file("--out", out, csv.as_bytes())?;
     }
     Ok(CompensateReport { csv, targets: rows.len(), unreachable })
 }

@@ -38,7 +38,7 @@ pub fn run(spec: &FkSpec) -> Result<FkReport, Error> {
     let joints = fk::read_joints(&spec.joints)?;
     let csv = fk::to_csv(&fk::fk_rows(&file, &joints));
     if let Some(out) = &spec.out {
-        crate::io::out_dir::write_file_atomically(out, &csv).map_err(Error::io(out))?;
+        crate::io::out_dir::write_output_file("--out", out, csv.as_bytes())?;
     }
     Ok(FkReport { csv, rows: joints.len() })
 }

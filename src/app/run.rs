@@ -292,7 +292,7 @@ pub fn run(spec: &RunSpec, observer: &dyn Observer) -> Result<RunReport, Error> 
     let written = crate::io::results::write(&spec.out, results).map_err(Error::io(&spec.out))?;
     let dest = written.dest.clone();
     if let (Some(j), Some(c)) = (&spec.junit, &check_report) {
-        crate::io::out_dir::write_file_atomically(j, c.junit()).map_err(Error::io(j))?;
+        crate::io::out_dir::write_output_file("--junit", j, c.junit().as_bytes())?;
     }
     let write_s = t_write.elapsed().as_secs_f64();
     if let Some(w) = fit_health(&spec.scenario, outcome.fits())? {

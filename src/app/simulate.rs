@@ -31,13 +31,7 @@ pub fn run(spec: &Path, out: Option<&Path>) -> Result<Simulated, Error> {
             std::fs::create_dir_all(out).map_err(|e| Error::input(format!("{}: --out", out.display()), e.to_string()))?;
             let path = out.join(format!("{stem}.csv"));
             crate::io::out_dir::vet_file(&path, &[spec])?;
-            crate::io::out_dir::write_new_file(&path, csv.as_bytes()).map_err(|e| match e.kind() {
-                std::io::ErrorKind::AlreadyExists => Error::input(
-                    format!("{}: --out", path.display()),
-                    "the file exists (calsim does not replace a file: remove it or choose another --out)",
-                ),
-                _ => Error::io(&path)(e),
-            })?;
+            crate::io::out_dir::write_output_file("--out", &path, csv.as_bytes())?;
             Some(path)
         }
         None => None,

@@ -42,6 +42,7 @@ use crate::robot::{LinkParam, ParamId, ParamSet};
 use measurements::{MeasurementError, Measurements};
 use problem::{Layout, Obs, Oriented, Problem, Reading, SolveOptions};
 use registration::{Raw, Unidentifiable, Unplaced};
+pub use results::ReadingFlags;
 pub use robust::OutlierMode;
 use robust::{RobustFit, fit_without, robust_fit_and_first};
 pub use validation::KFoldBy;
@@ -713,8 +714,8 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
     let mut assignment = validation::assign(m, &opts.split, opts.folds, opts.seed).map_err(split_error)?;
     (assignment.fold_all, assignment.folds_all) = validation::assign_every_pose(m, opts.kfold_by, opts.folds, opts.seed)
         .map_err(|message| CalibrateError::Option { key: "kfold-by".into(), message })?;
-    let s = setup_with(robot, m, &opts.noise())?;
-    let cands = candidates(robot, m, &s, &full)?;
+    let mut s = setup_with(robot, m, &opts.noise())?;
+    let mut cands = candidates(robot, m, &s, &full)?;
     let sopts = SolveOptions::default();
     // Outliers are a property of the data, decided once by the most complete model's robust fit
     // on every point (a simpler model would take its own misfit for outliers). `flagged` are the
@@ -722,21 +723,30 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
     // flagged ones under `OutlierMode::Reject`, none otherwise).
     // The robust fit's first round (every point, none flagged) is the most complete model's fit on
     // every point when no point is left out: kept, with its layout and columns, for that fit.
-    let (flagged, outliers_by, first_round) = {
+    let (flagged, readings_flagged, outliers_by, mut first_round) = {
         let (kind, layout, _) = cands.last().expect("at least one model");
         let problem = s.fit(&robot.nominal, layout.clone());
         let all: Vec<usize> = (0..s.obs.len()).collect();
         let x0 = validation::start_values(layout, &robot.nominal, &s.frames_x);
         let free = free_columns(&problem, &all, true);
-        let (flagged, first) = match opts.outliers {
-            OutlierMode::Off => (vec![false; s.obs.len()], None),
+        let n = s.obs.len();
+        let (flagged, readings, first) = match opts.outliers {
+            OutlierMode::Off => (vec![false; n], ReadingFlags { flagged: vec![false; n], normalized: vec![f64::NAN; n] }, None),
             OutlierMode::Report | OutlierMode::Reject => {
                 let (fit, first) = robust_fit_and_first(&problem, &x0, &free, &all, opts.outlier_threshold, &sopts);
-                (fit.outlier, Some(first))
+                (fit.outlier, ReadingFlags { flagged: fit.reading_outlier, normalized: fit.reading_normalized }, Some(first))
             }
         };
-        (flagged, kind.name(), first.map(|f| (layout.clone(), free, f)))
+        (flagged, readings, kind.name(), first.map(|f| (layout.clone(), free, f)))
     };
+    // Rejected readings leave the data: every fit below is that of the file without them (their
+    // points' positions stay).
+    if opts.outliers == OutlierMode::Reject && readings_flagged.flagged.iter().any(|f| *f) {
+        let without = without_readings(m, &readings_flagged.flagged);
+        s = setup_with(robot, &without, &opts.noise())?;
+        cands = candidates(robot, &without, &s, &full)?;
+        first_round = None;
+    }
     let outliers = match opts.outliers {
         OutlierMode::Reject => flagged.clone(),
         OutlierMode::Off | OutlierMode::Report => vec![false; s.obs.len()],
@@ -806,6 +816,7 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
             register_tools: &register_tools,
             outliers: &outliers,
             flagged: &flagged,
+            readings_flagged: &readings_flagged.flagged,
             draws: opts.prediction_draws,
             key,
             seed: opts.seed,
@@ -855,10 +866,35 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
         train_fit: (!m.orientation_columns).then(|| (idx, models[chosen].layout.clone(), free, solved)),
     };
     let c = finish(
-        Parts { robot, m, opts, s, assignment, before, models, chosen, full: &listed, inert, outliers_by, flagged: flagged.clone() },
+        Parts {
+            robot,
+            m,
+            opts,
+            s,
+            assignment,
+            before,
+            models,
+            chosen,
+            full: &listed,
+            inert,
+            outliers_by,
+            flagged: flagged.clone(),
+            readings_flagged,
+        },
         fit,
     )?;
     Ok((c, kept))
+}
+
+/// `m` with the orientation readings of the points flagged in `dropped` taken out (their
+/// positions kept).
+fn without_readings(m: &Measurements, dropped: &[bool]) -> Measurements {
+    let mut out = m.clone();
+    for (p, _) in out.points.iter_mut().zip(dropped).filter(|(_, d)| **d) {
+        p.orientation = None;
+        p.sigma_rad = None;
+    }
+    out
 }
 
 /// `m` with a target per session and target (`SMR1@A`): each session's targets get their own

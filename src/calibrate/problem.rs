@@ -912,6 +912,10 @@ pub trait Fit: Sync {
     /// Per point of `idx`: its rotation error `log(R_measured R_model^T)` (rad; `None` for a point
     /// without a reading); `None` when the fit has no readings or `x` makes no model.
     fn rotation_errors(&self, x: &[f64], idx: &[usize]) -> Option<Vec<Option<Vector3<f64>>>>;
+    /// Point `i`'s reading's uncertainty, rad (`None`: the point has no reading).
+    fn reading_sigma(&self, _i: usize) -> Option<f64> {
+        None
+    }
 }
 
 impl Fit for Problem<'_> {
@@ -1286,6 +1290,9 @@ impl Fit for Oriented<'_> {
     }
     /// Per point of `idx`: its rotation error `log(R_measured R_model^T)` at `x`, rad (`None` for a
     /// point without a reading); `None` when `x` makes no model.
+    fn reading_sigma(&self, i: usize) -> Option<f64> {
+        self.readings.get(i).copied().flatten().map(|r| r.sigma_rad)
+    }
     fn rotation_errors(&self, x: &[f64], idx: &[usize]) -> Option<Vec<Option<Vector3<f64>>>> {
         if self.rotated() == 0 {
             return None;

@@ -187,19 +187,28 @@ pub fn terminal(c: &Calibration, dir: &Path) -> String {
     for (name, why) in &c.chosen().undetermined {
         let _ = writeln!(s, "{name}: not determined (kept nominal): {why}");
     }
-    let f = &c.chosen().fit;
-    let lines: Vec<String> = (0..f.outlier.len()).filter(|&i| f.outlier[i]).map(|i| format!("line {}", m.points[i].line)).collect();
-    let shown = match lines.len() {
-        0 => String::new(),
-        1..=10 => format!(" ({})", lines.join(", ")),
-        n => format!(" ({}, and {} more in summary.md)", lines[..10].join(", "), n - 10),
-    };
+    let lines = flagged_lines(&c.chosen().fit.outlier, m);
+    let shown = shown_lines(&lines);
     let mode = match c.options.outliers {
         super::OutlierMode::Off => " (--outliers off: none flagged)",
         super::OutlierMode::Report => "; kept in every figure (--outliers report)",
         super::OutlierMode::Reject => "; left out of every figure (--outliers reject)",
     };
     let _ = writeln!(s, "outliers: {}{shown}{mode}", lines.len());
+    if c.measurements.orientation_columns {
+        let flagged = flagged_lines(&c.readings_flagged.flagged, m);
+        let _ = writeln!(s, "orientation outliers: {}{}{mode}", flagged.len(), shown_lines(&flagged));
+    }
+    if let Some(h) = c.chosen().held_out.as_ref().filter(|h| h.readings_flagged > 0 && c.options.outliers == super::OutlierMode::Report) {
+        let (with, without) = (h.rotation.unwrap_or_default(), h.rotation_without_flagged.unwrap_or_default());
+        let _ = writeln!(
+            s,
+            "held-out rotation RMS of the chosen model: {:.2} mdeg with the {} flagged, {:.2} mdeg without",
+            with.rms,
+            count(h.readings_flagged, "reading"),
+            without.rms
+        );
+    }
     if let Some(h) = c.chosen().held_out.as_ref().filter(|h| h.flagged > 0) {
         let _ = writeln!(
             s,
@@ -243,6 +252,20 @@ fn models_lines(c: &Calibration, s: &mut String) {
     }
 }
 
+/// The file lines of the points flagged in `flags` ("line 12").
+fn flagged_lines(flags: &[bool], m: &super::measurements::Measurements) -> Vec<String> {
+    (0..flags.len()).filter(|&i| flags[i]).map(|i| format!("line {}", m.points[i].line)).collect()
+}
+
+/// The first ten of `lines` in parentheses, the rest counted.
+fn shown_lines(lines: &[String]) -> String {
+    match lines.len() {
+        0 => String::new(),
+        1..=10 => format!(" ({})", lines.join(", ")),
+        n => format!(" ({}, and {} more in summary.md)", lines[..10].join(", "), n - 10),
+    }
+}
+
 /// `n` and the noun, plural unless `n` is 1 ("1 session", "3 sessions").
 fn count(n: usize, noun: &str) -> String {
     if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") }
@@ -251,15 +274,49 @@ fn count(n: usize, noun: &str) -> String {
 /// The loud line `calsim calibrate` writes to standard error when the outlier rule flags points:
 /// how many, what was done with them, and the chosen model's held-out RMS with and without them.
 pub fn outlier_warning(c: &Calibration) -> Option<String> {
+    let warnings: Vec<String> = [point_warning(c), reading_warning(c)].into_iter().flatten().collect();
+    (!warnings.is_empty()).then(|| warnings.join("\n"))
+}
+
+/// The warning line of [`outlier_warning`] for the orientation readings.
+fn reading_warning(c: &Calibration) -> Option<String> {
+    let flags = &c.readings_flagged.flagged;
+    let flagged: Vec<usize> = (0..flags.len()).filter(|&i| flags[i]).collect();
+    if flagged.is_empty() {
+        return None;
+    }
+    let m = &c.measurements;
+    let lines: Vec<String> = flagged.iter().map(|&i| m.points[i].line.to_string()).collect();
+    let done = match c.options.outliers {
+        super::OutlierMode::Reject => "LEFT OUT of every fit (--outliers reject; their positions kept)",
+        _ => "kept in every fit and figure (--outliers report; `reject` leaves them out)",
+    };
+    let read = m.points.iter().filter(|p| p.orientation.is_some()).count();
+    Some(format!(
+        "calsim calibrate: WARNING: {} of {read} flagged as outliers ({} {}), {done}",
+        count(flagged.len(), "orientation reading"),
+        if flagged.len() == 1 { "line" } else { "lines" },
+        shown(&lines)
+    ))
+}
+
+/// The first ten of `lines` joined, the rest counted.
+fn shown(lines: &[String]) -> String {
+    let mut out: Vec<String> = lines.iter().take(10).cloned().collect();
+    if lines.len() > 10 {
+        out.push(format!("and {} more", lines.len() - 10));
+    }
+    out.join(", ")
+}
+
+/// The warning line of [`outlier_warning`] for the points.
+fn point_warning(c: &Calibration) -> Option<String> {
     let flagged: Vec<usize> = (0..c.flagged.len()).filter(|&i| c.flagged[i]).collect();
     if flagged.is_empty() {
         return None;
     }
     let m = &c.measurements;
-    let mut lines: Vec<String> = flagged.iter().take(10).map(|&i| m.points[i].line.to_string()).collect();
-    if flagged.len() > 10 {
-        lines.push(format!("and {} more", flagged.len() - 10));
-    }
+    let lines: Vec<String> = flagged.iter().map(|&i| m.points[i].line.to_string()).collect();
     let done = match c.options.outliers {
         super::OutlierMode::Reject => "LEFT OUT of every fit and figure (--outliers reject)",
         _ => "kept in every fit and figure (--outliers report; `reject` leaves them out)",
@@ -283,6 +340,6 @@ pub fn outlier_warning(c: &Calibration) -> Option<String> {
         count(flagged.len(), "point"),
         m.points.len(),
         if flagged.len() == 1 { "line" } else { "lines" },
-        lines.join(", ")
+        shown(&lines)
     ))
 }

@@ -154,6 +154,8 @@ pub struct Calibration {
     pub outliers_by: &'static str,
     /// Per point: flagged by the outlier rule (left out only under `--outliers reject`).
     pub flagged: Vec<bool>,
+    /// The outlier rule's verdict on the orientation readings.
+    pub readings_flagged: ReadingFlags,
     /// Joint compliances with no gravity torque to act through (kept nominal, in no model): name
     /// and reason.
     pub inert: Vec<(String, String)>,
@@ -226,6 +228,17 @@ pub(super) fn point_fit(oriented: &Oriented<'_>, fit: &RobustFit, flagged: &[boo
     }
 }
 
+/// The outlier rule's verdict on the orientation readings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReadingFlags {
+    /// Per point: its orientation reading flagged as an outlier (left out of every fit under
+    /// `--outliers reject`; false for a point without a reading).
+    pub flagged: Vec<bool>,
+    /// Per point: its reading's weighted rotation residual over the readings' robust scale in the
+    /// fit that decided the outliers (NaN without a reading or under `--outliers off`).
+    pub normalized: Vec<f64>,
+}
+
 /// What [`finish`] assembles.
 pub(super) struct Parts<'a> {
     pub(super) robot: &'a RobotFile,
@@ -240,11 +253,12 @@ pub(super) struct Parts<'a> {
     pub(super) inert: Vec<(String, String)>,
     pub(super) outliers_by: &'static str,
     pub(super) flagged: Vec<bool>,
+    pub(super) readings_flagged: ReadingFlags,
 }
 
 /// The chosen model's estimates and covariance from its fit on every point.
 pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, CalibrateError> {
-    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, inert, outliers_by, flagged } = parts;
+    let Parts { robot, m, opts, s, assignment, before, models, chosen, full, inert, outliers_by, flagged, readings_flagged } = parts;
     let r = &models[chosen];
     let layout = &r.layout;
     let problem = s.fit(&robot.nominal, layout.clone());
@@ -322,6 +336,7 @@ pub(super) fn finish(parts: Parts<'_>, fit: RobustFit) -> Result<Calibration, Ca
         points_base_mm,
         outliers_by,
         flagged,
+        readings_flagged,
         inert,
         probe_rotations,
     })

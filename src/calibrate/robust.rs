@@ -8,10 +8,19 @@
 //! fit explains it). The default threshold 4.5943 is the chi(3) quantile at 1 - 1e-4: a Gaussian
 //! point is flagged with probability 1e-4 (one in 10,000 points). Every flagged point stays in
 //! the report with its residual.
+//!
+//! Orientation readings follow the same rule on their own scale: a reading's weighted rotation
+//! residual `|e| / sigma_rad` (e the rotation vector between the measured and the model's probe
+//! frame) is chi(3)-distributed times one scale when the readings are Gaussian, as a point's
+//! weighted position residual is; that scale is taken robustly over the readings alone
+//! (`median / 1.5382`), so a misstated `--orientation-noise-mdeg` neither flags nor hides readings,
+//! and a Gaussian reading exceeds the threshold with the same probability as a Gaussian point. A
+//! flagged reading is left out of the next round's fit while its point's position stays in (and
+//! the other way round).
 
 use nalgebra::DMatrix;
 
-use super::problem::{Fit, SolveOptions, Solved, solve};
+use super::problem::{Fit, Oriented, Reading, SolveOptions, Solved, solve};
 
 /// Median of the chi distribution with 3 degrees of freedom (the square root of the median of
 /// chi-square(3), 2.365974).
@@ -72,6 +81,11 @@ pub struct RobustFit {
     pub sigma_hat: f64,
     /// Rounds of fitting and flagging.
     pub rounds: usize,
+    /// Per point of `idx`: its orientation reading flagged as an outlier (false without one).
+    pub reading_outlier: Vec<bool>,
+    /// Per point of `idx`: its reading's weighted rotation residual norm over the readings' robust
+    /// scale (NaN without a reading, or for a reading the fit left out).
+    pub reading_normalized: Vec<f64>,
 }
 
 impl RobustFit {
@@ -82,21 +96,15 @@ impl RobustFit {
 }
 
 /// Fits `free` over the points `idx` from `x0` with the outlier rule of this module.
-pub fn robust_fit<P: Fit + ?Sized>(
-    problem: &P,
-    x0: &[f64],
-    free: &[usize],
-    idx: &[usize],
-    threshold: f64,
-    opts: &SolveOptions,
-) -> RobustFit {
+pub fn robust_fit(problem: &Oriented<'_>, x0: &[f64], free: &[usize], idx: &[usize], threshold: f64, opts: &SolveOptions) -> RobustFit {
     robust_fit_and_first(problem, x0, free, idx, threshold, opts).0
 }
 
 /// [`robust_fit`] and its first round: the fit of every point of `idx` from `x0`
-/// ([`fit_without`] with no point flagged).
-pub fn robust_fit_and_first<P: Fit + ?Sized>(
-    problem: &P,
+/// ([`fit_without`] with no point flagged). Points and orientation readings are flagged
+/// separately: a flagged reading leaves its point's position in the fit.
+pub fn robust_fit_and_first(
+    problem: &Oriented<'_>,
     x0: &[f64],
     free: &[usize],
     idx: &[usize],
@@ -104,21 +112,58 @@ pub fn robust_fit_and_first<P: Fit + ?Sized>(
     opts: &SolveOptions,
 ) -> (RobustFit, RobustFit) {
     let mut outlier = vec![false; idx.len()];
+    let mut dropped = vec![false; idx.len()];
     let mut x = x0.to_vec();
     let mut rounds = 0;
     let mut first = None;
     loop {
         rounds += 1;
-        let fit = fit_without(problem, &x, free, idx, &outlier, opts);
+        let kept: Vec<Option<Reading>>;
+        let reduced;
+        let on = if dropped.iter().any(|d| *d) {
+            kept = without_readings(problem.readings, idx, &dropped);
+            reduced = Oriented { readings: &kept, ..problem.clone() };
+            &reduced
+        } else {
+            problem
+        };
+        let mut fit = fit_without(on, &x, free, idx, &outlier, opts);
+        // Every reading's residual, the ones left out of this round's fit included.
+        fit.reading_normalized = reading_residuals(problem, &fit.solved.x, idx);
         let first = first.get_or_insert_with(|| fit.clone());
         // NaN (no model) flags nothing: the fit's outcome says what happened.
         let flags: Vec<bool> = fit.normalized.iter().map(|u| *u > threshold).collect();
-        if flags == outlier || rounds == MOST_ROUNDS || !fit.robust_scale.is_finite() {
-            return (RobustFit { rounds, ..fit }, first.clone());
+        let reading_flags: Vec<bool> = fit.reading_normalized.iter().map(|u| *u > threshold).collect();
+        if (flags == outlier && reading_flags == dropped) || rounds == MOST_ROUNDS || !fit.robust_scale.is_finite() {
+            return (RobustFit { rounds, reading_outlier: dropped, ..fit }, first.clone());
         }
         x.clone_from(&fit.solved.x);
         outlier = flags;
+        dropped = reading_flags;
     }
+}
+
+/// `readings` with the readings of the points of `idx` flagged in `dropped` taken out.
+pub fn without_readings(readings: &[Option<Reading>], idx: &[usize], dropped: &[bool]) -> Vec<Option<Reading>> {
+    let mut kept = readings.to_vec();
+    for (&i, _) in idx.iter().zip(dropped).filter(|(_, d)| **d) {
+        kept[i] = None;
+    }
+    kept
+}
+
+/// Per point of `idx`: its reading's weighted rotation residual norm `|e| / sigma_rad` at `x` over
+/// the robust scale of those norms (`median / chi(3)'s median`); NaN without a reading.
+fn reading_residuals<P: Fit + ?Sized>(problem: &P, x: &[f64], idx: &[usize]) -> Vec<f64> {
+    let Some(errors) = problem.rotation_errors(x, idx) else { return vec![f64::NAN; idx.len()] };
+    let norms: Vec<f64> =
+        errors.iter().zip(idx).map(|(e, &i)| e.zip(problem.reading_sigma(i)).map_or(f64::NAN, |(e, s)| e.norm() / s)).collect();
+    let read: Vec<f64> = norms.iter().copied().filter(|u| !u.is_nan()).collect();
+    if read.is_empty() {
+        return norms;
+    }
+    let scale = (crate::study::stats::median(&read) / CHI3_MEDIAN).max(LEAST_SCALE);
+    norms.iter().map(|u| u / scale).collect()
 }
 
 /// Fits `free` over the points of `idx` not flagged in `outlier` (one flag per point of `idx`):
@@ -143,7 +188,17 @@ pub fn fit_without<P: Fit + ?Sized>(
     let dof = (3 * active.len() + problem.own_rows(&active)).saturating_sub(free.len());
     let sigma_hat = if dof == 0 { f64::NAN } else { (solved.cost / dof as f64).sqrt() };
     let normalized = norms.iter().map(|u| u / scale).collect();
-    RobustFit { solved, idx: idx.to_vec(), outlier: outlier.to_vec(), normalized, robust_scale: scale, sigma_hat, rounds: 1 }
+    RobustFit {
+        solved,
+        idx: idx.to_vec(),
+        outlier: outlier.to_vec(),
+        normalized,
+        robust_scale: scale,
+        sigma_hat,
+        rounds: 1,
+        reading_outlier: vec![false; idx.len()],
+        reading_normalized: vec![f64::NAN; idx.len()],
+    }
 }
 
 /// The first-order covariance `sigma_hat^2 (J^T J)^-1` of the free unknowns of `fit` (internal

@@ -335,6 +335,10 @@ pub struct HeldOut {
     /// Statistics of the rotation errors of the held-out points with a reading not left out,
     /// mdeg (`None`: the file has no orientation columns).
     pub rotation: Option<ErrorStats>,
+    /// Held-out readings flagged by the outlier rule (whatever `--outliers` does with them).
+    pub readings_flagged: usize,
+    /// Statistics of the rotation errors of [`Self::rotation`]'s readings less the flagged ones, mdeg.
+    pub rotation_without_flagged: Option<ErrorStats>,
 }
 
 /// What [`held_out`] needs besides the training fit.
@@ -350,6 +354,8 @@ pub struct HeldOutSpec<'a> {
     pub outliers: &'a [bool],
     /// Per problem point: flagged by the outlier rule.
     pub flagged: &'a [bool],
+    /// Per problem point: its orientation reading flagged by the outlier rule.
+    pub readings_flagged: &'a [bool],
     /// Parameter-error draws of the prediction.
     pub draws: usize,
     /// The stream key of the draws (under the calibration's seed).
@@ -391,8 +397,16 @@ pub fn held_out<P: Fit + ?Sized>(fit: &P, train: &RobustFit, free: &[usize], spe
         .rotation_errors(&x, spec.test)
         .map(|r| r.iter().map(|e| e.map_or(f64::NAN, |e| e.norm().to_degrees() * 1e3)).collect())
         .unwrap_or_default();
-    let rotation = (!rotation_errors_mdeg.is_empty())
-        .then(|| ErrorStats::of(&kept.iter().map(|&k| rotation_errors_mdeg[k]).filter(|v| v.is_finite()).collect::<Vec<_>>()));
+    let rotation_of = |keep: &dyn Fn(usize) -> bool| {
+        (!rotation_errors_mdeg.is_empty()).then(|| {
+            ErrorStats::of(
+                &kept.iter().filter(|&&k| keep(k)).map(|&k| rotation_errors_mdeg[k]).filter(|v| v.is_finite()).collect::<Vec<_>>(),
+            )
+        })
+    };
+    let rotation = rotation_of(&|_| true);
+    let rotation_without_flagged = rotation_of(&|k| !spec.readings_flagged[spec.test[k]]);
+    let readings_flagged = spec.test.iter().filter(|&&i| spec.readings_flagged[i]).count();
     HeldOut {
         errors_mm,
         outlier,
@@ -404,6 +418,8 @@ pub fn held_out<P: Fit + ?Sized>(fit: &P, train: &RobustFit, free: &[usize], spe
         without_flagged,
         rotation_errors_mdeg,
         rotation,
+        readings_flagged,
+        rotation_without_flagged,
     }
 }
 

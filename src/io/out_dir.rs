@@ -141,13 +141,20 @@ pub fn vet_file(out: &Path, inputs: &[&Path]) -> Result<(), OutDirError> {
     vet_output_file("--out", out, inputs)
 }
 
+/// Why an output file is refused where a file (or a link, even a dangling one) already is.
+const EXISTS: &str = "the file exists: calsim writes a new file and does not replace one it did not create; remove it or choose another name (it is left as it is)";
+
 /// Refuses, before any work, an output file `out` (named by the option `flag`) that cannot be
-/// written in place of what is there: an existing object that is not a regular file (a device, a
-/// pipe, a socket, a directory), an input of the command (one of `inputs` or any file it read so
-/// far, [`crate::io::inputs`]; the same file under any name, through any link), a file inside the
-/// results of another run ([`vet_dir`]), or a file whose directory does not exist.
+/// written: an existing object that is not a regular file (a device, a pipe, a socket, a
+/// directory), an input of the command (one of `inputs` or any file it read so far,
+/// [`crate::io::inputs`]; the same file under any name, through any link), any other file or link
+/// already there (calsim's single-file outputs are new files: [`write_output_file`]), a file inside
+/// the results of another run ([`vet_dir`]), or a file whose directory does not exist.
 pub fn vet_output_file(flag: &str, out: &Path, inputs: &[&Path]) -> Result<(), OutDirError> {
     use std::os::unix::fs::MetadataExt;
+    if fs::symlink_metadata(out).is_ok() && fs::metadata(out).is_err() {
+        return Err(refused(flag, out, EXISTS));
+    }
     if let Ok(meta) = fs::metadata(out) {
         if !meta.is_file() {
             return Err(refused(flag, out, format!("is {}: {flag} names a regular file calsim writes (it is left as it is)", kind(&meta))));
@@ -167,6 +174,9 @@ pub fn vet_output_file(flag: &str, out: &Path, inputs: &[&Path]) -> Result<(), O
                     ),
                 ));
             }
+        }
+        if !written_by_calsim(out) {
+            return Err(refused(flag, out, EXISTS));
         }
     }
     let real = resolved(out);
@@ -393,6 +403,33 @@ pub fn write_file_atomically(path: &Path, text: impl AsRef<[u8]>) -> io::Result<
         let _ = fs::remove_file(&tmp);
     }
     result
+}
+
+/// How a JUnit report of `calsim check` begins (the check report writes it so).
+pub const JUNIT_HEAD: &str = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<testsuites><testsuite name=\"calsim check ";
+
+/// Whether the regular file `path` is one calsim wrote and may write again: a JUnit report of
+/// `calsim check` (a CI job's `--junit` of every run), recognised by its first bytes. Other
+/// single-file outputs (a robot file, joint tables) may have been edited since, so they are new
+/// files only.
+fn written_by_calsim(path: &Path) -> bool {
+    let mut head = vec![0u8; JUNIT_HEAD.len()];
+    fs::symlink_metadata(path).is_ok_and(|m| m.is_file())
+        && fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head)).is_ok()
+        && head == JUNIT_HEAD.as_bytes()
+}
+
+/// Writes the output file `out` named by the option `flag` (vetted by [`vet_output_file`]): in
+/// place of a file calsim wrote ([`written_by_calsim`]) atomically, otherwise as a new file
+/// ([`write_new_file`]), so that a file that appeared there since is refused and left as it is.
+pub fn write_output_file(flag: &str, out: &Path, bytes: &[u8]) -> Result<(), OutDirError> {
+    if written_by_calsim(out) {
+        return write_file_atomically(out, bytes).map_err(io_err(out));
+    }
+    write_new_file(out, bytes).map_err(|e| match e.kind() {
+        io::ErrorKind::AlreadyExists => refused(flag, out, EXISTS),
+        _ => io_err(out)(e),
+    })
 }
 
 /// Writes `bytes` to the new file `path`, which must not exist: through a temporary beside it

@@ -600,10 +600,10 @@ impl CheckReport {
     pub fn junit(&self) -> String {
         let esc = |t: &str| t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;");
         let skipped = self.figures.iter().filter(|f| f.verdict == "report").count();
-        let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
+        let mut s = String::from(crate::io::out_dir::JUNIT_HEAD);
         let _ = writeln!(
             s,
-            "<testsuites><testsuite name=\"calsim check {}\" tests=\"{}\" failures=\"{}\" skipped=\"{skipped}\">",
+            "{}\" tests=\"{}\" failures=\"{}\" skipped=\"{skipped}\">",
             esc(&self.scenario),
             self.figures.len(),
             self.missed

@@ -260,7 +260,14 @@ impl Row {
                     }
                     row.sigma = Some(v);
                 }
-                Column::Quaternion(k) => quaternion[k] = number(field).map_err(err)?,
+                Column::Quaternion(k) => {
+                    let v = number(field).map_err(err)?;
+                    // A unit quaternion's component: a larger one is named by its own column.
+                    if v.abs() > 1.0 + QUATERNION_NORM_TOLERANCE {
+                        return Err(err(format!("{field}: a unit quaternion's component lies within -1 to 1")));
+                    }
+                    quaternion[k] = v;
+                }
                 Column::SigmaAngle(to_rad) => {
                     let v = number(field).map_err(err)? * to_rad;
                     if !(v > 0.0 && v <= std::f64::consts::PI) {
@@ -279,7 +286,7 @@ impl Row {
         }
         if columns.iter().any(|c| matches!(c, Column::Quaternion(_))) {
             let norm = quaternion.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if (norm - 1.0).abs() > 1e-3 {
+            if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
                 let at = columns.iter().position(|c| matches!(c, Column::Quaternion(0))).unwrap_or(0);
                 return Err((names[at].clone(), format!("the quaternion's norm is {norm}, not 1")));
             }
@@ -289,6 +296,9 @@ impl Row {
         Ok(row)
     }
 }
+
+/// How far a quaternion's norm may be from 1.
+const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
 /// A finite number.
 fn number(field: &str) -> Result<f64, String> {

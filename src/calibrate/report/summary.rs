@@ -6,7 +6,7 @@ use polars::prelude::DataFrame;
 
 use super::count;
 use super::tables::STATS;
-use crate::io::results::{Row, Rows, Summary, cell};
+use crate::io::results::{Cell, Row, Rows, Summary, cell};
 
 const RUN: &str = "calibration.parquet";
 const MODELS: &str = "models.parquet";
@@ -316,15 +316,62 @@ fn outliers(parts: &mut Summary<'_>) {
         }
         s
     });
-    let cells = vec![
+    let mut cells = where_cells();
+    cells.extend([
+        cell("error after, mm", |r| format!("{:.4}", r.f64("error_after_mm"))),
+        cell("robust standard deviations", |r| format!("{:.1}", r.f64("normalized_residual"))),
+    ]);
+    parts.table_if_rows("points.parquet", flagged("outlier"), cells);
+    reading_outliers(parts);
+}
+
+/// A flagged point's line, pose, session and target (points.parquet's columns).
+fn where_cells() -> Vec<Cell<'static>> {
+    vec![
         cell("line", |r| r.u64("line").to_string()),
         cell("pose", |r| r.str("pose")),
         cell("session", |r| r.str("session")),
         cell("target", |r| r.str("target")),
-        cell("error after, mm", |r| format!("{:.4}", r.f64("error_after_mm"))),
-        cell("robust standard deviations", |r| format!("{:.1}", r.f64("normalized_residual"))),
-    ];
-    parts.table_if_rows("points.parquet", flagged("outlier"), cells);
+    ]
+}
+
+/// The outlier rule on the orientation readings and the flagged readings (a file with
+/// orientation columns).
+fn reading_outliers(parts: &mut Summary<'_>) {
+    parts.text_from(RUN, |r| {
+        if !r.bool("orientation_columns") || r.str("outliers") == "off" {
+            return String::new();
+        }
+        let points = r.of("points.parquet", 0);
+        let flagged = (0..points.height()).filter(|&i| points.at(i).bool("reading_outlier")).count();
+        let done = if r.str("outliers") == "reject" {
+            "left out of every fit (their points' positions kept: the fits are those of the file without these readings)"
+        } else {
+            "kept in every fit and statistic"
+        };
+        let mut s = format!(
+            "The orientation readings go through the same rule on their own robust scale: a reading whose weighted rotation \
+             residual exceeds {} robust standard deviations of the readings' is flagged, independently of its point's position; \
+             flagged readings are {done}. {} of {} flagged.\n\n",
+            r.f64("outlier_threshold"),
+            flagged,
+            count(r.u64("orientation_points") as usize, "reading"),
+        );
+        let errors = r.of(ERRORS, chosen(r));
+        let with = errors.f64("held_out_rotation_rms_mdeg");
+        let without = errors.f64("held_out_rotation_without_flagged_rms_mdeg");
+        let held = errors.u64("held_out_readings_flagged") as usize;
+        if held > 0 && r.str("outliers") == "report" {
+            s += &format!(
+                "Held-out rotation RMS of the chosen model: {with:.2} mdeg with the {} flagged, {without:.2} mdeg without.\n\n",
+                count(held, "held-out reading")
+            );
+        }
+        s
+    });
+    let mut cells = where_cells();
+    cells.push(cell("robust standard deviations (readings)", |r| format!("{:.1}", r.f64("reading_normalized_residual"))));
+    parts.table_if_rows("points.parquet", flagged("reading_outlier"), cells);
 }
 
 /// A parameter's correction over its standard deviation.

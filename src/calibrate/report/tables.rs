@@ -168,6 +168,8 @@ fn rotation_point_columns(c: &Calibration) -> Vec<Column> {
         }
     }
     cols.push(Column::new("held_out_rotation_error_mdeg".into(), held_rotation));
+    cols.push(Column::new("reading_normalized_residual".into(), c.readings_flagged.normalized.clone()));
+    cols.push(Column::new("reading_outlier".into(), c.readings_flagged.flagged.clone()));
     cols
 }
 
@@ -263,7 +265,18 @@ fn model_error_columns(c: &Calibration) -> Vec<Column> {
         rows.iter().map(|r| r.held_out.as_ref().is_some_and(|h| h.rotation.is_some())).collect::<Vec<_>>(),
     ));
     let held_rotation = |r: &ModelResult| r.held_out.as_ref().and_then(|h| h.rotation).unwrap_or(NAN_STATS);
-    for (name, of) in [("rotation_fit", &fit_rotation as &dyn Fn(&ModelResult) -> ErrorStats), ("held_out_rotation", &held_rotation)] {
+    let held_rotation_without = |r: &ModelResult| r.held_out.as_ref().and_then(|h| h.rotation_without_flagged).unwrap_or(NAN_STATS);
+    type Of<'f> = &'f dyn Fn(&ModelResult) -> ErrorStats;
+    let mut of_rows: Vec<(&str, Of<'_>)> = vec![("rotation_fit", &fit_rotation), ("held_out_rotation", &held_rotation)];
+    // The readings' outliers, with orientation columns.
+    if c.measurements.orientation_columns {
+        cols.push(Column::new(
+            "held_out_readings_flagged".into(),
+            rows.iter().map(|r| r.held_out.as_ref().map_or(0, |h| h.readings_flagged as u32)).collect::<Vec<_>>(),
+        ));
+        of_rows.push(("held_out_rotation_without_flagged", &held_rotation_without));
+    }
+    for (name, of) in of_rows {
         let stats: Vec<ErrorStats> = rows.iter().map(|r| of(r)).collect();
         for (k, s) in [(0, "mean"), (3, "max"), (4, "rms")] {
             cols.push(Column::new(format!("{name}_{s}_mdeg").into(), stats.iter().map(|x| stat(x, k)).collect::<Vec<_>>()));

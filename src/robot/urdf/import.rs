@@ -69,7 +69,7 @@ pub fn import(urdf: &Path, out: &Path, options: &ImportOptions) -> Result<Import
     let meshes: Vec<std::path::PathBuf> = converted.meshes.iter().map(|(m, _)| m.into()).collect();
     let inputs: Vec<&Path> = std::iter::once(urdf).chain(meshes.iter().map(|m| m.as_path())).collect();
     crate::io::out_dir::vet_file(out, &inputs).map_err(|e| fail(e.to_string()))?;
-    crate::io::out_dir::write_file_atomically(out, &text).map_err(|e| fail(format!("{}: {e}", out.display())))?;
+    crate::io::out_dir::write_output_file("--out", out, text.as_bytes()).map_err(|e| fail(e.to_string()))?;
     Ok(ImportReport { converted, text, file_difference_mm: worst })
 }
 
