@@ -572,27 +572,3 @@ fn the_shape_of_the_error_left_tells_a_smooth_field_from_an_error_independent_pe
     }
     assert!(calsim::calibrate::twin::markdown(&independent).contains("**Independent per pose**"));
 }
-
-/// A smooth per-pose error drawn by calsim itself (`[learned]` with `pose_error_mdeg = 20` and
-/// `pose_error_length_rad = 1.5`, one world) on the arm of [`field_twin`]: the twin says Smooth
-/// and its fitted `pose_error_length_rad` holds 1.5 within its 95 % interval (the value plus or
-/// minus 1.96 of its standard deviation); an error independent per pose at the same level
-/// carries no length.
-#[test]
-fn a_smooth_field_drawn_by_calsim_is_recovered_at_its_length() {
-    let robot = robot();
-    let truth = truth(&robot);
-    let field = LearnedEffects { pose_error_mdeg: 20.0, pose_error_length_rad: 1.5, ..LearnedEffects::default() };
-    let drawn = field.draw(&truth, &mut common::rng(21));
-    let smooth = field_twin(&robot, 5, |q, _| drawn.joint_errors(q, q));
-    eprintln!("{}", calsim::calibrate::twin::markdown(&smooth));
-    let l = &smooth.learned;
-    eprintln!("length {} rad, std {} rad", l.pose_error_length_rad, l.pose_error_length_std_rad);
-    assert!(calsim::calibrate::twin::markdown(&smooth).contains("**Smooth**"));
-    let half = 1.96 * l.pose_error_length_std_rad;
-    assert!(within(1.5, [l.pose_error_length_rad - half, l.pose_error_length_rad + half]), "{l:?}");
-    let plain = LearnedEffects { pose_error_length_rad: 0.0, ..field };
-    let drawn = plain.draw(&truth, &mut common::rng(21));
-    let independent = field_twin(&robot, 5, |q, _| drawn.joint_errors(q, q));
-    assert_eq!(independent.learned.pose_error_length_rad, 0.0, "{:?}", independent.correlation);
-}

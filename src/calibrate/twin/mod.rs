@@ -671,11 +671,7 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     }
     let correlation = left_correlation(m, &train, &train_pose, &(&rw - &fitted_w), jf, &kept_projected);
     let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
-    let mut learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
-    if let (Some(scale), true) = (shape::length_scale(&correlation), learned.pose_error_mdeg > 0.0) {
-        learned.pose_error_length_rad = scale.length_rad;
-        learned.pose_error_length_std_rad = (scale.interval[1] - scale.interval[0]) / (2.0 * Z95);
-    }
+    let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
     let noise_mm = decomposition.instrument.as_ref().map(|l| l.sigma_mm);
     Ok(Twin {
         decomposition,

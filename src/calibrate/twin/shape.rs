@@ -27,8 +27,6 @@ pub const DISTANCE_BINS: [f64; 4] = [0.01, 0.05, 0.25, 1.0];
 /// count (70,000 poses would be 2.4e9 pairs); above it, every k-th pose (the least k that leaves at
 /// most this many) and its points.
 pub const MAX_POSES: usize = 3000;
-/// The most pairs of poses per bin [`length_scale`] averages the kernel over.
-pub const KERNEL_SAMPLE: usize = 4000;
 /// The two-sided 95 % normal quantile.
 const Z95: f64 = 1.959_963_984_540_054;
 
@@ -52,9 +50,6 @@ pub struct CorrelationBin {
     pub interval: [f64; 2],
     /// The value the fit gives white residuals (the hat matrix's share).
     pub white: f64,
-    /// Distances of its pairs of poses, rad, with their pairs of points: every k-th pair of poses
-    /// (k the least that leaves at most [`KERNEL_SAMPLE`]), for [`length_scale`].
-    pub kernel_sample: Vec<(f64, f64)>,
 }
 
 impl CorrelationBin {
@@ -158,7 +153,6 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         pose_pairs: usize,
         trace: f64,
         per_pose: Vec<(f64, usize)>,
-        sample: Vec<(f64, f64)>,
     }
     let new_bin = |label: String, same_pose: bool| Sums {
         label,
@@ -169,7 +163,6 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         pose_pairs: 0,
         trace: 0.0,
         per_pose: vec![(0.0, 0); poses],
-        sample: Vec::new(),
     };
     let mut bins: Vec<Sums> = Vec::new();
     // The other targets at one pose.
@@ -207,8 +200,6 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         let label = format!("distinct poses, nearest {:.0}-{:.0} % of pairs", 100.0 * low, 100.0 * edge);
         low = edge;
         let mut b = new_bin(label, false);
-        let stride = (to - from).div_ceil(KERNEL_SAMPLE).max(1);
-        b.sample = pairs[from..to].iter().step_by(stride).map(|&(d, p, s)| (d, (count[p as usize] * count[s as usize]) as f64)).collect();
         for &(d, p, s) in &pairs[from..to] {
             let (p, s) = (p as usize, s as usize);
             let prod: f64 = (0..3).map(|a| r_sum[p][a] * r_sum[s][a]).sum();
@@ -258,67 +249,10 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
                 correlation,
                 interval,
                 white: -(b.trace / b.pairs as f64) / white_sq,
-                kernel_sample: b.sample,
             }
         })
         .collect();
     Correlation { bins, poses }
-}
-
-/// The correlation length of a smooth error, fitted to the bins of distinct poses.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LengthScale {
-    /// The length `l` of the kernel `exp(-d^2 / (2 l^2))`, rad.
-    pub length_rad: f64,
-    /// Its 95 % interval (profile of the fit's weighted squared misfit), rad.
-    pub interval: [f64; 2],
-    /// The fitted correlation at distance 0 (the field's share of a point's squared residual).
-    pub share: f64,
-}
-
-/// The grid of lengths [`length_scale`] profiles, rad: log-spaced from 0.01 to 100.
-fn length_grid() -> impl Iterator<Item = f64> {
-    (0..=400).map(|k| 10f64.powf(-2.0 + k as f64 / 100.0))
-}
-
-/// The correlation length of the error left, where a bin of distinct poses is above the fit's
-/// value for white residuals (`None` otherwise, or with fewer than two bins with an interval).
-/// Each bin's excess over that value is modelled as `share K_b(l)`, `K_b` the mean of
-/// `exp(-d^2 / (2 l^2))` over the bin's pairs (weighted by their point pairs), and weighted by
-/// its jackknife standard error (the interval's half width over 1.96); for each `l` of a log grid
-/// the share is its weighted least squares (kept >= 0), and `l` the one of least weighted squared
-/// misfit. Its 95 % interval: the lengths whose misfit is within 3.84 of the least (the profile,
-/// chi-square with one degree of freedom; the bins share poses, so it is approximate).
-pub fn length_scale(c: &Correlation) -> Option<LengthScale> {
-    let bins: Vec<&CorrelationBin> = c.bins.iter().filter(|b| !b.same_pose && b.interval.iter().all(|v| v.is_finite())).collect();
-    if bins.len() < 2 || !bins.iter().any(|b| b.above_white()) {
-        return None;
-    }
-    let se: Vec<f64> = bins.iter().map(|b| ((b.interval[1] - b.interval[0]) / (2.0 * Z95)).max(1e-12)).collect();
-    let excess: Vec<f64> = bins.iter().map(|b| b.correlation - b.white).collect();
-    let fit = |l: f64| -> (f64, f64) {
-        let k: Vec<f64> = bins
-            .iter()
-            .map(|b| {
-                let w: f64 = b.kernel_sample.iter().map(|x| x.1).sum();
-                b.kernel_sample.iter().map(|&(d, n)| n * (-d * d / (2.0 * l * l)).exp()).sum::<f64>() / w.max(1e-300)
-            })
-            .collect();
-        let (num, den) =
-            (0..bins.len()).fold((0.0, 0.0), |(a, b), i| (a + excess[i] * k[i] / se[i].powi(2), b + k[i] * k[i] / se[i].powi(2)));
-        let share = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
-        let misfit = (0..bins.len()).map(|i| ((excess[i] - share * k[i]) / se[i]).powi(2)).sum();
-        (share, misfit)
-    };
-    let profile: Vec<(f64, f64, f64)> = length_grid()
-        .map(|l| {
-            let (share, misfit) = fit(l);
-            (l, share, misfit)
-        })
-        .collect();
-    let best = profile.iter().min_by(|a, b| a.2.total_cmp(&b.2))?;
-    let inside: Vec<f64> = profile.iter().filter(|p| p.2 <= best.2 + Z95 * Z95).map(|p| p.0).collect();
-    Some(LengthScale { length_rad: best.0, interval: [inside[0], inside[inside.len() - 1]], share: best.1 })
 }
 
 #[cfg(test)]
