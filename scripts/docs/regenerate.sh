@@ -221,6 +221,20 @@ if [ $# -eq 0 ] || [[ " $* " == *" probe-example "* ]]; then
         --orientation-noise-mdeg 10 --position-noise-mm 0.012 --hold-out-session L --no-plots
 fi
 
+# The plan's round trip over 20 seeds (docs/plan.md, "How far to trust the band").
+if [ $# -eq 0 ] || [[ " $* " == *" plan-round-trip "* ]]; then
+    echo "regenerate: plan-round-trip: bash scripts/docs/plan_round_trip.sh <calsim> 20"
+    start=$SECONDS
+    bash scripts/docs/plan_round_trip.sh "$calsim" 20 >"$scratch/plan-round-trip.stdout"
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`bash scripts/docs/plan_round_trip.sh target/release/calsim 20\` at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        cat "$scratch/plan-round-trip.stdout"
+    } >"docs/generated/plan-round-trip.md"
+    echo "regenerate: plan-round-trip: docs/generated/plan-round-trip.md"
+fi
+
 # The README's quick start timed from a fresh clone and an empty target directory (a cold build).
 if [ $# -eq 0 ] || [[ " $* " == *" first-hour "* ]]; then
     bash scripts/docs/first_hour.sh
