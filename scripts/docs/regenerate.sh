@@ -235,6 +235,21 @@ if [ $# -eq 0 ] || [[ " $* " == *" plan-round-trip "* ]]; then
     echo "regenerate: plan-round-trip: docs/generated/plan-round-trip.md"
 fi
 
+# Where the ISO 9283 cube would have to stand for Table 6's before row (docs/guide-reproduce.md).
+if [ $# -eq 0 ] || [[ " $* " == *" table6-placement "* ]]; then
+    cargo build --release --locked --example table6_placement
+    echo "regenerate: table6-placement: cargo run --release --example table6_placement"
+    start=$SECONDS
+    "$CARGO_TARGET_DIR/release/examples/table6_placement" >"$scratch/table6-placement.stdout"
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`cargo run --release --example table6_placement\` at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        cat "$scratch/table6-placement.stdout"
+    } >"docs/generated/table6-placement.md"
+    echo "regenerate: table6-placement: docs/generated/table6-placement.md"
+fi
+
 # The README's quick start timed from a fresh clone and an empty target directory (a cold build).
 if [ $# -eq 0 ] || [[ " $* " == *" first-hour "* ]]; then
     bash scripts/docs/first_hour.sh
