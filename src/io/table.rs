@@ -4,7 +4,7 @@
 use std::fs;
 use std::path::Path;
 
-use polars::prelude::{Column, DataFrame, ParquetWriter};
+use polars::prelude::{AnyValue, Column, DataFrame, ParquetWriter};
 use sha2::{Digest, Sha256};
 
 /// A result table in memory.
@@ -30,6 +30,38 @@ pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
         return Err(in_table(&format!("two columns named `{twice}`")));
     }
     DataFrame::new_infer_height(columns).map_err(|e| in_table(&e))
+}
+
+/// The CSV text of `frame`: a header line of its column names, then a line per row; a float is
+/// written in Rust's shortest decimal that reads back to the same bits, a boolean `true`/`false`,
+/// a null as `null` (the frame's column types decide every field: no column is named here).
+pub fn csv_text(frame: &DataFrame, null: &str) -> std::io::Result<String> {
+    let fields: Vec<Vec<String>> = frame.columns().iter().map(|c| column_text(c, null)).collect::<std::io::Result<_>>()?;
+    let mut out = frame.get_column_names().iter().map(|n| n.as_str()).collect::<Vec<_>>().join(",");
+    out.push('\n');
+    for row in 0..frame.height() {
+        let line: Vec<&str> = fields.iter().map(|f| f[row].as_str()).collect();
+        out.push_str(&line.join(","));
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+/// Each field of `column` as CSV text (see [`csv_text`]).
+fn column_text(column: &Column, null: &str) -> std::io::Result<Vec<String>> {
+    let column = column.as_materialized_series();
+    (0..column.len())
+        .map(|i| match column.get(i).map_err(err)? {
+            AnyValue::Null => Ok(null.to_string()),
+            AnyValue::Float64(v) => Ok(format!("{v}")),
+            AnyValue::Boolean(v) => Ok(v.to_string()),
+            AnyValue::String(v) => Ok(v.to_string()),
+            AnyValue::Int64(v) => Ok(v.to_string()),
+            AnyValue::UInt32(v) => Ok(v.to_string()),
+            AnyValue::UInt64(v) => Ok(v.to_string()),
+            other => Err(err(format!("column `{}`: no CSV text for {}", column.name(), other.dtype()))),
+        })
+        .collect()
 }
 
 /// Writes `frame` as the parquet table `dir/name`.
