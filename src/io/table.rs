@@ -4,7 +4,7 @@
 use std::fs;
 use std::path::Path;
 
-use polars::prelude::{Column, DataFrame, ParquetWriter};
+use polars::prelude::{AnyValue, Column, DataFrame, ParquetWriter};
 use sha2::{Digest, Sha256};
 
 /// A result table in memory.
@@ -30,6 +30,38 @@ pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
         return Err(in_table(&format!("two columns named `{twice}`")));
     }
     DataFrame::new_infer_height(columns).map_err(|e| in_table(&e))
+}
+
+/// The CSV text of `frame`: a header line of its column names, then a line per row; a float is
+/// written in Rust's shortest decimal that reads back to the same bits, a boolean `true`/`false`,
+/// a null as `null` (the frame's column types decide every field: no column is named here).
+pub fn csv_text(frame: &DataFrame, null: &str) -> std::io::Result<String> {
+    let fields: Vec<Vec<String>> = frame.columns().iter().map(|c| column_text(c, null)).collect::<std::io::Result<_>>()?;
+    let mut out = frame.get_column_names().iter().map(|n| n.as_str()).collect::<Vec<_>>().join(",");
+    out.push('\n');
+    for row in 0..frame.height() {
+        let line: Vec<&str> = fields.iter().map(|f| f[row].as_str()).collect();
+        out.push_str(&line.join(","));
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+/// Each field of `column` as CSV text (see [`csv_text`]).
+fn column_text(column: &Column, null: &str) -> std::io::Result<Vec<String>> {
+    let column = column.as_materialized_series();
+    (0..column.len())
+        .map(|i| match column.get(i).map_err(err)? {
+            AnyValue::Null => Ok(null.to_string()),
+            AnyValue::Float64(v) => Ok(format!("{v}")),
+            AnyValue::Boolean(v) => Ok(v.to_string()),
+            AnyValue::String(v) => Ok(v.to_string()),
+            AnyValue::Int64(v) => Ok(v.to_string()),
+            AnyValue::UInt32(v) => Ok(v.to_string()),
+            AnyValue::UInt64(v) => Ok(v.to_string()),
+            other => Err(err(format!("column `{}`: no CSV text for {}", column.name(), other.dtype()))),
+        })
+        .collect()
 }
 
 /// Writes `frame` as the parquet table `dir/name`.
@@ -59,4 +91,33 @@ pub fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<St
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use polars::prelude::Column;
+
+    use super::{csv_text, frame};
+
+    #[test]
+    fn csv_text_writes_each_field_by_its_column_type() {
+        let columns = vec![
+            Column::new("x".into(), [0.1 + 0.2, -0.0, 1.5e6]),
+            Column::new("n".into(), [Some(3_i64), None, Some(-7)]),
+            Column::new("ok".into(), [true, false, true]),
+            Column::new("s".into(), ["a", "b c", ""]),
+        ];
+        let text = csv_text(&frame("t", columns).unwrap(), "null").unwrap();
+        assert_eq!(text, "x,n,ok,s\n0.30000000000000004,3,true,a\n-0,null,false,b c\n1500000,-7,true,\n");
+        // Every float reads back to the bits it was written from.
+        let field: f64 = text.lines().nth(1).unwrap().split(',').next().unwrap().parse().unwrap();
+        assert_eq!(field.to_bits(), (0.1_f64 + 0.2).to_bits());
+    }
+
+    #[test]
+    fn csv_text_names_a_column_it_cannot_write() {
+        let columns = vec![Column::new("day".into(), [1_i32, 2])];
+        let e = csv_text(&frame("t", columns).unwrap(), "").unwrap_err();
+        assert!(e.to_string().contains("column `day`"), "{e}");
+    }
 }

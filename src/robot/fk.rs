@@ -176,25 +176,3 @@ pub fn fk_rows(file: &RobotFile, joints: &[Joints]) -> Vec<FkRow> {
         })
         .collect()
 }
-
-/// The CSV text of `rows` (columns in the module doc; numbers written to round-trip).
-pub fn to_csv(rows: &[FkRow]) -> String {
-    let mut header: Vec<String> = JOINT_COLUMNS.iter().map(|c| c.to_string()).collect();
-    header.extend(["x_mm", "y_mm", "z_mm", "alpha_deg", "beta_deg", "gamma_deg"].map(String::from));
-    header.extend((1..=JOINTS).map(|i| format!("tau{i}_nm")));
-    header.extend((1..=JOINTS).map(|i| format!("deflection{i}_mdeg")));
-    header.push("within_limits".into());
-    let mut out = header.join(",");
-    out.push('\n');
-    for r in rows {
-        let t = &r.tool;
-        let mut v: Vec<String> = r.q.iter().map(|x| format!("{}", x.to_degrees())).collect();
-        v.extend([t.x, t.y, t.z, t.alpha.to_degrees(), t.beta.to_degrees(), t.gamma.to_degrees()].iter().map(|x| format!("{x}")));
-        v.extend(r.torque_nm.iter().map(|x| format!("{}", x + 0.0)));
-        v.extend(r.deflection_rad.iter().map(|x| format!("{}", x.to_degrees() * 1e3)));
-        v.push(r.within_limits.to_string());
-        out.push_str(&v.join(","));
-        out.push('\n');
-    }
-    out
-}
