@@ -3,7 +3,9 @@
 regressions, each over many seeds (every seed a check of its own: `study.check_realisations`
 worlds, judged at `study.check_false_alarm`).
 
-    python3 scripts/ci/check_power.py CALSIM_BIN [--seeds 200] [--regression-seeds 50] [--first-seed 1]
+    python3 scripts/ci/check_power.py [CALSIM_BIN] [--seeds 200] [--regression-seeds 50] [--first-seed 1]
+
+(CALSIM_BIN defaults to the environment's CALSIM, as scripts/docs/regenerate.sh gives it.)
 
 (`--regression-seeds 0` runs the unchanged model only, e.g. to extend its seeds with --first-seed.)
 
@@ -16,6 +18,7 @@ the rate with its 95 % Clopper-Pearson interval, and the median wall time of one
 
 import argparse
 import math
+import os
 import re
 import shutil
 import statistics
@@ -90,11 +93,13 @@ def double_harmonics(scen: str) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("calsim")
+    ap.add_argument("calsim", nargs="?", default=os.environ.get("CALSIM"))
     ap.add_argument("--seeds", type=int, default=200)
     ap.add_argument("--regression-seeds", type=int, default=50)
     ap.add_argument("--first-seed", type=int, default=1)
     args = ap.parse_args()
+    if not args.calsim:
+        ap.error("no calsim binary: give CALSIM_BIN or set CALSIM")
     same = lambda t: t  # noqa: E731
     tmp = Path(tempfile.mkdtemp(prefix="calsim-check-power-"))
     try:

@@ -82,9 +82,9 @@ if [ $# -eq 0 ] || [[ " $* " == *" optimise-three-starts "* ]]; then
 fi
 
 # The findings' candidate error models, the CI gate's figures over 400 worlds, the sizing
-# sweep's ranking, the plans' wall clock on 2 threads and an optimiser evaluation's CPU and its
-# split (docs/findings.md, docs/guide-reproduce.md, docs/guide-sweeps.md, docs/plan.md,
-# docs/optimise.md).
+# sweep's ranking, the plans' wall clock on 2 threads, an optimiser evaluation's CPU and its
+# split, and the CI check's power over seeds (docs/findings.md, docs/guide-reproduce.md,
+# docs/guide-sweeps.md, docs/plan.md, docs/optimise.md).
 more=(
     "sweep-cell-sizing|sweep scenarios/sweeps/cell_sizing.toml"
     "check-ci-quick-400|check scenarios/ci_quick.toml --realisations 400 --no-plots --no-recording"
@@ -97,6 +97,7 @@ more=(
     "plan-speed-spms|plan scenarios/plans/er20c10_spms.toml --threads 2"
     "optimise-cost-hand|bash scripts/docs/optimise_cost.sh scenarios/designs/irb120_spheres.toml"
     "optimise-cost-paper|bash scripts/docs/optimise_cost.sh scenarios/designs/irb120_spheres_from_paper.toml"
+    "check-power|python3 scripts/ci/check_power.py"
 )
 for run in "${more[@]}"; do
     IFS='|' read -r name command <<<"$run"
