@@ -15,6 +15,22 @@ scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
 mkdir -p docs/generated
 
+# page NAME MADE [NOTE]: docs/generated/NAME.md from the standard input, headed by the warning,
+# MADE (what made it, Markdown), the commit and the seconds since $start (NOTE in brackets after).
+page() {
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by $2 at commit $commit in $((SECONDS - start)) s${3:+ ($3)}.*"
+        echo
+        cat
+    } >"docs/generated/$1.md"
+    echo "regenerate: $1: docs/generated/$1.md"
+}
+# fenced FILE: FILE's text in a text block (its trailing blank lines dropped).
+fenced() {
+    printf '%s\n%s\n%s\n' '```text' "$(cat "$1")" '```'
+}
+
 # name | command (given --out, except table8, which prints only)
 runs=(
     "optimise-irb120-spheres|optimise scenarios/designs/irb120_spheres.toml"
@@ -42,19 +58,11 @@ for run in "${runs[@]}"; do
     # shellcheck disable=SC2086
     "$calsim" $command "${out[@]}" >"$scratch/$name.stdout"
     summary="$(find "$scratch/$name" -maxdepth 2 -name summary.md 2>/dev/null | head -n 1)"
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`calsim $command\` at commit $commit in $((SECONDS - start)) s.*"
-        echo
-        if [ -n "$summary" ]; then
-            cat "$summary"
-        else
-            echo '```text'
-            cat "$scratch/$name.stdout"
-            echo '```'
-        fi
-    } >"docs/generated/$name.md"
-    echo "regenerate: $name: docs/generated/$name.md"
+    if [ -n "$summary" ]; then
+        cat "$summary"
+    else
+        fenced "$scratch/$name.stdout"
+    fi | page "$name" "\`calsim $command\`"
 done
 
 # The docs' three-start table (docs/optimise-results.md, "Does the answer depend on the start?"):
@@ -72,13 +80,9 @@ if [ $# -eq 0 ] || [[ " $* " == *" optimise-three-starts "* ]]; then
         fi
         dirs+=("$label=$scratch/$name")
     done
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`calsim optimise scenarios/designs/<file>.toml\` for irb120_spheres, irb120_spheres_from_paper and irb120_spheres_from_random, read by \`python3 scripts/docs/three_starts.py\`, at commit $commit in $((SECONDS - start)) s (the runs' own time where this call made them).*"
-        echo
-        python3 scripts/docs/three_starts.py "${dirs[@]}"
-    } >"docs/generated/optimise-three-starts.md"
-    echo "regenerate: optimise-three-starts: docs/generated/optimise-three-starts.md"
+    python3 scripts/docs/three_starts.py "${dirs[@]}" | page optimise-three-starts \
+        "\`calsim optimise scenarios/designs/<file>.toml\` for irb120_spheres, irb120_spheres_from_paper and irb120_spheres_from_random, read by \`python3 scripts/docs/three_starts.py\`," \
+        "the runs' own time where this call made them"
 fi
 
 # The findings' candidate error models, the CI gate's figures over 400 worlds, the sizing
@@ -110,28 +114,18 @@ for run in "${more[@]}"; do
         # shellcheck disable=SC2086
         CALSIM="$calsim" $command >"$scratch/$name.stdout"
         made="\`$command\`"
-        if [[ $command == bash* ]]; then
-            body="$(printf '%s\n' '```text'; cat "$scratch/$name.stdout"; printf '%s' '```')"
-        else
-            body="$(cat "$scratch/$name.stdout")"
-        fi
     else
         # shellcheck disable=SC2086
         "$calsim" $command --out "$scratch/$name" >"$scratch/$name.stdout" || [ $? -eq 1 ]
         made="\`calsim $command\`"
-        if [[ $command == sweep* ]]; then
-            body="$(cat "$scratch/$name"/*/summary.md)"
-        else
-            body="$(printf '%s\n' '```text'; cat "$scratch/$name.stdout"; printf '%s' '```')"
-        fi
     fi
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by $made at commit $commit in $((SECONDS - start)) s.*"
-        echo
-        echo "$body"
-    } >"docs/generated/$name.md"
-    echo "regenerate: $name: docs/generated/$name.md"
+    if [[ $command == sweep* ]]; then
+        printf '%s\n' "$(cat "$scratch/$name"/*/summary.md)"
+    elif [[ $command == python3* ]]; then
+        printf '%s\n' "$(cat "$scratch/$name.stdout")"
+    else
+        fenced "$scratch/$name.stdout"
+    fi | page "$name" "$made"
 done
 
 # The plan against the outcome on the shipped example (docs/calibrate.md, "Plan against outcome"):
@@ -142,13 +136,8 @@ if [ $# -eq 0 ] || [[ " $* " == *" calibrate-example-plan "* ]]; then
     start=$SECONDS
     # shellcheck disable=SC2086
     "$calsim" $command --out "$scratch/calibrate-example-plan" >"$scratch/calibrate-example-plan.stdout"
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`calsim $command\` at commit $commit in $((SECONDS - start)) s (plan.md of the report).*"
-        echo
-        cat "$scratch/calibrate-example-plan/example_measurements.calibration/plan.md"
-    } >"docs/generated/calibrate-example-plan.md"
-    echo "regenerate: calibrate-example-plan: docs/generated/calibrate-example-plan.md"
+    page calibrate-example-plan "\`calsim $command\`" "plan.md of the report" \
+        <"$scratch/calibrate-example-plan/example_measurements.calibration/plan.md"
 fi
 
 # The plan against the outcome over files of the example's own generating process
@@ -177,15 +166,7 @@ for run in "${checks[@]}"; do
     start=$SECONDS
     # shellcheck disable=SC2086
     "$CARGO_TARGET_DIR/release/examples/twin_plan_check" $arguments >"$scratch/$name.stdout"
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`$command\` at commit $commit in $((SECONDS - start)) s.*"
-        echo
-        echo '```text'
-        cat "$scratch/$name.stdout"
-        echo '```'
-    } >"docs/generated/$name.md"
-    echo "regenerate: $name: docs/generated/$name.md"
+    fenced "$scratch/$name.stdout" | page "$name" "\`$command\`"
 done
 
 # DETMAX warm-started from a neighbouring design's set against its random start
@@ -201,15 +182,7 @@ if [ $# -eq 0 ] || [[ " $* " == *" detmax-warm "* ]]; then
         "$CARGO_TARGET_DIR/release/examples/detmax_warm" 200 300 251 "$shift"
         echo
     done >"$scratch/detmax-warm.stdout"
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`$command\` for SHIFT 5, 20 and 100 at commit $commit in $((SECONDS - start)) s.*"
-        echo
-        echo '```text'
-        cat "$scratch/detmax-warm.stdout"
-        echo '```'
-    } >"docs/generated/detmax-warm.md"
-    echo "regenerate: detmax-warm: docs/generated/detmax-warm.md"
+    fenced "$scratch/detmax-warm.stdout" | page detmax-warm "\`$command\` for SHIFT 5, 20 and 100"
 fi
 
 # The simulated examples of docs/calibrate.md (their measurement files are made, not kept).
@@ -227,13 +200,7 @@ if [ $# -eq 0 ] || [[ " $* " == *" plan-round-trip "* ]]; then
     echo "regenerate: plan-round-trip: bash scripts/docs/plan_round_trip.sh <calsim> 20"
     start=$SECONDS
     bash scripts/docs/plan_round_trip.sh "$calsim" 20 >"$scratch/plan-round-trip.stdout"
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`bash scripts/docs/plan_round_trip.sh target/release/calsim 20\` at commit $commit in $((SECONDS - start)) s.*"
-        echo
-        cat "$scratch/plan-round-trip.stdout"
-    } >"docs/generated/plan-round-trip.md"
-    echo "regenerate: plan-round-trip: docs/generated/plan-round-trip.md"
+    page plan-round-trip "\`bash scripts/docs/plan_round_trip.sh target/release/calsim 20\`" <"$scratch/plan-round-trip.stdout"
 fi
 
 # Where the ISO 9283 cube would have to stand for Table 6's before row (docs/guide-reproduce.md).
@@ -242,13 +209,7 @@ if [ $# -eq 0 ] || [[ " $* " == *" table6-placement "* ]]; then
     echo "regenerate: table6-placement: cargo run --release --example table6_placement"
     start=$SECONDS
     "$CARGO_TARGET_DIR/release/examples/table6_placement" >"$scratch/table6-placement.stdout"
-    {
-        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
-        echo "*Made by \`cargo run --release --example table6_placement\` at commit $commit in $((SECONDS - start)) s.*"
-        echo
-        cat "$scratch/table6-placement.stdout"
-    } >"docs/generated/table6-placement.md"
-    echo "regenerate: table6-placement: docs/generated/table6-placement.md"
+    page table6-placement "\`cargo run --release --example table6_placement\`" <"$scratch/table6-placement.stdout"
 fi
 
 # The README's quick start timed from a fresh clone and an empty target directory (a cold build).
