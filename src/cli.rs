@@ -1,9 +1,11 @@
 //! Command-line interface: argument parsing and the terminal report. Errors are printed as one
 //! line and exit with code 2 (bad input) or 1 (a check that failed).
 
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -557,15 +559,30 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// The terminal's observer: the start line and warnings on standard error, a progress bar per stage.
+/// The terminal's observer: the start line and warnings on standard error, a progress bar per stage
+/// on a terminal; where standard error is not a terminal (a log, a pipe, CI), a plain progress line
+/// every `PLAIN_EVERY` at most, none for a stage shorter than that.
 struct Terminal {
     bar: Mutex<Option<ProgressBar>>,
+    /// `Some` where standard error is not a terminal: when the stage began and when it last printed.
+    plain: Option<Mutex<Option<(Instant, Instant)>>>,
 }
+
+/// The least time between two plain progress lines, and before the first.
+const PLAIN_EVERY: Duration = Duration::from_secs(10);
 
 impl Terminal {
     fn new() -> Self {
-        Self { bar: Mutex::new(None) }
+        let plain = (!std::io::stderr().is_terminal()).then(|| Mutex::new(None));
+        Self { bar: Mutex::new(None), plain }
     }
+}
+
+/// A plain progress line: `done/total what, elapsed`.
+fn plain_progress(done: usize, total: usize, what: &str, elapsed: Duration) -> String {
+    let s = elapsed.as_secs();
+    let shown = if s >= 60 { format!("{} min {:02} s", s / 60, s % 60) } else { format!("{s} s") };
+    format!("{done}/{total} {what}, {shown} elapsed")
 }
 
 impl Observer for Terminal {
@@ -574,6 +591,16 @@ impl Observer for Terminal {
     }
 
     fn progress(&self, done: usize, total: usize, what: &str) {
+        if let Some(plain) = &self.plain {
+            let now = Instant::now();
+            let mut state = plain.lock().unwrap_or_else(|e| e.into_inner());
+            let (began, last) = state.get_or_insert((now, now));
+            if now.duration_since(*last) >= PLAIN_EVERY {
+                *last = now;
+                eprintln!("{}", plain_progress(done, total, what, now.duration_since(*began)));
+            }
+            return;
+        }
         let mut bar = self.bar.lock().unwrap_or_else(|e| e.into_inner());
         let b = bar.get_or_insert_with(|| {
             let b = ProgressBar::new(total as u64);
@@ -586,6 +613,9 @@ impl Observer for Terminal {
     }
 
     fn stage_done(&self) {
+        if let Some(plain) = &self.plain {
+            *plain.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        }
         if let Some(b) = self.bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
             b.finish_and_clear();
         }
@@ -944,4 +974,15 @@ fn table8(args: &Table8Args) -> Result<ExitCode, String> {
     print!("{}", app::table8::terminal(&r.table, r.worlds).map_err(|e| e.to_string())?);
     println!("timing: {:.3} s", r.run_s);
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plain_progress_line_counts_and_tells_the_elapsed_time_in_minutes_past_one() {
+        assert_eq!(plain_progress(3, 10, "designs", Duration::from_secs(75)), "3/10 designs, 1 min 15 s elapsed");
+        assert_eq!(plain_progress(0, 4, "worlds", Duration::from_millis(10_900)), "0/4 worlds, 10 s elapsed");
+    }
 }
