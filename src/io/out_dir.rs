@@ -142,7 +142,7 @@ pub fn vet_file(out: &Path, inputs: &[&Path]) -> Result<(), OutDirError> {
 }
 
 /// Why an output file is refused where a file (or a link, even a dangling one) already is.
-const EXISTS: &str = "the file exists: calsim writes a new file and does not replace one it did not create; remove it or choose another name (it is left as it is)";
+const EXISTS: &str = "the file exists: an output file is always a new one (calsim cannot tell a file it wrote from a user's, so it replaces none); remove it or choose another name (it is left as it is)";
 
 /// Refuses, before any work, an output file `out` (named by the option `flag`) that cannot be
 /// written: an existing object that is not a regular file (a device, a pipe, a socket, a
