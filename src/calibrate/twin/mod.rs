@@ -669,9 +669,17 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
             ),
         );
     }
-    let correlation = left_correlation(m, &train, &train_pose, &(&rw - &fitted_w), jf, &kept_projected);
+    let (correlation, length) = left_correlation(m, &train, &train_pose, &(&rw - &fitted_w), jf, &kept_projected, &jl);
     let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
-    let learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
+    let mut learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
+    if let (Some(scale), true) = (length, learned.pose_error_mdeg > 0.0) {
+        // A smooth field: its length, and its level as the fit of the bins gives it (the level
+        // above assumes an error independent per pose, of which the fit absorbs less).
+        learned.pose_error_length_rad = scale.length_rad;
+        learned.pose_error_length_std_rad = (scale.interval[1] - scale.interval[0]) / (2.0 * Z95);
+        learned.pose_error_mdeg = scale.level_rad[0].to_degrees() * 1e3;
+        learned.pose_error_std_mdeg = scale.level_rad[1].to_degrees() * 1e3;
+    }
     let noise_mm = decomposition.instrument.as_ref().map(|l| l.sigma_mm);
     Ok(Twin {
         decomposition,
@@ -688,9 +696,11 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     })
 }
 
-/// The shape of the residual left ([`shape::correlation`]): `resid` the weighted residual after
-/// the kept effects on the training points `train` (dense poses `train_pose`), the fit's columns
-/// the model's (`model`) and the kept effects' projected off them (`kept_projected`).
+/// The shape of the residual left ([`shape::correlation`]) and a smooth field's length and level
+/// fitted to it ([`shape::length_scale`]): `resid` the weighted residual after the kept effects on
+/// the training points `train` (dense poses `train_pose`), the fit's columns the model's (`model`)
+/// and the kept effects' projected off them (`kept_projected`), `jl` the weighted link-angle
+/// Jacobian at the training points.
 fn left_correlation(
     m: &super::Measurements,
     train: &[usize],
@@ -698,7 +708,8 @@ fn left_correlation(
     resid: &DVector<f64>,
     model: &DMatrix<f64>,
     kept_projected: &DMatrix<f64>,
-) -> shape::Correlation {
+    jl: &DMatrix<f64>,
+) -> (shape::Correlation, Option<shape::LengthScale>) {
     let poses = train_pose.iter().copied().max().map_or(0, |v| v + 1);
     let mut q = vec![[0.0; JOINTS]; poses];
     for (&i, &p) in train.iter().zip(train_pose) {
@@ -706,7 +717,10 @@ fn left_correlation(
     }
     let a = hstack([model, kept_projected].into_iter().filter(|a| a.ncols() > 0));
     let Some(sub) = shape::Subset::of(train_pose, &q) else {
-        return shape::correlation(resid, train_pose, &q, &column_basis(&a));
+        let basis = column_basis(&a);
+        let correlation = shape::correlation(resid, train_pose, &q, &basis);
+        let length = shape::length_scale(&correlation, jl, train_pose, &q, &basis);
+        return (correlation, length);
     };
     // Many poses: the hat matrix's rows at the kept points only, `A_s V S^-1` from the Gram
     // matrix's eigenvectors (the same projection as the tall matrix's singular vectors, without
@@ -723,7 +737,12 @@ fn left_correlation(
         }
         a.select_rows(&sub.rows) * v
     };
-    shape::correlation(&resid.select_rows(&sub.rows), &sub.pose_of, &sub.q, &basis)
+    let correlation = shape::correlation(&resid.select_rows(&sub.rows), &sub.pose_of, &sub.q, &basis);
+    // The field's prediction projects off the fit's columns at the kept points alone: a fit of
+    // that many points absorbs the same slow part of a field as the fit of them all.
+    let own = column_basis(&a.select_rows(&sub.rows));
+    let length = shape::length_scale(&correlation, &jl.select_rows(&sub.rows), &sub.pose_of, &sub.q, &own);
+    (correlation, length)
 }
 
 /// One fold of the cross-validation: the Gram matrix and right-hand side of every family's

@@ -27,6 +27,10 @@ pub const DISTANCE_BINS: [f64; 4] = [0.01, 0.05, 0.25, 1.0];
 /// count (70,000 poses would be 2.4e9 pairs); above it, every k-th pose (the least k that leaves at
 /// most this many) and its points.
 pub const MAX_POSES: usize = 3000;
+/// The most pairs of poses per bin [`length_scale`] predicts the correlation over.
+pub const PAIR_SAMPLE: usize = 4000;
+/// Random Fourier features of the unit field [`length_scale`] predicts with (shared by the joints).
+pub const LENGTH_FEATURES: usize = 48;
 /// The two-sided 95 % normal quantile.
 const Z95: f64 = 1.959_963_984_540_054;
 
@@ -50,6 +54,9 @@ pub struct CorrelationBin {
     pub interval: [f64; 2],
     /// The value the fit gives white residuals (the hat matrix's share).
     pub white: f64,
+    /// Its pairs of distinct poses (indices as the binned poses'): every k-th (k the least that
+    /// leaves at most [`PAIR_SAMPLE`]), for [`length_scale`]; empty for the distance-0 bin.
+    pub pair_sample: Vec<(u32, u32)>,
 }
 
 impl CorrelationBin {
@@ -67,6 +74,8 @@ pub struct Correlation {
     pub bins: Vec<CorrelationBin>,
     /// Poses of the training points.
     pub poses: usize,
+    /// The mean squared residual of a point (the correlations' denominator).
+    pub mean_sq: f64,
 }
 
 /// The correlation of `resid` (3 rows per training point, weighted) between points by the
@@ -114,7 +123,7 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
     let poses = q.len();
     let k = hat_basis.ncols();
     if n == 0 || poses < 2 || resid.len() != 3 * n {
-        return Correlation { bins: Vec::new(), poses };
+        return Correlation { bins: Vec::new(), poses, mean_sq: 0.0 };
     }
     // Per pose: the sum of its points' residuals, their count, the sum of their squared
     // residuals, the sum of their rows of the hat basis (3 x k) and of tr H_ii.
@@ -153,6 +162,7 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         pose_pairs: usize,
         trace: f64,
         per_pose: Vec<(f64, usize)>,
+        sample: Vec<(u32, u32)>,
     }
     let new_bin = |label: String, same_pose: bool| Sums {
         label,
@@ -163,6 +173,7 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         pose_pairs: 0,
         trace: 0.0,
         per_pose: vec![(0.0, 0); poses],
+        sample: Vec::new(),
     };
     let mut bins: Vec<Sums> = Vec::new();
     // The other targets at one pose.
@@ -200,6 +211,8 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         let label = format!("distinct poses, nearest {:.0}-{:.0} % of pairs", 100.0 * low, 100.0 * edge);
         low = edge;
         let mut b = new_bin(label, false);
+        let stride = (to - from).div_ceil(PAIR_SAMPLE).max(1);
+        b.sample = pairs[from..to].iter().step_by(stride).map(|&(_, p, s)| (p, s)).collect();
         for &(d, p, s) in &pairs[from..to] {
             let (p, s) = (p as usize, s as usize);
             let prod: f64 = (0..3).map(|a| r_sum[p][a] * r_sum[s][a]).sum();
@@ -249,10 +262,176 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
                 correlation,
                 interval,
                 white: -(b.trace / b.pairs as f64) / white_sq,
+                pair_sample: b.sample,
             }
         })
         .collect();
-    Correlation { bins, poses }
+    Correlation { bins, poses, mean_sq }
+}
+
+/// The correlation length of a smooth error, fitted to the bins of distinct poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LengthScale {
+    /// The length `l` of the kernel `exp(-d^2 / (2 l^2))`, rad.
+    pub length_rad: f64,
+    /// Its 95 % interval (profile of the fit's weighted squared misfit), rad.
+    pub interval: [f64; 2],
+    /// The field's RMS per joint before the fit, rad, and its standard deviation.
+    pub level_rad: [f64; 2],
+}
+
+/// The grid of lengths [`length_scale`] profiles, rad: log-spaced from 0.02 to 20, 10 a decade.
+fn length_grid() -> Vec<f64> {
+    (0..=30).map(|k| 0.02 * 10f64.powf(k as f64 / 10.0)).collect()
+}
+
+/// What a smooth joint-space field of unit RMS per joint and length `l` gives the bins after the
+/// fit: per bin the expected mean product of a pair's residuals, and the expected mean squared
+/// residual of a point. The field is [`LENGTH_FEATURES`] random Fourier features of the kernel
+/// (fixed frequencies scaled by `1 / l`, so that the prediction is smooth in `l`), moved to the
+/// points by the weighted link-angle Jacobian `jl` (3 rows per point, a column per joint) and
+/// projected off the fit's columns (`basis`, orthonormal over the same rows).
+fn predicted(
+    c: &Correlation,
+    l: f64,
+    jl: &DMatrix<f64>,
+    pose_of: &[usize],
+    q: &[crate::robot::Joints],
+    basis: &DMatrix<f64>,
+) -> (Vec<f64>, f64) {
+    use rand::{RngExt, SeedableRng};
+    let f = LENGTH_FEATURES;
+    let joints = jl.ncols();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5eed_1e47);
+    let features: Vec<([f64; crate::robot::JOINTS], f64)> = (0..f)
+        .map(|_| {
+            let w = std::array::from_fn(|_| rng.sample::<f64, _>(rand_distr::StandardNormal));
+            (w, rng.random::<f64>() * std::f64::consts::TAU)
+        })
+        .collect();
+    let amp = (2.0 / f as f64).sqrt();
+    let phi = DMatrix::from_fn(q.len(), f, |p, k| {
+        let (w, b) = &features[k];
+        amp * (w.iter().zip(&q[p]).map(|(a, x)| a * x).sum::<f64>() / l + b).cos()
+    });
+    let n = pose_of.len();
+    let mut g = DMatrix::from_fn(3 * n, joints * f, |r, col| jl[(r, col / f)] * phi[(pose_of[r / 3], col % f)]);
+    if basis.ncols() > 0 {
+        g -= basis * basis.tr_mul(&g);
+    }
+    let width = 3 * joints * f;
+    let mut sum = vec![0.0f64; c.poses * width];
+    let mut own = vec![0.0f64; c.poses];
+    let mut count = vec![0usize; c.poses];
+    for (i, &p) in pose_of.iter().enumerate() {
+        count[p] += 1;
+        for a in 0..3 {
+            let row = g.row(3 * i + a);
+            for (k, v) in row.iter().enumerate() {
+                sum[p * width + a * joints * f + k] += v;
+                own[p] += v * v;
+            }
+        }
+    }
+    let dot = |p: usize, s: usize| -> f64 {
+        sum[p * width..(p + 1) * width].iter().zip(&sum[s * width..(s + 1) * width]).map(|(x, y)| x * y).sum()
+    };
+    let mean_sq = own.iter().sum::<f64>() / n.max(1) as f64;
+    let products = c
+        .bins
+        .iter()
+        .map(|b| {
+            let (product, pairs) = if b.same_pose {
+                (0..c.poses)
+                    .filter(|&p| count[p] >= 2)
+                    .fold((0.0, 0usize), |(x, n), p| (x + 0.5 * (dot(p, p) - own[p]), n + count[p] * (count[p] - 1) / 2))
+            } else {
+                b.pair_sample
+                    .iter()
+                    .fold((0.0, 0usize), |(x, n), &(p, s)| (x + dot(p as usize, s as usize), n + count[p as usize] * count[s as usize]))
+            };
+            product / pairs.max(1) as f64
+        })
+        .collect();
+    (products, mean_sq)
+}
+
+/// The correlation length and level of the error left, where a bin of distinct poses is above the
+/// fit's value for white residuals (`None` otherwise, with fewer than two bins with an interval, or
+/// where the best length is the grid's least, an error independent per pose, or its greatest).
+///
+/// The residual is modelled as a smooth field of RMS `s` per joint and length `l` plus white noise,
+/// both after the fit: a bin's correlation is `c_b = a M_b(l) + (1 - a S(l)) w_b`, with `M_b` and
+/// `S` the mean product and mean square a unit field leaves after the fit ([`predicted`]: the fit
+/// absorbs the field's slow part, so the bins see less of a long field than the kernel says),
+/// `w_b` the bin's value for white residuals and `a = s^2 / mean_sq`. For each `l` of a log grid
+/// `a` is the weighted least squares of `c_b - w_b` on `M_b - S w_b` (weights the jackknife
+/// variances; kept >= 0), `l` the one of least weighted squared misfit; its 95 % interval the
+/// lengths whose misfit is within 3.84 of the least (the profile, chi-square with one degree of
+/// freedom, its threshold scaled by the least misfit over its degrees of freedom where that is
+/// above 1; the bins share poses, so it is approximate); the level's interval spans the levels'
+/// least-squares intervals at the lengths inside. `jl`, `pose_of`, `q` and `basis` are over the
+/// rows and poses the correlation binned.
+pub fn length_scale(
+    c: &Correlation,
+    jl: &DMatrix<f64>,
+    pose_of: &[usize],
+    q: &[crate::robot::Joints],
+    basis: &DMatrix<f64>,
+) -> Option<LengthScale> {
+    use rayon::prelude::*;
+    let usable: Vec<usize> = (0..c.bins.len()).filter(|&b| c.bins[b].interval.iter().all(|v| v.is_finite())).collect();
+    if usable.len() < 2 || !c.bins.iter().any(|b| !b.same_pose && b.above_white()) {
+        return None;
+    }
+    let se: Vec<f64> = usable.iter().map(|&b| ((c.bins[b].interval[1] - c.bins[b].interval[0]) / (2.0 * Z95)).max(1e-12)).collect();
+    let excess: Vec<f64> = usable.iter().map(|&b| c.bins[b].correlation - c.bins[b].white).collect();
+    let grid = length_grid();
+    let profile: Vec<(f64, f64, f64, f64)> = grid
+        .par_iter()
+        .map(|&l| {
+            let (m, s) = predicted(c, l, jl, pose_of, q, basis);
+            let k: Vec<f64> = usable.iter().map(|&b| m[b] - s * c.bins[b].white).collect();
+            let (num, den) =
+                (0..k.len()).fold((0.0, 0.0), |(x, y), i| (x + excess[i] * k[i] / se[i].powi(2), y + k[i] * k[i] / se[i].powi(2)));
+            let a = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+            let misfit = (0..k.len()).map(|i| ((excess[i] - a * k[i]) / se[i]).powi(2)).sum();
+            (l, a, misfit, if den > 0.0 { 1.0 / den.sqrt() } else { f64::INFINITY })
+        })
+        .collect();
+    let b = (0..profile.len()).min_by(|&x, &y| profile[x].2.total_cmp(&profile[y].2))?;
+    // The grid's least length: an error independent per pose; its greatest: a field the fit
+    // absorbs all but a trace of, whose length and level the bins cannot tell.
+    if b == 0 || b + 1 == profile.len() || profile[b].1 <= 0.0 {
+        return None;
+    }
+    // The interval's ends: where the misfit crosses the least plus 3.84, linear in log l between
+    // the grid's lengths (the grid's end where it does not cross).
+    // The misfit's scale: over its degrees of freedom (bins less the length and the level) where
+    // the bins scatter about the best prediction more than their intervals say.
+    let dof = usable.len().saturating_sub(2).max(1) as f64;
+    let scale = (profile[b].2 / dof).max(1.0).sqrt();
+    let cut = profile[b].2 + Z95 * Z95 * scale * scale;
+    let cross = |i: usize, o: usize| -> f64 {
+        let (li, lo, mi, mo) = (profile[i].0.ln(), profile[o].0.ln(), profile[i].2, profile[o].2);
+        (li + (lo - li) * (cut - mi) / (mo - mi)).exp()
+    };
+    let low = (0..b).rev().find(|&i| profile[i].2 > cut).map_or(profile[0].0, |i| cross(i + 1, i));
+    let high = (b + 1..profile.len()).find(|&i| profile[i].2 > cut).map_or(profile[profile.len() - 1].0, |i| cross(i - 1, i));
+    // The level at each length inside, with its least-squares interval (d sqrt(a m) = sqrt(m) da
+    // / (2 sqrt(a))); the level's interval spans them all.
+    let level = |p: &(f64, f64, f64, f64)| -> [f64; 2] {
+        let v = (p.1 * c.mean_sq).sqrt();
+        let se = if p.1 > 0.0 { c.mean_sq.sqrt() * p.3 * scale / (2.0 * p.1.sqrt()) } else { 0.0 };
+        [v - Z95 * se, v + Z95 * se]
+    };
+    let span = profile
+        .iter()
+        .filter(|p| p.2 <= cut)
+        .map(level)
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |acc, x| [acc[0].min(x[0]), acc[1].max(x[1])]);
+    let value = (profile[b].1 * c.mean_sq).sqrt();
+    Some(LengthScale { length_rad: profile[b].0, interval: [low, high], level_rad: [value, (span[1] - span[0]).max(0.0) / (2.0 * Z95)] })
 }
 
 #[cfg(test)]
