@@ -151,6 +151,7 @@ class SimulateReport(TypedDict):
     written: Path | None
 
 class FkReport(TypedDict):
+    table: ArrowFrame
     csv: str
     rows: int
 

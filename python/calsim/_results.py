@@ -384,7 +384,7 @@ class FkResult:
     def __init__(self, report: FkReport) -> None:
         self.csv: str = report["csv"]
         self.rows: int = report["rows"]
-        self.table: pl.DataFrame = _csv_frame(self.csv, [])
+        self.table: pl.DataFrame = pl.DataFrame(report["table"])
 
     def __repr__(self) -> str:
         return f"FkResult(rows={self.rows})"

@@ -830,6 +830,7 @@ fn fk<'py>(py: Python<'py>, robot: PathBuf, joints: PathBuf, out: Option<PathBuf
     let spec = app::fk::FkSpec { robot, joints, out };
     let (r, _) = detached(py, None, |_| app::fk::run(&spec))?;
     let d = PyDict::new(py);
+    d.set_item("table", ArrowFrame(r.table))?;
     d.set_item("csv", &r.csv)?;
     d.set_item("rows", r.rows)?;
     Ok(d)

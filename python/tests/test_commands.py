@@ -197,6 +197,11 @@ def test_fk_gives_the_cli_csv_and_a_typed_frame(tmp_path: Path) -> None:
     assert r.table["x_mm"][0] == float(first[6]) and r.table["tau2_nm"][0] == float(first[13])
     out = tmp_path / "fk.csv"
     assert calsim.fk(ROBOT, path, out=out).csv == out.read_text() == r.csv
+    # The frame equals the file the CLI writes, read by polars with the documented dtypes.
+    written = tmp_path / "cli_fk.csv"
+    cli("fk", ROBOT, path, "--out", written)
+    schema = {c: (pl.Boolean if c == "within_limits" else pl.Float64) for c in r.table.columns}
+    assert r.table.equals(pl.read_csv(written, schema=schema))
 
 
 def test_bad_fk_arguments_name_the_file_key_and_value(tmp_path: Path) -> None:

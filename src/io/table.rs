@@ -34,10 +34,12 @@ pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
 
 /// The CSV text of `frame`: a header line of its column names, then a line per row; a float is
 /// written in Rust's shortest decimal that reads back to the same bits, a boolean `true`/`false`,
-/// a null as `null` (the frame's column types decide every field: no column is named here).
+/// a null as `null`, a string as itself, quoted as RFC 4180 asks when it holds a comma, a double
+/// quote or a line break (the frame's column types decide every field: no column is named here).
+/// A column name is quoted by the same rule.
 pub fn csv_text(frame: &DataFrame, null: &str) -> std::io::Result<String> {
     let fields: Vec<Vec<String>> = frame.columns().iter().map(|c| column_text(c, null)).collect::<std::io::Result<_>>()?;
-    let mut out = frame.get_column_names().iter().map(|n| n.as_str()).collect::<Vec<_>>().join(",");
+    let mut out = frame.get_column_names().iter().map(|n| quoted(n.as_str())).collect::<Vec<_>>().join(",");
     out.push('\n');
     for row in 0..frame.height() {
         let line: Vec<&str> = fields.iter().map(|f| f[row].as_str()).collect();
@@ -55,13 +57,19 @@ fn column_text(column: &Column, null: &str) -> std::io::Result<Vec<String>> {
             AnyValue::Null => Ok(null.to_string()),
             AnyValue::Float64(v) => Ok(format!("{v}")),
             AnyValue::Boolean(v) => Ok(v.to_string()),
-            AnyValue::String(v) => Ok(v.to_string()),
+            AnyValue::String(v) => Ok(quoted(v)),
             AnyValue::Int64(v) => Ok(v.to_string()),
             AnyValue::UInt32(v) => Ok(v.to_string()),
             AnyValue::UInt64(v) => Ok(v.to_string()),
             other => Err(err(format!("column `{}`: no CSV text for {}", column.name(), other.dtype()))),
         })
         .collect()
+}
+
+/// `field` as one CSV field (RFC 4180): as itself, or between double quotes with each double quote
+/// doubled when it holds a comma, a double quote, a carriage return or a line feed.
+fn quoted(field: &str) -> String {
+    if field.contains([',', '"', '\r', '\n']) { format!("\"{}\"", field.replace('"', "\"\"")) } else { field.to_string() }
 }
 
 /// Writes `frame` as the parquet table `dir/name`.
@@ -112,6 +120,20 @@ mod tests {
         // Every float reads back to the bits it was written from.
         let field: f64 = text.lines().nth(1).unwrap().split(',').next().unwrap().parse().unwrap();
         assert_eq!(field.to_bits(), (0.1_f64 + 0.2).to_bits());
+    }
+
+    #[test]
+    fn csv_text_quotes_a_string_holding_a_comma_quote_or_line_break() {
+        let strings = ["plain", "a,b", "say \"hi\"", "two\nlines", "cr\r", ""];
+        let columns = vec![Column::new("s".into(), strings), Column::new("n,m".into(), [1_i64, 2, 3, 4, 5, 6])];
+        let table = frame("t", columns).unwrap();
+        let text = csv_text(&table, "null").unwrap();
+        assert_eq!(text, "s,\"n,m\"\nplain,1\n\"a,b\",2\n\"say \"\"hi\"\"\",3\n\"two\nlines\",4\n\"cr\r\",5\n,6\n");
+        // An RFC 4180 reader gives back the header and every string as it was.
+        let mut reader = csv::Reader::from_reader(text.as_bytes());
+        assert_eq!(reader.headers().unwrap().iter().collect::<Vec<_>>(), ["s", "n,m"]);
+        let back: Vec<String> = reader.records().map(|r| r.unwrap()[0].to_string()).collect();
+        assert_eq!(back, strings);
     }
 
     #[test]
