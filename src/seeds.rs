@@ -207,6 +207,9 @@ pub mod fixed {
     /// The candidate poses of a TriCal campaign's feasibility, pool cones and validation
     /// configurations (`device::trical::campaign::feasibility`; "FEASIB" in ASCII).
     pub const FEASIBILITY: u64 = 0x4645_4153_4942_0000;
+    /// The random Fourier features of the unit field a twin's length fit predicts the bins with
+    /// (`calibrate::twin::shape::length_scale`).
+    pub const SMOOTH_FIELD: u64 = 0x5eed_1e47;
 }
 
 /// A generator seeded with `seed` itself (for the [`fixed`] streams).

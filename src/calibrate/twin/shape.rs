@@ -299,10 +299,10 @@ fn predicted(
     q: &[crate::robot::Joints],
     basis: &DMatrix<f64>,
 ) -> (Vec<f64>, f64) {
-    use rand::{RngExt, SeedableRng};
+    use rand::RngExt;
     let f = LENGTH_FEATURES;
     let joints = jl.ncols();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5eed_1e47);
+    let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::SMOOTH_FIELD);
     let features: Vec<([f64; crate::robot::JOINTS], f64)> = (0..f)
         .map(|_| {
             let w = std::array::from_fn(|_| rng.sample::<f64, _>(rand_distr::StandardNormal));
