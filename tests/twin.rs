@@ -578,7 +578,8 @@ fn the_shape_of_the_error_left_tells_a_smooth_field_from_an_error_independent_pe
 /// says Smooth in each; the median of the fitted lengths is within a factor 1.5 of 1.5 rad and
 /// every fitted level within a factor 2 of 20 mdeg (a fit of the bins by the kernel alone, which
 /// ignores what the calibration absorbs of a long field, gave 0.8 rad); an error independent per
-/// pose at the same level carries no length.
+/// pose at the same level carries no length. The summary names the fitted length, and the
+/// decomposition's systematic part left is the fitted field's level.
 #[test]
 fn a_smooth_field_drawn_by_calsim_is_recovered_at_its_length_and_level() {
     let robot = robot();
@@ -593,8 +594,16 @@ fn a_smooth_field_drawn_by_calsim_is_recovered_at_its_length_and_level() {
             "seed {seed}: length {:.3} +- {:.3} rad, level {:.2} +- {:.2} mdeg",
             l.pose_error_length_rad, l.pose_error_length_std_rad, l.pose_error_mdeg, l.pose_error_std_mdeg
         );
-        assert!(calsim::calibrate::twin::markdown(&t).contains("**Smooth**"), "seed {seed}");
+        let summary = calsim::calibrate::twin::markdown(&t);
+        assert!(summary.contains("**Smooth**"), "seed {seed}");
         assert!(l.pose_error_length_rad > 0.0, "seed {seed}: {l:?}");
+        // The summary names the fitted length, and the decomposition's systematic part left is
+        // the fitted field's level (not an error independent per pose).
+        let named = format!("length {:.2} rad (95 %", l.pose_error_length_rad);
+        assert!(summary.contains(&named) && summary.contains("pose_error_length_rad = "), "seed {seed}: {summary}");
+        let left = t.decomposition.left.as_ref().expect("a level left");
+        assert!(left.by.starts_with("a smooth joint-space field"), "seed {seed}: {left:?}");
+        assert!(left.interval_mm[0] <= left.sigma_mm && left.sigma_mm <= left.interval_mm[1] && left.sigma_mm > 0.0, "{left:?}");
         assert!((10.0..=40.0).contains(&l.pose_error_mdeg), "seed {seed}: {l:?}");
         lengths.push(l.pose_error_length_rad);
     }
@@ -605,4 +614,6 @@ fn a_smooth_field_drawn_by_calsim_is_recovered_at_its_length_and_level() {
     let drawn = plain.draw(&truth, &mut common::rng(21));
     let independent = field_twin(&robot, 5, |q, _| drawn.joint_errors(q, q));
     assert_eq!(independent.learned.pose_error_length_rad, 0.0, "{:?}", independent.correlation);
+    assert!(independent.length.is_none());
+    assert!(!calsim::calibrate::twin::markdown(&independent).contains("pose_error_length_rad = "));
 }

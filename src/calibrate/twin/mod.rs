@@ -195,6 +195,9 @@ pub struct Twin {
     pub noise_mm: Option<f64>,
     /// How the residual left is correlated between poses by their joint-space distance.
     pub correlation: shape::Correlation,
+    /// The smooth field's length and level fitted to [`Twin::correlation`] (`None`: no bin of
+    /// distinct poses above white, or a length the bins do not resolve).
+    pub length: Option<shape::LengthScale>,
 }
 
 impl Twin {
@@ -672,13 +675,15 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     let (correlation, length) = left_correlation(m, &train, &train_pose, &(&rw - &fitted_w), jf, &kept_projected, &jl);
     let jl_mm = DMatrix::from_fn(jl.nrows(), jl.ncols(), |r, k| jl[(r, k)] * sig[r / 3]);
     let mut learned = learned_table(c, &decomposition, &effects, &jl_mm, train.len(), field);
-    if let (Some(scale), true) = (length, learned.pose_error_mdeg > 0.0) {
+    let length = length.filter(|_| learned.pose_error_mdeg > 0.0);
+    if let Some(scale) = &length {
         // A smooth field: its length, and its level as the fit of the bins gives it (the level
         // above assumes an error independent per pose, of which the fit absorbs less).
         learned.pose_error_length_rad = scale.length_rad;
         learned.pose_error_length_std_rad = (scale.interval[1] - scale.interval[0]) / (2.0 * Z95);
         learned.pose_error_mdeg = scale.level_rad[0].to_degrees() * 1e3;
         learned.pose_error_std_mdeg = scale.level_rad[1].to_degrees() * 1e3;
+        decomposition.left = Some(smooth_left(scale, &jl_mm));
     }
     let noise_mm = decomposition.instrument.as_ref().map(|l| l.sigma_mm);
     Ok(Twin {
@@ -693,7 +698,25 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
         model,
         noise_mm,
         correlation,
+        length,
     })
+}
+
+/// The systematic part left as the smooth field fitted to the correlation gives it: its level
+/// before the fit, per coordinate (an error of RMS `s` per joint moves a point by `s^2 |J|_F^2 / 3`
+/// on average, `jl_mm` the link-angle Jacobian over the training points, mm per rad).
+fn smooth_left(scale: &shape::LengthScale, jl_mm: &DMatrix<f64>) -> Level {
+    let per_rad = (jl_mm.iter().map(|v| v * v).sum::<f64>() / (3 * (jl_mm.nrows() / 3).max(1)) as f64).sqrt();
+    let [level, std] = scale.level_rad;
+    Level {
+        sigma_mm: level * per_rad,
+        interval_mm: [(level - Z95 * std).max(0.0) * per_rad, (level + Z95 * std) * per_rad],
+        by: format!(
+            "a smooth joint-space field of length {:.2} rad fitted to the error left's correlation by pose distance (below), its \
+             level before the fit",
+            scale.length_rad
+        ),
+    }
 }
 
 /// The shape of the residual left ([`shape::correlation`]) and a smooth field's length and level
@@ -738,6 +761,9 @@ fn left_correlation(
         a.select_rows(&sub.rows) * v
     };
     let correlation = shape::correlation(&resid.select_rows(&sub.rows), &sub.pose_of, &sub.q, &basis);
+    if !correlation.bins.iter().any(|b| !b.same_pose && b.above_white()) {
+        return (correlation, None);
+    }
     // The field's prediction projects off the fit's columns at the kept points alone: a fit of
     // that many points absorbs the same slow part of a field as the fit of them all.
     let own = column_basis(&a.select_rows(&sub.rows));

@@ -123,6 +123,11 @@ fn twin_columns(t: &Twin) -> Vec<Column> {
         number("pose_error_mdeg", l.pose_error_mdeg),
         number("pose_error_std_mdeg", l.pose_error_std_mdeg),
         whole("harmonics", l.harmonic.len()),
+        number("pose_error_length_rad", l.pose_error_length_rad),
+        number("pose_error_length_std_rad", l.pose_error_length_std_rad),
+        Column::new("length_fitted".into(), vec![t.length.is_some()]),
+        Column::new("length_low_rad".into(), vec![t.length.as_ref().map(|x| x.interval[0])]),
+        Column::new("length_high_rad".into(), vec![t.length.as_ref().map(|x| x.interval[1])]),
     ]
 }
 
@@ -229,10 +234,20 @@ fn confounded(r: &Row<'_>) -> String {
 
 /// The `[learned]` levels.
 fn learned(r: &Row<'_>) -> String {
+    let smooth = if r.bool("length_fitted") {
+        format!(
+            " The per-pose error is a smooth field: pose_error_length_rad = {:.3} (pose_error_length_std_rad = {:.3}), its level \
+             above as the fit of the correlation by pose distance gives it.",
+            r.f64("pose_error_length_rad"),
+            r.f64("pose_error_length_std_rad")
+        )
+    } else {
+        String::new()
+    };
     format!(
         "\n`[learned]`: repeatability_mm = {:.4} (ISO 9283 RP of the repeatability per coordinate; repeatability_std_mm = {:.4}, \
          from its 95 % interval: a plan draws the level per world), pose_error_mdeg = {:.3} \
-         (pose_error_std_mdeg = {:.3}, from its 95 % interval: a plan draws the level per world), {} harmonics.\n",
+         (pose_error_std_mdeg = {:.3}, from its 95 % interval: a plan draws the level per world), {} harmonics.{smooth}\n",
         r.f64("repeatability_mm"),
         r.f64("repeatability_std_mm"),
         r.f64("pose_error_mdeg"),
@@ -242,6 +257,23 @@ fn learned(r: &Row<'_>) -> String {
 }
 
 const CORRELATION: &str = "twin_correlation.parquet";
+
+/// The smooth field's length as the fit of the bins gives it, or why there is none.
+fn fitted_length(r: &Row<'_>) -> String {
+    if !r.bool("length_fitted") {
+        return "The bins do not resolve a length (too few bins with an interval, the best fit at the end of the lengths tried, or no \
+                level left): the twin keeps the error independent per pose."
+            .to_string();
+    }
+    format!(
+        "Fitted as a smooth joint-space field (the bins' correlations against what such a field leaves after the fit): length \
+         {:.2} rad (95 % {:.2}-{:.2}), RMS per joint {:.3} mdeg.",
+        r.f64("pose_error_length_rad"),
+        r.f64("length_low_rad"),
+        r.f64("length_high_rad"),
+        r.f64("pose_error_mdeg")
+    )
+}
 
 /// `twin_correlation.parquet`: a row per bin of pairs ([`super::shape::correlation`]).
 fn correlation_table(t: &Twin, r: &mut Results<'_>) -> std::io::Result<()> {
@@ -311,9 +343,10 @@ fn correlation_section(parts: &mut Summary<'_>) {
         };
         let line = match above.last() {
             Some(far) => format!(
-                "**Smooth**: the error left is correlated between distinct poses up to {:.2} rad apart (nearest pairs: {}).",
+                "**Smooth**: the error left is correlated between distinct poses up to {:.2} rad apart (nearest pairs: {}). {}",
                 far.f64("distance_high_rad"),
-                shown(nearest)
+                shown(nearest),
+                fitted_length(r)
             ),
             None => format!(
                 "**Independent per pose**: no bin of distinct poses is correlated beyond what the fit gives white residuals (nearest \
