@@ -14,8 +14,11 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// A test's scratch directory, emptied: under cargo's scratch space for integration tests in the
+/// target directory (a run replaces the last run's directory of the same name; `cargo clean`
+/// removes them), not the system's temporary directory, which the runs would fill.
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("calsim-plan-test-{name}-{}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("plan-test-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
