@@ -317,7 +317,10 @@ fn predicted(
     let n = pose_of.len();
     let mut g = DMatrix::from_fn(3 * n, joints * f, |r, col| jl[(r, col / f)] * phi[(pose_of[r / 3], col % f)]);
     if basis.ncols() > 0 {
-        g -= basis * basis.tr_mul(&g);
+        // Both products by the blocked matrix multiply (nalgebra's `tr_mul` of two tall matrices
+        // is a dot product per entry, most of a large calibration's length fit).
+        let coef = basis.transpose() * &g;
+        g -= basis * coef;
     }
     let width = 3 * joints * f;
     let mut sum = vec![0.0f64; c.poses * width];
