@@ -285,57 +285,132 @@ fn length_grid() -> Vec<f64> {
     (0..=30).map(|k| 0.02 * 10f64.powf(k as f64 / 10.0)).collect()
 }
 
-/// What a smooth joint-space field of unit RMS per joint and length `l` gives the bins after the
-/// fit: per bin the expected mean product of a pair's residuals, and the expected mean squared
-/// residual of a point. The field is [`LENGTH_FEATURES`] random Fourier features of the kernel
-/// (fixed frequencies scaled by `1 / l`, so that the prediction is smooth in `l`), moved to the
-/// points by the weighted link-angle Jacobian `jl` (3 rows per point, a column per joint) and
-/// projected off the fit's columns (`basis`, orthonormal over the same rows).
-fn predicted(
-    c: &Correlation,
-    l: f64,
-    jl: &DMatrix<f64>,
-    pose_of: &[usize],
-    q: &[crate::robot::Joints],
-    basis: &DMatrix<f64>,
-) -> (Vec<f64>, f64) {
+/// The random Fourier features of the unit field [`predicted`] uses: per feature, a frequency per
+/// joint value (standard normal, divided by the length) and a phase.
+type Features = Vec<([f64; crate::robot::JOINTS], f64)>;
+
+fn features() -> Features {
     use rand::RngExt;
-    let f = LENGTH_FEATURES;
-    let joints = jl.ncols();
     let mut rng = crate::seeds::fixed_stream(crate::seeds::fixed::SMOOTH_FIELD);
-    let features: Vec<([f64; crate::robot::JOINTS], f64)> = (0..f)
+    (0..LENGTH_FEATURES)
         .map(|_| {
             let w = std::array::from_fn(|_| rng.sample::<f64, _>(rand_distr::StandardNormal));
             (w, rng.random::<f64>() * std::f64::consts::TAU)
         })
-        .collect();
-    let amp = (2.0 / f as f64).sqrt();
-    let phi = DMatrix::from_fn(q.len(), f, |p, k| {
+        .collect()
+}
+
+/// The features' values at each pose for length `l` (poses x features), scaled to unit variance.
+fn feature_values(features: &Features, q: &[crate::robot::Joints], l: f64) -> DMatrix<f64> {
+    let amp = (2.0 / features.len() as f64).sqrt();
+    DMatrix::from_fn(q.len(), features.len(), |p, k| {
         let (w, b) = &features[k];
         amp * (w.iter().zip(&q[p]).map(|(a, x)| a * x).sum::<f64>() / l + b).cos()
-    });
-    let n = pose_of.len();
-    let mut g = DMatrix::from_fn(3 * n, joints * f, |r, col| jl[(r, col / f)] * phi[(pose_of[r / 3], col % f)]);
-    if basis.ncols() > 0 {
-        // Both products by the blocked matrix multiply (nalgebra's `tr_mul` of two tall matrices
-        // is a dot product per entry, most of a large calibration's length fit).
-        let coef = basis.transpose() * &g;
-        g -= basis * coef;
+    })
+}
+
+/// What [`predicted`] needs of the points that does not depend on the length, summed per pose
+/// (`L` the weighted link-angle Jacobian, a row per coordinate of a point, `B` the fit's
+/// orthonormal basis over the same rows): so that the field's values at the points (a row
+/// `L_r (x) phi_p` per row of pose `p`) and their projection off `B` are never formed.
+struct PoseSums {
+    /// Points per pose.
+    count: Vec<usize>,
+    /// Per pose and coordinate `a`, the sum of its rows of `L` (poses x 3, a column per joint).
+    l_sum: Vec<[[f64; crate::robot::JOINTS]; 3]>,
+    /// Per pose, the sum of the squared entries of its rows of `L`.
+    l_sq: Vec<f64>,
+    /// Per joint `j`, per pose, the sum over its rows of `L_rj B_r` (poses x basis).
+    w: Vec<DMatrix<f64>>,
+    /// Per pose and coordinate, the sum of its rows of `B` (3 poses x basis, row `3 p + a`).
+    b_sum: DMatrix<f64>,
+    /// Per pose, the sum over its rows of `B_r^T B_r` (basis x basis).
+    b_outer: Vec<DMatrix<f64>>,
+}
+
+impl PoseSums {
+    fn of(jl: &DMatrix<f64>, pose_of: &[usize], poses: usize, basis: &DMatrix<f64>) -> PoseSums {
+        let (joints, k) = (jl.ncols(), basis.ncols());
+        let mut s = PoseSums {
+            count: vec![0; poses],
+            l_sum: vec![[[0.0; crate::robot::JOINTS]; 3]; poses],
+            l_sq: vec![0.0; poses],
+            w: vec![DMatrix::zeros(poses, k); joints],
+            b_sum: DMatrix::zeros(3 * poses, k),
+            b_outer: vec![DMatrix::zeros(k, k); poses],
+        };
+        for (i, &p) in pose_of.iter().enumerate() {
+            s.count[p] += 1;
+            for a in 0..3 {
+                let r = 3 * i + a;
+                let b = basis.row(r);
+                for j in 0..joints {
+                    let v = jl[(r, j)];
+                    s.l_sum[p][a][j] += v;
+                    s.l_sq[p] += v * v;
+                    for c in 0..k {
+                        s.w[j][(p, c)] += v * b[c];
+                    }
+                }
+                for c in 0..k {
+                    s.b_sum[(3 * p + a, c)] += b[c];
+                    for d in 0..k {
+                        s.b_outer[p][(c, d)] += b[c] * b[d];
+                    }
+                }
+            }
+        }
+        s
+    }
+}
+
+/// What a smooth joint-space field of unit RMS per joint and length `l` gives the bins after the
+/// fit: per bin the expected mean product of a pair's residuals, and the expected mean squared
+/// residual of a point. The field is [`LENGTH_FEATURES`] random Fourier features of the kernel
+/// (fixed frequencies scaled by `1 / l`, so that the prediction is smooth in `l`), moved to the
+/// points by the weighted link-angle Jacobian `L` (3 rows per point, a column per joint) and
+/// projected off the fit's columns (`B`, orthonormal over the same rows): the field's values at
+/// row `r` of pose `p` are `G_r = L_r (x) phi_p - B_r C` with `C = B^T (L (x) phi)`, and only
+/// their sums per pose and their squares per pose are needed, which [`PoseSums`] gives without
+/// forming `G` (`C_j = W_j^T Phi`; the squares `|L_r|^2 |phi_p|^2 - 2 sum_j W_jp . C_j phi_p +
+/// <C C^T, sum_r B_r^T B_r>`).
+fn predicted(c: &Correlation, l: f64, sums: &PoseSums, features: &Features, q: &[crate::robot::Joints], n: usize) -> (Vec<f64>, f64) {
+    let f = features.len();
+    let joints = sums.w.len();
+    let phi = feature_values(features, q, l);
+    let k = sums.b_sum.ncols();
+    // Per joint: C_j (basis x features), B-sums times C_j (3 poses x features), Phi C_j^T.
+    let cj: Vec<DMatrix<f64>> = sums.w.iter().map(|w| w.transpose() * &phi).collect();
+    let bc: Vec<DMatrix<f64>> = cj.iter().map(|x| &sums.b_sum * x).collect();
+    let e: Vec<DMatrix<f64>> = cj.iter().map(|x| &phi * x.transpose()).collect();
+    let mut gram = DMatrix::zeros(k, k);
+    for x in &cj {
+        gram += x * x.transpose();
     }
     let width = 3 * joints * f;
     let mut sum = vec![0.0f64; c.poses * width];
     let mut own = vec![0.0f64; c.poses];
-    let mut count = vec![0usize; c.poses];
-    for (i, &p) in pose_of.iter().enumerate() {
-        count[p] += 1;
+    for p in 0..c.poses {
         for a in 0..3 {
-            let row = g.row(3 * i + a);
-            for (k, v) in row.iter().enumerate() {
-                sum[p * width + a * joints * f + k] += v;
-                own[p] += v * v;
+            for j in 0..joints {
+                let base = p * width + a * joints * f + j * f;
+                for kf in 0..f {
+                    sum[base + kf] = sums.l_sum[p][a][j] * phi[(p, kf)] - bc[j][(3 * p + a, kf)];
+                }
             }
         }
+        let phi_sq: f64 = phi.row(p).iter().map(|v| v * v).sum();
+        let cross: f64 = (0..joints).map(|j| sums.w[j].row(p).iter().zip(e[j].row(p).iter()).map(|(x, y)| x * y).sum::<f64>()).sum();
+        own[p] = sums.l_sq[p] * phi_sq - 2.0 * cross + gram.component_mul(&sums.b_outer[p]).sum();
     }
+    bin_products(c, &sum, &own, &sums.count, n)
+}
+
+/// Per bin, the mean product of the field's values over its pairs of points, and the mean squared
+/// value of a point: `sum` the values summed per pose (a row of `width` per pose), `own` their
+/// squares summed per pose, `count` the points per pose, `n` the points.
+fn bin_products(c: &Correlation, sum: &[f64], own: &[f64], count: &[usize], n: usize) -> (Vec<f64>, f64) {
+    let width = sum.len() / c.poses.max(1);
     let dot = |p: usize, s: usize| -> f64 {
         sum[p * width..(p + 1) * width].iter().zip(&sum[s * width..(s + 1) * width]).map(|(x, y)| x * y).sum()
     };
@@ -390,10 +465,12 @@ pub fn length_scale(
     let se: Vec<f64> = usable.iter().map(|&b| ((c.bins[b].interval[1] - c.bins[b].interval[0]) / (2.0 * Z95)).max(1e-12)).collect();
     let excess: Vec<f64> = usable.iter().map(|&b| c.bins[b].correlation - c.bins[b].white).collect();
     let grid = length_grid();
+    let sums = PoseSums::of(jl, pose_of, c.poses, basis);
+    let features = features();
     let profile: Vec<(f64, f64, f64, f64)> = grid
         .par_iter()
         .map(|&l| {
-            let (m, s) = predicted(c, l, jl, pose_of, q, basis);
+            let (m, s) = predicted(c, l, &sums, &features, q, pose_of.len());
             let k: Vec<f64> = usable.iter().map(|&b| m[b] - s * c.bins[b].white).collect();
             let (num, den) =
                 (0..k.len()).fold((0.0, 0.0), |(x, y), i| (x + excess[i] * k[i] / se[i].powi(2), y + k[i] * k[i] / se[i].powi(2)));
@@ -440,6 +517,69 @@ pub fn length_scale(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The dense reference of [`predicted`]: the field's values at every row of the points formed
+    /// (`jl` 3 rows per point, a column per joint) and projected off `basis`.
+    fn predicted_dense(
+        c: &Correlation,
+        l: f64,
+        jl: &DMatrix<f64>,
+        pose_of: &[usize],
+        q: &[crate::robot::Joints],
+        basis: &DMatrix<f64>,
+    ) -> (Vec<f64>, f64) {
+        let f = LENGTH_FEATURES;
+        let joints = jl.ncols();
+        let phi = feature_values(&features(), q, l);
+        let n = pose_of.len();
+        let mut g = DMatrix::from_fn(3 * n, joints * f, |r, col| jl[(r, col / f)] * phi[(pose_of[r / 3], col % f)]);
+        if basis.ncols() > 0 {
+            g -= basis * (basis.transpose() * &g);
+        }
+        let width = 3 * joints * f;
+        let mut sum = vec![0.0f64; c.poses * width];
+        let mut own = vec![0.0f64; c.poses];
+        let mut count = vec![0usize; c.poses];
+        for (i, &p) in pose_of.iter().enumerate() {
+            count[p] += 1;
+            for a in 0..3 {
+                let row = g.row(3 * i + a);
+                for (k, v) in row.iter().enumerate() {
+                    sum[p * width + a * joints * f + k] += v;
+                    own[p] += v * v;
+                }
+            }
+        }
+        bin_products(c, &sum, &own, &count, n)
+    }
+
+    /// The per-pose sums give the same prediction as the field formed at every row and projected
+    /// off the basis (random Jacobian, basis and poses: 120 poses, 1-3 points each, 7 basis
+    /// columns; three lengths), to 1e-9 relative.
+    #[test]
+    fn the_prediction_by_pose_sums_is_the_dense_one() {
+        use rand::RngExt;
+        let mut rng = crate::seeds::stream(9, 0);
+        let poses = 120;
+        let q: Vec<crate::robot::Joints> = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
+        let pose_of: Vec<usize> = (0..poses).flat_map(|p| std::iter::repeat_n(p, 1 + p % 3)).collect();
+        let n = pose_of.len();
+        let jl = DMatrix::from_fn(3 * n, 6, |_, _| rng.random_range(-1.0..1.0));
+        let basis = DMatrix::from_fn(3 * n, 7, |_, _| rng.random_range(-1.0..1.0)).qr().q();
+        let resid = DVector::from_fn(3 * n, |_, _| rng.random_range(-1.0..1.0));
+        let c = correlation(&resid, &pose_of, &q, &basis);
+        let sums = PoseSums::of(&jl, &pose_of, poses, &basis);
+        let features = features();
+        for l in [0.3, 1.5, 6.0] {
+            let (m, s) = predicted(&c, l, &sums, &features, &q, n);
+            let (md, sd) = predicted_dense(&c, l, &jl, &pose_of, &q, &basis);
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1e-3);
+            assert!(close(s, sd), "l {l}: {s} {sd}");
+            for (a, b) in m.iter().zip(&md) {
+                assert!(close(*a, *b), "l {l}: {m:?} {md:?}");
+            }
+        }
+    }
 
     /// Residuals drawn as a smooth function of the pose (the same at nearby poses) correlate in the
     /// nearest bins and not in the farthest; white residuals correlate in no bin beyond their
