@@ -443,19 +443,31 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
         Some((rh, jh.select_columns(&free), jlh, own, pose_of(&held)))
     };
 
-    // Every family's columns (those the model absorbs left out: the calibrated robot carries them).
+    // Every family's columns, projected off the model's all at once; those the model absorbs
+    // left out (the calibrated robot carries them).
+    let candidates: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> = Family::all()
+        .into_iter()
+        .chain(effects::scan(&train, &jl, &data, &rw))
+        .map(|f| {
+            let (e, coefs) = columns(f, &train, &jl, &data);
+            (f, e, coefs)
+        })
+        .filter(|(_, e, _)| e.ncols() > 0)
+        .collect();
+    let projected_every = model_lsq.resid(&hstack(candidates.iter().map(|(_, e, _)| e)));
     let mut families: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> = Vec::new();
     let mut absorbed: Vec<Vec<String>> = Vec::new();
-    for f in Family::all().into_iter().chain(effects::scan(&train, &jl, &data, &rw)) {
-        let (e, coefs) = columns(f, &train, &jl, &data);
-        if e.ncols() == 0 {
-            continue;
-        }
-        let p = model_lsq.resid(&e);
+    let mut projected: Vec<DMatrix<f64>> = Vec::new();
+    let mut at = 0;
+    for (f, e, coefs) in candidates {
+        let p = projected_every.columns(at, e.ncols());
+        at += e.ncols();
         let keep: Vec<usize> = (0..e.ncols()).filter(|&k| p.column(k).norm() >= ABSORBED * e.column(k).norm()).collect();
         absorbed.push((0..e.ncols()).filter(|k| !keep.contains(k)).map(|k| coefs[k].name.clone()).collect());
+        projected.push(p.select_columns(&keep));
         families.push((f, e.select_columns(&keep), keep.iter().map(|&k| coefs[k].clone()).collect()));
     }
+    drop(projected_every);
     // Column ranges of each family in the stacked matrix of every family.
     let mut ranges = Vec::new();
     let mut at = 0;
@@ -464,9 +476,6 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
         at += e.ncols();
     }
     let all_e = hstack(families.iter().map(|(_, e, _)| e));
-    let projected_all = model_lsq.resid(&all_e);
-    let projected: Vec<DMatrix<f64>> = ranges.iter().map(|r| projected_all.columns(r.start, r.len()).into_owned()).collect();
-    drop(projected_all);
     let rw_m = DMatrix::from_column_slice(rw.len(), 1, rw.as_slice());
 
     // Cross-validation on the calibration split's folds (poses as units): per fold, the model and
