@@ -320,9 +320,10 @@ struct PoseSums {
     l_sum: Vec<[[f64; crate::robot::JOINTS]; 3]>,
     /// Per pose, the sum of the squared entries of its rows of `L`.
     l_sq: Vec<f64>,
-    /// Per joint `j`, per pose, the sum over its rows of `L_rj B_r` (poses x basis).
+    /// Per joint `j`, per pose, the sum over its rows of `L_rj B_r` (basis x poses: a pose's
+    /// sums together).
     w: Vec<DMatrix<f64>>,
-    /// Per pose and coordinate, the sum of its rows of `B` (3 poses x basis, row `3 p + a`).
+    /// Per pose and coordinate, the sum of its rows of `B` (basis x 3 poses, column `3 p + a`).
     b_sum: DMatrix<f64>,
     /// Per pose, the sum over its rows of `B_r^T B_r` (basis x basis).
     b_outer: Vec<DMatrix<f64>>,
@@ -335,8 +336,8 @@ impl PoseSums {
             count: vec![0; poses],
             l_sum: vec![[[0.0; crate::robot::JOINTS]; 3]; poses],
             l_sq: vec![0.0; poses],
-            w: vec![DMatrix::zeros(poses, k); joints],
-            b_sum: DMatrix::zeros(3 * poses, k),
+            w: vec![DMatrix::zeros(k, poses); joints],
+            b_sum: DMatrix::zeros(k, 3 * poses),
             b_outer: vec![DMatrix::zeros(k, k); poses],
         };
         for (i, &p) in pose_of.iter().enumerate() {
@@ -349,11 +350,11 @@ impl PoseSums {
                     s.l_sum[p][a][j] += v;
                     s.l_sq[p] += v * v;
                     for c in 0..k {
-                        s.w[j][(p, c)] += v * b[c];
+                        s.w[j][(c, p)] += v * b[c];
                     }
                 }
                 for c in 0..k {
-                    s.b_sum[(3 * p + a, c)] += b[c];
+                    s.b_sum[(c, 3 * p + a)] += b[c];
                     for d in 0..k {
                         s.b_outer[p][(c, d)] += b[c] * b[d];
                     }
@@ -371,49 +372,61 @@ impl PoseSums {
 /// points by the weighted link-angle Jacobian `L` (3 rows per point, a column per joint) and
 /// projected off the fit's columns (`B`, orthonormal over the same rows): the field's values at
 /// row `r` of pose `p` are `G_r = L_r (x) phi_p - B_r C` with `C = B^T (L (x) phi)`, and only
-/// their sums per pose and their squares per pose are needed, which [`PoseSums`] gives without
-/// forming `G` (`C_j = W_j^T Phi`; the squares `|L_r|^2 |phi_p|^2 - 2 sum_j W_jp . C_j phi_p +
-/// <C C^T, sum_r B_r^T B_r>`).
+/// the products of their sums per pose and their squares per pose are needed, which [`PoseSums`]
+/// gives without forming `G` (`C_j = W_j^T Phi`, `E_j = Phi C_j^T`, `K = sum_j C_j C_j^T`):
+/// - the squares `|L_r|^2 |phi_p|^2 - 2 sum_j W_jp . E_jp + <K, sum_r B_r^T B_r>`;
+/// - the product of the sums of poses `p` and `s`, with `l_pa` the sum of pose `p`'s rows of
+///   coordinate `a` of `L` and `b_pa` those of `B`: `sum_a [ (l_pa . l_sa) (phi_p . phi_s) -
+///   b_sa . y_pa - b_pa . y_sa + b_pa K b_sa ]`, `y_pa = sum_j l_paj E_jp`.
 fn predicted(c: &Correlation, l: f64, sums: &PoseSums, features: &Features, q: &[crate::robot::Joints], n: usize) -> (Vec<f64>, f64) {
-    let f = features.len();
     let joints = sums.w.len();
     let phi = feature_values(features, q, l);
-    let k = sums.b_sum.ncols();
-    // Per joint: C_j (basis x features), B-sums times C_j (3 poses x features), Phi C_j^T.
-    let cj: Vec<DMatrix<f64>> = sums.w.iter().map(|w| w.transpose() * &phi).collect();
-    let bc: Vec<DMatrix<f64>> = cj.iter().map(|x| &sums.b_sum * x).collect();
-    let e: Vec<DMatrix<f64>> = cj.iter().map(|x| &phi * x.transpose()).collect();
+    let k = sums.b_sum.nrows();
+    // The features transposed (features x poses: a pose's values together).
+    let phi_t = phi.transpose();
+    let cj: Vec<DMatrix<f64>> = sums.w.iter().map(|w| w * &phi).collect();
+    // E_j transposed (basis x poses: a pose's values together).
+    let e: Vec<DMatrix<f64>> = cj.iter().map(|x| x * &phi_t).collect();
     let mut gram = DMatrix::zeros(k, k);
     for x in &cj {
         gram += x * x.transpose();
     }
-    let width = 3 * joints * f;
-    let mut sum = vec![0.0f64; c.poses * width];
+    // Per pose and coordinate (column 3 p + a): y (sum_j l_paj E_jp) and K b.
+    let bk = &gram * &sums.b_sum;
+    let mut y = DMatrix::zeros(k, 3 * c.poses);
+    let phi_sq: Vec<f64> = (0..c.poses).map(|p| phi_t.column(p).norm_squared()).collect();
     let mut own = vec![0.0f64; c.poses];
     for p in 0..c.poses {
         for a in 0..3 {
             for j in 0..joints {
-                let base = p * width + a * joints * f + j * f;
-                for kf in 0..f {
-                    sum[base + kf] = sums.l_sum[p][a][j] * phi[(p, kf)] - bc[j][(3 * p + a, kf)];
-                }
+                let v = sums.l_sum[p][a][j];
+                let mut column = y.column_mut(3 * p + a);
+                column.axpy(v, &e[j].column(p), 1.0);
             }
         }
-        let phi_sq: f64 = phi.row(p).iter().map(|v| v * v).sum();
-        let cross: f64 = (0..joints).map(|j| sums.w[j].row(p).iter().zip(e[j].row(p).iter()).map(|(x, y)| x * y).sum::<f64>()).sum();
-        own[p] = sums.l_sq[p] * phi_sq - 2.0 * cross + gram.component_mul(&sums.b_outer[p]).sum();
+        let cross: f64 = (0..joints).map(|j| sums.w[j].column(p).iter().zip(e[j].column(p).iter()).map(|(x, y)| x * y).sum::<f64>()).sum();
+        let outer: f64 = gram.iter().zip(sums.b_outer[p].iter()).map(|(x, y)| x * y).sum();
+        own[p] = sums.l_sq[p] * phi_sq[p] - 2.0 * cross + outer;
     }
-    bin_products(c, &sum, &own, &sums.count, n)
+    let column_dot = |m: &DMatrix<f64>, r: usize, o: &DMatrix<f64>, s: usize| -> f64 { m.column(r).dot(&o.column(s)) };
+    let dot = |p: usize, s: usize| -> f64 {
+        let phi_ps = phi_t.column(p).dot(&phi_t.column(s));
+        (0..3)
+            .map(|a| {
+                let (rp, rs) = (3 * p + a, 3 * s + a);
+                let ll: f64 = (0..joints).map(|j| sums.l_sum[p][a][j] * sums.l_sum[s][a][j]).sum();
+                ll * phi_ps - column_dot(&sums.b_sum, rs, &y, rp) - column_dot(&sums.b_sum, rp, &y, rs)
+                    + column_dot(&sums.b_sum, rp, &bk, rs)
+            })
+            .sum()
+    };
+    bin_products(c, dot, &own, &sums.count, n)
 }
 
 /// Per bin, the mean product of the field's values over its pairs of points, and the mean squared
-/// value of a point: `sum` the values summed per pose (a row of `width` per pose), `own` their
-/// squares summed per pose, `count` the points per pose, `n` the points.
-fn bin_products(c: &Correlation, sum: &[f64], own: &[f64], count: &[usize], n: usize) -> (Vec<f64>, f64) {
-    let width = sum.len() / c.poses.max(1);
-    let dot = |p: usize, s: usize| -> f64 {
-        sum[p * width..(p + 1) * width].iter().zip(&sum[s * width..(s + 1) * width]).map(|(x, y)| x * y).sum()
-    };
+/// value of a point: `dot(p, s)` the product of the values summed per pose `p` and those summed
+/// per pose `s`, `own` their squares summed per pose, `count` the points per pose, `n` the points.
+fn bin_products(c: &Correlation, dot: impl Fn(usize, usize) -> f64, own: &[f64], count: &[usize], n: usize) -> (Vec<f64>, f64) {
     let mean_sq = own.iter().sum::<f64>() / n.max(1) as f64;
     let products = c
         .bins
@@ -550,7 +563,10 @@ mod tests {
                 }
             }
         }
-        bin_products(c, &sum, &own, &count, n)
+        let dot = |p: usize, s: usize| -> f64 {
+            sum[p * width..(p + 1) * width].iter().zip(&sum[s * width..(s + 1) * width]).map(|(x, y)| x * y).sum()
+        };
+        bin_products(c, dot, &own, &count, n)
     }
 
     /// The per-pose sums give the same prediction as the field formed at every row and projected
