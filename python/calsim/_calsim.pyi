@@ -107,6 +107,7 @@ class OptimiseReport(TypedDict):
     warnings: list[str]
 
 class CompensateReport(TypedDict):
+    table: ArrowFrame
     csv: str
     targets: int
     unreachable: list[int]

@@ -272,18 +272,11 @@ class OptimiseResult(Results):
         return self._summary
 
 
-def _csv_frame(text: str, null_values: list[str]) -> pl.DataFrame:
-    """A CSV text of calsim as a frame: every column but ``within_limits`` a float (the CSV's
-    shortest round-trip decimals, read back bit for bit)."""
-    header = text.split("\n", 1)[0].split(",")
-    schema = {c: (pl.Boolean if c == "within_limits" else pl.Float64) for c in header}
-    return pl.read_csv(io.StringIO(text), schema=schema, null_values=null_values)
-
-
 class CompensateResult:
     """The compensated targets: ``joints`` (per target ``q1_deg`` ... ``q6_deg``, the model's
     ``model_error_mm`` and ``model_error_deg`` at them and, with a nominal model, the
-    ``nominal_*`` Cartesian target to command; nulls where the model cannot reach the target),
+    ``nominal_*`` Cartesian target to command, every column a float; where the model cannot reach
+    the target, null joint values and nominal target and NaN errors),
     ``csv`` (the CLI's text), ``unreachable`` (1-based target numbers) and ``out`` (the CSV
     written, or None)."""
 
@@ -293,7 +286,7 @@ class CompensateResult:
         self.unreachable: list[int] = list(report["unreachable"])
         self.warnings: list[str] = list(report["warnings"])
         self.out = out
-        self.joints: pl.DataFrame = _csv_frame(self.csv, ["unreachable", ""])
+        self.joints: pl.DataFrame = pl.DataFrame(report["table"])
 
     def __repr__(self) -> str:
         return f"CompensateResult(targets={self.targets}, unreachable={len(self.unreachable)})"

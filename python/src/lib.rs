@@ -659,6 +659,7 @@ fn compensate<'py>(
     d.set_item("targets", r.targets)?;
     d.set_item("unreachable", &r.unreachable)?;
     d.set_item("warnings", r.unreachable_line().into_iter().collect::<Vec<_>>())?;
+    d.set_item("table", ArrowFrame(r.table))?;
     Ok(d)
 }
 

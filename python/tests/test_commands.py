@@ -170,6 +170,29 @@ def test_an_unreachable_target_is_a_row_of_nulls_and_a_warning(calibration: cals
     assert r.joints["q1_deg"].is_null().to_list() == [False, True]
 
 
+def test_compensate_frame_equals_the_file_the_cli_writes(calibration: calsim.CalibrationResult, tmp_path: Path) -> None:
+    targets = pl.read_csv(TARGETS).head(3)
+    targets = targets.with_columns(pl.Series("x_mm", [targets["x_mm"][0], 5000.0, targets["x_mm"][2]]))
+    path = tmp_path / "targets.csv"
+    targets.write_csv(path)
+    for k, nominal in enumerate([calibration.dest / "before.toml", None]):
+        with pytest.warns(calsim.CalsimWarning, match="1 of 3 targets cannot be reached"):
+            r = calsim.compensate(calibration.robot_file, path, nominal=nominal)
+        written = tmp_path / f"cli{k}.csv"
+        extra = [] if nominal is None else ["--nominal", str(nominal)]
+        args = [cli_binary(), "compensate", str(calibration.robot_file), str(path), *extra, "--out", str(written)]
+        assert subprocess.run(args, capture_output=True).returncode == 1
+        assert written.read_text() == r.csv
+        # Read by polars with the documented dtypes: every column a float, `unreachable` and an
+        # empty field null, the model's errors NaN where the target cannot be reached.
+        schema = {c: pl.Float64 for c in r.joints.columns}
+        assert r.joints.schema == pl.Schema(schema)
+        assert r.joints.equals(pl.read_csv(written, schema=schema, null_values=["unreachable", ""]))
+        assert r.joints["q6_deg"].is_null().to_list() == [False, True, False]
+        assert r.joints["model_error_deg"].is_nan().to_list() == [False, True, False]
+        assert r.joints["nominal_z_mm"].is_null().to_list() == ([False, True, False] if nominal else [True] * 3)
+
+
 def test_bad_compensate_arguments_name_the_file_key_and_value(calibration: calsim.CalibrationResult, tmp_path: Path) -> None:
     bad = tmp_path / "targets.csv"
     bad.write_text("x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n1,2,abc,0,0,0\n")
