@@ -147,6 +147,7 @@ class ImportReport(TypedDict):
     lines: list[str]
 
 class SimulateReport(TypedDict):
+    table: ArrowFrame
     csv: str
     rows: int
     written: Path | None

@@ -3,7 +3,6 @@ the parquet files calsim wrote), its figures and summary, and what the command r
 
 from __future__ import annotations
 
-import io
 import json
 from functools import cached_property
 from pathlib import Path
@@ -386,18 +385,14 @@ class FkResult:
 class SimulatedMeasurements:
     """A simulated measurement file for :func:`calibrate`: ``csv`` (the file's text, its ``#``
     header lines included), ``table`` (its rows: ``pose``, ``session`` and ``target`` as text, the
-    joint values and positions as floats read back bit for bit), ``rows`` and ``path`` (the file
-    written, or None)."""
+    joint values, positions and any orientation readings as the floats the file's text was written
+    from), ``rows`` and ``path`` (the file written, or None)."""
 
     def __init__(self, report: SimulateReport) -> None:
         self.csv: str = report["csv"]
         self.rows: int = report["rows"]
         self.path: Path | None = None if report["written"] is None else Path(report["written"])
-        body = "".join(line for line in self.csv.splitlines(keepends=True) if not line.startswith("#"))
-        header = body.split("\n", 1)[0].split(",")
-        text = {"pose", "session", "target"}
-        schema = {c: (pl.String if c in text else pl.Float64) for c in header}
-        self.table: pl.DataFrame = pl.read_csv(io.StringIO(body), schema=schema)
+        self.table: pl.DataFrame = pl.DataFrame(report["table"])
 
     def __repr__(self) -> str:
         return f"SimulatedMeasurements(rows={self.rows}, path={None if self.path is None else str(self.path)!r})"

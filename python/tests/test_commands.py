@@ -499,6 +499,10 @@ def test_simulate_measurements_gives_the_cli_file_and_calibrates(tmp_path: Path)
     # The frame holds the file's numbers bit for bit.
     first = next(line for line in r.csv.splitlines() if not line.startswith("#") and not line.startswith("pose"))
     assert r.table["x_mm"][0] == float(first.split(",")[9])
+    # The frame equals the file the CLI writes, read by polars with the documented dtypes.
+    schema = {c: (pl.String if c in ("pose", "session", "target") else pl.Float64) for c in r.table.columns}
+    assert r.table.schema == pl.Schema(schema)
+    assert r.table.equals(pl.read_csv(tmp_path / "cli" / "imported_example.csv", comment_prefix="#", schema=schema))
     c = calsim.calibrate(
         REPO / "robots" / "examples" / "lrmate200ic_coupled.toml",
         written.path,
@@ -508,6 +512,17 @@ def test_simulate_measurements_gives_the_cli_file_and_calibrates(tmp_path: Path)
         tool_per_session=True,
     )
     assert c.tables["points"].height == r.rows
+
+
+def test_simulated_orientation_readings_are_the_cli_file_columns(tmp_path: Path) -> None:
+    spec = REPO / "docs" / "calibrate" / "probe_example.toml"
+    r = calsim.simulate_measurements(spec)
+    cli("simulate-measurements", spec, "--out", tmp_path)
+    written = tmp_path / "probe_example.csv"
+    assert written.read_text() == r.csv
+    assert r.table.columns[-4:] == ["quat_w", "quat_x", "quat_y", "quat_z"] and r.rows == r.table.height
+    schema = {c: (pl.String if c in ("pose", "session", "target") else pl.Float64) for c in r.table.columns}
+    assert r.table.equals(pl.read_csv(written, comment_prefix="#", schema=schema))
 
 
 def test_bad_simulation_files_name_the_file_key_and_value(tmp_path: Path) -> None:
