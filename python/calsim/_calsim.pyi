@@ -107,6 +107,7 @@ class OptimiseReport(TypedDict):
     warnings: list[str]
 
 class CompensateReport(TypedDict):
+    table: ArrowFrame
     csv: str
     targets: int
     unreachable: list[int]
@@ -146,6 +147,7 @@ class ImportReport(TypedDict):
     lines: list[str]
 
 class SimulateReport(TypedDict):
+    table: ArrowFrame
     csv: str
     rows: int
     written: Path | None

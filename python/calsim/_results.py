@@ -3,7 +3,6 @@ the parquet files calsim wrote), its figures and summary, and what the command r
 
 from __future__ import annotations
 
-import io
 import json
 from functools import cached_property
 from pathlib import Path
@@ -272,18 +271,11 @@ class OptimiseResult(Results):
         return self._summary
 
 
-def _csv_frame(text: str, null_values: list[str]) -> pl.DataFrame:
-    """A CSV text of calsim as a frame: every column but ``within_limits`` a float (the CSV's
-    shortest round-trip decimals, read back bit for bit)."""
-    header = text.split("\n", 1)[0].split(",")
-    schema = {c: (pl.Boolean if c == "within_limits" else pl.Float64) for c in header}
-    return pl.read_csv(io.StringIO(text), schema=schema, null_values=null_values)
-
-
 class CompensateResult:
     """The compensated targets: ``joints`` (per target ``q1_deg`` ... ``q6_deg``, the model's
     ``model_error_mm`` and ``model_error_deg`` at them and, with a nominal model, the
-    ``nominal_*`` Cartesian target to command; nulls where the model cannot reach the target),
+    ``nominal_*`` Cartesian target to command, every column a float; where the model cannot reach
+    the target, null joint values and nominal target and NaN errors),
     ``csv`` (the CLI's text), ``unreachable`` (1-based target numbers) and ``out`` (the CSV
     written, or None)."""
 
@@ -293,7 +285,7 @@ class CompensateResult:
         self.unreachable: list[int] = list(report["unreachable"])
         self.warnings: list[str] = list(report["warnings"])
         self.out = out
-        self.joints: pl.DataFrame = _csv_frame(self.csv, ["unreachable", ""])
+        self.joints: pl.DataFrame = pl.DataFrame(report["table"])
 
     def __repr__(self) -> str:
         return f"CompensateResult(targets={self.targets}, unreachable={len(self.unreachable)})"
@@ -393,18 +385,14 @@ class FkResult:
 class SimulatedMeasurements:
     """A simulated measurement file for :func:`calibrate`: ``csv`` (the file's text, its ``#``
     header lines included), ``table`` (its rows: ``pose``, ``session`` and ``target`` as text, the
-    joint values and positions as floats read back bit for bit), ``rows`` and ``path`` (the file
-    written, or None)."""
+    joint values, positions and any orientation readings as the floats the file's text was written
+    from), ``rows`` and ``path`` (the file written, or None)."""
 
     def __init__(self, report: SimulateReport) -> None:
         self.csv: str = report["csv"]
         self.rows: int = report["rows"]
         self.path: Path | None = None if report["written"] is None else Path(report["written"])
-        body = "".join(line for line in self.csv.splitlines(keepends=True) if not line.startswith("#"))
-        header = body.split("\n", 1)[0].split(",")
-        text = {"pose", "session", "target"}
-        schema = {c: (pl.String if c in text else pl.Float64) for c in header}
-        self.table: pl.DataFrame = pl.read_csv(io.StringIO(body), schema=schema)
+        self.table: pl.DataFrame = pl.DataFrame(report["table"])
 
     def __repr__(self) -> str:
         return f"SimulatedMeasurements(rows={self.rows}, path={None if self.path is None else str(self.path)!r})"

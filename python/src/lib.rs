@@ -659,6 +659,7 @@ fn compensate<'py>(
     d.set_item("targets", r.targets)?;
     d.set_item("unreachable", &r.unreachable)?;
     d.set_item("warnings", r.unreachable_line().into_iter().collect::<Vec<_>>())?;
+    d.set_item("table", ArrowFrame(r.table))?;
     Ok(d)
 }
 
@@ -817,6 +818,7 @@ fn import_urdf<'py>(
 fn simulate_measurements<'py>(py: Python<'py>, spec: PathBuf, out: Option<PathBuf>) -> PyResult<Bound<'py, PyDict>> {
     let (r, _) = detached(py, None, |_| app::simulate::run(&spec, out.as_deref()))?;
     let d = PyDict::new(py);
+    d.set_item("table", ArrowFrame(r.table))?;
     d.set_item("csv", &r.csv)?;
     d.set_item("rows", r.rows)?;
     d.set_item("written", &r.written)?;

@@ -170,6 +170,29 @@ def test_an_unreachable_target_is_a_row_of_nulls_and_a_warning(calibration: cals
     assert r.joints["q1_deg"].is_null().to_list() == [False, True]
 
 
+def test_compensate_frame_equals_the_file_the_cli_writes(calibration: calsim.CalibrationResult, tmp_path: Path) -> None:
+    targets = pl.read_csv(TARGETS).head(3)
+    targets = targets.with_columns(pl.Series("x_mm", [targets["x_mm"][0], 5000.0, targets["x_mm"][2]]))
+    path = tmp_path / "targets.csv"
+    targets.write_csv(path)
+    for k, nominal in enumerate([calibration.dest / "before.toml", None]):
+        with pytest.warns(calsim.CalsimWarning, match="1 of 3 targets cannot be reached"):
+            r = calsim.compensate(calibration.robot_file, path, nominal=nominal)
+        written = tmp_path / f"cli{k}.csv"
+        extra = [] if nominal is None else ["--nominal", str(nominal)]
+        args = [cli_binary(), "compensate", str(calibration.robot_file), str(path), *extra, "--out", str(written)]
+        assert subprocess.run(args, capture_output=True).returncode == 1
+        assert written.read_text() == r.csv
+        # Read by polars with the documented dtypes: every column a float, `unreachable` and an
+        # empty field null, the model's errors NaN where the target cannot be reached.
+        schema = {c: pl.Float64 for c in r.joints.columns}
+        assert r.joints.schema == pl.Schema(schema)
+        assert r.joints.equals(pl.read_csv(written, schema=schema, null_values=["unreachable", ""]))
+        assert r.joints["q6_deg"].is_null().to_list() == [False, True, False]
+        assert r.joints["model_error_deg"].is_nan().to_list() == [False, True, False]
+        assert r.joints["nominal_z_mm"].is_null().to_list() == ([False, True, False] if nominal else [True] * 3)
+
+
 def test_bad_compensate_arguments_name_the_file_key_and_value(calibration: calsim.CalibrationResult, tmp_path: Path) -> None:
     bad = tmp_path / "targets.csv"
     bad.write_text("x_mm,y_mm,z_mm,alpha_deg,beta_deg,gamma_deg\n1,2,abc,0,0,0\n")
@@ -476,6 +499,10 @@ def test_simulate_measurements_gives_the_cli_file_and_calibrates(tmp_path: Path)
     # The frame holds the file's numbers bit for bit.
     first = next(line for line in r.csv.splitlines() if not line.startswith("#") and not line.startswith("pose"))
     assert r.table["x_mm"][0] == float(first.split(",")[9])
+    # The frame equals the file the CLI writes, read by polars with the documented dtypes.
+    schema = {c: (pl.String if c in ("pose", "session", "target") else pl.Float64) for c in r.table.columns}
+    assert r.table.schema == pl.Schema(schema)
+    assert r.table.equals(pl.read_csv(tmp_path / "cli" / "imported_example.csv", comment_prefix="#", schema=schema))
     c = calsim.calibrate(
         REPO / "robots" / "examples" / "lrmate200ic_coupled.toml",
         written.path,
@@ -485,6 +512,17 @@ def test_simulate_measurements_gives_the_cli_file_and_calibrates(tmp_path: Path)
         tool_per_session=True,
     )
     assert c.tables["points"].height == r.rows
+
+
+def test_simulated_orientation_readings_are_the_cli_file_columns(tmp_path: Path) -> None:
+    spec = REPO / "docs" / "calibrate" / "probe_example.toml"
+    r = calsim.simulate_measurements(spec)
+    cli("simulate-measurements", spec, "--out", tmp_path)
+    written = tmp_path / "probe_example.csv"
+    assert written.read_text() == r.csv
+    assert r.table.columns[-4:] == ["quat_w", "quat_x", "quat_y", "quat_z"] and r.rows == r.table.height
+    schema = {c: (pl.String if c in ("pose", "session", "target") else pl.Float64) for c in r.table.columns}
+    assert r.table.equals(pl.read_csv(written, comment_prefix="#", schema=schema))
 
 
 def test_bad_simulation_files_name_the_file_key_and_value(tmp_path: Path) -> None:

@@ -20,10 +20,13 @@ use std::path::{Path, PathBuf};
 use super::Error;
 
 use nalgebra::{Isometry3, Matrix3, Translation3};
+use polars::prelude::Column;
 
+use crate::io::table::{CsvFormat, FieldFormat, Frame};
 use crate::robot::file::RobotFile;
+use crate::robot::fk::JOINT_COLUMNS;
 use crate::robot::ik::pose_error;
-use crate::robot::{Joints, KinState, RobotModel, XyzZyx, inverse, world_from_flange};
+use crate::robot::{JOINTS, Joints, KinState, RobotModel, XyzZyx, inverse, world_from_flange};
 
 /// The columns of a targets file.
 pub const TARGET_COLUMNS: [&str; 6] = ["x_mm", "y_mm", "z_mm", "alpha_deg", "beta_deg", "gamma_deg"];
@@ -81,7 +84,9 @@ pub struct CompensateSpec {
 /// What `compensate` did.
 #[derive(Clone, Debug)]
 pub struct CompensateReport {
-    /// The CSV text (written to `out` when one was given).
+    /// The table, a row per target (columns in [`frame`]).
+    pub table: Frame,
+    /// The CSV text of the table (written to `out` when one was given).
     pub csv: String,
     /// Targets read.
     pub targets: usize,
@@ -185,11 +190,12 @@ pub fn run(spec: &CompensateSpec) -> Result<CompensateReport, Error> {
             ),
         ));
     }
-    let csv = to_csv(&rows).map_err(|e| Error::input("compensate", e))?;
+    let table = frame(&rows).map_err(Error::io(&spec.targets))?;
+    let csv = crate::io::table::csv_text(&table, &csv_format()).map_err(Error::io(&spec.targets))?;
     if let Some(out) = &spec.out {
         crate::io::out_dir::write_output_file("--out", out, csv.as_bytes())?;
     }
-    Ok(CompensateReport { csv, targets: rows.len(), unreachable })
+    Ok(CompensateReport { table, csv, targets: rows.len(), unreachable })
 }
 
 /// One compensated target.
@@ -247,29 +253,27 @@ pub fn compensate(model: &RobotFile, nominal: Option<&RobotFile>, targets: &[Iso
         .collect()
 }
 
-/// The CSV text of `rows`: joint values in degrees, the model's position and orientation errors,
-/// the nominal target.
-pub fn to_csv(rows: &[Compensated]) -> Result<String, String> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let mut header: Vec<String> = (1..=6).map(|i| format!("q{i}_deg")).collect();
-    header.push("model_error_mm".into());
-    header.push("model_error_deg".into());
-    header.extend(TARGET_COLUMNS.iter().map(|c| format!("nominal_{c}")));
-    w.write_record(&header).map_err(|e| e.to_string())?;
-    for r in rows {
-        let mut rec: Vec<String> = match r.q {
-            Some(q) => q.iter().map(|v| format!("{}", v.to_degrees())).collect(),
-            None => vec!["unreachable".into(); 6],
-        };
-        rec.push(format!("{:e}", r.error_mm));
-        rec.push(format!("{:e}", r.error_deg));
-        match &r.nominal_target {
-            Some(t) => {
-                rec.extend([t.x, t.y, t.z, t.alpha.to_degrees(), t.beta.to_degrees(), t.gamma.to_degrees()].iter().map(|v| format!("{v}")))
-            }
-            None => rec.extend(std::iter::repeat_n(String::new(), 6)),
-        }
-        w.write_record(&rec).map_err(|e| e.to_string())?;
-    }
-    String::from_utf8(w.into_inner().map_err(|e| e.to_string())?).map_err(|e| e.to_string())
+/// The table of `rows`: the joint values `q1_deg` ... `q6_deg` (null where the model cannot reach
+/// the target), the model's errors `model_error_mm` and `model_error_deg` at them (NaN there), and
+/// the nominal model's tool frame `nominal_x_mm` ... `nominal_gamma_deg` (null without a nominal
+/// model or a reached target).
+pub fn frame(rows: &[Compensated]) -> std::io::Result<Frame> {
+    let optional = |name: String, v: &dyn Fn(&Compensated) -> Option<f64>| Column::new(name.into(), rows.iter().map(v).collect::<Vec<_>>());
+    let mut columns: Vec<Column> = (0..JOINTS).map(|i| optional(JOINT_COLUMNS[i].into(), &|r| r.q.map(|q| q[i].to_degrees()))).collect();
+    let number = |name: &str, v: fn(&Compensated) -> f64| Column::new(name.into(), rows.iter().map(v).collect::<Vec<f64>>());
+    columns.extend([number("model_error_mm", |r| r.error_mm), number("model_error_deg", |r| r.error_deg)]);
+    let nominal = |r: &Compensated| {
+        r.nominal_target.as_ref().map(|t| [t.x, t.y, t.z, t.alpha.to_degrees(), t.beta.to_degrees(), t.gamma.to_degrees()])
+    };
+    columns.extend(TARGET_COLUMNS.iter().enumerate().map(|(k, c)| optional(format!("nominal_{c}"), &|r| nominal(r).map(|v| v[k]))));
+    crate::io::table::frame("compensate", columns)
+}
+
+/// How the table of [`frame`] is written as CSV: a joint value the model cannot reach as
+/// `unreachable`, the model's errors in scientific notation, a missing nominal target as an empty
+/// field.
+pub fn csv_format() -> CsvFormat {
+    CsvFormat::new(FieldFormat::decimal(""))
+        .with(JOINT_COLUMNS, FieldFormat::decimal("unreachable"))
+        .with(["model_error_mm", "model_error_deg"], FieldFormat::scientific(""))
 }

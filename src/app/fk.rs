@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use polars::prelude::Column;
 
 use super::Error;
-use crate::io::table::Frame;
+use crate::io::table::{CsvFormat, FieldFormat, Frame};
 use crate::robot::JOINTS;
 use crate::robot::file::RobotFile;
 use crate::robot::fk::{self, FkRow};
@@ -43,7 +43,7 @@ pub fn run(spec: &FkSpec) -> Result<FkReport, Error> {
     let file = RobotFile::load(&spec.robot)?;
     let joints = fk::read_joints(&spec.joints)?;
     let table = frame(&fk::fk_rows(&file, &joints)).map_err(Error::io(&spec.joints))?;
-    let csv = crate::io::table::csv_text(&table, "null").map_err(Error::io(&spec.joints))?;
+    let csv = crate::io::table::csv_text(&table, &CsvFormat::new(FieldFormat::decimal("null"))).map_err(Error::io(&spec.joints))?;
     if let Some(out) = &spec.out {
         crate::io::out_dir::write_output_file("--out", out, csv.as_bytes())?;
     }

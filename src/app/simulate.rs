@@ -4,12 +4,17 @@
 use std::path::{Path, PathBuf};
 
 use super::Error;
-use crate::calibrate::simulate::{read_spec, to_csv_with};
+use crate::calibrate::simulate::{measurement_file, read_spec};
+use crate::io::table::Frame;
 
 /// What `simulate-measurements` made.
 #[derive(Clone, Debug)]
 pub struct Simulated {
-    /// The measurement file's text (the `calibrate` CSV layout).
+    /// The measurement table, a row per target measured at a pose (columns in
+    /// [`crate::calibrate::simulate::frame_with`]).
+    pub table: Frame,
+    /// The measurement file's text (the `calibrate` CSV layout): its `#` header lines, then the
+    /// table.
     pub csv: String,
     /// Data rows (one per target measured at a pose).
     pub rows: usize,
@@ -24,8 +29,8 @@ pub fn run(spec: &Path, out: Option<&Path>) -> Result<Simulated, Error> {
     let _inputs = crate::io::inputs::Ledger::open();
     let stem = crate::io::names::of_file(spec)?;
     let s = read_spec(spec).map_err(|e| spec_error(spec, &e))?;
-    let csv = to_csv_with(&s.spec, s.orientation.as_ref());
-    let rows = csv.lines().filter(|l| !l.starts_with('#')).count().saturating_sub(1);
+    let (table, csv) = measurement_file(&s.spec, s.orientation.as_ref()).map_err(Error::io(spec))?;
+    let rows = table.height();
     let written = match out {
         Some(out) => {
             std::fs::create_dir_all(out).map_err(|e| Error::input(format!("{}: --out", out.display()), e.to_string()))?;
@@ -36,7 +41,7 @@ pub fn run(spec: &Path, out: Option<&Path>) -> Result<Simulated, Error> {
         }
         None => None,
     };
-    Ok(Simulated { csv, rows, written })
+    Ok(Simulated { table, csv, rows, written })
 }
 
 /// The simulation file's one-line error (`<file>: <key>: <what is wrong>`) as an input error naming

@@ -6,10 +6,13 @@
 //! the file says `# simulated = true`.
 
 use nalgebra::Vector3;
+use polars::prelude::Column;
 use rand_distr::{Distribution, Normal};
 
+use crate::io::table::{CsvFormat, FieldFormat, Frame};
 use crate::robot::coupling::JointCoupling;
-use crate::robot::{Joints, KinState, RobotModel, UnmodelledSpec, VirtualRobot, XyzZyx, forward};
+use crate::robot::fk::JOINT_COLUMNS;
+use crate::robot::{JOINTS, Joints, KinState, RobotModel, UnmodelledSpec, VirtualRobot, XyzZyx, forward};
 
 /// What to simulate.
 #[derive(Clone, Debug)]
@@ -239,31 +242,39 @@ pub fn to_csv(spec: &SimulationSpec) -> String {
 
 /// [`to_csv`] with the columns `quat_w, quat_x, quat_y, quat_z` of `orientation`'s readings.
 pub fn to_csv_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> String {
-    let mut s = String::from("# simulated = true\n");
-    s.push_str(&format!("# format = {}\n", super::measurements::FORMAT));
+    // Its columns are strings and floats, each of one name and the same length: the table has a text.
+    measurement_file(spec, orientation).map(|(_, text)| text).expect("a table of strings and floats has a CSV text")
+}
+
+/// The measurement file of `spec` (with `orientation`'s readings): its table ([`frame_with`]) and
+/// its text, the header lines (`# simulated = true`, the format, the spec's comments) and then the
+/// table as CSV (every number written to round-trip exactly).
+pub fn measurement_file(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> std::io::Result<(Frame, String)> {
+    let table = frame_with(spec, orientation)?;
+    let mut text = format!("# simulated = true\n# format = {}\n", super::measurements::FORMAT);
     for c in &spec.comments {
-        s.push_str(&format!("# {c}\n"));
+        text.push_str(&format!("# {c}\n"));
     }
-    s.push_str("pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm");
-    s.push_str(if orientation.is_some() { ",quat_w,quat_x,quat_y,quat_z\n" } else { "\n" });
-    for r in rows_with(spec, orientation) {
-        let q: Vec<String> = r.q_controller.iter().map(|v| format!("{}", v.to_degrees())).collect();
-        s.push_str(&format!(
-            "{},{},{},{},{},{},{}",
-            r.pose,
-            r.session,
-            r.target,
-            q.join(","),
-            r.measured_mm.x,
-            r.measured_mm.y,
-            r.measured_mm.z
-        ));
-        if let Some(o) = r.orientation {
-            s.push_str(&format!(",{},{},{},{}", o.w, o.i, o.j, o.k));
-        }
-        s.push('\n');
+    text.push_str(&crate::io::table::csv_text(&table, &CsvFormat::new(FieldFormat::decimal("")))?);
+    Ok((table, text))
+}
+
+/// The table of `spec`'s rows ([`rows_with`]): the labels `pose`, `session` and `target`, the
+/// controller's joint values `q1_deg` ... `q6_deg`, the measured position `x_mm`, `y_mm`, `z_mm`
+/// in the session's frame and, with `orientation`, the probe's reading `quat_w`, `quat_x`,
+/// `quat_y`, `quat_z`.
+pub fn frame_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> std::io::Result<Frame> {
+    let rows = rows_with(spec, orientation);
+    let label = |name: &str, v: fn(&SimulatedRow) -> &str| Column::new(name.into(), rows.iter().map(v).collect::<Vec<&str>>());
+    let number = |name: &str, v: &dyn Fn(&SimulatedRow) -> Option<f64>| Column::new(name.into(), rows.iter().map(v).collect::<Vec<_>>());
+    let mut columns = vec![label("pose", |r| &r.pose), label("session", |r| &r.session), label("target", |r| &r.target)];
+    columns.extend((0..JOINTS).map(|i| number(JOINT_COLUMNS[i], &|r| Some(r.q_controller[i].to_degrees()))));
+    columns.extend(["x_mm", "y_mm", "z_mm"].iter().enumerate().map(|(k, c)| number(c, &|r| Some(r.measured_mm[k]))));
+    if orientation.is_some() {
+        let quat = ["quat_w", "quat_x", "quat_y", "quat_z"];
+        columns.extend(quat.iter().enumerate().map(|(k, c)| number(c, &|r| r.orientation.map(|o| [o.w, o.i, o.j, o.k][k]))));
     }
-    s
+    crate::io::table::frame("measurements", columns)
 }
 
 /// The shipped example (`docs/calibrate/example_measurements.csv`): the IRB 120 of `irb120` (a

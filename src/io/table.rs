@@ -32,13 +32,67 @@ pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
     DataFrame::new_infer_height(columns).map_err(|e| in_table(&e))
 }
 
-/// The CSV text of `frame`: a header line of its column names, then a line per row; a float is
-/// written in Rust's shortest decimal that reads back to the same bits, a boolean `true`/`false`,
-/// a null as `null`, a string as itself, quoted as RFC 4180 asks when it holds a comma, a double
-/// quote or a line break (the frame's column types decide every field: no column is named here).
-/// A column name is quoted by the same rule.
-pub fn csv_text(frame: &DataFrame, null: &str) -> std::io::Result<String> {
-    let fields: Vec<Vec<String>> = frame.columns().iter().map(|c| column_text(c, null)).collect::<std::io::Result<_>>()?;
+/// How [`csv_text`] writes the fields of one column: the text of a null, and the notation of a
+/// float (both notations read back to the same bits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FieldFormat {
+    /// The text of a null field.
+    pub null: &'static str,
+    /// `true`: a float in Rust's shortest scientific notation (`{:e}`: `1.5e6`, `3e-1`); `false`:
+    /// in its shortest decimal (`{}`: `1500000`, `0.3`).
+    pub scientific: bool,
+}
+
+impl FieldFormat {
+    /// Floats in the shortest decimal, a null written as the text `null` given.
+    pub const fn decimal(null: &'static str) -> Self {
+        Self { null, scientific: false }
+    }
+
+    /// Floats in the shortest scientific notation, a null written as the text `null` given.
+    pub const fn scientific(null: &'static str) -> Self {
+        Self { null, scientific: true }
+    }
+}
+
+/// The CSV layout of a frame, passed beside it to [`csv_text`]: one [`FieldFormat`] for every
+/// column, and columns named with formats of their own.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CsvFormat {
+    every: FieldFormat,
+    columns: Vec<(String, FieldFormat)>,
+}
+
+impl CsvFormat {
+    /// Every column in `every`.
+    pub fn new(every: FieldFormat) -> Self {
+        Self { every, columns: Vec::new() }
+    }
+
+    /// `self` with the columns `names` in `format`.
+    pub fn with<S: Into<String>>(mut self, names: impl IntoIterator<Item = S>, format: FieldFormat) -> Self {
+        self.columns.extend(names.into_iter().map(|n| (n.into(), format)));
+        self
+    }
+
+    /// The format of the column `name`.
+    fn of(&self, name: &str) -> FieldFormat {
+        self.columns.iter().rev().find(|(n, _)| n == name).map_or(self.every, |(_, f)| *f)
+    }
+}
+
+/// The CSV text of `frame` laid out by `format`: a header line of its column names, then a line
+/// per row; a float is written in Rust's shortest decimal (or scientific notation) that reads back
+/// to the same bits, a boolean `true`/`false`, a null as its column's null text, a string as
+/// itself, quoted as RFC 4180 asks when it holds a comma, a double quote or a line break (the
+/// frame's column types decide every field; the format names no column the frame lacks). A column
+/// name is quoted by the same rule.
+pub fn csv_text(frame: &DataFrame, format: &CsvFormat) -> std::io::Result<String> {
+    if let Some((name, _)) = format.columns.iter().find(|(n, _)| frame.column(n).is_err()) {
+        return Err(err(format!("the CSV format names the column `{name}`, which the table does not have")));
+    }
+    let fields: Vec<Vec<String>> =
+        frame.columns().iter().map(|c| column_text(c, format.of(c.name().as_str()))).collect::<std::io::Result<_>>()?;
     let mut out = frame.get_column_names().iter().map(|n| quoted(n.as_str())).collect::<Vec<_>>().join(",");
     out.push('\n');
     for row in 0..frame.height() {
@@ -49,12 +103,13 @@ pub fn csv_text(frame: &DataFrame, null: &str) -> std::io::Result<String> {
     Ok(out)
 }
 
-/// Each field of `column` as CSV text (see [`csv_text`]).
-fn column_text(column: &Column, null: &str) -> std::io::Result<Vec<String>> {
+/// Each field of `column` as CSV text in `format` (see [`csv_text`]).
+fn column_text(column: &Column, format: FieldFormat) -> std::io::Result<Vec<String>> {
     let column = column.as_materialized_series();
     (0..column.len())
         .map(|i| match column.get(i).map_err(err)? {
-            AnyValue::Null => Ok(null.to_string()),
+            AnyValue::Null => Ok(format.null.to_string()),
+            AnyValue::Float64(v) if format.scientific => Ok(format!("{v:e}")),
             AnyValue::Float64(v) => Ok(format!("{v}")),
             AnyValue::Boolean(v) => Ok(v.to_string()),
             AnyValue::String(v) => Ok(quoted(v)),
@@ -105,7 +160,7 @@ pub fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<St
 mod tests {
     use polars::prelude::Column;
 
-    use super::{csv_text, frame};
+    use super::{CsvFormat, FieldFormat, csv_text, frame};
 
     #[test]
     fn csv_text_writes_each_field_by_its_column_type() {
@@ -115,7 +170,7 @@ mod tests {
             Column::new("ok".into(), [true, false, true]),
             Column::new("s".into(), ["a", "b c", ""]),
         ];
-        let text = csv_text(&frame("t", columns).unwrap(), "null").unwrap();
+        let text = csv_text(&frame("t", columns).unwrap(), &CsvFormat::new(FieldFormat::decimal("null"))).unwrap();
         assert_eq!(text, "x,n,ok,s\n0.30000000000000004,3,true,a\n-0,null,false,b c\n1500000,-7,true,\n");
         // Every float reads back to the bits it was written from.
         let field: f64 = text.lines().nth(1).unwrap().split(',').next().unwrap().parse().unwrap();
@@ -127,7 +182,7 @@ mod tests {
         let strings = ["plain", "a,b", "say \"hi\"", "two\nlines", "cr\r", ""];
         let columns = vec![Column::new("s".into(), strings), Column::new("n,m".into(), [1_i64, 2, 3, 4, 5, 6])];
         let table = frame("t", columns).unwrap();
-        let text = csv_text(&table, "null").unwrap();
+        let text = csv_text(&table, &CsvFormat::new(FieldFormat::decimal("null"))).unwrap();
         assert_eq!(text, "s,\"n,m\"\nplain,1\n\"a,b\",2\n\"say \"\"hi\"\"\",3\n\"two\nlines\",4\n\"cr\r\",5\n,6\n");
         // An RFC 4180 reader gives back the header and every string as it was.
         let mut reader = csv::Reader::from_reader(text.as_bytes());
@@ -139,7 +194,32 @@ mod tests {
     #[test]
     fn csv_text_names_a_column_it_cannot_write() {
         let columns = vec![Column::new("day".into(), [1_i32, 2])];
-        let e = csv_text(&frame("t", columns).unwrap(), "").unwrap_err();
+        let e = csv_text(&frame("t", columns).unwrap(), &CsvFormat::new(FieldFormat::decimal(""))).unwrap_err();
         assert!(e.to_string().contains("column `day`"), "{e}");
+    }
+
+    #[test]
+    fn csv_text_writes_each_column_in_its_own_format() {
+        let columns = vec![
+            Column::new("q".into(), [Some(1.5), None, Some(-0.0)]),
+            Column::new("e".into(), [1.5e-9, f64::NAN, 0.1 + 0.2]),
+            Column::new("n".into(), [None, Some(2.0), None]),
+        ];
+        let format = CsvFormat::new(FieldFormat::decimal(""))
+            .with(["q"], FieldFormat::decimal("unreachable"))
+            .with(["e"], FieldFormat::scientific(""));
+        let text = csv_text(&frame("t", columns).unwrap(), &format).unwrap();
+        assert_eq!(text, "q,e,n\n1.5,1.5e-9,\nunreachable,NaN,2\n-0,3.0000000000000004e-1,\n");
+        // A float in scientific notation reads back to the bits it was written from.
+        let field: f64 = text.lines().nth(3).unwrap().split(',').nth(1).unwrap().parse().unwrap();
+        assert_eq!(field.to_bits(), (0.1_f64 + 0.2).to_bits());
+    }
+
+    #[test]
+    fn csv_text_refuses_a_format_naming_a_column_the_table_lacks() {
+        let columns = vec![Column::new("x".into(), [1.0])];
+        let format = CsvFormat::new(FieldFormat::decimal("null")).with(["y"], FieldFormat::scientific(""));
+        let e = csv_text(&frame("t", columns).unwrap(), &format).unwrap_err();
+        assert!(e.to_string().contains("column `y`"), "{e}");
     }
 }
