@@ -212,6 +212,40 @@ if [ $# -eq 0 ] || [[ " $* " == *" table6-placement "* ]]; then
     page table6-placement "\`cargo run --release --example table6_placement\`" <"$scratch/table6-placement.stdout"
 fi
 
+# The speed figures of docs/benchmarks.md: the kernels' criterion medians and two whole studies,
+# with the machine and its load (speed figures hold for that machine and load only).
+if [ $# -eq 0 ] || [[ " $* " == *" benchmarks "* ]]; then
+    echo "regenerate: benchmarks: cargo bench --bench core; calsim run (TriCal, SPMS)"
+    start=$SECONDS
+    load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
+    cargo bench --locked --bench core 2>/dev/null | grep -E '^[^ ]|time:' >"$scratch/bench-core.stdout"
+    for scenario in irb120_trical er20c10_spms; do
+        /usr/bin/time -f "$scenario: %e s wall, %U s user, %S s system, %M KB peak RSS" \
+            "$calsim" run "scenarios/$scenario.toml" --no-plots --no-recording --out "$scratch/bench-$scenario" \
+            >"$scratch/bench-$scenario.stdout" 2>>"$scratch/bench-commands.txt" || [ $? -eq 1 ]
+        tail -n 1 "$scratch/bench-$scenario.stdout" >>"$scratch/bench-commands.txt"
+    done
+    {
+        echo "<!-- made by scripts/docs/regenerate.sh: do not edit -->"
+        echo "*Made by \`cargo bench --bench core\` and \`/usr/bin/time calsim run scenarios/<scenario>.toml --no-plots --no-recording\` at commit $commit in $((SECONDS - start)) s.*"
+        echo
+        echo "Machine: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores; load average (1, 5, 15 min) before: $load_before, after: $(cut -d' ' -f1-3 /proc/loadavg)."
+        echo
+        echo "## Kernels (criterion: lower bound, median, upper bound)"
+        echo
+        echo '```text'
+        cat "$scratch/bench-core.stdout"
+        echo '```'
+        echo
+        echo "## Whole studies (release build, default threads; the study's own timing line after each)"
+        echo
+        echo '```text'
+        cat "$scratch/bench-commands.txt"
+        echo '```'
+    } >"docs/generated/benchmarks.md"
+    echo "regenerate: benchmarks: docs/generated/benchmarks.md"
+fi
+
 # The README's quick start timed from a fresh clone and an empty target directory (a cold build).
 if [ $# -eq 0 ] || [[ " $* " == *" first-hour "* ]]; then
     bash scripts/docs/first_hour.sh
