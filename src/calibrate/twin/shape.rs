@@ -325,8 +325,10 @@ struct PoseSums {
     w: Vec<DMatrix<f64>>,
     /// Per pose and coordinate, the sum of its rows of `B` (basis x 3 poses, column `3 p + a`).
     b_sum: DMatrix<f64>,
-    /// Per pose, the sum over its rows of `B_r^T B_r` (basis x basis).
-    b_outer: Vec<DMatrix<f64>>,
+    /// The sum of `B_r^T B_r` over the rows of every pose, and over those of the poses of two or
+    /// more points (basis x basis each): a pose's own square enters the bins only in these two
+    /// sums (the mean square of a point; the pairs within a pose).
+    b_outer: [DMatrix<f64>; 2],
 }
 
 impl PoseSums {
@@ -338,10 +340,12 @@ impl PoseSums {
             l_sq: vec![0.0; poses],
             w: vec![DMatrix::zeros(k, poses); joints],
             b_sum: DMatrix::zeros(k, 3 * poses),
-            b_outer: vec![DMatrix::zeros(k, k); poses],
+            b_outer: [basis.tr_mul(basis), DMatrix::zeros(k, k)],
         };
-        for (i, &p) in pose_of.iter().enumerate() {
+        for &p in pose_of {
             s.count[p] += 1;
+        }
+        for (i, &p) in pose_of.iter().enumerate() {
             for a in 0..3 {
                 let r = 3 * i + a;
                 let b = basis.row(r);
@@ -355,9 +359,10 @@ impl PoseSums {
                 }
                 for c in 0..k {
                     s.b_sum[(c, 3 * p + a)] += b[c];
-                    for d in 0..k {
-                        s.b_outer[p][(c, d)] += b[c] * b[d];
-                    }
+                }
+                if s.count[p] >= 2 {
+                    let b = b.transpose();
+                    s.b_outer[1].ger(1.0, &b, &b, 1.0);
                 }
             }
         }
@@ -405,9 +410,15 @@ fn predicted(c: &Correlation, l: f64, sums: &PoseSums, features: &Features, q: &
             }
         }
         let cross: f64 = (0..joints).map(|j| sums.w[j].column(p).iter().zip(e[j].column(p).iter()).map(|(x, y)| x * y).sum::<f64>()).sum();
-        let outer: f64 = gram.iter().zip(sums.b_outer[p].iter()).map(|(x, y)| x * y).sum();
-        own[p] = sums.l_sq[p] * phi_sq[p] - 2.0 * cross + outer;
+        own[p] = sums.l_sq[p] * phi_sq[p] - 2.0 * cross;
     }
+    // The squares' last term, `<K, sum_r B_r^T B_r>`, over every pose and over the poses of two
+    // or more points.
+    let outer = sums.b_outer.each_ref().map(|b| gram.iter().zip(b.iter()).map(|(x, y)| x * y).sum::<f64>());
+    let own = Own {
+        every: own.iter().sum::<f64>() + outer[0],
+        repeated: (0..c.poses).filter(|&p| sums.count[p] >= 2).map(|p| own[p]).sum::<f64>() + outer[1],
+    };
     let column_dot = |m: &DMatrix<f64>, r: usize, o: &DMatrix<f64>, s: usize| -> f64 { m.column(r).dot(&o.column(s)) };
     let dot = |p: usize, s: usize| -> f64 {
         let phi_ps = phi_t.column(p).dot(&phi_t.column(s));
@@ -423,19 +434,28 @@ fn predicted(c: &Correlation, l: f64, sums: &PoseSums, features: &Features, q: &
     bin_products(c, dot, &own, &sums.count, n)
 }
 
+/// The squares of the field's values summed over the points of every pose, and over those of the
+/// poses of two or more points.
+struct Own {
+    every: f64,
+    repeated: f64,
+}
+
 /// Per bin, the mean product of the field's values over its pairs of points, and the mean squared
 /// value of a point: `dot(p, s)` the product of the values summed per pose `p` and those summed
-/// per pose `s`, `own` their squares summed per pose, `count` the points per pose, `n` the points.
-fn bin_products(c: &Correlation, dot: impl Fn(usize, usize) -> f64, own: &[f64], count: &[usize], n: usize) -> (Vec<f64>, f64) {
-    let mean_sq = own.iter().sum::<f64>() / n.max(1) as f64;
+/// per pose `s`, `own` their squares summed, `count` the points per pose, `n` the points.
+fn bin_products(c: &Correlation, dot: impl Fn(usize, usize) -> f64, own: &Own, count: &[usize], n: usize) -> (Vec<f64>, f64) {
+    let mean_sq = own.every / n.max(1) as f64;
     let products = c
         .bins
         .iter()
         .map(|b| {
             let (product, pairs) = if b.same_pose {
-                (0..c.poses)
+                // The pairs within a pose: half the square of its sum less its squares.
+                let (squares, pairs) = (0..c.poses)
                     .filter(|&p| count[p] >= 2)
-                    .fold((0.0, 0usize), |(x, n), p| (x + 0.5 * (dot(p, p) - own[p]), n + count[p] * (count[p] - 1) / 2))
+                    .fold((0.0, 0usize), |(x, n), p| (x + dot(p, p), n + count[p] * (count[p] - 1) / 2));
+                (0.5 * (squares - own.repeated), pairs)
             } else {
                 b.pair_sample
                     .iter()
@@ -566,6 +586,7 @@ mod tests {
         let dot = |p: usize, s: usize| -> f64 {
             sum[p * width..(p + 1) * width].iter().zip(&sum[s * width..(s + 1) * width]).map(|(x, y)| x * y).sum()
         };
+        let own = Own { every: own.iter().sum(), repeated: (0..c.poses).filter(|&p| count[p] >= 2).map(|p| own[p]).sum() };
         bin_products(c, dot, &own, &count, n)
     }
 
