@@ -119,6 +119,7 @@ impl Subset {
 }
 
 fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Joints], hat_basis: &DMatrix<f64>) -> Correlation {
+    use rayon::prelude::*;
     let n = pose_of.len();
     let poses = q.len();
     let k = hat_basis.ncols();
@@ -199,7 +200,8 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
             pairs.push((d, p as u32, s as u32));
         }
     }
-    pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    // The order is total (ties by the poses' numbers): the parallel sort gives the serial one's.
+    pairs.par_sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
     let total = pairs.len();
     let mut from = 0usize;
     let mut low = 0.0;
@@ -213,14 +215,16 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
         let mut b = new_bin(label, false);
         let stride = (to - from).div_ceil(PAIR_SAMPLE).max(1);
         b.sample = pairs[from..to].iter().step_by(stride).map(|&(_, p, s)| (p, s)).collect();
-        for &(d, p, s) in &pairs[from..to] {
+        // The pairs' tr H_ij side by side, summed below in the pairs' order.
+        let traces: Vec<f64> = pairs[from..to].par_iter().map(|&(_, p, s)| dot_q(p as usize, s as usize)).collect();
+        for (&(d, p, s), trace) in pairs[from..to].iter().zip(traces) {
             let (p, s) = (p as usize, s as usize);
             let prod: f64 = (0..3).map(|a| r_sum[p][a] * r_sum[s][a]).sum();
             let n_pairs = count[p] * count[s];
             b.product += prod;
             b.pairs += n_pairs;
             b.pose_pairs += 1;
-            b.trace += dot_q(p, s);
+            b.trace += trace;
             for x in [p, s] {
                 b.per_pose[x].0 += prod;
                 b.per_pose[x].1 += n_pairs;
