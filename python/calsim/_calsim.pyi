@@ -138,6 +138,9 @@ class PlanReport(TypedDict):
     o1_random: float
     prediction: Prediction
     frames: dict[str, ArrowFrame]
+    table: ArrowFrame
+    tour: ArrowFrame
+    simulated: ArrowFrame | None
     seconds: float
     warnings: list[str]
     unidentifiable: list[str]

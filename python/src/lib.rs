@@ -715,7 +715,7 @@ fn plan<'py>(
         twin: p.twin,
         seconds: r.seconds,
     };
-    let d = shared.dict(py, r.frames, warnings)?;
+    let d = shared.dict(py, r.frames, r.files, warnings)?;
     d.set_item("unidentifiable", p.unidentifiable.iter().map(|u| u.name.clone()).collect::<Vec<_>>())?;
     Ok(d)
 }
@@ -738,8 +738,15 @@ struct PlanShared<'a> {
 
 impl PlanShared<'_> {
     /// The plan's report with these keys, its tables (`frames`: `plan`, `search`, `comparison`
-    /// ..., the tables written, by stem) and `warnings`.
-    fn dict<'py>(&self, py: Python<'py>, tables: Vec<(String, Frame)>, warnings: Vec<String>) -> PyResult<Bound<'py, PyDict>> {
+    /// ..., the tables written, by stem), the tables of its files (`table`: `poses.csv`, `tour`,
+    /// `simulated` or None) and `warnings`.
+    fn dict<'py>(
+        &self,
+        py: Python<'py>,
+        tables: Vec<(String, Frame)>,
+        files: app::plan::PlanFiles,
+        warnings: Vec<String>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("instrument", self.instrument)?;
         d.set_item("dest", self.dest)?;
@@ -758,6 +765,9 @@ impl PlanShared<'_> {
         prediction.set_item("twin", self.twin)?;
         d.set_item("prediction", prediction)?;
         d.set_item("frames", frames(py, by_stem(tables))?)?;
+        d.set_item("table", ArrowFrame(files.poses))?;
+        d.set_item("tour", ArrowFrame(files.tour))?;
+        d.set_item("simulated", files.simulated.map(ArrowFrame))?;
         d.set_item("seconds", self.seconds)?;
         d.set_item("warnings", warnings)?;
         Ok(d)
@@ -788,7 +798,7 @@ fn plan_device<'py>(py: Python<'py>, spec: &app::plan::PlanSpec, progress: Optio
         twin: false,
         seconds: r.seconds,
     };
-    let d = shared.dict(py, r.frames, warnings)?;
+    let d = shared.dict(py, r.frames, r.files, warnings)?;
     d.set_item("unidentifiable", p.unidentifiable.clone())?;
     Ok(d)
 }
