@@ -231,15 +231,19 @@ class CalibrationResult(Results):
     """What a calibration did: the report directory (``tables['points']``, ``models``,
     ``parameters``, ``bases``, ``tools``, ``correlation``, the figures, ``summary.md``), the model
     chosen by its held-out error (``model``: ``offsets``, ``geometric`` or ``compliance``), the
-    CLI's report (``report``) and, with ``plan_worlds``, the plan's comparison (``plan``: the
-    measured held-out statistic beside the simulated one with its P10-P90, and ``inside``)."""
+    CLI's report (``report``) and, with ``plan_worlds``, the plans' comparison (``plan``: a row
+    per plan in the order of ``plan.md``'s table: ``plan``, ``scenario`` (what each world draws),
+    ``statistic``, the measured held-out figure ``measured_mm`` beside the simulated
+    ``simulated_p10_mm``, ``simulated_mm`` (the median) and ``simulated_p90_mm`` over ``worlds``,
+    and ``inside``; None without a plan)."""
 
     def __init__(self, report: CalibrateReport) -> None:
         super().__init__(report["dest"])
         self.dest: Path = Path(report["dest"])
         self.model: str = report["model"]
         self.report: str = report["report"]
-        self.plan: dict[str, Any] | None = None if report["plan"] is None else dict(report["plan"])
+        plan = report["plan"]
+        self.plan: pl.DataFrame | None = None if plan is None else pl.DataFrame(plan)
 
     @property
     def robot_file(self) -> Path:

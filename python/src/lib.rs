@@ -586,21 +586,7 @@ fn calibrate<'py>(
     d.set_item("dest", &r.dir)?;
     d.set_item("model", c.models[c.chosen].kind.map_or("before", |k| k.name()))?;
     d.set_item("report", calsim::calibrate::report::terminal(c, &r.dir))?;
-    match &r.plan {
-        None => d.set_item("plan", py.None())?,
-        Some(p) => {
-            let plan = PyDict::new(py);
-            plan.set_item("scenario", &p.scenario)?;
-            plan.set_item("statistic", p.statistic.name())?;
-            plan.set_item("measured_mm", p.measured_mm)?;
-            plan.set_item("simulated_p10_mm", p.simulated_mm[0])?;
-            plan.set_item("simulated_mm", p.simulated_mm[1])?;
-            plan.set_item("simulated_p90_mm", p.simulated_mm[2])?;
-            plan.set_item("worlds", p.worlds)?;
-            plan.set_item("inside", p.inside)?;
-            d.set_item("plan", plan)?;
-        }
-    }
+    d.set_item("plan", r.plan_table.map(ArrowFrame))?;
     Ok(d)
 }
 

@@ -102,10 +102,20 @@ def test_calibrate_from_a_dataframe_gives_the_same_tables_as_the_file(calibratio
 
 
 def test_calibrate_with_a_plan_sets_the_measured_median_beside_the_simulated(tmp_path: Path) -> None:
-    c = calsim.calibrate(ROBOT, MEASUREMENTS, out=tmp_path, plan_worlds=2, plan_noise_mm=0.012, plots=False)
-    assert c.plan is not None and c.plan["worlds"] == 2
-    assert c.plan["simulated_p10_mm"] <= c.plan["simulated_mm"] <= c.plan["simulated_p90_mm"]
-    assert c.plan["inside"] == (c.plan["simulated_p10_mm"] <= c.plan["measured_mm"] <= c.plan["simulated_p90_mm"])
+    c = calsim.calibrate(ROBOT, MEASUREMENTS, out=tmp_path, plan_worlds=2, plan_noise_mm=0.012, plan_with="all", plots=False)
+    assert c.plan is not None and c.plan["plan"].to_list() == ["noise only", "twin", "residual as noise"]
+    shown = (c.dest / "plan.md").read_text()
+    assert c.plan["measured_mm"].n_unique() == 1 and f"measured ({c.plan['measured_mm'][0]:.4f} mm)" in shown
+    for row in c.plan.iter_rows(named=True):
+        assert row["worlds"] == 2 and row["statistic"] == "median"
+        assert row["simulated_p10_mm"] <= row["simulated_mm"] <= row["simulated_p90_mm"]
+        assert row["inside"] == (row["simulated_p10_mm"] <= row["measured_mm"] <= row["simulated_p90_mm"])
+        # The row as plan.md shows it.
+        p10, p50, p90 = row["simulated_p10_mm"], row["simulated_mm"], row["simulated_p90_mm"]
+        inside = "yes" if row["inside"] else "no"
+        assert f"| {row['plan']} | {row['scenario']} | 2 | {p10:.4f} | {p50:.4f} | {p90:.4f} | {inside} |" in shown, row
+    alone = calsim.calibrate(ROBOT, MEASUREMENTS, out=tmp_path / "alone", plan_worlds=2, plan_noise_mm=0.012, plots=False)
+    assert alone.plan is not None and alone.plan["plan"].to_list() == ["twin"]
 
 
 @pytest.mark.parametrize(
