@@ -10,7 +10,8 @@ fn main() -> Result<(), String> {
     let spec = calsim::calibrate::simulate::example_spec(&robot)?;
     let out = root.join("docs/calibrate/example_measurements.csv");
     std::fs::create_dir_all(out.parent().expect("a parent")).map_err(|e| e.to_string())?;
-    std::fs::write(&out, calsim::calibrate::simulate::to_csv(&spec)).map_err(|e| format!("{}: {e}", out.display()))?;
+    let text = calsim::calibrate::simulate::to_csv(&spec).map_err(|e| format!("{}: {e}", out.display()))?;
+    std::fs::write(&out, text).map_err(|e| format!("{}: {e}", out.display()))?;
     println!("wrote {}", out.display());
     Ok(())
 }

@@ -170,7 +170,7 @@ fn main() -> Result<(), String> {
             }
             v => return Err(format!("{v}: as-shipped, no-outlier or pure")),
         }
-        let text = calsim::calibrate::simulate::to_csv(&spec);
+        let text = calsim::calibrate::simulate::to_csv(&spec).map_err(|e| e.to_string())?;
         if !(spec.lines.is_empty() && spec.coupling.is_none() && spec.learned.is_none() && spec.repeats_per_session == 0)
             || text != process_file(&spec, calsim::seeds::stream(spec.seed, calsim::seeds::calibrate::SIMULATED_NOISE))
         {

@@ -11,7 +11,7 @@ fn main() -> Result<(), String> {
         outliers: vec![],
         ..calsim::calibrate::simulate::example_spec(&robot)?
     };
-    std::fs::write(&out, calsim::calibrate::simulate::to_csv(&spec)).map_err(|e| e.to_string())?;
+    std::fs::write(&out, calsim::calibrate::simulate::to_csv(&spec).map_err(|e| e.to_string())?).map_err(|e| e.to_string())?;
     let m = calsim::calibrate::measurements::read(&out, &robot).map_err(|e| e.to_string())?;
     let opts = calsim::calibrate::Options { plots: false, ..Default::default() };
     let t0 = Instant::now();

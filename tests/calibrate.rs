@@ -50,7 +50,7 @@ fn spec(truth: RobotModel, robot: &RobotFile, noise_mm: f64, outliers: Vec<(usiz
 
 /// The measurement file of `spec`, read back for `robot`.
 fn measured(spec: &SimulationSpec, robot: &RobotFile) -> measurements::Measurements {
-    measurements::parse(Path::new("simulated.csv"), &to_csv(spec), robot).unwrap()
+    measurements::parse(Path::new("simulated.csv"), &to_csv(spec).unwrap(), robot).unwrap()
 }
 
 /// A target's position in the calibrated frame 6 when d6 and theta_offs6 are kept nominal: the
@@ -216,7 +216,7 @@ fn the_shipped_example_and_its_report_are_reproduced() {
     let spec = calsim::calibrate::simulate::example_spec(&robot).unwrap();
     let shipped = std::fs::read_to_string(root.join("docs/calibrate/example_measurements.csv")).unwrap();
     assert!(shipped.starts_with("# simulated = true\n"));
-    assert_eq!(to_csv(&spec), shipped);
+    assert_eq!(to_csv(&spec).unwrap(), shipped);
     let out = common::scratch("calibrate-example");
     let status = common::calsim()
         .args(["calibrate", "robots/irb120.toml", "docs/calibrate/example_measurements.csv", "--out"])
@@ -312,7 +312,7 @@ fn the_calibrated_robot_file_loads_back_with_its_coupling() {
     let robot = RobotFile::load(&robot_path).unwrap();
     let truth = truth_on(&robot, &default_params());
     let csv = dir.path().join("run.csv");
-    std::fs::write(&csv, to_csv(&spec(truth, &robot, 0.012, vec![]))).unwrap();
+    std::fs::write(&csv, to_csv(&spec(truth, &robot, 0.012, vec![])).unwrap()).unwrap();
     let spec = calsim::calibrate::CalibrateSpec {
         robot_file: robot_path,
         measurements: csv,
@@ -362,7 +362,7 @@ fn valid_rows() -> Vec<String> {
 /// metres under `_mm` column names.
 fn metres_as_mm() -> String {
     let robot = robot_from(&coupled_irb120_text());
-    let text = to_csv(&spec(truth_on(&robot, &default_params()), &robot, 0.0, vec![]));
+    let text = to_csv(&spec(truth_on(&robot, &default_params()), &robot, 0.0, vec![])).unwrap();
     text.lines()
         .map(|l| {
             let f: Vec<&str> = l.split(',').collect();
@@ -619,7 +619,7 @@ fn mutated_measurement_values_are_refused_in_one_line_or_calibrated() {
     let mut s = spec(truth_on(&robot, &default_params()), &robot, 0.012, vec![]);
     s.poses_per_session = 8;
     s.targets.truncate(1);
-    let text = to_csv(&s);
+    let text = to_csv(&s).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     let row = lines.iter().position(|l| l.starts_with("p005")).unwrap();
     let mutations = ["NaN", "inf", "-inf", "1e300", "-1e300", "", "abc", "1e-300", "-0", "1e4", "-720"];
@@ -718,7 +718,7 @@ fn a_plan_asked_for_wrongly_is_one_line_naming_the_option() {
 /// moved by `shift_mm` along x (a fault only the held-out poses carry). Returns the file with the
 /// column and the file of the training rows alone (no column).
 fn split_files(robot: &RobotFile, offsets: &ParamSet, shift_mm: f64) -> (String, String) {
-    let text = to_csv(&spec(truth_on(robot, offsets), robot, 0.012, vec![]));
+    let text = to_csv(&spec(truth_on(robot, offsets), robot, 0.012, vec![])).unwrap();
     let (mut with_column, mut train) = (String::new(), String::new());
     for l in text.lines() {
         if l.starts_with('#') {
@@ -938,7 +938,7 @@ fn the_k_fold_over_every_pose_predicts_each_pose_once_by_a_fit_without_it() {
     let csv = write_csv(
         dir.path(),
         "small.csv",
-        &to_csv(&SimulationSpec { poses_per_session: 9, ..spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]) }),
+        &to_csv(&SimulationSpec { poses_per_session: 9, ..spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]) }).unwrap(),
     );
     let robot_path = write_csv(dir.path(), "irb120_coupled.toml", &coupled_irb120_text());
     for by in ["pose", "session"] {
@@ -1037,7 +1037,7 @@ fn compliance_on_a_massless_arm_says_why_and_fits_a_lumped_payload_given_at_the_
         assert!(t.abs() < 4.0, "{name}: {t} std from the lumped truth");
     }
 
-    let csv = write_csv(dir.path(), "massless.csv", &to_csv(&sim));
+    let csv = write_csv(dir.path(), "massless.csv", &to_csv(&sim).unwrap());
     let cli = |extra: &[&str]| {
         let mut cmd = common::calsim();
         cmd.args(["calibrate", "--no-plots", "--params", &names.join(","), "--out"]).arg(dir.path().join("out"));
@@ -1073,7 +1073,7 @@ fn compliance_on_a_massless_arm_says_why_and_fits_a_lumped_payload_given_at_the_
 #[test]
 fn a_fit_failure_names_the_sessions_points_and_parameters_involved() {
     let robot = robot_from(&coupled_irb120_text());
-    let text = to_csv(&spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![]));
+    let text = to_csv(&spec(truth_on(&robot, &offsets_only()), &robot, 0.012, vec![])).unwrap();
     let scatter = [[3.0, -2.0, 4.0], [-4.0, 1.0, 2.0], [2.0, 4.0, -3.0], [-1.0, -3.0, -4.0], [4.0, 2.0, 1.0]];
     let mut out = String::new();
     let mut added = 0;
@@ -1183,8 +1183,8 @@ fn a_tool_per_session_registers_a_remounted_probe() {
     let ab = SimulationSpec { sessions: base.sessions[..2].to_vec(), ..base.clone() };
     let moved: Vec<(String, Vector3<f64>)> = base.targets.iter().map(|(l, t)| (l.clone(), t + Vector3::new(0.8, 0.0, 0.0))).collect();
     let c_only = SimulationSpec { sessions: base.sessions[2..].to_vec(), targets: moved, seed: 8, ..base.clone() };
-    let mut text = to_csv(&ab);
-    for l in to_csv(&c_only).lines().filter(|l| l.starts_with('p') && !l.starts_with("pose,")) {
+    let mut text = to_csv(&ab).unwrap();
+    for l in to_csv(&c_only).unwrap().lines().filter(|l| l.starts_with('p') && !l.starts_with("pose,")) {
         text.push_str(&format!("q{}\n", &l[1..]));
     }
     let m = measurements::parse(Path::new("remounted.csv"), &text, &robot).unwrap();

@@ -76,7 +76,7 @@ fn held_out_rms(c: &Calibration) -> f64 {
 fn a_line_session_held_out_is_calibrated_with_its_rotation_about_the_line_kept() {
     let robot = coupled_irb120();
     let spec = with_line(&robot, 0.012);
-    let m = measurements::parse(Path::new("line.csv"), &to_csv(&spec), &robot).unwrap();
+    let m = measurements::parse(Path::new("line.csv"), &to_csv(&spec).unwrap(), &robot).unwrap();
     assert_eq!(m.sessions, ["A", "B", "C", "L"]);
     assert_eq!(m.poses.iter().filter(|p| p.session == 3).count(), 30, "the whole line is within reach");
     let c = run(&robot, &m, &options(Split::Session("L".into()))).unwrap_or_else(|e| panic!("{e}"));
@@ -104,7 +104,7 @@ fn a_line_session_held_out_is_calibrated_with_its_rotation_about_the_line_kept()
 fn a_line_session_in_the_fit_keeps_only_its_rotation_about_the_line() {
     let robot = coupled_irb120();
     let spec = with_line(&robot, 0.0);
-    let m = measurements::parse(Path::new("line.csv"), &to_csv(&spec), &robot).unwrap();
+    let m = measurements::parse(Path::new("line.csv"), &to_csv(&spec).unwrap(), &robot).unwrap();
     let c = run(&robot, &m, &options(Split::Poses { fraction: 0.2 })).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(c.chosen().layout.still[3], [false, false, false, false, true, false]);
     assert_eq!(

@@ -82,7 +82,7 @@ fn a_noise_free_round_trip_with_orientation_recovers_the_robot_and_the_probe_rot
     let truth = truth_on(&robot, &identifiable());
     let s = spec(truth.clone(), &robot, 0.0, 7);
     let o = probes(0.0);
-    let m = parse(&to_csv_with(&s, Some(&o)), &robot);
+    let m = parse(&to_csv_with(&s, Some(&o)).unwrap(), &robot);
     assert!(m.orientation_columns && m.points.iter().all(|p| p.orientation.is_some()));
     let c = run(&robot, &m, &options()).unwrap();
     for e in c.estimates.iter().filter(|e| identifiable().position(e.id).is_some()) {
@@ -114,12 +114,12 @@ fn a_single_target_session_with_orientation_gets_its_probe_rotation() {
     s.targets.truncate(1);
     let mut o = probes(0.0);
     o.probe_rotations.truncate(1);
-    let c = run(&robot, &parse(&to_csv_with(&s, Some(&o)), &robot), &options()).unwrap();
+    let c = run(&robot, &parse(&to_csv_with(&s, Some(&o)).unwrap(), &robot), &options()).unwrap();
     let err = probe_errors_deg(&c, &o)[0];
     assert!(err < 1e-7, "{err:e} deg off");
     let std = c.probe_rotations[0].as_ref().unwrap().std_mdeg;
     assert!(std.iter().all(|v| v.is_finite()), "{std:?}");
-    let without = run(&robot, &parse(&to_csv(&s), &robot), &options()).unwrap();
+    let without = run(&robot, &parse(&to_csv(&s).unwrap(), &robot), &options()).unwrap();
     assert_eq!(without.probe_rotations, vec![None]);
 }
 
@@ -145,13 +145,13 @@ fn a_line_session_with_orientation_gets_its_full_registration() {
     let truth_frame = s.lines[0].frame.isometry();
     let o = probes(0.0);
     let opts = Options { split: calsim::calibrate::validation::Split::Poses { fraction: 0.2 }, ..options() };
-    let c = run(&robot, &parse(&to_csv_with(&s, Some(&o)), &robot), &opts).unwrap();
+    let c = run(&robot, &parse(&to_csv_with(&s, Some(&o)).unwrap(), &robot), &opts).unwrap();
     let l = c.bases.iter().find(|b| b.session == "L").unwrap();
     let delta = truth_frame.inverse() * l.session_from_base.isometry();
     assert!(delta.translation.vector.norm() < 1e-6, "{:e} mm", delta.translation.vector.norm());
     assert!(delta.rotation.angle() < 1e-9, "{:e} rad", delta.rotation.angle());
     assert!(l.std.iter().all(|v| *v > 0.0), "every number free: {:?}", l.std);
-    let positions = run(&robot, &parse(&to_csv(&s), &robot), &opts).unwrap();
+    let positions = run(&robot, &parse(&to_csv(&s).unwrap(), &robot), &opts).unwrap();
     let l = positions.bases.iter().find(|b| b.session == "L").unwrap();
     assert_eq!(l.std[3..].iter().filter(|v| **v == 0.0).count(), 1, "one turn kept at the registration: {:?}", l.std);
 }
@@ -172,7 +172,7 @@ fn the_fitted_std_agrees_with_the_scatter_over_seeds() {
     let mut z = Vec::new();
     for seed in 0..6 {
         let s = spec(truth.clone(), &robot, 0.012, 100 + seed);
-        let c = run(&robot, &parse(&to_csv_with(&s, Some(&o)), &robot), &opts).unwrap();
+        let c = run(&robot, &parse(&to_csv_with(&s, Some(&o)).unwrap(), &robot), &opts).unwrap();
         for e in c.estimates.iter().filter(|e| e.status == ParamStatus::Identified) {
             z.push((e.value - e.id.get(truth.data())) / e.std);
         }
@@ -204,8 +204,8 @@ fn orientation_columns_reach_points_parquet_and_the_summary() {
     let dir = common::scratch("orientation-report");
     let plain = dir.path().join("plain.csv");
     let probe = dir.path().join("probe.csv");
-    std::fs::write(&plain, to_csv(&s)).unwrap();
-    std::fs::write(&probe, to_csv_with(&s, Some(&probes(5.0)))).unwrap();
+    std::fs::write(&plain, to_csv(&s).unwrap()).unwrap();
+    std::fs::write(&probe, to_csv_with(&s, Some(&probes(5.0))).unwrap()).unwrap();
     let params = "a2,a3,d4,theta_offs2,theta_offs3,theta_offs4";
     for (csv, with) in [(&plain, false), (&probe, true)] {
         let o = common::calsim()
@@ -242,7 +242,7 @@ fn readings_in_another_convention_are_one_line_exit_2() {
     let truth = truth_on(&robot, &identifiable());
     let mut s = spec(truth, &robot, 0.0, 3);
     s.poses_per_session = 12;
-    let text = to_csv_with(&s, Some(&probes(0.0)));
+    let text = to_csv_with(&s, Some(&probes(0.0))).unwrap();
     // w, x, y, z -> x, y, z, w under the same column names.
     let swapped: String = text
         .lines()
@@ -335,7 +335,7 @@ fn a_corrupted_reading_is_flagged_and_reject_equals_the_file_without_it() {
     let robot = irb120();
     let truth = truth_on(&robot, &identifiable());
     let s = spec(truth, &robot, 0.012, 21);
-    let text = to_csv_with(&s, Some(&probes(10.0)));
+    let text = to_csv_with(&s, Some(&probes(10.0))).unwrap();
     let line = data_line(&text, 40);
     let m = parse(&turn_reading(&text, line, 2.0), &robot);
     let k = m.points.iter().position(|p| p.line == line as u64).unwrap();
@@ -371,7 +371,7 @@ fn clean_readings_are_not_flagged() {
     let noisy = Options { position_noise_mm: 0.012, orientation_noise_mdeg: 10.0, ..options() };
     let mut readings = 0;
     for seed in 0..4 {
-        let m = parse(&to_csv_with(&spec(truth.clone(), &robot, 0.012, 300 + seed), Some(&probes(10.0))), &robot);
+        let m = parse(&to_csv_with(&spec(truth.clone(), &robot, 0.012, 300 + seed), Some(&probes(10.0))).unwrap(), &robot);
         let c = run(&robot, &m, &noisy).unwrap();
         let flagged: Vec<u64> = (0..m.points.len()).filter(|&i| c.readings_flagged.flagged[i]).map(|i| m.points[i].line).collect();
         assert!(flagged.is_empty(), "seed {seed}: lines {flagged:?} flagged");
@@ -392,7 +392,7 @@ fn a_flagged_reading_is_named_by_its_line_and_bad_readings_exit_2() {
     let truth = truth_on(&robot, &identifiable());
     let mut s = spec(truth, &robot, 0.01, 3);
     s.poses_per_session = 12;
-    let text = to_csv_with(&s, Some(&probes(5.0)));
+    let text = to_csv_with(&s, Some(&probes(5.0))).unwrap();
     let line = data_line(&text, 10);
     let dir = common::scratch("orientation-outlier");
     let csv = dir.path().join("turned.csv");

@@ -63,7 +63,7 @@ fn arm(robot: &RobotFile, learned: Option<LearnedEffects>, repeatability_mm: f64
 }
 
 fn calibrated(spec: &SimulationSpec, robot: &RobotFile) -> Calibration {
-    let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec), robot).unwrap();
+    let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec).unwrap(), robot).unwrap();
     run(robot, &m, &Options { plots: false, prediction_draws: 10, ..Options::default() }).unwrap()
 }
 
@@ -80,7 +80,7 @@ fn injected_repeatability(spec: &SimulationSpec) -> f64 {
         0.5 * (l.min + l.max)
     });
     let sigma_q = VirtualRobot::new(spec.truth.clone(), &UnmodelledSpec::default(), RP_MM, &reference, &mut common::rng(1)).sigma_q;
-    let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec), &robot()).unwrap();
+    let m = measurements::parse(Path::new("twin.csv"), &to_csv(spec).unwrap(), &robot()).unwrap();
     let per_session = spec.poses_per_session + spec.repeats_per_session;
     let (mut sum, mut n) = (0.0, 0.0);
     for (_, pose) in m.poses.iter().enumerate().filter(|(k, _)| k % per_session < spec.repeats_per_session) {
@@ -165,7 +165,7 @@ fn a_twin_recovers_injected_effects_repeatability_and_noise_within_their_interva
     // The twin as a file: the calibrated robot file with its [learned] table, loaded back.
     let dir = common::scratch("twin-file");
     let csv = dir.path().join("twin.csv");
-    std::fs::write(&csv, to_csv(&spec)).unwrap();
+    std::fs::write(&csv, to_csv(&spec).unwrap()).unwrap();
     let report = calsim::calibrate::calibrate(&calsim::calibrate::CalibrateSpec {
         robot_file: common::repo().join("robots/irb120.toml"),
         measurements: csv,

@@ -79,21 +79,11 @@ class ExportReport(TypedDict):
     validation_median_mm: float
     files: list[str]
 
-class CalibratePlan(TypedDict):
-    scenario: str
-    statistic: str
-    measured_mm: float
-    simulated_p10_mm: float
-    simulated_mm: float
-    simulated_p90_mm: float
-    worlds: int
-    inside: bool
-
 class CalibrateReport(TypedDict):
     dest: Path
     model: str
     report: str
-    plan: CalibratePlan | None
+    plan: ArrowFrame | None
 
 class OptimiseReport(TypedDict):
     name: str
@@ -138,6 +128,9 @@ class PlanReport(TypedDict):
     o1_random: float
     prediction: Prediction
     frames: dict[str, ArrowFrame]
+    table: ArrowFrame
+    tour: ArrowFrame
+    simulated: ArrowFrame | None
     seconds: float
     warnings: list[str]
     unidentifiable: list[str]

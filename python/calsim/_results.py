@@ -231,15 +231,19 @@ class CalibrationResult(Results):
     """What a calibration did: the report directory (``tables['points']``, ``models``,
     ``parameters``, ``bases``, ``tools``, ``correlation``, the figures, ``summary.md``), the model
     chosen by its held-out error (``model``: ``offsets``, ``geometric`` or ``compliance``), the
-    CLI's report (``report``) and, with ``plan_worlds``, the plan's comparison (``plan``: the
-    measured held-out statistic beside the simulated one with its P10-P90, and ``inside``)."""
+    CLI's report (``report``) and, with ``plan_worlds``, the plans' comparison (``plan``: a row
+    per plan in the order of ``plan.md``'s table: ``plan``, ``scenario`` (what each world draws),
+    ``statistic``, the measured held-out figure ``measured_mm`` beside the simulated
+    ``simulated_p10_mm``, ``simulated_mm`` (the median) and ``simulated_p90_mm`` over ``worlds``,
+    and ``inside``; None without a plan)."""
 
     def __init__(self, report: CalibrateReport) -> None:
         super().__init__(report["dest"])
         self.dest: Path = Path(report["dest"])
         self.model: str = report["model"]
         self.report: str = report["report"]
-        self.plan: dict[str, Any] | None = None if report["plan"] is None else dict(report["plan"])
+        plan = report["plan"]
+        self.plan: pl.DataFrame | None = None if plan is None else pl.DataFrame(plan)
 
     @property
     def robot_file(self) -> Path:
@@ -312,9 +316,11 @@ class PlanResult:
     of a device with configurations of its own (``"trical"``): ``dest`` (its directory),
     ``poses`` (the training poses planned: the plan's count or its objective's), ``pool`` (the
     feasible poses chosen from) and ``drawn`` (the candidates drawn; a device plan: the
-    configurations its campaign centred), ``table`` (``poses.csv`` as a DataFrame: the measurement
-    file to fill), ``tour`` (``tour.csv``: the order to visit them, via configurations of re-routed
-    moves split ``via``), ``simulated`` (``simulated.csv`` with ``simulate``, else ``None``),
+    configurations its campaign centred), ``table`` (``poses.csv``'s rows: the measurement file to
+    fill, its labels as text, its joint values and positions as floats, a position to measure
+    null), ``tour`` (``tour.csv``'s: the order to visit them, via configurations of re-routed moves
+    split ``via``, the values as the file states them), ``simulated`` (``simulated.csv``'s with
+    ``simulate``, else ``None``),
     ``prediction`` (the predicted held-out median: ``p10_mm``, ``median_mm``, ``p90_mm``,
     ``worlds``, ``pilot_mm``, ``twin``), ``unidentifiable``, ``tables`` (the tables ``plan.md``
     is rendered from, as written: ``plan`` (one row: the plan's inputs and figures),
@@ -339,13 +345,10 @@ class PlanResult:
         self.objective: pl.DataFrame | None = self.tables.get("objective")
         self.search: pl.DataFrame | None = self.tables.get("search")
         self.comparison: pl.DataFrame | None = self.tables.get("comparison")
-        positions = {"x_mm": pl.Float64, "y_mm": pl.Float64, "z_mm": pl.Float64}
-        self.table: pl.DataFrame = pl.read_csv(self.dest / "poses.csv", comment_prefix="#", schema_overrides=positions)
-        self.tour: pl.DataFrame = pl.read_csv(self.dest / "tour.csv")
-        simulated = self.dest / "simulated.csv"
-        self.simulated: pl.DataFrame | None = (
-            pl.read_csv(simulated, comment_prefix="#", schema_overrides=positions) if simulated.exists() else None
-        )
+        self.table: pl.DataFrame = pl.DataFrame(report["table"])
+        self.tour: pl.DataFrame = pl.DataFrame(report["tour"])
+        simulated = report["simulated"]
+        self.simulated: pl.DataFrame | None = None if simulated is None else pl.DataFrame(simulated)
         self.figure: Path = self.dest / "plan_poses.png"
         self.seconds: float = report["seconds"]
 

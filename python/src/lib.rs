@@ -586,21 +586,7 @@ fn calibrate<'py>(
     d.set_item("dest", &r.dir)?;
     d.set_item("model", c.models[c.chosen].kind.map_or("before", |k| k.name()))?;
     d.set_item("report", calsim::calibrate::report::terminal(c, &r.dir))?;
-    match &r.plan {
-        None => d.set_item("plan", py.None())?,
-        Some(p) => {
-            let plan = PyDict::new(py);
-            plan.set_item("scenario", &p.scenario)?;
-            plan.set_item("statistic", p.statistic.name())?;
-            plan.set_item("measured_mm", p.measured_mm)?;
-            plan.set_item("simulated_p10_mm", p.simulated_mm[0])?;
-            plan.set_item("simulated_mm", p.simulated_mm[1])?;
-            plan.set_item("simulated_p90_mm", p.simulated_mm[2])?;
-            plan.set_item("worlds", p.worlds)?;
-            plan.set_item("inside", p.inside)?;
-            d.set_item("plan", plan)?;
-        }
-    }
+    d.set_item("plan", r.plan_table.map(ArrowFrame))?;
     Ok(d)
 }
 
@@ -715,7 +701,7 @@ fn plan<'py>(
         twin: p.twin,
         seconds: r.seconds,
     };
-    let d = shared.dict(py, r.frames, warnings)?;
+    let d = shared.dict(py, r.frames, r.files, warnings)?;
     d.set_item("unidentifiable", p.unidentifiable.iter().map(|u| u.name.clone()).collect::<Vec<_>>())?;
     Ok(d)
 }
@@ -738,8 +724,15 @@ struct PlanShared<'a> {
 
 impl PlanShared<'_> {
     /// The plan's report with these keys, its tables (`frames`: `plan`, `search`, `comparison`
-    /// ..., the tables written, by stem) and `warnings`.
-    fn dict<'py>(&self, py: Python<'py>, tables: Vec<(String, Frame)>, warnings: Vec<String>) -> PyResult<Bound<'py, PyDict>> {
+    /// ..., the tables written, by stem), the tables of its files (`table`: `poses.csv`, `tour`,
+    /// `simulated` or None) and `warnings`.
+    fn dict<'py>(
+        &self,
+        py: Python<'py>,
+        tables: Vec<(String, Frame)>,
+        files: app::plan::PlanFiles,
+        warnings: Vec<String>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("instrument", self.instrument)?;
         d.set_item("dest", self.dest)?;
@@ -758,6 +751,9 @@ impl PlanShared<'_> {
         prediction.set_item("twin", self.twin)?;
         d.set_item("prediction", prediction)?;
         d.set_item("frames", frames(py, by_stem(tables))?)?;
+        d.set_item("table", ArrowFrame(files.poses))?;
+        d.set_item("tour", ArrowFrame(files.tour))?;
+        d.set_item("simulated", files.simulated.map(ArrowFrame))?;
         d.set_item("seconds", self.seconds)?;
         d.set_item("warnings", warnings)?;
         Ok(d)
@@ -788,7 +784,7 @@ fn plan_device<'py>(py: Python<'py>, spec: &app::plan::PlanSpec, progress: Optio
         twin: false,
         seconds: r.seconds,
     };
-    let d = shared.dict(py, r.frames, warnings)?;
+    let d = shared.dict(py, r.frames, r.files, warnings)?;
     d.set_item("unidentifiable", p.unidentifiable.clone())?;
     Ok(d)
 }

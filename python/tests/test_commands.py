@@ -102,10 +102,20 @@ def test_calibrate_from_a_dataframe_gives_the_same_tables_as_the_file(calibratio
 
 
 def test_calibrate_with_a_plan_sets_the_measured_median_beside_the_simulated(tmp_path: Path) -> None:
-    c = calsim.calibrate(ROBOT, MEASUREMENTS, out=tmp_path, plan_worlds=2, plan_noise_mm=0.012, plots=False)
-    assert c.plan is not None and c.plan["worlds"] == 2
-    assert c.plan["simulated_p10_mm"] <= c.plan["simulated_mm"] <= c.plan["simulated_p90_mm"]
-    assert c.plan["inside"] == (c.plan["simulated_p10_mm"] <= c.plan["measured_mm"] <= c.plan["simulated_p90_mm"])
+    c = calsim.calibrate(ROBOT, MEASUREMENTS, out=tmp_path, plan_worlds=2, plan_noise_mm=0.012, plan_with="all", plots=False)
+    assert c.plan is not None and c.plan["plan"].to_list() == ["noise only", "twin", "residual as noise"]
+    shown = (c.dest / "plan.md").read_text()
+    assert c.plan["measured_mm"].n_unique() == 1 and f"measured ({c.plan['measured_mm'][0]:.4f} mm)" in shown
+    for row in c.plan.iter_rows(named=True):
+        assert row["worlds"] == 2 and row["statistic"] == "median"
+        assert row["simulated_p10_mm"] <= row["simulated_mm"] <= row["simulated_p90_mm"]
+        assert row["inside"] == (row["simulated_p10_mm"] <= row["measured_mm"] <= row["simulated_p90_mm"])
+        # The row as plan.md shows it.
+        p10, p50, p90 = row["simulated_p10_mm"], row["simulated_mm"], row["simulated_p90_mm"]
+        inside = "yes" if row["inside"] else "no"
+        assert f"| {row['plan']} | {row['scenario']} | 2 | {p10:.4f} | {p50:.4f} | {p90:.4f} | {inside} |" in shown, row
+    alone = calsim.calibrate(ROBOT, MEASUREMENTS, out=tmp_path / "alone", plan_worlds=2, plan_noise_mm=0.012, plots=False)
+    assert alone.plan is not None and alone.plan["plan"].to_list() == ["twin"]
 
 
 @pytest.mark.parametrize(
@@ -375,9 +385,19 @@ def small_plan(tmp_path: Path, extra: str = "") -> Path:
     return f
 
 
+def plan_file(path: Path, frame: pl.DataFrame) -> pl.DataFrame:
+    """A plan's CSV file written by the CLI, read by polars with the documented dtypes (the labels
+    as text, ``step`` and a device plan's ``sphere`` or ``station`` as integers, every other column
+    as floats), its columns those of ``frame``."""
+    text, integer = ("pose", "session", "target", "split"), ("step", "sphere", "station")
+    schema = pl.Schema({c: pl.String if c in text else pl.Int64 if c in integer else pl.Float64 for c in frame.columns})
+    assert frame.schema == schema, path
+    return pl.read_csv(path, comment_prefix="#", schema=schema)
+
+
 def test_plan_writes_the_cli_files(tmp_path: Path) -> None:
     f = small_plan(tmp_path)
-    r = calsim.plan(f, out=tmp_path / "py", threads=2, progress=False)
+    r = calsim.plan(f, out=tmp_path / "py", threads=2, simulate=True, progress=False)
     assert r.poses == 40 and r.validation == 8
     assert r.table.height == 2 * 48  # two targets per pose
     assert r.table["split"].value_counts().sort("split")["count"].to_list() == [16, 80]
@@ -385,9 +405,15 @@ def test_plan_writes_the_cli_files(tmp_path: Path) -> None:
     assert r.prediction["worlds"] == 8
     assert 0 < r.prediction["p10_mm"] <= r.prediction["median_mm"] <= r.prediction["p90_mm"]
     assert r.figure.exists() and r.objective is None and r.comparison is None
-    cli("plan", f, "--out", tmp_path / "cli", "--threads", "2")
-    for name in ["poses.csv", "joints.txt", "tour.csv", "plan.md", "plan_poses.png"]:
-        assert (r.dest / name).read_bytes() == (tmp_path / "cli" / "small.plan" / name).read_bytes(), name
+    cli("plan", f, "--out", tmp_path / "cli", "--threads", "2", "--simulate")
+    dest = tmp_path / "cli" / "small.plan"
+    for name in ["poses.csv", "joints.txt", "tour.csv", "plan.md", "plan_poses.png", "simulated.csv"]:
+        assert (r.dest / name).read_bytes() == (dest / name).read_bytes(), name
+    # The frames equal the CLI's files read by polars.
+    assert r.simulated is not None and r.simulated["x_mm"].is_not_null().all()
+    for frame, name in [(r.table, "poses.csv"), (r.tour, "tour.csv"), (r.simulated, "simulated.csv")]:
+        assert frame.equals(plan_file(dest / name, frame)), name
+    assert r.tour.filter(pl.col("split") != "via")["pose"].sort().equals(r.table["pose"].unique().sort())
 
 
 def test_plan_comparison_as_a_frame(tmp_path: Path) -> None:
@@ -455,6 +481,8 @@ def test_a_trical_plan_gives_the_cli_files_and_its_tables_as_frames(tmp_path: Pa
                 else:
                     assert value == float(text) and not (dtype.is_integer() and "." in text), (name, column, value, text)
     assert r.tour.filter(pl.col("split") != "via").height == 105
+    for frame, name in [(r.table, "poses.csv"), (r.simulated, "simulated.csv"), (r.tour, "tour.csv")]:
+        assert frame is not None and frame.equals(plan_file(dest / name, frame)), name
     assert r.simulated is not None and r.simulated["x_mm"].is_not_null().all()
     assert (r.table.filter(pl.col("split") == "holdout")["x_mm"].is_null()).all()
     # The predicted median as plan.md rounds it.

@@ -37,6 +37,19 @@ pub struct PlanReport {
     pub seconds: f64,
     /// The tables written, by file name (`plan.parquet` ..., [`crate::plan::summary`]).
     pub frames: Vec<(String, Frame)>,
+    /// The tables of `poses.csv`, `tour.csv` and `simulated.csv`.
+    pub files: PlanFiles,
+}
+
+/// The tables of a plan's files, each as its CSV states it.
+#[derive(Clone, Debug)]
+pub struct PlanFiles {
+    /// `poses.csv`: the measurement file to fill ([`crate::plan::files::measurement_file`]).
+    pub poses: Frame,
+    /// `tour.csv`: the order to visit the poses in ([`crate::plan::files::tour_file`]).
+    pub tour: Frame,
+    /// `simulated.csv` (`--simulate`): the measurement file filled in a simulated world.
+    pub simulated: Option<Frame>,
 }
 
 /// Reads and checks a plan file.
@@ -73,34 +86,25 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
     let t0 = std::time::Instant::now();
     let outcome = pool.install(|| crate::plan::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
     let cell = crate::plan::cell::Cell::new(&plan).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
-    let simulated = if spec.simulate {
-        let (positions, _) = crate::plan::measure(&plan, &cell, &outcome.rows, crate::seeds::plan::SIMULATE)
-            .map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
-        Some(crate::plan::csv(
-            &plan,
-            &outcome.rows,
-            Some(&positions),
-            &["SIMULATED by calsim plan --simulate: the robot file's truth (its nominal where it gives none) at the plan's poses, positions in the".into(),
-              "robot base frame, the tracker's noise at each point's distance; no effect outside the model".into()],
-        ))
-    } else {
-        None
-    };
+    let simulated = if spec.simulate { Some(simulated_file(&plan, &cell, &outcome, &spec.out)?) } else { None };
     let seconds = t0.elapsed().as_secs_f64();
     // plan.md is rendered from the tables the directory stores.
     let tables = crate::plan::summary::tables(&plan, &outcome);
+    let poses = crate::plan::measurement_file(&plan, &outcome.rows, None, &[]).map_err(Error::io(&spec.out))?;
+    let tour = crate::plan::tour_file(&plan, &outcome).map_err(Error::io(&spec.out))?;
     let files = [
-        ("poses.csv", crate::plan::csv(&plan, &outcome.rows, None, &[])),
+        ("poses.csv", poses.1),
         ("joints.txt", crate::plan::joint_list(&plan, &outcome.rows)),
-        ("tour.csv", crate::plan::tour_csv(&plan, &outcome)),
+        ("tour.csv", tour.1),
         ("plan.md", crate::plan::summary::markdown(&tables).map_err(Error::io(&spec.out))?),
     ];
+    let (simulated, simulated_text) = simulated.unzip();
     let frames;
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
         let io = |e: std::io::Error| Error::io(&spec.out)(e);
         r.field("plan", &name).map_err(io)?.field("simulate", spec.simulate).map_err(io)?.field("recording", spec.recording).map_err(io)?;
-        frames = add_files(&mut r, tables, files, simulated).map_err(io)?;
+        frames = add_files(&mut r, tables, files, simulated_text).map_err(io)?;
         // plan.md shows the figure itself.
         r.draw(Box::new(|d| crate::plan::plot::write(d, &plan, &cell, &outcome).map(|()| Vec::new())));
         if spec.recording {
@@ -113,7 +117,19 @@ pub fn plan(spec: &PlanSpec, observer: &dyn Observer) -> Result<PlanReport, Erro
         }
         crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
     };
-    Ok(PlanReport { plan, outcome, dir, seconds, frames })
+    Ok(PlanReport { plan, outcome, dir, seconds, frames, files: PlanFiles { poses: poses.0, tour: tour.0, simulated } })
+}
+
+/// `simulated.csv` of a tracker plan (`--simulate`): the robot file's truth measured at the
+/// plan's poses ([`crate::plan::measure`]); its table and its text.
+fn simulated_file(plan: &Plan, cell: &crate::plan::cell::Cell, outcome: &Outcome, out: &Path) -> Result<(Frame, String), Error> {
+    let (positions, _) = crate::plan::measure(plan, cell, &outcome.rows, crate::seeds::plan::SIMULATE)
+        .map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
+    let comments = [
+        "SIMULATED by calsim plan --simulate: the robot file's truth (its nominal where it gives none) at the plan's poses, positions in the".into(),
+        "robot base frame, the tracker's noise at each point's distance; no effect outside the model".into(),
+    ];
+    crate::plan::measurement_file(plan, &outcome.rows, Some(&positions), &comments).map_err(Error::io(out))
 }
 
 /// The plan's tables, its files and `simulated.csv` (with `--simulate`) added to `r`; the tables'
@@ -150,6 +166,8 @@ pub struct DevicePlanReport {
     pub seconds: f64,
     /// The tables written, by file name (`plan.parquet` ..., [`crate::plan::device_summary`]).
     pub frames: Vec<(String, Frame)>,
+    /// The tables of `poses.csv`, `tour.csv` and `simulated.csv`.
+    pub files: PlanFiles,
 }
 
 /// Whether the plan file names an `[instrument]` (a device plan, [`plan_device`]) rather than a
@@ -190,16 +208,20 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
     let t0 = std::time::Instant::now();
     let outcome =
         pool.install(|| crate::plan::device::run(&plan)).map_err(|e| Error::input(format!("{}: {}", e.path, e.key), e.message))?;
-    let simulated = spec.simulate.then(|| crate::plan::device::simulated_csv(&plan, &outcome));
+    let simulated =
+        if spec.simulate { Some(crate::plan::device::simulated_file(&plan, &outcome).map_err(Error::io(&spec.out))?) } else { None };
     let seconds = t0.elapsed().as_secs_f64();
     // plan.md is rendered from the tables the directory stores.
     let tables = crate::plan::device_summary::tables(&plan, &outcome);
+    let poses = crate::plan::device::measurement_file(&plan, &outcome).map_err(Error::io(&spec.out))?;
+    let tour = crate::plan::device::tour_file(&plan, &outcome).map_err(Error::io(&spec.out))?;
     let files = [
-        ("poses.csv", crate::plan::device::csv(&plan, &outcome)),
+        ("poses.csv", poses.1),
         ("joints.txt", crate::plan::device::joint_list(&plan, &outcome)),
-        ("tour.csv", crate::plan::device::tour_csv(&plan, &outcome)),
+        ("tour.csv", tour.1),
         ("plan.md", crate::plan::device_summary::markdown(&tables).map_err(Error::io(&spec.out))?),
     ];
+    let (simulated, simulated_text) = simulated.unzip();
     let frames;
     let dir = {
         let mut r = crate::io::results::Results::new(&name, crate::io::results::Head::Run(crate::io::manifest::Provenance::of_run(&[])));
@@ -212,7 +234,7 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
             .map_err(io)?
             .field("recording", spec.recording)
             .map_err(io)?;
-        frames = add_files(&mut r, tables, files, simulated).map_err(io)?;
+        frames = add_files(&mut r, tables, files, simulated_text).map_err(io)?;
         r.draw(Box::new(|d| crate::plan::device_view::write_figure(d, &plan, &outcome).map(|()| Vec::new())));
         if spec.recording {
             r.record_as(
@@ -225,5 +247,5 @@ pub fn plan_device(spec: &PlanSpec, observer: &dyn Observer) -> Result<DevicePla
         }
         crate::io::results::write(&spec.out, r).map_err(Error::io(&spec.out))?.dest
     };
-    Ok(DevicePlanReport { plan, outcome, dir, seconds, frames })
+    Ok(DevicePlanReport { plan, outcome, dir, seconds, frames, files: PlanFiles { poses: poses.0, tour: tour.0, simulated } })
 }

@@ -223,6 +223,8 @@ pub struct CalibrationReport {
     pub plan: Option<plan::PlanComparison>,
     /// Every plan asked for (`--plan-with`), in the order of `plan.md`'s table.
     pub plans: Vec<(plan::PlanWith, plan::PlanComparison)>,
+    /// `plans` as a table ([`plan::table`]; `None`: no plan made).
+    pub plan_table: Option<crate::io::table::Frame>,
     /// The twin ([`twin::analyse`]), or why it could not be fitted.
     pub twin: Result<twin::Twin, String>,
 }
@@ -295,9 +297,10 @@ pub fn calibrate(spec: &CalibrateSpec) -> Result<CalibrationReport, CalibrateErr
     let twin = twin::analyse_with(&calibration, spec.instrument_noise_mm, Some(&kept)).map_err(|e| e.to_string());
     drop(kept);
     let (plans, missing) = plans(spec, &calibration, twin.as_ref().ok(), plan_effects.as_ref())?;
-    let dir = report::write_with(&spec.out, &name, &calibration, (&plans, &missing), &twin)
-        .map_err(|source| CalibrateError::Io { path: spec.out.join(&name), source })?;
-    Ok(CalibrationReport { calibration, dir, plan: plans.first().map(|(_, p)| p.clone()), plans, twin })
+    let io = |source| CalibrateError::Io { path: spec.out.join(&name), source };
+    let plan_table = (!plans.is_empty()).then(|| plan::table(&plans)).transpose().map_err(io)?;
+    let dir = report::write_with(&spec.out, &name, &calibration, (&plans, &missing), &twin).map_err(io)?;
+    Ok(CalibrationReport { calibration, dir, plan: plans.first().map(|(_, p)| p.clone()), plans, plan_table, twin })
 }
 
 /// Plans asked for that were made, and those that could not be, with why.

@@ -18,6 +18,7 @@
 use std::fmt::Write as _;
 
 use nalgebra::Vector3;
+use polars::prelude::Column;
 use rand_distr::{Distribution, Normal};
 
 use super::{CalibrateError, Calibration};
@@ -165,6 +166,29 @@ impl PlanWith {
             Self::All => "all",
         }
     }
+}
+
+/// The plans beside the measured figure as a table, a row per plan in the order of `plan.md`'s:
+/// `plan` (its name), `scenario` (what each world draws), `statistic`, `measured_mm`,
+/// `simulated_p10_mm`, `simulated_mm` (the median), `simulated_p90_mm`, `worlds` (with a finite
+/// value) and `inside` (the measured figure within the simulated P10-P90).
+pub fn table(plans: &[(PlanWith, PlanComparison)]) -> std::io::Result<crate::io::table::Frame> {
+    let text =
+        |name: &str, v: fn(&(PlanWith, PlanComparison)) -> &str| Column::new(name.into(), plans.iter().map(v).collect::<Vec<&str>>());
+    let number =
+        |name: &str, v: fn(&PlanComparison) -> f64| Column::new(name.into(), plans.iter().map(|(_, p)| v(p)).collect::<Vec<f64>>());
+    let columns = vec![
+        text("plan", |(k, _)| k.name()),
+        text("scenario", |(_, p)| &p.scenario),
+        text("statistic", |(_, p)| p.statistic.name()),
+        number("measured_mm", |p| p.measured_mm),
+        number("simulated_p10_mm", |p| p.simulated_mm[0]),
+        number("simulated_mm", |p| p.simulated_mm[1]),
+        number("simulated_p90_mm", |p| p.simulated_mm[2]),
+        Column::new("worlds".into(), plans.iter().map(|(_, p)| p.worlds as u64).collect::<Vec<u64>>()),
+        Column::new("inside".into(), plans.iter().map(|(_, p)| p.inside).collect::<Vec<bool>>()),
+    ];
+    crate::io::table::frame("plan", columns)
 }
 
 /// Several plans beside the measured figure, as markdown: one row per plan, and lines for the

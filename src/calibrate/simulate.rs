@@ -236,14 +236,13 @@ pub fn rows_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) ->
 }
 
 /// The measurement file's text of `spec`'s rows (every number written to round-trip exactly).
-pub fn to_csv(spec: &SimulationSpec) -> String {
+pub fn to_csv(spec: &SimulationSpec) -> std::io::Result<String> {
     to_csv_with(spec, None)
 }
 
 /// [`to_csv`] with the columns `quat_w, quat_x, quat_y, quat_z` of `orientation`'s readings.
-pub fn to_csv_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> String {
-    // Its columns are strings and floats, each of one name and the same length: the table has a text.
-    measurement_file(spec, orientation).map(|(_, text)| text).expect("a table of strings and floats has a CSV text")
+pub fn to_csv_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> std::io::Result<String> {
+    measurement_file(spec, orientation).map(|(_, text)| text)
 }
 
 /// The measurement file of `spec` (with `orientation`'s readings): its table ([`frame_with`]) and
@@ -266,11 +265,14 @@ pub fn measurement_file(spec: &SimulationSpec, orientation: Option<&OrientationS
 pub fn frame_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> std::io::Result<Frame> {
     let rows = rows_with(spec, orientation);
     let label = |name: &str, v: fn(&SimulatedRow) -> &str| Column::new(name.into(), rows.iter().map(v).collect::<Vec<&str>>());
-    let number = |name: &str, v: &dyn Fn(&SimulatedRow) -> Option<f64>| Column::new(name.into(), rows.iter().map(v).collect::<Vec<_>>());
+    let number =
+        |name: &str, v: &dyn Fn(&SimulatedRow) -> Option<f64>| Column::new(name.into(), rows.iter().filter_map(v).collect::<Vec<f64>>());
     let mut columns = vec![label("pose", |r| &r.pose), label("session", |r| &r.session), label("target", |r| &r.target)];
     columns.extend((0..JOINTS).map(|i| number(JOINT_COLUMNS[i], &|r| Some(r.q_controller[i].to_degrees()))));
     columns.extend(["x_mm", "y_mm", "z_mm"].iter().enumerate().map(|(k, c)| number(c, &|r| Some(r.measured_mm[k]))));
     if orientation.is_some() {
+        // Every row has a reading: a row without one would leave its column short, which
+        // `frame` refuses.
         let quat = ["quat_w", "quat_x", "quat_y", "quat_z"];
         columns.extend(quat.iter().enumerate().map(|(k, c)| number(c, &|r| r.orientation.map(|o| [o.w, o.i, o.j, o.k][k]))));
     }

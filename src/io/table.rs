@@ -33,26 +33,48 @@ pub fn frame(name: &str, columns: Vec<Column>) -> std::io::Result<DataFrame> {
 }
 
 /// How [`csv_text`] writes the fields of one column: the text of a null, and the notation of a
-/// float (both notations read back to the same bits).
+/// float.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FieldFormat {
     /// The text of a null field.
     pub null: &'static str,
-    /// `true`: a float in Rust's shortest scientific notation (`{:e}`: `1.5e6`, `3e-1`); `false`:
-    /// in its shortest decimal (`{}`: `1500000`, `0.3`).
-    pub scientific: bool,
+    /// The notation of a float.
+    pub notation: Notation,
+}
+
+/// The notation [`csv_text`] writes a float in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Notation {
+    /// Rust's shortest decimal that reads back to the same bits (`{}`: `1500000`, `0.3`).
+    Shortest,
+    /// Rust's shortest scientific notation that reads back to the same bits (`{:e}`: `1.5e6`,
+    /// `3e-1`).
+    Scientific,
+    /// This many decimals (`{:.N}`: `0.300000`); the value the text states is [`rounded`]'s.
+    Fixed(usize),
 }
 
 impl FieldFormat {
     /// Floats in the shortest decimal, a null written as the text `null` given.
     pub const fn decimal(null: &'static str) -> Self {
-        Self { null, scientific: false }
+        Self { null, notation: Notation::Shortest }
     }
 
     /// Floats in the shortest scientific notation, a null written as the text `null` given.
     pub const fn scientific(null: &'static str) -> Self {
-        Self { null, scientific: true }
+        Self { null, notation: Notation::Scientific }
     }
+
+    /// Floats with `decimals` decimals, a null written as the text `null` given.
+    pub const fn fixed(null: &'static str, decimals: usize) -> Self {
+        Self { null, notation: Notation::Fixed(decimals) }
+    }
+}
+
+/// `v` rounded to `decimals` decimals: the value its text with that many decimals reads back as
+/// (that text again when written with as many), so that a frame holds what its CSV states.
+pub fn rounded(v: f64, decimals: usize) -> f64 {
+    format!("{v:.decimals$}").parse().unwrap_or(v)
 }
 
 /// The CSV layout of a frame, passed beside it to [`csv_text`]: one [`FieldFormat`] for every
@@ -82,8 +104,7 @@ impl CsvFormat {
 }
 
 /// The CSV text of `frame` laid out by `format`: a header line of its column names, then a line
-/// per row; a float is written in Rust's shortest decimal (or scientific notation) that reads back
-/// to the same bits, a boolean `true`/`false`, a null as its column's null text, a string as
+/// per row; a float is written in its column's [`Notation`], a boolean `true`/`false`, a null as its column's null text, a string as
 /// itself, quoted as RFC 4180 asks when it holds a comma, a double quote or a line break (the
 /// frame's column types decide every field; the format names no column the frame lacks). A column
 /// name is quoted by the same rule.
@@ -109,8 +130,11 @@ fn column_text(column: &Column, format: FieldFormat) -> std::io::Result<Vec<Stri
     (0..column.len())
         .map(|i| match column.get(i).map_err(err)? {
             AnyValue::Null => Ok(format.null.to_string()),
-            AnyValue::Float64(v) if format.scientific => Ok(format!("{v:e}")),
-            AnyValue::Float64(v) => Ok(format!("{v}")),
+            AnyValue::Float64(v) => Ok(match format.notation {
+                Notation::Shortest => format!("{v}"),
+                Notation::Scientific => format!("{v:e}"),
+                Notation::Fixed(decimals) => format!("{v:.decimals$}"),
+            }),
             AnyValue::Boolean(v) => Ok(v.to_string()),
             AnyValue::String(v) => Ok(quoted(v)),
             AnyValue::Int64(v) => Ok(v.to_string()),
@@ -160,7 +184,7 @@ pub fn table_hashes(dir: &Path) -> std::io::Result<std::collections::BTreeMap<St
 mod tests {
     use polars::prelude::Column;
 
-    use super::{CsvFormat, FieldFormat, csv_text, frame};
+    use super::{CsvFormat, FieldFormat, csv_text, frame, rounded};
 
     #[test]
     fn csv_text_writes_each_field_by_its_column_type() {
@@ -221,5 +245,19 @@ mod tests {
         let format = CsvFormat::new(FieldFormat::decimal("null")).with(["y"], FieldFormat::scientific(""));
         let e = csv_text(&frame("t", columns).unwrap(), &format).unwrap_err();
         assert!(e.to_string().contains("column `y`"), "{e}");
+    }
+
+    #[test]
+    fn csv_text_writes_fixed_decimals_and_rounded_values_give_that_text_again() {
+        let values = [0.1 + 0.2, -1e-9, 123.4567895, 2.0 / 3.0, -0.0];
+        let columns = vec![Column::new("q".into(), values), Column::new("r".into(), values.map(|v| rounded(v, 6)))];
+        let text = csv_text(&frame("t", columns).unwrap(), &CsvFormat::new(FieldFormat::fixed("", 6))).unwrap();
+        let expected: String = values.iter().map(|v| format!("{v:.6},{v:.6}\n")).collect();
+        assert_eq!(text, format!("q,r\n{expected}"));
+        assert_eq!(text.lines().nth(1), Some("0.300000,0.300000"));
+        // The rounded value is the one its text reads back as.
+        for v in values {
+            assert_eq!(rounded(v, 6).to_bits(), format!("{v:.6}").parse::<f64>().unwrap().to_bits());
+        }
     }
 }

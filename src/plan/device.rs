@@ -686,33 +686,46 @@ fn controller_deg(plan: &DevicePlan, q: &Joints) -> [f64; JOINTS] {
 /// sphere's nominal centre in {W} in the position columns (the centres the ballbar locates replace
 /// them); the validation rows with empty positions (a laser tracker registered to {W} on the
 /// sphere nests fills them).
-pub fn csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
-    let mut s = String::new();
-    let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
-    s.push_str("# joints = controller\n");
-    let _ = writeln!(s, "# robot = {}", plan.robot_name);
+pub fn measurement_file(plan: &DevicePlan, o: &DeviceOutcome) -> std::io::Result<(crate::io::table::Frame, String)> {
+    let mut lines = header_lines(plan);
     if plan.kind == "spms" {
-        s.push_str("# frame = {W}, the first station's head frame as the tracker measured it\n");
-        s.push_str("# SPMS plan (calsim plan): a train row is a configuration measured at station N (its label ends in _sN); its position is that station's convergence point\n");
-        s.push_str("# replace the positions with the sphere centres the head measures; holdout rows: a tracker registered to {W} on the first station's A1-A3\n");
+        lines.push("SPMS plan (calsim plan): a train row is a configuration measured at station N (its label ends in _sN); its position is that station's convergence point".into());
+        lines.push("replace the positions with the sphere centres the head measures; holdout rows: a tracker registered to {W} on the first station's A1-A3".into());
     } else {
-        s.push_str("# frame = {W}, the datum spheres' frame\n");
-        s.push_str("# TriCal plan (calsim plan): a train row is a configuration centred on datum sphere N (its label ends in _sN); its position is that sphere's nominal centre\n");
-        s.push_str("# replace the joints with those recorded when the centring loop ends and the centres with the ballbar's; holdout rows: a tracker registered to {W} on the nests\n");
+        lines.push("TriCal plan (calsim plan): a train row is a configuration centred on datum sphere N (its label ends in _sN); its position is that sphere's nominal centre".into());
+        lines.push("replace the joints with those recorded when the centring loop ends and the centres with the ballbar's; holdout rows: a tracker registered to {W} on the nests".into());
     }
-    s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
-    for r in &o.rows {
-        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v}")).collect();
-        let xyz = r.group.map_or_else(
-            || ",,".to_string(),
-            |g| {
-                let c = o.groups_w_mm[g];
-                format!("{},{},{}", c[0], c[1], c[2])
-            },
-        );
-        let _ = writeln!(s, "{},{TRAINING},TCP,{},{},{xyz}", r.label, r.split, q.join(","));
+    let rows: Vec<_> = o.rows.iter().map(|r| measurement_row(plan, r, r.group.map(|g| o.groups_w_mm[g]))).collect();
+    super::files::measurement_file(&lines, &rows)
+}
+
+/// The `#` lines a device plan's measurement files begin with: the format, the joints, the robot
+/// and the frame.
+fn header_lines(plan: &DevicePlan) -> Vec<String> {
+    let frame = if plan.kind == "spms" {
+        "{W}, the first station's head frame as the tracker measured it"
+    } else {
+        "{W}, the datum spheres' frame"
+    };
+    vec![
+        format!("format = {}", crate::calibrate::measurements::FORMAT),
+        "joints = controller".into(),
+        format!("robot = {}", plan.robot_name),
+        format!("frame = {frame}"),
+    ]
+}
+
+/// The measurement file's row of `r`: the TCP in the session `training`, at the controller's
+/// joint values, at `xyz_mm` (`None`: to be measured).
+fn measurement_row<'a>(plan: &DevicePlan, r: &'a DeviceRow, xyz_mm: Option<[f64; 3]>) -> super::files::MeasurementRow<'a> {
+    super::files::MeasurementRow {
+        pose: &r.label,
+        session: TRAINING,
+        target: "TCP",
+        split: r.split,
+        q_deg: controller_deg(plan, &r.q),
+        xyz_mm,
     }
-    s
 }
 
 /// `simulated.csv` of a device plan (`--simulate`): the measurement file with its positions
@@ -721,35 +734,25 @@ pub fn csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
 /// coordinate (`DevicePrediction::noise_mm`, the plan's worlds' draw; stream
 /// `seeds::plan::SIMULATE`); a validation row gets the true arm's TCP without error (the reference
 /// the plan's worlds judge a calibration against).
-pub fn simulated_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
+pub fn simulated_file(plan: &DevicePlan, o: &DeviceOutcome) -> std::io::Result<(crate::io::table::Frame, String)> {
     let mut rng = crate::seeds::stream(plan.seed, crate::seeds::plan::SIMULATE);
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
     let mut st = KinState::default();
-    let mut s = String::new();
-    let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
-    s.push_str("# joints = controller\n");
-    let _ = writeln!(s, "# robot = {}", plan.robot_name);
-    s.push_str(if plan.kind == "spms" {
-        "# frame = {W}, the first station's head frame as the tracker measured it\n"
-    } else {
-        "# frame = {W}, the datum spheres' frame\n"
-    });
-    s.push_str("# SIMULATED by calsim plan --simulate: the true arm of the plan's planning world at the planned configurations; train rows: its TCP in {W}\n");
-    let _ = writeln!(
-        s,
-        "# with {:.6} mm per coordinate (the pool's observation error, drawn independently per row); holdout rows: its TCP without error",
+    let mut lines = header_lines(plan);
+    lines.push("SIMULATED by calsim plan --simulate: the true arm of the plan's planning world at the planned configurations; train rows: its TCP in {W}".into());
+    lines.push(format!(
+        "with {:.6} mm per coordinate (the pool's observation error, drawn independently per row); holdout rows: its TCP without error",
         o.prediction.noise_mm
-    );
-    s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
+    ));
+    let mut rows = Vec::with_capacity(o.rows.len());
     for r in &o.rows {
         let mut p = forward(&o.truth, &mut st, &r.q);
         if r.group.is_some() {
             p += Vector3::from_fn(|_, _| o.prediction.noise_mm * unit.sample(&mut rng));
         }
-        let q: Vec<String> = controller_deg(plan, &r.q).iter().map(|v| format!("{v}")).collect();
-        let _ = writeln!(s, "{},{TRAINING},TCP,{},{},{},{},{}", r.label, r.split, q.join(","), p.x, p.y, p.z);
+        rows.push(measurement_row(plan, r, Some(p.into())));
     }
-    s
+    super::files::measurement_file(&lines, &rows)
 }
 
 /// The device study's own identification on a measured device-plan file (`simulated.csv`, or the
@@ -808,21 +811,17 @@ pub fn joint_list(plan: &DevicePlan, o: &DeviceOutcome) -> String {
 /// The tour as CSV: step, pose, split, sphere, joint values (deg, controller), the largest joint
 /// move to it (deg); a via configuration of a re-routed move is a row of its own, split `via`
 /// (passed, not measured).
-pub fn tour_csv(plan: &DevicePlan, o: &DeviceOutcome) -> String {
-    let mut s = format!("step,pose,split,{},q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n", group_word(plan));
-    let mut prev: Option<Joints> = None;
-    for (k, stop) in super::select::stops(&o.tour.0, &o.routing).iter().enumerate() {
-        let (label, split, group, q) = match stop {
-            super::select::Stop::Pose(i) => (o.rows[*i].label.as_str(), o.rows[*i].split, o.rows[*i].group, o.rows[*i].q),
+pub fn tour_file(plan: &DevicePlan, o: &DeviceOutcome) -> std::io::Result<(crate::io::table::Frame, String)> {
+    let stops = super::select::stops(&o.tour.0, &o.routing);
+    let rows = super::files::tour_rows(
+        &stops,
+        |stop| match stop {
+            super::select::Stop::Pose(i) => (o.rows[*i].label.as_str(), o.rows[*i].split, o.rows[*i].group.map(|g| g + 1), o.rows[*i].q),
             super::select::Stop::Via(label, q) => (label.as_str(), super::select::VIA, None, *q),
-        };
-        let qd: Vec<String> = controller_deg(plan, &q).iter().map(|v| format!("{v:.6}")).collect();
-        let step = prev.map_or(0.0, |p| p.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        let g = group.map_or_else(String::new, |g| (g + 1).to_string());
-        let _ = writeln!(s, "{},{label},{split},{g},{},{step:.3}", k + 1, qd.join(","));
-        prev = Some(q);
-    }
-    s
+        },
+        |q| controller_deg(plan, q),
+    );
+    super::files::tour_file(Some(group_word(plan)), &rows)
 }
 
 /// `plan.md` of a device plan, rendered from its tables ([`super::device_summary::tables`]) by

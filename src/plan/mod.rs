@@ -22,6 +22,7 @@ pub mod cell;
 pub mod device;
 pub mod device_summary;
 pub mod device_view;
+pub mod files;
 pub mod plot;
 pub mod record;
 pub mod select;
@@ -391,7 +392,7 @@ fn worlds_at(
     let fail = |e: String| PlanError::new(&plan.path, "poses", format!("the plan's poses cannot be calibrated: {e}"));
     // Positions are placeholders: every world replaces them.
     let zeros: Vec<Vec<Vector3<f64>>> = rows.iter().map(|_| vec![Vector3::zeros(); plan.targets.len()]).collect();
-    let text = csv(plan, rows, Some(&zeros), &[]);
+    let text = csv(plan, rows, &zeros)?;
     let m = crate::calibrate::measurements::parse(Path::new("(a candidate set of the plan)"), &text, &plan.robot)
         .map_err(|e| fail(e.to_string()))?;
     let effects = twin_effects(plan);
@@ -419,30 +420,41 @@ pub fn twin_effects(plan: &Plan) -> Option<crate::calibrate::plan::Effects> {
 }
 
 /// The measurement file of `rows` at every target: `positions` (per row, per target, mm) or
-/// empty position columns. The joint columns are the controller's values (the robot file's
-/// coupling inverted where it has one), in degrees written to round-trip.
-pub fn csv(plan: &Plan, rows: &[PoseRow], positions: Option<&[Vec<Vector3<f64>>]>, comments: &[String]) -> String {
-    let mut s = String::new();
-    if positions.is_some() {
-        s.push_str("# simulated = true\n");
-    }
-    let _ = writeln!(s, "# format = {}", crate::calibrate::measurements::FORMAT);
-    s.push_str("# joints = controller\n");
-    let _ = writeln!(s, "# robot = {}", plan.robot_name);
-    s.push_str("# frame = laser tracker frame\n");
-    for c in comments {
-        let _ = writeln!(s, "# {c}");
-    }
-    s.push_str("pose,session,target,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n");
+/// empty position columns, with `comments` among its `#` lines. The joint columns are the
+/// controller's values (the robot file's coupling inverted where it has one), in degrees written
+/// to round-trip. Its table ([`files::measurement_file`]) and its text.
+pub fn measurement_file(
+    plan: &Plan,
+    rows: &[PoseRow],
+    positions: Option<&[Vec<Vector3<f64>>]>,
+    comments: &[String],
+) -> std::io::Result<(crate::io::table::Frame, String)> {
+    let mut lines: Vec<String> = positions.map(|_| "simulated = true".to_string()).into_iter().collect();
+    lines.push(format!("format = {}", crate::calibrate::measurements::FORMAT));
+    lines.push("joints = controller".into());
+    lines.push(format!("robot = {}", plan.robot_name));
+    lines.push("frame = laser tracker frame".into());
+    lines.extend(comments.iter().cloned());
+    let mut table = Vec::with_capacity(rows.len() * plan.targets.len());
     for (r, row) in rows.iter().enumerate() {
         let qc = plan.robot.coupling.as_ref().map_or(row.q, |c| c.controller_from_model(&row.q));
-        let q: Vec<String> = qc.iter().map(|v| format!("{}", v.to_degrees())).collect();
         for (k, t) in plan.targets.iter().enumerate() {
-            let xyz = positions.map_or_else(|| ",,".to_string(), |p| format!("{},{},{}", p[r][k].x, p[r][k].y, p[r][k].z));
-            let _ = writeln!(s, "{},{},{},{},{},{xyz}", row.label, row.session, t.name, row.split, q.join(","));
+            table.push(files::MeasurementRow {
+                pose: &row.label,
+                session: row.session,
+                target: &t.name,
+                split: row.split,
+                q_deg: qc.map(f64::to_degrees),
+                xyz_mm: positions.map(|p| p[r][k].into()),
+            });
         }
     }
-    s
+    files::measurement_file(&lines, &table)
+}
+
+/// The text of [`measurement_file`], for `calibrate`'s reader.
+fn csv(plan: &Plan, rows: &[PoseRow], positions: &[Vec<Vector3<f64>>]) -> Result<String, PlanError> {
+    measurement_file(plan, rows, Some(positions), &[]).map(|(_, text)| text).map_err(|e| PlanError::new(&plan.path, "poses", e.to_string()))
 }
 
 /// What [`measure`] gives: the positions per row and target, mm, and the noise per point, mm.
@@ -531,7 +543,7 @@ pub fn predict(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<Prediction,
 /// coordinate, mm.
 fn pilot(plan: &Plan, cell: &Cell, rows: &[PoseRow]) -> Result<(crate::calibrate::Calibration, f64), PlanError> {
     let (positions, sigmas) = measure(plan, cell, rows, crate::seeds::plan::PILOT)?;
-    let text = csv(plan, rows, Some(&positions), &[]);
+    let text = csv(plan, rows, &positions)?;
     let pilot_path = Path::new("(the plan's pilot world)");
     let fail = |e: String| PlanError::new(&plan.path, "poses", format!("the plan's poses cannot be calibrated: {e}"));
     let m = crate::calibrate::measurements::parse(pilot_path, &text, &plan.robot).map_err(|e| fail(e.to_string()))?;
@@ -576,24 +588,20 @@ pub fn joint_list(plan: &Plan, rows: &[PoseRow]) -> String {
     s
 }
 
-/// The tour as CSV: step, pose, split, joint values (deg, controller), the move to it (largest
-/// joint change, deg); a via configuration of a re-routed move is a row of its own, split `via`
-/// (passed, not measured).
-pub fn tour_csv(plan: &Plan, o: &Outcome) -> String {
-    let mut s = String::from("step,pose,split,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,largest_joint_move_deg\n");
-    let mut prev: Option<Joints> = None;
-    for (k, stop) in select::stops(&o.tour.0, &o.routing).iter().enumerate() {
-        let (label, split, q) = match stop {
-            select::Stop::Pose(i) => (o.rows[*i].label.as_str(), o.rows[*i].split, o.rows[*i].q),
-            select::Stop::Via(label, q) => (label.as_str(), select::VIA, *q),
-        };
-        let qc = plan.robot.coupling.as_ref().map_or(q, |c| c.controller_from_model(&q));
-        let qd: Vec<String> = qc.iter().map(|v| format!("{:.6}", v.to_degrees())).collect();
-        let step = prev.map_or(0.0, |p| p.iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max).to_degrees());
-        let _ = writeln!(s, "{},{label},{split},{},{step:.3}", k + 1, qd.join(","));
-        prev = Some(q);
-    }
-    s
+/// The tour: step, pose, split, joint values (deg, controller), the move to it (largest joint
+/// change, deg); a via configuration of a re-routed move is a row of its own, split `via`
+/// (passed, not measured). Its table ([`files::tour_file`]) and its text.
+pub fn tour_file(plan: &Plan, o: &Outcome) -> std::io::Result<(crate::io::table::Frame, String)> {
+    let stops = select::stops(&o.tour.0, &o.routing);
+    let rows = files::tour_rows(
+        &stops,
+        |stop| match stop {
+            select::Stop::Pose(i) => (o.rows[*i].label.as_str(), o.rows[*i].split, None, o.rows[*i].q),
+            select::Stop::Via(label, q) => (label.as_str(), select::VIA, None, *q),
+        },
+        |q| plan.robot.coupling.as_ref().map_or(*q, |c| c.controller_from_model(q)).map(f64::to_degrees),
+    );
+    files::tour_file(None, &rows)
 }
 
 /// `plan.md`: what was planned and what it will buy, rendered from the plan's tables
