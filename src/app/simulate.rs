@@ -11,7 +11,7 @@ use crate::io::table::Frame;
 #[derive(Clone, Debug)]
 pub struct Simulated {
     /// The measurement table, a row per target measured at a pose (columns in
-    /// [`crate::calibrate::simulate::frame_with`]).
+    /// [`crate::calibrate::measurements::file::measurement_file`]).
     pub table: Frame,
     /// The measurement file's text (the `calibrate` CSV layout): its `#` header lines, then the
     /// table.

@@ -6,13 +6,12 @@
 //! the file says `# simulated = true`.
 
 use nalgebra::Vector3;
-use polars::prelude::Column;
 use rand_distr::{Distribution, Normal};
 
-use crate::io::table::{CsvFormat, FieldFormat, Frame};
+use super::measurements::file::MeasurementRow;
+use crate::io::table::Frame;
 use crate::robot::coupling::JointCoupling;
-use crate::robot::fk::JOINT_COLUMNS;
-use crate::robot::{JOINTS, Joints, KinState, RobotModel, UnmodelledSpec, VirtualRobot, XyzZyx, forward};
+use crate::robot::{Joints, KinState, RobotModel, UnmodelledSpec, VirtualRobot, XyzZyx, forward};
 
 /// What to simulate.
 #[derive(Clone, Debug)]
@@ -245,38 +244,26 @@ pub fn to_csv_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) 
     measurement_file(spec, orientation).map(|(_, text)| text)
 }
 
-/// The measurement file of `spec` (with `orientation`'s readings): its table ([`frame_with`]) and
-/// its text, the header lines (`# simulated = true`, the format, the spec's comments) and then the
-/// table as CSV (every number written to round-trip exactly).
+/// The measurement file of `spec` (with `orientation`'s readings): its table and its text
+/// ([`super::measurements::file::measurement_file`] of [`rows_with`]'s rows), the header lines
+/// (`# simulated = true`, the format, the spec's comments) and then the table as CSV.
 pub fn measurement_file(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> std::io::Result<(Frame, String)> {
-    let table = frame_with(spec, orientation)?;
-    let mut text = format!("# simulated = true\n# format = {}\n", super::measurements::FORMAT);
-    for c in &spec.comments {
-        text.push_str(&format!("# {c}\n"));
-    }
-    text.push_str(&crate::io::table::csv_text(&table, &CsvFormat::new(FieldFormat::decimal("")))?);
-    Ok((table, text))
-}
-
-/// The table of `spec`'s rows ([`rows_with`]): the labels `pose`, `session` and `target`, the
-/// controller's joint values `q1_deg` ... `q6_deg`, the measured position `x_mm`, `y_mm`, `z_mm`
-/// in the session's frame and, with `orientation`, the probe's reading `quat_w`, `quat_x`,
-/// `quat_y`, `quat_z`.
-pub fn frame_with(spec: &SimulationSpec, orientation: Option<&OrientationSim>) -> std::io::Result<Frame> {
+    let mut header = vec!["simulated = true".to_string(), format!("format = {}", super::measurements::FORMAT)];
+    header.extend(spec.comments.iter().cloned());
     let rows = rows_with(spec, orientation);
-    let label = |name: &str, v: fn(&SimulatedRow) -> &str| Column::new(name.into(), rows.iter().map(v).collect::<Vec<&str>>());
-    let number =
-        |name: &str, v: &dyn Fn(&SimulatedRow) -> Option<f64>| Column::new(name.into(), rows.iter().filter_map(v).collect::<Vec<f64>>());
-    let mut columns = vec![label("pose", |r| &r.pose), label("session", |r| &r.session), label("target", |r| &r.target)];
-    columns.extend((0..JOINTS).map(|i| number(JOINT_COLUMNS[i], &|r| Some(r.q_controller[i].to_degrees()))));
-    columns.extend(["x_mm", "y_mm", "z_mm"].iter().enumerate().map(|(k, c)| number(c, &|r| Some(r.measured_mm[k]))));
-    if orientation.is_some() {
-        // Every row has a reading: a row without one would leave its column short, which
-        // `frame` refuses.
-        let quat = ["quat_w", "quat_x", "quat_y", "quat_z"];
-        columns.extend(quat.iter().enumerate().map(|(k, c)| number(c, &|r| r.orientation.map(|o| [o.w, o.i, o.j, o.k][k]))));
-    }
-    crate::io::table::frame("measurements", columns)
+    let rows: Vec<MeasurementRow<'_>> = rows
+        .iter()
+        .map(|r| MeasurementRow {
+            pose: &r.pose,
+            session: &r.session,
+            target: &r.target,
+            split: None,
+            q_deg: r.q_controller.map(f64::to_degrees),
+            xyz_mm: Some(r.measured_mm.into()),
+            quat: r.orientation.map(|o| [o.w, o.i, o.j, o.k]),
+        })
+        .collect();
+    super::measurements::file::measurement_file(&header, &rows)
 }
 
 /// The shipped example (`docs/calibrate/example_measurements.csv`): the IRB 120 of `irb120` (a

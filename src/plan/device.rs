@@ -696,7 +696,7 @@ pub fn measurement_file(plan: &DevicePlan, o: &DeviceOutcome) -> std::io::Result
         lines.push("replace the joints with those recorded when the centring loop ends and the centres with the ballbar's; holdout rows: a tracker registered to {W} on the nests".into());
     }
     let rows: Vec<_> = o.rows.iter().map(|r| measurement_row(plan, r, r.group.map(|g| o.groups_w_mm[g]))).collect();
-    super::files::measurement_file(&lines, &rows)
+    crate::calibrate::measurements::file::measurement_file(&lines, &rows)
 }
 
 /// The `#` lines a device plan's measurement files begin with: the format, the joints, the robot
@@ -717,14 +717,19 @@ fn header_lines(plan: &DevicePlan) -> Vec<String> {
 
 /// The measurement file's row of `r`: the TCP in the session `training`, at the controller's
 /// joint values, at `xyz_mm` (`None`: to be measured).
-fn measurement_row<'a>(plan: &DevicePlan, r: &'a DeviceRow, xyz_mm: Option<[f64; 3]>) -> super::files::MeasurementRow<'a> {
-    super::files::MeasurementRow {
+fn measurement_row<'a>(
+    plan: &DevicePlan,
+    r: &'a DeviceRow,
+    xyz_mm: Option<[f64; 3]>,
+) -> crate::calibrate::measurements::file::MeasurementRow<'a> {
+    crate::calibrate::measurements::file::MeasurementRow {
         pose: &r.label,
         session: TRAINING,
         target: "TCP",
-        split: r.split,
+        split: Some(r.split),
         q_deg: controller_deg(plan, &r.q),
         xyz_mm,
+        quat: None,
     }
 }
 
@@ -752,7 +757,7 @@ pub fn simulated_file(plan: &DevicePlan, o: &DeviceOutcome) -> std::io::Result<(
         }
         rows.push(measurement_row(plan, r, Some(p.into())));
     }
-    super::files::measurement_file(&lines, &rows)
+    crate::calibrate::measurements::file::measurement_file(&lines, &rows)
 }
 
 /// The device study's own identification on a measured device-plan file (`simulated.csv`, or the

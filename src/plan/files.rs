@@ -1,5 +1,6 @@
-//! The plan's files as tables: the measurement file (`poses.csv`, `simulated.csv`) and the tour
-//! (`tour.csv`), each a frame and its text written from the frame by [`csv_text`].
+//! The plan's tour (`tour.csv`) as a table, its text written from the frame by [`csv_text`] (the
+//! measurement files, `poses.csv` and `simulated.csv`, are
+//! [`crate::calibrate::measurements::file`]'s).
 
 use polars::prelude::Column;
 
@@ -12,44 +13,6 @@ use crate::robot::{JOINTS, Joints};
 const TOUR_JOINT_DECIMALS: usize = 6;
 /// Decimals of a tour's largest joint move, deg.
 const TOUR_MOVE_DECIMALS: usize = 3;
-
-/// A row of a plan's measurement file: a target at a pose.
-#[derive(Clone, Debug)]
-pub struct MeasurementRow<'a> {
-    /// The pose's label.
-    pub pose: &'a str,
-    /// The session.
-    pub session: &'a str,
-    /// The target.
-    pub target: &'a str,
-    /// `train` or `holdout`.
-    pub split: &'a str,
-    /// The controller's joint values, deg.
-    pub q_deg: [f64; JOINTS],
-    /// The position, mm (`None`: to be measured).
-    pub xyz_mm: Option<[f64; 3]>,
-}
-
-/// The measurement file of `rows`: its table (the labels `pose`, `session`, `target` and `split`
-/// as strings, `q1_deg` ... `q6_deg` and `x_mm`, `y_mm`, `z_mm` as floats, a position to be
-/// measured null) and its text: a `# ` line per entry of `comments`, then the table as CSV (every
-/// number in the shortest decimal that reads back to the same bits, a null an empty field).
-pub fn measurement_file<'a>(comments: &[String], rows: &[MeasurementRow<'a>]) -> std::io::Result<(Frame, String)> {
-    let label = |name: &str, v: fn(&MeasurementRow<'a>) -> &'a str| Column::new(name.into(), rows.iter().map(v).collect::<Vec<&str>>());
-    let mut columns =
-        vec![label("pose", |r| r.pose), label("session", |r| r.session), label("target", |r| r.target), label("split", |r| r.split)];
-    columns.extend((0..JOINTS).map(|i| Column::new(JOINT_COLUMNS[i].into(), rows.iter().map(|r| r.q_deg[i]).collect::<Vec<f64>>())));
-    columns.extend(
-        ["x_mm", "y_mm", "z_mm"]
-            .iter()
-            .enumerate()
-            .map(|(k, c)| Column::new((*c).into(), rows.iter().map(|r| r.xyz_mm.map(|p| p[k])).collect::<Vec<Option<f64>>>())),
-    );
-    let table = crate::io::table::frame("measurements", columns)?;
-    let mut text: String = comments.iter().map(|c| format!("# {c}\n")).collect();
-    text.push_str(&csv_text(&table, &CsvFormat::new(FieldFormat::decimal("")))?);
-    Ok((table, text))
-}
 
 /// A stop of a plan's tour.
 #[derive(Clone, Debug)]

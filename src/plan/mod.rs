@@ -422,7 +422,7 @@ pub fn twin_effects(plan: &Plan) -> Option<crate::calibrate::plan::Effects> {
 /// The measurement file of `rows` at every target: `positions` (per row, per target, mm) or
 /// empty position columns, with `comments` among its `#` lines. The joint columns are the
 /// controller's values (the robot file's coupling inverted where it has one), in degrees written
-/// to round-trip. Its table ([`files::measurement_file`]) and its text.
+/// to round-trip. Its table ([`crate::calibrate::measurements::file::measurement_file`]) and its text.
 pub fn measurement_file(
     plan: &Plan,
     rows: &[PoseRow],
@@ -439,17 +439,18 @@ pub fn measurement_file(
     for (r, row) in rows.iter().enumerate() {
         let qc = plan.robot.coupling.as_ref().map_or(row.q, |c| c.controller_from_model(&row.q));
         for (k, t) in plan.targets.iter().enumerate() {
-            table.push(files::MeasurementRow {
+            table.push(crate::calibrate::measurements::file::MeasurementRow {
                 pose: &row.label,
                 session: row.session,
                 target: &t.name,
-                split: row.split,
+                split: Some(row.split),
                 q_deg: qc.map(f64::to_degrees),
                 xyz_mm: positions.map(|p| p[r][k].into()),
+                quat: None,
             });
         }
     }
-    files::measurement_file(&lines, &table)
+    crate::calibrate::measurements::file::measurement_file(&lines, &table)
 }
 
 /// The text of [`measurement_file`], for `calibrate`'s reader.

@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
+pub mod file;
 mod header;
 mod layout;
 
