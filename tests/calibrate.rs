@@ -335,6 +335,38 @@ fn the_calibrated_robot_file_loads_back_with_its_coupling() {
     }
 }
 
+/// `plans.parquet` is the frame calibrate returns (`plan_table`), a row per plan in `plan.md`'s
+/// order (three with `--plan-with all`, 3 worlds each, on the shipped example); a calibration
+/// without plan worlds writes none.
+#[test]
+fn the_plans_table_is_the_frame_calibrate_returns_a_row_per_plan() {
+    let dir = common::scratch("calibrate-plans");
+    let spec = |plan_worlds: usize, out: &str| calsim::calibrate::CalibrateSpec {
+        robot_file: common::repo().join("robots/irb120.toml"),
+        measurements: common::repo().join("docs/calibrate/example_measurements.csv"),
+        out: dir.path().join(out),
+        options: Options { plots: false, ..Options::default() },
+        plan_worlds,
+        plan_noise_mm: None,
+        plan_scenario: None,
+        plan_with: if plan_worlds > 0 { calsim::calibrate::plan::PlanWith::All } else { Default::default() },
+        instrument_noise_mm: None,
+    };
+    let report = calsim::calibrate::calibrate(&spec(3, "planned")).unwrap();
+    let written = read_parquet(&report.dir.join("plans.parquet"));
+    let returned = report.plan_table.expect("a plan table");
+    assert!(written.equals_missing(&returned), "{written}\n{returned}");
+    let names: Vec<String> = report.plans.iter().map(|(k, _)| k.name().to_string()).collect();
+    assert_eq!(names.len(), 3);
+    let column: Vec<String> = written.column("plan").unwrap().str().unwrap().iter().map(|v| v.unwrap_or_default().to_string()).collect();
+    assert_eq!(column, names);
+    let plan_md = std::fs::read_to_string(report.dir.join("plan.md")).unwrap();
+    let at = |name: &str| plan_md.find(&format!("| {name} |")).unwrap_or_else(|| panic!("{name} in {plan_md}"));
+    assert!(names.windows(2).all(|w| at(&w[0]) < at(&w[1])), "{plan_md}");
+    let plain = calsim::calibrate::calibrate(&spec(0, "plain")).unwrap();
+    assert!(plain.plan_table.is_none() && !plain.dir.join("plans.parquet").exists());
+}
+
 /// A measurement file from `header` and `rows` in a scratch directory.
 fn write_csv(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

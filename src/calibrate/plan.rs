@@ -173,11 +173,16 @@ impl PlanWith {
 /// `simulated_p10_mm`, `simulated_mm` (the median), `simulated_p90_mm`, `worlds` (with a finite
 /// value) and `inside` (the measured figure within the simulated P10-P90).
 pub fn table(plans: &[(PlanWith, PlanComparison)]) -> std::io::Result<crate::io::table::Frame> {
+    crate::io::table::frame("plan", columns(plans))
+}
+
+/// The columns of [`table`] (`plans.parquet` in the report).
+pub fn columns(plans: &[(PlanWith, PlanComparison)]) -> Vec<Column> {
     let text =
         |name: &str, v: fn(&(PlanWith, PlanComparison)) -> &str| Column::new(name.into(), plans.iter().map(v).collect::<Vec<&str>>());
     let number =
         |name: &str, v: fn(&PlanComparison) -> f64| Column::new(name.into(), plans.iter().map(|(_, p)| v(p)).collect::<Vec<f64>>());
-    let columns = vec![
+    vec![
         text("plan", |(k, _)| k.name()),
         text("scenario", |(_, p)| &p.scenario),
         text("statistic", |(_, p)| p.statistic.name()),
@@ -187,8 +192,7 @@ pub fn table(plans: &[(PlanWith, PlanComparison)]) -> std::io::Result<crate::io:
         number("simulated_p90_mm", |p| p.simulated_mm[2]),
         Column::new("worlds".into(), plans.iter().map(|(_, p)| p.worlds as u64).collect::<Vec<u64>>()),
         Column::new("inside".into(), plans.iter().map(|(_, p)| p.inside).collect::<Vec<bool>>()),
-    ];
-    crate::io::table::frame("plan", columns)
+    ]
 }
 
 /// Several plans beside the measured figure, as markdown: one row per plan, and lines for the

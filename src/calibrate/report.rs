@@ -52,6 +52,9 @@ pub fn write_with(
             r.draw(Box::new(move |dir| super::plots::write_plan(dir, plans.0).map(|_| Vec::new())));
         }
         r.file("plan.md", text);
+        if !plans.0.is_empty() {
+            r.table("plans.parquet", super::plan::columns(plans.0))?;
+        }
     }
     if let Ok(t) = twin {
         r.file("twin.toml", twin_text(c, t).map_err(std::io::Error::other)?);
