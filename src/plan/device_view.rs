@@ -253,13 +253,5 @@ fn log_all(rec: &RecordingStream, plan: &DevicePlan, o: &DeviceOutcome) -> Rr {
     )?;
     log_tour(rec, o, &views, colour)?;
     rec.reset_time();
-    rec.log_static("study/heldout_median_mm", &SeriesLines::new().with_names(["held-out median, mm"]))?;
-    for (w, m) in o.prediction.per_world_mm.iter().enumerate() {
-        if m.is_finite() {
-            rec.set_time_sequence("world", w as i64);
-            rec.log("study/heldout_median_mm", &Scalars::new([*m]))?;
-        }
-    }
-    rec.reset_time();
-    Ok(())
+    super::record::log_heldout_medians(rec, &o.prediction.per_world_mm)
 }

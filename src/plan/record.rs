@@ -182,9 +182,14 @@ fn log_all(rec: &RecordingStream, plan: &Plan, cell: &Cell, o: &Outcome) -> Rr {
 
     log_tour(rec, plan, cell, o, &views)?;
     rec.reset_time();
+    log_heldout_medians(rec, &o.prediction.per_world_mm)
+}
 
+/// The simulated worlds' held-out medians as a series over the worlds (the finite ones), for
+/// both kinds of plan.
+pub(super) fn log_heldout_medians(rec: &RecordingStream, per_world_mm: &[f64]) -> Rr {
     rec.log_static("study/heldout_median_mm", &SeriesLines::new().with_names(["held-out median, mm"]))?;
-    for (w, m) in o.prediction.per_world_mm.iter().enumerate() {
+    for (w, m) in per_world_mm.iter().enumerate() {
         if m.is_finite() {
             rec.set_time_sequence("world", w as i64);
             rec.log("study/heldout_median_mm", &Scalars::new([*m]))?;
