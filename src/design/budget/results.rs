@@ -125,6 +125,10 @@ fn tables(b: &BudgetReport<'_>, r: &mut Results<'_>) -> std::io::Result<()> {
 /// `prediction.parquet`, where a configuration has a prediction.
 fn prediction_table(b: &BudgetReport<'_>, r: &mut Results<'_>) -> std::io::Result<()> {
     let f = |name: &str, v: Vec<f64>| Column::new(name.into(), v);
+    let compared = compared(b);
+    if !compared.is_empty() {
+        r.table(PREDICTION_SUMMARY, prediction_summary_columns(b, &compared))?;
+    }
     if let Some(rows) = prediction_rows(b) {
         r.table(
             "prediction.parquet",
@@ -211,22 +215,71 @@ fn prediction_rows(b: &BudgetReport<'_>) -> Option<Vec<PredictionRow>> {
 /// misses the configuration's sources.
 const MISSED_RATIO: f64 = 1.2;
 
-/// The section on the linear prediction against the Monte Carlo.
-///
-/// Long by design: the section top to bottom (what it compares, the table, then what it misses).
-fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
-    let rows: Vec<(&Config, &Prediction)> = b
-        .configs
+/// The configurations the linear prediction is compared in (every source on, none, and each source
+/// alone), with their prediction, in the configurations' order.
+fn compared<'a>(b: &BudgetReport<'a>) -> Vec<(&'a Config, &'a Prediction)> {
+    b.configs
         .iter()
         .zip(b.predictions)
         .filter(|(c, _)| c.mode != "off" && c.mode != "scaled")
         .filter_map(|(c, p)| p.as_ref().map(|p| (c, p)))
-        .collect();
-    if rows.is_empty() {
+        .collect()
+}
+
+/// Why the linear prediction misses a source acting alone (empty where it holds).
+fn missed_because(p: &Prediction) -> String {
+    let (ratio, e) = (p.median_ratio(), p.errors_mm());
+    let mut why = Vec::new();
+    if ratio > MISSED_RATIO {
+        why.push(format!("its parameter errors are {ratio:.1} times the predicted std: a bias the parameters absorb"));
+    }
+    if e[3] > VALIDATION_MISSED * e[1] && e[3] - e[1] > 0.01 {
+        why.push(format!(
+            "the simulated validation p95 is {:.3} mm against {:.3} mm predicted{}",
+            e[3],
+            e[1],
+            if ratio > MISSED_RATIO { "" } else { ": error at the validation poses themselves, which no parameter carries" }
+        ));
+    }
+    why.join("; ")
+}
+
+/// The table of the prediction section.
+const PREDICTION_SUMMARY: &str = "prediction_summary.parquet";
+
+/// `prediction_summary.parquet`: per configuration [`compared`], its source (empty for every
+/// source on or none), the identifications, the fit's noise estimate, the simulated parameter
+/// errors over the predicted std (median over parameters), the predicted and simulated median and
+/// p95 of the validation errors (medians over identifications), whether the validation errors
+/// are predicted at all, and for a source alone why the linear prediction misses it.
+fn prediction_summary_columns(b: &BudgetReport<'_>, rows: &[(&Config, &Prediction)]) -> Vec<Column> {
+    let f = |name: &str, k: usize| Column::new(name.into(), rows.iter().map(|(_, p)| p.errors_mm()[k]).collect::<Vec<f64>>());
+    let text = |name: &str, v: &dyn Fn(&Config, &Prediction) -> String| {
+        Column::new(name.into(), rows.iter().map(|(c, p)| v(c, p)).collect::<Vec<String>>())
+    };
+    vec![
+        text("configuration", &|c, _| c.label.clone()),
+        text("mode", &|c, _| c.mode.to_string()),
+        text("source", &|c, _| c.source.map_or(String::new(), |k| b.sources[k].label.to_string())),
+        Column::new("identifications".into(), rows.iter().map(|(_, p)| p.tasks).collect::<Vec<u32>>()),
+        f("sigma_mm", 4),
+        Column::new("parameter_ratio".into(), rows.iter().map(|(_, p)| p.median_ratio()).collect::<Vec<f64>>()),
+        f("predicted_median_mm", 0),
+        f("predicted_p95_mm", 1),
+        f("simulated_median_mm", 2),
+        f("simulated_p95_mm", 3),
+        Column::new("validation_predicted".into(), rows.iter().map(|(_, p)| !p.predicted_mm.is_empty()).collect::<Vec<bool>>()),
+        text("missed_because", &|c, p| if c.mode == "alone" && c.source.is_some() { missed_because(p) } else { String::new() }),
+    ]
+}
+
+/// The section on the linear prediction against the Monte Carlo, read from
+/// `prediction_summary.parquet` (nothing where no configuration has a prediction).
+fn prediction_section<'a>(b: &BudgetReport<'a>, parts: &mut Summary<'a>) {
+    if compared(b).is_empty() {
         return;
     }
-    let _ = writeln!(
-        s,
+    parts.text(format!(
         "\n## Predicted (linear, from one fit) versus Monte Carlo\n\n\
          What a calibration tool reports from one run: the parameter covariance sigma^2 (J^T J)^-1, with sigma the fit's own \
          noise estimate (SSR / (3n - m) per coordinate) and J the identification Jacobian of the chosen set; the predicted \
@@ -235,69 +288,65 @@ fn prediction_section(b: &BudgetReport<'_>, s: &mut String) {
          every realisation. Ratio: simulated RMS over predicted std, median over the parameters (per-parameter values in \
          `prediction.parquet`, internal units mm, rad, rad/(N m)). A ratio near 1 means the source acts as white noise and one run's covariance is right; above \
          {MISSED_RATIO} the linear prediction misses the source: it is a bias (the same in every configuration of a set) that \
-         the parameters absorb while the residuals stay small.\n"
-    );
-    if rows.iter().all(|(_, p)| p.predicted_mm.is_empty()) {
-        let _ = writeln!(
-            s,
-            "Here the figure of merit (ISO 9283 AP over P1-P5, after the controller's inverse kinematics, in the base frame) is \
-             not predicted: the comparison covers the parameters; the simulated columns give the AP's median and p95.\n"
-        );
-    }
-    let _ = writeln!(
-        s,
-        "| configuration | identifications | sigma (fit), um | ratio, parameters | predicted median / p95, mm | simulated median / p95, mm |\n|---|---|---|---|---|---|"
-    );
-    for (c, p) in &rows {
-        let e = p.errors_mm();
-        let _ = writeln!(
-            s,
-            "| {} | {} | {:.2} | {:.2} | {} / {} | {} / {} |",
-            c.label,
-            p.tasks,
-            e[4] * 1e3,
-            p.median_ratio(),
-            f3(e[0]),
-            f3(e[1]),
-            f3(e[2]),
-            f3(e[3])
-        );
-    }
-    let mut missed = Vec::new();
-    let mut held = Vec::new();
-    for (c, p) in rows.iter().filter(|(c, _)| c.mode == "alone") {
-        let Some(k) = c.source else { continue };
-        let (ratio, e) = (p.median_ratio(), p.errors_mm());
-        let mut why = Vec::new();
-        if ratio > MISSED_RATIO {
-            why.push(format!("its parameter errors are {ratio:.1} times the predicted std: a bias the parameters absorb"));
+         the parameters absorb while the residuals stay small.\n\n"
+    ));
+    parts.text_from(PREDICTION_SUMMARY, |r| {
+        if (0..r.height()).any(|i| r.at(i).bool("validation_predicted")) {
+            return String::new();
         }
-        if e[3] > VALIDATION_MISSED * e[1] && e[3] - e[1] > 0.01 {
-            why.push(format!(
-                "the simulated validation p95 is {:.3} mm against {:.3} mm predicted{}",
-                e[3],
-                e[1],
-                if ratio > MISSED_RATIO { "" } else { ": error at the validation poses themselves, which no parameter carries" }
-            ));
-        }
-        let label = b.sources[k].label;
-        if why.is_empty() { held.push(format!("{label} ({ratio:.1})")) } else { missed.push(format!("**{label}**: {}", why.join("; "))) }
-    }
+        "Here the figure of merit (ISO 9283 AP over P1-P5, after the controller's inverse kinematics, in the base frame) is not \
+         predicted: the comparison covers the parameters; the simulated columns give the AP's median and p95.\n\n"
+            .to_string()
+    });
+    let pair = |a: &'static str, b: &'static str| move |r: &Row<'_>| format!("{} / {}", f3(r.f64(a)), f3(r.f64(b)));
+    parts.table(
+        PREDICTION_SUMMARY,
+        Summary::all_rows(),
+        vec![
+            crate::io::results::cell("configuration", |r| r.str("configuration")),
+            crate::io::results::cell("identifications", |r| r.u64("identifications").to_string()),
+            crate::io::results::cell("sigma (fit), um", |r| format!("{:.2}", r.f64("sigma_mm") * 1e3)),
+            crate::io::results::cell("ratio, parameters", |r| format!("{:.2}", r.f64("parameter_ratio"))),
+            crate::io::results::cell("predicted median / p95, mm", pair("predicted_median_mm", "predicted_p95_mm")),
+            crate::io::results::cell("simulated median / p95, mm", pair("simulated_median_mm", "simulated_p95_mm")),
+        ],
+    );
+    parts.text_from(PREDICTION_SUMMARY, prediction_verdict);
+}
+
+/// Which sources the linear prediction misses and for which it holds, from
+/// `prediction_summary.parquet`.
+fn prediction_verdict(r: &Row<'_>) -> String {
+    let rows: Vec<Row<'_>> = (0..r.height()).map(|i| r.at(i)).collect();
+    let alone: Vec<&Row<'_>> = rows.iter().filter(|x| x.str("mode") == "alone" && !x.str("source").is_empty()).collect();
+    let mut s = String::new();
+    let missed: Vec<String> = alone
+        .iter()
+        .filter(|x| !x.str("missed_because").is_empty())
+        .map(|x| format!("**{}**: {}", x.str("source"), x.str("missed_because")))
+        .collect();
     if !missed.is_empty() {
-        let _ = writeln!(s, "\nThe linear prediction misses:\n");
+        s.push_str("The linear prediction misses:\n\n");
         for m in &missed {
             let _ = writeln!(s, "- {m}");
         }
+        s.push('\n');
     }
+    let held: Vec<String> = alone
+        .iter()
+        .filter(|x| x.str("missed_because").is_empty())
+        .map(|x| format!("{} ({:.1})", x.str("source"), x.f64("parameter_ratio")))
+        .collect();
     let _ = writeln!(
         s,
-        "\nIt holds (white noise, parameter ratio in brackets) for: {}.{}",
+        "It holds (white noise, parameter ratio in brackets) for: {}.{}",
         if held.is_empty() { "none of the sources".to_string() } else { held.join(", ") },
-        rows.iter().find(|(c, _)| c.mode == "all").map_or(String::new(), |(_, p)| format!(
+        rows.iter().find(|x| x.str("mode") == "all").map_or(String::new(), |x| format!(
             " With every source on, the simulated parameter errors are {:.1} times the predicted std (median over parameters).",
-            p.median_ratio()
+            x.f64("parameter_ratio")
         ))
     );
+    s
 }
 
 /// Where the simulated validation p95 exceeds the predicted one by more than this factor (and by
@@ -332,10 +381,8 @@ pub fn summary<'a>(b: &'a BudgetReport<'a>, parts: &mut Summary<'a>) {
     parts.text(s);
     shares_table(b, parts);
     detail(b, parts);
-    let mut s = String::new();
-    prediction_section(b, &mut s);
-    s.push_str("\n## Every configuration\n\n");
-    parts.text(s);
+    prediction_section(b, parts);
+    parts.text("\n## Every configuration\n\n");
     parts.table(
         "budget.parquet",
         Summary::all_rows(),
