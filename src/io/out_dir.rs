@@ -220,9 +220,63 @@ fn may_not_replace(flag: &str, dest: &Path, is_ours: &dyn Fn(&Path) -> bool, wha
 }
 
 /// [`prepare`] for the results directory `out/<name>`: it may be replaced when it is absent,
-/// empty, or a calsim results directory holding no input of the run.
+/// empty, or a calsim results directory holding no input of the run and nothing but what calsim
+/// wrote there (the files its manifest lists, [`listing`]).
 fn results_in_the_way(dest: &Path) -> Option<OutDirError> {
     may_not_replace("--out", dest, &is_results_dir, "a calsim results directory (it has no calsim manifest.json)")
+        .or_else(|| not_written_by_calsim(dest).map(|why| refused("--out", dest, why)))
+}
+
+/// Why the calsim results directory `dest` holds something calsim did not write there: an entry
+/// its manifest's `files` does not list (a file a user added), or no such list. `None` when every
+/// entry is listed (or `dest` is absent or empty).
+fn not_written_by_calsim(dest: &Path) -> Option<String> {
+    let present = listing(dest).ok()?;
+    if present.is_empty() {
+        return None;
+    }
+    let listed: Option<Vec<String>> = crate::io::read_own(&dest.join("manifest.json"), crate::io::MOST_INPUT_BYTES)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| serde_json::from_value(v.get("files")?.clone()).ok());
+    let Some(listed) = listed else {
+        return Some(
+            "is a calsim results directory whose manifest.json lists no files (written by an earlier calsim), so calsim cannot \
+             tell its files from others: move it away or choose another --out (it is left as it is)"
+                .into(),
+        );
+    };
+    let listed: std::collections::BTreeSet<&str> = listed.iter().map(String::as_str).collect();
+    present.iter().find(|p| !listed.contains(p.as_str())).map(|extra| {
+        format!(
+            "holds {extra}, which calsim did not write there (calsim replaces only what it made): move it away or choose \
+             another --out (it is left as it is)"
+        )
+    })
+}
+
+/// Every entry under `dir` (files, links and directories, depth first; links not followed), as
+/// paths relative to it joined by `/`, a directory's ending in `/`, sorted; `manifest.json` at
+/// the top left out. What a results directory's manifest lists as `files`.
+pub fn listing(dir: &Path) -> io::Result<Vec<String>> {
+    fn walk(dir: &Path, prefix: &str, out: &mut Vec<String>) -> io::Result<()> {
+        for entry in fs::read_dir(dir)? {
+            let entry = entry?;
+            let name = crate::io::names::escape_controls(&entry.file_name().to_string_lossy());
+            let path = format!("{prefix}{name}");
+            if entry.file_type()?.is_dir() {
+                out.push(format!("{path}/"));
+                walk(&entry.path(), &format!("{path}/"), out)?;
+            } else if path != "manifest.json" {
+                out.push(path);
+            }
+        }
+        Ok(())
+    }
+    let mut out = Vec::new();
+    walk(dir, "", &mut out)?;
+    out.sort();
+    Ok(out)
 }
 
 /// Checks, before anything runs, that the results of `name` can be written under `out`: `name` is

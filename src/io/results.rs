@@ -438,7 +438,6 @@ impl<'a> Results<'a> {
         if let serde_json::Value::Object(h) = head {
             manifest.extend(h);
         }
-        write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(crate::io::table::err)?)?;
         let t = std::time::Instant::now();
         if let Some((file, record)) = self.record {
             record(&dir.join(file)).map_err(std::io::Error::other)?;
@@ -454,6 +453,10 @@ impl<'a> Results<'a> {
             write_file(&dir.join("summary.md"), text)?;
             shown = printed;
         }
+        // Last: the manifest lists every file written, so that a later run replaces only this.
+        let files = crate::io::out_dir::listing(dir)?;
+        manifest.insert("files".into(), serde_json::to_value(files).map_err(crate::io::table::err)?);
+        write_file(&dir.join("manifest.json"), serde_json::to_string_pretty(&manifest).map_err(crate::io::table::err)?)?;
         Ok((shown, recording_s))
     }
 }
@@ -545,6 +548,53 @@ mod tests {
         let mut r = results();
         r.summary.table_if_rows("t.parquet", Box::new(|_| vec![1, 0]), x());
         assert_eq!(r.summary_text().unwrap(), "| x |\n|---|\n| NaN |\n| 1.5 |\n\n");
+    }
+
+    /// The manifest lists every file written (nested results included); a second run replaces
+    /// the directory, but not once a user has added a file or a directory to it, nor one whose
+    /// manifest lists no files: refused naming the entry, and every byte left as it was.
+    #[test]
+    fn results_holding_a_file_calsim_did_not_write_are_not_replaced() {
+        let tmp = tempfile::Builder::new().prefix("calsim-results-").tempdir().unwrap();
+        let with_nested = || {
+            let mut r = results();
+            r.file("notes.md", "n").nested("winner", results());
+            r
+        };
+        let dest = write(tmp.path(), with_nested()).unwrap().dest;
+        let manifest: serde_json::Value = serde_json::from_slice(&std::fs::read(dest.join("manifest.json")).unwrap()).unwrap();
+        let files: Vec<&str> = manifest["files"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+        assert_eq!(files, ["notes.md", "t.parquet", "winner/", "winner/manifest.json", "winner/t.parquet"]);
+        assert_eq!(write(tmp.path(), with_nested()).unwrap().dest, dest, "calsim's own results are replaced");
+        let snapshot = |d: &Path| -> Vec<(String, Vec<u8>)> {
+            let mut v: Vec<(String, Vec<u8>)> = crate::io::out_dir::listing(d)
+                .unwrap()
+                .into_iter()
+                .filter(|p| !p.ends_with('/'))
+                .chain(["manifest.json".to_string()])
+                .map(|p| (p.clone(), std::fs::read(d.join(&p)).unwrap()))
+                .collect();
+            v.sort();
+            v
+        };
+        for added in ["QA_signoff.txt", "winner/mine.toml", "extra/"] {
+            let path = dest.join(added);
+            if added.ends_with('/') {
+                std::fs::create_dir(&path).unwrap();
+            } else {
+                std::fs::write(&path, "a user's").unwrap();
+            }
+            let before = snapshot(&dest);
+            let e = write(tmp.path(), with_nested()).unwrap_err().to_string();
+            assert!(e.contains(&format!("holds {added}, which calsim did not write there")), "{e}");
+            assert_eq!(snapshot(&dest), before, "{added}: nothing changed");
+            if added.ends_with('/') { std::fs::remove_dir(&path) } else { std::fs::remove_file(&path) }.unwrap();
+        }
+        let mut manifest = manifest;
+        manifest.as_object_mut().unwrap().remove("files");
+        std::fs::write(dest.join("manifest.json"), manifest.to_string()).unwrap();
+        let e = write(tmp.path(), with_nested()).unwrap_err().to_string();
+        assert!(e.contains("lists no files"), "{e}");
     }
 
     #[test]
