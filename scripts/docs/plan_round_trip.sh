@@ -22,7 +22,10 @@ for s in $(seq 1 "$seeds"); do
     read -r lo hi <<< "$band"
     out="$("$calsim" calibrate robots/irb120.toml "$work/rt$s.plan/simulated.csv" --seed "$s" --no-plots --out "$work" 2>/dev/null)"
     chosen="$(grep -- '<- chosen' <<< "$out" | awk '{print $1}')"
-    median="$(grep -E "^\| $chosen \| [0-9]+ \|" "$work/simulated.calibration/summary.md" | sed -n 2p | awk -F'|' '{gsub(/ /,"",$5); print $5}')"
+    # The measured held-out median: the chosen model's row of summary.md's held-out table.
+    median="$(sed -n '/^## Held-out errors, measured and predicted/,/^#/p' "$work/simulated.calibration/summary.md" |
+        grep -E "^\| $chosen \| [0-9]+ \|" | awk -F'|' '{gsub(/ /,"",$5); print $5}')"
+    [ -n "$median" ] || { echo "plan_round_trip: seed $s: no held-out median of $chosen in summary.md" >&2; exit 1; }
     ok="$(awk -v m="$median" -v a="$lo" -v b="$hi" 'BEGIN { print (m >= a && m <= b) ? "yes" : "no" }')"
     [ "$ok" = yes ] && inside=$((inside + 1))
     echo "| $s | $lo-$hi | $median | $ok |"
