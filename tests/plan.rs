@@ -850,7 +850,7 @@ fn the_shipped_objective_plan_runs() {
     let file = shipped_short(&dir, "irb120_tracker_objective.toml", |t| {
         t.replace("pool = 2000", "pool = 300")
             .replace("validation = 20", "validation = 8")
-            .replace("most_poses = 400", "most_poses = 80")
+            .replace("most_poses = 400", "most_poses = 40")
             .replace("worlds = 60 ", "worlds = 24 ")
     });
     let r =
