@@ -5,7 +5,8 @@
 //! `pose_error_mdeg = 20`, `pose_error_length_rad` the true length), calibrated and its twin
 //! analysed. Per length: the worlds that gave a length, the median fitted length with its P10-P90
 //! over them, and how many of their 95 % intervals hold the true length and the true level
-//! (Wilson 95 % intervals of those shares).
+//! (Wilson 95 % intervals of those shares), for the bootstrap's basic interval (in log scale) and
+//! its percentile interval; and the replicates censored at the ends of the lengths tried.
 //!
 //! `cargo run --release --example twin_length_coverage -- WORLDS LENGTHS` (e.g. `40 0.5,1.5,4.0`),
 //! from the repository root.
@@ -13,6 +14,7 @@
 use std::path::Path;
 
 use calsim::calibrate::simulate::{SimulationSpec, example_spec, joint_error_csv};
+use calsim::calibrate::twin::shape::BOOTSTRAP_REPLICATES;
 use calsim::calibrate::{Options, default_params, measurements, run};
 use calsim::robot::file::RobotFile;
 use calsim::robot::{LearnedEffects, ParamSet, RobotModel, UnmodelledSpec};
@@ -34,11 +36,14 @@ fn truth(robot: &RobotFile) -> Result<RobotModel, String> {
         .map_err(|e| e.to_string())
 }
 
-/// One world's fitted length, its interval, and the level's interval (mdeg), when the twin gives a length.
+/// One world's fitted length and its intervals (the basic one and the percentile one),
+/// the level's likewise (mdeg), and its replicates censored at the grid's ends, when the twin
+/// gives a length.
 struct Fitted {
     length: f64,
-    interval: [f64; 2],
-    level_mdeg: [f64; 2],
+    interval: [[f64; 2]; 2],
+    level_mdeg: [[f64; 2]; 2],
+    censored: usize,
 }
 
 fn world(robot: &RobotFile, truth: &RobotModel, length: f64, seed: u64) -> Result<Option<Fitted>, String> {
@@ -61,9 +66,13 @@ fn world(robot: &RobotFile, truth: &RobotModel, length: f64, seed: u64) -> Resul
     let c = run(robot, &m, &Options { plots: false, prediction_draws: 10, ..Options::default() }).map_err(|e| e.to_string())?;
     let t = calsim::calibrate::twin::analyse(&c, None).map_err(|e| e.to_string())?;
     Ok(t.length.as_ref().map(|s| {
-        let mdeg = |r: f64| r.to_degrees() * 1e3;
-        let [v, sd] = s.level_rad;
-        Fitted { length: s.length_rad, interval: s.interval, level_mdeg: [mdeg(v - Z95 * sd), mdeg(v + Z95 * sd)] }
+        let mdeg = |[a, b]: [f64; 2]| [a.to_degrees() * 1e3, b.to_degrees() * 1e3];
+        Fitted {
+            length: s.length_rad,
+            interval: [s.basic[0], s.percentile[0]],
+            level_mdeg: [mdeg(s.basic[1]), mdeg(s.percentile[1])],
+            censored: s.censored[0] + s.censored[1],
+        }
     }))
 }
 
@@ -98,11 +107,12 @@ fn main() -> Result<(), String> {
         .collect::<Result<_, _>>()?;
     let robot = RobotFile::load(Path::new("robots/irb120.toml")).map_err(|e| e.to_string())?;
     let truth = truth(&robot)?;
-    println!("{worlds} worlds per length, level {LEVEL_MDEG} mdeg per joint");
+    println!("{worlds} worlds per length, level {LEVEL_MDEG} mdeg per joint; intervals: basic (log) / percentile bootstrap");
     println!(
-        "| true length (rad) | worlds with a length | median length (P10-P90) | length covered, % (Wilson 95 %) | level covered, % (Wilson 95 %) |"
+        "| true length (rad) | worlds with a length | median length (P10-P90) | length covered, basic | length covered, percentile | level \
+         covered, basic | level covered, percentile | replicates censored |"
     );
-    println!("|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for (i, &length) in lengths.iter().enumerate() {
         let mut fitted = Vec::new();
         for w in 0..worlds {
@@ -113,21 +123,20 @@ fn main() -> Result<(), String> {
         let n = fitted.len();
         let mut ls: Vec<f64> = fitted.iter().map(|f| f.length).collect();
         ls.sort_by(f64::total_cmp);
-        let inside = |lo: f64, hi: f64, x: f64| lo <= x && x <= hi;
-        let cover_l = fitted.iter().filter(|f| inside(f.interval[0], f.interval[1], length)).count();
-        let cover_v = fitted.iter().filter(|f| inside(f.level_mdeg[0], f.level_mdeg[1], LEVEL_MDEG)).count();
-        let (wl, wv) = (wilson(cover_l, n), wilson(cover_v, n));
+        let covered = |k: usize| {
+            let w = wilson(k, n);
+            format!("{k} of {n}: {:.0} % ({:.0}-{:.0})", 100.0 * k as f64 / n.max(1) as f64, w[0], w[1])
+        };
+        let inside = |[lo, hi]: [f64; 2], x: f64| lo <= x && x <= hi;
+        let cells: Vec<String> = [0, 1]
+            .iter()
+            .map(|&k| covered(fitted.iter().filter(|f| inside(f.interval[k], length)).count()))
+            .chain([0, 1].iter().map(|&k| covered(fitted.iter().filter(|f| inside(f.level_mdeg[k], LEVEL_MDEG)).count())))
+            .collect();
         let spread =
             if n > 0 { format!("{:.2} ({:.2}-{:.2})", quantile(&ls, 0.5), quantile(&ls, 0.1), quantile(&ls, 0.9)) } else { "-".into() };
-        println!(
-            "| {length} | {n} of {worlds} | {spread} | {cover_l} of {n}: {:.0} ({:.0}-{:.0}) | {cover_v} of {n}: {:.0} ({:.0}-{:.0}) |",
-            100.0 * cover_l as f64 / n.max(1) as f64,
-            wl[0],
-            wl[1],
-            100.0 * cover_v as f64 / n.max(1) as f64,
-            wv[0],
-            wv[1]
-        );
+        let censored: usize = fitted.iter().map(|f| f.censored).sum();
+        println!("| {length} | {n} of {worlds} | {spread} | {} | {censored} of {} |", cells.join(" | "), n * BOOTSTRAP_REPLICATES);
     }
     Ok(())
 }
