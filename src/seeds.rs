@@ -210,6 +210,9 @@ pub mod fixed {
     /// The random Fourier features of the unit field a twin's length fit predicts the bins with
     /// (`calibrate::twin::shape::length_scale`).
     pub const SMOOTH_FIELD: u64 = 0x5eed_1e47;
+    /// The replicates of the twin's length fit's parametric bootstrap: replicate `i` draws from
+    /// `stream(LENGTH_BOOTSTRAP, i)` (`calibrate::twin::shape::length_scale`).
+    pub const LENGTH_BOOTSTRAP: u64 = 0x5eed_1e48;
 }
 
 /// A generator seeded with `seed` itself (for the [`fixed`] streams).

@@ -499,37 +499,8 @@ fn field_twin(
     seed: u64,
     error: impl Fn(&calsim::robot::Joints, &mut rand_chacha::ChaCha8Rng) -> calsim::robot::Joints,
 ) -> Twin {
-    use rand_distr::{Distribution, Normal};
     let spec = SimulationSpec { poses_per_session: 100, repeats_per_session: 0, seed, ..arm(robot, None, 0.0) };
-    let mut poses = calsim::seeds::stream(seed, calsim::seeds::calibrate::SIMULATED_POSES);
-    let mut rng = common::rng(seed);
-    let noise = Normal::new(0.0, NOISE_MM).unwrap();
-    let mut st = calsim::robot::KinState::default();
-    let mut text = format!("# simulated = true\n# format = {}\n", measurements::FORMAT);
-    for c in &spec.comments {
-        text += &format!("# {c}\n");
-    }
-    text += "pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n";
-    for (s, (session, frame)) in spec.sessions.iter().enumerate() {
-        for k in 0..spec.poses_per_session {
-            let q = calsim::robot::uniform_configuration(&spec.truth, spec.margin, &mut poses);
-            let e = error(&q, &mut rng);
-            let links: calsim::robot::Joints = std::array::from_fn(|j| q[j] + e[j]);
-            for (target, tool) in &spec.targets {
-                let model = spec
-                    .truth
-                    .edited(|d| {
-                        d.world_from_base = *frame;
-                        d.flange_tcp_mm = *tool;
-                    })
-                    .unwrap();
-                let p = calsim::robot::forward(&model, &mut st, &links) + nalgebra::Vector3::from_fn(|_, _| noise.sample(&mut rng));
-                let qd: Vec<String> = q.iter().map(|v| format!("{}", v.to_degrees())).collect();
-                text +=
-                    &format!("p{:03},{session},{target},{},{},{},{}\n", s * spec.poses_per_session + k + 1, qd.join(","), p.x, p.y, p.z);
-            }
-        }
-    }
+    let text = calsim::calibrate::simulate::joint_error_csv(&spec, &mut common::rng(seed), error);
     let m = measurements::parse(Path::new("field.csv"), &text, robot).unwrap();
     let c = run(robot, &m, &Options { plots: false, prediction_draws: 10, ..Options::default() }).unwrap();
     analyse(&c, None).unwrap()

@@ -203,6 +203,17 @@ if [ $# -eq 0 ] || [[ " $* " == *" plan-round-trip "* ]]; then
     page plan-round-trip "\`bash scripts/docs/plan_round_trip.sh target/release/calsim 20\`" <"$scratch/plan-round-trip.stdout"
 fi
 
+# Coverage of the twin's smooth-field length and level intervals (docs/twin.md, "A smooth per-pose
+# error"): examples/twin_length_coverage.rs, 40 worlds per true length.
+if [ $# -eq 0 ] || [[ " $* " == *" twin-length-coverage "* ]]; then
+    cargo build --release --locked --example twin_length_coverage
+    command="cargo run --release --example twin_length_coverage -- 40 0.5,1.5,4.0"
+    echo "regenerate: twin-length-coverage: $command"
+    start=$SECONDS
+    "$CARGO_TARGET_DIR/release/examples/twin_length_coverage" 40 0.5,1.5,4.0 >"$scratch/twin-length-coverage.stdout"
+    page twin-length-coverage "\`$command\`" <"$scratch/twin-length-coverage.stdout"
+fi
+
 # Where the ISO 9283 cube would have to stand for Table 6's before row (docs/guide-reproduce.md).
 if [ $# -eq 0 ] || [[ " $* " == *" table6-placement "* ]]; then
     cargo build --release --locked --example table6_placement

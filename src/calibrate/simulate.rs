@@ -266,6 +266,44 @@ pub fn measurement_file(spec: &SimulationSpec, orientation: Option<&OrientationS
     super::measurements::file::measurement_file(&header, &rows)
 }
 
+/// The measurement file's text of `spec`'s sessions and targets at `spec.poses_per_session` random
+/// poses per session (the poses' stream keyed by `spec.seed`), every pose's link angles moved by
+/// `error(q, rng)` (rad per joint, shared by the targets of a pose) and every coordinate by a
+/// normal noise of `spec.noise_mm`, both drawn from `rng`; no repeats, outliers, effects or
+/// coupling. The twin's round trips of a per-pose joint error (tests and examples).
+#[doc(hidden)]
+pub fn joint_error_csv<R: rand::Rng>(spec: &SimulationSpec, rng: &mut R, error: impl Fn(&Joints, &mut R) -> Joints) -> String {
+    let mut poses = crate::seeds::stream(spec.seed, crate::seeds::calibrate::SIMULATED_POSES);
+    let noise = Normal::new(0.0, spec.noise_mm).expect("a finite noise");
+    let mut st = KinState::default();
+    let mut text = format!("# simulated = true\n# format = {}\n", super::measurements::FORMAT);
+    for c in &spec.comments {
+        text += &format!("# {c}\n");
+    }
+    text += "pose,session,target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm\n";
+    for (s, (session, frame)) in spec.sessions.iter().enumerate() {
+        for k in 0..spec.poses_per_session {
+            let q = crate::robot::uniform_configuration(&spec.truth, spec.margin, &mut poses);
+            let e = error(&q, rng);
+            let links: Joints = std::array::from_fn(|j| q[j] + e[j]);
+            for (target, tool) in &spec.targets {
+                let model = spec
+                    .truth
+                    .edited(|d| {
+                        d.world_from_base = *frame;
+                        d.flange_tcp_mm = *tool;
+                    })
+                    .expect("the truth in a session's frame");
+                let p = forward(&model, &mut st, &links) + Vector3::from_fn(|_, _| noise.sample(rng));
+                let qd: Vec<String> = q.iter().map(|v| format!("{}", v.to_degrees())).collect();
+                text +=
+                    &format!("p{:03},{session},{target},{},{},{},{}\n", s * spec.poses_per_session + k + 1, qd.join(","), p.x, p.y, p.z);
+            }
+        }
+    }
+    text
+}
+
 /// The shipped example (`docs/calibrate/example_measurements.csv`): the IRB 120 of `irb120` (a
 /// loaded `robots/irb120.toml`; its `[truth]`, Table 7, is the robot measured) in three laser
 /// tracker placements, two SMRs on the flange, 40 poses per placement, one outlier.

@@ -286,7 +286,7 @@ impl LearnedEffects {
 /// of amplitude `rms sqrt(2 / features)`, each frequency drawn from the kernel's spectral
 /// density (a normal of standard deviation `1 / length` per joint value), each phase uniform.
 /// Over worlds, the field's covariance is the kernel's exactly.
-fn smooth_field<R: Rng + ?Sized>(rms_rad: f64, length_rad: f64, rng: &mut R) -> Vec<(usize, Joints, f64, f64)> {
+pub(crate) fn smooth_field<R: Rng + ?Sized>(rms_rad: f64, length_rad: f64, rng: &mut R) -> Vec<(usize, Joints, f64, f64)> {
     let frequency = Normal::new(0.0, 1.0 / length_rad).expect("a positive length");
     let phase = Uniform::new(0.0, 2.0 * PI).expect("range");
     let amplitude = rms_rad * (2.0 / FIELD_FEATURES as f64).sqrt();
@@ -298,6 +298,14 @@ fn smooth_field<R: Rng + ?Sized>(rms_rad: f64, length_rad: f64, rng: &mut R) -> 
         }
     }
     field
+}
+
+/// Adds the smooth field `field` ([`smooth_field`]'s features) at joint values `q` to `e`, rad.
+pub(crate) fn add_field(field: &[(usize, Joints, f64, f64)], q: &Joints, e: &mut Joints) {
+    for (j, w, phase, amplitude) in field {
+        let x: f64 = w.iter().zip(q).map(|(a, b)| a * b).sum::<f64>() + phase;
+        e[*j] += amplitude * x.cos();
+    }
 }
 
 impl LearnedEffects {
@@ -330,10 +338,7 @@ impl DrawnEffects {
             let x = order * q[j];
             e[j] += s * x.sin() + c * x.cos();
         }
-        for (j, w, phase, amplitude) in &self.field {
-            let x: f64 = w.iter().zip(q).map(|(a, b)| a * b).sum::<f64>() + phase;
-            e[*j] += amplitude * x.cos();
-        }
+        add_field(&self.field, q, &mut e);
         for j in 0..JOINTS {
             e[j] += if q[j] > from[j] {
                 -self.half_backlash[j]

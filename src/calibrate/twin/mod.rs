@@ -716,10 +716,10 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
 /// on average, `jl_mm` the link-angle Jacobian over the training points, mm per rad).
 fn smooth_left(scale: &shape::LengthScale, jl_mm: &DMatrix<f64>) -> Level {
     let per_rad = (jl_mm.iter().map(|v| v * v).sum::<f64>() / (3 * (jl_mm.nrows() / 3).max(1)) as f64).sqrt();
-    let [level, std] = scale.level_rad;
+    let ([level, _], [low, high]) = (scale.level_rad, scale.level_interval_rad);
     Level {
         sigma_mm: level * per_rad,
-        interval_mm: [(level - Z95 * std).max(0.0) * per_rad, (level + Z95 * std) * per_rad],
+        interval_mm: [low.max(0.0) * per_rad, high * per_rad],
         by: format!(
             "a smooth joint-space field of length {:.2} rad fitted to the error left's correlation by pose distance (below), its \
              level before the fit",

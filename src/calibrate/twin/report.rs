@@ -128,6 +128,9 @@ fn twin_columns(t: &Twin) -> Vec<Column> {
         Column::new("length_fitted".into(), vec![t.length.is_some()]),
         Column::new("length_low_rad".into(), vec![t.length.as_ref().map(|x| x.interval[0])]),
         Column::new("length_high_rad".into(), vec![t.length.as_ref().map(|x| x.interval[1])]),
+        Column::new("length_replicates".into(), vec![t.length.as_ref().map(|x| x.replicates as u64)]),
+        Column::new("length_censored_low".into(), vec![t.length.as_ref().map(|x| x.censored[0] as u64)]),
+        Column::new("length_censored_high".into(), vec![t.length.as_ref().map(|x| x.censored[1] as u64)]),
     ]
 }
 
@@ -267,11 +270,15 @@ fn fitted_length(r: &Row<'_>) -> String {
     }
     format!(
         "Fitted as a smooth joint-space field (the bins' correlations against what such a field leaves after the fit): length \
-         {:.2} rad (95 % {:.2}-{:.2}), RMS per joint {:.3} mdeg.",
+         {:.2} rad (95 % {:.2}-{:.2}), RMS per joint {:.3} mdeg; intervals from {} bootstrap replicates of the fit ({} at the \
+         least length tried, {} at the greatest).",
         r.f64("pose_error_length_rad"),
         r.f64("length_low_rad"),
         r.f64("length_high_rad"),
-        r.f64("pose_error_mdeg")
+        r.f64("pose_error_mdeg"),
+        r.u64("length_replicates"),
+        r.u64("length_censored_low"),
+        r.u64("length_censored_high")
     )
 }
 

@@ -119,158 +119,224 @@ impl Subset {
 }
 
 fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Joints], hat_basis: &DMatrix<f64>) -> Correlation {
-    use rayon::prelude::*;
-    let n = pose_of.len();
     let poses = q.len();
-    let k = hat_basis.ncols();
-    if n == 0 || poses < 2 || resid.len() != 3 * n {
+    if pose_of.is_empty() || poses < 2 || resid.len() != 3 * pose_of.len() {
         return Correlation { bins: Vec::new(), poses, mean_sq: 0.0 };
     }
-    // Per pose: the sum of its points' residuals, their count, the sum of their squared
-    // residuals, the sum of their rows of the hat basis (3 x k) and of tr H_ii.
-    let mut r_sum = vec![[0.0f64; 3]; poses];
-    let mut count = vec![0usize; poses];
-    let mut sq = vec![0.0f64; poses];
-    let mut q_sum = vec![0.0f64; poses * 3 * k];
-    let mut h_ii = vec![0.0f64; poses];
-    for (i, &p) in pose_of.iter().enumerate() {
-        count[p] += 1;
-        for a in 0..3 {
-            let v = resid[3 * i + a];
-            r_sum[p][a] += v;
-            sq[p] += v * v;
-            for c in 0..k {
-                let h = hat_basis[(3 * i + a, c)];
-                q_sum[(p * 3 + a) * k + c] += h;
-                h_ii[p] += h * h;
-            }
-        }
-    }
-    let mean_sq = sq.iter().sum::<f64>() / n as f64;
-    let white_sq = (3.0 * n as f64 - h_ii.iter().sum::<f64>()) / n as f64;
-    let dot_q = |p: usize, s: usize| -> f64 {
-        let (a, b) = (&q_sum[p * 3 * k..(p + 1) * 3 * k], &q_sum[s * 3 * k..(s + 1) * 3 * k]);
-        a.iter().zip(b).map(|(x, y)| x * y).sum()
-    };
+    let binning = Binning::of(pose_of, q);
+    let (traces, white_sq) = binning.traces(hat_basis);
+    binning.correlation(resid, &traces, white_sq)
+}
 
-    // Bin sums: products, point pairs, tr H_ij; and per pose, the same over the pairs it is in.
-    struct Sums {
-        label: String,
-        same_pose: bool,
-        range: [f64; 2],
-        product: f64,
-        pairs: usize,
-        pose_pairs: usize,
-        trace: f64,
-        per_pose: Vec<(f64, usize)>,
-        sample: Vec<(u32, u32)>,
-    }
-    let new_bin = |label: String, same_pose: bool| Sums {
-        label,
-        same_pose,
-        range: [f64::INFINITY, f64::NEG_INFINITY],
-        product: 0.0,
-        pairs: 0,
-        pose_pairs: 0,
-        trace: 0.0,
-        per_pose: vec![(0.0, 0); poses],
-        sample: Vec::new(),
-    };
-    let mut bins: Vec<Sums> = Vec::new();
-    // The other targets at one pose.
-    if count.iter().any(|&c| c >= 2) {
-        let mut b = new_bin("other targets at one pose".into(), true);
-        for p in (0..poses).filter(|&p| count[p] >= 2) {
-            let s = 0.5 * (r_sum[p].iter().map(|v| v * v).sum::<f64>() - sq[p]);
-            let pairs = count[p] * (count[p] - 1) / 2;
-            b.product += s;
-            b.pairs += pairs;
-            b.pose_pairs += 1;
-            b.trace += 0.5 * (dot_q(p, p) - h_ii[p]);
-            b.per_pose[p] = (s, pairs);
-            b.range = [0.0, 0.0];
+/// The pairs [`correlation`] bins, which depend only on the poses: the points per pose, the pairs
+/// of distinct poses sorted by distance and each bin's share of them.
+pub(crate) struct Binning {
+    pose_of: Vec<usize>,
+    count: Vec<usize>,
+    /// The pairs of distinct poses, by distance (ties by the poses' numbers).
+    pairs: Vec<(f64, u32, u32)>,
+    bins: Vec<BinPairs>,
+}
+
+/// One bin of a [`Binning`].
+struct BinPairs {
+    label: String,
+    same_pose: bool,
+    range: [f64; 2],
+    /// Its pairs of distinct poses in [`Binning::pairs`] (empty for the distance-0 bin).
+    span: std::ops::Range<usize>,
+    pairs: usize,
+    pose_pairs: usize,
+    /// Per pose, the pairs of points it is in.
+    per_pose: Vec<usize>,
+    sample: Vec<(u32, u32)>,
+}
+
+impl Binning {
+    /// The binning of the points of poses `pose_of` (at least two poses in `q`).
+    pub(crate) fn of(pose_of: &[usize], q: &[crate::robot::Joints]) -> Binning {
+        use rayon::prelude::*;
+        let poses = q.len();
+        let mut count = vec![0usize; poses];
+        for &p in pose_of {
+            count[p] += 1;
         }
-        bins.push(b);
-    }
-    // Distinct poses, by the rank of their distance.
-    let mut pairs: Vec<(f64, u32, u32)> = Vec::with_capacity(poses * (poses - 1) / 2);
-    for p in 0..poses {
-        for s in p + 1..poses {
-            let d = q[p].iter().zip(&q[s]).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
-            pairs.push((d, p as u32, s as u32));
-        }
-    }
-    // The order is total (ties by the poses' numbers): the parallel sort gives the serial one's.
-    pairs.par_sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-    let total = pairs.len();
-    let mut from = 0usize;
-    let mut low = 0.0;
-    for &edge in &DISTANCE_BINS {
-        let to = ((edge * total as f64).round() as usize).clamp(from, total);
-        if to == from {
-            continue;
-        }
-        let label = format!("distinct poses, nearest {:.0}-{:.0} % of pairs", 100.0 * low, 100.0 * edge);
-        low = edge;
-        let mut b = new_bin(label, false);
-        let stride = (to - from).div_ceil(PAIR_SAMPLE).max(1);
-        b.sample = pairs[from..to].iter().step_by(stride).map(|&(_, p, s)| (p, s)).collect();
-        // The pairs' tr H_ij side by side, summed below in the pairs' order.
-        let traces: Vec<f64> = pairs[from..to].par_iter().map(|&(_, p, s)| dot_q(p as usize, s as usize)).collect();
-        for (&(d, p, s), trace) in pairs[from..to].iter().zip(traces) {
-            let (p, s) = (p as usize, s as usize);
-            let prod: f64 = (0..3).map(|a| r_sum[p][a] * r_sum[s][a]).sum();
-            let n_pairs = count[p] * count[s];
-            b.product += prod;
-            b.pairs += n_pairs;
-            b.pose_pairs += 1;
-            b.trace += trace;
-            for x in [p, s] {
-                b.per_pose[x].0 += prod;
-                b.per_pose[x].1 += n_pairs;
+        let new_bin = |label: String, same_pose: bool, span: std::ops::Range<usize>| BinPairs {
+            label,
+            same_pose,
+            range: [f64::INFINITY, f64::NEG_INFINITY],
+            span,
+            pairs: 0,
+            pose_pairs: 0,
+            per_pose: vec![0; poses],
+            sample: Vec::new(),
+        };
+        let mut bins = Vec::new();
+        // The other targets at one pose.
+        if count.iter().any(|&c| c >= 2) {
+            let mut b = new_bin("other targets at one pose".into(), true, 0..0);
+            for p in (0..poses).filter(|&p| count[p] >= 2) {
+                let pairs = count[p] * (count[p] - 1) / 2;
+                b.pairs += pairs;
+                b.pose_pairs += 1;
+                b.per_pose[p] = pairs;
+                b.range = [0.0, 0.0];
             }
-            b.range = [b.range[0].min(d), b.range[1].max(d)];
+            bins.push(b);
         }
-        bins.push(b);
-        from = to;
+        // Distinct poses, by the rank of their distance.
+        let mut pairs: Vec<(f64, u32, u32)> = Vec::with_capacity(poses * (poses - 1) / 2);
+        for p in 0..poses {
+            for s in p + 1..poses {
+                let d = q[p].iter().zip(&q[s]).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+                pairs.push((d, p as u32, s as u32));
+            }
+        }
+        // The order is total (ties by the poses' numbers): the parallel sort gives the serial one's.
+        pairs.par_sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        let total = pairs.len();
+        let mut from = 0usize;
+        let mut low = 0.0;
+        for &edge in &DISTANCE_BINS {
+            let to = ((edge * total as f64).round() as usize).clamp(from, total);
+            if to == from {
+                continue;
+            }
+            let label = format!("distinct poses, nearest {:.0}-{:.0} % of pairs", 100.0 * low, 100.0 * edge);
+            low = edge;
+            let mut b = new_bin(label, false, from..to);
+            let stride = (to - from).div_ceil(PAIR_SAMPLE).max(1);
+            b.sample = pairs[from..to].iter().step_by(stride).map(|&(_, p, s)| (p, s)).collect();
+            for &(d, p, s) in &pairs[from..to] {
+                let n_pairs = count[p as usize] * count[s as usize];
+                b.pairs += n_pairs;
+                b.pose_pairs += 1;
+                b.per_pose[p as usize] += n_pairs;
+                b.per_pose[s as usize] += n_pairs;
+                b.range = [b.range[0].min(d), b.range[1].max(d)];
+            }
+            bins.push(b);
+            from = to;
+        }
+        Binning { pose_of: pose_of.to_vec(), count, pairs, bins }
     }
 
-    let total_sq: f64 = sq.iter().sum();
-    let bins = bins
-        .into_iter()
-        .map(|b| {
-            let correlation = b.product / b.pairs as f64 / mean_sq;
-            // Delete-one jackknife over the poses with points.
-            let left_out: Vec<f64> = (0..poses)
-                .filter(|&p| count[p] > 0 && b.pairs > b.per_pose[p].1 && n > count[p])
-                .map(|p| {
-                    let (s, c) = b.per_pose[p];
-                    ((b.product - s) / (b.pairs - c) as f64) / ((total_sq - sq[p]) / (n - count[p]) as f64)
-                })
-                .collect();
-            let g = left_out.len() as f64;
-            let interval = if left_out.len() >= 2 {
-                let mean = left_out.iter().sum::<f64>() / g;
-                let var = (g - 1.0) / g * left_out.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
-                let h = Z95 * var.sqrt();
-                [correlation - h, correlation + h]
-            } else {
-                [f64::NAN; 2]
-            };
-            CorrelationBin {
-                same_pose: b.same_pose,
-                label: b.label,
-                distance_rad: b.range,
-                pairs: b.pairs,
-                pose_pairs: b.pose_pairs,
-                correlation,
-                interval,
-                white: -(b.trace / b.pairs as f64) / white_sq,
-                pair_sample: b.sample,
+    /// Per bin, the sum of tr H_ij over its pairs of points (`hat_basis` an orthonormal basis of
+    /// the fit's columns, 3 rows per point), and the mean over points of `3 - tr H_ii` (the mean
+    /// squared residual of a point per unit variance of white residuals).
+    fn traces(&self, hat_basis: &DMatrix<f64>) -> (Vec<f64>, f64) {
+        use rayon::prelude::*;
+        let (poses, k, n) = (self.count.len(), hat_basis.ncols(), self.pose_of.len());
+        // Per pose: the sum of its rows of the hat basis (3 x k) and of tr H_ii.
+        let mut q_sum = vec![0.0f64; poses * 3 * k];
+        let mut h_ii = vec![0.0f64; poses];
+        for (i, &p) in self.pose_of.iter().enumerate() {
+            for a in 0..3 {
+                for c in 0..k {
+                    let h = hat_basis[(3 * i + a, c)];
+                    q_sum[(p * 3 + a) * k + c] += h;
+                    h_ii[p] += h * h;
+                }
             }
-        })
-        .collect();
-    Correlation { bins, poses, mean_sq }
+        }
+        let white_sq = (3.0 * n as f64 - h_ii.iter().sum::<f64>()) / n as f64;
+        let dot_q = |p: usize, s: usize| -> f64 {
+            let (a, b) = (&q_sum[p * 3 * k..(p + 1) * 3 * k], &q_sum[s * 3 * k..(s + 1) * 3 * k]);
+            a.iter().zip(b).map(|(x, y)| x * y).sum()
+        };
+        let traces = self
+            .bins
+            .iter()
+            .map(|b| {
+                let mut trace = 0.0;
+                if b.same_pose {
+                    for p in (0..poses).filter(|&p| self.count[p] >= 2) {
+                        trace += 0.5 * (dot_q(p, p) - h_ii[p]);
+                    }
+                } else {
+                    // The pairs' tr H_ij side by side, summed in the pairs' order.
+                    let terms: Vec<f64> = self.pairs[b.span.clone()].par_iter().map(|&(_, p, s)| dot_q(p as usize, s as usize)).collect();
+                    for t in terms {
+                        trace += t;
+                    }
+                }
+                trace
+            })
+            .collect();
+        (traces, white_sq)
+    }
+
+    /// The correlation of `resid` (3 rows per point) over the bins, `traces` and `white_sq` those
+    /// of [`Binning::traces`].
+    fn correlation(&self, resid: &DVector<f64>, traces: &[f64], white_sq: f64) -> Correlation {
+        let (poses, n) = (self.count.len(), self.pose_of.len());
+        // Per pose: the sum of its points' residuals and of their squared residuals.
+        let mut r_sum = vec![[0.0f64; 3]; poses];
+        let mut sq = vec![0.0f64; poses];
+        for (i, &p) in self.pose_of.iter().enumerate() {
+            for a in 0..3 {
+                let v = resid[3 * i + a];
+                r_sum[p][a] += v;
+                sq[p] += v * v;
+            }
+        }
+        let mean_sq = sq.iter().sum::<f64>() / n as f64;
+        let total_sq: f64 = sq.iter().sum();
+        let bins = self
+            .bins
+            .iter()
+            .zip(traces)
+            .map(|(b, &trace)| {
+                // The bin's sum of products, and per pose the same over the pairs it is in.
+                let mut product = 0.0;
+                let mut per_pose = vec![0.0f64; poses];
+                if b.same_pose {
+                    for p in (0..poses).filter(|&p| self.count[p] >= 2) {
+                        let s = 0.5 * (r_sum[p].iter().map(|v| v * v).sum::<f64>() - sq[p]);
+                        product += s;
+                        per_pose[p] = s;
+                    }
+                } else {
+                    for &(_, p, s) in &self.pairs[b.span.clone()] {
+                        let (p, s) = (p as usize, s as usize);
+                        let prod: f64 = (0..3).map(|a| r_sum[p][a] * r_sum[s][a]).sum();
+                        product += prod;
+                        per_pose[p] += prod;
+                        per_pose[s] += prod;
+                    }
+                }
+                let correlation = product / b.pairs as f64 / mean_sq;
+                // Delete-one jackknife over the poses with points.
+                let left_out: Vec<f64> = (0..poses)
+                    .filter(|&p| self.count[p] > 0 && b.pairs > b.per_pose[p] && n > self.count[p])
+                    .map(|p| {
+                        ((product - per_pose[p]) / (b.pairs - b.per_pose[p]) as f64) / ((total_sq - sq[p]) / (n - self.count[p]) as f64)
+                    })
+                    .collect();
+                let g = left_out.len() as f64;
+                let interval = if left_out.len() >= 2 {
+                    let mean = left_out.iter().sum::<f64>() / g;
+                    let var = (g - 1.0) / g * left_out.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+                    let h = Z95 * var.sqrt();
+                    [correlation - h, correlation + h]
+                } else {
+                    [f64::NAN; 2]
+                };
+                CorrelationBin {
+                    same_pose: b.same_pose,
+                    label: b.label.clone(),
+                    distance_rad: b.range,
+                    pairs: b.pairs,
+                    pose_pairs: b.pose_pairs,
+                    correlation,
+                    interval,
+                    white: -(trace / b.pairs as f64) / white_sq,
+                    pair_sample: b.sample.clone(),
+                }
+            })
+            .collect();
+        Correlation { bins, poses, mean_sq }
+    }
 }
 
 /// The correlation length of a smooth error, fitted to the bins of distinct poses.
@@ -278,11 +344,25 @@ fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Jo
 pub struct LengthScale {
     /// The length `l` of the kernel `exp(-d^2 / (2 l^2))`, rad.
     pub length_rad: f64,
-    /// Its 95 % interval (profile of the fit's weighted squared misfit), rad.
+    /// Its 95 % interval (the parametric bootstrap's basic interval in log length), rad.
     pub interval: [f64; 2],
-    /// The field's RMS per joint before the fit, rad, and its standard deviation.
+    /// The field's RMS per joint before the fit, rad, and the width of its interval over 2 x 1.96.
     pub level_rad: [f64; 2],
+    /// The level's 95 % interval (the bootstrap's percentile interval), rad.
+    pub level_interval_rad: [f64; 2],
+    /// The bootstrap's basic intervals in log scale (`[v^2 / q97.5, v^2 / q2.5]`, `q` the
+    /// replicates' quantiles) of the length and of the level, rad.
+    pub basic: [[f64; 2]; 2],
+    /// The bootstrap's percentile intervals (`[q2.5, q97.5]`) of the length and of the level, rad.
+    pub percentile: [[f64; 2]; 2],
+    /// The bootstrap's replicates fitted.
+    pub replicates: usize,
+    /// Replicates whose best length is the grid's least and its greatest (counted there).
+    pub censored: [usize; 2],
 }
+
+/// The replicates of [`length_scale`]'s parametric bootstrap.
+pub const BOOTSTRAP_REPLICATES: usize = 100;
 
 /// The grid of lengths [`length_scale`] profiles, rad: log-spaced from 0.02 to 20, 10 a decade.
 fn length_grid() -> Vec<f64> {
@@ -471,6 +551,58 @@ fn bin_products(c: &Correlation, dot: impl Fn(usize, usize) -> f64, own: &Own, c
     (products, mean_sq)
 }
 
+/// Per length of [`length_grid`], what a unit field gives the bins after the fit ([`predicted`]):
+/// the expensive part of the fit, which depends only on the poses, the Jacobian and the basis.
+struct Predictions {
+    grid: Vec<f64>,
+    by_length: Vec<(Vec<f64>, f64)>,
+}
+
+impl Predictions {
+    fn of(c: &Correlation, jl: &DMatrix<f64>, pose_of: &[usize], q: &[crate::robot::Joints], basis: &DMatrix<f64>) -> Predictions {
+        use rayon::prelude::*;
+        let grid = length_grid();
+        let sums = PoseSums::of(jl, pose_of, c.poses, basis);
+        let features = features();
+        let by_length = grid.par_iter().map(|&l| predicted(c, l, &sums, &features, q, pose_of.len())).collect();
+        Predictions { grid, by_length }
+    }
+}
+
+/// One length of the profile: the length, the level share `a`, the weighted squared misfit and
+/// `a`'s least-squares standard error.
+type ProfilePoint = (f64, f64, f64, f64);
+
+/// The profile of `c`'s bins against the predictions (`None` with fewer than two bins with an
+/// interval).
+fn profile(c: &Correlation, p: &Predictions) -> Option<Vec<ProfilePoint>> {
+    let usable: Vec<usize> = (0..c.bins.len()).filter(|&b| c.bins[b].interval.iter().all(|v| v.is_finite())).collect();
+    if usable.len() < 2 {
+        return None;
+    }
+    let se: Vec<f64> = usable.iter().map(|&b| ((c.bins[b].interval[1] - c.bins[b].interval[0]) / (2.0 * Z95)).max(1e-12)).collect();
+    let excess: Vec<f64> = usable.iter().map(|&b| c.bins[b].correlation - c.bins[b].white).collect();
+    let points = p
+        .grid
+        .iter()
+        .zip(&p.by_length)
+        .map(|(&l, (m, s))| {
+            let k: Vec<f64> = usable.iter().map(|&b| m[b] - s * c.bins[b].white).collect();
+            let (num, den) =
+                (0..k.len()).fold((0.0, 0.0), |(x, y), i| (x + excess[i] * k[i] / se[i].powi(2), y + k[i] * k[i] / se[i].powi(2)));
+            let a = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+            let misfit = (0..k.len()).map(|i| ((excess[i] - a * k[i]) / se[i]).powi(2)).sum();
+            (l, a, misfit, if den > 0.0 { 1.0 / den.sqrt() } else { f64::INFINITY })
+        })
+        .collect();
+    Some(points)
+}
+
+/// The index of the profile's least misfit.
+fn best(profile: &[ProfilePoint]) -> Option<usize> {
+    (0..profile.len()).min_by(|&x, &y| profile[x].2.total_cmp(&profile[y].2))
+}
+
 /// The correlation length and level of the error left, where a bin of distinct poses is above the
 /// fit's value for white residuals (`None` otherwise, with fewer than two bins with an interval, or
 /// where the best length is the grid's least, an error independent per pose, or its greatest).
@@ -481,11 +613,8 @@ fn bin_products(c: &Correlation, dot: impl Fn(usize, usize) -> f64, own: &Own, c
 /// absorbs the field's slow part, so the bins see less of a long field than the kernel says),
 /// `w_b` the bin's value for white residuals and `a = s^2 / mean_sq`. For each `l` of a log grid
 /// `a` is the weighted least squares of `c_b - w_b` on `M_b - S w_b` (weights the jackknife
-/// variances; kept >= 0), `l` the one of least weighted squared misfit; its 95 % interval the
-/// lengths whose misfit is within 3.84 of the least (the profile, chi-square with one degree of
-/// freedom, its threshold scaled by the least misfit over its degrees of freedom where that is
-/// above 1; the bins share poses, so it is approximate); the level's interval spans the levels'
-/// least-squares intervals at the lengths inside. `jl`, `pose_of`, `q` and `basis` are over the
+/// variances; kept >= 0), `l` the one of least weighted squared misfit. The intervals come from a
+/// parametric bootstrap of that fit ([`bootstrap`]). `jl`, `pose_of`, `q` and `basis` are over the
 /// rows and poses the correlation binned.
 pub fn length_scale(
     c: &Correlation,
@@ -494,61 +623,122 @@ pub fn length_scale(
     q: &[crate::robot::Joints],
     basis: &DMatrix<f64>,
 ) -> Option<LengthScale> {
-    use rayon::prelude::*;
-    let usable: Vec<usize> = (0..c.bins.len()).filter(|&b| c.bins[b].interval.iter().all(|v| v.is_finite())).collect();
-    if usable.len() < 2 || !c.bins.iter().any(|b| !b.same_pose && b.above_white()) {
+    if !c.bins.iter().any(|b| !b.same_pose && b.above_white()) {
         return None;
     }
-    let se: Vec<f64> = usable.iter().map(|&b| ((c.bins[b].interval[1] - c.bins[b].interval[0]) / (2.0 * Z95)).max(1e-12)).collect();
-    let excess: Vec<f64> = usable.iter().map(|&b| c.bins[b].correlation - c.bins[b].white).collect();
-    let grid = length_grid();
-    let sums = PoseSums::of(jl, pose_of, c.poses, basis);
-    let features = features();
-    let profile: Vec<(f64, f64, f64, f64)> = grid
-        .par_iter()
-        .map(|&l| {
-            let (m, s) = predicted(c, l, &sums, &features, q, pose_of.len());
-            let k: Vec<f64> = usable.iter().map(|&b| m[b] - s * c.bins[b].white).collect();
-            let (num, den) =
-                (0..k.len()).fold((0.0, 0.0), |(x, y), i| (x + excess[i] * k[i] / se[i].powi(2), y + k[i] * k[i] / se[i].powi(2)));
-            let a = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
-            let misfit = (0..k.len()).map(|i| ((excess[i] - a * k[i]) / se[i]).powi(2)).sum();
-            (l, a, misfit, if den > 0.0 { 1.0 / den.sqrt() } else { f64::INFINITY })
-        })
-        .collect();
-    let b = (0..profile.len()).min_by(|&x, &y| profile[x].2.total_cmp(&profile[y].2))?;
+    let predictions = Predictions::of(c, jl, pose_of, q, basis);
+    let profile = profile(c, &predictions)?;
+    let b = best(&profile)?;
     // The grid's least length: an error independent per pose; its greatest: a field the fit
     // absorbs all but a trace of, whose length and level the bins cannot tell.
     if b == 0 || b + 1 == profile.len() || profile[b].1 <= 0.0 {
         return None;
     }
-    // The interval's ends: where the misfit crosses the least plus 3.84, linear in log l between
-    // the grid's lengths (the grid's end where it does not cross).
-    // The misfit's scale: over its degrees of freedom (bins less the length and the level) where
-    // the bins scatter about the best prediction more than their intervals say.
-    let dof = usable.len().saturating_sub(2).max(1) as f64;
-    let scale = (profile[b].2 / dof).max(1.0).sqrt();
-    let cut = profile[b].2 + Z95 * Z95 * scale * scale;
-    let cross = |i: usize, o: usize| -> f64 {
-        let (li, lo, mi, mo) = (profile[i].0.ln(), profile[o].0.ln(), profile[i].2, profile[o].2);
-        (li + (lo - li) * (cut - mi) / (mo - mi)).exp()
+    let (length, level) = (profile[b].0, (profile[b].1 * c.mean_sq).sqrt());
+    let model = Model { length, level, share: profile[b].1, unit_sq: predictions.by_length[b].1 };
+    let fits = bootstrap(c, &model, &predictions, &Rows { jl, pose_of, q, basis });
+    let last = predictions.grid.len() - 1;
+    let censored = [fits.iter().filter(|f| f.0 == 0).count(), fits.iter().filter(|f| f.0 == last).count()];
+    let lengths: Vec<f64> = fits.iter().map(|f| predictions.grid[f.0]).collect();
+    let levels: Vec<f64> = fits.iter().map(|f| f.1).collect();
+    let (length_basic, length_percentile) = intervals(length, lengths);
+    let (level_basic, level_percentile) = intervals(level, levels);
+    Some(LengthScale {
+        length_rad: length,
+        interval: length_basic,
+        level_rad: [level, (level_percentile[1] - level_percentile[0]) / (2.0 * Z95)],
+        level_interval_rad: level_percentile,
+        basic: [length_basic, level_basic],
+        percentile: [length_percentile, level_percentile],
+        replicates: fits.len(),
+        censored,
+    })
+}
+
+/// The fitted model a bootstrap replicate draws from: the length and level (rad), the level share
+/// `a` and the mean square `S` a unit field of that length leaves after the fit.
+struct Model {
+    length: f64,
+    level: f64,
+    share: f64,
+    unit_sq: f64,
+}
+
+/// The rows and poses the correlation binned: the weighted link-angle Jacobian, each point's pose,
+/// the poses' joint values and the fit's orthonormal basis.
+struct Rows<'a> {
+    jl: &'a DMatrix<f64>,
+    pose_of: &'a [usize],
+    q: &'a [crate::robot::Joints],
+    basis: &'a DMatrix<f64>,
+}
+
+/// The basic 95 % bootstrap interval of a positive `value` in log scale (`[v^2 / q97.5, v^2 /
+/// q2.5]`), and the percentile one (`[q2.5, q97.5]`), of the replicates' values.
+fn intervals(value: f64, mut replicates: Vec<f64>) -> ([f64; 2], [f64; 2]) {
+    replicates.sort_by(f64::total_cmp);
+    let q = |f: f64| -> f64 {
+        let x = f * (replicates.len() - 1) as f64;
+        let (i, t) = (x.floor() as usize, x - x.floor());
+        let next = replicates[(i + 1).min(replicates.len() - 1)];
+        replicates[i] + t * (next - replicates[i])
     };
-    let low = (0..b).rev().find(|&i| profile[i].2 > cut).map_or(profile[0].0, |i| cross(i + 1, i));
-    let high = (b + 1..profile.len()).find(|&i| profile[i].2 > cut).map_or(profile[profile.len() - 1].0, |i| cross(i - 1, i));
-    // The level at each length inside, with its least-squares interval (d sqrt(a m) = sqrt(m) da
-    // / (2 sqrt(a))); the level's interval spans them all.
-    let level = |p: &(f64, f64, f64, f64)| -> [f64; 2] {
-        let v = (p.1 * c.mean_sq).sqrt();
-        let se = if p.1 > 0.0 { c.mean_sq.sqrt() * p.3 * scale / (2.0 * p.1.sqrt()) } else { 0.0 };
-        [v - Z95 * se, v + Z95 * se]
-    };
-    let span = profile
-        .iter()
-        .filter(|p| p.2 <= cut)
-        .map(level)
-        .fold([f64::INFINITY, f64::NEG_INFINITY], |acc, x| [acc[0].min(x[0]), acc[1].max(x[1])]);
-    let value = (profile[b].1 * c.mean_sq).sqrt();
-    Some(LengthScale { length_rad: profile[b].0, interval: [low, high], level_rad: [value, (span[1] - span[0]).max(0.0) / (2.0 * Z95)] })
+    if replicates.is_empty() {
+        return ([f64::NAN; 2], [f64::NAN; 2]);
+    }
+    let (low, high) = (q(0.025), q(0.975));
+    let basic = if low > 0.0 { [value * value / high, value * value / low] } else { [value * value / high, f64::INFINITY] };
+    (basic, [low, high])
+}
+
+/// The parametric bootstrap of the length fit: [`BOOTSTRAP_REPLICATES`] residuals drawn from the
+/// fitted model, each a smooth field of the fitted length and level drawn as a world draws the
+/// twin's field (`robot::learned`'s random Fourier features, from the replicate's own stream)
+/// carried to the points by the weighted link-angle Jacobian, plus white noise of the model's
+/// share of the mean square, projected off the fit's basis, binned as `c` and fitted against the
+/// same predictions. Per replicate (in index order, any thread count), the index of its best
+/// length on the grid (at the grid's ends where it is there) and its level, rad.
+fn bootstrap(c: &Correlation, model: &Model, predictions: &Predictions, rows: &Rows<'_>) -> Vec<(usize, f64)> {
+    use rand_distr::{Distribution, Normal};
+    use rayon::prelude::*;
+    let n = rows.pose_of.len();
+    let binning = Binning::of(rows.pose_of, rows.q);
+    // The mean squared white residual of a point per unit variance: 3 less tr H_ii.
+    let white_sq = (3.0 * n as f64 - rows.basis.iter().map(|v| v * v).sum::<f64>()) / n as f64;
+    let white_sd = ((1.0 - model.share * model.unit_sq).max(0.0) * c.mean_sq / white_sq).sqrt();
+    let no_traces = vec![0.0; c.bins.len()];
+    (0..BOOTSTRAP_REPLICATES)
+        .into_par_iter()
+        .filter_map(|i| {
+            let mut rng = crate::seeds::stream(crate::seeds::fixed::LENGTH_BOOTSTRAP, i as u64);
+            let field = crate::robot::learned::smooth_field(model.level, model.length, &mut rng);
+            let e: Vec<crate::robot::Joints> = rows
+                .q
+                .iter()
+                .map(|x| {
+                    let mut e = [0.0; crate::robot::JOINTS];
+                    crate::robot::learned::add_field(&field, x, &mut e);
+                    e
+                })
+                .collect();
+            let noise = Normal::new(0.0, white_sd).ok()?;
+            let jl = rows.jl;
+            let mut g = DVector::from_fn(jl.nrows(), |r, _| {
+                let p = rows.pose_of[r / 3];
+                (0..jl.ncols()).map(|j| jl[(r, j)] * e[p][j]).sum::<f64>() + noise.sample(&mut rng)
+            });
+            if rows.basis.ncols() > 0 {
+                g -= rows.basis * rows.basis.tr_mul(&g);
+            }
+            let mut r = binning.correlation(&g, &no_traces, white_sq);
+            for (x, b) in r.bins.iter_mut().zip(&c.bins) {
+                x.white = b.white;
+            }
+            let profile = profile(&r, predictions)?;
+            let b = best(&profile)?;
+            Some((b, (profile[b].1 * r.mean_sq).sqrt()))
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -620,6 +810,36 @@ mod tests {
                 assert!(close(*a, *b), "l {l}: {m:?} {md:?}");
             }
         }
+    }
+
+    /// The bootstrap of a known model (no fit: an empty basis; 150 poses of 2 points, a random
+    /// Jacobian; the field's length the grid's 1.00 rad and 80 % of the mean square) draws the
+    /// same replicates on 1 and 2 threads, one per replicate.
+    #[test]
+    fn the_bootstraps_replicates_are_the_same_on_any_thread_count() {
+        use rand::RngExt;
+        let mut rng = crate::seeds::stream(11, 0);
+        let poses = 150;
+        let q: Vec<crate::robot::Joints> = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
+        let pose_of: Vec<usize> = (0..2 * poses).map(|i| i / 2).collect();
+        let n = pose_of.len();
+        let jl = DMatrix::from_fn(3 * n, 6, |_, _| rng.random_range(-1.0..1.0));
+        let basis = DMatrix::zeros(3 * n, 0);
+        let resid = DVector::from_fn(3 * n, |_, _| rng.random_range(-1.0..1.0));
+        let c = correlation(&resid, &pose_of, &q, &basis);
+        let predictions = Predictions::of(&c, &jl, &pose_of, &q, &basis);
+        let k = 17;
+        let length = predictions.grid[k];
+        let share = 0.8 / predictions.by_length[k].1;
+        let model = Model { length, level: (share * c.mean_sq).sqrt(), share, unit_sq: predictions.by_length[k].1 };
+        let rows = Rows { jl: &jl, pose_of: &pose_of, q: &q, basis: &basis };
+        let on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| bootstrap(&c, &model, &predictions, &rows))
+        };
+        let (one, two) = (on(1), on(2));
+        assert_eq!(one, two);
+        assert_eq!(one.len(), BOOTSTRAP_REPLICATES);
     }
 
     /// Residuals drawn as a smooth function of the pose (the same at nearby poses) correlate in the
