@@ -15,29 +15,38 @@ use crate::io::plot::{
 /// Writes the figures of `c` into `dir`.
 pub fn write(dir: &Path, c: &Calibration) -> Result<Vec<Written>, PlotError> {
     register_font();
+    // The marks each figure draws: a point before and after; three coordinates per joint; a point
+    // in each of two views. A figure of more is written as a PNG alone.
+    let n = c.chosen().fit.errors_mm.len();
+    let svg = |marks: usize| marks <= crate::io::plot::MOST_SVG_MARKS;
     let mut out = Vec::new();
-    both!(dir, "residuals_per_point", |root| per_point(root, c));
+    let (per_point_svg, per_joint_svg, map_svg) = (svg(2 * n), svg(3 * crate::robot::JOINTS * n), svg(2 * n));
+    both!(dir, "residuals_per_point", png_only: !per_point_svg, |root| per_point(root, c));
     out.push(Written {
+        svg: per_point_svg,
         stem: "residuals_per_point".into(),
         caption:
             "Error of every point before (nominal robot, fitted bases and tools) and after calibration, in file order; outliers circled"
                 .into(),
     });
-    both!(dir, "residuals_per_joint", |root| per_joint(root, c));
+    both!(dir, "residuals_per_joint", png_only: !per_joint_svg, |root| per_joint(root, c));
     out.push(Written {
+        svg: per_joint_svg,
         stem: "residuals_per_joint".into(),
         caption: "Residual after calibration (x, y, z in the robot's base frame, signed) against each joint's angle: a pattern along a \
                   joint (a sag growing with the arm's reach) is an error the model does not hold"
             .into(),
     });
-    both!(dir, "error_map", |root| error_map(root, c));
+    both!(dir, "error_map", png_only: !map_svg, |root| error_map(root, c));
     out.push(Written {
+        svg: map_svg,
         stem: "error_map".into(),
         caption: "Error after calibration where each point was measured, in the robot's base frame".into(),
     });
     if c.chosen().held_out.is_some() {
         both!(dir, "held_out", |root| held_out(root, c));
         out.push(Written {
+            svg: true,
             stem: "held_out".into(),
             caption: "Held-out errors of every model (cumulative distributions), measured, with the chosen model's prediction".into(),
         });
@@ -220,7 +229,7 @@ pub fn write_plan(dir: &Path, plans: &[(super::plan::PlanWith, super::plan::Plan
     }
     register_font();
     both!(dir, PLAN_FIGURE.0, |root| plan(root, plans));
-    Ok(Some(Written { stem: PLAN_FIGURE.0.into(), caption: PLAN_FIGURE.1.into() }))
+    Ok(Some(Written { svg: true, stem: PLAN_FIGURE.0.into(), caption: PLAN_FIGURE.1.into() }))
 }
 
 fn plan<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plans: &[(super::plan::PlanWith, super::plan::PlanComparison)]) -> DrawResult {

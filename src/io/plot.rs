@@ -24,7 +24,15 @@ pub struct Written {
     pub stem: String,
     /// Caption for the summary.
     pub caption: String,
+    /// Whether `<stem>.svg` was written (a figure of more than [`MOST_SVG_MARKS`] marks is a PNG
+    /// alone).
+    pub svg: bool,
 }
+
+/// The most marks a figure is also written as SVG with: an SVG holds an element per mark, about
+/// 100 bytes each (10 MB at this count; a browser renders it slowly beyond), where a PNG's size does
+/// not grow with them.
+pub const MOST_SVG_MARKS: usize = 100_000;
 
 /// A figure could not be drawn or written.
 #[derive(Debug, thiserror::Error)]
@@ -246,6 +254,22 @@ pub fn written<E: std::fmt::Display>(path: &std::path::Path) -> impl FnOnce(E) -
 /// Draws `draw` into `dir/<stem>.png` and `dir/<stem>.svg` ([`SIZE`] pixels, or `size`); a
 /// write error names the file.
 macro_rules! both {
+    ($dir:expr, $stem:expr, png_only: $png_only:expr, $draw:expr) => {{
+        let png = $dir.join(format!("{}.png", $stem));
+        {
+            let root =
+                plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::BitMapBackend::new(&png, $crate::io::plot::SIZE));
+            $draw(&root)?;
+            root.present().map_err($crate::io::plot::written(&png))?;
+        }
+        if !$png_only {
+            let svg = $dir.join(format!("{}.svg", $stem));
+            let root =
+                plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::SVGBackend::new(&svg, $crate::io::plot::SIZE));
+            $draw(&root)?;
+            root.present().map_err($crate::io::plot::written(&svg))?;
+        }
+    }};
     ($dir:expr, $stem:expr, $draw:expr) => {
         $crate::io::plot::both!($dir, $stem, $crate::io::plot::SIZE, $draw)
     };

@@ -213,7 +213,17 @@ impl<'a> Summary<'a> {
                         file.push_str(&heading);
                     }
                     for w in drawn {
-                        file.push_str(&format!("![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n\n", w.caption, w.stem, w.caption, w.stem));
+                        if w.svg {
+                            file.push_str(&format!("![{}]({}.png)\n\n*{}* ([SVG]({}.svg))\n\n", w.caption, w.stem, w.caption, w.stem));
+                        } else {
+                            file.push_str(&format!(
+                                "![{}]({}.png)\n\n*{}* (no SVG: more than {} marks)\n\n",
+                                w.caption,
+                                w.stem,
+                                w.caption,
+                                crate::io::plot::MOST_SVG_MARKS
+                            ));
+                        }
                     }
                 }
                 Part::TextFrom { table, read } => {

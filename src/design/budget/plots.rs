@@ -33,6 +33,7 @@ pub fn write_tornado(dir: &Path, lines: &[TornadoLine], all_mm: f64) -> Result<V
     register_font();
     both!(dir, "budget_tornado", |root| tornado(root, lines, all_mm));
     Ok(vec![Written {
+        svg: true,
         stem: "budget_tornado".into(),
         caption: format!(
             "p95 after calibration with each source off or scaled (every other source as in the scenario), each read as a change from all sources on, paired per world: the line, all sources, {all_mm:.3} mm, plus the median per-world change, with its 95 % interval (a bar that crosses the line is noise)"
@@ -124,6 +125,7 @@ pub fn write_prediction(dir: &Path, all: &[(f64, f64)], none: &[(f64, f64)]) -> 
     register_font();
     both!(dir, "budget_predicted_vs_simulated", |root| prediction(root, all, none));
     Ok(vec![Written {
+        svg: true,
         stem: "budget_predicted_vs_simulated".into(),
         caption: "Per identified parameter: the linear prediction's std (sigma^2 (J^T J)^-1, sigma from the fit) against the \
                   simulated RMS error over identifications and realisations; on the line the prediction is right"

@@ -37,6 +37,7 @@ pub fn write(dir: &Path, p: &OptimisePlotInputs) -> Result<Vec<Written>, PlotErr
     let mut out = Vec::new();
     both!(dir, "optimise_convergence", |root| convergence(root, p));
     out.push(Written {
+        svg: true,
         stem: "optimise_convergence".into(),
         caption: format!(
             "Best search score so far per restart against the designs evaluated (lower is better: {}; designs the geometry \
@@ -47,6 +48,7 @@ pub fn write(dir: &Path, p: &OptimisePlotInputs) -> Result<Vec<Written>, PlotErr
     if !p.front.is_empty() {
         both!(dir, "optimise_front", |root| front(root, p));
         out.push(Written {
+            svg: true,
             stem: "optimise_front".into(),
             caption: "Campaign time against the objective on the held-out worlds, with its interval: the optimiser's best design of \
                       each count (red) and the compared designs (blue)"
@@ -57,6 +59,7 @@ pub fn write(dir: &Path, p: &OptimisePlotInputs) -> Result<Vec<Written>, PlotErr
         let panels = cell_panels(sheet);
         both!(dir, "optimise_cell", (1400, 1400), |root| cell(root, &panels));
         out.push(Written {
+            svg: true,
             stem: "optimise_cell".into(),
             caption: "The winning cell to scale, in {W} (top) and in the robot's base frame (bottom), from above and from the side: \
                       the sphere centres (red, numbered, with their height z), the plate's top (blue), the robot base's origin \

@@ -153,6 +153,7 @@ pub fn write(dir: &Path, info: &ShardInfo, points: &[PointRow], designs: &[Desig
     };
     both!(dir, "sweep_p95_by_design", |root| estimates(root, &figure, &p95));
     out.push(Written {
+        svg: true,
         stem: "sweep_p95_by_design".into(),
         caption: format!(
             "p95 of the validation error after calibration at the table set size per design: dot, median over realisations; \
@@ -188,6 +189,7 @@ pub fn write(dir: &Path, info: &ShardInfo, points: &[PointRow], designs: &[Desig
         let size = ((cols as u32 * if side_view { 520 } else { 300 }).max(900), (rows as u32 * 300 + 60).max(600));
         both!(dir, "sweep_layouts", size, |root| layouts(root, &panels, side_view));
         out.push(Written {
+            svg: true,
             stem: "sweep_layouts".into(),
             caption: format!(
                 "Each design's cell to scale in {{W}} (sphere 1 at the origin, mm){}: datum spheres (grey: the campaign could not \
@@ -230,6 +232,7 @@ pub fn write(dir: &Path, info: &ShardInfo, points: &[PointRow], designs: &[Desig
             both!(dir, "sweep_success_by_set_size", |root| estimates(root, &figure, &rows));
         }
         out.push(Written {
+            svg: true,
             stem: "sweep_success_by_set_size".into(),
             caption: format!(
                 "P({statistic} error <= {threshold} mm) per design{}: the fraction of successful calibrations over realisations x \

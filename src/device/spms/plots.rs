@@ -38,6 +38,7 @@ pub fn write(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, PlotErr
         Some((0.03, "0.03 mm (paper: nearly all below)"))
     ));
     out.push(Written {
+        svg: true,
         stem: "spms_fig05_fit_residuals".into(),
         caption: "Fig. 5: largest sphere-fit residual of each accuracy measurement, head identified by PSO + LM \
              (paper's form) and by LM on the minimal form"
@@ -51,11 +52,13 @@ pub fn write(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, PlotErr
         Some((0.034, "paper mean 0.034 mm"))
     ));
     out.push(Written {
+        svg: true,
         stem: "spms_fig06_measuring_error".into(),
         caption: "Fig. 6: measuring error of each sphere measurement against the laser tracker (Table 3)".into(),
     });
     both!(dir, "spms_table6_ap_per_point", |root| ap_bars(root, p));
     out.push(Written {
+        svg: true,
         stem: "spms_table6_ap_per_point".into(),
         caption: format!(
             "Table 6: ISO 9283 AP per test point before and after calibration, published and calsim (after: \
@@ -73,6 +76,7 @@ pub fn write(dir: &Path, p: &SpmsPlotInputs<'_>) -> Result<Vec<Written>, PlotErr
         "mean AP after calibration (mm)"
     ));
     out.push(Written {
+        svg: true,
         stem: "spms_ap_by_set_size".into(),
         caption: "Mean ISO 9283 AP over P1-P5 after each identification, per set size: random sets (the paper) and DETMAX sets on O1"
             .into(),

@@ -35,6 +35,7 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
 
     both!(dir, "fig07_validation_poses", |root| fig07(root, inputs));
     out.push(Written {
+        svg: true,
         stem: "fig07_validation_poses".into(),
         caption: format!("Fig. 7: the {} validation poses and the datum spheres, top and side views", inputs.validation_w.len()),
     });
@@ -67,6 +68,7 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
         "mean error after calibration (mm)"
     ));
     out.push(Written {
+        svg: true,
         stem: "fig08_mean_error_by_set_size".into(),
         caption: "Fig. 8: mean validation error of each identification per set size (box: quartiles; whiskers: 1.5 IQR; crosses: outliers)"
             .into(),
@@ -78,6 +80,7 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
         "std of error after calibration (mm)"
     ));
     out.push(Written {
+        svg: true,
         stem: "fig09_std_error_by_set_size".into(),
         caption: "Fig. 9: standard deviation of the validation error of each identification per set size".into(),
     });
@@ -88,6 +91,7 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
     let n = inputs.table_n;
     both!(dir, "fig10_error_map", |root| fig10(root, inputs, after, n, task));
     out.push(Written {
+        svg: true,
         stem: "fig10_error_map".into(),
         caption: format!(
             "Fig. 10: error after calibration at each validation pose (set of {n}, task {task}: the median of the \
@@ -104,6 +108,7 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
         "distance from the base origin (mm)"
     ));
     out.push(Written {
+        svg: true,
         stem: "fig11_error_vs_distance_to_base".into(),
         caption: "Fig. 11: error after calibration against the distance to the base, with the least-squares line".into(),
     });
@@ -115,12 +120,14 @@ pub fn write_all(dir: &Path, results: &StudyResults, inputs: &PlotInputs) -> Res
         "distance from the CCZ (mm)"
     ));
     out.push(Written {
+        svg: true,
         stem: "fig12_error_vs_distance_to_ccz".into(),
         caption: "Fig. 12: error after calibration against the distance to the centre of the calibration zone (centroid of the spheres)"
             .into(),
     });
     both!(dir, "fig13_error_histograms", |root| fig13(root, &results.before_errors, after, n));
     out.push(Written {
+        svg: true,
         stem: "fig13_error_histograms".into(),
         caption: "Fig. 13: distribution of the position errors before and after calibration, with descriptive statistics".into(),
     });
