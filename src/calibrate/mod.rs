@@ -798,15 +798,20 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
             layout = registration::with_robot(&layout, ParamSet::new(keep).expect("a subset of a set"));
         };
         let x0 = validation::start_values(&layout, &robot.nominal, &s.frames_x);
+        // The cross-validations' folds start from the fit on every point (a fold's minimum lies
+        // within its share of the data of it): a step or two fewer per fit than from the nominal
+        // robot, the same minimum to the solver's tolerance. The training fit starts from the
+        // nominal robot, as the twin's fit of the same points does (the twin takes it as it is).
+        let x_folds = if all_fit.solved.outcome.is_converged() { all_fit.solved.x.clone() } else { x0.clone() };
         let problem = s.fit(&robot.nominal, layout.clone());
         let with_robot = !layout.robot.is_empty();
         // The two cross-validations and the training fit are independent (run side by side).
         let cv = || match kind {
-            Some(_) => validation::cross_validate(&problem, &x0, &point_fold, opts.folds, &outliers, &sopts, &labels),
+            Some(_) => validation::cross_validate(&problem, &x_folds, &point_fold, opts.folds, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let cv_all = || match kind {
-            Some(_) => validation::cross_validate(&problem, &x0, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
+            Some(_) => validation::cross_validate(&problem, &x_folds, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let free = free_columns(&problem, &train, with_robot);
