@@ -1,17 +1,43 @@
-//! Times `calibrate::run` and `calibrate::twin::analyse` on a simulated 3,000-point file (the
-//! shipped example's arm and sessions, 500 poses per session, 2 targets) written to `$1`.
+//! Times `calibrate::run` and `calibrate::twin::analyse` on a simulated file written to `$1`: the
+//! shipped example's arm, sessions and 2 targets, 450 random poses and 50 repeats per session
+//! (3,000 points), or `$2` random poses per session and no repeats (`$2` 23340: 140,040 points).
+//! With `$3`, the arm's link angles also carry a smooth per-pose field of 20 mdeg per joint and
+//! that length, rad (drawn as a world draws `[learned]` `pose_error_length_rad`), which the twin
+//! fits a length and level to (with their bootstrap); `$2` 500 with it: 3,000 points.
+//!
+//! `cargo run --release --example twin_timing -- FILE [POSES_PER_SESSION [LENGTH_RAD]]`, from the
+//! repository root.
 use std::time::Instant;
 
+use rand::SeedableRng;
+
 fn main() -> Result<(), String> {
-    let out = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: twin_timing <file.csv>")?);
+    let out = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: twin_timing <file.csv> [poses per session [length, rad]]")?);
     let robot = calsim::robot::file::RobotFile::load(std::path::Path::new("robots/irb120.toml")).map_err(|e| e.to_string())?;
+    let number = |k: usize, what: &str| -> Result<Option<f64>, String> {
+        std::env::args()
+            .nth(k)
+            .map(|a| a.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0).ok_or(format!("{what}: {a} is not a positive number")))
+            .transpose()
+    };
+    let poses = number(2, "poses per session")?.map(|v| v as usize);
+    let length = number(3, "length")?;
     let spec = calsim::calibrate::simulate::SimulationSpec {
-        poses_per_session: 450,
-        repeats_per_session: 50,
+        poses_per_session: poses.unwrap_or(450),
+        repeats_per_session: if poses.is_some() { 0 } else { 50 },
         outliers: vec![],
         ..calsim::calibrate::simulate::example_spec(&robot)?
     };
-    std::fs::write(&out, calsim::calibrate::simulate::to_csv(&spec).map_err(|e| e.to_string())?).map_err(|e| e.to_string())?;
+    let text = match length {
+        None => calsim::calibrate::simulate::to_csv(&spec).map_err(|e| e.to_string())?,
+        Some(l) => {
+            let field = calsim::robot::LearnedEffects { pose_error_mdeg: 20.0, pose_error_length_rad: l, ..Default::default() };
+            let drawn = field.draw(&spec.truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed));
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed);
+            calsim::calibrate::simulate::joint_error_csv(&spec, &mut rng, |q, _| drawn.joint_errors(q, q))
+        }
+    };
+    std::fs::write(&out, text).map_err(|e| e.to_string())?;
     let m = calsim::calibrate::measurements::read(&out, &robot).map_err(|e| e.to_string())?;
     let opts = calsim::calibrate::Options { plots: false, ..Default::default() };
     let t0 = Instant::now();
@@ -20,11 +46,16 @@ fn main() -> Result<(), String> {
     let t = calsim::calibrate::twin::analyse(&c, None).map_err(|e| e.to_string())?;
     let t2 = Instant::now();
     println!(
-        "{} points: calibrate::run {:.3} s, twin::analyse {:.3} s; {} families kept",
+        "{} points: calibrate::run {:.3} s, twin::analyse {:.3} s; {} families kept; smooth field: {}",
         m.points.len(),
         (t1 - t0).as_secs_f64(),
         (t2 - t1).as_secs_f64(),
-        t.families.iter().filter(|f| f.kept).count()
+        t.families.iter().filter(|f| f.kept).count(),
+        t.length.as_ref().map_or("none fitted".to_string(), |s| format!(
+            "length {:.2} rad, level {:.2} mdeg",
+            s.length_rad,
+            s.level_rad[0].to_degrees() * 1e3
+        ))
     );
     Ok(())
 }

@@ -287,12 +287,23 @@ impl LearnedEffects {
 /// density (a normal of standard deviation `1 / length` per joint value), each phase uniform.
 /// Over worlds, the field's covariance is the kernel's exactly.
 pub(crate) fn smooth_field<R: Rng + ?Sized>(rms_rad: f64, length_rad: f64, rng: &mut R) -> Vec<(usize, Joints, f64, f64)> {
+    smooth_field_of(rms_rad, length_rad, FIELD_FEATURES, rng)
+}
+
+/// [`smooth_field`] with `features` cosines per joint (its covariance over worlds is the kernel's
+/// for any count; a single draw's departs from it by about `1 / sqrt(features)`).
+pub(crate) fn smooth_field_of<R: Rng + ?Sized>(
+    rms_rad: f64,
+    length_rad: f64,
+    features: usize,
+    rng: &mut R,
+) -> Vec<(usize, Joints, f64, f64)> {
     let frequency = Normal::new(0.0, 1.0 / length_rad).expect("a positive length");
     let phase = Uniform::new(0.0, 2.0 * PI).expect("range");
-    let amplitude = rms_rad * (2.0 / FIELD_FEATURES as f64).sqrt();
-    let mut field = Vec::with_capacity(JOINTS * FIELD_FEATURES);
+    let amplitude = rms_rad * (2.0 / features as f64).sqrt();
+    let mut field = Vec::with_capacity(JOINTS * features);
     for j in 0..JOINTS {
-        for _ in 0..FIELD_FEATURES {
+        for _ in 0..features {
             let w: Joints = std::array::from_fn(|_| frequency.sample(rng));
             field.push((j, w, phase.sample(rng), amplitude));
         }

@@ -364,6 +364,13 @@ pub struct LengthScale {
 /// The replicates of [`length_scale`]'s parametric bootstrap.
 pub const BOOTSTRAP_REPLICATES: usize = 100;
 
+/// The cosines per joint of a bootstrap replicate's field (a world's field has
+/// `robot::learned::FIELD_FEATURES`): the field at a pose costs a cosine per feature and joint,
+/// the replicates' whole cost at 3,000 poses; a replicate's covariance departs from the kernel's by
+/// about 1 / 8, which widens the intervals a little (docs/generated/twin-length-coverage.md
+/// measures their coverage).
+pub const BOOTSTRAP_FEATURES: usize = 64;
+
 /// The grid of lengths [`length_scale`] profiles, rad: log-spaced from 0.02 to 20, 10 a decade.
 fn length_grid() -> Vec<f64> {
     (0..=30).map(|k| 0.02 * 10f64.powf(k as f64 / 10.0)).collect()
@@ -693,7 +700,8 @@ fn intervals(value: f64, mut replicates: Vec<f64>) -> ([f64; 2], [f64; 2]) {
 
 /// The parametric bootstrap of the length fit: [`BOOTSTRAP_REPLICATES`] residuals drawn from the
 /// fitted model, each a smooth field of the fitted length and level drawn as a world draws the
-/// twin's field (`robot::learned`'s random Fourier features, from the replicate's own stream)
+/// twin's field (`robot::learned`'s random Fourier features, [`BOOTSTRAP_FEATURES`] per joint,
+/// from the replicate's own stream)
 /// carried to the points by the weighted link-angle Jacobian, plus white noise of the model's
 /// share of the mean square, projected off the fit's basis, binned as `c` and fitted against the
 /// same predictions. Per replicate (in index order, any thread count), the index of its best
@@ -711,7 +719,7 @@ fn bootstrap(c: &Correlation, model: &Model, predictions: &Predictions, rows: &R
         .into_par_iter()
         .filter_map(|i| {
             let mut rng = crate::seeds::stream(crate::seeds::fixed::LENGTH_BOOTSTRAP, i as u64);
-            let field = crate::robot::learned::smooth_field(model.level, model.length, &mut rng);
+            let field = crate::robot::learned::smooth_field_of(model.level, model.length, BOOTSTRAP_FEATURES, &mut rng);
             let e: Vec<crate::robot::Joints> = rows
                 .q
                 .iter()
