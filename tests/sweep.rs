@@ -114,6 +114,11 @@ fn the_sweep_and_merge_commands_shard_and_merge() {
     assert!(!whole.join("c.shard-0-of-1").exists(), "the whole sweep removes its shard directory");
     assert!(!timing(&o).contains(" to "), "the timing line names a removed directory: {}", timing(&o));
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("into {}", whole.join("c").display())), "{}", String::from_utf8_lossy(&o.stdout));
+    // The ranking says which way its comparison with the leader reads: this design minus the leader.
+    let summary = std::fs::read_to_string(whole.join("c/summary.md")).unwrap();
+    assert!(summary.contains("| this design - leader (paired on common worlds) |"), "{summary}");
+    assert!(summary.contains("this design minus the leader in each common realisation"), "{summary}");
+    assert!(summary.contains("above 0, the design did worse"), "{summary}");
     // The axis's column holds its values as numbers, as the sweep file writes them.
     use polars::prelude::SerReader;
     let points = polars::prelude::ParquetReader::new(std::fs::File::open(dir.join("c/points.parquet")).unwrap()).finish().unwrap();

@@ -274,8 +274,8 @@ def sweep_pairing(out: Output) -> str:
     leader and the pairing's correlation and variance saved, from summary.md."""
     table = md_table(out.summary, "| rank | design |")
     head = cells(table[0])
-    pick = [head.index(c) for c in ("design", "objective (95 % interval)", "vs leader (paired on common worlds)", "pairing: r, variance saved")]
-    rows = ["| design | p95 after, mm (95 % interval) | vs the leader, paired on common worlds | pairing: r, variance saved |", "|---|---|---|---|"]
+    pick = [head.index(c) for c in ("design", "objective (95 % interval)", "this design - leader (paired on common worlds)", "pairing: r, variance saved")]
+    rows = ["| design | p95 after, mm (95 % interval) | this design - the leader, paired on common worlds | pairing: r, variance saved |", "|---|---|---|---|"]
     for line in table[2:]:
         c = cells(line)
         rows.append("| " + " | ".join(c[i] for i in pick) + " |")
