@@ -329,6 +329,14 @@ def tour_row(md: str, moves: int) -> str:
     return row + " |\n"
 
 
+CALIBRATE_EXAMPLE = "calsim calibrate robots/irb120.toml docs/calibrate/example_measurements.csv"
+
+
+def calibrate_printed(out: str) -> str:
+    """What `calsim calibrate` prints, its scratch directory written as the guide's `results/`."""
+    return fenced([re.sub(r" in \S*/results-\d+/", " in results/", l) for l in out.rstrip("\n").split("\n")])
+
+
 def plan_figures(md: str) -> dict:
     """The figures of a plan.md."""
     pool = re.search(r"- Pool: (\d+) feasible configurations of (\d+) drawn within the limits \(refused: (.*)\)\.", md)
@@ -485,6 +493,7 @@ EXCERPTS = {
     "plan-trical-objective": ("docs/plan.md", PLAN_TRICAL_OBJECTIVE, plan_objective),
     "plan-spms-printed": ("docs/plan.md", PLAN_SPMS, plan_printed),
     "plan-spms-table": ("docs/plan.md", PLAN_SPMS, plan_spms_table),
+    "calibrate-example-printed": ("docs/calibrate.md", CALIBRATE_EXAMPLE, calibrate_printed),
     "tracker-worlds": ("docs/tracker.md", "calsim run scenarios/irb120_tracker.toml --realisations 10 --no-plots --no-recording", worlds_table),
 }
 
