@@ -496,6 +496,15 @@ fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
             "line 1: z_mm: missing column",
             "",
         ),
+        (
+            "missing_z_in_metres",
+            with(&HEADER.replace("x_mm", "x_m").replace("y_mm", "y_m").replace(",z_mm", ""), &|r| {
+                r.iter_mut().for_each(|x| *x = x.rsplit_once(',').unwrap().0.to_string())
+            }),
+            "line 1: z_m: missing column",
+            "",
+        ),
+        ("absurd_in_metres", with(&HEADER.replace("z_mm", "z_m"), &replace_field(3, 11, "1e300")), "line 5: z_m: 1e300 m: beyond +-100000 mm", ""),
         ("unknown_unit", with(&HEADER.replace("x_mm", "x_in"), &|_| {}), "line 1: x_in: unknown unit `in`", ""),
         ("no_unit", with(&HEADER.replace("q2_deg", "q2"), &|_| {}), "line 1: q2: a joint column needs its unit", ""),
         ("unknown_column", with(&HEADER.replace("z_mm", "temperature_c"), &|_| {}), "line 1: temperature_c: unknown column", ""),
