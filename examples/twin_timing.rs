@@ -2,7 +2,18 @@
 //! shipped example's arm and sessions, 500 poses per session, 2 targets) written to `$1`.
 use std::time::Instant;
 
-fn main() -> Result<(), String> {
+fn main() -> std::process::ExitCode {
+    // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", calsim::app::message::one_line(&e));
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
     let out = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: twin_timing <file.csv>")?);
     let robot = calsim::robot::file::RobotFile::load(std::path::Path::new("robots/irb120.toml")).map_err(|e| e.to_string())?;
     let spec = calsim::calibrate::simulate::SimulationSpec {
