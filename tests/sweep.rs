@@ -113,7 +113,11 @@ fn the_sweep_and_merge_commands_shard_and_merge() {
     let o = run(&["sweep", fs], &whole);
     assert!(!whole.join("c.shard-0-of-1").exists(), "the whole sweep removes its shard directory");
     assert!(!timing(&o).contains(" to "), "the timing line names a removed directory: {}", timing(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("into {}", whole.join("c").display())), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains(&format!("into {}", whole.join("c").display())),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     // The ranking says which way its comparison with the leader reads: this design minus the leader.
     let summary = std::fs::read_to_string(whole.join("c/summary.md")).unwrap();
     assert!(summary.contains("| this design - leader (paired on common worlds) |"), "{summary}");
