@@ -504,7 +504,7 @@ fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
             "line 1: z_m: missing column",
             "",
         ),
-        ("absurd_in_metres", with(&HEADER.replace("z_mm", "z_m"), &replace_field(3, 11, "1e300")), "line 5: z_m: 1e300 m: beyond +-100000 mm", ""),
+        ("mm_under_metres", with(&HEADER.replace("z_mm", "z_m"), &|_| {}), "line 2: z_m: 500 m: beyond +-100000 mm", ""),
         ("unknown_unit", with(&HEADER.replace("x_mm", "x_in"), &|_| {}), "line 1: x_in: unknown unit `in`", ""),
         ("no_unit", with(&HEADER.replace("q2_deg", "q2"), &|_| {}), "line 1: q2: a joint column needs its unit", ""),
         ("unknown_column", with(&HEADER.replace("z_mm", "temperature_c"), &|_| {}), "line 1: temperature_c: unknown column", ""),
@@ -575,7 +575,7 @@ fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
             with(&format!("{HEADER},sigma_um"), &|r| {
                 r.iter_mut().enumerate().for_each(|(k, x)| x.push_str(if k == 2 { ",0" } else { ",10" }))
             }),
-            "line 4: sigma_um: 0: an uncertainty must be above 0",
+            "line 4: sigma_um: 0 um: an uncertainty must be above 0",
             "",
         ),
         (
