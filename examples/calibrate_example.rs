@@ -4,7 +4,18 @@
 
 use std::path::Path;
 
-fn main() -> Result<(), String> {
+fn main() -> std::process::ExitCode {
+    // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", calsim::app::message::one_line(&e));
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let robot = calsim::robot::file::RobotFile::load(&root.join("robots/irb120.toml")).map_err(|e| e.to_string())?;
     let spec = calsim::calibrate::simulate::example_spec(&robot)?;

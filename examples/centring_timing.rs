@@ -14,7 +14,7 @@ fn main() {
     let s = match scenario::load(std::path::Path::new(&path)) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", calsim::app::message::one_line(&e.to_string()));
             std::process::exit(2);
         }
     };

@@ -50,7 +50,7 @@ fn main() -> ExitCode {
     match demo(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", calsim::app::message::one_line(&e.to_string()));
             ExitCode::from(2)
         }
     }

@@ -16,7 +16,7 @@ fn main() {
     let s = match calsim::device::spms::spec::load(std::path::Path::new(&path)) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("{e}");
+            eprintln!("error: {}", calsim::app::message::one_line(&e.to_string()));
             std::process::exit(2);
         }
     };

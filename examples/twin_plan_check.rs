@@ -137,7 +137,18 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
     (mean, if v.len() > 1 { (var / n).sqrt() } else { f64::NAN })
 }
 
-fn main() -> Result<(), String> {
+fn main() -> std::process::ExitCode {
+    // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", calsim::app::message::one_line(&e));
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
     let args: Vec<u64> =
         std::env::args().skip(1).take(3).map(|a| a.parse::<u64>().map_err(|e| format!("{a}: {e}"))).collect::<Result<_, _>>()?;
     let (first, last, worlds) =

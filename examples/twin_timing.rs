@@ -11,7 +11,18 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 
-fn main() -> Result<(), String> {
+fn main() -> std::process::ExitCode {
+    // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", calsim::app::message::one_line(&e));
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
     let out = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: twin_timing <file.csv> [poses per session [length, rad]]")?);
     let robot = calsim::robot::file::RobotFile::load(std::path::Path::new("robots/irb120.toml")).map_err(|e| e.to_string())?;
     let number = |k: usize, what: &str| -> Result<Option<f64>, String> {

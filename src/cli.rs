@@ -716,12 +716,13 @@ fn sweep(args: &SweepArgs) -> Result<ExitCode, String> {
     };
     let r = app::sweep::run(&spec, &Terminal::new()).map_err(|e| e.to_string())?;
     let (k, count) = r.shard;
+    // A whole sweep's shard directory is removed once merged: the merge's line names the results.
+    let written = if r.merged.is_some() { String::new() } else { format!(" to {}", r.shard_dir.display()) };
     println!(
-        "timing: {} work units of shard {k}/{count} in {:.3} s ({:.3} s per unit) to {}",
+        "timing: {} work units of shard {k}/{count} in {:.3} s ({:.3} s per unit){written}",
         r.units,
         r.run_s,
         r.run_s / r.units.max(1) as f64,
-        r.shard_dir.display()
     );
     match &r.merged {
         None if r.plan.complete => println!(

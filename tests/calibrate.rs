@@ -496,6 +496,15 @@ fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
             "line 1: z_mm: missing column",
             "",
         ),
+        (
+            "missing_z_in_metres",
+            with(&HEADER.replace("x_mm", "x_m").replace("y_mm", "y_m").replace(",z_mm", ""), &|r| {
+                r.iter_mut().for_each(|x| *x = x.rsplit_once(',').unwrap().0.to_string())
+            }),
+            "line 1: z_m: missing column",
+            "",
+        ),
+        ("mm_under_metres", with(&HEADER.replace("z_mm", "z_m"), &|_| {}), "line 2: z_m: 500 m: beyond +-100000 mm", ""),
         ("unknown_unit", with(&HEADER.replace("x_mm", "x_in"), &|_| {}), "line 1: x_in: unknown unit `in`", ""),
         ("no_unit", with(&HEADER.replace("q2_deg", "q2"), &|_| {}), "line 1: q2: a joint column needs its unit", ""),
         ("unknown_column", with(&HEADER.replace("z_mm", "temperature_c"), &|_| {}), "line 1: temperature_c: unknown column", ""),
@@ -566,7 +575,7 @@ fn bad_measurement_files_are_one_line_naming_the_file_line_and_column() {
             with(&format!("{HEADER},sigma_um"), &|r| {
                 r.iter_mut().enumerate().for_each(|(k, x)| x.push_str(if k == 2 { ",0" } else { ",10" }))
             }),
-            "line 4: sigma_um: 0: an uncertainty must be above 0",
+            "line 4: sigma_um: 0 um: an uncertainty must be above 0",
             "",
         ),
         (

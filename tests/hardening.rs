@@ -82,6 +82,40 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Every command's one-line error starts `error: `: calsim's (each refusal above) and the
+/// examples' the docs run (`cargo run --example ...`). An example's `main` returning a `Result`
+/// would print Rust's `Error: "..."` instead, so none does, and every exit 2 follows an
+/// `error: ` line.
+#[test]
+fn every_commands_error_line_starts_the_same_way() {
+    let mut checked = 0;
+    for entry in std::fs::read_dir(repo().join("examples")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(!text.contains("fn main() -> Result"), "{}: main returns a Result (`Error: ...`)", path.display());
+        let lines: Vec<&str> = text.lines().collect();
+        for (k, line) in lines.iter().enumerate() {
+            if line.contains("exit(2)") || line.contains("ExitCode::from(2)") {
+                let before = &lines[k.saturating_sub(3)..k];
+                assert!(
+                    before.iter().any(|l| l.contains("eprintln!(\"error: ")),
+                    "{}:{}: exit 2 without an `error: ` line before it",
+                    path.display(),
+                    k + 1
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 6, "the examples' error exits: {checked}");
+    let (code, err) = run_in(&repo(), &["run", "no-such-scenario.toml"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.starts_with("error: no-such-scenario.toml: "), "{err}");
+}
+
 #[test]
 fn inputs_nested_without_bound_are_refused_in_one_line_before_any_parser_recurses() {
     let tmp = scratch("deep");

@@ -102,8 +102,27 @@ fn the_sweep_and_merge_commands_shard_and_merge() {
     let o = run(&["sweep", fs, "--shard", "0/1"], dir);
     assert!(String::from_utf8_lossy(&o.stdout).contains("merge the shards with: calsim merge"), "{}", String::from_utf8_lossy(&o.stdout));
     let shard = dir.join("c.shard-0-of-1");
+    let timing = |o: &std::process::Output| {
+        String::from_utf8_lossy(&o.stdout).lines().find(|l| l.starts_with("timing: ")).expect("a timing line").to_string()
+    };
+    assert!(timing(&o).ends_with(&format!(" to {}", shard.display())), "a shard names its directory: {}", timing(&o));
     let o = run(&["merge", shard.to_str().unwrap()], dir);
     assert!(String::from_utf8_lossy(&o.stdout).contains("merged 2 work units (0 failed)"), "{}", String::from_utf8_lossy(&o.stdout));
+    // A whole sweep merges and removes its shard directory: its timing line names no path.
+    let whole = dir.join("whole");
+    let o = run(&["sweep", fs], &whole);
+    assert!(!whole.join("c.shard-0-of-1").exists(), "the whole sweep removes its shard directory");
+    assert!(!timing(&o).contains(" to "), "the timing line names a removed directory: {}", timing(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains(&format!("into {}", whole.join("c").display())),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    // The ranking says which way its comparison with the leader reads: this design minus the leader.
+    let summary = std::fs::read_to_string(whole.join("c/summary.md")).unwrap();
+    assert!(summary.contains("| this design - leader (paired on common worlds) |"), "{summary}");
+    assert!(summary.contains("this design minus the leader in each common realisation"), "{summary}");
+    assert!(summary.contains("above 0, the design did worse"), "{summary}");
     // The axis's column holds its values as numbers, as the sweep file writes them.
     use polars::prelude::SerReader;
     let points = polars::prelude::ParquetReader::new(std::fs::File::open(dir.join("c/points.parquet")).unwrap()).finish().unwrap();

@@ -274,8 +274,8 @@ def sweep_pairing(out: Output) -> str:
     leader and the pairing's correlation and variance saved, from summary.md."""
     table = md_table(out.summary, "| rank | design |")
     head = cells(table[0])
-    pick = [head.index(c) for c in ("design", "objective (95 % interval)", "vs leader (paired on common worlds)", "pairing: r, variance saved")]
-    rows = ["| design | p95 after, mm (95 % interval) | vs the leader, paired on common worlds | pairing: r, variance saved |", "|---|---|---|---|"]
+    pick = [head.index(c) for c in ("design", "objective (95 % interval)", "this design - leader (paired on common worlds)", "pairing: r, variance saved")]
+    rows = ["| design | p95 after, mm (95 % interval) | this design - the leader, paired on common worlds | pairing: r, variance saved |", "|---|---|---|---|"]
     for line in table[2:]:
         c = cells(line)
         rows.append("| " + " | ".join(c[i] for i in pick) + " |")
@@ -327,6 +327,14 @@ def tour_row(md: str, moves: int) -> str:
     if colliding:
         row += f"; not re-routed: {len(unrouted)}"
     return row + " |\n"
+
+
+CALIBRATE_EXAMPLE = "calsim calibrate robots/irb120.toml docs/calibrate/example_measurements.csv"
+
+
+def calibrate_printed(out: str) -> str:
+    """What `calsim calibrate` prints, its scratch directory written as the guide's `results/`."""
+    return fenced([re.sub(r" in \S*/results-\d+/", " in results/", l) for l in out.rstrip("\n").split("\n")])
 
 
 def plan_figures(md: str) -> dict:
@@ -485,6 +493,7 @@ EXCERPTS = {
     "plan-trical-objective": ("docs/plan.md", PLAN_TRICAL_OBJECTIVE, plan_objective),
     "plan-spms-printed": ("docs/plan.md", PLAN_SPMS, plan_printed),
     "plan-spms-table": ("docs/plan.md", PLAN_SPMS, plan_spms_table),
+    "calibrate-example-printed": ("docs/calibrate.md", CALIBRATE_EXAMPLE, calibrate_printed),
     "tracker-worlds": ("docs/tracker.md", "calsim run scenarios/irb120_tracker.toml --realisations 10 --no-plots --no-recording", worlds_table),
 }
 

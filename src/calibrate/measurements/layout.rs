@@ -165,7 +165,10 @@ impl Layout {
         }
         for (slot, name) in SLOT_NAMES.iter().enumerate().take(12) {
             if slots[slot].is_none() {
-                return Err((name.to_string(), "missing column (the layout needs pose, session, target, q1..q6, x, y, z)".into()));
+                return Err((
+                    missing_name(slot, name, &names, &slots),
+                    "missing column (the layout needs pose, session, target, q1..q6 and x, y, z, each with its unit)".into(),
+                ));
             }
         }
         let quaternion = slots[13..17].iter().filter(|s| s.is_some()).count();
@@ -195,6 +198,30 @@ impl Layout {
     /// The file's name of joint column `k` (0-based).
     pub(super) fn joint(&self, k: usize) -> &str {
         &self.names[self.slots[3 + k].unwrap_or(0)]
+    }
+}
+
+/// The name of missing column `slot` (`standard`: its name in mm and deg) with the unit the file
+/// gives its siblings (a file in metres misses `z_m`, not `z_mm`).
+fn missing_name(slot: usize, standard: &str, names: &[String], slots: &[Option<usize>; SLOTS]) -> String {
+    let siblings = match slot {
+        3..=8 => 3..9,
+        9..=11 => 9..12,
+        _ => return standard.to_string(),
+    };
+    let quantity = standard.split_once('_').map_or(standard, |(q, _)| q);
+    siblings
+        .filter_map(|s| slots[s])
+        .find_map(|i| names[i].split_once('_').map(|(_, unit)| format!("{quantity}_{unit}")))
+        .unwrap_or_else(|| standard.to_string())
+}
+
+/// `value` as the file gives it, with the unit of column `name` where the bound it breaks is in
+/// another unit (`bound_unit`): `200 m` against a bound in mm.
+fn with_unit(value: &str, name: &str, bound_unit: &str) -> String {
+    match name.split_once('_') {
+        Some((_, unit)) if unit != bound_unit => format!("{value} {unit}"),
+        _ => value.to_string(),
     }
 }
 
@@ -242,21 +269,24 @@ impl Row {
                 Column::Joint(k, to_rad) => {
                     let v = number(field).map_err(err)?;
                     if v.abs() * to_rad > MOST_JOINT_DEG.to_radians() {
-                        return Err(err(format!("{field}: beyond +-{MOST_JOINT_DEG} deg")));
+                        return Err(err(format!("{}: beyond +-{MOST_JOINT_DEG} deg", with_unit(field, name, "deg"))));
                     }
                     row.q[k] = v * to_rad;
                 }
                 Column::Coordinate(k, to_mm) => {
                     let v = number(field).map_err(err)?;
                     if v.abs() * to_mm > MOST_MM {
-                        return Err(err(format!("{field}: beyond +-{MOST_MM} mm")));
+                        return Err(err(format!("{}: beyond +-{MOST_MM} mm", with_unit(field, name, "mm"))));
                     }
                     row.xyz[k] = v * to_mm;
                 }
                 Column::Sigma(to_mm) => {
                     let v = number(field).map_err(err)? * to_mm;
                     if !(v > 0.0 && v <= MOST_MM) {
-                        return Err(err(format!("{field}: an uncertainty must be above 0 and at most {MOST_MM} mm")));
+                        return Err(err(format!(
+                            "{}: an uncertainty must be above 0 and at most {MOST_MM} mm",
+                            with_unit(field, name, "mm")
+                        )));
                     }
                     row.sigma = Some(v);
                 }

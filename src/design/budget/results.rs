@@ -210,10 +210,17 @@ fn prediction_rows(b: &BudgetReport<'_>) -> Option<Vec<PredictionRow>> {
     (!rows.is_empty()).then_some(rows)
 }
 
-/// Where the simulated parameter errors exceed the linear prediction by more than this factor
-/// (median over parameters; 20 %, the agreement a white-noise source reaches), the prediction
-/// misses the configuration's sources.
+/// Where a source alone's simulated parameter errors over the predicted std (median over
+/// parameters) exceed the floor's ratio ([`floor_ratio`]) by more than this factor (20 %, the
+/// agreement a white-noise source reaches), the prediction misses the source.
 const MISSED_RATIO: f64 = 1.2;
+
+/// The ratio a source alone is judged against: the floor's (every source off: the solver's own
+/// error, present in every configuration), or 1 (white noise) where the floor's is below 1 or
+/// not predicted.
+fn floor_ratio(rows: &[(&Config, &Prediction)]) -> f64 {
+    rows.iter().find(|(c, _)| c.mode == "none").map(|(_, p)| p.median_ratio()).filter(|r| r.is_finite()).map_or(1.0, |r| r.max(1.0))
+}
 
 /// The configurations the linear prediction is compared in (every source on, none, and each source
 /// alone), with their prediction, in the configurations' order.
@@ -226,19 +233,24 @@ fn compared<'a>(b: &BudgetReport<'a>) -> Vec<(&'a Config, &'a Prediction)> {
         .collect()
 }
 
-/// Why the linear prediction misses a source acting alone (empty where it holds).
-fn missed_because(p: &Prediction) -> String {
+/// Why the linear prediction misses a source acting alone (empty where it holds), its parameter
+/// ratio judged against `floor` ([`floor_ratio`]).
+fn missed_because(p: &Prediction, floor: f64) -> String {
     let (ratio, e) = (p.median_ratio(), p.errors_mm());
     let mut why = Vec::new();
-    if ratio > MISSED_RATIO {
-        why.push(format!("its parameter errors are {ratio:.1} times the predicted std: a bias the parameters absorb"));
+    let biased = ratio > MISSED_RATIO * floor;
+    if biased {
+        why.push(format!(
+            "its parameter errors are {ratio:.2} times the predicted std, more than {MISSED_RATIO} times {floor:.2} (the floor's ratio, \
+             at least 1): a bias the parameters absorb"
+        ));
     }
     if e[3] > VALIDATION_MISSED * e[1] && e[3] - e[1] > 0.01 {
         why.push(format!(
             "the simulated validation p95 is {:.3} mm against {:.3} mm predicted{}",
             e[3],
             e[1],
-            if ratio > MISSED_RATIO { "" } else { ": error at the validation poses themselves, which no parameter carries" }
+            if biased { "" } else { ": error at the validation poses themselves, which no parameter carries" }
         ));
     }
     why.join("; ")
@@ -253,6 +265,7 @@ const PREDICTION_SUMMARY: &str = "prediction_summary.parquet";
 /// p95 of the validation errors (medians over identifications), whether the validation errors
 /// are predicted at all, and for a source alone why the linear prediction misses it.
 fn prediction_summary_columns(b: &BudgetReport<'_>, rows: &[(&Config, &Prediction)]) -> Vec<Column> {
+    let floor = floor_ratio(rows);
     let f = |name: &str, k: usize| Column::new(name.into(), rows.iter().map(|(_, p)| p.errors_mm()[k]).collect::<Vec<f64>>());
     let text = |name: &str, v: &dyn Fn(&Config, &Prediction) -> String| {
         Column::new(name.into(), rows.iter().map(|(c, p)| v(c, p)).collect::<Vec<String>>())
@@ -269,7 +282,7 @@ fn prediction_summary_columns(b: &BudgetReport<'_>, rows: &[(&Config, &Predictio
         f("simulated_median_mm", 2),
         f("simulated_p95_mm", 3),
         Column::new("validation_predicted".into(), rows.iter().map(|(_, p)| !p.predicted_mm.is_empty()).collect::<Vec<bool>>()),
-        text("missed_because", &|c, p| if c.mode == "alone" && c.source.is_some() { missed_because(p) } else { String::new() }),
+        text("missed_because", &|c, p| if c.mode == "alone" && c.source.is_some() { missed_because(p, floor) } else { String::new() }),
     ]
 }
 
@@ -286,9 +299,12 @@ fn prediction_section<'a>(b: &BudgetReport<'a>, parts: &mut Summary<'a>) {
          validation errors |J_v d| with d drawn from it. Beside it what the simulated worlds gave: the RMS error of each \
          identified parameter against the truth and the validation errors, over every identification at the table set size and \
          every realisation. Ratio: simulated RMS over predicted std, median over the parameters (per-parameter values in \
-         `prediction.parquet`, internal units mm, rad, rad/(N m)). A ratio near 1 means the source acts as white noise and one run's covariance is right; above \
-         {MISSED_RATIO} the linear prediction misses the source: it is a bias (the same in every configuration of a set) that \
-         the parameters absorb while the residuals stay small.\n\n"
+         `prediction.parquet`, internal units mm, rad, rad/(N m)). A ratio near 1 means the source acts as white noise and one run's covariance is right. \
+         Every configuration keeps the floor (the row all off: the solver's own error), so a source alone is judged against the \
+         floor's ratio, {floor:.2} here (1 where the floor's is below 1): above {MISSED_RATIO} times it the linear prediction \
+         misses the source: it is a bias (the same in every configuration of a set) that the parameters absorb while the \
+         residuals stay small; a source that leaves the parameters alone keeps the floor's ratio.\n\n",
+        floor = floor_ratio(&compared(b))
     ));
     parts.text_from(PREDICTION_SUMMARY, |r| {
         if (0..r.height()).any(|i| r.at(i).bool("validation_predicted")) {
@@ -335,11 +351,11 @@ fn prediction_verdict(r: &Row<'_>) -> String {
     let held: Vec<String> = alone
         .iter()
         .filter(|x| x.str("missed_because").is_empty())
-        .map(|x| format!("{} ({:.1})", x.str("source"), x.f64("parameter_ratio")))
+        .map(|x| format!("{} ({:.2})", x.str("source"), x.f64("parameter_ratio")))
         .collect();
     let _ = writeln!(
         s,
-        "It holds (white noise, parameter ratio in brackets) for: {}.{}",
+        "It holds (parameter ratio in brackets, within {MISSED_RATIO} times the floor's; validation p95 as predicted) for: {}.{}",
         if held.is_empty() { "none of the sources".to_string() } else { held.join(", ") },
         rows.iter().find(|x| x.str("mode") == "all").map_or(String::new(), |x| format!(
             " With every source on, the simulated parameter errors are {:.1} times the predicted std (median over parameters).",
@@ -520,4 +536,51 @@ fn detail<'a>(b: &'a BudgetReport<'a>, parts: &mut Summary<'a>) {
     }
     cells.push(cell("interaction", |r| if r.bool("interacts") { "yes" } else { "" }.to_string()));
     parts.table("lines.parquet", Summary::all_rows(), cells);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A prediction of `tasks` identifications whose parameter errors are `ratio` times the
+    /// predicted std, with the predicted and simulated validation p95 (mm).
+    fn prediction(ratio: f64, predicted_p95: f64, simulated_p95: f64) -> Prediction {
+        Prediction {
+            names: vec!["a".into(), "b".into(), "c".into()],
+            simulated_sq: vec![ratio * ratio; 3],
+            predicted_var: vec![1.0; 3],
+            tasks: 1,
+            predicted_mm: vec![[0.007, predicted_p95]],
+            simulated_mm: vec![[0.008, simulated_p95]],
+            sigma_mm: vec![0.0007],
+        }
+    }
+
+    fn config(mode: &'static str, source: Option<usize>) -> Config {
+        Config { label: mode.into(), source, mode, factor: 1.0, factors: vec![1.0] }
+    }
+
+    /// A source acting at the validation only keeps the floor's parameter ratio (above 1.2 in the
+    /// TriCal cell): judged against the floor, it is missed for its validation error alone, and a
+    /// source that raises the ratio beyond 1.2 times the floor's is a bias.
+    #[test]
+    fn a_source_alone_is_judged_against_the_floors_ratio() {
+        let (none, all) = (config("none", None), config("all", None));
+        let floor = prediction(1.32, 0.023, 0.023);
+        let on = prediction(1.07, 0.5, 0.47);
+        let rows = [(&all, &on), (&none, &floor)];
+        let reference = floor_ratio(&rows);
+        assert!((reference - 1.32).abs() < 1e-12, "{reference}");
+        let validation_only = missed_because(&prediction(1.32, 0.023, 0.042), reference);
+        assert!(!validation_only.contains("bias"), "{validation_only}");
+        assert!(validation_only.contains("which no parameter carries"), "{validation_only}");
+        assert_eq!(missed_because(&prediction(1.41, 0.031, 0.031), reference), "", "within 1.2 times the floor's ratio");
+        let biased = missed_because(&prediction(1.61, 0.036, 0.036), reference);
+        assert!(biased.contains("1.61 times the predicted std, more than 1.2 times 1.32"), "{biased}");
+        // A floor below 1 (white noise) leaves the reference at 1; no floor row, the same.
+        let low = prediction(0.91, 0.0, 0.0);
+        assert_eq!(floor_ratio(&[(&none, &low)]), 1.0);
+        assert_eq!(floor_ratio(&[(&all, &on)]), 1.0);
+        assert!(missed_because(&prediction(1.25, 0.0, 0.0), 1.0).contains("bias"));
+    }
 }

@@ -306,6 +306,11 @@ fn f3(x: f64) -> String {
     }
 }
 
+/// A difference with its sign, `+0.012`, `-0.002` (`fails` where the design fails more often).
+fn signed(x: f64) -> String {
+    if x.is_finite() { format!("{x:+.3}") } else { f3(x) }
+}
+
 /// A value with its interval, `0.950 (0.881-0.986)`.
 fn with_interval(x: f64, (lo, hi): (f64, f64)) -> String {
     if lo.is_finite() && hi.is_finite() {
@@ -353,9 +358,16 @@ pub fn summary<'a>(m: &'a Merged, s: &mut Summary<'a>) {
     s.text(format!(
         "**Objective**: {}{}. Intervals at {conf} % confidence over realisations (the unit of independence: one robot, cell and \
          set of draws each); a design is tied with the leader when the sign test of their paired values on common \
-         realisations does not separate them at that confidence.{}\n\n",
+         realisations does not separate them at that confidence. The comparison with the leader is this design minus the \
+         leader in each common realisation ({}), with the realisations in which the design did better and worse; \
+         between tied designs its sign can run against the ranking, which orders each design's own estimate.{}\n\n",
         o.describe(),
         if constraints.is_empty() { String::new() } else { format!(", subject to {}", constraints.join(", ")) },
+        if o.maximises() {
+            "the mean of the differences: above 0, the design did better"
+        } else {
+            "the median of the differences with its interval: above 0, the design did worse"
+        },
         match &info.race {
             Some(r) => format!(
                 " Adaptive realisations: {} then batches of {} up to {}, {} stages run; a design leaves the race when it is infeasible or \
@@ -397,7 +409,7 @@ fn ranked<'a>(m: &'a Merged, s: &mut Summary<'a>) {
             cell("design", move |r| design_label(info, r)),
             cell(format!("objective ({conf} % interval)"), |r| shown_interval(r, "estimate", "estimate_lo", "estimate_hi")),
             cell("feasibility", |r| r.str("feasibility")),
-            cell("vs leader (paired on common worlds)", move |r| vs_leader(r, maximises)),
+            cell("this design - leader (paired on common worlds)", move |r| vs_leader(r, maximises)),
             cell("pairing: r, variance saved", |r| {
                 if r.u64("rank") == 1 {
                     "-".to_string()
@@ -572,9 +584,9 @@ fn vs_leader(r: &Row<'_>, maximises: bool) -> String {
         // Fractions of successes tie in most worlds: the mean difference and the counts say more.
         format!("mean {:+.3}; better in {better}, worse in {worse} worlds, p = {p:.3}", r.f64("vs_leader_mean_difference"))
     } else {
-        let c = |name: &str| f3(r.f64(name));
+        let c = |name: &str| signed(r.f64(name));
         format!(
-            "{} ({}-{}); better in {better}, worse in {worse}, p = {p:.3}",
+            "{} ({} to {}); better in {better}, worse in {worse} worlds, p = {p:.3}",
             c("vs_leader_median_difference"),
             c("vs_leader_difference_lo"),
             c("vs_leader_difference_hi")
