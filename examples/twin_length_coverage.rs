@@ -95,7 +95,7 @@ fn quantile(v: &[f64], f: f64) -> f64 {
 
 fn main() -> std::process::ExitCode {
     // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
-    match run() {
+    match coverage() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", calsim::app::message::one_line(&e));
@@ -104,7 +104,7 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-fn run() -> Result<(), String> {
+fn coverage() -> Result<(), String> {
     let usage = "usage: twin_length_coverage WORLDS LENGTHS (e.g. 40 0.5,1.5,4.0)";
     let args: Vec<String> = std::env::args().skip(1).collect();
     let worlds: u64 = args.first().and_then(|a| a.parse().ok()).filter(|&w| w > 0).ok_or(usage)?;
