@@ -25,14 +25,26 @@ fn main() -> std::process::ExitCode {
 fn run() -> Result<(), String> {
     let out = std::path::PathBuf::from(std::env::args().nth(1).ok_or("usage: twin_timing <file.csv> [poses per session [length, rad]]")?);
     let robot = calsim::robot::file::RobotFile::load(std::path::Path::new("robots/irb120.toml")).map_err(|e| e.to_string())?;
-    let number = |k: usize, what: &str| -> Result<Option<f64>, String> {
-        std::env::args()
-            .nth(k)
-            .map(|a| a.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0).ok_or(format!("{what}: {a} is not a positive number")))
-            .transpose()
+    // Bounds: the measurement reader's 1,000,000 rows (3 sessions x 2 targets per pose); a field
+    // length within the lengths the twin profiles (0.02-20 rad).
+    let poses = match std::env::args().nth(2) {
+        None => None,
+        Some(a) => Some(
+            a.parse::<usize>()
+                .ok()
+                .filter(|v| (1..=150_000).contains(v))
+                .ok_or(format!("poses per session: {a} is not a whole number from 1 to 150000"))?,
+        ),
     };
-    let poses = number(2, "poses per session")?.map(|v| v as usize);
-    let length = number(3, "length")?;
+    let length = match std::env::args().nth(3) {
+        None => None,
+        Some(a) => Some(
+            a.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && (0.02..=20.0).contains(v))
+                .ok_or(format!("length: {a} is not a number from 0.02 to 20 rad"))?,
+        ),
+    };
     let spec = calsim::calibrate::simulate::SimulationSpec {
         poses_per_session: poses.unwrap_or(450),
         repeats_per_session: if poses.is_some() { 0 } else { 50 },
@@ -48,7 +60,13 @@ fn run() -> Result<(), String> {
             calsim::calibrate::simulate::joint_error_csv(&spec, &mut rng, |q, _| drawn.joint_errors(q, q))
         }
     };
-    std::fs::write(&out, text).map_err(|e| e.to_string())?;
+    // A file that exists is not replaced.
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&out)
+        .map_err(|e| format!("{}: {e} (an existing file is not replaced)", out.display()))?;
+    std::io::Write::write_all(&mut file, text.as_bytes()).map_err(|e| format!("{}: {e}", out.display()))?;
     let m = calsim::calibrate::measurements::read(&out, &robot).map_err(|e| e.to_string())?;
     let opts = calsim::calibrate::Options { plots: false, ..Default::default() };
     let t0 = Instant::now();
