@@ -26,14 +26,15 @@ impl ErrorStats {
         let n = values.len() as f64;
         let mean = values.iter().sum::<f64>() / n;
         let var = if values.len() > 1 { values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
-        let mut sorted = values.to_vec();
-        sorted.sort_by(f64::total_cmp);
+        // The order statistics by selection (those of the sorted sample, in linear time: a
+        // prediction pools millions of draws).
+        let mut scratch = values.to_vec();
         Self {
             mean,
-            median: quantile(&sorted, 0.5),
+            median: crate::numeric::quantile_selected(&mut scratch, 0.5),
             std: var.sqrt(),
-            p95: quantile(&sorted, 0.95),
-            max: sorted[sorted.len() - 1],
+            p95: crate::numeric::quantile_selected(&mut scratch, 0.95),
+            max: values.iter().copied().max_by(f64::total_cmp).expect("a value"),
             rms: (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt(),
         }
     }
