@@ -244,7 +244,7 @@ impl Lsq {
         if self.a.ncols() == 0 {
             return b.clone();
         }
-        b - &self.a * self.coef(b)
+        b - super::problem::mul(&self.a, &self.coef(b))
     }
 
     /// Covariance of the coefficients (internal units) with the residuals `u` clustered by `groups`
@@ -403,9 +403,6 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     let x = solved.x;
     let pr = layout.robot.len();
     let fitted = layout.robot.unpack(nominal, &x[..pr]).map_err(|e| no_model(e.to_string()))?;
-    let (rw, jw) = problem.linearise(&x, &train).ok_or_else(|| no_model("the twin's training fit has no model".into()))?;
-    let jf = jw.select_columns(&free);
-    drop(jw);
     // The link-angle Jacobian: the fitted robot with the six joint offsets as its only parameters.
     let offsets = ParamSet::new((1..=JOINTS).map(|joint| ParamId::Link { joint, kind: LinkParam::ThetaOffset }).collect())
         .expect("six joint offsets");
@@ -414,7 +411,11 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     x6.extend_from_slice(&x[layout.frames()]);
     let p6 = Problem { start: &fitted, layout: lay6, obs: &s.obs };
     let link_jacobian = |idx: &[usize]| p6.linearise(&x6, idx).map(|(_, j)| j.columns(0, JOINTS).into_owned());
-    let jl = link_jacobian(&train).ok_or_else(|| no_model("the twin's link Jacobian".into()))?;
+    // The model's residuals and Jacobian, and the link-angle Jacobian, side by side.
+    let (model_rows, jl) =
+        rayon::join(|| problem.linearise(&x, &train).map(|(rw, jw)| (rw, jw.select_columns(&free))), || link_jacobian(&train));
+    let (rw, jf) = model_rows.ok_or_else(|| no_model("the twin's training fit has no model".into()))?;
+    let jl = jl.ok_or_else(|| no_model("the twin's link Jacobian".into()))?;
     let data = point_data(c, &s.obs, &fitted);
     // Pose of each training row, and the per-pose groups.
     let pose_of = |idx: &[usize]| -> Vec<usize> {
@@ -436,8 +437,9 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
     let held_parts = if held.is_empty() {
         None
     } else {
-        let (rh, jh) = problem.linearise(&x, &held).ok_or_else(|| no_model("the twin's held-out points".into()))?;
-        let jlh = link_jacobian(&held).ok_or_else(|| no_model("the twin's link Jacobian".into()))?;
+        let (rows, jlh) = rayon::join(|| problem.linearise(&x, &held), || link_jacobian(&held));
+        let (rh, jh) = rows.ok_or_else(|| no_model("the twin's held-out points".into()))?;
+        let jlh = jlh.ok_or_else(|| no_model("the twin's link Jacobian".into()))?;
         let own: Vec<usize> = (0..layout.len()).filter(|k| !free.contains(k) && jh.column(*k).iter().any(|v| *v != 0.0)).collect();
         let own = Lsq::new(jh.select_columns(&own));
         Some((rh, jh.select_columns(&free), jlh, own, pose_of(&held)))
