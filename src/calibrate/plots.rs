@@ -12,46 +12,64 @@ use crate::io::plot::{
     DrawResult, FAMILY, Mark, PlotError, Side, Written, both, colour_bar, e2s, heat, interval_bar, keyed, range_of, register_font, whole,
 };
 
-/// Writes the figures of `c` into `dir`.
+/// Writes the figures of `c` into `dir` (side by side: each its own files).
 pub fn write(dir: &Path, c: &Calibration) -> Result<Vec<Written>, PlotError> {
+    use rayon::prelude::*;
     register_font();
     // The marks each figure draws: a point before and after; three coordinates per joint; a point
     // in each of two views. A figure of more is written as a PNG alone.
     let n = c.chosen().fit.errors_mm.len();
     let svg = |marks: usize| marks <= crate::io::plot::MOST_SVG_MARKS;
-    let mut out = Vec::new();
+    type Draw<'c> = Box<dyn Fn(&Path) -> DrawResult + Send + Sync + 'c>;
+    let written = |svg: bool, stem: &str, caption: &str| Written { svg, stem: stem.into(), caption: caption.into() };
     let (per_point_svg, per_joint_svg, map_svg) = (svg(2 * n), svg(3 * crate::robot::JOINTS * n), svg(2 * n));
-    both!(dir, "residuals_per_point", png_only: !per_point_svg, |root| per_point(root, c));
-    out.push(Written {
-        svg: per_point_svg,
-        stem: "residuals_per_point".into(),
-        caption:
-            "Error of every point before (nominal robot, fitted bases and tools) and after calibration, in file order; outliers circled"
-                .into(),
-    });
-    both!(dir, "residuals_per_joint", png_only: !per_joint_svg, |root| per_joint(root, c));
-    out.push(Written {
-        svg: per_joint_svg,
-        stem: "residuals_per_joint".into(),
-        caption: "Residual after calibration (x, y, z in the robot's base frame, signed) against each joint's angle: a pattern along a \
-                  joint (a sag growing with the arm's reach) is an error the model does not hold"
-            .into(),
-    });
-    both!(dir, "error_map", png_only: !map_svg, |root| error_map(root, c));
-    out.push(Written {
-        svg: map_svg,
-        stem: "error_map".into(),
-        caption: "Error after calibration where each point was measured, in the robot's base frame".into(),
-    });
+    let mut figures: Vec<(Draw<'_>, Written)> = vec![
+        (
+            Box::new(move |dir| {
+                both!(dir, "residuals_per_point", png_only: !per_point_svg, |root| per_point(root, c));
+                Ok(())
+            }),
+            written(
+                per_point_svg,
+                "residuals_per_point",
+                "Error of every point before (nominal robot, fitted bases and tools) and after calibration, in file order; outliers circled",
+            ),
+        ),
+        (
+            Box::new(move |dir| {
+                both!(dir, "residuals_per_joint", png_only: !per_joint_svg, |root| per_joint(root, c));
+                Ok(())
+            }),
+            written(
+                per_joint_svg,
+                "residuals_per_joint",
+                "Residual after calibration (x, y, z in the robot's base frame, signed) against each joint's angle: a pattern along a \
+                 joint (a sag growing with the arm's reach) is an error the model does not hold",
+            ),
+        ),
+        (
+            Box::new(move |dir| {
+                both!(dir, "error_map", png_only: !map_svg, |root| error_map(root, c));
+                Ok(())
+            }),
+            written(map_svg, "error_map", "Error after calibration where each point was measured, in the robot's base frame"),
+        ),
+    ];
     if c.chosen().held_out.is_some() {
-        both!(dir, "held_out", |root| held_out(root, c));
-        out.push(Written {
-            svg: true,
-            stem: "held_out".into(),
-            caption: "Held-out errors of every model (cumulative distributions), measured, with the chosen model's prediction".into(),
-        });
+        figures.push((
+            Box::new(move |dir| {
+                both!(dir, "held_out", |root| held_out(root, c));
+                Ok(())
+            }),
+            written(
+                true,
+                "held_out",
+                "Held-out errors of every model (cumulative distributions), measured, with the chosen model's prediction",
+            ),
+        ));
     }
-    Ok(out)
+    figures.par_iter().map(|(draw, _)| draw(dir)).collect::<Result<Vec<()>, PlotError>>()?;
+    Ok(figures.into_iter().map(|(_, w)| w).collect())
 }
 
 fn per_point<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Calibration) -> DrawResult {

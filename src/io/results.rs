@@ -25,7 +25,7 @@ use crate::io::plot::{PlotError, Written};
 use crate::io::record::RecordError;
 
 /// Draws figures into the directory it is given and names them (stem and caption).
-pub type Draw<'a> = Box<dyn FnOnce(&Path) -> Result<Vec<Written>, PlotError> + 'a>;
+pub type Draw<'a> = Box<dyn FnOnce(&Path) -> Result<Vec<Written>, PlotError> + Send + 'a>;
 
 /// Writes a recording to the path it is given.
 pub type Record<'a> = Box<dyn FnOnce(&Path) -> Result<(), RecordError> + 'a>;
@@ -427,12 +427,33 @@ impl<'a> Results<'a> {
     /// summary as printed and the time the recording took, s.
     pub fn write_into(self, dir: &Path) -> std::io::Result<(String, f64)> {
         use crate::io::out_dir::write_file;
-        for (name, frame) in &self.tables {
-            crate::io::table::write_frame(dir, name, frame.clone())?;
+        let t = std::time::Instant::now();
+        if let Some((file, record)) = self.record {
+            record(&dir.join(file)).map_err(std::io::Error::other)?;
         }
-        for (name, bytes) in &self.files {
-            write_file(&dir.join(name), bytes)?;
-        }
+        let recording_s = t.elapsed().as_secs_f64();
+        // The tables and files, and the figures, side by side (each its own files).
+        let (tables, files, draw) = (&self.tables, &self.files, self.draw);
+        let (written, drawn) = rayon::join(
+            || -> std::io::Result<()> {
+                for (name, frame) in tables {
+                    crate::io::table::write_frame(dir, name, frame.clone())?;
+                }
+                for (name, bytes) in files {
+                    write_file(&dir.join(name), bytes)?;
+                }
+                Ok(())
+            },
+            || -> std::io::Result<Vec<Written>> {
+                let mut drawn = Vec::new();
+                for draw in draw {
+                    drawn.extend(draw(dir).map_err(std::io::Error::other)?);
+                }
+                Ok(drawn)
+            },
+        );
+        written?;
+        let drawn = drawn?;
         for (name, results) in self.nested {
             let sub = dir.join(&name);
             std::fs::create_dir(&sub).map_err(crate::io::out_dir::named(&sub))?;
@@ -447,15 +468,6 @@ impl<'a> Results<'a> {
         .map_err(crate::io::table::err)?;
         if let serde_json::Value::Object(h) = head {
             manifest.extend(h);
-        }
-        let t = std::time::Instant::now();
-        if let Some((file, record)) = self.record {
-            record(&dir.join(file)).map_err(std::io::Error::other)?;
-        }
-        let recording_s = t.elapsed().as_secs_f64();
-        let mut drawn = Vec::new();
-        for draw in self.draw {
-            drawn.extend(draw(dir).map_err(std::io::Error::other)?);
         }
         let mut shown = String::new();
         if !self.summary.parts.is_empty() {
