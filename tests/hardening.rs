@@ -156,6 +156,103 @@ fn inputs_nested_without_bound_are_refused_in_one_line_before_any_parser_recurse
     assert!(!dir.join("out").exists(), "nothing ran");
 }
 
+/// The text of the repository's file `rel` with every path it names relative to itself (`"../`)
+/// made absolute, so that a copy written elsewhere still finds them.
+fn text_anywhere(rel: &str) -> String {
+    let path = repo().join(rel);
+    let text = std::fs::read_to_string(&path).unwrap();
+    text.replace("\"../", &format!("\"{}/../", path.parent().unwrap().display()))
+}
+
+/// An array of a fixed length (a point's three coordinates, a range's two ends) given more values
+/// is refused, not read as its first ones, and given fewer too: in every kind of TOML file calsim
+/// reads, the one line naming the file, the key, the count written and the count the key takes.
+#[test]
+fn an_array_longer_or_shorter_than_its_key_takes_is_refused_in_every_kind_of_file() {
+    let tmp = scratch("array-lengths");
+    let dir = tmp.path();
+    let scenario = small_scenario();
+    std::fs::write(dir.join("base.toml"), &scenario).unwrap();
+    std::fs::write(dir.join("joints.csv"), "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n0,0,0,0,0,0\n").unwrap();
+    let sweep = "base = \"base.toml\"\n[[axis]]\nkey = \"robot.tcp_mm\"\nvalues = [[35.0, 0.0, 125.0]]\n";
+    // (kind, file text, the array as written, its first values, command, key named, length taken)
+    let cases = [
+        ("scenario", scenario.clone(), "tcp_mm = [35.0, 0.0, 125.0]", "tcp_mm = [35.0, 0.0", "run", "robot.tcp_mm", 3),
+        ("sweep", sweep.to_string(), "[[35.0, 0.0, 125.0]]", "[[35.0, 0.0", "sweep", "robot.tcp_mm", 3),
+        ("robot", text_anywhere("robots/irb120.toml"), "com_mm = [101.24, 0.78, -2.12]", "com_mm = [101.24, 0.78", "fk", "com_mm", 3),
+        (
+            "twin",
+            text_anywhere("robots/examples/irb120_twin.toml"),
+            "backlash_mdeg = [0.0, 4.0, 3.0, 0.0, 0.0, 0.0]",
+            "backlash_mdeg = [0.0, 4.0, 3.0, 0.0, 0.0",
+            "fk",
+            "backlash_mdeg",
+            6,
+        ),
+        (
+            "design",
+            text_anywhere("scenarios/designs/irb120_spheres.toml"),
+            "x_mm = [-150.0, 450.0]",
+            "x_mm = [-150.0",
+            "optimise",
+            "points.x_mm",
+            2,
+        ),
+        (
+            "tracker plan",
+            text_anywhere("scenarios/plans/irb120_tracker.toml"),
+            "position_mm = [1800.0, 0.0, 300.0]",
+            "position_mm = [1800.0, 0.0",
+            "plan",
+            "position_mm",
+            3,
+        ),
+        (
+            "device plan",
+            text_anywhere("scenarios/plans/irb120_trical.toml"),
+            "workspace_min_mm = [200.0, -250.0, 250.0]",
+            "workspace_min_mm = [200.0, -250.0",
+            "plan",
+            "workspace_min_mm",
+            3,
+        ),
+        (
+            "device plan",
+            text_anywhere("scenarios/plans/irb120_trical.toml"),
+            "[150.0, 259.8076, 0.0]]",
+            "[150.0, 259.8076",
+            "plan",
+            "spheres_w_mm",
+            3,
+        ),
+        (
+            "simulation",
+            text_anywhere("docs/calibrate/probe_example.toml"),
+            "flange_mm = [20.0, -10.0, 60.0]",
+            "flange_mm = [20.0, -10.0",
+            "simulate-measurements",
+            "flange_mm",
+            3,
+        ),
+    ];
+    for (k, (kind, text, array, first, command, key, n)) in cases.into_iter().enumerate() {
+        let close = if array.ends_with("]]") { "]]" } else { "]" };
+        for (name, written, count) in
+            [("long", format!("{}, 7.0{close}", &array[..array.len() - close.len()]), n + 1), ("short", format!("{first}{close}"), n - 1)]
+        {
+            let changed = text.replacen(array, &written, 1);
+            assert_ne!(changed, text, "{kind}: `{array}` is in the shipped file");
+            let file = format!("{name}{k}.toml");
+            std::fs::write(dir.join(&file), changed).unwrap();
+            let mut args = vec![command, &file];
+            args.extend(if command == "fk" { ["joints.csv"].as_slice() } else { ["--out", "out"].as_slice() });
+            let length = format!("invalid length {count}, expected an array of length {n}");
+            refused(dir, &args, &[&file, key, &length]);
+        }
+    }
+    assert!(!dir.join("out").exists(), "nothing ran");
+}
+
 #[test]
 fn names_that_are_not_one_path_component_are_refused_before_any_work() {
     let tmp = scratch("names");

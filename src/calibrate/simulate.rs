@@ -432,7 +432,7 @@ pub fn read_spec(path: &std::path::Path) -> Result<SpecFile, String> {
     let bytes = crate::io::read_bytes(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let text = String::from_utf8(bytes).map_err(|_| format!("{}: not UTF-8 text", path.display()))?;
     let raw: RawSpec =
-        toml::from_str(&text).map_err(|e| err(&crate::io::toml_position(&text, e.span()), e.message().replace('\n', " ")))?;
+        crate::io::toml_de::from_str(&text).map_err(|e| err(&crate::io::toml_position(&text, e.span()), e.message().replace('\n', " ")))?;
     let finite = |key: &str, v: &[f64], most: f64| -> Result<(), String> {
         match v.iter().find(|x| !(x.is_finite() && x.abs() <= most)) {
             Some(x) => Err(err(key, format!("{x}: a finite number within +-{most}"))),

@@ -74,7 +74,7 @@ pub enum ScenarioError {
 
 /// Parses scenario text into its TOML table, naming the line of a syntax error.
 pub fn table(text: &str, shown: &str) -> Result<toml::Table, ScenarioError> {
-    toml::from_str(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
+    toml::from_str::<toml::Table>(text).map_err(|e: toml::de::Error| ScenarioError::Parse {
         path: shown.into(),
         key: crate::io::toml_position(text, e.span()),
         message: e.message().to_string(),
@@ -109,7 +109,7 @@ fn finite(v: &toml::Value, path: &mut Vec<String>, shown: &str) -> Result<(), Sc
 /// Fills the keys of `section` that `t` leaves out from `defaults` (TOML text): how a device gives
 /// a common section its own defaults.
 pub fn with_defaults(mut t: toml::Table, section: &str, defaults: &str) -> toml::Table {
-    let defaults: toml::Table = toml::from_str(defaults).expect("device defaults are valid TOML");
+    let defaults = toml::from_str::<toml::Table>(defaults).expect("device defaults are valid TOML");
     let entry = t.entry(section.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
     if let toml::Value::Table(given) = entry {
         for (k, v) in defaults {
@@ -125,14 +125,7 @@ pub fn deserialize<T: serde::de::DeserializeOwned>(t: toml::Table, shown: &str) 
     for (k, v) in &t {
         finite(v, &mut vec![k.clone()], shown)?;
     }
-    serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
-        let key = e.path().to_string();
-        ScenarioError::Parse {
-            path: shown.into(),
-            key: if key == "." { "(file)".into() } else { key },
-            message: e.into_inner().message().to_string(),
-        }
-    })
+    crate::io::toml_de::from_table(t).map_err(|(key, message)| ScenarioError::Parse { path: shown.into(), key, message })
 }
 
 /// Range checks that name the file, section, key, value and rule of what fails. Every rule a

@@ -2,11 +2,11 @@
 //! input calsim reads goes through [`read_text`], [`read_bytes`] or [`read_bytes_at_most`], a test
 //! keeps it so), the shape of an XML input checked before it is parsed (`xml`), the names calsim
 //! makes directories from (`names`), the atomic results directory and the vetting of output paths
-//! (`out_dir`: the one writer and its safety rule), parquet tables and their hashes (`table`), the
-//! ledger of the files a command read (`inputs`), the provenance block of every manifest
-//! (`manifest`), the plot kit (`plot`) and the recording kit (`record`). It computes no figure and
-//! imports no device, study, sweep or budget: each producer computes its own figures and renders
-//! them through it.
+//! (`out_dir`: the one writer and its safety rule), parquet tables and their hashes (`table`), TOML
+//! read into calsim's types with every array held to its length (`toml_de`), the ledger of the
+//! files a command read (`inputs`), the provenance block of every manifest (`manifest`), the plot
+//! kit (`plot`) and the recording kit (`record`). It computes no figure and imports no device,
+//! study, sweep or budget: each producer computes its own figures and renders them through it.
 
 pub mod inputs;
 pub mod manifest;
@@ -16,6 +16,7 @@ pub mod plot;
 pub mod record;
 pub mod results;
 pub mod table;
+pub mod toml_de;
 pub mod xml;
 
 use std::io::Read;

@@ -131,7 +131,8 @@ pub fn fewest_poses(m: usize) -> usize {
 /// Checks a device plan's text (`path` names it in errors; files are found relative to it).
 pub fn parse(path: &Path, text: &str) -> Result<DevicePlan, PlanError> {
     let err = |key: &str, message: String| PlanError::new(path, key, message);
-    let raw: Raw = toml::from_str(text).map_err(|e| err(&crate::io::toml_position(text, e.span()), e.message().replace('\n', " ")))?;
+    let raw: Raw =
+        crate::io::toml_de::from_str(text).map_err(|e| err(&crate::io::toml_position(text, e.span()), e.message().replace('\n', " ")))?;
     let robot = spec::load_robot(path, &raw.robot)?;
     let kind = KINDS.into_iter().find(|k| *k == raw.instrument.kind).ok_or_else(|| {
         err(

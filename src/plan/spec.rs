@@ -400,7 +400,8 @@ fn vec3(v: [f64; 3]) -> Vector3<f64> {
 /// Checks a plan file's text (`path` names it in errors; a robot file is found relative to it).
 pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
     let err = |key: &str, message: String| PlanError::new(path, key, message);
-    let raw: Raw = toml::from_str(text).map_err(|e| err(&crate::io::toml_position(text, e.span()), e.message().replace('\n', " ")))?;
+    let raw: Raw =
+        crate::io::toml_de::from_str(text).map_err(|e| err(&crate::io::toml_position(text, e.span()), e.message().replace('\n', " ")))?;
     let finite = |key: &str, v: &[f64]| -> Result<(), PlanError> {
         match v.iter().find(|x| !x.is_finite() || x.abs() > MOST_MM) {
             Some(x) => Err(err(key, format!("{x} is not a finite number within +-{MOST_MM} "))),

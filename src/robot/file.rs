@@ -334,7 +334,7 @@ impl RobotFile {
     /// flange, collision, truth), each key checked where it is read and named in its error;
     /// pieces would hand the half-built model and the key context back and forth.
     fn parse(path: &Path, text: &str) -> Result<Self, (String, String)> {
-        let f: File = toml::from_str(text).map_err(|e| {
+        let f: File = crate::io::toml_de::from_str(text).map_err(|e| {
             let msg = e.message().to_string();
             (crate::io::toml_position(text, e.span()), msg)
         })?;

@@ -110,7 +110,7 @@ pub struct Spms {
 }
 
 static PUBLISHED: LazyLock<Published> =
-    LazyLock::new(|| toml::from_str(TEXT).unwrap_or_else(|e| panic!("reference/published-figures.toml: {e}")));
+    LazyLock::new(|| crate::io::toml_de::from_str(TEXT).unwrap_or_else(|e| panic!("reference/published-figures.toml: {e}")));
 
 /// The published figures.
 pub fn published() -> &'static Published {

@@ -437,13 +437,7 @@ const MOST_EVALUATIONS: u32 = 100_000;
 /// Reads and checks a design file.
 pub fn load(path: &Path) -> Result<DesignSpace, DesignError> {
     let text = crate::io::read_text(path).map_err(|e| err(path, "(file)", format!("cannot read: {e}")))?;
-    let file: DesignFile = {
-        let de = toml::Deserializer::parse(&text).map_err(|e| err(path, crate::io::toml_position(&text, e.span()), e.message()))?;
-        serde_path_to_error::deserialize(de).map_err(|e| {
-            let key = e.path().to_string();
-            err(path, key, e.into_inner().message())
-        })?
-    };
+    let file: DesignFile = crate::io::toml_de::from_str_keyed(&text).map_err(|(key, message)| err(path, key, message))?;
     let objective = file.objective.clone().check().map_err(|(k, m)| err(path, k, m))?;
     let base_path = path.parent().unwrap_or(Path::new(".")).join(&file.base);
     let (base_text, mut base) = scenario::read_table(&base_path).map_err(|e| err(path, "base", e.to_string()))?;

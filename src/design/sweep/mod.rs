@@ -396,7 +396,7 @@ impl ShardInfo {
     /// The whole scenario of grid point `p` as a table (a record read from disk is checked by
     /// [`record::check`] first).
     pub fn point_table(&self, p: usize) -> Result<toml::Table, String> {
-        let base: toml::Table = toml::from_str(&self.scenario).map_err(|e: toml::de::Error| format!("scenario: {}", e.message()))?;
+        let base = toml::from_str::<toml::Table>(&self.scenario).map_err(|e: toml::de::Error| format!("scenario: {}", e.message()))?;
         let changes = self.changes.get(p).ok_or_else(|| format!("no grid point {p}"))?;
         record::apply(&base, changes).map_err(|(i, why)| format!("changes[{p}][{i}]: {why}"))
     }
@@ -439,7 +439,8 @@ pub struct ShardRun {
 /// The record of `sweep` that shard `k` of `count` writes as its `sweep.json`.
 pub fn shard_info(sweep: &Sweep, k: usize, count: usize) -> ShardInfo {
     // Every point's text is calsim's own TOML of a table it loaded (`spec::load`, `from_tables`).
-    let tables: Vec<toml::Table> = sweep.points.par_iter().map(|p| toml::from_str(&p.scenario.header().text).unwrap_or_default()).collect();
+    let tables: Vec<toml::Table> =
+        sweep.points.par_iter().map(|p| toml::from_str::<toml::Table>(&p.scenario.header().text).unwrap_or_default()).collect();
     let base = tables.first().cloned().unwrap_or_default();
     ShardInfo {
         name: sweep.name.clone(),

@@ -99,7 +99,7 @@ pub fn apply(base: &toml::Table, changes: &[Change]) -> Result<toml::Table, (usi
                 }
             }
             Some(text) => {
-                let doc: toml::Table = match toml::from_str(&format!("v = {text}")) {
+                let doc: toml::Table = match toml::from_str::<toml::Table>(&format!("v = {text}")) {
                     Ok(doc) => doc,
                     Err(e) => return fail(format!("key {}: value {text:?} is not one TOML value ({})", c.key.join("."), e.message())),
                 };
@@ -223,8 +223,8 @@ pub fn check(info: &ShardInfo, file: &Path) -> Result<Vec<PointStudy>, MergeErro
             return Err(fail(&format!("robots[{p}]"), "not a robot's place in the cell (finite mm within 1 km, a unit up axis)".into()));
         }
     }
-    let base: toml::Table =
-        toml::from_str(&info.scenario).map_err(|e: toml::de::Error| fail("scenario", format!("not TOML: {}", e.message())))?;
+    let base = toml::from_str::<toml::Table>(&info.scenario)
+        .map_err(|e: toml::de::Error| fail("scenario", format!("not TOML: {}", e.message())))?;
     // Loading a scenario checks it whole (the identifiability of its parameters among it): the
     // points load in parallel, and the first failing point in grid order is the one named.
     let studies: Vec<Result<PointStudy, MergeError>> = (0..points)

@@ -358,13 +358,7 @@ pub fn load(path: &Path) -> Result<Sweep, SweepError> {
 pub fn load_with(path: &Path, realisations_override: Option<u32>) -> Result<Sweep, SweepError> {
     let shown = path.display().to_string();
     let text = crate::io::read_text(path).map_err(|e| file_err(path, "(file)", format!("cannot read: {e}")))?;
-    let file: SweepFile = {
-        let de = toml::Deserializer::parse(&text).map_err(|e| file_err(path, &crate::io::toml_position(&text, e.span()), e.message()))?;
-        serde_path_to_error::deserialize(de).map_err(|e| {
-            let key = e.path().to_string();
-            file_err(path, &key, e.into_inner().message())
-        })?
-    };
+    let file: SweepFile = crate::io::toml_de::from_str_keyed(&text).map_err(|(key, message)| file_err(path, &key, message))?;
     let objective = match file.objective.clone() {
         Some(o) => o.check().map_err(|(k, m)| file_err(path, &k, m))?,
         None => super::objective::Objective::default(),
