@@ -145,6 +145,26 @@ fn only_io_results_writes_a_results_directory() {
     assert!(wrong.is_empty(), "results written beside io::results:\n{}", wrong.join("\n"));
 }
 
+/// TOML reaches calsim's types through `io::toml_de` alone, which holds every fixed-length array
+/// to its length (toml's own reader takes the first values of a longer one): elsewhere TOML text
+/// is parsed only into a `toml::Table`, and no deserializer of toml's is driven directly.
+#[test]
+fn toml_reaches_calsims_types_only_through_io_toml_de() {
+    let mut wrong = Vec::new();
+    for (rel, text) in code_outside_io() {
+        let joined: String = text.split_whitespace().collect();
+        if joined.matches("toml::from_str").count() > joined.matches("toml::from_str::<toml::Table>").count() {
+            wrong.push(format!("{}: toml::from_str into something other than a toml::Table", rel.display()));
+        }
+        for forbidden in ["toml::Deserializer", "ValueDeserializer", "serde_path_to_error::deserialize(toml::"] {
+            if joined.contains(forbidden) {
+                wrong.push(format!("{}: names {forbidden}", rel.display()));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "TOML read beside io::toml_de:\n{}", wrong.join("\n"));
+}
+
 /// No escape hatch around the device interface: no module reaches a device's own types through
 /// `Any` (a command that needs something of a device asks the [`calsim::device::Scenario`] trait's
 /// hooks). The CLI's panic hook reads a panic's payload, the one downcast there is.
