@@ -46,14 +46,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    match demo(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {}", calsim::app::message::one_line(&e.to_string()));
-            ExitCode::from(2)
-        }
-    }
+    calsim::app::message::exit_code(demo(&Args::parse()))
 }
 
 fn demo(args: &Args) -> Result<(), String> {

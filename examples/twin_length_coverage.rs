@@ -95,13 +95,7 @@ fn quantile(v: &[f64], f: f64) -> f64 {
 
 fn main() -> std::process::ExitCode {
     // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
-    match coverage() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {}", calsim::app::message::one_line(&e));
-            std::process::ExitCode::from(2)
-        }
-    }
+    calsim::app::message::exit_code(coverage())
 }
 
 fn coverage() -> Result<(), String> {

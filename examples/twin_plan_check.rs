@@ -139,13 +139,7 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 
 fn main() -> std::process::ExitCode {
     // Bad input: one line, `error: ...`, exit 2, as calsim's commands.
-    match run() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {}", calsim::app::message::one_line(&e));
-            std::process::ExitCode::from(2)
-        }
-    }
+    calsim::app::message::exit_code(run())
 }
 
 fn run() -> Result<(), String> {

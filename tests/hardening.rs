@@ -84,18 +84,24 @@ fn s(p: &Path) -> &str {
 
 /// Every command's one-line error starts `error: `: calsim's (each refusal above) and the
 /// examples' the docs run (`cargo run --example ...`). An example's `main` returning a `Result`
-/// would print Rust's `Error: "..."` instead, so none does, and every exit 2 follows an
+/// would print Rust's `Error: "..."` instead, so none does: it ends through
+/// `calsim::app::message::exit_code` (an error: its `error: ` line, exit 2) or exits 2 itself
+/// after an `error: ` line. Every exit 2, in the examples and in `exit_code`, follows an
 /// `error: ` line.
 #[test]
 fn every_commands_error_line_starts_the_same_way() {
-    let mut checked = 0;
-    for entry in std::fs::read_dir(repo().join("examples")).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_none_or(|e| e != "rs") {
-            continue;
-        }
-        let text = std::fs::read_to_string(&path).unwrap();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(repo().join("examples"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+        .collect();
+    files.push(repo().join("src/app/message.rs"));
+    let (mut exits, mut through_exit_code) = (0, 0);
+    for path in &files {
+        let text = std::fs::read_to_string(path).unwrap();
+        let text = text.split("\n#[cfg(test)]").next().unwrap_or_default();
         assert!(!text.contains("fn main() -> Result"), "{}: main returns a Result (`Error: ...`)", path.display());
+        through_exit_code += usize::from(text.contains("calsim::app::message::exit_code("));
         let lines: Vec<&str> = text.lines().collect();
         for (k, line) in lines.iter().enumerate() {
             if line.contains("exit(2)") || line.contains("ExitCode::from(2)") {
@@ -106,11 +112,12 @@ fn every_commands_error_line_starts_the_same_way() {
                     path.display(),
                     k + 1
                 );
-                checked += 1;
+                exits += 1;
             }
         }
     }
-    assert!(checked >= 6, "the examples' error exits: {checked}");
+    assert!(exits >= 3, "exit_code's and the examples' own exits 2: {exits}");
+    assert!(through_exit_code >= 4, "the examples that end through message::exit_code: {through_exit_code}");
     let (code, err) = run_in(&repo(), &["run", "no-such-scenario.toml"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.starts_with("error: no-such-scenario.toml: "), "{err}");

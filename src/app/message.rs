@@ -10,6 +10,18 @@ pub fn one_line(msg: &str) -> String {
     shorten_long_words(&compact_numbers(&crate::io::names::escape_controls(msg)))
 }
 
+/// How a program over calsim's library ends (the examples), as calsim's commands end: exit code 0
+/// on success; on an error, `error: ` and its [`one_line`] on standard error, and exit code 2.
+pub fn exit_code(result: Result<(), impl std::fmt::Display>) -> std::process::ExitCode {
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e.to_string()));
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
 /// Most characters of a run without a space that a message shows whole.
 const MOST_WORD_CHARS: usize = 200;
 
@@ -60,7 +72,7 @@ fn compact_numbers(msg: &str) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{compact_numbers, one_line};
+    use super::{compact_numbers, exit_code, one_line};
 
     #[test]
     fn an_error_line_stays_one_line_whatever_its_paths_and_values_hold() {
@@ -70,6 +82,12 @@ mod tests {
         assert!(line.starts_with("a\\nb.toml: axis[0] (a.a.a."), "{line}");
         assert!(line.contains("characters]...") && line.len() < 1000, "{line}");
         assert!(line.ends_with("value 1e300: x\\r\\u{2028}y"), "{line}");
+    }
+
+    #[test]
+    fn an_error_ends_with_exit_code_2_and_success_with_0() {
+        assert_eq!(exit_code(Ok::<(), String>(())), std::process::ExitCode::SUCCESS);
+        assert_eq!(exit_code(Err("x.toml: seed: not a number")), std::process::ExitCode::from(2));
     }
 
     #[test]
