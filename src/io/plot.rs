@@ -251,42 +251,32 @@ pub fn written<E: std::fmt::Display>(path: &std::path::Path) -> impl FnOnce(E) -
     move |e| PlotError(format!("{}: {e}", path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned())))
 }
 
-/// Draws `draw` into `dir/<stem>.png` and `dir/<stem>.svg` ([`SIZE`] pixels, or `size`); a
-/// write error names the file.
+/// Draws `draw` into `dir/<stem>.png` and `dir/<stem>.svg` ([`SIZE`] pixels, or `size`), the SVG
+/// left out where `png_only:` is true; a write error names the file.
 macro_rules! both {
-    ($dir:expr, $stem:expr, png_only: $png_only:expr, $draw:expr) => {{
-        let png = $dir.join(format!("{}.png", $stem));
-        {
-            let root =
-                plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::BitMapBackend::new(&png, $crate::io::plot::SIZE));
-            $draw(&root)?;
-            root.present().map_err($crate::io::plot::written(&png))?;
-        }
-        if !$png_only {
-            let svg = $dir.join(format!("{}.svg", $stem));
-            let root =
-                plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::SVGBackend::new(&svg, $crate::io::plot::SIZE));
-            $draw(&root)?;
-            root.present().map_err($crate::io::plot::written(&svg))?;
-        }
-    }};
-    ($dir:expr, $stem:expr, $draw:expr) => {
-        $crate::io::plot::both!($dir, $stem, $crate::io::plot::SIZE, $draw)
+    ($dir:expr, $stem:expr, png_only: $png_only:expr, $draw:expr) => {
+        $crate::io::plot::both!($dir, $stem, $crate::io::plot::SIZE, png_only: $png_only, $draw)
     };
-    ($dir:expr, $stem:expr, $size:expr, $draw:expr) => {{
+    ($dir:expr, $stem:expr, $size:expr, png_only: $png_only:expr, $draw:expr) => {{
         let png = $dir.join(format!("{}.png", $stem));
-        let svg = $dir.join(format!("{}.svg", $stem));
         {
             let root = plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::BitMapBackend::new(&png, $size));
             $draw(&root)?;
             root.present().map_err($crate::io::plot::written(&png))?;
         }
-        {
+        if !$png_only {
+            let svg = $dir.join(format!("{}.svg", $stem));
             let root = plotters::prelude::IntoDrawingArea::into_drawing_area(plotters::prelude::SVGBackend::new(&svg, $size));
             $draw(&root)?;
             root.present().map_err($crate::io::plot::written(&svg))?;
         }
     }};
+    ($dir:expr, $stem:expr, $draw:expr) => {
+        $crate::io::plot::both!($dir, $stem, $crate::io::plot::SIZE, png_only: false, $draw)
+    };
+    ($dir:expr, $stem:expr, $size:expr, $draw:expr) => {
+        $crate::io::plot::both!($dir, $stem, $size, png_only: false, $draw)
+    };
 }
 
 /// The range of `v` widened by `pad` of its span on each side (0..1 when `v` has no finite value).
