@@ -149,21 +149,28 @@ pub struct Problem<'a> {
 /// (session, target) and its members as (row in `idx`, point index).
 type Group = ((usize, usize), Vec<(usize, usize)>);
 
+/// Groups [`groups`] finds by looking through them rather than in its map.
+const FEW_GROUPS: usize = 16;
+
 /// The points of `idx` grouped by (session, target): each group sees one model. Groups in the order
 /// of their first point, members in the order of `idx`.
 fn groups(obs: &[Obs], idx: &[usize]) -> Vec<Group> {
     let mut out: Vec<Group> = Vec::new();
     let mut at: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
-    // The last point's group first (points come in runs of one group), else the map.
+    // The last point's group first (points come in runs of one group, or a pose's targets in
+    // turn), then the groups themselves while they are few, else the map.
     let mut last: Option<((usize, usize), usize)> = None;
     for (row, &i) in idx.iter().enumerate() {
         let key = (obs[i].session, obs[i].target);
         let k = match last {
             Some((l, k)) if l == key => k,
-            _ => *at.entry(key).or_insert_with(|| {
-                out.push((key, Vec::new()));
-                out.len() - 1
-            }),
+            _ => match (out.len() <= FEW_GROUPS).then(|| out.iter().position(|(g, _)| *g == key)).flatten() {
+                Some(k) => k,
+                None => *at.entry(key).or_insert_with(|| {
+                    out.push((key, Vec::new()));
+                    out.len() - 1
+                }),
+            },
         };
         last = Some((key, k));
         out[k].1.push((row, i));
@@ -593,6 +600,57 @@ pub(crate) fn mul(a: &DMatrix<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
     let mut out = DMatrix::zeros(n, c);
     for (b, r0) in blocks.iter().zip((0..n).step_by(MUL_ROWS)) {
         out.rows_mut(r0, b.nrows()).copy_from(b);
+    }
+    out
+}
+
+/// Rows of `A` per task of [`mul_vectors`] (with eight vectors, their results' rows and a column
+/// of `A`'s sit in the first-level cache).
+const MUL_VECTORS_ROWS: usize = 512;
+
+/// `A x` for each `x` of `xs` as nalgebra's product of a matrix and a vector gives it, bit for bit
+/// (its `gemv`: the first column's products, then each further column's added in order), with `A`
+/// read once for all of them: blocks of rows side by side (each entry its row's own sum: the same
+/// for any thread count). The prediction's draws multiply one tall Jacobian by a few vectors each.
+pub(crate) fn mul_vectors(a: &DMatrix<f64>, xs: &[DVector<f64>]) -> Vec<DVector<f64>> {
+    use rayon::prelude::*;
+    let (n, p) = a.shape();
+    assert!(xs.iter().all(|x| x.len() == p), "A x of matching sizes");
+    if p == 0 || xs.is_empty() {
+        return xs.iter().map(|x| a * x).collect();
+    }
+    let m = xs.len();
+    // Each block's results, vector by vector.
+    let blocks: Vec<Vec<f64>> = (0..n)
+        .into_par_iter()
+        .step_by(MUL_VECTORS_ROWS)
+        .map(|r0| {
+            let len = MUL_VECTORS_ROWS.min(n - r0);
+            let mut out = vec![0.0; m * len];
+            let col = |k: usize| &a.as_slice()[k * n + r0..k * n + r0 + len];
+            for (o, x) in out.chunks_exact_mut(len).zip(xs) {
+                for (y, v) in o.iter_mut().zip(col(0)) {
+                    *y = v * x[0];
+                }
+            }
+            for k in 1..p {
+                let c = col(k);
+                for (o, x) in out.chunks_exact_mut(len).zip(xs) {
+                    let xk = x[k];
+                    for (y, v) in o.iter_mut().zip(c) {
+                        *y += v * xk;
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let mut out: Vec<DVector<f64>> = (0..m).map(|_| DVector::zeros(n)).collect();
+    for (b, r0) in blocks.iter().zip((0..n).step_by(MUL_VECTORS_ROWS)) {
+        let len = MUL_VECTORS_ROWS.min(n - r0);
+        for (o, part) in out.iter_mut().zip(b.chunks_exact(len)) {
+            o.rows_mut(r0, len).copy_from_slice(part);
+        }
     }
     out
 }
@@ -1485,6 +1543,29 @@ mod tests {
                         assert_eq!(got[u * cols + w].to_bits(), want[(u, w)].to_bits(), "{name} {rows} x {cols}: ({u}, {w})");
                     }
                 }
+            }
+        }
+    }
+
+    /// [`mul_vectors`] equals nalgebra's `A x` for each vector bit for bit: 1 to 2,000 rows (a block
+    /// and a short last one), 1 to 60 columns, 1 to 9 vectors; entries of mixed sign and magnitude,
+    /// zeros of both signs (a product of -0 starts a sum), infinities and NaN.
+    #[test]
+    fn mul_vectors_equals_nalgebra_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        for (rows, cols, m) in [(1, 1, 1), (7, 3, 2), (513, 1, 9), (1024, 6, 8), (2000, 60, 3), (517, 11, 5)] {
+            let mut value = || match rng.random_range(0..40) {
+                0 => -0.0,
+                1 => 0.0,
+                2 => f64::INFINITY,
+                3 => f64::NAN,
+                _ => rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-6..6)),
+            };
+            let a = DMatrix::<f64>::from_fn(rows, cols, |_, _| value());
+            let xs: Vec<DVector<f64>> = (0..m).map(|_| DVector::from_fn(cols, |_, _| value())).collect();
+            let bits = |v: &DVector<f64>| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            for (got, x) in mul_vectors(&a, &xs).iter().zip(&xs) {
+                assert_eq!(bits(got), bits(&(&a * x)), "{rows} x {cols}, {m} vectors");
             }
         }
     }

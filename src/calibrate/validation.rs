@@ -11,7 +11,7 @@ use rand::seq::SliceRandom;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::measurements::Measurements;
-use super::problem::{Fit, Layout, SolveOptions};
+use super::problem::{Fit, Layout, SolveOptions, mul_vectors};
 use super::robust::{RobustFit, covariance, fit_without};
 use crate::study::stats::{ErrorStats, finite_sorted, quantile};
 
@@ -478,10 +478,12 @@ fn predict<P: Fit + ?Sized>(
                 (z, noise)
             })
             .collect();
-        let norms: Vec<Vec<f64>> = drawn
-            .par_iter()
-            .map(|(z, noise)| {
-                let mut v = &jf * (chol.l() * z);
+        let ys: Vec<DVector<f64>> = drawn.iter().map(|(z, _)| chol.l() * z).collect();
+        let vs = mul_vectors(&jf, &ys);
+        let norms: Vec<Vec<f64>> = vs
+            .into_par_iter()
+            .zip(&drawn)
+            .map(|(mut v, (_, noise))| {
                 for r in 0..v.len() {
                     v[r] += noise[r] * train.sigma_hat * sigmas[r / 3];
                 }
