@@ -805,19 +805,27 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
         let x_folds = if all_fit.solved.outcome.is_converged() { all_fit.solved.x.clone() } else { x0.clone() };
         let problem = s.fit(&robot.nominal, layout.clone());
         let with_robot = !layout.robot.is_empty();
+        // Every fold of both starts at `x_folds`: its points' kinematics there computed once.
+        let start = kind.and_then(|_| problem.problem.start_at(&x_folds));
+        let folds_fit = start.as_ref().map(|start| problem::Started { fit: &problem, start });
+        let folds_fit: &(dyn problem::Fit + Sync) = match &folds_fit {
+            Some(f) => f,
+            None => &problem,
+        };
         // The two cross-validations and the training fit are independent (run side by side).
         let cv = || match kind {
-            Some(_) => validation::cross_validate(&problem, &x_folds, &point_fold, opts.folds, &outliers, &sopts, &labels),
+            Some(_) => validation::cross_validate(folds_fit, &x_folds, &point_fold, opts.folds, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let cv_all = || match kind {
-            Some(_) => validation::cross_validate(&problem, &x_folds, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
+            Some(_) => validation::cross_validate(folds_fit, &x_folds, &point_fold_all, assignment.folds_all, &outliers, &sopts, &labels),
             None => validation::CrossValidation::empty(s.obs.len()),
         };
         let free = free_columns(&problem, &train, with_robot);
         let mask = |idx: &[usize]| idx.iter().map(|&i| outliers[i]).collect::<Vec<bool>>();
         let train_fit = || fit_without(&problem, &x0, &free, &train, &mask(&train), &sopts);
         let (cv, (cv_all, fit)) = rayon::join(cv, || rayon::join(cv_all, train_fit));
+        drop(start);
         let spec = HeldOutSpec {
             test: &held,
             register: &register,
