@@ -750,35 +750,44 @@ fn left_correlation(
         q[p] = m.poses[m.points[i].pose].q;
     }
     let a = hstack([model, kept_projected].into_iter().filter(|a| a.ncols() > 0));
-    let Some(sub) = shape::Subset::of(train_pose, &q) else {
-        let basis = column_basis(&a);
-        let correlation = shape::correlation(resid, train_pose, &q, &basis);
-        let length = shape::length_scale(&correlation, jl, train_pose, &q, &basis);
-        return (correlation, length);
-    };
+    let sub = shape::Subset::of(train_pose, &q);
     // Many poses: the hat matrix's rows at the kept points only, `A_s V S^-1` from the Gram
     // matrix's eigenvectors (the same projection as the tall matrix's singular vectors, without
     // them).
-    let basis = if a.ncols() == 0 {
-        DMatrix::zeros(sub.rows.len(), 0)
-    } else {
-        let eig = nalgebra::SymmetricEigen::new(super::problem::tr_mul(&a, None));
-        let top = eig.eigenvalues.iter().fold(0.0f64, |x, v| x.max(*v));
-        let keep: Vec<usize> = (0..eig.eigenvalues.len()).filter(|&k| eig.eigenvalues[k] > 1e-12 * top).collect();
-        let mut v = eig.eigenvectors.select_columns(&keep);
-        for (c, &k) in keep.iter().enumerate() {
-            v.column_mut(c).scale_mut(1.0 / eig.eigenvalues[k].sqrt());
+    let basis = match &sub {
+        None => column_basis(&a),
+        Some(sub) if a.ncols() == 0 => DMatrix::zeros(sub.rows.len(), 0),
+        Some(sub) => {
+            let eig = nalgebra::SymmetricEigen::new(super::problem::tr_mul(&a, None));
+            let top = eig.eigenvalues.iter().fold(0.0f64, |x, v| x.max(*v));
+            let keep: Vec<usize> = (0..eig.eigenvalues.len()).filter(|&k| eig.eigenvalues[k] > 1e-12 * top).collect();
+            let mut v = eig.eigenvectors.select_columns(&keep);
+            for (c, &k) in keep.iter().enumerate() {
+                v.column_mut(c).scale_mut(1.0 / eig.eigenvalues[k].sqrt());
+            }
+            a.select_rows(&sub.rows) * v
         }
-        a.select_rows(&sub.rows) * v
     };
-    let correlation = shape::correlation(&resid.select_rows(&sub.rows), &sub.pose_of, &sub.q, &basis);
-    if !correlation.bins.iter().any(|b| !b.same_pose && b.above_white()) {
+    let (resid, jl, pose_of, q) = match &sub {
+        None => (std::borrow::Cow::Borrowed(resid), std::borrow::Cow::Borrowed(jl), train_pose, &q[..]),
+        Some(sub) => (
+            std::borrow::Cow::Owned(resid.select_rows(&sub.rows)),
+            std::borrow::Cow::Owned(jl.select_rows(&sub.rows)),
+            &sub.pose_of[..],
+            &sub.q[..],
+        ),
+    };
+    let (correlation, binning) = shape::correlation_binned(&resid, pose_of, q, &basis);
+    let Some(binning) = binning.filter(|_| correlation.bins.iter().any(|b| !b.same_pose && b.above_white())) else {
         return (correlation, None);
-    }
-    // The field's prediction projects off the fit's columns at the kept points alone: a fit of
+    };
+    // The field's prediction projects off the fit's columns at the binned points alone: a fit of
     // that many points absorbs the same slow part of a field as the fit of them all.
-    let own = column_basis(&a.select_rows(&sub.rows));
-    let length = shape::length_scale(&correlation, &jl.select_rows(&sub.rows), &sub.pose_of, &sub.q, &own);
+    let own = match &sub {
+        None => basis,
+        Some(sub) => column_basis(&a.select_rows(&sub.rows)),
+    };
+    let length = shape::length_scale(&binning, &correlation, &jl, pose_of, q, &own);
     (correlation, length)
 }
 

@@ -119,13 +119,24 @@ impl Subset {
 }
 
 fn correlation_of(resid: &DVector<f64>, pose_of: &[usize], q: &[crate::robot::Joints], hat_basis: &DMatrix<f64>) -> Correlation {
+    correlation_binned(resid, pose_of, q, hat_basis).0
+}
+
+/// [`correlation`] of every point given (no subset), and its binning for [`length_scale`]
+/// (`None` when no pair was binned: fewer than two poses, or no point).
+pub(crate) fn correlation_binned(
+    resid: &DVector<f64>,
+    pose_of: &[usize],
+    q: &[crate::robot::Joints],
+    hat_basis: &DMatrix<f64>,
+) -> (Correlation, Option<Binning>) {
     let poses = q.len();
     if pose_of.is_empty() || poses < 2 || resid.len() != 3 * pose_of.len() {
-        return Correlation { bins: Vec::new(), poses, mean_sq: 0.0 };
+        return (Correlation { bins: Vec::new(), poses, mean_sq: 0.0 }, None);
     }
     let binning = Binning::of(pose_of, q);
     let (traces, white_sq) = binning.traces(hat_basis);
-    binning.correlation(resid, &traces, white_sq)
+    (binning.correlation(resid, &traces, white_sq), Some(binning))
 }
 
 /// The pairs [`correlation`] bins, which depend only on the poses: the points per pose, the pairs
@@ -184,16 +195,14 @@ impl Binning {
             }
             bins.push(b);
         }
-        // Distinct poses, by the rank of their distance.
-        let mut pairs: Vec<(f64, u32, u32)> = Vec::with_capacity(poses * (poses - 1) / 2);
-        for p in 0..poses {
-            for s in p + 1..poses {
-                let d = q[p].iter().zip(&q[s]).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
-                pairs.push((d, p as u32, s as u32));
-            }
-        }
-        // The order is total (ties by the poses' numbers): the parallel sort gives the serial one's.
-        pairs.par_sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        // Distinct poses, by the rank of their distance (each pose's pairs side by side).
+        let pairs_of = |p: usize| {
+            (p + 1..poses).map(move |s| (q[p].iter().zip(&q[s]).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt(), p as u32, s as u32))
+        };
+        let mut pairs: Vec<(f64, u32, u32)> = (0..poses).into_par_iter().flat_map_iter(pairs_of).collect();
+        // The order is total and every pair is there once (ties by the poses' numbers): any sort,
+        // stable or not, serial or parallel, gives this one.
+        pairs.par_sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
         let total = pairs.len();
         let mut from = 0usize;
         let mut low = 0.0;
@@ -244,6 +253,8 @@ impl Binning {
             let (a, b) = (&q_sum[p * 3 * k..(p + 1) * 3 * k], &q_sum[s * 3 * k..(s + 1) * 3 * k]);
             a.iter().zip(b).map(|(x, y)| x * y).sum()
         };
+        // Rows of `q_sum` per pose, four pairs of them at a time.
+        let dots = |pairs: &[(f64, u32, u32)]| row_dots(&q_sum, 3 * k, pairs.iter().map(|&(_, p, s)| (p as usize, s as usize)));
         let traces = self
             .bins
             .iter()
@@ -255,7 +266,7 @@ impl Binning {
                     }
                 } else {
                     // The pairs' tr H_ij side by side, summed in the pairs' order.
-                    let terms: Vec<f64> = self.pairs[b.span.clone()].par_iter().map(|&(_, p, s)| dot_q(p as usize, s as usize)).collect();
+                    let terms: Vec<f64> = self.pairs[b.span.clone()].par_chunks(DOT_CHUNK).flat_map_iter(dots).collect();
                     for t in terms {
                         trace += t;
                     }
@@ -269,74 +280,143 @@ impl Binning {
     /// The correlation of `resid` (3 rows per point) over the bins, `traces` and `white_sq` those
     /// of [`Binning::traces`].
     fn correlation(&self, resid: &DVector<f64>, traces: &[f64], white_sq: f64) -> Correlation {
-        let (poses, n) = (self.count.len(), self.pose_of.len());
-        // Per pose: the sum of its points' residuals and of their squared residuals.
-        let mut r_sum = vec![[0.0f64; 3]; poses];
-        let mut sq = vec![0.0f64; poses];
-        for (i, &p) in self.pose_of.iter().enumerate() {
-            for a in 0..3 {
-                let v = resid[3 * i + a];
-                r_sum[p][a] += v;
-                sq[p] += v * v;
+        self.correlations(&[resid], traces, white_sq).pop().expect("one residual")
+    }
+
+    /// [`Binning::correlation`] of each of `resids` (at most [`LANES`]), each the numbers it has
+    /// alone: every bin's pairs read once for all of them, their sums per pose side by side in
+    /// lanes (one per residual; the sums of a lane in the order of one residual alone, the first
+    /// term added to -0.0 as `Iterator::sum` does).
+    fn correlations(&self, resids: &[&DVector<f64>], traces: &[f64], white_sq: f64) -> Vec<Correlation> {
+        let (poses, n, m) = (self.count.len(), self.pose_of.len(), resids.len());
+        assert!(m <= LANES, "at most {LANES} residuals binned together");
+        // Per pose, coordinate and residual: the sum of its points' residuals (`r_sum`) and of
+        // their squared residuals (`sq`, a residual's together).
+        let mut r_sum = vec![[[0.0f64; LANES]; 3]; poses];
+        let mut sq = vec![vec![0.0f64; poses]; m];
+        for (k, resid) in resids.iter().enumerate() {
+            for (i, &p) in self.pose_of.iter().enumerate() {
+                for a in 0..3 {
+                    let v = resid[3 * i + a];
+                    r_sum[p][a][k] += v;
+                    sq[k][p] += v * v;
+                }
             }
         }
-        let mean_sq = sq.iter().sum::<f64>() / n as f64;
-        let total_sq: f64 = sq.iter().sum();
-        let bins = self
+        let total_sq: Vec<f64> = sq.iter().map(|s| s.iter().sum::<f64>()).collect();
+        // Per bin and residual, the bin's sum of products, and per pose the same over the pairs
+        // it is in.
+        let sums: Vec<([f64; LANES], Vec<[f64; LANES]>)> = self
             .bins
             .iter()
-            .zip(traces)
-            .map(|(b, &trace)| {
-                // The bin's sum of products, and per pose the same over the pairs it is in.
-                let mut product = 0.0;
-                let mut per_pose = vec![0.0f64; poses];
+            .map(|b| {
+                let mut product = [0.0f64; LANES];
+                let mut per_pose = vec![[0.0f64; LANES]; poses];
                 if b.same_pose {
                     for p in (0..poses).filter(|&p| self.count[p] >= 2) {
-                        let s = 0.5 * (r_sum[p].iter().map(|v| v * v).sum::<f64>() - sq[p]);
-                        product += s;
-                        per_pose[p] = s;
+                        for k in 0..m {
+                            let square = ((-0.0 + r_sum[p][0][k] * r_sum[p][0][k]) + r_sum[p][1][k] * r_sum[p][1][k])
+                                + r_sum[p][2][k] * r_sum[p][2][k];
+                            let s = 0.5 * (square - sq[k][p]);
+                            product[k] += s;
+                            per_pose[p][k] = s;
+                        }
                     }
                 } else {
                     for &(_, p, s) in &self.pairs[b.span.clone()] {
                         let (p, s) = (p as usize, s as usize);
-                        let prod: f64 = (0..3).map(|a| r_sum[p][a] * r_sum[s][a]).sum();
-                        product += prod;
-                        per_pose[p] += prod;
-                        per_pose[s] += prod;
+                        let (rp, rs) = (&r_sum[p], &r_sum[s]);
+                        let mut prod = [-0.0f64; LANES];
+                        for a in 0..3 {
+                            for k in 0..LANES {
+                                prod[k] += rp[a][k] * rs[a][k];
+                            }
+                        }
+                        for k in 0..LANES {
+                            product[k] += prod[k];
+                            per_pose[p][k] += prod[k];
+                            per_pose[s][k] += prod[k];
+                        }
                     }
                 }
-                let correlation = product / b.pairs as f64 / mean_sq;
-                // Delete-one jackknife over the poses with points.
-                let left_out: Vec<f64> = (0..poses)
-                    .filter(|&p| self.count[p] > 0 && b.pairs > b.per_pose[p] && n > self.count[p])
-                    .map(|p| {
-                        ((product - per_pose[p]) / (b.pairs - b.per_pose[p]) as f64) / ((total_sq - sq[p]) / (n - self.count[p]) as f64)
-                    })
-                    .collect();
-                let g = left_out.len() as f64;
-                let interval = if left_out.len() >= 2 {
-                    let mean = left_out.iter().sum::<f64>() / g;
-                    let var = (g - 1.0) / g * left_out.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
-                    let h = Z95 * var.sqrt();
-                    [correlation - h, correlation + h]
-                } else {
-                    [f64::NAN; 2]
-                };
-                CorrelationBin {
-                    same_pose: b.same_pose,
-                    label: b.label.clone(),
-                    distance_rad: b.range,
-                    pairs: b.pairs,
-                    pose_pairs: b.pose_pairs,
-                    correlation,
-                    interval,
-                    white: -(trace / b.pairs as f64) / white_sq,
-                    pair_sample: b.sample.clone(),
-                }
+                (product, per_pose)
             })
             .collect();
-        Correlation { bins, poses, mean_sq }
+        (0..m)
+            .map(|k| {
+                let (sq, total_sq) = (&sq[k], total_sq[k]);
+                let mean_sq = sq.iter().sum::<f64>() / n as f64;
+                let bins = self
+                    .bins
+                    .iter()
+                    .zip(traces)
+                    .zip(&sums)
+                    .map(|((b, &trace), (product, per_pose))| {
+                        let product = product[k];
+                        let correlation = product / b.pairs as f64 / mean_sq;
+                        // Delete-one jackknife over the poses with points.
+                        let left_out: Vec<f64> = (0..poses)
+                            .filter(|&p| self.count[p] > 0 && b.pairs > b.per_pose[p] && n > self.count[p])
+                            .map(|p| {
+                                ((product - per_pose[p][k]) / (b.pairs - b.per_pose[p]) as f64)
+                                    / ((total_sq - sq[p]) / (n - self.count[p]) as f64)
+                            })
+                            .collect();
+                        let g = left_out.len() as f64;
+                        let interval = if left_out.len() >= 2 {
+                            let mean = left_out.iter().sum::<f64>() / g;
+                            let var = (g - 1.0) / g * left_out.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+                            let h = Z95 * var.sqrt();
+                            [correlation - h, correlation + h]
+                        } else {
+                            [f64::NAN; 2]
+                        };
+                        CorrelationBin {
+                            same_pose: b.same_pose,
+                            label: b.label.clone(),
+                            distance_rad: b.range,
+                            pairs: b.pairs,
+                            pose_pairs: b.pose_pairs,
+                            correlation,
+                            interval,
+                            white: -(trace / b.pairs as f64) / white_sq,
+                            pair_sample: b.sample.clone(),
+                        }
+                    })
+                    .collect();
+                Correlation { bins, poses, mean_sq }
+            })
+            .collect()
     }
+}
+
+/// Residuals [`Binning::correlations`] bins together.
+const LANES: usize = 8;
+
+/// Pairs of poses per piece of [`Binning::traces`]' parallel sums.
+const DOT_CHUNK: usize = 4096;
+
+/// Per pair `(p, s)` of `pairs`, the dot product of rows `p` and `s` of `rows` (row-major, `width`
+/// wide), each summed in the order of its entries from -0.0 (as `Iterator::sum`): four pairs side
+/// by side, independent sums that the processor overlaps, the same numbers as one at a time.
+fn row_dots(rows: &[f64], width: usize, pairs: impl Iterator<Item = (usize, usize)>) -> Vec<f64> {
+    let pairs: Vec<(usize, usize)> = pairs.collect();
+    let row = |i: usize| &rows[i * width..(i + 1) * width];
+    let mut out = Vec::with_capacity(pairs.len());
+    for four in pairs.chunks(4) {
+        // A short last group repeats its first pair (its extra sums are not kept).
+        let pick = |l: usize| if l < four.len() { four[l] } else { four[0] };
+        let a: [&[f64]; 4] = std::array::from_fn(|l| row(pick(l).0));
+        let b: [&[f64]; 4] = std::array::from_fn(|l| row(pick(l).1));
+        let mut acc = [-0.0f64; 4];
+        for c in 0..width {
+            for l in 0..4 {
+                acc[l] += a[l][c] * b[l][c];
+            }
+        }
+        out.extend_from_slice(&acc[..four.len()]);
+    }
+    out
 }
 
 /// The correlation length of a smooth error, fitted to the bins of distinct poses.
@@ -622,8 +702,9 @@ fn best(profile: &[ProfilePoint]) -> Option<usize> {
 /// `a` is the weighted least squares of `c_b - w_b` on `M_b - S w_b` (weights the jackknife
 /// variances; kept >= 0), `l` the one of least weighted squared misfit. The intervals come from a
 /// parametric bootstrap of that fit ([`bootstrap`]). `jl`, `pose_of`, `q` and `basis` are over the
-/// rows and poses the correlation binned.
-pub fn length_scale(
+/// rows and poses the correlation binned, `binning` their binning ([`correlation_binned`]).
+pub(crate) fn length_scale(
+    binning: &Binning,
     c: &Correlation,
     jl: &DMatrix<f64>,
     pose_of: &[usize],
@@ -643,7 +724,7 @@ pub fn length_scale(
     }
     let (length, level) = (profile[b].0, (profile[b].1 * c.mean_sq).sqrt());
     let model = Model { length, level, share: profile[b].1, unit_sq: predictions.by_length[b].1 };
-    let fits = bootstrap(c, &model, &predictions, &Rows { jl, pose_of, q, basis });
+    let fits = bootstrap(binning, c, &model, &predictions, &Rows { jl, pose_of, q, basis });
     let last = predictions.grid.len() - 1;
     let censored = [fits.iter().filter(|f| f.0 == 0).count(), fits.iter().filter(|f| f.0 == last).count()];
     let lengths: Vec<f64> = fits.iter().map(|f| predictions.grid[f.0]).collect();
@@ -706,18 +787,17 @@ fn intervals(value: f64, mut replicates: Vec<f64>) -> ([f64; 2], [f64; 2]) {
 /// share of the mean square, projected off the fit's basis, binned as `c` and fitted against the
 /// same predictions. Per replicate (in index order, any thread count), the index of its best
 /// length on the grid (at the grid's ends where it is there) and its level, rad.
-fn bootstrap(c: &Correlation, model: &Model, predictions: &Predictions, rows: &Rows<'_>) -> Vec<(usize, f64)> {
+fn bootstrap(binning: &Binning, c: &Correlation, model: &Model, predictions: &Predictions, rows: &Rows<'_>) -> Vec<(usize, f64)> {
     use rand_distr::{Distribution, Normal};
     use rayon::prelude::*;
     let n = rows.pose_of.len();
-    let binning = Binning::of(rows.pose_of, rows.q);
     // The mean squared white residual of a point per unit variance: 3 less tr H_ii.
     let white_sq = (3.0 * n as f64 - rows.basis.iter().map(|v| v * v).sum::<f64>()) / n as f64;
     let white_sd = ((1.0 - model.share * model.unit_sq).max(0.0) * c.mean_sq / white_sq).sqrt();
-    let no_traces = vec![0.0; c.bins.len()];
-    (0..BOOTSTRAP_REPLICATES)
+    // Each replicate's residual (`None`: no noise of that level).
+    let drawn: Vec<Option<DVector<f64>>> = (0..BOOTSTRAP_REPLICATES)
         .into_par_iter()
-        .filter_map(|i| {
+        .map(|i| {
             let mut rng = crate::seeds::stream(crate::seeds::fixed::LENGTH_BOOTSTRAP, i as u64);
             let field = crate::robot::learned::smooth_field_of(model.level, model.length, BOOTSTRAP_FEATURES, &mut rng);
             let e: Vec<crate::robot::Joints> = rows
@@ -738,14 +818,27 @@ fn bootstrap(c: &Correlation, model: &Model, predictions: &Predictions, rows: &R
             if rows.basis.ncols() > 0 {
                 g -= rows.basis * rows.basis.tr_mul(&g);
             }
-            let mut r = binning.correlation(&g, &no_traces, white_sq);
-            for (x, b) in r.bins.iter_mut().zip(&c.bins) {
-                x.white = b.white;
-            }
-            let profile = profile(&r, predictions)?;
-            let b = best(&profile)?;
-            Some((b, (profile[b].1 * r.mean_sq).sqrt()))
+            Some(g)
         })
+        .collect();
+    let no_traces = vec![0.0; c.bins.len()];
+    let fitted = |mut r: Correlation| -> Option<(usize, f64)> {
+        for (x, b) in r.bins.iter_mut().zip(&c.bins) {
+            x.white = b.white;
+        }
+        let profile = profile(&r, predictions)?;
+        let b = best(&profile)?;
+        Some((b, (profile[b].1 * r.mean_sq).sqrt()))
+    };
+    // The replicates binned [`LANES`] at a time (each block's pairs read once).
+    drawn
+        .par_chunks(LANES)
+        .flat_map_iter(|block| {
+            let present: Vec<&DVector<f64>> = block.iter().flatten().collect();
+            let mut binned = binning.correlations(&present, &no_traces, white_sq).into_iter();
+            block.iter().map(|g| g.as_ref().and_then(|_| fitted(binned.next().expect("a correlation per residual")))).collect::<Vec<_>>()
+        })
+        .flatten()
         .collect()
 }
 
@@ -843,7 +936,7 @@ mod tests {
         let rows = Rows { jl: &jl, pose_of: &pose_of, q: &q, basis: &basis };
         let on = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            pool.install(|| bootstrap(&c, &model, &predictions, &rows))
+            pool.install(|| bootstrap(&Binning::of(&pose_of, &q), &c, &model, &predictions, &rows))
         };
         let (one, two) = (on(1), on(2));
         assert_eq!(one, two);
@@ -904,5 +997,65 @@ mod tests {
         let sub = correlation_of(&resid.select_rows(&rows), &sub_pose, &sub_q, &basis.select_rows(&rows));
         assert_eq!(c, sub);
         assert_eq!(c.bins.iter().skip(1).map(|b| b.pose_pairs).sum::<usize>(), 2001 * 2000 / 2);
+    }
+
+    /// Residuals binned together ([`Binning::correlations`], 1, 3 and 8 of them) give each the
+    /// numbers it has binned alone, bit for bit, and those of the pairs of points summed directly
+    /// to 1e-12 (60 poses of 1-3 points, a 4-column basis); four pairs' dot products side by side
+    /// ([`row_dots`]) are those of `Iterator::sum`, bit for bit, for 0 to 9 pairs (short last
+    /// groups, zeros of either sign).
+    #[test]
+    fn residuals_binned_together_are_binned_as_alone() {
+        use rand::RngExt;
+        let mut rng = crate::seeds::stream(13, 0);
+        let poses = 60;
+        let q: Vec<crate::robot::Joints> = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
+        let pose_of: Vec<usize> = (0..poses).flat_map(|p| std::iter::repeat_n(p, 1 + p % 3)).collect();
+        let n = pose_of.len();
+        let binning = Binning::of(&pose_of, &q);
+        let basis = DMatrix::from_fn(3 * n, 4, |_, _| rng.random_range(-1.0..1.0)).qr().q();
+        let (traces, white_sq) = binning.traces(&basis);
+        let resids: Vec<DVector<f64>> = (0..LANES).map(|_| DVector::from_fn(3 * n, |_, _| rng.random_range(-1.0..1.0))).collect();
+        for m in [1, 3, LANES] {
+            let together = binning.correlations(&resids[..m].iter().collect::<Vec<_>>(), &traces, white_sq);
+            assert_eq!(together.len(), m);
+            for (c, r) in together.iter().zip(&resids) {
+                assert_eq!(*c, binning.correlation(r, &traces, white_sq));
+                // The bins of distinct poses against the pairs of points summed directly.
+                let mean_sq = r.norm_squared() / n as f64;
+                for b in c.bins.iter().filter(|b| !b.same_pose) {
+                    let (mut sum, mut pairs) = (0.0, 0usize);
+                    for i in 0..n {
+                        for j in 0..n {
+                            let d = q[pose_of[i]].iter().zip(&q[pose_of[j]]).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+                            let inside = d >= b.distance_rad[0] && d <= b.distance_rad[1] && pose_of[i] < pose_of[j];
+                            if inside {
+                                sum += (0..3).map(|a| r[3 * i + a] * r[3 * j + a]).sum::<f64>();
+                                pairs += 1;
+                            }
+                        }
+                    }
+                    assert_eq!(pairs, b.pairs, "{}", b.label);
+                    let direct = sum / pairs as f64 / mean_sq;
+                    assert!((direct - b.correlation).abs() <= 1e-12 * direct.abs().max(1.0), "{}: {direct} {}", b.label, b.correlation);
+                }
+            }
+        }
+        let width = 7;
+        let mut rows: Vec<f64> = (0..5 * width).map(|_| rng.random_range(-1.0..1.0)).collect();
+        rows[3] = -0.0;
+        rows[width + 3] = 0.0;
+        for count in 0..10 {
+            let pairs: Vec<(usize, usize)> = (0..count).map(|i| (i % 5, (3 * i + 1) % 5)).collect();
+            let side_by_side = row_dots(&rows, width, pairs.iter().copied());
+            let one_at_a_time: Vec<f64> = pairs
+                .iter()
+                .map(|&(p, s)| rows[p * width..(p + 1) * width].iter().zip(&rows[s * width..(s + 1) * width]).map(|(x, y)| x * y).sum())
+                .collect();
+            assert_eq!(side_by_side.len(), count);
+            for (a, b) in side_by_side.iter().zip(&one_at_a_time) {
+                assert_eq!(a.to_bits(), b.to_bits(), "{count} pairs");
+            }
+        }
     }
 }
