@@ -806,7 +806,7 @@ fn run_keeping(robot: &RobotFile, m: &Measurements, opts: &Options) -> Result<(C
         let problem = s.fit(&robot.nominal, layout.clone());
         let with_robot = !layout.robot.is_empty();
         // Every fold of both starts at `x_folds`: its points' kinematics there computed once.
-        let start = kind.and_then(|_| problem.problem.start_at(&x_folds));
+        let start = kind.and_then(|_| problem::Start::for_fit(&problem, &x_folds));
         let folds_fit = start.as_ref().map(|start| problem::Started { fit: &problem, start });
         let folds_fit: &(dyn problem::Fit + Sync) = match &folds_fit {
             Some(f) => f,

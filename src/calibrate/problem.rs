@@ -1026,6 +1026,13 @@ pub struct Start {
 }
 
 impl Start {
+    /// The start of `fit`'s points at `x`, when the fit takes its normal equations from its
+    /// positions alone (`None` for a fit with unknowns of its own, as orientation readings bring,
+    /// which [`Started`] would not use; or when `x` makes no model).
+    pub fn for_fit<P: Fit + ?Sized>(fit: &P, x: &[f64]) -> Option<Start> {
+        positions_alone(fit).then(|| fit.positions().start_at(x)).flatten()
+    }
+
     /// The Jacobians and positions of `members` (row, point), as [`Problem::piece_jacobians`] gives
     /// them.
     fn piece(&self, members: &[(usize, usize)]) -> (Vec<f64>, Vec<Vector3<f64>>) {
@@ -1036,6 +1043,12 @@ impl Start {
         }
         (jt, members.iter().map(|(_, i)| self.tcps[*i]).collect())
     }
+}
+
+/// A fit whose unknowns are its positions' problem's alone (no orientation unknowns of its own):
+/// its normal equations are that problem's.
+fn positions_alone<P: Fit + ?Sized>(fit: &P) -> bool {
+    fit.unknowns() == fit.positions().layout.len()
 }
 
 /// A fit whose normal equations at [`Start`]'s `x` come from it (a fit with orientation unknowns of
@@ -1061,9 +1074,8 @@ impl<P: Fit + ?Sized> Fit for Started<'_, P> {
         self.fit.normal_equations(x, idx, cols)
     }
     fn normal_equations_and_cost(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {
-        let positions = self.fit.positions();
-        if self.fit.unknowns() == positions.layout.len() {
-            positions.normal_equations_and_cost_from(x, idx, cols, Some(self.start))
+        if positions_alone(self.fit) {
+            self.fit.positions().normal_equations_and_cost_from(x, idx, cols, Some(self.start))
         } else {
             self.fit.normal_equations_and_cost(x, idx, cols)
         }
@@ -1545,8 +1557,9 @@ mod tests {
 
     /// The normal equations and cost of fits started at a [`Start`] are those computed point by
     /// point, bit for bit: its `x` with subsets of the points (every other one, a fold's share in
-    /// reverse order) and of the columns; another `x` ignores it. The IRB 120 with Table 7's
-    /// compliance, 3 sessions, 2 targets, 2,100 points (pieces of more than one run of lanes).
+    /// reverse order) and of the columns; another `x` ignores it; a fit with unknowns of its own
+    /// gets no start. The IRB 120 with Table 7's compliance, 3 sessions, 2 targets, 2,100 points
+    /// (pieces of more than one run of lanes).
     #[test]
     fn fits_started_at_a_start_take_the_same_normal_equations() {
         let (model, layout, obs, x) = fixture(2100, 41);
@@ -1565,6 +1578,16 @@ mod tests {
                 }
             }
         }
+        // A fit with unknowns of its own (its probes' rotations on the flange) gets no start (it
+        // would not use it); one with orientation readings on no target does.
+        let none = vec![None; obs.len()];
+        let plain = Oriented { problem: problem.clone(), readings: &none, tool_rotations: &[None, None] };
+        assert!(Start::for_fit(&plain, &x).is_some());
+        let readings = vec![Some(Reading { measured: Rotation3::identity(), sigma_rad: 0.01 }); obs.len()];
+        let rotations = [Some(Rotation3::identity()), Some(Rotation3::identity())];
+        let oriented = Oriented { problem: problem.clone(), readings: &readings, tool_rotations: &rotations };
+        assert!(oriented.unknowns() > layout.len());
+        assert!(Start::for_fit(&oriented, &x).is_none());
     }
 
     /// A fit started at its own minimum tries one step there and stops: a step whose predicted
