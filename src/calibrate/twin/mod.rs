@@ -803,8 +803,8 @@ struct CvFold {
 }
 
 /// `m[:, cols] a` as nalgebra's product of the selected columns by the vector `a` forms it
-/// (`gemv`: the first column times its coefficient, then each next column's product added to the
-/// sum, row by row), without copying the columns.
+/// (`gemv`: each row's sum starts at the first column's product, and each next column's product
+/// is added to it in order; the columns taken one after another), without copying the columns.
 fn columns_times(m: &DMatrix<f64>, cols: &[usize], a: &[f64]) -> DVector<f64> {
     let rows = m.nrows();
     let mut y = vec![0.0; rows];
