@@ -249,10 +249,6 @@ impl Binning {
             }
         }
         let white_sq = (3.0 * n as f64 - h_ii.iter().sum::<f64>()) / n as f64;
-        let dot_q = |p: usize, s: usize| -> f64 {
-            let (a, b) = (&q_sum[p * 3 * k..(p + 1) * 3 * k], &q_sum[s * 3 * k..(s + 1) * 3 * k]);
-            a.iter().zip(b).map(|(x, y)| x * y).sum()
-        };
         // Rows of `q_sum` per pose, four pairs of them at a time.
         let dots = |pairs: &[(f64, u32, u32)]| row_dots(&q_sum, 3 * k, pairs.iter().map(|&(_, p, s)| (p as usize, s as usize)));
         let traces = self
@@ -261,8 +257,9 @@ impl Binning {
             .map(|b| {
                 let mut trace = 0.0;
                 if b.same_pose {
-                    for p in (0..poses).filter(|&p| self.count[p] >= 2) {
-                        trace += 0.5 * (dot_q(p, p) - h_ii[p]);
+                    let repeated: Vec<usize> = (0..poses).filter(|&p| self.count[p] >= 2).collect();
+                    for (&p, square) in repeated.iter().zip(row_dots(&q_sum, 3 * k, repeated.iter().map(|&p| (p, p)))) {
+                        trace += 0.5 * (square - h_ii[p]);
                     }
                 } else {
                     // The pairs' tr H_ij side by side, summed in the pairs' order.
@@ -885,6 +882,13 @@ mod tests {
         bin_products(c, dot, &own, &count, n)
     }
 
+    /// `poses` random poses (joint values in -2..2 rad) and their points: pose `p` has `1 + p % 3`.
+    fn poses_of_one_to_three_points(rng: &mut impl rand::Rng, poses: usize) -> (Vec<crate::robot::Joints>, Vec<usize>) {
+        use rand::RngExt;
+        let q = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
+        (q, (0..poses).flat_map(|p| std::iter::repeat_n(p, 1 + p % 3)).collect())
+    }
+
     /// The per-pose sums give the same prediction as the field formed at every row and projected
     /// off the basis (random Jacobian, basis and poses: 120 poses, 1-3 points each, 7 basis
     /// columns; three lengths), to 1e-9 relative.
@@ -893,8 +897,7 @@ mod tests {
         use rand::RngExt;
         let mut rng = crate::seeds::stream(9, 0);
         let poses = 120;
-        let q: Vec<crate::robot::Joints> = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
-        let pose_of: Vec<usize> = (0..poses).flat_map(|p| std::iter::repeat_n(p, 1 + p % 3)).collect();
+        let (q, pose_of) = poses_of_one_to_three_points(&mut rng, poses);
         let n = pose_of.len();
         let jl = DMatrix::from_fn(3 * n, 6, |_, _| rng.random_range(-1.0..1.0));
         let basis = DMatrix::from_fn(3 * n, 7, |_, _| rng.random_range(-1.0..1.0)).qr().q();
@@ -1009,8 +1012,7 @@ mod tests {
         use rand::RngExt;
         let mut rng = crate::seeds::stream(13, 0);
         let poses = 60;
-        let q: Vec<crate::robot::Joints> = (0..poses).map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0))).collect();
-        let pose_of: Vec<usize> = (0..poses).flat_map(|p| std::iter::repeat_n(p, 1 + p % 3)).collect();
+        let (q, pose_of) = poses_of_one_to_three_points(&mut rng, poses);
         let n = pose_of.len();
         let binning = Binning::of(&pose_of, &q);
         let basis = DMatrix::from_fn(3 * n, 4, |_, _| rng.random_range(-1.0..1.0)).qr().q();
