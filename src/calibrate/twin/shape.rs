@@ -779,8 +779,8 @@ fn intervals(value: f64, mut replicates: Vec<f64>) -> ([f64; 2], [f64; 2]) {
 /// The parametric bootstrap of the length fit: [`BOOTSTRAP_REPLICATES`] residuals drawn from the
 /// fitted model, each a smooth field of the fitted length and level drawn as a world draws the
 /// twin's field (`robot::learned`'s random Fourier features, [`BOOTSTRAP_FEATURES`] per joint,
-/// from the replicate's own stream)
-/// carried to the points by the weighted link-angle Jacobian, plus white noise of the model's
+/// from the replicate's own stream; their cosines by `numeric::cosines`, within a unit in the last
+/// place of the library's) carried to the points by the weighted link-angle Jacobian, plus white noise of the model's
 /// share of the mean square, projected off the fit's basis, binned as `c` and fitted against the
 /// same predictions. Per replicate (in index order, any thread count), the index of its best
 /// length on the grid (at the grid's ends where it is there) and its level, rad.
@@ -797,15 +797,19 @@ fn bootstrap(binning: &Binning, c: &Correlation, model: &Model, predictions: &Pr
         .map(|i| {
             let mut rng = crate::seeds::stream(crate::seeds::fixed::LENGTH_BOOTSTRAP, i as u64);
             let field = crate::robot::learned::smooth_field_of(model.level, model.length, BOOTSTRAP_FEATURES, &mut rng);
-            let e: Vec<crate::robot::Joints> = rows
-                .q
-                .iter()
-                .map(|x| {
-                    let mut e = [0.0; crate::robot::JOINTS];
-                    crate::robot::learned::add_field(&field, x, &mut e);
-                    e
-                })
-                .collect();
+            // `robot::learned::add_field` at every pose, a feature at a time over the poses (each
+            // pose's sum in the features' order) and the cosines many at once.
+            let mut e = vec![[0.0; crate::robot::JOINTS]; rows.q.len()];
+            let mut x = vec![0.0; rows.q.len()];
+            for (j, w, phase, amplitude) in &field {
+                for (x, q) in x.iter_mut().zip(rows.q) {
+                    *x = w.iter().zip(q).map(|(a, b)| a * b).sum::<f64>() + phase;
+                }
+                crate::numeric::cosines(&mut x);
+                for (e, c) in e.iter_mut().zip(&x) {
+                    e[*j] += amplitude * c;
+                }
+            }
             let noise = Normal::new(0.0, white_sd).ok()?;
             let jl = rows.jl;
             let mut g = DVector::from_fn(jl.nrows(), |r, _| {
