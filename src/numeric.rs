@@ -504,9 +504,9 @@ const COS_REDUCED_UP_TO: f64 = 5.0e5;
 /// `xs[k] = cos(xs[k])` for every value, the same bits on every x86-64 and other CPU (multiplies
 /// and adds, no fused operations, no table), within a unit in the last place of the correctly
 /// rounded value (the unit test measures it against the library's cosine): the argument reduced by
-/// pi / 2 in three parts (fdlibm's `__ieee754_rem_pio2` medium case without its refinement, exact
-/// where a unit in the reduced argument's last place matters: its error is about 1e-25 rad), then
-/// musl's `__cos` and `__sin` polynomials on [-pi/4, pi/4]. Compiled for AVX2 where the CPU has
+/// pi / 2 in fdlibm's parts (33, 33, 33 and 53 bits), carried as a head and a tail with every
+/// rounding of the differences kept, then musl's `__cos` and `__sin` polynomials of the head and
+/// tail on [-pi/4, pi/4]. Compiled for AVX2 where the CPU has
 /// it (four values at a time, the same roundings): many cosines of unrelated arguments cost what a
 /// few of the library's do.
 pub fn cosines(xs: &mut [f64]) {
@@ -549,14 +549,21 @@ fn cosines_body(xs: &mut [f64]) {
     }
 }
 
+/// `a + b` and its rounding error, exactly (Knuth's two-sum, for any magnitudes).
+#[inline(always)]
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
+}
+
 /// The cosine of each of `x` (|x| <= [`COS_REDUCED_UP_TO`]), lane by lane, without branches.
 #[inline(always)]
 fn cos_lanes<const L: usize>(x: [f64; L]) -> [f64; L] {
-    // fdlibm's pi / 2 in three parts of 33 bits each, and each part's rest.
+    // fdlibm's pi / 2 in three parts of 33 bits each and the rest (pio2_1, pio2_2, pio2_3, pio2_3t).
     const INV_PIO2: f64 = 6.366_197_723_675_813_824_33e-01;
     const PIO2_1: f64 = 1.570_796_326_734_125_614_17e+00;
     const PIO2_2: f64 = 6.077_100_506_303_965_976_60e-11;
-    const PIO2_2T: f64 = 2.022_266_248_795_950_631_54e-21;
     const PIO2_3: f64 = 2.022_266_248_711_166_455_80e-21;
     const PIO2_3T: f64 = 8.478_427_660_368_899_569_97e-32;
     // Adding and taking 1.5 * 2^52 rounds to the nearest integer (ties to even).
@@ -579,15 +586,15 @@ fn cos_lanes<const L: usize>(x: [f64; L]) -> [f64; L] {
     for l in 0..L {
         let v = if x[l].abs() <= COS_REDUCED_UP_TO { x[l] } else { 0.0 };
         let k = (v * INV_PIO2 + TO_INT) - TO_INT;
-        // The reduced argument as y0 + y1 (fdlibm's three rounds, every round taken).
+        // The reduced argument v - k pi / 2 as y0 + y1: each part's product with k exact (33
+        // bits by at most 20), the first difference exact (the two within a factor 2), the next
+        // two's rounding errors kept (Knuth's two-sum) and added to the tail with the last part.
         let t = v - k * PIO2_1;
-        let (r, w) = (t - k * PIO2_2, k * PIO2_2);
-        let w = k * PIO2_2T - ((t - r) - w);
-        let t = r;
-        let (r, w) = (t - k * PIO2_3, k * PIO2_3);
-        let w = k * PIO2_3T - ((t - r) - w);
-        let y0 = r - w;
-        let y1 = (r - y0) - w;
+        let (s1, e1) = two_sum(t, -(k * PIO2_2));
+        let (s2, e2) = two_sum(s1, -(k * PIO2_3));
+        let tail = (e1 + e2) - k * PIO2_3T;
+        let y0 = s2 + tail;
+        let y1 = (s2 - y0) + tail;
         let z = y0 * y0;
         let w = z * z;
         // musl's __cos(y0, y1).
