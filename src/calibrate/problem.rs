@@ -468,7 +468,14 @@ impl Problem<'_> {
 
     /// Weighted sum of squared residuals of `idx` at `x`; infinite when `x` makes no model.
     pub fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
-        self.errors(x, idx).map_or(f64::INFINITY, |e| e.iter().zip(idx).map(|(e, &i)| (e / self.obs[i].sigma).norm_squared()).sum())
+        self.cost_and_errors(x, idx).0
+    }
+
+    /// [`Self::cost`] and the errors it sums ([`Self::errors`]), from one pass.
+    pub fn cost_and_errors(&self, x: &[f64], idx: &[usize]) -> (f64, Option<Vec<Vector3<f64>>>) {
+        let errors = self.errors(x, idx);
+        let cost = errors.as_ref().map_or(f64::INFINITY, |e| e.iter().zip(idx).map(|(e, &i)| (e / self.obs[i].sigma).norm_squared()).sum());
+        (cost, errors)
     }
 }
 
@@ -912,6 +919,10 @@ pub struct Solved {
     pub outcome: FitOutcome,
     /// Weighted sum of squared residuals at `x`.
     pub cost: f64,
+    /// The points' position errors at `x` (those of [`Problem::errors`] over the points solved),
+    /// when the fit's last pass computed them (its last step's cost alone): a caller that wants
+    /// them takes them instead of computing them again.
+    pub errors: Option<Vec<Vector3<f64>>>,
 }
 
 /// Levenberg-Marquardt on the free columns `free` over the points `idx` from `x0`: column-scaled
@@ -927,7 +938,7 @@ pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[us
     let rows = (3 * idx.len()).max(1) as f64;
     for iteration in 1..=opts.max_iterations {
         let Some((n, b)) = next.take() else {
-            return Solved { x, outcome: FitOutcome::NotFinite, cost: f64::NAN };
+            return Solved { x, outcome: FitOutcome::NotFinite, cost: f64::NAN, errors: None };
         };
         let norms: Vec<f64> = (0..free.len()).map(|c| n[(c, c)].sqrt()).collect();
         let inv: Vec<f64> = norms.iter().map(|v| if *v > 0.0 { 1.0 / v } else { 0.0 }).collect();
@@ -948,7 +959,7 @@ pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[us
             let Some(step) = m.cholesky().map(|c| c.solve(&bs)) else {
                 damping.reject();
                 if damping.mu > 1e16 {
-                    return Solved { x, outcome: rank_deficient(problem, free), cost };
+                    return Solved { x, outcome: rank_deficient(problem, free), cost, errors: None };
                 }
                 continue;
             };
@@ -963,15 +974,20 @@ pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[us
             // Jacobians), the normal equations there only if the fit goes on. The same iterates
             // and the same bits either way (the cost is the same from both passes).
             let ending = moved < opts.step_tol || gain <= LIKELY_LAST * opts.cost_rtol * cost;
-            let (trial_cost, pending) =
-                if ending { (problem.cost(&trial, idx), None) } else { equations_and_cost(problem, &trial, free, idx) };
+            let (trial_cost, pending, trial_errors) = if ending {
+                let (cost, errors) = problem.cost_and_errors(&trial, idx);
+                (cost, None, errors)
+            } else {
+                let (cost, pending) = equations_and_cost(problem, &trial, free, idx);
+                (cost, pending, None)
+            };
             let rho = if gain > 0.0 && trial_cost.is_finite() { (cost - trial_cost) / gain } else { -1.0 };
             if damping.update(rho) {
                 let change = (cost - trial_cost).abs();
                 x = trial;
                 cost = trial_cost;
                 if moved < opts.step_tol || change <= opts.cost_rtol * cost {
-                    return Solved { x, outcome: FitOutcome::Converged { iterations: iteration }, cost };
+                    return Solved { x, outcome: FitOutcome::Converged { iterations: iteration }, cost, errors: trial_errors };
                 }
                 next = if ending { equations_and_cost(problem, &x, free, idx).1 } else { pending };
                 break;
@@ -981,11 +997,11 @@ pub fn solve<P: Fit + ?Sized>(problem: &P, x0: &[f64], free: &[usize], idx: &[us
             // smaller steps of more damping predict less, and whether one of them lowers the cost
             // by that little is decided by the rounding of the cost, not by the model.
             if damping.mu > 1e16 || gain <= opts.cost_rtol * cost {
-                return Solved { x, outcome: FitOutcome::Converged { iterations: iteration }, cost };
+                return Solved { x, outcome: FitOutcome::Converged { iterations: iteration }, cost, errors: None };
             }
         }
     }
-    Solved { x, outcome: FitOutcome::IterationCap { iterations: opts.max_iterations }, cost }
+    Solved { x, outcome: FitOutcome::IterationCap { iterations: opts.max_iterations }, cost, errors: None }
 }
 
 /// A step predicted to change the cost by at most this many times the cost rule's tolerance
@@ -1070,6 +1086,9 @@ impl<P: Fit + ?Sized> Fit for Started<'_, P> {
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
         self.fit.cost(x, idx)
     }
+    fn cost_and_errors(&self, x: &[f64], idx: &[usize]) -> (f64, Option<Vec<Vector3<f64>>>) {
+        self.fit.cost_and_errors(x, idx)
+    }
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         self.fit.normal_equations(x, idx, cols)
     }
@@ -1113,6 +1132,11 @@ pub trait Fit: Sync {
     fn unknowns(&self) -> usize;
     /// Weighted sum of squared residuals of `idx` at `x`; infinite when `x` makes no model.
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64;
+    /// [`Fit::cost`] and, where the fit has them from the same pass, the positions' errors
+    /// ([`Problem::errors`] of `idx` at `x`; `None` where that gives none): the same bits as each.
+    fn cost_and_errors(&self, x: &[f64], idx: &[usize]) -> (f64, Option<Vec<Vector3<f64>>>) {
+        (self.cost(x, idx), None)
+    }
     /// `N = J_c^T J_c` and `b = J_c^T r` of the columns `cols` over the points `idx` at `x`.
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)>;
     /// [`Fit::normal_equations`] and [`Fit::cost`] at `x` (`None` where the normal equations give
@@ -1150,6 +1174,9 @@ impl Fit for Problem<'_> {
     }
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
         Problem::cost(self, x, idx)
+    }
+    fn cost_and_errors(&self, x: &[f64], idx: &[usize]) -> (f64, Option<Vec<Vector3<f64>>>) {
+        Problem::cost_and_errors(self, x, idx)
     }
     fn normal_equations(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         Problem::normal_equations(self, x, idx, cols)
@@ -1391,15 +1418,20 @@ impl Fit for Oriented<'_> {
         self.problem.layout.len() + 3 * self.rotated()
     }
     fn cost(&self, x: &[f64], idx: &[usize]) -> f64 {
+        self.cost_and_errors(x, idx).0
+    }
+    fn cost_and_errors(&self, x: &[f64], idx: &[usize]) -> (f64, Option<Vec<Vector3<f64>>>) {
+        let (positions, errors) = self.problem.cost_and_errors(x, idx);
         if self.rotated() == 0 {
-            return self.problem.cost(x, idx);
+            return (positions, errors);
         }
-        let positions = self.problem.cost(x, idx);
         match self.rotation_rows(x, idx, false) {
             Some(rows) => {
-                positions + rows.iter().map(|(i, e, _)| (e / self.readings[*i].map_or(1.0, |r| r.sigma_rad)).norm_squared()).sum::<f64>()
+                let rotations =
+                    rows.iter().map(|(i, e, _)| (e / self.readings[*i].map_or(1.0, |r| r.sigma_rad)).norm_squared()).sum::<f64>();
+                (positions + rotations, errors)
             }
-            None => f64::INFINITY,
+            None => (f64::INFINITY, errors),
         }
     }
     fn normal_equations_and_cost(&self, x: &[f64], idx: &[usize], cols: &[usize]) -> Option<(DMatrix<f64>, DVector<f64>, f64)> {

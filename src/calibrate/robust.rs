@@ -178,9 +178,22 @@ pub fn fit_without<P: Fit + ?Sized>(
     opts: &SolveOptions,
 ) -> RobustFit {
     let active: Vec<usize> = idx.iter().zip(outlier).filter(|(_, o)| !**o).map(|(i, _)| *i).collect();
-    let solved = solve(problem, x0, free, &active, opts);
+    let mut solved = solve(problem, x0, free, &active, opts);
     let positions = problem.positions();
-    let norms: Vec<f64> = match positions.errors(&solved.x, idx) {
+    // The errors at the solution: the solver's last pass has the fitted points' (a point's error
+    // is its own, whichever pass computes it), the flagged ones computed here.
+    let errors = match solved.errors.take() {
+        None => positions.errors(&solved.x, idx),
+        Some(fitted) if fitted.len() == idx.len() => Some(fitted),
+        Some(fitted) => {
+            let flagged: Vec<usize> = idx.iter().zip(outlier).filter(|(_, o)| **o).map(|(i, _)| *i).collect();
+            positions.errors(&solved.x, &flagged).map(|left| {
+                let (mut fitted, mut left) = (fitted.into_iter(), left.into_iter());
+                outlier.iter().map(|o| if *o { left.next() } else { fitted.next() }.expect("an error per point")).collect()
+            })
+        }
+    };
+    let norms: Vec<f64> = match errors {
         Some(e) => e.iter().zip(idx).map(|(e, &i)| e.norm() / positions.obs[i].sigma).collect(),
         None => vec![f64::NAN; idx.len()],
     };
