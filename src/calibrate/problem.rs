@@ -17,7 +17,9 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 
 use crate::identify::FitOutcome;
 use crate::identify::damping::Damping;
-use crate::robot::{BaseParam, Joints, ParamId, ParamSet, RobotModel, tcp_jacobians_transposed};
+use crate::robot::{
+    AngleSines, BaseParam, Joints, ParamId, ParamSet, RobotModel, angle_sines, tcp_jacobians_transposed, tcp_jacobians_transposed_by,
+};
 
 /// The six base parameters of eq. 7, in the order of a session's block.
 pub const BASE_PARAMS: [BaseParam; 6] = [BaseParam::X, BaseParam::Y, BaseParam::Z, BaseParam::Alpha, BaseParam::Beta, BaseParam::Gamma];
@@ -178,6 +180,12 @@ fn groups(obs: &[Obs], idx: &[usize]) -> Vec<Group> {
     out
 }
 
+#[cfg(test)]
+thread_local! {
+    /// [`Problem::shared_angles`] gives none on this thread (the reference its tests compare with).
+    static NOT_SHARED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
 /// Points per piece of the loops over a group's points that run side by side (each point's
 /// kinematics is its own: a piece's results are those of its points whatever the pieces; sums over
 /// pieces are taken in their order, so that every result is the same for any thread count).
@@ -205,9 +213,16 @@ impl Problem<'_> {
         let groups = groups(self.obs, idx);
         let models = self.models(x, &groups)?;
         let pieces = pieces(&groups);
+        let shared = self.shared_angles(&models, idx);
         let tcps: Vec<Vec<Vector3<f64>>> = pieces
             .par_iter()
-            .map(|(g, r)| crate::robot::tcps_world(&models[*g], groups[*g].1[r.clone()].iter().map(|(_, i)| &self.obs[*i].q)))
+            .map(|(g, r)| {
+                let members = &groups[*g].1[r.clone()];
+                match &shared {
+                    Some(sines) => crate::robot::tcps_world_by(&models[*g], members.len(), |k| sines[members[k].0]),
+                    None => crate::robot::tcps_world(&models[*g], members.iter().map(|(_, i)| &self.obs[*i].q)),
+                }
+            })
             .collect();
         let mut out = vec![Vector3::zeros(); idx.len()];
         for ((g, r), tcps) in pieces.iter().zip(tcps) {
@@ -223,13 +238,60 @@ impl Problem<'_> {
         groups.iter().map(|((s, t), _)| self.model_at(x, *s, *t)).collect()
     }
 
+    /// Per row of `idx`, the [`AngleSines`] of its point's joints at `models`' joint offsets, taken
+    /// once per run of rows at one configuration (a pose's targets in turn, each target a group
+    /// of its own): `None` where runs are rare (a point per pose), or where the models' offsets
+    /// differ (they do not: the robot's unknowns are every group's). The kernels take them as
+    /// they would compute them (the same bits).
+    fn shared_angles(&self, models: &[RobotModel], idx: &[usize]) -> Option<Vec<AngleSines>> {
+        use rayon::prelude::*;
+        #[cfg(test)]
+        if NOT_SHARED.with(|c| c.get()) {
+            return None;
+        }
+        let first = models.first()?;
+        let offsets = |m: &RobotModel| m.data().links.iter().map(|l| l.theta_offset.to_bits()).collect::<Vec<u64>>();
+        let same = |a: usize, b: usize| self.obs[a].q.iter().zip(&self.obs[b].q).all(|(x, y)| x.to_bits() == y.to_bits());
+        let repeated = idx.windows(2).filter(|w| same(w[0], w[1])).count();
+        if 4 * repeated < idx.len() || models.iter().any(|m| offsets(m) != offsets(first)) {
+            return None;
+        }
+        Some(
+            idx.par_chunks(4 * PIECE)
+                .flat_map_iter(|chunk| {
+                    let mut out: Vec<AngleSines> = Vec::with_capacity(chunk.len());
+                    for (k, &i) in chunk.iter().enumerate() {
+                        let sines = match out.last() {
+                            Some(last) if same(chunk[k - 1], i) => *last,
+                            _ => angle_sines(first, &self.obs[i].q),
+                        };
+                        out.push(sines);
+                    }
+                    out
+                })
+                .collect(),
+        )
+    }
+
     /// The identification Jacobians (transposed, [`tcp_jacobians_transposed`]) and predicted
-    /// positions of the members `r` of group `g`.
-    fn piece_jacobians(&self, set: &ParamSet, model: &RobotModel, members: &[(usize, usize)]) -> (Vec<f64>, Vec<Vector3<f64>>) {
-        let qs: Vec<Joints> = members.iter().map(|(_, i)| self.obs[*i].q).collect();
-        let mut jt = vec![0.0; set.len() * 3 * qs.len()];
-        let mut tcps = vec![Vector3::zeros(); qs.len()];
-        tcp_jacobians_transposed(model, set, &qs, &mut jt, &mut tcps);
+    /// positions of the members `(row, point)` of a group at its `model`, their angles from
+    /// `shared` (by row, [`Self::shared_angles`]) where given.
+    fn piece_jacobians(
+        &self,
+        set: &ParamSet,
+        model: &RobotModel,
+        members: &[(usize, usize)],
+        shared: Option<&[AngleSines]>,
+    ) -> (Vec<f64>, Vec<Vector3<f64>>) {
+        let mut jt = vec![0.0; set.len() * 3 * members.len()];
+        let mut tcps = vec![Vector3::zeros(); members.len()];
+        match shared {
+            Some(sines) => tcp_jacobians_transposed_by(model, set, members.len(), |k| sines[members[k].0], &mut jt, &mut tcps),
+            None => {
+                let qs: Vec<Joints> = members.iter().map(|(_, i)| self.obs[*i].q).collect();
+                tcp_jacobians_transposed(model, set, &qs, &mut jt, &mut tcps);
+            }
+        }
         (jt, tcps)
     }
 
@@ -245,10 +307,13 @@ impl Problem<'_> {
         let groups = groups(self.obs, idx);
         let models = self.models(x, &groups)?;
         let pieces = pieces(&groups);
+        let shared = self.shared_angles(&models, idx);
         // A few pieces at a time (their Jacobians side by side), each scattered into `r` and `J`.
         for batch in pieces.chunks(16) {
-            let done: Vec<(Vec<f64>, Vec<Vector3<f64>>)> =
-                batch.par_iter().map(|(g, rg)| self.piece_jacobians(&set, &models[*g], &groups[*g].1[rg.clone()])).collect();
+            let done: Vec<(Vec<f64>, Vec<Vector3<f64>>)> = batch
+                .par_iter()
+                .map(|(g, rg)| self.piece_jacobians(&set, &models[*g], &groups[*g].1[rg.clone()], shared.as_deref()))
+                .collect();
             for ((g, rg), (jt, tcps)) in batch.iter().zip(done) {
                 let ((s, t), members) = &groups[*g];
                 // Column c of the point's set goes to: the robot block, session s's base block or
@@ -284,12 +349,13 @@ impl Problem<'_> {
         let groups = groups(self.obs, idx);
         let models = self.models(x, &groups)?;
         let pieces = pieces(&groups);
+        let shared = self.shared_angles(&models, idx);
         let factors: Vec<Option<DMatrix<f64>>> = pieces
             .par_iter()
             .map(|(g, rg)| {
                 let ((s, t), members) = &groups[*g];
                 let members = &members[rg.clone()];
-                let (jt, _) = self.piece_jacobians(&set, &models[*g], members);
+                let (jt, _) = self.piece_jacobians(&set, &models[*g], members, shared.as_deref());
                 let mut block = DMatrix::zeros(3 * members.len(), p);
                 for (k, (_, i)) in members.iter().enumerate() {
                     let sigma = self.obs[*i].sigma;
@@ -346,8 +412,9 @@ impl Problem<'_> {
         let groups = groups(self.obs, &all);
         let models = self.models(x, &groups)?;
         let pieces = pieces(&groups);
+        let shared = self.shared_angles(&models, &all);
         let done: Vec<(Vec<f64>, Vec<Vector3<f64>>)> =
-            pieces.par_iter().map(|(g, r)| self.piece_jacobians(&set, &models[*g], &groups[*g].1[r.clone()])).collect();
+            pieces.par_iter().map(|(g, r)| self.piece_jacobians(&set, &models[*g], &groups[*g].1[r.clone()], shared.as_deref())).collect();
         let mut start = Start { x: x.to_vec(), p, jt: vec![0.0; 3 * p * all.len()], tcps: vec![Vector3::zeros(); all.len()] };
         for ((g, r), (jt, tcps)) in pieces.iter().zip(done) {
             for (k, (_, i)) in groups[*g].1[r.clone()].iter().enumerate() {
@@ -393,6 +460,7 @@ impl Problem<'_> {
         // one more column) multiplied out, side by side; the products summed per group in order
         // and scattered into N and b.
         let pieces = pieces(&groups);
+        let shared = if start.is_some() { None } else { self.shared_angles(&models, idx) };
         // Per piece, its product and each member's squared weighted residual.
         type Product = Option<(Vec<f64>, Vec<f64>)>;
         let products: Vec<Product> = pieces
@@ -403,7 +471,7 @@ impl Problem<'_> {
                 let used = slot.len();
                 let (jt, tcps) = match start {
                     Some(s) => s.piece(members),
-                    None => self.piece_jacobians(&set, &models[*g], members),
+                    None => self.piece_jacobians(&set, &models[*g], members, shared.as_deref()),
                 };
                 let rows = 3 * members.len();
                 // In groups of eight rows ([`gram`]'s layout); the residuals are column `used`.
@@ -1585,6 +1653,63 @@ mod tests {
         x.extend(std::iter::repeat_n(0.0, 6 * layout.sessions));
         x.extend([10.0, 20.0, 80.0, -30.0, 5.0, 60.0]);
         (model, layout, obs, x)
+    }
+
+    /// Points of one pose at several targets (runs of one to three, each target of a session its
+    /// own group) take their joints' sines and cosines once per run: the errors, the residuals and
+    /// Jacobian, the normal equations and cost, a start's Jacobians and the triangular factor are
+    /// those the kernels give computing every point's, bit for bit. The IRB 120 with Table 7's
+    /// compliance, 3 sessions, 3 targets, 1,500 points (pieces of more than one run of lanes).
+    #[test]
+    fn a_poses_targets_share_its_angles_with_the_same_bits() {
+        let (model, mut layout, mut obs, mut x) = fixture(1500, 43);
+        layout.targets = 3;
+        x.extend([-40.0, 15.0, 70.0]);
+        // Runs of 1, 2 and 3 points at one configuration, a target each, in one session.
+        let mut k = 0;
+        let mut run = 0;
+        while k < obs.len() {
+            let len = (1 + run % 3).min(obs.len() - k);
+            for t in 0..len {
+                obs[k + t].q = obs[k].q;
+                obs[k + t].session = obs[k].session;
+                obs[k + t].target = t;
+            }
+            k += len;
+            run += 1;
+        }
+        let problem = Problem { start: &model, layout: layout.clone(), obs: &obs };
+        let idx: Vec<usize> = (0..obs.len()).collect();
+        let every: Vec<usize> = (0..layout.len()).collect();
+        let groups = groups(&obs, &idx);
+        let models = problem.models(&x, &groups).unwrap();
+        assert!(problem.shared_angles(&models, &idx).is_some(), "runs shared");
+        assert!(problem.shared_angles(&models, &[0]).is_none(), "one point: nothing shared");
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        let passes = || {
+            let errors: Vec<f64> = problem.errors(&x, &idx).unwrap().iter().flat_map(|e| e.iter().copied()).collect();
+            let (r, j) = problem.linearise(&x, &idx).unwrap();
+            let (n, b, cost) = problem.normal_equations_and_cost(&x, &idx, &every).unwrap();
+            let start = problem.start_at(&x).unwrap();
+            let rf = problem.r_factor(&x, &idx).unwrap();
+            [
+                errors,
+                r.as_slice().to_vec(),
+                j.as_slice().to_vec(),
+                n.as_slice().to_vec(),
+                b.as_slice().to_vec(),
+                vec![cost],
+                start.jt,
+                rf.as_slice().to_vec(),
+            ]
+        };
+        let shared = passes();
+        NOT_SHARED.with(|c| c.set(true));
+        let own = passes();
+        NOT_SHARED.with(|c| c.set(false));
+        for (a, b) in shared.iter().zip(&own) {
+            assert_eq!(bits(a), bits(b));
+        }
     }
 
     /// The normal equations and cost of fits started at a [`Start`] are those computed point by

@@ -22,8 +22,8 @@ pub mod virtual_robot;
 
 pub use ik::{IkError, inverse};
 pub use kinematics::{
-    KinState, forward, gravity_torques, tcp_jacobian, tcp_jacobian_matrix, tcp_jacobians_transposed, tcp_world, tcps_world,
-    world_from_base, world_from_flange,
+    AngleSines, KinState, angle_sines, forward, gravity_torques, tcp_jacobian, tcp_jacobian_matrix, tcp_jacobians_transposed,
+    tcp_jacobians_transposed_by, tcp_world, tcps_world, tcps_world_by, world_from_base, world_from_flange,
 };
 pub use learned::{LearnedEffects, LearnedHarmonic};
 pub use model::{Inertial, JOINTS, JointLimit, Joints, Link, ModelError, RobotData, RobotModel, XyzZyx, uniform_configuration};

@@ -10,7 +10,9 @@
 //! (a test compares them over 50 models), and every Jacobian column the same as
 //! [`super::tcp_jacobian`]'s (`tcp_jacobian_portable`'s operations: torque
 //! sensitivities, the suffix and prefix sums of the compliance term, each parameter's motion);
-//! the lanes only share the model's constants and the loop. The validation of every identified
+//! the lanes only share the model's constants and the loop. A configuration's joint angles enter as
+//! their sines and cosines ([`AngleSines`], the same call), which callers measuring one pose at
+//! several targets (a model per target) take once for all of them (`*_by`). The validation of every identified
 //! model takes its TCPs here (506 poses, one model), the identification its Jacobians (every
 //! configuration of the set, one model per iteration).
 //!
@@ -152,13 +154,13 @@ struct Frames {
 /// [`Frames`] of four configurations into `f` (`kinematics::forward_portable`, lane by lane).
 /// `all`: the deflected chain's frames too (the Jacobian reads them; the TCP only the last).
 #[inline(always)]
-fn forward(model: &RobotModel, q: &[Joints; LANES], all: bool, f: &mut Frames) {
+fn forward(model: &RobotModel, sines: &[AngleSines; LANES], all: bool, f: &mut Frames) {
     let data = model.data();
     let links = &data.links;
     let mut sc0 = [(splat(0.0), splat(1.0)); JOINTS];
     for (i, sci) in sc0.iter_mut().enumerate() {
         for l in 0..LANES {
-            (sci.0[l], sci.1[l]) = (q[l][i] + links[i].theta_offset).sin_cos();
+            (sci.0[l], sci.1[l]) = sines[l][i];
         }
     }
     let (r6, o6) = chain(model, &sc0, Some((&mut f.rot0, &mut f.org0)));
@@ -351,38 +353,56 @@ fn jacobian(model: &RobotModel, f: &Frames, set: &ParamSet, sums: &mut Complianc
 /// The configurations of one chunk in lanes; a short last chunk repeats its last configuration
 /// (computed, not returned).
 #[inline(always)]
-fn padded<Q: std::borrow::Borrow<Joints>>(chunk: &[Q]) -> [Joints; LANES] {
-    std::array::from_fn(|l| *chunk[l.min(chunk.len() - 1)].borrow())
+fn padded(n: usize, first: usize, sines: &impl Fn(usize) -> AngleSines) -> [AngleSines; LANES] {
+    std::array::from_fn(|l| sines((first + l).min(n - 1)))
+}
+
+/// The sines and cosines of a configuration's joint angles at a model's joint offsets,
+/// `(q_i + theta_offset_i).sin_cos()` per joint: what the kernels here take a configuration as.
+pub type AngleSines = [(f64, f64); JOINTS];
+
+/// [`AngleSines`] of `q` at `model`'s joint offsets. Configurations shared by many calls (a pose
+/// measured at several targets, each with its own tool) take them once.
+#[inline(always)]
+pub fn angle_sines(model: &RobotModel, q: &Joints) -> AngleSines {
+    let links = &model.data().links;
+    std::array::from_fn(|i| (q[i] + links[i].theta_offset).sin_cos())
 }
 
 /// The TCP in {W} (mm) of every configuration of `qs` at `model`, in order: the same to the bit as
 /// [`super::forward`] of each.
 pub fn tcps_world<'a>(model: &RobotModel, qs: impl IntoIterator<Item = &'a Joints>) -> Vec<Vector3<f64>> {
     let qs: Vec<&Joints> = qs.into_iter().collect();
+    tcps_world_by(model, qs.len(), |k| angle_sines(model, qs[k]))
+}
+
+/// [`tcps_world`] of `n` configurations given by their [`AngleSines`] at `model`, `sines(k)` the
+/// k-th's (the same bits).
+pub fn tcps_world_by(model: &RobotModel, n: usize, sines: impl Fn(usize) -> AngleSines) -> Vec<Vector3<f64>> {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU was just found to support AVX2, the only requirement of `tcps_avx2`.
         #[allow(unsafe_code)]
-        return unsafe { tcps_avx2(model, &qs) };
+        return unsafe { tcps_avx2(model, n, sines) };
     }
-    tcps_body(model, &qs)
+    tcps_body(model, n, sines)
 }
 
 /// [`tcps_world`] compiled for AVX2 (the lanes in one vector; the same operations).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn tcps_avx2(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
-    tcps_body(model, qs)
+fn tcps_avx2(model: &RobotModel, n: usize, sines: impl Fn(usize) -> AngleSines) -> Vec<Vector3<f64>> {
+    tcps_body(model, n, sines)
 }
 
 #[inline(always)]
-fn tcps_body(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
-    let mut out = Vec::with_capacity(qs.len());
+fn tcps_body(model: &RobotModel, n: usize, sines: impl Fn(usize) -> AngleSines) -> Vec<Vector3<f64>> {
+    let mut out = Vec::with_capacity(n);
     let mut f = Frames::new();
-    for chunk in qs.chunks(LANES) {
-        forward(model, &padded(chunk), false, &mut f);
+    for first in (0..n).step_by(LANES) {
+        forward(model, &padded(n, first, &sines), false, &mut f);
         let w = &f.tcp_world;
-        out.extend((0..chunk.len()).map(|l| Vector3::new(w[0][l], w[1][l], w[2][l])));
+        out.extend((0..LANES.min(n - first)).map(|l| Vector3::new(w[0][l], w[1][l], w[2][l])));
     }
     out
 }
@@ -392,41 +412,68 @@ fn tcps_body(model: &RobotModel, qs: &[&Joints]) -> Vec<Vector3<f64>> {
 /// holds row i of configuration k's 3 x p Jacobian); `tcps` gets the TCP in {W} of each (mm). The
 /// same to the bit as [`super::tcp_jacobian`] of each.
 pub fn tcp_jacobians_transposed(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
-    assert_eq!(jt.len(), 3 * qs.len() * set.len(), "p x 3n");
-    assert_eq!(tcps.len(), qs.len(), "one TCP per configuration");
+    tcp_jacobians_transposed_by(model, set, qs.len(), |k| angle_sines(model, &qs[k]), jt, tcps);
+}
+
+/// [`tcp_jacobians_transposed`] of `n` configurations given by their [`AngleSines`] at `model`,
+/// `sines(k)` the k-th's (the same bits).
+pub fn tcp_jacobians_transposed_by(
+    model: &RobotModel,
+    set: &ParamSet,
+    n: usize,
+    sines: impl Fn(usize) -> AngleSines,
+    jt: &mut [f64],
+    tcps: &mut [Vector3<f64>],
+) {
+    assert_eq!(jt.len(), 3 * n * set.len(), "p x 3n");
+    assert_eq!(tcps.len(), n, "one TCP per configuration");
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU was just found to support AVX2, the only requirement of
         // `jacobians_avx2`.
         #[allow(unsafe_code)]
         unsafe {
-            jacobians_avx2(model, set, qs, jt, tcps)
+            jacobians_avx2(model, set, n, sines, jt, tcps)
         };
         return;
     }
-    jacobians_body(model, set, qs, jt, tcps);
+    jacobians_body(model, set, n, sines, jt, tcps);
 }
 
 /// [`tcp_jacobians_transposed`] compiled for AVX2 (the lanes in one vector; the same operations).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn jacobians_avx2(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
-    jacobians_body(model, set, qs, jt, tcps);
+fn jacobians_avx2(
+    model: &RobotModel,
+    set: &ParamSet,
+    n: usize,
+    sines: impl Fn(usize) -> AngleSines,
+    jt: &mut [f64],
+    tcps: &mut [Vector3<f64>],
+) {
+    jacobians_body(model, set, n, sines, jt, tcps);
 }
 
 #[inline(always)]
-fn jacobians_body(model: &RobotModel, set: &ParamSet, qs: &[Joints], jt: &mut [f64], tcps: &mut [Vector3<f64>]) {
+fn jacobians_body(
+    model: &RobotModel,
+    set: &ParamSet,
+    n: usize,
+    sines: impl Fn(usize) -> AngleSines,
+    jt: &mut [f64],
+    tcps: &mut [Vector3<f64>],
+) {
     let p = set.len();
     let mut f = Frames::new();
     let mut sums = ComplianceSums::new();
-    for (n, chunk) in qs.chunks(LANES).enumerate() {
-        forward(model, &padded(chunk), true, &mut f);
-        let first = n * LANES;
-        for l in 0..chunk.len() {
+    for first in (0..n).step_by(LANES) {
+        forward(model, &padded(n, first, &sines), true, &mut f);
+        let len = LANES.min(n - first);
+        for l in 0..len {
             tcps[first + l] = Vector3::new(f.tcp_world[0][l], f.tcp_world[1][l], f.tcp_world[2][l]);
         }
         // This chunk's 3 x len columns of jt, each p values.
-        let out = &mut jt[3 * first * p..3 * (first + chunk.len()) * p];
+        let out = &mut jt[3 * first * p..3 * (first + len) * p];
         jacobian(model, &f, set, &mut sums, |c, col| {
             for (l, rows) in out.chunks_exact_mut(3 * p).enumerate() {
                 for (i, row) in rows.chunks_exact_mut(p).enumerate() {
@@ -461,7 +508,10 @@ mod tests {
         for model in &models {
             let qs: Vec<Joints> = (0..203).map(|j| configuration(&mut rng, j)).collect();
             let batch = tcps_world(model, &qs);
-            let body = tcps_body(model, &qs.iter().collect::<Vec<_>>());
+            let body = tcps_body(model, qs.len(), |k| angle_sines(model, &qs[k]));
+            // The angles taken once, ahead (as a pose's targets share them).
+            let sines: Vec<AngleSines> = qs.iter().map(|q| angle_sines(model, q)).collect();
+            assert_eq!(tcps_world_by(model, sines.len(), |k| sines[k]), batch);
             for (q, (b, p)) in qs.iter().zip(batch.iter().zip(&body)) {
                 let expected = forward(model, &mut st, q);
                 large += st.tau.iter().zip(&model.data().links).filter(|(t, l)| (l.compliance * *t).abs() >= 1e-3).count();
@@ -491,7 +541,13 @@ mod tests {
             let (mut jt, mut tcps) = (vec![0.0; 3 * qs.len() * p], vec![Vector3::zeros(); qs.len()]);
             tcp_jacobians_transposed(model, &set, &qs, &mut jt, &mut tcps);
             let (mut jt_b, mut tcps_b) = (jt.clone(), tcps.clone());
-            jacobians_body(model, &set, &qs, &mut jt_b, &mut tcps_b);
+            jacobians_body(model, &set, qs.len(), |k| angle_sines(model, &qs[k]), &mut jt_b, &mut tcps_b);
+            // The angles taken once, ahead (as a pose's targets share them).
+            let sines: Vec<AngleSines> = qs.iter().map(|q| angle_sines(model, q)).collect();
+            let (mut jt_s, mut tcps_s) = (jt.clone(), tcps.clone());
+            tcp_jacobians_transposed_by(model, &set, sines.len(), |k| sines[k], &mut jt_s, &mut tcps_s);
+            assert_eq!(jt_s.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), jt.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+            assert_eq!(tcps_s, tcps);
             // Column c of configuration n's Jacobian, from the transposed layout.
             let column = |jt: &[f64], n: usize, c: usize| Vector3::from_fn(|i, _| jt[(3 * n + i) * p + c]);
             let bits = |v: &Vector3<f64>| v.map(f64::to_bits);

@@ -23,7 +23,7 @@ use nalgebra::{Isometry3, Matrix3xX, Vector3};
 
 use crate::robot::model::{JOINTS, Joints, RobotModel};
 use crate::robot::params::ParamSet;
-pub use batch::{tcp_jacobians_transposed, tcps_world};
+pub use batch::{AngleSines, angle_sines, tcp_jacobians_transposed, tcp_jacobians_transposed_by, tcps_world, tcps_world_by};
 pub(crate) use portable::{forward_portable, tcp_jacobian_portable};
 pub use state::KinState;
 use state::isometry;
