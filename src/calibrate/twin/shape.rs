@@ -870,10 +870,10 @@ fn intervals(value: f64, mut replicates: Vec<f64>) -> ([f64; 2], [f64; 2]) {
 /// fitted model, each a smooth field of the fitted length and level drawn as a world draws the
 /// twin's field (`robot::learned`'s random Fourier features, [`BOOTSTRAP_FEATURES`] per joint,
 /// from the replicate's own stream; their cosines by `numeric::cosines`, within a unit in the last
-/// place of the library's) carried to the points by the weighted link-angle Jacobian, plus white noise of the model's
-/// share of the mean square, projected off the fit's basis, binned as `c` and fitted against the
-/// same predictions. Per replicate (in index order, any thread count), the index of its best
-/// length on the grid (at the grid's ends where it is there) and its level, rad.
+/// place of the library's) carried to the points by the weighted link-angle Jacobian, plus white
+/// noise of the model's share of the mean square, projected off the fit's basis, binned as `c` and
+/// fitted against the same predictions. Per replicate (in index order, any thread count), the
+/// index of its best length on the grid (at the grid's ends where it is there) and its level, rad.
 fn bootstrap(binning: &Binning, c: &Correlation, model: &Model, predictions: &Predictions, rows: &Rows<'_>) -> Vec<(usize, f64)> {
     use rand_distr::{Distribution, Normal};
     use rayon::prelude::*;
