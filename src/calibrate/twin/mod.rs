@@ -244,7 +244,10 @@ impl Lsq {
         if self.a.ncols() == 0 {
             return b.clone();
         }
-        b - super::problem::mul(&self.a, &self.coef(b))
+        // `b - A c` into the product's own storage (no third matrix of b's size).
+        let mut out = super::problem::mul(&self.a, &self.coef(b));
+        out.zip_apply(b, |x, y| *x = y - *x);
+        out
     }
 
     /// Covariance of the coefficients (internal units) with the residuals `u` clustered by `groups`
@@ -447,15 +450,19 @@ pub(crate) fn analyse_with(c: &Calibration, stated_noise_mm: Option<f64>, reuse:
 
     // Every family's columns, projected off the model's all at once; those the model absorbs
     // left out (the calibrated robot carries them).
-    let candidates: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> = Family::all()
-        .into_iter()
-        .chain(effects::scan(&train, &jl, &data, &rw))
-        .map(|f| {
-            let (e, coefs) = columns(f, &train, &jl, &data);
-            (f, e, coefs)
-        })
-        .filter(|(_, e, _)| e.ncols() > 0)
-        .collect();
+    // The families' columns side by side (the scan beside the fixed families'), in their order.
+    let family_columns = |families: Vec<Family>| -> Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> {
+        families
+            .into_par_iter()
+            .map(|f| {
+                let (e, coefs) = columns(f, &train, &jl, &data);
+                (f, e, coefs)
+            })
+            .collect()
+    };
+    let (fixed, scanned) = rayon::join(|| family_columns(Family::all()), || family_columns(effects::scan(&train, &jl, &data, &rw)));
+    let candidates: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> =
+        fixed.into_iter().chain(scanned).filter(|(_, e, _)| e.ncols() > 0).collect();
     let projected_every = model_lsq.resid(&hstack(candidates.iter().map(|(_, e, _)| e)));
     let mut families: Vec<(Family, DMatrix<f64>, Vec<Coefficient>)> = Vec::new();
     let mut absorbed: Vec<Vec<String>> = Vec::new();
