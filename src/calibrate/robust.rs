@@ -177,6 +177,7 @@ pub fn fit_without<P: Fit + ?Sized>(
     outlier: &[bool],
     opts: &SolveOptions,
 ) -> RobustFit {
+    debug_assert_eq!(idx.len(), outlier.len(), "a flag per point");
     let active: Vec<usize> = idx.iter().zip(outlier).filter(|(_, o)| !**o).map(|(i, _)| *i).collect();
     let mut solved = solve(problem, x0, free, &active, opts);
     let positions = problem.positions();

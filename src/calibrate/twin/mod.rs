@@ -244,10 +244,7 @@ impl Lsq {
         if self.a.ncols() == 0 {
             return b.clone();
         }
-        // `b - A c` into the product's own storage (no third matrix of b's size).
-        let mut out = super::problem::mul(&self.a, &self.coef(b));
-        out.zip_apply(b, |x, y| *x = y - *x);
-        out
+        b - super::problem::mul(&self.a, &self.coef(b))
     }
 
     /// Covariance of the coefficients (internal units) with the residuals `u` clustered by `groups`

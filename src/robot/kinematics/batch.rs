@@ -12,9 +12,9 @@
 //! sensitivities, the suffix and prefix sums of the compliance term, each parameter's motion);
 //! the lanes only share the model's constants and the loop. A configuration's joint angles enter as
 //! their sines and cosines ([`AngleSines`], the same call), which callers measuring one pose at
-//! several targets (a model per target) take once for all of them (`*_by`). The validation of every identified
-//! model takes its TCPs here (506 poses, one model), the identification its Jacobians (every
-//! configuration of the set, one model per iteration).
+//! several targets (a model per target) take once for all of them (`*_by`). The validation of
+//! every identified model takes its TCPs here (506 poses, one model), the identification its
+//! Jacobians (every configuration of the set, one model per iteration).
 //!
 //! [`forward`]: super::forward
 
