@@ -218,10 +218,7 @@ impl Problem<'_> {
             .par_iter()
             .map(|(g, r)| {
                 let members = &groups[*g].1[r.clone()];
-                match &shared {
-                    Some(sines) => crate::robot::tcps_world_by(&models[*g], members.len(), |k| sines[members[k].0]),
-                    None => crate::robot::tcps_world(&models[*g], members.iter().map(|(_, i)| &self.obs[*i].q)),
-                }
+                crate::robot::tcps_world_by(&models[*g], members.len(), |k| self.member_angles(&models[*g], members[k], shared.as_deref()))
             })
             .collect();
         let mut out = vec![Vector3::zeros(); idx.len()];
@@ -253,7 +250,8 @@ impl Problem<'_> {
         let offsets = |m: &RobotModel| m.data().links.iter().map(|l| l.theta_offset.to_bits()).collect::<Vec<u64>>();
         let same = |a: usize, b: usize| self.obs[a].q.iter().zip(&self.obs[b].q).all(|(x, y)| x.to_bits() == y.to_bits());
         let repeated = idx.windows(2).filter(|w| same(w[0], w[1])).count();
-        if 4 * repeated < idx.len() || models.iter().any(|m| offsets(m) != offsets(first)) {
+        let reference = offsets(first);
+        if 4 * repeated < idx.len() || models.iter().any(|m| offsets(m) != reference) {
             return None;
         }
         Some(
@@ -285,14 +283,17 @@ impl Problem<'_> {
     ) -> (Vec<f64>, Vec<Vector3<f64>>) {
         let mut jt = vec![0.0; set.len() * 3 * members.len()];
         let mut tcps = vec![Vector3::zeros(); members.len()];
-        match shared {
-            Some(sines) => tcp_jacobians_transposed_by(model, set, members.len(), |k| sines[members[k].0], &mut jt, &mut tcps),
-            None => {
-                let qs: Vec<Joints> = members.iter().map(|(_, i)| self.obs[*i].q).collect();
-                tcp_jacobians_transposed(model, set, &qs, &mut jt, &mut tcps);
-            }
-        }
+        tcp_jacobians_transposed_by(model, set, members.len(), |k| self.member_angles(model, members[k], shared), &mut jt, &mut tcps);
         (jt, tcps)
+    }
+
+    /// The [`AngleSines`] of the member `(row, point)` at `model`: the row's in `shared` where
+    /// given, else its point's own (the same bits).
+    fn member_angles(&self, model: &RobotModel, (row, point): (usize, usize), shared: Option<&[AngleSines]>) -> AngleSines {
+        match shared {
+            Some(sines) => sines[row],
+            None => angle_sines(model, &self.obs[point].q),
+        }
     }
 
     /// Weighted residuals `r` (3 per point of `idx`) and the weighted Jacobian `J = d pred / dx`
